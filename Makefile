@@ -39,8 +39,21 @@ $(SETUP): pyproject.toml constraints.txt
 	@touch $@
 
 # ---------------------------------------------------------------- main commands
-demo: $(SETUP) ## the main job on the committed defaults (FEM case, surrogate, gesture)
-	$(PY) -m workflow.demo
+DEMO := build/demo
+DEMO_CASE := --p 0.2 --f1 1 --f2 -1 --m 20
+demo: $(SETUP) ## the main job on the committed defaults: FEM case + render, surrogate, gesture
+	@mkdir -p $(DEMO)
+	@echo "== 1. FEM: one joint load case on the production mesh (DOLFINx)"
+	$(PY) -m fem.solve $(DEMO_CASE) --json > $(DEMO)/fem.json
+	$(PY) -m fem.solve $(DEMO_CASE) | tail -n 14
+	$(PY) -m fem.render $(DEMO_CASE) --out $(DEMO)/joint.png
+	@if [ -f results/surrogate/improved.pt ]; then \
+	  echo "== 2. surrogate: the same case in microseconds"; \
+	  $(PY) -m surrogate.predict --model results/surrogate/improved.pt $(DEMO_CASE); \
+	else echo "== 2. surrogate: no committed model yet (make train)"; fi
+	@echo "== 3. gripper gesture under gravity, (P1, P2) = (-0.1, 0.1) MPa"
+	$(PY) -m predictor.gesture --p1 -0.1 --p2 0.1 --model $(PRED_JOINT) --plot $(DEMO)/gesture.png
+	@echo "demo outputs in $(DEMO)/"
 
 test: $(SETUP) ## the test suite (coarse FEM, small data; < 15 min)
 	$(PY) -m pytest -q -ra
@@ -67,9 +80,44 @@ results/fem/joint.png: fem/*.py | $(SETUP)
 
 # ---------------------------------------------------------------- surrogate (issue 4)
 # (section owned by surrogate/)
+SURROGATE_TRAIN   := results/data/train
+SURROGATE_HELDOUT := results/data/heldout
+SURROGATE_CODE    := surrogate/data.py surrogate/model.py surrogate/train.py surrogate/evaluate.py \
+                     workflow/shards.py
+
+train: results/surrogate/metrics.json ## surrogates (paper, improved) + KNN -> results/surrogate/
+
+results/surrogate/paper.pt results/surrogate/improved.pt: results/surrogate/%.pt: \
+    $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
+	nice $(PY) -m surrogate.train --config $* --data $(SURROGATE_TRAIN) --out $@
+
+results/surrogate/metrics.json: results/surrogate/paper.pt results/surrogate/improved.pt \
+    surrogate/knn.py $(wildcard $(SURROGATE_HELDOUT)/manifest.json) | $(SETUP)
+	$(PY) -m surrogate.evaluate --report --train-data $(SURROGATE_TRAIN) \
+	  --heldout $(SURROGATE_HELDOUT) --dir results/surrogate
 
 # ---------------------------------------------------------------- predictor (issue 5)
 # (section owned by predictor/)
+# Joint model for the predictor: the committed surrogate when present, else the analytic stand-in.
+PRED_JOINT := $(if $(wildcard results/surrogate/improved.pt),results/surrogate/improved.pt,analytic)
+PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py
+
+gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
+results/predictor/gestures.json: $(PRED_CORE) predictor/plot.py predictor/figures.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
+	nice $(PY) -m predictor.figures --out results/predictor --model $(PRED_JOINT)
+
+results/predictor/gravity_nn_paper.pt: $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN (75 epochs, ~2 min)
+	nice $(PY) -m predictor.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
+
+results/predictor/gravity_nn.pt: $(PRED_CORE) | $(SETUP) ## train the improved gravity NN (SiLU + L-BFGS, ~5 min)
+	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
+
+results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN on solver labels (~6 min)
+	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
+
+bench-predictor: results/bench/predictor.json ## predictor timings and residuals -> results/bench/predictor.json
+results/bench/predictor.json: $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
+	$(PY) -m predictor.bench --model $(PRED_JOINT) --out $@
 
 clean: ## remove the venv and caches (keeps results/)
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -1,0 +1,92 @@
+"""FEM timing benchmark at the production mesh -> results/bench/fem.json.
+
+    python -m fem.bench --out results/bench/fem.json
+
+Measures on one rank (the machine is noisy: medians of several solves in one run):
+
+* ``solve_from_zero_s``: median wall time of full solves from u = 0 for three mid-box
+  load cases, with their Newton iterations (``newton_iterations``: median total);
+* ``continuation_sample_s``: median wall time of the next sample when the solve starts
+  from a neighbouring converged state (steps of ``--step`` x the box half-width along a
+  random walk, as the campaign harvests samples), with the sensitivities included;
+* mesh figures: ``nodes`` (P2, incl. mid-side nodes), ``dofs``, vertices, element size.
+
+The paper's ANSYS figure is ~7 min per sample at 16,000 nodes (DESIGN.md §6).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import statistics
+import sys
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from fem.geometry import JointGeometry
+from fem.solver import INPUT_BOX, JointSolver, Load
+
+FROM_ZERO = [Load(0.2, 1.0, -1.0, 20.0), Load(-0.15, -1.0, 1.5, -40.0), Load(0.1, 2.0, 2.0, 60.0)]
+PAPER_SECONDS_PER_SAMPLE = 7 * 60
+
+
+def run(n_walk: int = 6, step: float = 0.1, seed: int = 0) -> dict:
+    geo = JointGeometry()
+    t0 = time.perf_counter()
+    solver = JointSolver(geo, MPI.COMM_SELF)
+    setup = time.perf_counter() - t0
+    zero = [solver.solve(load) for load in FROM_ZERO]
+    if not all(r.converged for r in zero):
+        raise RuntimeError("a from-zero benchmark solve did not converge")
+    rng = np.random.default_rng(seed)
+    x = FROM_ZERO[-1].as_array()
+    walk = []
+    for _ in range(n_walk):
+        x = np.clip(x + step * INPUT_BOX * rng.uniform(-1, 1, 4), -INPUT_BOX, INPUT_BOX)
+        t = time.perf_counter()
+        r = solver.solve(Load.from_array(x), continuation=True)
+        solver.sensitivities()
+        if not r.converged:
+            raise RuntimeError("a continuation benchmark solve did not converge")
+        walk.append((time.perf_counter() - t, r.iterations))
+    info = solver.mesh_info()
+    from_zero_s = statistics.median(r.wall_time for r in zero)
+    cont_s = statistics.median(t for t, _ in walk)
+    return {
+        **info,
+        "wall_mesh_size_mm": geo.wall_mesh_size or geo.mesh_size, "wall_thickness_mm": geo.wall,
+        "setup_s": setup,
+        "solve_from_zero_s": from_zero_s,
+        "solve_from_zero_cases": [{"load": r.load.as_array().tolist(), "wall_time_s": r.wall_time,
+                                   "newton_iterations": r.newton_iterations} for r in zero],
+        "newton_iterations": statistics.median(r.iterations for r in zero),
+        "continuation_sample_s": cont_s,
+        "continuation_newton_iterations": statistics.median(n for _, n in walk),
+        "continuation_step_fraction_of_box": step,
+        "paper_seconds_per_sample": PAPER_SECONDS_PER_SAMPLE, "paper_nodes": 16000,
+        "speedup_vs_paper_from_zero": PAPER_SECONDS_PER_SAMPLE / from_zero_s,
+        "speedup_vs_paper_continuation": PAPER_SECONDS_PER_SAMPLE / cont_s,
+        "ranks": 1,
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fem.bench", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default="results/bench/fem.json")
+    ap.add_argument("--walk", type=int, default=6, help="continuation samples to time")
+    ap.add_argument("--step", type=float, default=0.1, help="walk step, fraction of the box")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    out = run(args.walk, args.step)
+    with open(args.out, "w") as f:
+        json.dump(out, f, indent=1)
+    print(json.dumps({k: out[k] for k in ("nodes", "dofs", "solve_from_zero_s",
+                                          "continuation_sample_s", "newton_iterations")}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

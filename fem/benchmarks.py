@@ -1,0 +1,112 @@
+"""Large-deflection validation of the joint's loading code on a slender 3D cantilever.
+
+The beam (fem.geometry.BeamGeometry, nu = 0 so EI = E b h³/12 is unambiguous) is solved
+with the SAME Solver as the joint: its end block is the rigid cap, F2 is the dead load at
+the beam end (L, 0, 0) and M the pure couple of fem.solver. Results are compared with the
+exact elastica of fem.elastica:
+
+* ``cantilever --alpha A``: dead transverse tip load P = A·EI/L² (Bisshopp-Drucker);
+* ``rollup --theta T``: pure end moment M = T·EI/L (circular arc).
+
+    python -m fem.benchmarks cantilever --alpha 2 --json
+    python -m fem.benchmarks rollup --theta 6.2832 --json
+
+JSON keys: cantilever -> u_over_L, w_over_L, theta, exact, error_over_L; rollup ->
+x_over_L, y_over_L, theta, exact, error_over_L. Lengths relative to L, angles in rad.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import asdict
+
+from mpi4py import MPI
+
+from fem.elastica import cantilever_tip, rollup_tip
+from fem.geometry import BeamGeometry
+
+#: Defaults validated in tests/test_fem_benchmarks.py: L/h = 50, two P2 layers per h.
+DEFAULT_BEAM = BeamGeometry(length=100.0, thickness=2.0, width=2.0, cap=1.0, mesh_size=1.0)
+E_BEAM = 12.2
+
+
+def bending_stiffness(geo: BeamGeometry, E: float = E_BEAM) -> float:
+    """EI of the full (not half) rectangular section, N·mm²."""
+    return E * geo.width * geo.thickness ** 3 / 12
+
+
+def _solve(geo: BeamGeometry, F2: float, M: float, steps: int, comm):
+    from fem.solver import Load, SolverConfig, beam_solver
+
+    solver = beam_solver(geo, comm, E=E_BEAM, config=SolverConfig(first_step=1.0 / steps))
+    result = solver.solve(Load(F2=F2, M=M))
+    if not result.converged:
+        raise RuntimeError(f"beam solve did not converge: {result.reason}")
+    return result
+
+
+def cantilever(alpha: float, geo: BeamGeometry = DEFAULT_BEAM, comm=MPI.COMM_WORLD) -> dict:
+    """FEM tip of the tip-loaded cantilever at alpha = P L²/EI against the elastica."""
+    if not 0 <= alpha <= 10:
+        raise ValueError(f"alpha = {alpha} outside the validated range [0, 10]")
+    L = geo.length
+    P = alpha * bending_stiffness(geo) / L ** 2
+    r = _solve(geo, P, 0.0, steps=max(2, math.ceil(alpha)), comm=comm)
+    x, y = r.anchors[0] / L
+    fem_ = {"u_over_L": 1.0 - x, "w_over_L": y, "theta": r.cap_rotation}
+    exact = cantilever_tip(alpha)
+    err = math.hypot(fem_["u_over_L"] - exact["u_over_L"], fem_["w_over_L"] - exact["w_over_L"])
+    return {"case": "cantilever", "alpha": alpha, **fem_, "exact": exact, "error_over_L": err,
+            "newton_iterations": r.newton_iterations, "wall_time_s": r.wall_time,
+            "beam": asdict(geo)}
+
+
+def rollup(theta: float, geo: BeamGeometry = DEFAULT_BEAM, comm=MPI.COMM_WORLD) -> dict:
+    """FEM tip under a pure end moment M = T·EI/L against the circular arc."""
+    if not 0 <= theta <= 2 * math.pi + 1e-9:
+        raise ValueError(f"theta = {theta} outside the validated range [0, 2 pi]")
+    L = geo.length
+    M = theta * bending_stiffness(geo) / L
+    r = _solve(geo, 0.0, M, steps=max(2, math.ceil(2 * theta)), comm=comm)
+    x, y = r.anchors[0] / L
+    exact = rollup_tip(theta)
+    err = math.hypot(x - exact["x_over_L"], y - exact["y_over_L"])
+    return {"case": "rollup", "theta_load": theta, "x_over_L": x, "y_over_L": y,
+            "theta": r.cap_rotation, "exact": exact, "error_over_L": err,
+            "newton_iterations": r.newton_iterations, "wall_time_s": r.wall_time,
+            "beam": asdict(geo)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fem.benchmarks", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="case", required=True)
+    c = sub.add_parser("cantilever", help="dead tip load, alpha = P L^2/EI in [0, 10]")
+    c.add_argument("--alpha", type=float, required=True)
+    r = sub.add_parser("rollup", help="pure end moment, T = M L/EI in [0, 2 pi]")
+    r.add_argument("--theta", type=float, required=True)
+    for p in (c, r):
+        p.add_argument("--mesh-size", type=float, default=DEFAULT_BEAM.mesh_size, help="mm")
+        p.add_argument("--json", action="store_true", help="print JSON only")
+    args = ap.parse_args(argv)
+    geo = BeamGeometry(**{**asdict(DEFAULT_BEAM), "mesh_size": args.mesh_size})
+    try:
+        out = cantilever(args.alpha, geo) if args.case == "cantilever" else rollup(args.theta, geo)
+    except (ValueError, RuntimeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if MPI.COMM_WORLD.rank == 0:
+        if args.json:
+            print(json.dumps(out))
+        else:
+            keys = ("u_over_L", "w_over_L") if args.case == "cantilever" else ("x_over_L", "y_over_L")
+            for k in keys + ("theta",):
+                print(f"{k:10s} FEM {out[k]: .5f}   exact {out['exact'][k]: .5f}")
+            print(f"tip error {100 * out['error_over_L']:.3f}% of L, Newton {out['newton_iterations']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

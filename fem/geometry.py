@@ -1,0 +1,298 @@
+"""Parametric gmsh geometry builders: the two-chamber bellow joint and a slender beam.
+
+Both builders return the *global* ``gmsh.model`` holding one meshed half-model (z >= 0)
+with named physical groups, so the same solver code loads either of them. They only
+build and mesh; conversion to DOLFINx lives in :mod:`fem.mesh`.
+
+Frame and units (DESIGN.md §2-3): mm; x along the joint axis from the proximal face
+(x = 0) to the distal face (x = L); y in the bending plane, top chamber at +y;
+z normal to the bending plane, z = 0 the symmetry plane.
+
+Joint cross-section along x::
+
+    cap | cell | valley | cell | valley | cell | valley | cell | valley | cell | cap
+    3mm                                                                    3mm
+
+* outer height 2*H_out (y in [-10, 10]) at the cells and caps, 2*H_valley in a valley,
+  so the outer wall is corrugated between cells;
+* a solid spine y in [-s/2, s/2] carries the centre line;
+* every chamber wall is ``wall`` thick: each chamber is the union of its cell cavities
+  and one channel of height H_valley - wall - s/2 that connects them;
+* the distal cap (x in [L - cap, L]) is its own volume so the solver can make it rigid.
+
+Physical groups (the names are the contract with :mod:`fem.solver`):
+
+=================  ====  =====================================================
+name               dim   what
+=================  ====  =====================================================
+``solid``          3     the deformable body
+``distal_cap``     3     the end block bonded to the rigid connector
+``proximal``       2     x = 0, clamped
+``distal``         2     x = L
+``symmetry``       2     z = 0, u_z = 0
+``top_chamber``    2     walls of the +y chamber (pressurised when P > 0)
+``bottom_chamber`` 2     walls of the -y chamber (pressurised when P < 0)
+``valley_faces``   2     outer faces of the cells across a valley (self-contact)
+=================  ====  =====================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+#: Physical-group tags, shared with fem.solver.
+TAGS = {
+    "solid": 1, "distal_cap": 2,
+    "proximal": 11, "distal": 12, "symmetry": 13,
+    "top_chamber": 14, "bottom_chamber": 15, "valley_faces": 16,
+}
+_EPS = 1e-6
+_GMSH_READY = False
+
+
+@dataclass(frozen=True)
+class JointGeometry:
+    """Dimensions of the bellow joint half-model (mm). Defaults: DESIGN.md §3.
+
+    ``mesh_size`` is the target tetrahedron edge length; ``wall_mesh_size`` (default:
+    ``mesh_size``) is used on the chamber walls.
+    """
+
+    length: float = 45.45
+    wall: float = 1.2
+    height: float = 20.0           # outer, y in [-height/2, height/2]
+    width: float = 14.0            # full; the half-model is z in [0, width/2]
+    spine: float = 2.4             # y in [-spine/2, spine/2]
+    n_cells: int = 5
+    cap: float = 3.0
+    valley_height: float = 8.8     # outer height in a valley (y in [-4.4, 4.4])
+    valley_width: float = 2.5      # outer gap between two neighbouring cells along x
+    mesh_size: float = 1.6
+    wall_mesh_size: float | None = None
+
+    def __post_init__(self):
+        channel = self.valley_height / 2 - self.wall - self.spine / 2
+        if channel <= 0:
+            raise ValueError("valley_height leaves no channel between the cells")
+        if self.cell_width <= 2 * self.wall:
+            raise ValueError("cells are too narrow for their walls")
+
+    @property
+    def cell_width(self) -> float:
+        """Outer length of one bellow cell along x (mm)."""
+        inner = self.length - 2 * self.cap
+        return (inner - (self.n_cells - 1) * self.valley_width) / self.n_cells
+
+    def cells(self) -> list[tuple[float, float]]:
+        """(x_start, x_end) of every cell's outer wall (mm)."""
+        x0, w, g = self.cap, self.cell_width, self.valley_width
+        return [(x0 + i * (w + g), x0 + i * (w + g) + w) for i in range(self.n_cells)]
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class BeamGeometry:
+    """A slender rectangular cantilever with a rigid end block, for the elastica checks.
+
+    The flexible part is x in [0, length]; the ``distal_cap`` block x in
+    [length, length + cap] carries the loads, so the bending length is exactly
+    ``length``. Section: y in [-h/2, h/2], half-width z in [0, b/2].
+    """
+
+    length: float = 100.0
+    thickness: float = 2.0          # h, in the bending plane
+    width: float = 2.0              # b, full
+    cap: float = 1.0
+    mesh_size: float = 1.0
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _init_gmsh(name: str):
+    import gmsh
+
+    global _GMSH_READY
+    if not _GMSH_READY:   # gmsh 4.8 has no isInitialized()
+        gmsh.initialize()
+        _GMSH_READY = True
+    gmsh.clear()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.option.setNumber("General.Verbosity", 1)
+    gmsh.model.add(name)
+    return gmsh
+
+
+def _surfaces_in_box(gmsh, xmin, ymin, zmin, xmax, ymax, zmax) -> list[int]:
+    ents = gmsh.model.getEntitiesInBoundingBox(
+        xmin - _EPS, ymin - _EPS, zmin - _EPS, xmax + _EPS, ymax + _EPS, zmax + _EPS, 2)
+    return [tag for _, tag in ents]
+
+
+def _add_groups(gmsh, groups: dict[str, tuple[int, list[int]]]) -> None:
+    for name, (dim, tags) in groups.items():
+        if not tags:
+            raise RuntimeError(f"geometry: physical group '{name}' is empty")
+        gmsh.model.addPhysicalGroup(dim, sorted(set(tags)), TAGS[name])
+        gmsh.model.setPhysicalName(dim, TAGS[name], name)
+
+
+def build_joint(geo: JointGeometry = JointGeometry()):
+    """Build and mesh the joint half-model; return the global ``gmsh.model``.
+
+    Only the quarter y >= 0 is meshed; its mesh is then mirrored to y < 0 node by node
+    (:func:`_mirror_mesh_y`), so the discrete problem has the exact y-mirror symmetry of
+    DESIGN.md §3 and the solver reproduces it to solver tolerance, not mesh error.
+    Call on rank 0 only, then convert with :func:`fem.mesh.create_mesh`.
+    """
+    gmsh = _init_gmsh("bellow_joint")
+    occ = gmsh.model.occ
+    L, t, s = geo.length, geo.wall, geo.spine
+    H, Hv, Z = geo.height / 2, geo.valley_height / 2, geo.width / 2
+    cells = geo.cells()
+
+    # Outer body (y >= 0): a core bar of valley height, plus caps and cells at full height.
+    parts = [occ.addBox(0, 0, 0, L, Hv, Z),
+             occ.addBox(0, 0, 0, geo.cap, H, Z),
+             occ.addBox(L - geo.cap, 0, 0, geo.cap, H, Z)]
+    parts += [occ.addBox(x0, 0, 0, x1 - x0, H, Z) for x0, x1 in cells]
+    body, _ = occ.fuse([(3, parts[0])], [(3, p) for p in parts[1:]])
+
+    # Top chamber cavity: one channel joining the cell pockets.
+    x_in0, x_in1 = geo.cap, L - geo.cap
+    pieces = [occ.addBox(x_in0, s / 2, 0, x_in1 - x_in0, Hv - t - s / 2, Z - t)]
+    for i, (x0, x1) in enumerate(cells):
+        a = x0 if i == 0 else x0 + t
+        b = x1 if i == len(cells) - 1 else x1 - t
+        pieces.append(occ.addBox(a, s / 2, 0, b - a, H - t - s / 2, Z - t))
+    cavity, _ = occ.fuse([(3, pieces[0])], [(3, p) for p in pieces[1:]])
+    solid, _ = occ.cut(body, cavity)
+
+    # Split off the distal cap as its own volume; the cutter is exactly the (solid) cap
+    # block, so the fragments are the cap and the rest, sharing a conforming interface.
+    cutter = occ.addBox(L - geo.cap, 0, 0, geo.cap, H, Z)
+    occ.fragment(solid, [(3, cutter)])
+    occ.synchronize()
+    vols = [tag for _, tag in gmsh.model.getEntities(3)]
+    keep_cap = [v for v in vols if gmsh.model.getBoundingBox(3, v)[0] > L - geo.cap - _EPS]
+    keep_body = [v for v in vols if v not in keep_cap]
+
+    sym = _surfaces_in_box(gmsh, -1, -1, 0, L + 1, H + 1, 0)
+    top = [f for f in _surfaces_in_box(gmsh, x_in0, s / 2, 0, x_in1, H - t, Z - t) if f not in sym]
+    valley = []
+    for (_, x1), (x2, _) in zip(cells[:-1], cells[1:]):
+        valley += _surfaces_in_box(gmsh, x1, Hv, 0, x1, H, Z)
+        valley += _surfaces_in_box(gmsh, x2, Hv, 0, x2, H, Z)
+    groups = {
+        "solid": (3, keep_body), "distal_cap": (3, keep_cap),
+        "proximal": (2, _surfaces_in_box(gmsh, 0, 0, 0, 0, H, Z)),
+        "distal": (2, _surfaces_in_box(gmsh, L, 0, 0, L, H, Z)),
+        "symmetry": (2, sym), "top_chamber": (2, top), "valley_faces": (2, valley),
+    }
+    for name, (dim, tags) in groups.items():
+        if not tags:
+            raise RuntimeError(f"geometry: physical group '{name}' is empty")
+    _mesh(gmsh, geo.mesh_size, geo.wall_mesh_size, top)
+    _mirror_mesh_y(gmsh, groups, {"top_chamber": "bottom_chamber"})
+    return gmsh.model
+
+
+def _mirror_mesh_y(gmsh, groups: dict[str, tuple[int, list[int]]], swap: dict[str, str]) -> None:
+    """Replace the meshed quarter (y >= 0) by a discrete model of it plus its y-mirror.
+
+    Nodes on y = 0 are shared; mirrored tetrahedra get two nodes swapped to keep a
+    positive orientation. A group named in ``swap`` sends its mirror image to the other
+    name (top chamber -> bottom chamber); every other group keeps both halves.
+    """
+    tags, xyz, _ = gmsh.model.mesh.getNodes()
+    tags = tags.astype(np.int64)
+    xyz = xyz.reshape(-1, 3)
+    n = len(tags)
+    on_plane = np.abs(xyz[:, 1]) < 1e-9
+    # dolfinx wants node tags 1..N: originals keep their rank, mirrors follow.
+    index = np.zeros(tags.max() + 1, dtype=np.int64)
+    index[tags] = np.arange(1, n + 1)
+    mirror_of = np.arange(1, n + 1)
+    mirror_of[~on_plane] = n + 1 + np.arange((~on_plane).sum())
+    renumber = lambda c: index[c]
+    lookup = lambda c: mirror_of[index[c] - 1]
+    conn = {}
+    for name, (dim, ents) in groups.items():
+        etype = 4 if dim == 3 else 2          # linear tetrahedra / triangles
+        nper = 4 if dim == 3 else 3
+        blocks = []
+        for e in ents:
+            types, _, nodes = gmsh.model.mesh.getElements(dim, e)
+            blocks += [n.reshape(-1, nper) for t, n in zip(types, nodes) if t == etype]
+        c = np.vstack(blocks).astype(np.int64)
+        m = lookup(c)
+        m[:, [0, 1]] = m[:, [1, 0]]
+        c = renumber(c)
+        conn.setdefault(name, (dim, []))[1].append(c)
+        conn.setdefault(swap.get(name, name), (dim, []))[1].append(m)
+
+    new_xyz = np.vstack([xyz, xyz[~on_plane] * [1.0, -1.0, 1.0]])
+    new_tags = np.arange(1, len(new_xyz) + 1)
+    gmsh.model.add("bellow_joint_mirrored")
+    next_elem = 1
+    for i, (name, (dim, blocks)) in enumerate(conn.items(), start=1):
+        c = np.vstack(blocks)
+        gmsh.model.addDiscreteEntity(dim, i)
+        if i == 1:
+            gmsh.model.mesh.addNodes(dim, i, new_tags, new_xyz.ravel())
+        etags = np.arange(next_elem, next_elem + len(c))
+        next_elem += len(c)
+        gmsh.model.mesh.addElementsByType(i, 4 if dim == 3 else 2, etags, c.ravel())
+        gmsh.model.addPhysicalGroup(dim, [i], TAGS[name])
+        gmsh.model.setPhysicalName(dim, TAGS[name], name)
+
+
+def build_beam(geo: BeamGeometry = BeamGeometry()):
+    """Build and mesh the slender cantilever half-model; return the global ``gmsh.model``."""
+    gmsh = _init_gmsh("beam")
+    occ = gmsh.model.occ
+    L, h, Z = geo.length, geo.thickness, geo.width / 2
+    beam = occ.addBox(0, -h / 2, 0, L, h, Z)
+    cap = occ.addBox(L, -h / 2, 0, geo.cap, h, Z)
+    occ.fragment([(3, beam)], [(3, cap)])
+    occ.synchronize()
+    vols = [tag for _, tag in gmsh.model.getEntities(3)]
+    body = [v for v in vols if gmsh.model.getBoundingBox(3, v)[3] < L + _EPS]
+    capv = [v for v in vols if v not in body]
+    Lt = L + geo.cap
+    _add_groups(gmsh, {
+        "solid": (3, body), "distal_cap": (3, capv),
+        "proximal": (2, _surfaces_in_box(gmsh, 0, -h, 0, 0, h, Z)),
+        "distal": (2, _surfaces_in_box(gmsh, Lt, -h, 0, Lt, h, Z)),
+        "symmetry": (2, _surfaces_in_box(gmsh, 0, -h, 0, Lt, h, 0)),
+    })
+    _mesh(gmsh, geo.mesh_size, None, [])
+    return gmsh.model
+
+
+def _mesh(gmsh, size: float, wall_size: float | None, wall_surfaces: list[int]) -> None:
+    gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.25 * size)
+    gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+    gmsh.option.setNumber("Mesh.Algorithm3D", 1)   # Delaunay: robust on thin walls
+    if wall_size is not None and wall_surfaces:
+        f = gmsh.model.mesh.field
+        c = f.add("Constant")
+        f.setNumbers(c, "SurfacesList", wall_surfaces)
+        f.setNumber(c, "VIn", wall_size)
+        f.setNumber(c, "VOut", size)
+        f.setAsBackgroundMesh(c)
+    gmsh.model.mesh.generate(3)
+    gmsh.model.mesh.optimize("")  # default tetrahedral optimiser (no Netgen in Debian gmsh)
+
+
+def anchor_points(length: float, n: int = 10) -> np.ndarray:
+    """Material anchor points X_i = (i·L/n, 0, 0), i = 1..n (DESIGN.md §3). Shape (n, 3), mm."""
+    x = np.arange(1, n + 1) * length / n
+    return np.column_stack([x, np.zeros(n), np.zeros(n)])

@@ -1,0 +1,95 @@
+"""Off-screen pyvista render of the joint: undeformed geometry and one deformed case.
+
+    python -m fem.render --out results/fem/joint.png [--p 0.2 --f2 -1 --m 20]
+
+The half-model is mirrored about z = 0 so the full joint is shown. Left: the undeformed
+joint, cut open at z = 0 to show the two chambers and bellow cells. Right: the deformed
+joint coloured by displacement magnitude |u| (mm), with the 10 anchor points (like the
+paper's Figure 2C). Runs on one rank; needs no display (Plotter(off_screen=True)).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+
+import numpy as np
+from mpi4py import MPI
+
+from fem.geometry import JointGeometry
+from fem.solver import JointSolver, Load
+
+
+def _grid(solver):
+    """pyvista grid of the P2 mesh with point data 'u' (mm), mirrored to z <= 0 too."""
+    import pyvista
+    from dolfinx import plot
+
+    topology, cell_types, x = plot.create_vtk_mesh(solver.V)
+    grid = pyvista.UnstructuredGrid(topology, cell_types, x)
+    grid.point_data["u"] = solver.u.x.array.reshape(-1, 3).copy()
+    mirror = grid.copy()
+    mirror.points[:, 2] *= -1
+    mirror.point_data["u"][:, 2] *= -1
+    full = grid.merge(mirror)
+    full.point_data["|u| (mm)"] = np.linalg.norm(full.point_data["u"], axis=1)
+    return grid, full
+
+
+def render(solver, result, out: str) -> None:
+    """Write the two-panel PNG for a solved ``result`` of ``solver`` to ``out``."""
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    half, full = _grid(solver)
+    deformed = full.copy()
+    deformed.points += full.point_data["u"]
+    p = pyvista.Plotter(off_screen=True, shape=(1, 2), window_size=(1800, 800), border=False)
+    p.subplot(0, 0)
+    p.add_text("undeformed (half-model, cut at z = 0)", font_size=11)
+    p.add_mesh(half.extract_surface(nonlinear_subdivision=0), color="#7fa7d9",
+               show_edges=True, edge_color="#30507a", line_width=0.3, smooth_shading=False)
+    p.view_vector((0.35, 0.3, -1.0), viewup=(0, 1, 0))
+    p.add_axes()
+    p.subplot(0, 1)
+    L = result.load
+    p.add_text(f"P = {L.P:g} MPa, F1 = {L.F1:g} N, F2 = {L.F2:g} N, M = {L.M:g} N·mm\n"
+               f"phi_end = {np.degrees(result.phi_end):.1f} deg", font_size=11)
+    p.add_mesh(deformed.extract_surface(nonlinear_subdivision=0), scalars="|u| (mm)",
+               cmap="viridis", show_edges=False,
+               scalar_bar_args={"title": "|u| (mm)", "vertical": True})
+    anchors = np.column_stack([result.anchors, np.zeros(len(result.anchors))])
+    p.add_points(anchors + [0, 0, JointGeometry().width / 2 + 0.5], color="red",
+                 point_size=12, render_points_as_spheres=True)
+    p.view_xy()
+    p.camera.zoom(1.1)
+    p.screenshot(out)
+    p.close()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fem.render", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default="results/fem/joint.png")
+    ap.add_argument("--p", type=float, default=0.2)
+    ap.add_argument("--f1", type=float, default=0.0)
+    ap.add_argument("--f2", type=float, default=-1.0)
+    ap.add_argument("--m", type=float, default=20.0)
+    ap.add_argument("--mesh-size", type=float, default=JointGeometry().mesh_size)
+    args = ap.parse_args(argv)
+    comm = MPI.COMM_WORLD
+    if comm.size != 1:
+        print("error: render runs on one rank", file=sys.stderr)
+        return 2
+    solver = JointSolver(replace(JointGeometry(), mesh_size=args.mesh_size), comm)
+    result = solver.solve(Load(args.p, args.f1, args.f2, args.m))
+    if not result.converged:
+        print(f"error: solve did not converge: {result.reason}", file=sys.stderr)
+        return 1
+    render(solver, result, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,545 @@
+"""Static large-deflection solve of the bellow joint (and of the benchmark beam).
+
+Units: mm, N, MPa (= N/mm²), N·mm; angles in rad.
+
+Kinematics and material (compressible neo-Hookean, total Lagrangian, P2 tetrahedra)::
+
+    F = I + grad u,   J = det F,   I1 = tr(F^T F)
+    psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2          P = d psi / d F
+    mu = E / (2 (1 + nu)),   lambda = E nu / ((1 + nu)(1 - 2 nu))
+
+so the small-strain limit is exactly (E, nu) = (12.2 MPa, 0.49). P2 displacements avoid
+the volumetric locking of P1 at nu = 0.49 (mesh convergence: ``make mesh-study``). The
+paper used ANSYS linear elasticity with large deflection (St Venant-Kirchhoff-like);
+neo-Hookean agrees with it at small strain and stays stable in compression.
+
+Loads (DESIGN.md §3), on the half-model z >= 0, which carries half of each resultant:
+
+* Pressure, a follower load on the deformed chamber walls (Nanson)::
+
+      t0 = -p J F^-T N = -p cofac(F) N,   p_top = max(P, 0),  p_bottom = max(-P, 0)
+
+* The distal cap is bonded to a rigid connector: it is meshed as its own volume with
+  ``cap_stiffness`` x E, so it moves rigidly to solver precision. Its rotation about z at
+  a material point is ``theta = atan2(F_yx - F_xy, F_xx + F_yy)``, exact for any rigid
+  motion (taken relative to the last converged rotation, so it has no branch cut).
+* F1, F2 (dead, in the undeformed joint frame) applied at the reference point X_ref
+  (the distal centre, r_10) and M (pure couple about +z) enter as the potential::
+
+      Pi_ext = -1/(2 V_cap) ∫_cap [ f·(u + (R(theta) - I)(X_ref - X)) + M theta ] dX
+
+  where u + (R - I)(X_ref - X) is the displacement of X_ref carried rigidly by the cap.
+  Its variation is the virtual work f·δu_ref + M δtheta, so the couple is M at ANY end
+  rotation (no M cos(phi) error of a dead linear traction; see ``fem.benchmarks rollup``).
+
+Weak form: R(u; v) = ∫ P : grad v dX + ∫_chamber p cofac(F) N·v dA + δPi_ext = 0, with
+u = 0 on the proximal face and u_z = 0 on the symmetry plane. Newton with the exact
+tangent (MUMPS LU) along a load path with automatic cut-back.
+
+Sensitivities: at a converged state, du/dλ = -K^{-1} ∂R/∂λ for λ in (P, F1, F2, M), one
+back-substitution each with the last factorisation; anchors are linear in u.
+
+Data flow: JointGeometry -> fem.mesh.create_mesh -> Solver(...) -> Solver.solve(Load) ->
+SolveResult (anchors (10, 2) mm, phi_end, cap rotation, u, Newton figures).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import ufl
+from dolfinx import fem, geometry
+from dolfinx.fem.petsc import (apply_lifting, assemble_matrix, assemble_vector, create_matrix,
+                               create_vector, set_bc)
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem.geometry import TAGS, BeamGeometry, JointGeometry, anchor_points
+from fem.mesh import MeshData, create_mesh
+
+log = logging.getLogger("softjoint.fem")
+
+#: Half-widths of the input box (DESIGN.md §3) for (P MPa, F1 N, F2 N, M N·mm).
+INPUT_BOX = np.array([0.3, 3.0, 3.0, 100.0])
+
+
+class LoadOutOfRange(ValueError):
+    """A load outside the surrogate's training box without explicit extrapolation."""
+
+
+@dataclass(frozen=True)
+class Load:
+    """One load case: P (MPa, signed), F1, F2 (N, dead, joint frame), M (N·mm, about +z)."""
+
+    P: float = 0.0
+    F1: float = 0.0
+    F2: float = 0.0
+    M: float = 0.0
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.P, self.F1, self.F2, self.M], dtype=float)
+
+    @classmethod
+    def from_array(cls, a) -> "Load":
+        return cls(*(float(x) for x in a))
+
+    def check_box(self, allow_extrapolation: bool = False) -> None:
+        """Raise LoadOutOfRange when outside |P|<=0.3, |F1|,|F2|<=3, |M|<=100."""
+        a = self.as_array()
+        bad = [f"|{n}|={abs(v):g} > {b:g}" for n, v, b in zip("P F1 F2 M".split(), a, INPUT_BOX)
+               if abs(v) > b * (1 + 1e-12)]
+        if bad and not allow_extrapolation:
+            raise LoadOutOfRange("load outside the input box (" + ", ".join(bad)
+                                 + "); pass allow_extrapolation to go beyond it")
+
+
+@dataclass(frozen=True)
+class Material:
+    """Neo-Hookean material (MPa). Defaults: NinjaFlex (DESIGN.md §3)."""
+
+    E: float = 12.2
+    nu: float = 0.49
+    # Distal cap modulus = cap_stiffness * E: the 3 mm solid cap then bends by < 3e-5 rad
+    # under M = 100 N·mm, rigid for every reported figure. Much stiffer caps slow Newton:
+    # a linearised rotation step strains a stiff block by ~theta^2/2.
+    cap_stiffness: float = 100.0
+    # The connector need not be nearly incompressible; nu = 0.3 keeps lambda_cap small,
+    # since lambda * theta^2/2 is the spurious stress a linearised rotation step creates.
+    cap_nu: float = 0.3
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Discretisation and Newton / load-stepping controls."""
+
+    degree: int = 2                 # Lagrange degree of u
+    quadrature_degree: int = 2      # exact for the linearised P2 stiffness; see mesh study
+    atol: float = 1e-8              # Newton: absolute residual 2-norm (N)
+    stol: float = 1e-9              # Newton: |du| <= stol |u|, just above round-off
+    max_it: int = 12
+    box_step: float = 0.25          # first step: at most this fraction of the box per input
+    first_step: float | None = None # or a fixed first path fraction (e.g. for the beam)
+    max_step: float = 1.0
+    min_step: float = 1.0 / 256     # give up below this path fraction
+    grow: float = 1.5               # step growth after an easy step (<= 6 iterations)
+
+
+@dataclass
+class SolveResult:
+    """Outcome of one load case. anchors (n_probe, 2) mm; angles rad; times s."""
+
+    load: Load
+    converged: bool
+    anchors: np.ndarray
+    phi_end: float
+    cap_rotation: float
+    newton_iterations: list[int] = field(default_factory=list)
+    load_steps: int = 0
+    cutbacks: int = 0
+    wall_time: float = 0.0
+    reason: str = ""
+    extrapolated: bool = False
+    u: object = None                # dolfinx.fem.Function (this rank's part)
+
+    @property
+    def iterations(self) -> int:
+        return int(sum(self.newton_iterations))
+
+    def summary(self) -> dict:
+        """JSON-ready figures (no field data)."""
+        return {
+            "load": asdict(self.load), "converged": self.converged,
+            "anchors_mm": np.round(self.anchors, 6).tolist(),
+            "phi_end_rad": self.phi_end, "phi_end_deg": math.degrees(self.phi_end),
+            "cap_rotation_rad": self.cap_rotation,
+            "cap_rotation_deg": math.degrees(self.cap_rotation),
+            "tangent_assumption_error_deg": math.degrees(self.cap_rotation - self.phi_end),
+            "newton_iterations": self.newton_iterations, "iterations": self.iterations,
+            "load_steps": self.load_steps, "cutbacks": self.cutbacks,
+            "wall_time_s": self.wall_time, "reason": self.reason,
+            "extrapolated": self.extrapolated,
+        }
+
+
+def _lame(E: float, nu: float) -> tuple[float, float]:
+    return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
+
+
+def neo_hookean_psi(F, mu, lmbda):
+    """Strain energy density psi(F) (MPa = N·mm/mm³), compressible neo-Hookean."""
+    J = ufl.det(F)
+    I1 = ufl.tr(F.T * F)
+    return mu / 2 * (I1 - 3) - mu * ufl.ln(J) + lmbda / 2 * ufl.ln(J) ** 2
+
+
+class Solver:
+    """Large-deflection solver on one mesh; keeps its state for continuation.
+
+    ``probe_points`` (n, 3) are material points whose deformed (x, y) are reported
+    (the joint's anchors); ``ref_point`` (3,) is where F1, F2 act on the rigid cap.
+    """
+
+    def __init__(self, mesh_data: MeshData, ref_point, probe_points,
+                 material: Material = Material(), config: SolverConfig = SolverConfig()):
+        self.mesh_data, self.material, self.config = mesh_data, material, config
+        mesh, ct, ft = mesh_data.mesh, mesh_data.cell_tags, mesh_data.facet_tags
+        self.comm = mesh.comm
+        tdim = mesh.topology.dim
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        self.V = V = fem.VectorFunctionSpace(mesh, ("CG", config.degree))
+        self.u = u = fem.Function(V, name="u")
+        self._u_saved = fem.Function(V)
+        v, du = ufl.TestFunction(V), ufl.TrialFunction(V)
+
+        # --- boundary conditions: clamp + symmetry plane
+        clamp_facets = ft.find(TAGS["proximal"])
+        sym_facets = ft.find(TAGS["symmetry"])
+        zero = np.zeros(3, dtype=PETSc.ScalarType)
+        bc_clamp = fem.dirichletbc(zero, fem.locate_dofs_topological(V, tdim - 1, clamp_facets), V)
+        Vz = V.sub(2)
+        bc_sym = fem.dirichletbc(PETSc.ScalarType(0),
+                                 fem.locate_dofs_topological(Vz, tdim - 1, sym_facets), Vz)
+        self.bcs = [bc_clamp, bc_sym]
+
+        # --- measures
+        md = {"quadrature_degree": config.quadrature_degree}
+        dx = ufl.Measure("dx", domain=mesh, subdomain_data=ct, metadata=md)
+        ds = ufl.Measure("ds", domain=mesh, subdomain_data=ft, metadata=md)
+        self._dx_cap = dx(TAGS["distal_cap"])
+
+        # --- kinematics and internal energy
+        d = len(u)
+        I = ufl.Identity(d)
+        F = ufl.variable(I + ufl.grad(u))
+        mu, lmbda = _lame(material.E, material.nu)
+        mu_c, lmbda_c = _lame(material.cap_stiffness * material.E, material.cap_nu)
+        psi_body = neo_hookean_psi(F, mu, lmbda)
+        psi_cap = neo_hookean_psi(F, mu_c, lmbda_c)
+        P_body = ufl.diff(psi_body, F)
+        P_cap = ufl.diff(psi_cap, F)
+        R_int = (ufl.inner(P_body, ufl.grad(v)) * dx(TAGS["solid"])
+                 + ufl.inner(P_cap, ufl.grad(v)) * dx(TAGS["distal_cap"]))
+
+        # --- cap rotation, relative to the last converged rotation theta_ref
+        self.theta_ref = fem.Constant(mesh, PETSc.ScalarType(0))
+        c, s = ufl.cos(self.theta_ref), ufl.sin(self.theta_ref)
+        a, b = F[0, 0] + F[1, 1], F[1, 0] - F[0, 1]
+        theta = self.theta_ref + ufl.atan_2(b * c - a * s, a * c + b * s)
+        self._theta_form = fem.form(theta * self._dx_cap)
+        one = fem.Constant(mesh, PETSc.ScalarType(1))
+        self.cap_volume = self._allsum(fem.assemble_scalar(fem.form(one * self._dx_cap)))
+
+        # --- end-load potentials per unit F1, F2, M (the half-model carries half)
+        X = ufl.SpatialCoordinate(mesh)
+        Xref = ufl.as_vector([float(ref_point[0]), float(ref_point[1])])
+        Rth = ufl.as_matrix([[ufl.cos(theta), -ufl.sin(theta)], [ufl.sin(theta), ufl.cos(theta)]])
+        arm = Xref - ufl.as_vector([X[0], X[1]])
+        u_ref = ufl.as_vector([u[0], u[1]]) + (Rth - ufl.Identity(2)) * arm
+        w = -0.5 / self.cap_volume
+        potentials = [w * u_ref[0] * self._dx_cap, w * u_ref[1] * self._dx_cap,
+                      w * theta * self._dx_cap]
+        self._dR_dload = [ufl.derivative(pi, u, v) for pi in potentials]   # F1, F2, M
+
+        # --- pressure: follower traction on the deformed chamber walls
+        tags = set(np.unique(ft.values)) if ft.values.size else set()
+        tags = self.comm.allreduce(tags, op=MPI.BOR) if self.comm.size > 1 else tags
+        N = ufl.FacetNormal(mesh)
+        self._dR_dp = {}
+        for name in ("top_chamber", "bottom_chamber"):
+            if TAGS[name] in tags:
+                self._dR_dp[name] = ufl.inner(ufl.cofac(F) * N, v) * ds(TAGS[name])
+
+        # --- load constants and full residual
+        self.p = {name: fem.Constant(mesh, PETSc.ScalarType(0)) for name in self._dR_dp}
+        self.f = [fem.Constant(mesh, PETSc.ScalarType(0)) for _ in range(3)]  # F1, F2, M
+        R = R_int
+        for name, form in self._dR_dp.items():
+            R = R + self.p[name] * form
+        for lam, form in zip(self.f, self._dR_dload):
+            R = R + lam * form
+        Jac = ufl.derivative(R, u, du)
+        self._forms_p = {n: fem.form(f) for n, f in self._dR_dp.items()}
+        self._forms_load = [fem.form(f) for f in self._dR_dload]
+
+        self._R, self._J = fem.form(R), fem.form(Jac)
+        self._A = create_matrix(self._J)
+        self._b = create_vector(self._R)
+        self._du = fem.Function(V)
+        # Direct solver; PETSc keeps MUMPS' symbolic factorisation across Newton
+        # iterations and solves because the sparsity pattern never changes.
+        self.ksp = ksp = PETSc.KSP().create(self.comm)
+        ksp.setOperators(self._A)
+        ksp.setOptionsPrefix(f"softjoint_{id(self)}_")
+        opts = PETSc.Options()
+        prefix = ksp.getOptionsPrefix()
+        opts[f"{prefix}ksp_type"] = "preonly"
+        opts[f"{prefix}pc_type"] = "lu"
+        opts[f"{prefix}pc_factor_mat_solver_type"] = "mumps"
+        ksp.setFromOptions()
+
+        # --- probes (anchor points) and state
+        self.probe_points = np.asarray(probe_points, dtype=float).reshape(-1, 3)
+        self._probe_cells = self._locate(self.probe_points)
+        self.state_load: Load | None = Load()      # load of the current converged state
+        self._factor_fresh = False                 # last factorisation near current state?
+
+    # ------------------------------------------------------------------ helpers
+    def _allsum(self, x: float) -> float:
+        return self.comm.allreduce(x, op=MPI.SUM)
+
+    def _locate(self, points: np.ndarray) -> np.ndarray:
+        """Owning local cell of each point on this rank, or -1. Shape (n,)."""
+        mesh = self.mesh_data.mesh
+        tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+        cand = geometry.compute_collisions(tree, points)
+        coll = geometry.compute_colliding_cells(mesh, cand, points)
+        return np.array([coll.links(i)[0] if len(coll.links(i)) else -1
+                         for i in range(len(points))], dtype=np.int32)
+
+    def evaluate(self, func, points=None, cells=None) -> np.ndarray:
+        """Values of a vector Function at the probe points, gathered on all ranks. (n, 3)."""
+        points = self.probe_points if points is None else points
+        cells = self._probe_cells if cells is None else cells
+        vals = np.full((len(points), 3), np.nan)
+        mine = cells >= 0
+        if mine.any():
+            vals[mine] = func.eval(points[mine], cells[mine])
+        gathered = self.comm.allgather(vals)
+        out = np.full_like(vals, np.nan)
+        for g in gathered:   # first rank that owns a point wins: no duplicates
+            take = np.isnan(out[:, 0]) & ~np.isnan(g[:, 0])
+            out[take] = g[take]
+        if np.isnan(out).any():
+            raise RuntimeError("a probe point lies outside the mesh")
+        return out
+
+    def _residual(self) -> float:
+        """Assemble R(u) into self._b (Dirichlet rows: u - 0); return its 2-norm (N)."""
+        b = self._b
+        with b.localForm() as loc:
+            loc.set(0.0)
+        assemble_vector(b, self._R)
+        apply_lifting(b, [self._J], bcs=[self.bcs], x0=[self.u.vector], scale=-1.0)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        set_bc(b, self.bcs, self.u.vector, -1.0)
+        return b.norm()
+
+    def _factorise(self) -> None:
+        """Assemble the tangent K(u) and (re)factorise it."""
+        self._A.zeroEntries()
+        assemble_matrix(self._A, self._J, bcs=self.bcs)
+        self._A.assemble()
+        self.ksp.setOperators(self._A)
+        self.ksp.setUp()
+
+    def newton(self, reuse_factor: bool = False) -> tuple[int, bool]:
+        """Newton iterations at the current load from the current u: (iterations, converged).
+
+        With ``reuse_factor`` the first correction uses the existing factorisation, i.e.
+        the tangent of the last converged state under its own load (an Euler predictor).
+        This matters: at a new pressure the consistent tangent contains the follower
+        load stiffness p dcofac(F)N/du without the wall pre-stress that balances it, and
+        from the unstressed state it is near-singular (tip response flips sign at
+        P ~ 0.03 MPa), so a consistent first step would overshoot wildly.
+
+        Converged when ||R|| <= atol, or when the last correction satisfies
+        ||du|| <= stol ||u|| (the residual then sits at its round-off floor, which grows
+        with the cap stiffness and mesh size). Aborts early on a non-finite or exploding
+        residual.
+        """
+        cfg = self.config
+        r0 = self._residual()
+        norm, du = r0, math.inf
+        for it in range(cfg.max_it + 1):
+            if it > 0:
+                norm = self._residual()
+                du = self._du.vector.norm()
+            if not math.isfinite(norm) or norm > 1e6 * max(r0, 1.0):
+                return it, False
+            if self.comm.rank == 0:
+                log.debug("  Newton %d: |R| = %.3e N, |du| = %.3e mm", it, norm, du)
+            if norm <= cfg.atol or du <= cfg.stol * self.u.vector.norm():
+                return it, True
+            if it == cfg.max_it:
+                return it, False
+            if not (it == 0 and reuse_factor):
+                self._factorise()
+            self.ksp.solve(self._b, self._du.vector)
+            self._du.x.scatter_forward()
+            self.u.x.array[:] -= self._du.x.array
+        return cfg.max_it, False
+
+    def cap_rotation(self) -> float:
+        """Volume-averaged rotation of the distal cap about +z (rad)."""
+        return self._allsum(fem.assemble_scalar(self._theta_form)) / self.cap_volume
+
+    def _set_load(self, a: np.ndarray) -> None:
+        P = a[0]
+        if "top_chamber" in self.p:
+            self.p["top_chamber"].value = max(P, 0.0)
+        if "bottom_chamber" in self.p:
+            self.p["bottom_chamber"].value = max(-P, 0.0)
+        for lam, val in zip(self.f, a[1:]):
+            lam.value = val
+
+    def positions(self) -> np.ndarray:
+        """Deformed (x, y) of the probe points (mm), shape (n, 2)."""
+        return (self.probe_points + self.evaluate(self.u))[:, :2]
+
+    def reset(self) -> None:
+        """Return to the undeformed, unloaded state."""
+        self.u.x.array[:] = 0.0
+        self.theta_ref.value = 0.0
+        self.state_load = Load()
+        self._set_load(np.zeros(4))
+        self._factor_fresh = False
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, load: Load, continuation: bool = False) -> SolveResult:
+        """Solve for ``load``; from zero, or (continuation) from the current state.
+
+        The load path is linear from the start load to ``load``. A step whose Newton
+        iteration fails is undone and halved; below ``min_step`` the solve fails and the
+        solver returns to its last converged state (never a non-converged one).
+        """
+        cfg = self.config
+        t0 = time.perf_counter()
+        if not continuation or self.state_load is None:
+            self.reset()
+        start, target = self.state_load.as_array(), load.as_array()
+        span = np.abs((target - start) / INPUT_BOX).max()
+        ds = cfg.first_step or min(cfg.max_step, cfg.box_step / max(span, 1e-300))
+        s = 0.0
+        iters, cutbacks, steps, reason = [], 0, 0, ""
+        self._u_saved.x.array[:] = self.u.x.array
+        theta_saved = float(self.theta_ref.value)
+        while s < 1.0 - 1e-14:
+            s_try = min(1.0, s + ds)
+            if not self._factor_fresh:      # tangent of the converged state, own load
+                self._set_load(start + s * (target - start))
+                self._factorise()
+                self._factor_fresh = True
+            self._set_load(start + s_try * (target - start))
+            try:
+                n, ok = self.newton(reuse_factor=True)
+                ok = ok and bool(np.isfinite(self.u.x.array).all())
+            except PETSc.Error as exc:      # MUMPS failure on a singular/NaN tangent
+                n, ok = self.config.max_it, False
+                reason = str(exc).splitlines()[0]
+            if ok:
+                s, steps = s_try, steps + 1
+                iters.append(int(n))
+                self._u_saved.x.array[:] = self.u.x.array
+                self.theta_ref.value = theta_saved = self.cap_rotation()
+                # The last factorisation (previous iterate, same load) is the converged
+                # tangent up to a quadratically small error: keep it as the next predictor.
+                self._factor_fresh = n > 1
+                if self.comm.rank == 0:
+                    log.info("load step %d: path %.4f, %d Newton iterations", steps, s, n)
+                ds = min(cfg.max_step, ds * cfg.grow) if n <= 6 else ds
+            else:
+                cutbacks += 1
+                self.u.x.array[:] = self._u_saved.x.array
+                self.theta_ref.value = theta_saved
+                self._factor_fresh = False
+                ds /= 2
+                if self.comm.rank == 0:
+                    log.info("cut back at path %.4f -> step %.5f", s, ds)
+                if ds < cfg.min_step:
+                    reason = reason or f"no convergence after {cutbacks} cut-backs at path {s:.4f}"
+                    break
+        converged = s >= 1.0 - 1e-14
+        final = Load.from_array(start + s * (target - start))
+        self.state_load = final
+        self._set_load(final.as_array())
+        anchors = self.positions()
+        d = anchors[-1] - anchors[-2] if len(anchors) > 1 else np.full(2, np.nan)
+        result = SolveResult(
+            load=load, converged=converged, anchors=anchors,
+            phi_end=float(math.atan2(d[1], d[0])),
+            cap_rotation=float(self.theta_ref.value), newton_iterations=iters,
+            load_steps=steps, cutbacks=cutbacks, wall_time=time.perf_counter() - t0,
+            reason="" if converged else reason, u=self.u)
+        if self.comm.rank == 0:
+            log.info("solve %s: converged=%s, %d steps, %d iterations, %.2f s",
+                     load, converged, steps, result.iterations, result.wall_time)
+        return result
+
+    # ------------------------------------------------------------------ sensitivities
+    def sensitivities(self) -> np.ndarray:
+        """d(probe x, y)/d(P, F1, F2, M) at the current converged state, shape (2n, 4).
+
+        Rows are the probe coordinates flattened as (x_1, y_1, x_2, ...); columns in
+        mm/MPa, mm/N, mm/N, mm/(N·mm). Uses the last LU factorisation of the tangent
+        (from the final Newton iteration, a quadratically small distance from the
+        converged state); refactorises only when the last step needed no iteration.
+        At P = 0 the pressure derivative is the one-sided (top chamber) one.
+        """
+        ksp = self.ksp
+        if not self._factor_fresh:
+            self._factorise()
+            self._factor_fresh = True
+        P = self.state_load.P
+        rhs = []
+        if self._forms_p:
+            name, sign = ("top_chamber", 1.0) if P >= 0 else ("bottom_chamber", -1.0)
+            rhs.append((self._forms_p[name], sign))
+        else:
+            rhs.append((None, 0.0))
+        rhs += [(f, 1.0) for f in self._forms_load]
+        w = fem.Function(self.V)
+        cols = []
+        for form, sign in rhs:
+            if form is None:
+                cols.append(np.zeros(2 * len(self.probe_points)))
+                continue
+            b = assemble_vector(form)
+            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            set_bc(b, self.bcs, scale=0.0)
+            ksp.solve(b, w.vector)
+            w.x.scatter_forward()
+            # K du = -dR/dλ  -> du/dλ = -K^-1 dR/dλ
+            cols.append(-sign * self.evaluate(w)[:, :2].reshape(-1))
+            b.destroy()
+        return np.column_stack(cols)
+
+    # ------------------------------------------------------------------ info
+    def mesh_info(self) -> dict:
+        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs."""
+        mesh = self.mesh_data.mesh
+        imap = mesh.topology.index_map(0)
+        cmap = mesh.topology.index_map(mesh.topology.dim)
+        nodes = self.V.dofmap.index_map.size_global
+        return {"vertices": imap.size_global, "cells": cmap.size_global,
+                "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
+                "degree": self.config.degree, "mesh_size": self.mesh_data.geometry.mesh_size}
+
+
+class JointSolver(Solver):
+    """The bellow joint: anchors r_1..r_10 (DESIGN.md §3), loads at r_10."""
+
+    def __init__(self, geometry: JointGeometry = JointGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
+                 material: Material = Material(), config: SolverConfig = SolverConfig()):
+        X = anchor_points(geometry.length)
+        super().__init__(create_mesh(geometry, comm), ref_point=X[-1], probe_points=X,
+                         material=material, config=config)
+
+    def solve(self, load: Load, continuation: bool = False,
+              allow_extrapolation: bool = False) -> SolveResult:
+        """Solve one load case. Raises LoadOutOfRange outside the box unless allowed."""
+        load.check_box(allow_extrapolation)
+        result = super().solve(load, continuation)
+        result.extrapolated = bool(np.any(np.abs(load.as_array()) > INPUT_BOX))
+        return result
+
+
+def beam_solver(geometry: BeamGeometry = BeamGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
+                E: float = 12.2, config: SolverConfig = SolverConfig()) -> Solver:
+    """The slender benchmark cantilever (nu = 0): probes at the beam end (L, 0, 0)."""
+    tip = np.array([geometry.length, 0.0, 0.0])
+    return Solver(create_mesh(geometry, comm), ref_point=tip, probe_points=tip[None, :],
+                  material=Material(E=E, nu=0.0), config=config)

@@ -1,0 +1,131 @@
+"""Dataset preparation for the surrogate: load, split 7:2:1, mirror-augment, normalise.
+
+Data flow::
+
+    DIR/manifest.json + shards  --workflow.shards.load_dataset-->  arrays (sha256 and
+    checksums verified, shard configs checked against the manifest)
+        --split_of(sample_id, manifest seed)-->  train / val / test    (7:2:1)
+        --mirror (train only, paper config)-->  train ∪ mirror(train)
+        --normalisation(train)-->  input_scale, output_mean, output_scale
+
+A sample's split is a hash of its id and the dataset seed, so it never changes when the
+campaign adds shards. Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian
+d anchors.reshape(20) / d inputs (NaN rows where the campaign stored none).
+
+Normalisation (stored inside the model): z = x / INPUT_BOX, so the training box is
+[-1, 1]^4; anchors = output_mean + output_scale * network(z), with the per-coordinate
+mean and standard deviation of the (mirror-augmented) training anchors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from workflow.shards import INPUT_BOX, ShardError, load_dataset, mirror, split_of
+
+SPLITS = ("train", "val", "test")
+
+
+class ExtrapolationError(ValueError):
+    """An input lies outside the surrogate's training box."""
+
+
+@dataclass
+class Samples:
+    """A set of samples as float64 tensors.
+
+    inputs (n, 4) [MPa, N, N, N·mm]; anchors (n, 10, 2) mm; jacobian (n, 20, 4), NaN where
+    absent; sample_id (n,) int64.
+    """
+
+    inputs: torch.Tensor
+    anchors: torch.Tensor
+    jacobian: torch.Tensor
+    sample_id: torch.Tensor
+
+    def __len__(self) -> int:
+        return len(self.inputs)
+
+    def subset(self, index) -> "Samples":
+        return Samples(self.inputs[index], self.anchors[index], self.jacobian[index],
+                       self.sample_id[index])
+
+    @property
+    def has_jacobian(self) -> torch.Tensor:
+        """(n,) bool: the sample carries a finite FEM Jacobian."""
+        return torch.isfinite(self.jacobian).all(dim=(1, 2))
+
+
+def load_samples(root: str | Path) -> tuple[Samples, dict]:
+    """All samples of dataset ``root`` and its manifest. Raises ShardError if unusable."""
+    arrays, manifest = load_dataset(root)
+    if len(arrays["sample_id"]) == 0:
+        raise ShardError(f"{root}: the dataset holds no samples")
+    if not (np.isfinite(arrays["inputs"]).all() and np.isfinite(arrays["anchors"]).all()):
+        raise ShardError(f"{root}: non-finite inputs or anchors in the dataset")
+    samples = Samples(*(torch.as_tensor(arrays[k]) for k in
+                        ("inputs", "anchors", "jacobian", "sample_id")))
+    return samples, manifest
+
+
+def split(samples: Samples, seed: int) -> dict[str, Samples]:
+    """Split 7:2:1 into train / val / test by the dataset seed (workflow.shards.split_of)."""
+    label = torch.as_tensor(split_of(samples.sample_id.numpy(), seed))
+    return {name: samples.subset(label == i) for i, name in enumerate(SPLITS)}
+
+
+def load_splits(root: str | Path) -> tuple[dict[str, Samples], dict]:
+    """Load dataset ``root`` and split it; returns ({train, val, test}, manifest)."""
+    samples, manifest = load_samples(root)
+    if "seed" not in manifest:
+        raise ShardError(f"{root}: the manifest has no seed, so the split is undefined")
+    parts = split(samples, int(manifest["seed"]))
+    for name, part in parts.items():
+        if len(part) == 0:
+            raise ShardError(f"{root}: the {name} split is empty ({len(samples)} samples)")
+    return parts, manifest
+
+
+def augment_mirror(samples: Samples) -> Samples:
+    """samples ∪ their y-mirror images (DESIGN.md §3); the mirror copies keep their ids."""
+    x, r, j = mirror(samples.inputs.numpy(), samples.anchors.numpy(), samples.jacobian.numpy())
+    return Samples(torch.cat([samples.inputs, torch.as_tensor(x)]),
+                   torch.cat([samples.anchors, torch.as_tensor(r)]),
+                   torch.cat([samples.jacobian, torch.as_tensor(j)]),
+                   torch.cat([samples.sample_id, samples.sample_id]))
+
+
+def normalisation(train: Samples) -> dict[str, list[float]]:
+    """Normalisation constants from the training samples (mirror-augmented inside).
+
+    Returns input_scale (4,) = INPUT_BOX, output_mean (20,) mm, output_scale (20,) mm; the
+    y means are zero because the statistics include the mirror images.
+    """
+    anchors = augment_mirror(train).anchors.reshape(-1, 20)
+    return {"input_scale": INPUT_BOX.tolist(),
+            "output_mean": anchors.mean(0).tolist(),
+            "output_scale": anchors.std(0).clamp_min(1e-6).tolist()}
+
+
+def outside_box(inputs: torch.Tensor | np.ndarray) -> np.ndarray:
+    """(n, 4) inputs -> (n,) bool: outside the training box |x_k| <= INPUT_BOX_k (+1e-6 relative,
+    so float32 edge values count as inside)."""
+    x = np.asarray(inputs, dtype=np.float64).reshape(-1, 4)
+    return (np.abs(x) > INPUT_BOX * (1 + 1e-6)).any(axis=1)
+
+
+def check_box(inputs, allow_extrapolation: bool = False) -> int:
+    """Number of inputs (..., 4) outside the training box; raises ExtrapolationError if any
+    is outside and not allow_extrapolation."""
+    outside = outside_box(torch.as_tensor(inputs).detach())
+    if outside.any() and not allow_extrapolation:
+        bad = np.asarray(torch.as_tensor(inputs).detach()).reshape(-1, 4)[outside][0]
+        raise ExtrapolationError(
+            f"{outside.sum()} input(s) outside the training box |P|<=0.3 MPa, |F1|,|F2|<=3 N, "
+            f"|M|<=100 N*mm, e.g. [P, F1, F2, M] = {[round(float(v), 6) for v in bad]} "
+            f"(use --allow-extrapolation)")
+    return int(outside.sum())

@@ -1,0 +1,258 @@
+"""Accuracy, Jacobian and speed of surrogates on a dataset; the paper/improved/KNN report.
+
+Metrics on n samples with true anchors R (n, 10, 2) mm and predictions R̂:
+
+    e_ik = |R̂_ik - R_ik|                                 anchor error, mm
+    mean_anchor_error_mm = mean_ik e_ik;  p95_anchor_error_mm = 95th percentile of all e_ik
+    tip_error_mm         = mean_i e_i,10
+    phi_end_error_deg    = mean_i |wrap(phî_i - phi_i)|,  phi = atan2(y10 - y9, x10 - x9)
+    jacobian_rel_error   = mean_i ||(Ĵ_i - J_i) D||_F / ||J_i D||_F,  D = diag(INPUT_BOX)
+                           (the columns in mm per half-range of each input, so P, F1, F2
+                           and M weigh alike; samples without an FEM Jacobian are skipped,
+                           null when none has one)
+
+Inference time: the median wall time of one no-grad call on a single sample, and the
+throughput of no-grad calls on batches of 4,096 samples (over 1 s), in float64 (the dtype
+of load_surrogate) and in float32, on the threads torch is set to use (default 1).
+
+One checkpoint on any dataset directory:
+    python -m surrogate.evaluate --model PATH --data DIR [--split all|train|val|test] --json
+The report (metrics.json, metrics.md, comparison figure):
+    python -m surrogate.evaluate --report --train-data DIR --heldout DIR --dir results/surrogate
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from surrogate.data import Samples, check_box, load_samples, load_splits
+from surrogate.knn import choose_knn
+from surrogate.model import ModelError, load_checkpoint, load_surrogate, phi_end, wrap
+from workflow.shards import INPUT_BOX, ShardError
+
+METRIC_KEYS = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm",
+               "phi_end_error_deg", "jacobian_rel_error", "n")
+
+
+def jacobian(model, x: torch.Tensor) -> torch.Tensor:
+    """d model(x).reshape(20) / dx for independent rows: x (n, 4) -> (n, 20, 4)."""
+    x = x.detach().clone()
+    jac = torch.autograd.functional.jacobian(lambda a: model(a).reshape(len(a), -1).sum(0), x,
+                                             vectorize=True)
+    return jac.permute(1, 0, 2)
+
+
+def metrics(pred: torch.Tensor, true: torch.Tensor, pred_jac: torch.Tensor | None = None,
+            true_jac: torch.Tensor | None = None) -> dict:
+    """The metric dict (module docstring) from anchors (n, 10, 2) mm and Jacobians (n, 20, 4)."""
+    e = (pred - true).norm(dim=-1)
+    dphi = wrap(phi_end(pred) - phi_end(true)).abs()
+    out = {
+        "mean_anchor_error_mm": e.mean().item(),
+        "p95_anchor_error_mm": torch.quantile(e.flatten(), 0.95).item(),
+        "tip_error_mm": e[:, -1].mean().item(),
+        "phi_end_error_deg": math.degrees(dphi.mean().item()),
+        "jacobian_rel_error": None,
+        "n": len(true),
+        "max_anchor_error_mm": e.max().item(),
+        "p95_phi_end_error_deg": math.degrees(torch.quantile(dphi, 0.95).item()),
+    }
+    if pred_jac is not None and true_jac is not None:
+        ok = torch.isfinite(true_jac).all(dim=(1, 2))
+        if ok.any():
+            d = torch.as_tensor(INPUT_BOX)
+            num = ((pred_jac[ok] - true_jac[ok]) * d).flatten(1).norm(dim=1)
+            out["jacobian_rel_error"] = (num / (true_jac[ok] * d).flatten(1).norm(dim=1)).mean().item()
+    return out
+
+
+def evaluate(model, samples: Samples) -> dict:
+    """Metrics of a module (inputs (n, 4) -> anchors (n, 10, 2)) on samples."""
+    x = samples.inputs.to(torch.float64)
+    with torch.no_grad():
+        pred = model(x)
+    return metrics(pred, samples.anchors, jacobian(model, x), samples.jacobian)
+
+
+def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0) -> dict:
+    """Inference speed (module docstring): single-sample ms and batched samples/s per dtype."""
+    out = {"threads": torch.get_num_threads(), "batch": batch}
+    for dtype, tag in ((torch.float64, "float64"), (torch.float32, "float32")):
+        m = model.to(dtype)
+        x1 = torch.tensor([[0.1, 1.0, 0.5, 10.0]], dtype=dtype)
+        xb = (torch.rand(batch, 4, generator=torch.Generator().manual_seed(0), dtype=dtype)
+              * 2 - 1) * torch.as_tensor(INPUT_BOX, dtype=dtype)
+        with torch.no_grad():
+            for _ in range(50):
+                m(x1)
+            single = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                m(x1)
+                single.append(time.perf_counter() - t0)
+            m(xb)
+            calls, t0 = 0, time.perf_counter()
+            while time.perf_counter() - t0 < seconds:
+                m(xb)
+                calls += 1
+            rate = calls * batch / (time.perf_counter() - t0)
+        out[f"single_ms_{tag}"] = 1e3 * float(np.median(single))
+        out[f"batched_samples_per_s_{tag}"] = rate
+    model.to(torch.float64)
+    return out
+
+
+def comparison_figure(path: Path, samples: Samples, models: dict, source: str,
+                      n_cases: int = 8, seed: int = 0) -> None:
+    """Left: data against surrogate centre lines for random cases (like the paper's Fig. 2C).
+    Right: mean error of each anchor r_1..r_10 over all samples, per model."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    idx = torch.randperm(len(samples), generator=torch.Generator().manual_seed(seed))[:n_cases]
+    cases = samples.subset(idx)
+    styles = {"paper": ("tab:orange", "--"), "improved": ("tab:blue", "-"), "knn": ("tab:green", ":")}
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.5), gridspec_kw={"width_ratios": [1.4, 1]})
+    origin = torch.zeros(len(cases), 1, 2, dtype=torch.float64)
+    true = torch.cat([origin, cases.anchors], dim=1)
+    for i, line in enumerate(true):
+        a.plot(line[:, 0], line[:, 1], "ko", ms=4, label="data" if i == 0 else None)
+    for name, model in models.items():
+        color, ls = styles.get(name, ("gray", "-"))
+        with torch.no_grad():
+            pred = torch.cat([origin, model(cases.inputs)], dim=1)
+            err = (model(samples.inputs) - samples.anchors).norm(dim=-1).mean(0)
+        for i, line in enumerate(pred):
+            a.plot(line[:, 0], line[:, 1], color=color, ls=ls, lw=1.2,
+                   label=name if i == 0 else None)
+        b.semilogy(range(1, 11), err, color=color, ls=ls, marker="o", label=name)
+    a.set_aspect("equal")
+    a.set_xlabel("x (mm)")
+    a.set_ylabel("y (mm)")
+    a.set_title(f"{n_cases} random held-out cases: centre lines (anchors r_0..r_10)")
+    a.grid(alpha=0.3)
+    a.legend(fontsize=8)
+    b.set_xlabel("anchor i")
+    b.set_ylabel("mean error |r̂_i - r_i| (mm)")
+    b.set_title(f"held-out set, n = {len(samples)}")
+    b.grid(alpha=0.3, which="both")
+    b.legend(fontsize=8)
+    fig.suptitle(f"Joint surrogates against the dataset ({source})")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _fmt(v, digits=3):
+    return "n/a" if v is None else f"{v:.{digits}g}" if isinstance(v, float) else str(v)
+
+
+def markdown_table(report: dict) -> str:
+    """The metrics table for results/REPORT.md (held-out and test rows per model)."""
+    rows = ["| model | set | n | mean anchor (mm) | p95 anchor (mm) | tip (mm) | phi_end (deg) "
+            "| Jacobian rel. | train time (s) | single (ms, f64) | batched (samples/s, f64) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name in ("paper", "improved", "knn"):
+        entry = report[name]
+        t = entry.get("timing", {})
+        for part in ("heldout", "test"):
+            m = entry[part]
+            rows.append(
+                f"| {name} | {part} | {m['n']} | {_fmt(m['mean_anchor_error_mm'])} "
+                f"| {_fmt(m['p95_anchor_error_mm'])} | {_fmt(m['tip_error_mm'])} "
+                f"| {_fmt(m['phi_end_error_deg'])} | {_fmt(m['jacobian_rel_error'])} "
+                f"| {_fmt(entry.get('train_time_s'), 4)} | {_fmt(t.get('single_ms_float64'))} "
+                f"| {_fmt(t.get('batched_samples_per_s_float64'))} |")
+    return "\n".join(rows) + "\n"
+
+
+def report(train_root: Path, heldout_root: Path, out_dir: Path) -> dict:
+    """Evaluate paper.pt, improved.pt and a KNN (k on validation) on test and held-out sets.
+
+    Writes out_dir/metrics.json, metrics.md and comparison.png; returns the report dict.
+    """
+    splits, manifest = load_splits(train_root)
+    heldout, heldout_manifest = load_samples(heldout_root)
+    result, models = {}, {}
+    for name in ("paper", "improved"):
+        path = out_dir / f"{name}.pt"
+        ckpt = load_checkpoint(path)
+        models[name] = load_surrogate(path)
+        result[name] = {"test": evaluate(models[name], splits["test"]),
+                        "heldout": evaluate(models[name], heldout),
+                        "train_time_s": ckpt["metrics"].get("train_time_s"),
+                        "timing": timing(models[name])}
+    knn, choice = choose_knn(splits["train"], splits["val"])
+    models["knn"] = knn
+    result["knn"] = {"test": evaluate(knn, splits["test"]), "heldout": evaluate(knn, heldout),
+                     "train_time_s": choice["fit_time_s"], "choice": choice,
+                     "timing": timing(knn, repeats=200)}
+    result["datasets"] = {"train": {"root": str(train_root), "seed": manifest.get("seed"),
+                                    "config": manifest.get("config"),
+                                    "n": {k: len(v) for k, v in splits.items()}},
+                          "heldout": {"root": str(heldout_root), "seed": heldout_manifest.get("seed"),
+                                      "config": heldout_manifest.get("config"), "n": len(heldout)}}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "metrics.json").write_text(json.dumps(result, indent=1) + "\n")
+    (out_dir / "metrics.md").write_text(markdown_table(result))
+    source = (heldout_manifest.get("config") or {}).get("source", "FEM campaign")
+    comparison_figure(out_dir / "comparison.png", heldout, models, source)
+    return result
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m surrogate.evaluate",
+                                 description="Evaluate a surrogate checkpoint on a dataset, "
+                                             "or write the paper/improved/KNN report.")
+    ap.add_argument("--model", help="checkpoint (.pt) to evaluate")
+    ap.add_argument("--data", help="dataset directory (manifest.json + shards)")
+    ap.add_argument("--split", choices=("all", "train", "val", "test"), default="all",
+                    help="samples of --data to use (split 7:2:1 by the dataset seed)")
+    ap.add_argument("--allow-extrapolation", action="store_true",
+                    help="evaluate samples outside the training box too (recorded in the output)")
+    ap.add_argument("--report", action="store_true",
+                    help="evaluate DIR/paper.pt, DIR/improved.pt and KNN; write the report")
+    ap.add_argument("--train-data", default="results/data/train", help="--report: training dataset")
+    ap.add_argument("--heldout", default="results/data/heldout", help="--report: held-out dataset")
+    ap.add_argument("--dir", default="results/surrogate", help="--report: checkpoints and outputs")
+    ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    ap.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    try:
+        if args.report:
+            result = report(Path(args.train_data), Path(args.heldout), Path(args.dir))
+            print(json.dumps(result, indent=1) if args.json else markdown_table(result), end="")
+            return 0
+        if not args.model or not args.data:
+            ap.error("--model and --data are required (or use --report)")
+        model = load_surrogate(args.model)
+        if args.split == "all":
+            samples, _ = load_samples(args.data)
+        else:
+            samples = load_splits(args.data)[0][args.split]
+        outside = check_box(samples.inputs, args.allow_extrapolation)
+        result = evaluate(model, samples) | {"split": args.split, "extrapolated_samples": outside}
+    except (ModelError, ShardError, ValueError, OSError) as exc:
+        print(f"surrogate.evaluate: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        for k, v in result.items():
+            print(f"{k:>24s}  {_fmt(v, 4)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,74 @@
+"""Joint anchors for given loads, from the command line.
+
+    python -m surrogate.predict --model results/surrogate/improved.pt \\
+        --p 0.1 --f1 1 --f2 0 --m 10 [--allow-extrapolation] [--json]
+
+prints the anchors r_1..r_10 (mm, joint frame, relative to the proximal centre) and
+phi_end = atan2(y10 - y9, x10 - x9) (rad and deg). Inputs outside the training box
+|P| <= 0.3 MPa, |F1|, |F2| <= 3 N, |M| <= 100 N·mm are refused unless
+--allow-extrapolation is given, which the output records ("extrapolation": true).
+JSON keys: model, inputs {P_MPa, F1_N, F2_N, M_Nmm}, extrapolation, anchors_mm (10 x 2),
+phi_end_rad, phi_end_deg.
+
+The batched, differentiable torch API is ``surrogate.load_surrogate(path)`` (a frozen
+float64 module, (..., 4) -> (..., 10, 2) mm), with ``surrogate.check_box(x)`` for the
+box check and ``surrogate.phi_end(anchors)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+import torch
+
+from surrogate.data import check_box
+from surrogate.model import ModelError, load_surrogate, phi_end
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m surrogate.predict",
+                                 description="Predict the joint's anchor points and phi_end.")
+    ap.add_argument("--model", default="results/surrogate/improved.pt", help="checkpoint (.pt)")
+    ap.add_argument("--p", type=float, required=True, help="pressure P (MPa, signed)")
+    ap.add_argument("--f1", type=float, required=True, help="axial end force F1 (N)")
+    ap.add_argument("--f2", type=float, required=True, help="transverse end force F2 (N)")
+    ap.add_argument("--m", type=float, required=True, help="end moment M (N*mm, CCW positive)")
+    ap.add_argument("--allow-extrapolation", action="store_true",
+                    help="accept inputs outside the training box (flagged in the output)")
+    ap.add_argument("--json", action="store_true", help="print JSON")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    x = [args.p, args.f1, args.f2, args.m]
+    try:
+        if not all(math.isfinite(v) for v in x):
+            raise ValueError(f"inputs must be finite numbers, got {x}")
+        outside = check_box([x], args.allow_extrapolation)
+        model = load_surrogate(args.model)
+        with torch.no_grad():
+            anchors = model(torch.tensor(x, dtype=torch.float64))
+    except (ModelError, ValueError) as exc:
+        print(f"surrogate.predict: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    phi = phi_end(anchors).item()
+    out = {"model": args.model,
+           "inputs": {"P_MPa": args.p, "F1_N": args.f1, "F2_N": args.f2, "M_Nmm": args.m},
+           "extrapolation": outside > 0,
+           "anchors_mm": anchors.tolist(),
+           "phi_end_rad": phi,
+           "phi_end_deg": math.degrees(phi)}
+    if args.json:
+        print(json.dumps(out, indent=1))
+    else:
+        print(f"inputs P={args.p} MPa F1={args.f1} N F2={args.f2} N M={args.m} N*mm"
+              + ("  (EXTRAPOLATION)" if outside else ""))
+        for i, (ax, ay) in enumerate(out["anchors_mm"], 1):
+            print(f"  r_{i:<2d} x {ax:9.4f} mm  y {ay:9.4f} mm")
+        print(f"  phi_end {phi:.6f} rad = {math.degrees(phi):.4f} deg")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,161 @@
+"""Synthetic joint datasets from an analytic planar rod, for developing and testing the surrogate.
+
+NOT FEM data. Every manifest this module writes says ``"source": "synthetic-rod"`` in its
+config; never commit it as a campaign dataset.
+
+Model (units mm, N, MPa, rad). A clamped, extensible Kirchhoff rod of length L = 45.45 mm
+along x, cut into N straight segments of length h = L/N with angles theta_1..theta_N
+(theta_0 = 0 at the clamp). Segment j has stretch
+
+    lambda_j = 1 + e1 |P| + (F1 cos theta_j + F2 sin theta_j) / EA
+
+and the nodes are r_k = sum_{j<=k} h lambda_j (cos theta_j, sin theta_j). Moment balance
+at node k = 0..N-1 of the part distal to it, with dead end forces F = (F1, F2) at r_N and
+the couple M:
+
+    EI(P) [ (theta_{k+1} - theta_k) / h - kappa_P(P) ] = M + (x_N - x_k) F2 - (y_N - y_k) F1
+
+with EI(P) = EI0 (1 + s1 |P|) (a pressurised chamber stiffens) and the pressure's free
+curvature kappa_P(P) = -k1 P (1 + k2 |P|) (P > 0 inflates the +y chamber, which lengthens
+and bends the joint towards -y). The pressure terms use |P|, so the response has a kink
+at P = 0 like the two-chamber FEM. The model is exactly mirror-symmetric (DESIGN.md §3).
+
+The N equations G(theta; u) = 0 are solved by Newton with load stepping, batched over
+samples. The anchors are r_{iN/10}, i = 1..10, and their exact sensitivities follow from
+the implicit function theorem: d theta/du = -G_theta^{-1} G_u.
+
+Usage: ``python -m surrogate.synthetic --out DIR --n 2560 --seed 1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from workflow import shards
+
+
+@dataclass(frozen=True)
+class RodConfig:
+    length_mm: float = 45.45
+    segments: int = 50          # multiple of 10
+    ei0_nmm2: float = 9000.0    # bending stiffness at P = 0, N·mm²
+    ea_n: float = 400.0         # axial stiffness, N
+    k1_per_mpa_mm: float = 0.064
+    k2_per_mpa: float = 1.0
+    e1_per_mpa: float = 0.10
+    s1_per_mpa: float = 1.0
+    load_steps: int = 4
+
+
+def _stretch(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tensor:
+    """Segment stretches (N,) for one sample: theta (N,) rad, u (4,)."""
+    p, f1, f2 = u[0], u[1], u[2]
+    return 1 + c.e1_per_mpa * p.abs() + (f1 * theta.cos() + f2 * theta.sin()) / c.ea_n
+
+
+def _nodes(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tensor:
+    """Node positions r_1..r_N (N, 2) mm for one sample."""
+    h = c.length_mm / c.segments
+    lam = _stretch(theta, u, c)
+    seg = h * lam[:, None] * torch.stack([theta.cos(), theta.sin()], -1)
+    return seg.cumsum(0)
+
+
+def _residual(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tensor:
+    """Moment balance G (N,) in N·mm at nodes 0..N-1 for one sample."""
+    p, f1, f2, m = u
+    h = c.length_mm / c.segments
+    r = torch.cat([torch.zeros(1, 2, dtype=theta.dtype), _nodes(theta, u, c)])  # r_0..r_N
+    th = torch.cat([torch.zeros(1, dtype=theta.dtype), theta])                   # theta_0..theta_N
+    ei = c.ei0_nmm2 * (1 + c.s1_per_mpa * p.abs())
+    kappa_p = -c.k1_per_mpa_mm * p * (1 + c.k2_per_mpa * p.abs())
+    arm = r[-1] - r[:-1]
+    return ei * ((th[1:] - th[:-1]) / h - kappa_p) - (m + arm[:, 0] * f2 - arm[:, 1] * f1)
+
+
+def _anchors(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tensor:
+    """Anchor points r_1..r_10 (10, 2) mm for one sample."""
+    step = c.segments // shards.N_ANCHORS
+    return _nodes(theta, u, c)[step - 1::step]
+
+
+def solve(inputs: np.ndarray, cfg: RodConfig = RodConfig(), tol: float = 1e-11):
+    """Solve the rod for a batch of inputs (n, 4) [P MPa, F1 N, F2 N, M N·mm].
+
+    Returns (anchors (n, 10, 2) mm, jacobian (n, 20, 4) d anchors / d inputs,
+    end rotation theta_N (n,) rad, Newton iterations (n,)).
+    """
+    u_all = torch.as_tensor(inputs, dtype=torch.float64)
+    n = len(u_all)
+    res = torch.vmap(lambda t, u: _residual(t, u, cfg))
+    g_theta = torch.vmap(torch.func.jacrev(lambda t, u: _residual(t, u, cfg), argnums=0))
+    theta = torch.zeros(n, cfg.segments, dtype=torch.float64)
+    iterations = 0
+    for step in range(1, cfg.load_steps + 1):
+        u = u_all * step / cfg.load_steps
+        for _ in range(50):
+            delta = torch.linalg.solve(g_theta(theta, u), -res(theta, u))
+            theta = theta + delta
+            iterations += 1
+            if delta.abs().max() < tol:
+                break
+        else:
+            raise RuntimeError("synthetic rod: Newton did not converge")
+    jac_g = torch.vmap(torch.func.jacrev(lambda t, u: _residual(t, u, cfg), argnums=(0, 1)))
+    g_t, g_u = jac_g(theta, u_all)
+    dtheta_du = -torch.linalg.solve(g_t, g_u)                                    # (n, N, 4)
+    jac_r = torch.vmap(torch.func.jacrev(lambda t, u: _anchors(t, u, cfg).reshape(-1), argnums=(0, 1)))
+    r_t, r_u = jac_r(theta, u_all)
+    jacobian = r_t @ dtheta_du + r_u
+    anchors = torch.vmap(lambda t, u: _anchors(t, u, cfg))(theta, u_all)
+    return (anchors.numpy(), jacobian.numpy(), theta[:, -1].numpy(),
+            np.full(n, iterations, np.int64))
+
+
+def write_dataset(root: str | Path, n: int, seed: int, shard_size: int = 256,
+                  cfg: RodConfig = RodConfig()) -> Path:
+    """Sample n inputs uniformly in the box (seeded), solve, write shards + manifest to root."""
+    root = Path(root)
+    rng = np.random.default_rng(seed)
+    inputs = rng.uniform(-1, 1, (n, shards.N_INPUTS)) * shards.INPUT_BOX
+    config = {"source": "synthetic-rod", "rod": asdict(cfg)}
+    entries = []
+    for unit, start in enumerate(range(0, n, shard_size)):
+        x = inputs[start:start + shard_size]
+        t0 = time.perf_counter()
+        anchors, jac, end_rot, its = solve(x, cfg)
+        wall = (time.perf_counter() - t0) / len(x)
+        d = anchors[:, -1] - anchors[:, -2]
+        arrays = shards.empty_arrays() | {
+            "sample_id": np.arange(start, start + len(x), dtype=np.int64), "inputs": x,
+            "anchors": anchors, "jacobian": jac, "phi_end": np.arctan2(d[:, 1], d[:, 0]),
+            "cap_rotation": end_rot, "newton_iterations": its,
+            "wall_time_s": np.full(len(x), wall), "converged": np.ones(len(x), bool)}
+        file = f"shards/unit-{unit:05d}.npz"
+        meta = {"config": config, "seed": seed, "unit": unit, "git_commit": "synthetic"}
+        sha = shards.write_shard(root / file, arrays, meta)
+        entries.append({"file": file, "sha256": sha, "n": len(x)})
+    shards.write_manifest(root, {"seed": seed, "config": config, "shards": entries})
+    return root
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m surrogate.synthetic",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", required=True, help="dataset directory to write")
+    ap.add_argument("--n", type=int, default=2560, help="number of samples")
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    write_dataset(args.out, args.n, args.seed)
+    print(f"wrote {args.n} synthetic samples to {args.out} in {time.perf_counter() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,257 @@
+"""Train a joint surrogate on a campaign dataset; write its checkpoint and learning curve.
+
+    python -m surrogate.train --config paper|improved [--data DIR] [--out PATH]
+                              [--set key=value ...] [--threads N]
+
+Data flow: DIR (shards, verified) -> split 7:2:1 by the dataset seed -> [mirror-augment the
+train split] -> normalisation from train -> Adam on mini-batches -> the epoch with the
+lowest validation loss -> checkpoint (config, normalisation, training config, metrics on
+the validation and test splits, learning history) + learning-curve PNG.
+
+Loss per batch, every term in mm (R anchors (n, 10, 2) mm, phi_end rad, J (n, 20, 4)):
+
+    L = mean_ik |R̂_ik - R_ik|                          mean Euclidean anchor error (paper)
+      + w_phi · mean_i |wrap(phî_i - phi_i)|            end orientation; w_phi in mm/rad
+      + w_jac · mean_i ||(Ĵ_i - J_i) D||_F              Sobolev; D = diag(INPUT_BOX), so each
+                                                        column is mm per input half-range
+
+The paper config (DESIGN.md §6): MLP 4-96-192-96-20, Adam lr 0.0016 decayed ×0.99 per
+epoch, 500 epochs, mirror augmentation, anchor term only. The paper states neither the
+activation nor the batch size; we take ReLU and 32.
+
+The improved config is exactly mirror-symmetric (model.py), so mirror augmentation would
+only duplicate every loss term and is off. Its architecture (4 x 128 SiLU, residual, |P|
+feature) and weights were chosen from the runs in results/surrogate/architecture.md
+(synthetic data, pending the FEM set): the Sobolev term (w_jac = 0.05, so that a 5 %
+Jacobian error of about 2.4 mm weighs like a 0.12 mm anchor error) lowered the anchor and
+Jacobian errors 2.5x and 3.4x; w_phi = 10 mm/rad counts the end slope like an extra anchor on a
+100 mm lever (one finger link); w_phi = 50 slowed the anchor fit without a better slope.
+
+Seeded: the same seed, data and thread count reproduce the same weights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import torch
+
+from surrogate.data import Samples, augment_mirror, load_splits, normalisation
+from surrogate.evaluate import evaluate
+from surrogate.model import JointSurrogate, ModelConfig, phi_end, save_checkpoint, wrap
+from workflow.shards import INPUT_BOX, ShardError
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    epochs: int = 500
+    batch_size: int = 32
+    lr: float = 1.6e-3
+    lr_decay: float = 0.99          # per epoch
+    mirror_augment: bool = True
+    w_phi: float = 0.0              # mm/rad
+    w_jac: float = 0.0              # dimensionless (the Jacobian term is in mm already)
+    seed: int = 0
+
+
+CONFIGS = {
+    "paper": (ModelConfig(hidden=(96, 192, 96), activation="relu"),
+              TrainConfig()),
+    "improved": (ModelConfig(hidden=(128, 128, 128, 128), activation="silu", residual=True,
+                             symmetric=True, abs_pressure=True),
+                 TrainConfig(epochs=400, batch_size=64, lr=3e-3, lr_decay=0.99,
+                             mirror_augment=False, w_phi=10.0, w_jac=0.05)),
+}
+
+
+def loss_terms(model: JointSurrogate, batch: Samples, cfg: TrainConfig) -> dict[str, torch.Tensor]:
+    """Loss terms in mm (module docstring) of one batch; 'total' is their weighted sum."""
+    if cfg.w_jac > 0:
+        pred, jac = model.with_jacobian(batch.inputs)
+    else:
+        pred, jac = model(batch.inputs), None
+    terms = {"anchor": (pred - batch.anchors).norm(dim=-1).mean()}
+    total = terms["anchor"]
+    if cfg.w_phi > 0:
+        terms["phi"] = wrap(phi_end(pred) - phi_end(batch.anchors)).abs().mean()
+        total = total + cfg.w_phi * terms["phi"]
+    if jac is not None:
+        ok = batch.has_jacobian
+        d = torch.as_tensor(INPUT_BOX, dtype=jac.dtype)
+        diff = ((jac[ok] - batch.jacobian[ok]) * d).flatten(1).norm(dim=1)
+        terms["jac"] = diff.mean() if ok.any() else jac.sum() * 0
+        total = total + cfg.w_jac * terms["jac"]
+    terms["total"] = total
+    return terms
+
+
+def train(model_cfg: ModelConfig, cfg: TrainConfig, splits: dict[str, Samples],
+          log=print) -> tuple[JointSurrogate, dict]:
+    """Train from scratch; returns (model at the best validation epoch, history).
+
+    history: lists per epoch of train_loss, train_anchor_mm, val_loss, val_anchor_mm,
+    val_phi_deg, lr; plus best_epoch and train_time_s.
+    """
+    torch.manual_seed(cfg.seed)
+    data = augment_mirror(splits["train"]) if cfg.mirror_augment else splits["train"]
+    val = splits["val"]
+    model = JointSurrogate(model_cfg, normalisation(splits["train"])).to(torch.float64)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=cfg.lr_decay)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    history = {k: [] for k in ("train_loss", "train_anchor_mm", "val_loss", "val_anchor_mm",
+                               "val_phi_deg", "lr")}
+    best, best_state = math.inf, None
+    log_every = max(1, cfg.epochs // 20)
+    t0 = time.perf_counter()
+    for epoch in range(1, cfg.epochs + 1):
+        model.train()
+        order = torch.randperm(len(data), generator=gen)
+        sums, count = {"total": 0.0, "anchor": 0.0}, 0
+        for start in range(0, len(data), cfg.batch_size):
+            batch = data.subset(order[start:start + cfg.batch_size])
+            terms = loss_terms(model, batch, cfg)
+            opt.zero_grad(set_to_none=True)
+            terms["total"].backward()
+            opt.step()
+            for k in sums:
+                sums[k] += terms[k].item() * len(batch)
+            count += len(batch)
+        history["lr"].append(sched.get_last_lr()[0])
+        sched.step()
+        model.eval()
+        with torch.no_grad():
+            val_terms = loss_terms(model, val, cfg)
+            val_phi = wrap(phi_end(model(val.inputs)) - phi_end(val.anchors)).abs().mean()
+        history["train_loss"].append(sums["total"] / count)
+        history["train_anchor_mm"].append(sums["anchor"] / count)
+        history["val_loss"].append(val_terms["total"].item())
+        history["val_anchor_mm"].append(val_terms["anchor"].item())
+        history["val_phi_deg"].append(math.degrees(val_phi.item()))
+        if history["val_loss"][-1] < best:
+            best, best_state = history["val_loss"][-1], copy.deepcopy(model.state_dict())
+            history["best_epoch"] = epoch
+        if epoch % log_every == 0 or epoch == cfg.epochs:
+            log(f"epoch {epoch:4d}/{cfg.epochs}  loss {history['train_loss'][-1]:.4f} mm  "
+                f"val anchor {history['val_anchor_mm'][-1]:.4f} mm  "
+                f"val phi {history['val_phi_deg'][-1]:.3f} deg  lr {history['lr'][-1]:.2e}  "
+                f"{time.perf_counter() - t0:.0f} s")
+    history["train_time_s"] = time.perf_counter() - t0
+    model.load_state_dict(best_state)
+    model.eval()
+    return model, history
+
+
+def learning_curve(history: dict, path: Path, title: str) -> None:
+    """PNG of training and validation anchor error (and val phi_end error) per epoch."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    epochs = range(1, len(history["train_loss"]) + 1)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    a.semilogy(epochs, history["train_anchor_mm"], label="train (mean anchor error)")
+    a.semilogy(epochs, history["val_anchor_mm"], label="validation (mean anchor error)")
+    if history["train_loss"] != history["train_anchor_mm"]:
+        a.semilogy(epochs, history["train_loss"], lw=0.8, alpha=0.6, label="train loss (total)")
+    a.axvline(history["best_epoch"], color="gray", ls=":", label="kept epoch")
+    a.set_xlabel("epoch")
+    a.set_ylabel("mm")
+    a.legend()
+    a.grid(alpha=0.3, which="both")
+    b.semilogy(epochs, history["val_phi_deg"], color="tab:red")
+    b.set_xlabel("epoch")
+    b.set_ylabel("validation phi_end error (deg)")
+    b.grid(alpha=0.3, which="both")
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def apply_overrides(model_cfg: ModelConfig, cfg: TrainConfig, pairs: list[str]):
+    """Apply --set key=value to whichever config has the field; returns both configs."""
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        for target in (model_cfg, cfg):
+            names = {f.name: f for f in fields(target)}
+            if key in names:
+                break
+        else:
+            raise ValueError(f"--set {pair}: unknown field {key!r}")
+        current = getattr(target, key)
+        if not sep:
+            raise ValueError(f"--set {pair}: expected key=value")
+        if isinstance(current, bool):
+            if value.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(f"--set {pair}: expected true or false")
+            parsed = value.lower() in ("true", "1")
+        else:
+            try:
+                parsed = (tuple(int(w) for w in value.split(",")) if isinstance(current, tuple)
+                          else type(current)(value))
+            except ValueError as exc:
+                raise ValueError(f"--set {pair}: {exc}") from None
+        if target is model_cfg:
+            model_cfg = dataclasses.replace(model_cfg, **{key: parsed})
+        else:
+            cfg = dataclasses.replace(cfg, **{key: parsed})
+    return model_cfg, cfg
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m surrogate.train",
+                                 description="Train the joint surrogate (paper or improved config).")
+    ap.add_argument("--config", choices=sorted(CONFIGS), required=True)
+    ap.add_argument("--data", default="results/data/train", help="campaign dataset directory")
+    ap.add_argument("--out", help="checkpoint path (default results/surrogate/CONFIG.pt); "
+                                  "the learning curve goes beside it as *_curve.png")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a ModelConfig/TrainConfig field, e.g. hidden=64,64 or epochs=50")
+    ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    out = Path(args.out or f"results/surrogate/{args.config}.pt")
+    try:
+        model_cfg, cfg = apply_overrides(*CONFIGS[args.config], args.set)
+        splits, manifest = load_splits(args.data)
+    except ShardError as exc:
+        print(f"surrogate.train: error: {exc} (the campaign writes datasets: make dataset)",
+              file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"surrogate.train: error: {exc}", file=sys.stderr)
+        return 2
+    log = (lambda s: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    log(f"{args.config}: {model_cfg}\n{cfg}\n"
+        f"data {args.data}: " + ", ".join(f"{k} {len(v)}" for k, v in splits.items()))
+    model, history = train(model_cfg, cfg, splits, log)
+    metrics = {"train_time_s": history["train_time_s"], "best_epoch": history["best_epoch"],
+               "threads": args.threads, "val": evaluate(model, splits["val"]),
+               "test": evaluate(model, splits["test"]), "history": history}
+    dataset = {"root": str(args.data), "seed": manifest.get("seed"), "config": manifest.get("config"),
+               "n": {k: len(v) for k, v in splits.items()}}
+    save_checkpoint(out, model, {"name": args.config, **asdict(cfg)}, metrics, dataset)
+    source = (manifest.get("config") or {}).get("source", "FEM campaign")
+    learning_curve(history, out.with_name(out.stem + "_curve.png"),
+                   f"{args.config} surrogate: {len(splits['train'])} training samples ({source})")
+    for part in ("val", "test"):
+        m = metrics[part]
+        jac = "n/a" if m["jacobian_rel_error"] is None else f"{m['jacobian_rel_error']:.4f}"
+        print(f"{args.config}: {out} {part}: mean anchor {m['mean_anchor_error_mm']:.4f} mm, "
+              f"p95 {m['p95_anchor_error_mm']:.4f} mm, phi_end {m['phi_end_error_deg']:.3f} deg, "
+              f"Jacobian rel {jac}; trained in {history['train_time_s']:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

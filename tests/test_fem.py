@@ -1,0 +1,137 @@
+"""Physics tests of the FEM joint solver (coarse meshes; DOLFINx on one rank, and mpirun).
+
+Exact references: the Bisshopp-Drucker elastica and the roll-up circle for the beam, the
+y-mirror symmetry of DESIGN.md §3, u = 0 at zero load, and the linearised response
+(tangent solves) for small loads.
+"""
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("dolfinx")
+from mpi4py import MPI  # noqa: E402
+
+from fem import benchmarks  # noqa: E402
+from fem.elastica import cantilever_tip, rollup_tip  # noqa: E402
+from fem.geometry import JointGeometry, anchor_points  # noqa: E402
+from fem.solver import JointSolver, Load, LoadOutOfRange  # noqa: E402
+from workflow.shards import mirror  # noqa: E402
+
+pytestmark = pytest.mark.fem
+COARSE = JointGeometry(mesh_size=4.0)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="module")
+def joint():
+    return JointSolver(COARSE, MPI.COMM_SELF)
+
+
+@pytest.mark.parametrize("alpha, u, w, theta", [(0.5, 0.01592, 0.16214, 0.2445),
+                                                 (1.0, 0.05643, 0.30172, 0.4614),
+                                                 (2.0, 0.16064, 0.49346, 0.7818)])
+def test_elastica_reference_values(alpha, u, w, theta):
+    """Bisshopp-Drucker table (issue 2): u/L, w/L, theta to the printed 4-5 digits."""
+    exact = cantilever_tip(alpha)
+    assert exact["u_over_L"] == pytest.approx(u, abs=1e-5)
+    assert exact["w_over_L"] == pytest.approx(w, abs=1e-5)
+    assert exact["theta"] == pytest.approx(theta, abs=1e-4)
+
+
+def test_cantilever_matches_elastica():
+    """3D beam (L/h = 50, nu = 0) under a dead tip load, alpha = 3: tip within 1.5 % of L."""
+    out = benchmarks.cantilever(3.0, comm=MPI.COMM_SELF)
+    assert out["error_over_L"] < 0.015
+    assert out["theta"] == pytest.approx(out["exact"]["theta"], abs=0.02)
+
+
+def test_rollup_full_circle_is_a_pure_couple():
+    """Pure end moment M = 2 pi EI / L rolls the beam into a full circle: the tip returns
+    to the clamp (x = y = 0) within 2 % of L and the cap turns by 2 pi. A dead couple
+    would act as M cos(phi) and could not close the circle."""
+    out = benchmarks.rollup(2 * math.pi, comm=MPI.COMM_SELF)
+    assert out["error_over_L"] < 0.02
+    assert out["theta"] == pytest.approx(2 * math.pi, abs=0.03)
+    assert rollup_tip(2 * math.pi)["x_over_L"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_zero_load_gives_zero_displacement(joint):
+    """u = 0 solves R(u) = 0 exactly at zero load: no Newton iteration, anchors at X_i."""
+    r = joint.solve(Load())
+    assert r.converged and r.iterations == 0
+    np.testing.assert_array_equal(r.anchors, anchor_points(COARSE.length)[:, :2])
+    assert r.phi_end == 0.0
+
+
+def test_mirror_symmetry(joint):
+    """(R, P, F1, F2, M) -> (R diag(1,-1), -P, F1, -F2, -M) on a mirror-symmetric mesh:
+    anchors agree to solver tolerance (1e-6 mm), and so do the sensitivities."""
+    load = np.array([0.12, 1.5, 0.8, 25.0])
+    r1 = joint.solve(Load.from_array(load))
+    J1 = joint.sensitivities()
+    r2 = joint.solve(Load.from_array(load * [-1, 1, -1, -1]))
+    J2 = joint.sensitivities()
+    assert r1.converged and r2.converged
+    _, a_m, J_m = mirror(load[None], r1.anchors[None], J1[None])
+    np.testing.assert_allclose(r2.anchors, a_m[0], atol=1e-6)
+    assert r2.phi_end == pytest.approx(-r1.phi_end, abs=1e-8)
+    np.testing.assert_allclose(J2, J_m[0], atol=1e-6 * np.abs(J1).max())
+
+
+def test_small_loads_match_linearised_response(joint):
+    """For a small load lambda*e the displacement is lambda*K0^-1 f + O(lambda^2): the
+    anchor displacements over lambda converge to the tangent solve at u = 0 with rate 1."""
+    joint.solve(Load())
+    J0 = joint.sensitivities()
+    X = anchor_points(COARSE.length)[:, :2].reshape(-1)
+    e = np.array([0.3, 3.0, 3.0, 100.0])
+    errors = []
+    for lam in (2e-3, 1e-3):
+        r = joint.solve(Load.from_array(lam * e * [1, 1, 1, -1]))
+        du = (r.anchors.reshape(-1) - X) / lam
+        lin = J0 @ (e * [1, 1, 1, -1])
+        errors.append(np.abs(du - lin).max() / np.abs(lin).max())
+    assert errors[1] < 0.02
+    rate = math.log(errors[0] / errors[1], 2)
+    assert 0.8 < rate < 1.3, errors
+
+
+def test_out_of_box_load_is_refused(joint):
+    """|P| = 0.5 > 0.3 MPa is extrapolation: refused unless explicitly allowed."""
+    with pytest.raises(LoadOutOfRange, match=r"\|P\|=0.5 > 0.3"):
+        joint.solve(Load(P=0.5))
+
+
+def _cli(args, ranks=1):
+    cmd = [sys.executable, "-m", "fem.solve", *args]
+    if ranks > 1:
+        cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), *cmd]
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OMP_NUM_THREADS": "1"}
+    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+
+
+def test_cli_refuses_out_of_box_with_one_line():
+    """python -m fem.solve --m 150: exit status 2 and a one-line reason on stderr."""
+    p = _cli(["--m", "150", "--mesh-size", "4"])
+    assert p.returncode == 2
+    assert p.stderr.strip().count("\n") == 0 and "outside the input box" in p.stderr
+
+
+@pytest.mark.mpi
+def test_two_ranks_match_serial():
+    """The same case under mpirun -n 2 gives the serial anchors to solver tolerance."""
+    args = ["--p", "0.1", "--f2", "-0.5", "--m", "10", "--mesh-size", "4", "--json"]
+    serial, parallel = _cli(args), _cli(args, ranks=2)
+    assert serial.returncode == 0, serial.stderr
+    assert parallel.returncode == 0, parallel.stderr
+    a = np.array(json.loads(serial.stdout.splitlines()[-1])["anchors_mm"])
+    b = np.array(json.loads(parallel.stdout.splitlines()[-1])["anchors_mm"])
+    assert json.loads(parallel.stdout.splitlines()[-1])["ranks"] == 2
+    np.testing.assert_allclose(a, b, atol=1e-6)
