@@ -15,6 +15,7 @@ import sys
 from dataclasses import replace
 
 import numpy as np
+import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
 from mpi4py import MPI
 
 from fem.geometry import JointGeometry
@@ -23,7 +24,6 @@ from fem.solver import JointSolver, Load
 
 def _grid(solver):
     """pyvista grid of the P2 mesh with point data 'u' (mm), mirrored to z <= 0 too."""
-    import pyvista
     from dolfinx import plot
 
     topology, cell_types, x = plot.create_vtk_mesh(solver.V)
@@ -39,26 +39,18 @@ def _grid(solver):
 
 def render(solver, result, out: str) -> None:
     """Write the two-panel PNG for a solved ``result`` of ``solver`` to ``out``."""
-    import pyvista
-
-    pyvista.OFF_SCREEN = True
     half, full = _grid(solver)
     deformed = full.copy()
     deformed.points += full.point_data["u"]
+    L = result.load
     p = pyvista.Plotter(off_screen=True, shape=(1, 2), window_size=(1800, 800), border=False)
     p.subplot(0, 0)
-    p.add_text("undeformed (half-model, cut at z = 0)", font_size=11)
     p.add_mesh(half.extract_surface(nonlinear_subdivision=0), color="#7fa7d9",
                show_edges=True, edge_color="#30507a", line_width=0.3, smooth_shading=False)
     p.view_vector((0.35, 0.3, -1.0), viewup=(0, 1, 0))
-    p.add_axes()
     p.subplot(0, 1)
-    L = result.load
-    p.add_text(f"P = {L.P:g} MPa, F1 = {L.F1:g} N, F2 = {L.F2:g} N, M = {L.M:g} N·mm\n"
-               f"phi_end = {np.degrees(result.phi_end):.1f} deg", font_size=11)
     p.add_mesh(deformed.extract_surface(nonlinear_subdivision=0), scalars="|u| (mm)",
-               cmap="viridis", show_edges=False,
-               scalar_bar_args={"title": "|u| (mm)", "vertical": True})
+               cmap="viridis", scalar_bar_args={"title": "|u| (mm)", "vertical": True})
     anchors = np.column_stack([result.anchors, np.zeros(len(result.anchors))])
     p.add_points(anchors + [0, 0, JointGeometry().width / 2 + 0.5], color="red",
                  point_size=12, render_points_as_spheres=True)
@@ -66,6 +58,29 @@ def render(solver, result, out: str) -> None:
     p.camera.zoom(1.1)
     p.screenshot(out)
     p.close()
+    _caption(out, [
+        "undeformed (half-model, cut open at z = 0)",
+        f"P = {L.P:g} MPa, F1 = {L.F1:g} N, F2 = {L.F2:g} N, M = {L.M:g} N·mm;  "
+        f"phi_end = {np.degrees(result.phi_end):.1f}°, cap {np.degrees(result.cap_rotation):.1f}°"])
+
+
+def _caption(path: str, titles: list[str]) -> None:
+    """Put one title over each panel with matplotlib (VTK text actors crash in this
+    off-screen build when combined with subplots)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    img = plt.imread(path)
+    h, w = img.shape[:2]
+    fig = plt.figure(figsize=(w / 100, h / 100 + 0.5), dpi=100)
+    ax = fig.add_axes([0, 0, 1, h / (h + 50)])
+    ax.imshow(img)
+    ax.axis("off")
+    for i, t in enumerate(titles):
+        fig.text((i + 0.5) / len(titles), 1 - 25 / (h + 50), t, ha="center", va="center", fontsize=13)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def main(argv=None) -> int:

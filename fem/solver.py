@@ -234,12 +234,13 @@ class Solver:
         self.cap_volume = self._allsum(fem.assemble_scalar(fem.form(one * self._dx_cap)))
 
         # --- end-load potentials per unit F1, F2, M (the half-model carries half)
+        # Mesh-dependent numbers are Constants, so one compiled form serves every mesh.
         X = ufl.SpatialCoordinate(mesh)
-        Xref = ufl.as_vector([float(ref_point[0]), float(ref_point[1])])
+        Xref = fem.Constant(mesh, np.asarray(ref_point[:2], dtype=PETSc.ScalarType))
         Rth = ufl.as_matrix([[ufl.cos(theta), -ufl.sin(theta)], [ufl.sin(theta), ufl.cos(theta)]])
         arm = Xref - ufl.as_vector([X[0], X[1]])
         u_ref = ufl.as_vector([u[0], u[1]]) + (Rth - ufl.Identity(2)) * arm
-        w = -0.5 / self.cap_volume
+        w = fem.Constant(mesh, PETSc.ScalarType(-0.5 / self.cap_volume))
         potentials = [w * u_ref[0] * self._dx_cap, w * u_ref[1] * self._dx_cap,
                       w * theta * self._dx_cap]
         self._dR_dload = [ufl.derivative(pi, u, v) for pi in potentials]   # F1, F2, M
