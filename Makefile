@@ -77,6 +77,30 @@ results/fem/joint.png: fem/*.py | $(SETUP)
 
 # ---------------------------------------------------------------- campaign (issue 3)
 # (section owned by workflow/)
+# The datasets are resumable: each campaign stops cleanly after DATASET_HOURS (exit 3,
+# which stops make) and `make dataset` again resumes from the shards. Train and held-out
+# sets use different seeds; ranks = DATASET_RANKS groups of one rank.
+DATASET_RANKS ?= 2
+DATASET_HOURS ?= 2
+CAMPAIGN      := nice $(MPIRUN) -n $(DATASET_RANKS) $(PY) -m workflow.campaign
+SMOKE_DIR     := build/dataset-smoke
+
+dataset: | $(SETUP) ## FEM datasets: results/data/train (2560, seed 1) + heldout (256, seed 2); re-run resumes
+	$(CAMPAIGN) --samples 2560 --seed 1 --out results/data/train --max-hours $(DATASET_HOURS)
+	$(CAMPAIGN) --samples 256 --seed 2 --out results/data/heldout --max-hours $(DATASET_HOURS)
+	$(PY) -m workflow.dataset verify results/data/train --require-complete --mirror 2
+	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
+
+dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse mesh into build/dataset-smoke, verified
+	rm -rf $(SMOKE_DIR)
+	$(MPIRUN) -n 2 $(PY) -m workflow.campaign --samples 8 --seed 3 --unit-size 4 --mesh-size 4 \
+	  --out $(SMOKE_DIR) --progress-every 10
+	$(PY) -m workflow.dataset verify $(SMOKE_DIR) --require-complete --mirror 1
+	$(PY) -m workflow.dataset info $(SMOKE_DIR)
+
+bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh -> results/bench/campaign.json
+results/bench/campaign.json: workflow/campaign.py workflow/bench_campaign.py fem/solver.py | $(SETUP)
+	nice $(PY) -m workflow.bench_campaign --mpirun "$(MPIRUN)" --out $@
 
 # ---------------------------------------------------------------- surrogate (issue 4)
 # (section owned by surrogate/)
@@ -100,7 +124,8 @@ results/surrogate/metrics.json: results/surrogate/paper.pt results/surrogate/imp
 # (section owned by predictor/)
 # Joint model for the predictor: the committed surrogate when present, else the analytic stand-in.
 PRED_JOINT := $(if $(wildcard results/surrogate/improved.pt),results/surrogate/improved.pt,analytic)
-PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py
+PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
+              $(filter-out analytic,$(PRED_JOINT))
 
 gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
 results/predictor/gestures.json: $(PRED_CORE) predictor/plot.py predictor/figures.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)

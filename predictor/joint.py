@@ -1,0 +1,129 @@
+"""Joint models: (P, F1, F2, M) -> 10 anchor points of one bellow joint.
+
+Data flow: ``inputs (..., 4) = [P MPa, F1 N, F2 N, M N·mm]`` -> ``anchors (..., 10, 2) mm``
+in the joint frame of DESIGN.md §3 (x along the undeformed axis from the proximal face,
+y in the bending plane, proximal centre at the origin). Both implementations are torch,
+float64, batched over any leading shape and differentiable in every input, so the
+equilibrium solver can take exact autograd Jacobians through them.
+
+``AnalyticJoint`` is the stand-in used until the FEM-trained surrogate exists, and the
+test oracle (its anchors have a closed form). It is a planar beam of length L = 45.45 mm
+cut into 10 segments (one per anchor interval, h = L/10). Segment k (midpoint s_k) has
+constant curvature
+
+    kappa_k = (M - c_p·P + F2·(L - s_k)) / EI                          [1/mm]
+
+i.e. the bending moment of the dead end loads taken about the undeformed section
+(linear moment law), with exact large-rotation kinematics: the segment is a circular arc,
+start angle a_k = sum_{j<k} kappa_j·h, chord
+
+    Δr_k = (1 + F1/EA) · h · sinc(kappa_k h / 2) · (cos(a_k + kappa_k h/2), sin(...)),
+
+and r_i = sum_{k<=i} Δr_k. Sign of the pressure moment: P > 0 pressurises the top (+y)
+chamber, the top bellow lengthens, so the joint bends towards -y (clockwise); hence the
+``-c_p·P``. The model keeps the DESIGN.md §3 mirror symmetry
+(R·diag(1,-1), -P, F1, -F2, -M) exactly.
+
+Stand-in stiffnesses (chosen, not measured; documented here so reports can quote them):
+- EI = 3000 N·mm²: a 100 N·mm end couple bends the joint by 100·45.45/3000 = 1.52 rad.
+- c_p = 333 N·mm/MPa (≈ chamber area 120 mm² × lever 2.8 mm): |P| = 0.3 MPa gives a
+  100 N·mm pressure couple, i.e. a free end angle of 87°; 0.1 MPa gives 29°, the tens of
+  degrees a pneumatic bellow joint reaches. Gravity (≈0.2 N at ≈100 mm) droops ≈ 10°.
+- EA = 300 N: the bellow is axially soft, 3 N stretches it by 1 % (0.45 mm).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+JOINT_LENGTH = 45.45  # mm, fixed by the paper (DESIGN.md §3)
+N_ANCHORS = 10
+# Surrogate training box (DESIGN.md §3): |P| MPa, |F1| N, |F2| N, |M| N·mm.
+INPUT_BOX = (0.3, 3.0, 3.0, 100.0)
+
+
+def end_angle(anchors: torch.Tensor) -> torch.Tensor:
+    """Distal end orientation phi_end = atan2(y10 - y9, x10 - x9) (DESIGN.md §3).
+
+    anchors: (..., 10, 2) mm in the joint frame. Returns (...) rad, 0 when undeformed.
+    """
+    d = anchors[..., -1, :] - anchors[..., -2, :]
+    return torch.atan2(d[..., 1], d[..., 0])
+
+
+class JointModel:
+    """Interface: ``joint(inputs)`` maps (..., 4) [P MPa, F1 N, F2 N, M N·mm] (float64)
+    to anchors (..., 10, 2) mm in the joint frame, differentiably."""
+
+    length: float = JOINT_LENGTH
+    name: str = "joint"
+
+    def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class AnalyticJoint(JointModel):
+    """Segment-wise constant-curvature beam (module docstring has the equations).
+
+    EI in N·mm², c_p in N·mm/MPa (pressure couple per MPa), EA in N, L in mm.
+    """
+
+    EI: float = 3000.0
+    c_p: float = 333.0
+    EA: float = 300.0
+    length: float = JOINT_LENGTH
+    name: str = "analytic"
+
+    def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
+        P, F1, F2, M = inputs.unbind(-1)
+        h = self.length / N_ANCHORS
+        s_mid = (torch.arange(N_ANCHORS, dtype=inputs.dtype) + 0.5) * h  # (10,)
+        kappa = (M - self.c_p * P)[..., None] + F2[..., None] * (self.length - s_mid)
+        kappa = kappa / self.EI  # (..., 10) 1/mm
+        turn = kappa * h
+        start = torch.cumsum(turn, -1) - turn  # angle at each segment start
+        mid = start + 0.5 * turn
+        # sinc(x) = sin(x)/x for the chord of an arc; torch.sinc is the normalised one.
+        chord = (1.0 + F1 / self.EA)[..., None] * h * torch.sinc(0.5 * turn / math.pi)
+        steps = torch.stack((chord * torch.cos(mid), chord * torch.sin(mid)), -1)
+        return torch.cumsum(steps, -2)
+
+
+class SurrogateJoint(JointModel):
+    """The FEM-trained surrogate (issue 4) loaded from a checkpoint file.
+
+    Wraps ``surrogate.load_surrogate(path)`` (an nn.Module in float64, (..., 4) ->
+    (..., 10, 2) mm). Its parameters are frozen: the predictor differentiates through
+    the network with respect to its inputs only.
+    """
+
+    def __init__(self, path: str | Path):
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"model checkpoint not found: {path}")
+        try:
+            from surrogate import load_surrogate
+        except ImportError as exc:  # surrogate package not delivered yet
+            raise ValueError(f"cannot load {path}: surrogate.load_surrogate unavailable ({exc})") from None
+        self.module = load_surrogate(path).double().eval()
+        for p in self.module.parameters():
+            p.requires_grad_(False)
+        self.name = f"surrogate:{path.name}"
+        self.length = JOINT_LENGTH
+
+    def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
+        return self.module(inputs)
+
+
+def load_joint(spec: str | None) -> JointModel:
+    """``None`` or ``"analytic"`` -> AnalyticJoint(); otherwise a checkpoint path.
+
+    Raises ValueError (surrogate.ModelError is one) with a one-line reason.
+    """
+    if spec is None or spec == "analytic":
+        return AnalyticJoint()
+    return SurrogateJoint(spec)

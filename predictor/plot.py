@@ -1,0 +1,68 @@
+"""Matplotlib drawing of gestures in the paper's colours (Figure 5).
+
+Rigid parts red, joints blue, object green, the gravity-free (tau = 0) shape dashed.
+Both fingers are drawn: the right one solved, the left one its mirror. Units mm.
+"""
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from predictor.gripper import FingerPose  # noqa: E402
+from predictor.statics import Obstacle  # noqa: E402
+
+
+def object_outline(obstacle: Obstacle, n: int = 200) -> np.ndarray:
+    """Closed outline (n+1, 2) mm of the object in the global plane."""
+    t = np.linspace(0.0, 2.0 * math.pi, n + 1)
+    if obstacle.kind == "rectangle":
+        a, b = obstacle.a, obstacle.b
+        pts = np.array([[a, b], [-a, b], [-a, -b], [a, -b], [a, b]])
+    else:
+        pts = np.stack((obstacle.a * np.cos(t), obstacle.b * np.sin(t)), -1)
+    c, s = math.cos(obstacle.angle), math.sin(obstacle.angle)
+    return pts @ np.array([[c, s], [-s, c]]) + np.array([obstacle.x, obstacle.y])
+
+
+def draw_finger(ax, pose: FingerPose, index: int, dashed: bool = False) -> None:
+    """Draw sample ``index`` of a FingerPose and its mirror on axes ``ax``."""
+    ls, lw = ("--", 1.2) if dashed else ("-", 3.0)
+    for p in (pose, pose.mirrored()):
+        for part, colour in ((p.joint1, "tab:blue"), (p.link, "tab:red"), (p.joint2, "tab:blue"), (p.tip, "tab:red")):
+            xy = part[index].detach().numpy()
+            ax.plot(xy[:, 0], xy[:, 1], ls, color=colour, lw=lw, alpha=0.6 if dashed else 1.0,
+                    solid_capstyle="round")
+
+
+def draw_gesture(ax, result, index: int = 0, obstacle: Obstacle | None = None, title: str | None = None) -> None:
+    """Draw solve result ``index``: gesture, gravity-free shape (dashed) and object."""
+    draw_finger(ax, result.free_pose, index, dashed=True)
+    if bool(result.converged[index]):
+        draw_finger(ax, result.pose, index)
+    if obstacle is not None:
+        xy = object_outline(obstacle)
+        ax.fill(xy[:, 0], xy[:, 1], color="tab:green", alpha=0.35)
+        ax.plot(xy[:, 0], xy[:, 1], color="tab:green")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_aspect("equal")
+    ax.set_xlabel("X (mm)")
+    ax.set_ylabel("Y (mm)")
+    p1, p2 = result.pressures[index].tolist()
+    state = "" if bool(result.converged[index]) else "  NOT CONVERGED"
+    if obstacle is not None and bool(result.converged[index]):
+        state += f"  N={result.normal_force_N[index]:.2f} N" + ("  SLIP" if bool(result.slip[index]) else "  holds")
+    ax.set_title(title or f"P1={p1:+.2f}, P2={p2:+.2f} MPa{state}", fontsize=9)
+
+
+def save_gesture(path: str, result, index: int = 0, obstacle: Obstacle | None = None) -> None:
+    """One-panel PNG of a gesture."""
+    fig, ax = plt.subplots(figsize=(5, 5.5))
+    draw_gesture(ax, result, index, obstacle)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)

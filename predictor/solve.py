@@ -1,0 +1,330 @@
+"""Iterative gesture predictor: find tau = (tau_1, tau_2) with zero Equation-1 residual.
+
+Unknowns x = (F1, F2, M)_1, (F1, F2, M)_2 per sample, (B, 6) in N, N, N·mm. The residual
+vector is r(x) = [R_F,1, R_M,1/100, R_F,2, R_M,2/100, out-of-box penalties] (12 numbers,
+see predictor.statics); the equilibrium is r = 0 with the penalties inactive.
+
+Two methods, both batched over B pressure pairs and both starting from tau = 0:
+
+- ``newton`` (the fast one): Levenberg-Marquardt on r with the exact Jacobian
+  J = dr/dx (B, 12, 6) from reverse-mode autograd (one batched pass, ``_jacobian_fn``).
+  Step (JᵀJ + mu·I) δ = -Jᵀr; mu shrinks ×0.1 on success and grows ×10 on failure, per
+  sample, and only unfinished samples are evaluated. Near the root mu -> 1e-12 and the step is Newton's, so the
+  convergence is quadratic: 3-6 iterations under gravity.
+- ``lbfgs`` (the paper's reference): torch L-BFGS with strong-Wolfe line search on the
+  scalar loss sum_b |r_b|².
+
+With an object the pressures are ramped from 0 (or from the approach gesture, see
+``solve(start=...)``) to the target in ``ramp_steps`` equal sub-steps: the grasp depends on
+the pressure history (the finger must arrive at the object from the open side). Each step
+starts from the tangent predictor x + dx/dP·ΔP (exact dr/dP from the same autograd pass,
+Jacobians reused from the previous step), converges to a 100x looser tolerance except the
+last, caps LM steps so the finger cannot jump through the object, refuses equilibria that
+penetrate deeper than ``max_penetration``, and is halved (up to ``cutbacks`` times) when
+it fails.
+
+A sample is converged when |R_F,i| <= tol_force and |R_M,i| <= tol_moment for both
+joints and tau is inside the surrogate's box. Non-converged samples are reported with
+``converged = False`` and NaN in tau and in the gesture: never returned as an answer.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import torch
+
+from predictor.gripper import FingerPose, GripperParams
+from predictor.joint import INPUT_BOX, JointModel
+from predictor.statics import (MOMENT_SCALE, PENALTY_WEIGHT, ContactParams, Obstacle, range_penalty, residual,
+                               residual_norms, scaled)
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """method: newton | lbfgs. Newton tolerances in N and N·mm (1e-4 mN, 1e-5 N·mm: 1000x
+    below the issue's 0.1 mN / 0.01 N·mm target; one extra Newton step costs ~2 ms).
+    L-BFGS (the paper's reference) runs to its own stall (lbfgs_max_iter iterations per
+    ramp step at most) and is accepted at the issue's target (lbfgs_tol_*): on stiff
+    contact steps it stalls near 0.02 mN, short of the Newton tolerance. max_iter: LM
+    iterations per ramp step. ramp_steps: pressure sub-steps when an object is present;
+    cutbacks: how many times a failed Newton sub-step may be halved (L-BFGS: none);
+    max_penetration (mm): deeper is treated as tunnelling (a failed step), not as an
+    equilibrium; contact_max_step: LM step cap with an object, in scaled units (0.3 N or
+    30 N·mm)."""
+
+    method: str = "newton"
+    tol_force: float = 1e-7
+    tol_moment: float = 1e-5
+    lbfgs_tol_force: float = 1e-4
+    lbfgs_tol_moment: float = 1e-2
+    max_iter: int = 30
+    lbfgs_max_iter: int = 1000
+    ramp_steps: int = 12
+    cutbacks: int = 4
+    max_penetration: float = 1.0
+    contact_max_step: float = 0.3
+    gravity: bool = True
+
+
+@dataclass
+class GestureResult:
+    """Batched solve result for the right finger (mirror with ``pose.mirrored()``).
+
+    pressures (B, 2) MPa; tau (B, 2, 3) [F1 N, F2 N, M N·mm], NaN where not converged;
+    converged (B,) bool; residual_force_mN, residual_moment_Nmm (B, 2) at the last
+    iterate; normal_force_N, friction_N (B,) total contact forces on the finger;
+    friction_ratio (B,) |f|/N demanded by the object; slip (B,) bool; iterations (B,)
+    (summed over ramp steps); time_ms: wall time of the whole batch; pose: FingerPose,
+    NaN where not converged; free_pose: the gravity- and contact-free shape (tau = 0).
+    """
+
+    pressures: torch.Tensor
+    tau: torch.Tensor
+    converged: torch.Tensor
+    residual_force_mN: torch.Tensor
+    residual_moment_Nmm: torch.Tensor
+    normal_force_N: torch.Tensor
+    friction_N: torch.Tensor
+    friction_ratio: torch.Tensor
+    slip: torch.Tensor
+    iterations: torch.Tensor
+    time_ms: float
+    pose: FingerPose
+    free_pose: FingerPose
+    method: str
+
+
+def _residual_fn(joint, params, obstacle, contact, gravity):
+    """Batched r(x; P): x (B, 6), P (B, 2) -> (B, 12) [scaled equilibrium, penalties]."""
+
+    def r(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+        tau = x.reshape(-1, 2, 3)
+        st = residual(joint, params, p, tau, obstacle, contact, gravity)
+        return torch.cat((scaled(st.residual), range_penalty(tau)), -1)
+
+    return r
+
+
+def _jacobian_fn(r_fn):
+    """Exact batched Jacobian by one reverse pass over 6 copies of each sample.
+
+    Copy k of sample b only feeds output row k, so the gradient of sum_k r[b, k, k]
+    with respect to copy k is row k of dr/dx: J (B, 6, 6) of the equilibrium rows in
+    one forward + one backward of a 6B batch (vmap(jacfwd) was 7x slower here). The
+    penalty rows are elementwise in x, so their Jacobian is diagonal and written out.
+    The same pass gives dr/dP (B, 6, 2) for the ramp's tangent predictor.
+    Returns jac(x, p) -> (J (B, 12, 6), r (B, 12), dr/dP (B, 6, 2)).
+    """
+    box = torch.tensor(INPUT_BOX[1:] * 2, dtype=torch.float64)
+    scale = torch.tensor([1.0, 1.0, MOMENT_SCALE] * 2, dtype=torch.float64)
+
+    def jac(x: torch.Tensor, p: torch.Tensor):
+        B = x.shape[0]
+        with torch.enable_grad():
+            xr = x.detach().repeat_interleave(6, 0).requires_grad_(True)
+            pr = p.detach().repeat_interleave(6, 0).requires_grad_(True)
+            r = r_fn(xr, pr).reshape(B, 6, 12)
+            g, gp = torch.autograd.grad(torch.diagonal(r[..., :6], dim1=1, dim2=2).sum(), (xr, pr))
+        d_pen = PENALTY_WEIGHT * torch.sign(x) * (x.abs() > box).to(x.dtype) / scale
+        J = torch.cat((g.reshape(B, 6, 6), torch.diag_embed(d_pen)), 1)
+        return J, r[:, 0].detach(), gp.reshape(B, 6, 2)
+
+    return jac
+
+
+# Default grasp approach gesture (MPa): open joint 1, bring the object in (statics.Obstacle).
+APPROACH = (-0.15, 0.0)
+STEP_SCALE = torch.tensor([1.0, 1.0, MOMENT_SCALE] * 2, dtype=torch.float64)
+
+
+def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
+    """Converged mask (B,) from residual vectors r (B, 12)."""
+    eq = r[:, :6].reshape(-1, 2, 3)
+    force = eq[..., :2].norm(dim=-1).amax(-1)
+    moment = eq[..., 2].abs().amax(-1) * 100.0
+    return (force <= opts.tol_force) & (moment <= opts.tol_moment) & (r[:, 6:].abs().amax(-1) == 0)
+
+
+def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):
+    """Batched LM from x (B, 6) at pressures p (B, 2).
+
+    Returns (x, converged, iterations, (dr/dx (B, 6, 6), dr/dP (B, 6, 2)) at the final x);
+    the last item is the next ramp step's ``prev_jac``, which saves one Jacobian per step.
+
+    p_prev: the pressures at which x is an equilibrium (a ramp step). The start is then
+    the tangent predictor x + dx/dP·(p - p_prev), dx/dP = -(dr/dx)⁻¹ dr/dP: it keeps the finger's geometry instead of its loads, so a pressure step does not
+    push the finger deep into the object.
+
+    max_step caps each step's largest scaled component (N, N·mm/100): with contact it
+    keeps the iterates on the branch of the previous ramp step, since a long step can jump
+    the finger through the object to a contact-free root."""
+    eye = torch.eye(6, dtype=x.dtype)
+    x = x.clone()
+    if p_prev is None:
+        J, r, Jp = jac_fn(x, p)
+    else:
+        J0, Jp0 = prev_jac if prev_jac is not None else (lambda a: (a[0][:, :6], a[2]))(jac_fn(x, p_prev))
+        dx = -torch.linalg.solve(J0 + 1e-12 * eye, Jp0 @ (p - p_prev)[..., None])[..., 0]
+        x = x + dx
+        J, r, Jp = jac_fn(x, p)
+    mu = torch.full((x.shape[0],), 1e-6, dtype=x.dtype)
+    iters = torch.zeros(x.shape[0], dtype=torch.long)
+    done = _done(r, opts)
+    stuck = torch.zeros_like(done)
+    for _ in range(opts.max_iter):
+        act = torch.nonzero(~(done | stuck)).flatten()  # work on unfinished samples only
+        if act.numel() == 0:
+            break
+        Ja, ra, ma = J[act], r[act], mu[act]
+        JT = Ja.transpose(1, 2)
+        step = -torch.linalg.solve(JT @ Ja + ma[:, None, None] * eye, JT @ ra[..., None])[..., 0]
+        if max_step is not None:
+            big = (step / STEP_SCALE).abs().amax(-1, keepdim=True) / max_step
+            step = step / big.clamp_min(1.0)
+        x_try = x[act] + step
+        J_try, r_try, Jp_try = jac_fn(x_try, p[act])
+        better = r_try.pow(2).sum(-1) < ra.pow(2).sum(-1)
+        x[act] = torch.where(better[:, None], x_try, x[act])
+        r[act] = torch.where(better[:, None], r_try, ra)
+        J[act] = torch.where(better[:, None, None], J_try, Ja)
+        Jp[act] = torch.where(better[:, None, None], Jp_try, Jp[act])
+        mu[act] = torch.where(better, (ma * 0.1).clamp_min(1e-12), ma * 10.0)
+        iters[act] += 1
+        done[act] = _done(r[act], opts)
+        stuck = mu > 1e8
+    return x, done, iters, (J[:, :6], Jp)
+
+
+def _lbfgs(loss_fn, x, p, opts):
+    """Paper's L-BFGS on sum_b |r_b|² from x (B, 6). Returns (x, converged, iterations)."""
+    x = x.clone().requires_grad_(True)
+    opt = torch.optim.LBFGS([x], lr=1.0, max_iter=opts.lbfgs_max_iter, tolerance_grad=1e-15,
+                            tolerance_change=1e-20, history_size=20, line_search_fn="strong_wolfe")
+
+    def closure():
+        opt.zero_grad()
+        r = loss_fn(x, p)
+        total = r.pow(2).sum()
+        total.backward()
+        return total
+
+    opt.step(closure)
+    x = x.detach()
+    with torch.no_grad():
+        r = loss_fn(x, p)
+    n_iter = opt.state[opt._params[0]]["n_iter"]
+    return x, _done(r, opts), torch.full((x.shape[0],), n_iter, dtype=torch.long), None
+
+
+def _advance(run, x, pa, pb, cutbacks, jac=None):
+    """One ramp step pa -> pb (B, 2) from the equilibrium x at pa (with its Jacobians
+    ``jac``, or None); samples that fail are retried as two half steps, recursively up to
+    ``cutbacks`` times (as the FEM does). Returns (x, converged, iterations, jac at x)."""
+    x_new, conv, its, jac_new = run(x, pb, pa, jac)
+    if bool(conv.all()) or cutbacks == 0:
+        return x_new, conv, its, jac_new
+    bad = ~conv
+    pm = 0.5 * (pa[bad] + pb[bad])
+    sub = None if jac is None else tuple(a[bad] for a in jac)
+    x1, c1, i1, j1 = _advance(run, x[bad], pa[bad], pm, cutbacks - 1, sub)
+    x2, c2, i2, j2 = _advance(run, x1, pm, pb[bad], cutbacks - 1, j1)
+    x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
+    x_new[bad], conv[bad], its[bad] = x2, c1 & c2, its[bad] + i1 + i2
+    if jac_new is not None:
+        for a, b in zip(jac_new, j2):
+            a[bad] = b
+    return x_new, conv, its, jac_new
+
+
+def solve(
+    joint: JointModel,
+    pressures: torch.Tensor,
+    obstacle: Obstacle | None = None,
+    params: GripperParams = GripperParams(),
+    contact: ContactParams = ContactParams(),
+    options: SolverOptions = SolverOptions(),
+    x0: torch.Tensor | None = None,
+    start: tuple[float, float] | None = None,
+) -> GestureResult:
+    """Equilibrium gesture for a batch of pressure pairs.
+
+    pressures: (B, 2) or (2,) MPa [P1, P2], |P| <= 0.3 (ValueError otherwise).
+    x0: optional warm start (B, 2, 3) (e.g. the NN's prediction); it disables the ramp.
+    start: the approach pressures (MPa) of a grasp: the gripper first settles there with
+    no object, the object is then brought in, and the pressures ramp to the target.
+    Without it the ramp starts at (0, 0) with the object present.
+    Returns a GestureResult (see its docstring for shapes and units).
+    """
+    pressures = torch.as_tensor(pressures, dtype=torch.float64).reshape(-1, 2)
+    if bool((pressures.abs() > 0.3 + 1e-6).any()) or not bool(torch.isfinite(pressures).all()):
+        raise ValueError(f"pressures must be finite and within ±0.3 MPa, got {pressures.tolist()}")
+    if options.method not in ("newton", "lbfgs"):
+        raise ValueError(f"unknown method {options.method!r}: use newton or lbfgs")
+    B = pressures.shape[0]
+    t0 = time.perf_counter()
+    def runner(obs, opts=options):
+        r_fn = _residual_fn(joint, params, obs, contact, opts.gravity)
+        if opts.method == "newton":
+            jac_fn = _jacobian_fn(r_fn)
+            cap = None if obs is None else opts.contact_max_step
+            method = lambda x, p, p_prev=None, jac=None: _levenberg_marquardt(  # noqa: E731
+                jac_fn, x, p, opts, cap, p_prev, jac)
+        else:
+            method = lambda x, p, p_prev=None, jac=None: _lbfgs(r_fn, x, p, opts)  # noqa: E731
+        if obs is None:
+            return method
+
+        def with_depth_check(x, p, p_prev=None, jac=None):
+            # A step so large that the finger passes into (or through) the object finds a
+            # spurious equilibrium; refuse it so that _advance cuts the step back.
+            x, conv, its, jac = method(x, p, p_prev, jac)
+            with torch.no_grad():
+                pen = residual(joint, params, p, x.reshape(-1, 2, 3), obs, contact, options.gravity).penetration
+            return x, conv & (pen <= options.max_penetration), its, jac
+
+        return with_depth_check
+
+    if options.method == "lbfgs":
+        options = dataclasses.replace(options, tol_force=options.lbfgs_tol_force,
+                                      tol_moment=options.lbfgs_tol_moment, cutbacks=0)
+    run, run_free = runner(obstacle, options), runner(None, options)
+    # Intermediate ramp steps only need to stay on the branch: a 100x looser tolerance
+    # saves the last (quadratic) Newton iteration of each; the final step uses the full one.
+    loose = dataclasses.replace(options, tol_force=100 * options.tol_force, tol_moment=100 * options.tol_moment)
+    run_loose = runner(obstacle, loose)
+    x = torch.zeros(B, 6, dtype=torch.float64) if x0 is None else x0.reshape(B, 6).double().clone()
+    iterations = torch.zeros(B, dtype=torch.long)
+    ok = torch.ones(B, dtype=torch.bool)
+    if obstacle is None or x0 is not None:
+        x, ok, iterations, _ = run(x, pressures)
+    else:
+        p0 = torch.zeros_like(pressures) if start is None else torch.as_tensor(start, dtype=torch.float64).expand(B, 2)
+        if start is not None:  # approach: open without the object, then bring it in
+            x, ok, iterations, _ = run_free(x, p0)
+        jac = None
+        for k in range(1, options.ramp_steps + 1):
+            pa = p0 + (pressures - p0) * ((k - 1) / options.ramp_steps)
+            pb = p0 + (pressures - p0) * (k / options.ramp_steps)
+            step_run = run if k == options.ramp_steps else run_loose
+            x, conv, its, jac = _advance(step_run, x, pa, pb, options.cutbacks, jac)
+            ok &= conv
+            iterations += its
+    elapsed = 1e3 * (time.perf_counter() - t0)
+
+    with torch.no_grad():
+        tau = x.reshape(B, 2, 3)
+        st = residual(joint, params, pressures, tau, obstacle, contact, options.gravity)
+        free = residual(joint, params, pressures, torch.zeros_like(tau), None, contact, gravity=False).pose
+    force, moment = residual_norms(st.residual)
+    nan = torch.where(ok, 0.0, float("nan"))
+    pose = FingerPose(*(getattr(st.pose, f) + nan.reshape(B, *([1] * (getattr(st.pose, f).dim() - 1))) for f in
+                        ("joint1", "joint2", "link", "tip", "theta", "phi", "link_points", "tip_points")))
+    return GestureResult(
+        pressures=pressures, tau=tau + nan[:, None, None], converged=ok,
+        residual_force_mN=force, residual_moment_Nmm=moment,
+        normal_force_N=st.normal_force, friction_N=st.friction_force, friction_ratio=st.friction_ratio,
+        slip=st.slip, iterations=iterations, time_ms=elapsed, pose=pose, free_pose=free,
+        method=options.method,
+    )

@@ -1,0 +1,299 @@
+"""Equilibrium residual of the right finger (paper's Equation 1), with gravity and contact.
+
+Load convention (must match how the FEM defines the surrogate's inputs, DESIGN.md §3-4):
+tau_i = (F1, F2, M)_i is the load that the part of the finger distal to joint i exerts ON
+joint i's distal end. F1, F2 (N) are dead loads at the end point r_10 expressed in joint
+i's UNDEFORMED frame, so their global value is Rot(theta_i)·(F1, F2) with theta_i the
+PROXIMAL orientation of joint i (theta_1 = -pi/2, theta_2 = phi_1). M (N·mm) is a pure
+couple about +z. The paper's Equation 2 writes Rot(phi_i), the DISTAL orientation; that
+would be right only if the FEM force followed the end's rotation. Our FEM applies it in
+the undeformed frame ("the coordinate of the force is consistent with the undeformed joint
+coordinate"), so theta_i is used here; the full-finger FEM is the arbiter.
+
+Equation 1, per joint i, with the external loads (F_k at p_k) on all distal parts:
+
+    R_F,i = Rot(theta_i)·(F1, F2)_i - sum_k F_k                       [N]
+    R_M,i = M_i - sum_k (p_k - r_10,i) × F_k                          [N·mm]
+
+Joint 1's distal parts: rigid link, joint 2, tip; joint 2's: the tip. Weights act at the
+link and tip midpoints and at the mean of a joint's anchors. Loads on joint 2's own body
+(weight, contact) enter joint 1's balance only: the surrogate takes end loads only, as in
+the paper. The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with alpha = beta =
+1 N⁻², gamma = 1e-4 (N·mm)⁻² (moments scaled by a 100 mm lever, the finger's size).
+
+Contact (object fixed in the plane, signed distance d < 0 inside, outward normal n):
+- sample points: 12 link midpoints, the 10 joint-2 anchors, 26 tip midpoints; each
+  carries its length w_k (mm);
+- normal penalty on the finger: N_k = k_c · max(0, -d_k) · w_k along +n_k (k_c in N/mm²);
+- friction: the object (weight W) hangs in two mirror fingers, so each side lifts W/2.
+  With t_k the object's tangent turned upwards (t_y >= 0) and a common ratio f_k = λ N_k,
+  the object's vertical balance gives λ = (W/2 + Σ N_k n_ky) / Σ N_k t_ky. The finger
+  feels N_k n_k - λ_c N_k t_k with λ_c = clip(λ, -mu, mu) (the cone |f| <= mu·N always
+  holds); ``slip`` is set when |λ| > mu or nothing touches the object. The split W/2
+  assumes the object is symmetric about X = 0 (off-axis objects: an approximation).
+
+Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
+max(0, |M|-100)/100 per joint, the surrogate's training box.
+"""
+from __future__ import annotations
+
+import functools
+import math
+import re
+from dataclasses import dataclass
+
+import torch
+
+from predictor.gripper import FingerPose, GripperParams, finger_pose, rot
+from predictor.joint import INPUT_BOX, JOINT_LENGTH, N_ANCHORS, JointModel
+
+MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
+PENALTY_WEIGHT = 10.0  # weight of the out-of-box residuals relative to the equilibrium ones
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A rigid object in the global plane. kind: circle | ellipse | rectangle.
+
+    a, b: radius/radius (circle), semi-axes (ellipse) or half width/half height
+    (rectangle), mm. x, y: centre, mm. angle: orientation, rad (counter-clockwise).
+    Default placement (a documented departure from "230 mm below the base"): centre at
+    Y = -195 mm, between the fingers' distal parts. The objects are wider (60-70 mm)
+    than the 50 mm free opening, so an object that clears the zero-pressure gesture has
+    to lie below the fingertips (Y_centre < -233 mm for the circle); there only its upper
+    shoulder can be reached, and mu = 0.3 cannot hold it (the solver reports slip, see
+    the tests). The grasp therefore starts from an open approach gesture (P = (-0.15, 0)
+    MPa, contact-free for these defaults), brings the object in, and ramps to the target.
+    """
+
+    kind: str = "circle"
+    a: float = 30.0
+    b: float = 30.0
+    x: float = 0.0
+    y: float = -195.0
+    angle: float = 0.0
+
+    def signed_distance(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """points (..., 2) mm -> (d (...) mm, negative inside; n (..., 2) outward unit normal).
+
+        Circle and rectangle are exact. The ellipse uses the first-order (Taubin) distance
+        g/|grad g| with g = (x/a)² + (y/b)² - 1, exact on the boundary and accurate to
+        O(d²) near it, which is where penalty contact lives.
+        """
+        centre = torch.tensor([self.x, self.y], dtype=points.dtype)
+        q = points - centre
+        if self.angle:
+            q = rot(torch.tensor(-self.angle, dtype=points.dtype), q)
+        if self.kind == "circle":
+            r = q.norm(dim=-1).clamp_min(1e-12)
+            d, n = r - self.a, q / r[..., None]
+        elif self.kind == "ellipse":
+            ab2 = torch.tensor([self.a**2, self.b**2], dtype=points.dtype)
+            g = (q * q / ab2).sum(-1) - 1.0
+            grad = 2.0 * q / ab2
+            gn = grad.norm(dim=-1).clamp_min(1e-12)
+            d, n = g / gn, grad / gn[..., None]
+        elif self.kind == "rectangle":
+            half = torch.tensor([self.a, self.b], dtype=points.dtype)
+            e = q.abs() - half
+            out = e.clamp_min(0.0)
+            out_len = out.norm(dim=-1)
+            inside = out_len <= 0.0
+            d = torch.where(inside, e.max(-1).values, out_len)
+            # outside: direction to the nearest boundary point; inside: the nearest face.
+            face = (e[..., 0] >= e[..., 1]).to(points.dtype)
+            n_in = torch.stack((face, 1.0 - face), -1)
+            n_out = out / out_len.clamp_min(1e-12)[..., None]
+            n = torch.where(inside[..., None], n_in, n_out) * torch.sign(q + (q == 0).to(q.dtype))
+        else:
+            raise ValueError(f"unknown object kind {self.kind!r} (use circle, ellipse or rectangle)")
+        return d, (rot(torch.tensor(self.angle, dtype=points.dtype), n) if self.angle else n)
+
+
+_DEFAULTS = {
+    "circle": dict(a=30.0, b=30.0, y=-195.0),
+    "ellipse": dict(a=35.0, b=25.0, y=-195.0),
+    "rectangle": dict(a=30.0, b=25.0, y=-195.0),
+}
+_KEYS = {
+    "circle": {"r": ("a", "b"), "x": ("x",), "y": ("y",), "deg": ("angle",)},
+    "ellipse": {"a": ("a",), "b": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",)},
+    "rectangle": {"w": ("a",), "h": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",)},
+}
+
+
+def parse_object(spec: str) -> Obstacle:
+    """Parse ``kind[:key=value,...]``, e.g. ``circle:r=30,y=-230``, ``ellipse:a=35,b=25,
+    deg=20``, ``rectangle:w=60,h=50,x=0,y=-245``. Lengths mm, ``deg`` in degrees.
+
+    Raises ValueError with a one-line reason for an unknown kind, key or value.
+    """
+    kind, _, rest = spec.strip().partition(":")
+    kind = kind.strip().lower()
+    if kind not in _KEYS:
+        raise ValueError(f"unknown object {kind!r} in {spec!r}: use circle, ellipse or rectangle")
+    fields = dict(kind=kind, **_DEFAULTS[kind])
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        m = re.fullmatch(r"([a-z]+)\s*=\s*([-+0-9.eE]+)", item)
+        if not m or m.group(1) not in _KEYS[kind]:
+            raise ValueError(f"bad object field {item!r} in {spec!r}: {kind} takes {', '.join(_KEYS[kind])}")
+        try:
+            value = float(m.group(2))
+        except ValueError:
+            raise ValueError(f"bad number in {item!r} of object spec {spec!r}") from None
+        if m.group(1) == "deg":
+            value = math.radians(value)
+        elif m.group(1) in ("w", "h"):
+            value *= 0.5  # full width/height -> half
+        for name in _KEYS[kind][m.group(1)]:
+            fields[name] = value
+    if fields["a"] <= 0 or fields["b"] <= 0:
+        raise ValueError(f"object sizes must be positive in {spec!r}")
+    return Obstacle(**fields)
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Penalty stiffness k_c (N per mm of penetration per mm of finger length), the
+    penalty's C1 smoothing width (mm) and the friction coefficient mu."""
+
+    stiffness: float = 2.0
+    smoothing: float = 0.05
+    mu: float = 0.3
+
+
+@dataclass
+class Statics:
+    """Residual and contact state of a batch of right fingers.
+
+    residual: (B, 2, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame).
+    normal_force: (B,) N, sum of N_k. friction_force: (B,) N, sum of |λ_c| N_k.
+    friction_ratio: (B,) λ (unclipped; NaN-free, ±inf replaced by ±1e3 when nothing
+    touches). slip: (B,) bool. penetration: (B,) mm, max(0, -min d).
+    contact_points, contact_forces: (B, K, 2) sample points (mm) and total force (N) on
+    the finger at each.
+    """
+
+    residual: torch.Tensor
+    pose: FingerPose
+    normal_force: torch.Tensor
+    friction_force: torch.Tensor
+    friction_ratio: torch.Tensor
+    slip: torch.Tensor
+    penetration: torch.Tensor
+    contact_points: torch.Tensor
+    contact_forces: torch.Tensor
+
+
+def _cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def smooth_penetration(pen: torch.Tensor, delta: float) -> torch.Tensor:
+    """C1 ramp of the penetration pen (mm): 0 for pen <= 0, pen²/(2 delta) up to delta,
+    pen - delta/2 beyond. It removes the force jump when a sample point enters contact,
+    which otherwise stalls Newton; it is exactly zero without penetration."""
+    pen = pen.clamp_min(0.0)
+    return torch.where(pen < delta, pen * pen / (2.0 * delta), pen - 0.5 * delta)
+
+
+@functools.lru_cache(maxsize=8)
+def _sample_layout(n_link: int, n_tip: int, link_length: float, tip_length: float):
+    """Part label (K,) (0 link, 1 joint 2, 2 tip) and length w_k (K,) mm of each contact
+    sample point; cached because the solver evaluates it thousands of times (read-only)."""
+    part = torch.cat((torch.zeros(n_link), torch.ones(N_ANCHORS), torch.full((n_tip,), 2.0))).long()
+    seg = torch.cat((torch.full((n_link,), link_length / n_link), torch.full((N_ANCHORS,), JOINT_LENGTH / N_ANCHORS),
+                     torch.full((n_tip,), tip_length / n_tip))).double()
+    return part, seg
+
+
+def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, contact: ContactParams, weight: float):
+    """Penalty + friction forces on the finger's sample points (module docstring).
+
+    weight: object weight W (N). Returns (points (B, K, 2) mm, forces (B, K, 2) N on the
+    finger, part (K,) 0=link 1=joint 2 2=tip, normal (B,) N, friction (B,) N, ratio (B,),
+    slip (B,) bool, penetration (B,) mm).
+    """
+    part, seg = _sample_layout(params.n_link_points, params.n_tip_points, params.link_length, params.tip_length)
+    points = torch.cat((pose.link_points, pose.joint2[:, 1:], pose.tip_points), 1)
+    d, n = obstacle.signed_distance(points)
+    normal = contact.stiffness * smooth_penetration(-d, contact.smoothing) * seg  # (B, K) N
+    t = torch.stack((-n[..., 1], n[..., 0]), -1)
+    t = t * torch.where(t[..., 1:] < 0, -1.0, 1.0)  # upward tangent
+    num = 0.5 * weight + (normal * n[..., 1]).sum(-1)
+    den = (normal * t[..., 1]).sum(-1)
+    holds = den > 1e-9
+    ratio = torch.where(holds, num / torch.where(holds, den, 1.0), torch.sign(num) * 1e3)
+    used = ratio.clamp(-contact.mu, contact.mu)
+    forces = normal[..., None] * (n - used[:, None, None] * t)
+    slip = (ratio.abs() > contact.mu) | ~holds
+    total = normal.sum(-1)
+    return points, forces, part, total, used.abs() * total, ratio, slip, (-d.min(-1).values).clamp_min(0.0)
+
+
+def residual(
+    joint: JointModel,
+    params: GripperParams,
+    pressures: torch.Tensor,
+    tau: torch.Tensor,
+    obstacle: Obstacle | None = None,
+    contact: ContactParams = ContactParams(),
+    gravity: bool = True,
+) -> Statics:
+    """Equation-1 residual of the right finger.
+
+    pressures: (B, 2) MPa; tau: (B, 2, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
+    obstacle None means no object. gravity False drops all weights (the gravity-free
+    gesture). Returns Statics with residual (B, 2, 3) in N, N, N·mm.
+    """
+    pose = finger_pose(joint, params, pressures, tau)
+    B, dt = tau.shape[0], tau.dtype
+    g = 1.0 if gravity else 0.0
+    down = torch.tensor([0.0, -1.0], dtype=dt)
+    # Weights: link, joint 2, tip (joint 1's own weight is not distal to any joint end).
+    w_pts = torch.stack((pose.link.mean(1), pose.joint2[:, 1:].mean(1), pose.tip.mean(1)), 1)
+    w_frc = g * torch.tensor([params.link_weight, params.joint_weight, params.tip_weight], dtype=dt)[:, None] * down
+    w_frc = w_frc.expand(B, 3, 2)
+    w_part = torch.tensor([0, 1, 2])
+    zeros = torch.zeros(B, dtype=dt)
+    if obstacle is None:
+        pts, frc, part = w_pts, w_frc, w_part
+        normal = friction = ratio = penetration = zeros
+        slip = torch.zeros(B, dtype=torch.bool)
+        c_pts = c_frc = torch.zeros(B, 0, 2, dtype=dt)
+    else:
+        c_pts, c_frc, c_part, normal, friction, ratio, slip, penetration = contact_loads(
+            pose, params, obstacle, contact, g * params.object_weight)
+        pts, frc, part = torch.cat((w_pts, c_pts), 1), torch.cat((w_frc, c_frc), 1), torch.cat((w_part, c_part))
+    ends = torch.stack((pose.joint1[:, -1], pose.joint2[:, -1]), 1)  # (B, 2, 2)
+    distal = torch.stack((torch.ones_like(part, dtype=dt), (part == 2).to(dt)), 0)  # (2, K)
+    f_sum = torch.einsum("ik,bkc->bic", distal, frc)
+    m_sum = torch.einsum("ik,bik->bi", distal, _cross(pts[:, None] - ends[:, :, None], frc[:, None]))
+    g_force = rot(pose.theta, tau[..., :2])
+    res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
+    return Statics(res, pose, normal, friction, ratio, slip, penetration, c_pts, c_frc)
+
+
+def scaled(res: torch.Tensor) -> torch.Tensor:
+    """(B, 2, 3) residual -> (B, 6) with moments divided by MOMENT_SCALE (loss weights)."""
+    scale = torch.tensor([1.0, 1.0, 1.0 / MOMENT_SCALE], dtype=res.dtype)
+    return (res * scale).reshape(res.shape[0], 6)
+
+
+def range_penalty(tau: torch.Tensor) -> torch.Tensor:
+    """Out-of-box penalty residuals (B, 6): PENALTY_WEIGHT·max(0, |tau| - box)/scale, with
+    box (3 N, 3 N, 100 N·mm) and scale (1, 1, MOMENT_SCALE); zero inside the box."""
+    box = torch.tensor(INPUT_BOX[1:], dtype=tau.dtype)
+    scale = torch.tensor([1.0, 1.0, MOMENT_SCALE], dtype=tau.dtype)
+    return (PENALTY_WEIGHT * (tau.abs() - box).clamp_min(0.0) / scale).reshape(tau.shape[0], 6)
+
+
+def loss(res: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+    """Per-sample loss (B,): alpha R_Fx² + beta R_Fy² + gamma R_M² summed over joints,
+    plus the squared out-of-range penalty."""
+    return scaled(res).pow(2).sum(-1) + range_penalty(tau).pow(2).sum(-1)
+
+
+def residual_norms(res: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(B, 2, 3) -> (force mN (B, 2) = 1000·|R_F|, moment N·mm (B, 2) = |R_M|)."""
+    return 1000.0 * res[..., :2].norm(dim=-1), res[..., 2].abs()
