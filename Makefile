@@ -16,7 +16,7 @@ export PYVISTA_OFF_SCREEN := true
 APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python3-venv openmpi-bin
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo test test-fast bench bench-fem mesh-study joint-render self-contact \
+.PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
         dataset dataset-smoke bench-campaign train gestures bench-predictor report clean
 
 help: ## show this help
@@ -70,6 +70,10 @@ results/fem/mesh_study.json: fem/*.py | $(SETUP)
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
 results/fem/self_contact.json: fem/*.py | $(SETUP)
 	$(PY) -m fem.self_contact --out $@
+
+validation: results/fem/validation.json ## FEM vs exact elastica: cantilever alpha<=10, roll-up to 2 pi
+results/fem/validation.json: fem/*.py | $(SETUP)
+	$(PY) -m fem.benchmarks table --out $@
 
 joint-render: results/fem/joint.png ## pyvista render of the joint, undeformed + deformed
 results/fem/joint.png: fem/*.py | $(SETUP)
@@ -143,6 +147,9 @@ results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN
 bench-predictor: results/bench/predictor.json ## predictor timings and residuals -> results/bench/predictor.json
 results/bench/predictor.json: $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
 	$(PY) -m predictor.bench --model $(PRED_JOINT) --out $@
+
+report: ## results/REPORT.md from the committed JSON artefacts
+	$(PY) -m workflow.report --out results/REPORT.md
 
 clean: ## remove the venv and caches (keeps results/)
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     ap.add_argument("--walk", type=int, default=6, help="continuation samples to time")
     ap.add_argument("--step", type=float, default=0.1, help="walk step, fraction of the box")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     out = run(args.walk, args.step)
     with open(args.out, "w") as f:
         json.dump(out, f, indent=1)

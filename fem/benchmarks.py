@@ -10,6 +10,7 @@ exact elastica of fem.elastica:
 
     python -m fem.benchmarks cantilever --alpha 2 --json
     python -m fem.benchmarks rollup --theta 6.2832 --json
+    python -m fem.benchmarks table --out results/fem/validation.json   # both sweeps
 
 JSON keys: cantilever -> u_over_L, w_over_L, theta, exact, error_over_L; rollup ->
 x_over_L, y_over_L, theta, exact, error_over_L. Lengths relative to L, angles in rad.
@@ -80,9 +81,26 @@ def rollup(theta: float, geo: BeamGeometry = DEFAULT_BEAM, comm=MPI.COMM_WORLD) 
             "beam": asdict(geo)}
 
 
+#: The sweeps of ``table``: alpha up to 10 and T up to a full circle.
+TABLE_ALPHA = (0.5, 1.0, 2.0, 5.0, 10.0)
+TABLE_THETA = (math.pi / 2, math.pi, 3 * math.pi / 2, 2 * math.pi)
+
+
+def table(geo: BeamGeometry = DEFAULT_BEAM) -> dict:
+    """Both sweeps with their worst errors (fraction of L)."""
+    cant = [cantilever(a, geo) for a in TABLE_ALPHA]
+    roll = [rollup(t, geo) for t in TABLE_THETA]
+    return {"cantilever": cant, "rollup": roll,
+            "max_cantilever_error_over_L": max(c["error_over_L"] for c in cant),
+            "max_rollup_error_over_L": max(r["error_over_L"] for r in roll),
+            "required": {"cantilever": 0.015, "rollup": 0.02}}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m fem.benchmarks", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="case", required=True)
+    t = sub.add_parser("table", help="alpha in 0.5..10 and T in pi/2..2 pi, written to --out")
+    t.add_argument("--out", required=True)
     c = sub.add_parser("cantilever", help="dead tip load, alpha = P L^2/EI in [0, 10]")
     c.add_argument("--alpha", type=float, required=True)
     r = sub.add_parser("rollup", help="pure end moment, T = M L/EI in [0, 2 pi]")
@@ -91,6 +109,14 @@ def main(argv=None) -> int:
         p.add_argument("--mesh-size", type=float, default=DEFAULT_BEAM.mesh_size, help="mm")
         p.add_argument("--json", action="store_true", help="print JSON only")
     args = ap.parse_args(argv)
+    if args.case == "table":
+        out = table()
+        if MPI.COMM_WORLD.rank == 0:
+            with open(args.out, "w") as f:
+                json.dump(out, f, indent=1)
+            print(f"max tip error: cantilever {100 * out['max_cantilever_error_over_L']:.3f}% L, "
+                  f"roll-up {100 * out['max_rollup_error_over_L']:.3f}% L -> {args.out}")
+        return 0
     geo = BeamGeometry(**{**asdict(DEFAULT_BEAM), "mesh_size": args.mesh_size})
     try:
         out = cantilever(args.alpha, geo) if args.case == "cantilever" else rollup(args.theta, geo)

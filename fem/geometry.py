@@ -119,10 +119,10 @@ def _init_gmsh(name: str):
     global _GMSH_READY
     if not _GMSH_READY:   # gmsh 4.8 has no isInitialized()
         gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.Verbosity", 1)
         _GMSH_READY = True
     gmsh.clear()
-    gmsh.option.setNumber("General.Terminal", 0)
-    gmsh.option.setNumber("General.Verbosity", 1)
     gmsh.model.add(name)
     return gmsh
 

@@ -64,7 +64,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="results/fem/mesh_study.json")
     ap.add_argument("--sizes", type=float, nargs="+", default=[2.4, 1.8, 1.35])
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     study = run(args.sizes)
     if MPI.COMM_WORLD.rank == 0:
         with open(args.out, "w") as f:

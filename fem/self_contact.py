@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="results/fem/self_contact.json")
     ap.add_argument("--mesh-size", type=float, default=None)
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     out = run(args.mesh_size)
     with open(args.out, "w") as f:
         json.dump(out, f, indent=1)

@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(message)s")
+                        format="%(message)s", force=True)
     load = Load(args.p, args.f1, args.f2, args.m)
     try:
         load.check_box(args.allow_extrapolation)
