@@ -44,8 +44,7 @@ DEMO_CASE := --p 0.2 --f1 1 --f2 -1 --m 20
 demo: $(SETUP) ## the main job on the committed defaults: FEM case + render, surrogate, gesture
 	@mkdir -p $(DEMO)
 	@echo "== 1. FEM: one joint load case on the production mesh (DOLFINx)"
-	$(PY) -m fem.solve $(DEMO_CASE) --json > $(DEMO)/fem.json
-	$(PY) -m fem.solve $(DEMO_CASE) | tail -n 14
+	$(PY) -m fem.solve $(DEMO_CASE)
 	$(PY) -m fem.render $(DEMO_CASE) --out $(DEMO)/joint.png
 	@if [ -f results/surrogate/improved.pt ]; then \
 	  echo "== 2. surrogate: the same case in microseconds"; \
