@@ -23,9 +23,10 @@ from mpi4py import MPI
 from fem.geometry import JointGeometry, anchor_points
 from fem.solver import JointSolver, Load
 
-#: Four corners of the box, none the y-mirror of another: (P MPa, F1 N, F2 N, M N·mm).
+#: Four corners of the box with P > 0, none the y-mirror of another (the mirror flips P):
+#: (P MPa, F1 N, F2 N, M N·mm). F2 and M bend with or against the pressure.
 CORNERS = [Load(0.3, 3, -3, -100), Load(0.3, -3, 3, 100), Load(0.3, 3, 3, -100),
-           Load(-0.3, -3, -3, -100)]
+           Load(0.3, -3, -3, 100)]
 TOLERANCE_PERCENT = 2.0
 
 

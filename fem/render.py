@@ -45,11 +45,11 @@ def render(solver, result, out: str) -> None:
     L = result.load
     p = pyvista.Plotter(off_screen=True, shape=(1, 2), window_size=(1800, 800), border=False)
     p.subplot(0, 0)
-    p.add_mesh(half.extract_surface(nonlinear_subdivision=0), color="#7fa7d9",
+    p.add_mesh(half.extract_surface(nonlinear_subdivision=0, algorithm='dataset_surface'), color="#7fa7d9",
                show_edges=True, edge_color="#30507a", line_width=0.3, smooth_shading=False)
     p.view_vector((0.35, 0.3, -1.0), viewup=(0, 1, 0))
     p.subplot(0, 1)
-    p.add_mesh(deformed.extract_surface(nonlinear_subdivision=0), scalars="|u| (mm)",
+    p.add_mesh(deformed.extract_surface(nonlinear_subdivision=0, algorithm='dataset_surface'), scalars="|u| (mm)",
                cmap="viridis", scalar_bar_args={"title": "|u| (mm)", "vertical": True})
     anchors = np.column_stack([result.anchors, np.zeros(len(result.anchors))])
     p.add_points(anchors + [0, 0, JointGeometry().width / 2 + 0.5], color="red",

@@ -1,0 +1,203 @@
+"""Tests of the MPI data campaign (workflow.campaign) on the coarse joint mesh (4 mm).
+
+One uninterrupted reference campaign (4 samples in 2 units of 2, seed 11) is run once
+per module in a subprocess; the kill/resume, corrupt-shard and 2-rank runs must reproduce
+it exactly (every array except the timings). In-process checks share one coarse solver.
+On a shared 2-core machine the file takes about 2.5 minutes (the mpirun test, marked
+``mpi``, about 25 s of it).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workflow import campaign, dataset, shards
+
+PY = sys.executable
+ROOT = Path(__file__).resolve().parents[1]
+COARSE = 4.0
+ARGS = ["--samples", "4", "--seed", "11", "--unit-size", "2", "--mesh-size", str(COARSE),
+        "--fresh-check-every", "2", "--quiet", "--json"]
+ENV = {**os.environ, "OMP_NUM_THREADS": "1", "OMPI_ALLOW_RUN_AS_ROOT": "1",
+       "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+
+
+def run_campaign(out, *extra, mpirun=None):
+    """Run the campaign CLI into ``out``; return (exit code, JSON summary or None)."""
+    cmd = (mpirun or []) + [PY, "-m", "workflow.campaign", *ARGS, "--out", str(out), *extra]
+    r = subprocess.run(cmd, cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=900)
+    start = r.stdout.find("{\n")
+    return r.returncode, (json.loads(r.stdout[start:r.stdout.rindex("}") + 1]) if start >= 0 else None)
+
+
+def assert_same_samples(a, b):
+    """Two datasets hold identical samples and failures (timings aside)."""
+    x, _ = shards.load_dataset(a)
+    y, _ = shards.load_dataset(b)
+    for k in dataset.REPRODUCIBLE_KEYS:
+        np.testing.assert_array_equal(x[k], y[k], err_msg=k)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted reference campaign (exit 0, 4 converged samples, complete)."""
+    out = tmp_path_factory.mktemp("campaign") / "ref"
+    code, summary = run_campaign(out)
+    assert code == 0 and summary["complete"] and summary["samples"] == 4, summary
+    return out
+
+
+@pytest.fixture(scope="module")
+def solver():
+    from mpi4py import MPI
+
+    from fem.geometry import JointGeometry
+    from fem.solver import JointSolver
+    return JointSolver(JointGeometry(mesh_size=COARSE), MPI.COMM_SELF)
+
+
+def test_walk_is_seeded_in_box_and_rank_free():
+    """unit_walk: same (seed, unit) -> same inputs; a longer unit extends a shorter one; all
+    inputs inside the box; consecutive points `step` apart in box-normalised coordinates
+    unless a face reflection shortened the step; different units differ."""
+    a = campaign.unit_walk(3, 5, 50, 0.2)
+    np.testing.assert_array_equal(a, campaign.unit_walk(3, 5, 50, 0.2))
+    np.testing.assert_array_equal(a[:20], campaign.unit_walk(3, 5, 20, 0.2))
+    assert (np.abs(a) <= shards.INPUT_BOX).all()
+    d = np.linalg.norm(np.diff(a / shards.INPUT_BOX, axis=0), axis=1)
+    assert (d <= 0.2 + 1e-12).all() and np.mean(np.isclose(d, 0.2)) > 0.8
+    assert not np.allclose(a, campaign.unit_walk(3, 6, 50, 0.2))
+
+
+def test_cli_errors_and_budget_stop(tmp_path):
+    """--help exits 0; bad arguments exit 2 with a one-line error; a budget too small for
+    any unit exits 3 (resume later) leaving a valid, empty, incomplete manifest."""
+    r = subprocess.run([PY, "-m", "workflow.campaign", "--help"], cwd=ROOT, capture_output=True)
+    assert r.returncode == 0
+    for bad in (["--samples", "0"], ["--step", "3"], ["--units", "5:9"], ["--bogus"]):
+        r = subprocess.run([PY, "-m", "workflow.campaign", *ARGS, "--out", str(tmp_path), *bad],
+                           cwd=ROOT, capture_output=True, text=True)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
+    code, summary = run_campaign(tmp_path / "budget", "--max-hours", "1e-9")
+    assert code == campaign.EXIT_INCOMPLETE and summary["stopped_by_budget"]
+    m = shards.load_manifest(tmp_path / "budget")
+    assert m["complete"] is False and m["shards"] == []
+
+
+@pytest.mark.fem
+def test_kill9_midway_then_resume_is_identical(reference, tmp_path):
+    """kill -9 during unit 1 (after unit 0's shard appeared), then the same command: exit 0,
+    only the missing unit is solved again, no temp file remains, and the dataset equals
+    the uninterrupted reference sample for sample."""
+    out = tmp_path / "killed"
+    cmd = [PY, "-m", "workflow.campaign", *ARGS, "--out", str(out)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=ENV, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    first = out / dataset.shard_file(0)
+    deadline = time.time() + 600
+    while not first.exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)                       # inside unit 1's first (from-zero) solve (~5 s)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (out / dataset.shard_file(1)).exists(), "kill came too late to test resume"
+    (out / "shards" / ".unit-00001.npz.stale.tmp").write_bytes(b"half a shard")
+    code, summary = run_campaign(out)
+    assert code == 0 and summary["units_run"] == 1 and summary["complete"]
+    assert not list(out.rglob("*.tmp"))
+    assert_same_samples(out, reference)
+
+
+@pytest.mark.fem
+def test_corrupt_shard_is_detected_and_redone(reference, tmp_path):
+    """One flipped byte in unit 1's shard: verify exits 1; the campaign re-run redoes
+    exactly that unit; the result equals the reference and verifies clean."""
+    out = tmp_path / "corrupt"
+    shutil.copytree(reference, out)
+    path = out / dataset.shard_file(1)
+    blob = bytearray(path.read_bytes())
+    blob[len(blob) // 2] ^= 0xFF
+    path.write_bytes(bytes(blob))
+    assert dataset.main(["verify", str(out)]) == 1
+    code, summary = run_campaign(out)
+    assert code == 0 and summary["units_run"] == 1
+    assert_same_samples(out, reference)
+    assert dataset.main(["verify", str(out)]) == 0
+
+
+@pytest.mark.fem
+def test_harvested_sample_equals_fresh_solve(reference, solver):
+    """The second sample of each unit, reached by continuation along the walk, equals a
+    solve from zero at the same inputs to 1e-6 mm: unit 0 by the campaign's own check
+    (--fresh-check-every 2, recorded in the shard meta), unit 1 here."""
+    from fem.solver import Load
+
+    data, _ = shards.load_dataset(reference)
+    _, meta = shards.read_shard(reference / dataset.shard_file(0))
+    (check,) = meta["fresh_checks"]
+    assert check["stored"] == "harvested" and check["max_anchor_diff_mm"] < 1e-6
+    i = int(np.flatnonzero(data["sample_id"] == 3)[0])          # unit 1, harvested
+    res = solver.solve(Load.from_array(data["inputs"][i]), continuation=False)
+    assert res.converged
+    assert np.abs(res.anchors - data["anchors"][i]).max() < 1e-6
+
+
+@pytest.mark.fem
+def test_jacobian_matches_central_differences(reference, solver):
+    """The stored Jacobian (20, 4) of sample 3 matches central differences of converged
+    solves at x ± h e_k (h = 1e-3 of the box half-width) to 1e-3 relative error, column by
+    column (scaled by the column's largest entry)."""
+    from fem.solver import Load
+
+    data, _ = shards.load_dataset(reference)
+    i = int(np.flatnonzero(data["sample_id"] == 3)[0])
+    x, jac = data["inputs"][i], data["jacobian"][i]
+    # Continuation from whatever state the shared solver holds: a converged path either way.
+    assert solver.solve(Load.from_array(x), continuation=True).converged
+    fd = np.empty((20, 4))
+    for k in range(4):
+        h = 1e-3 * shards.INPUT_BOX[k]
+        r = []
+        for sign in (1.0, -1.0):
+            e = x.copy()
+            e[k] += sign * h
+            res = solver.solve(Load.from_array(e), continuation=True)
+            assert res.converged
+            r.append(res.anchors.reshape(20))
+        fd[:, k] = (r[0] - r[1]) / (2 * h)
+    err = np.abs(fd - jac).max(axis=0) / np.abs(fd).max(axis=0)
+    assert (err < 1e-3).all(), err
+
+
+@pytest.mark.fem
+def test_mirror_relation_via_verify(reference):
+    """verify --mirror 1 solves the y-mirror of one stored sample: exit 0, anchors within
+    1e-6 mm of R·diag(1,-1) and the Jacobian within 1e-4 of S·J·B (DESIGN.md §3; the
+    mesh itself is mirror symmetric, so this holds to solver tolerance)."""
+    r = subprocess.run([PY, "-m", "workflow.dataset", "verify", str(reference), "--mirror", "1",
+                        "--json"], cwd=ROOT, env=ENV, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    report = json.loads(r.stdout[r.stdout.find("{\n"):])
+    assert report["mirror"]["max_anchor_error_mm"] < 1e-6
+    assert report["mirror"]["max_jacobian_rel_error"] < 1e-4
+
+
+@pytest.mark.fem
+@pytest.mark.mpi
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+def test_two_ranks_give_identical_samples(reference, tmp_path):
+    """mpirun -n 2 (two groups of one rank, one unit each) yields the same samples as the
+    1-rank reference, bit for bit (timings aside)."""
+    code, summary = run_campaign(tmp_path / "mpi", mpirun=["mpirun", "--oversubscribe", "-n", "2"])
+    assert code == 0 and summary["ranks"] == 2 and summary["complete"]
+    assert_same_samples(tmp_path / "mpi", reference)

@@ -1,0 +1,131 @@
+"""Campaign benchmark (``make bench-campaign``) -> results/bench/campaign.json.
+
+Data flow: two real campaigns into a temporary directory, at the same mesh and unit size,
+``mpirun -n 1`` and ``mpirun -n 2`` solving the same two units {0, 1} (one per rank on 2
+ranks), each timed end to end by the campaign itself (mesh build included) -> samples per
+hour and parallel efficiency = rate(2) / (2 rate(1)) for identical work. Then, in this process, a few stored inputs are
+solved again from zero -> seconds per fresh sample, against the median wall time per
+harvested (continuation) sample, Jacobian included, from the campaigns' shards. The
+committed datasets' manifests give the CPU hours they took (sum over units of wall time x
+ranks per group), against the paper's 7 min x 2,560 samples.
+
+Units: seconds, samples per hour, CPU hours. The machine is shared: the 1-minute load
+average before each run is recorded next to the figures.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from workflow import campaign, dataset, shards
+
+PAPER_CPU_HOURS = 7 / 60 * 2560
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(mpirun: str, ranks: int, out: Path, samples: int, args) -> dict:
+    """One campaign run on ``ranks`` ranks; returns its JSON summary plus the load average."""
+    cmd = shlex.split(mpirun) + ["-n", str(ranks), sys.executable, "-m", "workflow.campaign",
+                                 "--samples", str(samples), "--seed", str(args.seed),
+                                 "--unit-size", str(args.unit_size), "--step", str(args.step),
+                                 "--fresh-check-every", "0", "--out", str(out), "--json",
+                                 "--quiet"]
+    if args.mesh_size:
+        cmd += ["--mesh-size", str(args.mesh_size)]
+    load = os.getloadavg()[0]
+    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"campaign on {ranks} rank(s) failed: {r.stderr.strip()[-500:]}")
+    summary = json.loads(r.stdout[r.stdout.find("{\n"):r.stdout.rindex("}") + 1])
+    return {**summary, "loadavg_before": load}
+
+
+def main(argv=None) -> int:
+    ap = dataset.OneLineParser(prog="python -m workflow.bench_campaign",
+                               description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default="results/bench/campaign.json")
+    ap.add_argument("--mesh-size", type=float, default=None, help="default: production mesh")
+    ap.add_argument("--unit-size", type=int, default=campaign.DEFAULT_UNIT_SIZE,
+                    help="samples per unit = per rank (default: the campaign's)")
+    ap.add_argument("--step", type=float, default=campaign.DEFAULT_STEP)
+    ap.add_argument("--fresh", type=int, default=3, help="stored inputs re-solved from zero")
+    ap.add_argument("--seed", type=int, default=101)
+    ap.add_argument("--mpirun", default="mpirun --oversubscribe")
+    ap.add_argument("--data", nargs="*", default=["results/data/train", "results/data/heldout"],
+                    help="committed datasets whose CPU hours are reported")
+    args = ap.parse_args(argv)
+    if args.unit_size < 2 or args.fresh < 1:
+        ap.error("--unit-size must be >= 2 and --fresh >= 1")
+
+    with tempfile.TemporaryDirectory(prefix="bench-campaign-") as tmp:
+        one = run(args.mpirun, 1, Path(tmp) / "r1", 2 * args.unit_size, args)
+        two = run(args.mpirun, 2, Path(tmp) / "r2", 2 * args.unit_size, args)
+        data, _ = shards.load_dataset(Path(tmp) / "r2")
+    first = data["sample_id"] % args.unit_size == 0
+    harvested = data["wall_time_s"][~first]
+
+    from mpi4py import MPI
+
+    from fem.geometry import JointGeometry
+    from fem.solver import JointSolver, Load
+    solver = JointSolver(JointGeometry(mesh_size=one["mesh_size"]), MPI.COMM_SELF)
+    pick = np.flatnonzero(~first)[:: max(1, (~first).sum() // args.fresh)][:args.fresh]
+    fresh_s, fresh_its = [], []
+    for i in pick:
+        t0 = time.perf_counter()
+        res = solver.solve(Load.from_array(data["inputs"][i]), continuation=False)
+        solver.sensitivities()
+        fresh_s.append(time.perf_counter() - t0)
+        fresh_its.append(res.iterations)
+
+    cpu, counted = 0.0, []
+    for d in args.data:
+        try:
+            m = shards.load_manifest(d)
+        except shards.ShardError:
+            continue
+        cpu += float(m.get("cpu_hours", 0.0))
+        counted.append({"root": d, "samples": m.get("samples"), "cpu_hours": m.get("cpu_hours"),
+                        "complete": m.get("complete")})
+    sph1, sph2 = one["samples_per_hour"], two["samples_per_hour"]
+    result = {
+        "samples_per_hour_1rank": sph1,
+        "samples_per_hour_2ranks": sph2,
+        "parallel_efficiency": sph2 / (2 * sph1),
+        "harvested_sample_s": float(np.median(harvested)),
+        "fresh_sample_s": float(np.median(fresh_s)),
+        "dataset_cpu_hours": cpu if counted else None,
+        "paper_cpu_hours": PAPER_CPU_HOURS,
+        "speedup_harvested_vs_fresh": float(np.median(fresh_s) / np.median(harvested)),
+        "harvested_newton_iterations_median": float(np.median(data["newton_iterations"][~first])),
+        "fresh_newton_iterations_median": float(np.median(fresh_its)),
+        "hours_for_2560_samples_2ranks": 2560 / sph2,
+        "targets": {"samples_per_hour_2ranks>=400": sph2 >= 400,
+                    "parallel_efficiency>=0.85": sph2 / (2 * sph1) >= 0.85},
+        "setup": {"mesh": solver.mesh_info(), "unit_size": args.unit_size, "walk_step": args.step,
+                  "samples_1rank": one["samples"], "samples_2ranks": two["samples"],
+                  "wall_s_1rank": one["wall_s"], "wall_s_2ranks": two["wall_s"],
+                  "loadavg_before": [one["loadavg_before"], two["loadavg_before"]],
+                  "cpus": os.cpu_count(), "git_commit": two["git_commit"],
+                  "fresh_sample_s": fresh_s, "note": "timings include the mesh build; "
+                  "harvested/fresh seconds include the Jacobian (4 back-substitutions)"},
+        "datasets": counted,
+    }
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=1) + "\n")
+    print(json.dumps({k: result[k] for k in list(result)[:8]}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

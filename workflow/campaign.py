@@ -1,0 +1,400 @@
+"""MPI data campaign: random load cases of the joint -> FEM -> sharded dataset (issue 3).
+
+``python -m workflow.campaign --samples N --seed S --out DIR [options]``, on 1 rank or
+under ``mpirun -n K`` / ``srun``. Running the same command again resumes.
+
+Data flow::
+
+    (seed, unit u) --unit_walk--> inputs (n_u, 4) [P MPa, F1 N, F2 N, M N·mm]
+      --JointSolver on a group of ranks: continuation along the walk--> anchors (n_u, 10, 2) mm,
+        Jacobian (n_u, 20, 4) = d anchors / d inputs, per-sample Newton figures
+      --group rank 0: workflow.shards.write_shard (atomic)--> DIR/shards/unit-uuuuu.npz
+      --world rank 0: workflow.dataset.build_manifest (scan + verify, atomic)--> DIR/manifest.json
+
+Work units. Sample ids [u K, u K + n_u) form unit u (K = ``--unit-size``). Its inputs are a
+random walk drawn from its own stream ``np.random.default_rng([seed, u])``: a uniform start
+in the box, then steps of fixed length ``--step`` (in box-normalised coordinates, the box
+being [-1, 1]^4) in uniformly random directions, reflected at the box faces (the uniform
+distribution is stationary for a reflected walk). The inputs never depend on solver
+outcomes, so the samples are the same whatever the number of ranks or groups.
+
+Speed. The first sample of a unit is solved from zero (the solver's load path with
+cut-back); every further sample continues from the previous converged state along the
+short walk step (Euler predictor with the converged tangent, then Newton). The assembled
+sparsity, forms and MUMPS symbolic factorisation are reused throughout. The Jacobian
+comes from ``solver.sensitivities()``: one back-substitution per input with the existing
+factorisation.
+
+Failures. A sample whose continuation fails is retried once from zero; if that fails too
+it goes to the shard's failure arrays with its inputs and both reasons (never as data),
+and the walk continues from the solver's last converged state.
+
+Path check. Every ``--fresh-check-every``-th unit also re-solves its last sample from zero
+and records the largest anchor difference in the shard's meta (``fresh_checks``). If the
+two differ by more than ``FRESH_TOL_MM`` (a second equilibrium branch), the from-zero
+solution is stored instead: it is the one a user's single solve returns.
+
+Ranks. ``comm.Split`` forms groups of ``--ranks-per-group`` ranks; the units still to do
+are dealt round-robin to the groups. Only world rank 0 prints and writes the manifest;
+each group's rank 0 writes its shards. Resume: world rank 0 removes left-over temp files,
+scans DIR/shards (checksum + unit layout + config) and rebuilds the manifest; units with a
+missing or invalid shard are (re)done. A ``kill -9`` at any moment loses at most the
+units in progress: shards and manifest only ever appear complete (temp file + rename).
+
+Exit codes: 0 the dataset is complete, 3 stopped by ``--max-hours`` (re-run to resume),
+1 error, 2 bad command line. ``--json`` prints the summary as JSON on rank 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from workflow import shards
+from workflow.dataset import (OneLineParser, ShardScanner, build_manifest, clean_temporaries,
+                              shard_file, unit_count, unit_ids)
+
+EXIT_INCOMPLETE = 3
+#: A harvested sample farther than this (mm) from the from-zero solve is another branch.
+FRESH_TOL_MM = 1e-5
+DEFAULT_UNIT_SIZE = 64
+DEFAULT_STEP = 0.2
+
+
+def reflect(x: np.ndarray) -> np.ndarray:
+    """Fold coordinates into [-1, 1] by mirror reflection at the faces. Shape kept."""
+    y = np.mod(x + 1.0, 4.0)
+    return np.where(y > 2.0, 4.0 - y, y) - 1.0
+
+
+def unit_walk(seed: int, unit: int, n: int, step: float) -> np.ndarray:
+    """Inputs (n, 4) [P MPa, F1 N, F2 N, M N·mm] of unit ``unit``: a reflected random walk
+    of step ``step`` in the box-normalised cube, from the stream default_rng([seed, unit]).
+    The first k rows do not depend on n (a longer unit extends a shorter one)."""
+    rng = np.random.default_rng([seed, unit])
+    z = np.empty((n, shards.N_INPUTS))
+    x = rng.uniform(-1.0, 1.0, shards.N_INPUTS)
+    for j in range(n):
+        if j:
+            d = rng.normal(size=shards.N_INPUTS)
+            x = reflect(x + step * d / np.linalg.norm(d))
+        z[j] = x
+    return z * shards.INPUT_BOX
+
+
+def git_commit() -> str:
+    """HEAD commit of the source tree, with '+dirty' if it has uncommitted changes."""
+    here = Path(__file__).resolve().parent
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
+                             text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=here, capture_output=True, text=True).stdout.strip()
+        return sha + ("+dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def campaign_config(mesh_size: float, unit_size: int, step: float, fresh_check_every: int) -> dict:
+    """The manifest's ``config``: everything that determines the samples (not N, not ranks)."""
+    from fem.geometry import JointGeometry
+    from fem.solver import Material, SolverConfig
+
+    return {"source": "fem-campaign", "geometry": JointGeometry(mesh_size=mesh_size).as_dict(),
+            "material": asdict(Material()), "solver": asdict(SolverConfig()),
+            "unit_size": unit_size, "walk_step": step, "fresh_check_every": fresh_check_every,
+            "input_box": shards.INPUT_BOX.tolist()}
+
+
+# ---------------------------------------------------------------------------- one unit
+def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
+               on_sample=None) -> tuple[dict, dict]:
+    """Solve the walk ``inputs`` (n, 4) of one unit by continuation (collective over the
+    solver's communicator). Returns (arrays for write_shard, meta figures)."""
+    from fem.solver import Load
+
+    data = {k: [] for k in ("sample_id", "inputs", "anchors", "jacobian", "phi_end",
+                            "cap_rotation", "newton_iterations", "wall_time_s")}
+    fail = {"failed_sample_id": [], "failed_inputs": [], "failed_reason": []}
+    checks, t_unit = [], time.perf_counter()
+    solver.reset()
+    for j, (sid, x) in enumerate(zip(ids, inputs)):
+        t0 = time.perf_counter()
+        load = Load.from_array(x)
+        res = solver.solve(load, continuation=j > 0)
+        its = res.iterations
+        if not res.converged and j > 0:
+            first_reason = res.reason
+            res = solver.solve(load, continuation=False)
+            its += res.iterations
+            if not res.converged:
+                res.reason = f"continuation: {first_reason}; from zero: {res.reason}"
+        if res.converged:
+            jac = solver.sensitivities()
+            if fresh_check and j == len(ids) - 1 and j > 0:
+                # Last sample of the unit, so re-solving from zero costs the walk nothing.
+                fresh = solver.solve(load, continuation=False)
+                its += fresh.iterations
+                diff = float(np.abs(fresh.anchors - res.anchors).max()) if fresh.converged else None
+                other = diff is not None and diff > FRESH_TOL_MM
+                checks.append({"sample_id": int(sid), "max_anchor_diff_mm": diff,
+                               "stored": "from-zero" if other else "harvested",
+                               "note": "" if fresh.converged else f"from zero: {fresh.reason}"})
+                if other:
+                    res, jac = fresh, solver.sensitivities()
+            data["sample_id"].append(sid)
+            data["inputs"].append(x)
+            data["anchors"].append(res.anchors)
+            data["jacobian"].append(jac)
+            data["phi_end"].append(res.phi_end)
+            data["cap_rotation"].append(res.cap_rotation)
+            data["newton_iterations"].append(its)
+            data["wall_time_s"].append(time.perf_counter() - t0)
+        else:
+            fail["failed_sample_id"].append(sid)
+            fail["failed_inputs"].append(x)
+            fail["failed_reason"].append(res.reason or "no convergence")
+        if on_sample is not None:
+            on_sample(res.converged)
+    arrays = shards.empty_arrays()
+    for k, v in {**data, **fail}.items():
+        if v:
+            arrays[k] = np.asarray(v, dtype=arrays[k].dtype if k != "failed_reason" else str)
+    arrays["converged"] = np.ones(len(arrays["sample_id"]), bool)
+    return arrays, {"wall_s": time.perf_counter() - t_unit, "fresh_checks": checks}
+
+
+# ---------------------------------------------------------------------------- CLI
+class RankZeroParser(OneLineParser):
+    """One-line argparse errors, printed by the launcher's rank 0 only (arguments are
+    parsed before MPI starts, on every rank)."""
+
+    def _print_message(self, message, file=None):
+        rank = next((os.environ[v] for v in ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK",
+                                             "SLURM_PROCID") if v in os.environ), "0")
+        if rank == "0":
+            super()._print_message(message, file)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    ap = RankZeroParser(prog="python -m workflow.campaign",
+                       description="Resumable MPI FEM data campaign of the bellow joint "
+                                   "(run the same command again to resume).")
+    ap.add_argument("--samples", type=int, required=True, help="number of load cases N")
+    ap.add_argument("--seed", type=int, required=True, help="campaign seed (fixes all inputs)")
+    ap.add_argument("--out", required=True, help="dataset directory (manifest.json + shards/)")
+    ap.add_argument("--max-hours", type=float, default=None,
+                    help="time budget: start no unit that would end past it (exit 3 if unfinished)")
+    ap.add_argument("--ranks-per-group", type=int, default=1,
+                    help="MPI ranks per FEM solve (default 1; must divide the rank count)")
+    ap.add_argument("--mesh-size", type=float, default=None,
+                    help="tetrahedron size in mm (default: the FEM's production mesh)")
+    ap.add_argument("--unit-size", type=int, default=DEFAULT_UNIT_SIZE,
+                    help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
+    ap.add_argument("--step", type=float, default=DEFAULT_STEP,
+                    help=f"random-walk step, box-normalised (default {DEFAULT_STEP})")
+    ap.add_argument("--fresh-check-every", type=int, default=8, metavar="U",
+                    help="re-solve the last sample of every U-th unit from zero (0: never)")
+    ap.add_argument("--units", default=None, metavar="A:B",
+                    help="only units A..B-1 (split one campaign over independent jobs; "
+                         "merge with python -m workflow.dataset merge)")
+    ap.add_argument("--progress-every", type=float, default=60.0,
+                    help="seconds between progress lines (default 60)")
+    ap.add_argument("--json", action="store_true", help="print the summary as JSON")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines")
+    args = ap.parse_args(argv)
+    for name, ok in (("--samples", args.samples >= 1), ("--unit-size", args.unit_size >= 1),
+                     ("--ranks-per-group", args.ranks_per_group >= 1),
+                     ("--step", 0 < args.step <= 2), ("--fresh-check-every", args.fresh_check_every >= 0),
+                     ("--max-hours", args.max_hours is None or args.max_hours > 0),
+                     ("--mesh-size", args.mesh_size is None or 0.3 <= args.mesh_size <= 10)):
+        if not ok:
+            ap.error(f"invalid value for {name}")
+    n_units = unit_count(args.samples, args.unit_size)
+    if args.units is None:
+        args.unit_range = (0, n_units)
+    else:
+        try:
+            a, b = (int(v) for v in args.units.split(":"))
+        except ValueError:
+            ap.error(f"--units expects A:B, got {args.units!r}")
+        if not 0 <= a < b <= n_units:
+            ap.error(f"--units {args.units} outside 0:{n_units}")
+        args.unit_range = (a, b)
+    return args
+
+
+class Progress:
+    """Rank-0 progress line: samples done, rate, ETA, failures."""
+
+    def __init__(self, total: int, done0: int, quiet: bool, every: float):
+        self.total, self.done0, self.quiet, self.every = total, done0, quiet, every
+        self.t0 = self.last = time.perf_counter()
+        self.shown = None
+
+    def line(self, done: int, failures: int, force: bool = False) -> None:
+        now = time.perf_counter()
+        if self.quiet or (done, failures) == self.shown or (not force and now - self.last < self.every):
+            return
+        self.last, self.shown = now, (done, failures)
+        rate = (done - self.done0) / max(now - self.t0, 1e-9) * 3600
+        eta = (self.total - done) / rate if rate > 0 else math.inf
+        print(f"[campaign] {done}/{self.total} samples ({100 * done / self.total:.1f}%), "
+              f"{rate:.0f} samples/h, ETA {eta:.2f} h, failures {failures}", flush=True)
+
+
+def run(args) -> int:
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    rank, size = world.rank, world.size
+    G = args.ranks_per_group
+    if size % G:
+        if rank == 0:
+            print(f"python -m workflow.campaign: error: --ranks-per-group {G} does not divide "
+                  f"{size} ranks", file=sys.stderr)
+        return 2
+    from fem.geometry import JointGeometry
+    from fem.solver import JointSolver
+
+    mesh_size = args.mesh_size or JointGeometry().mesh_size
+    config = campaign_config(mesh_size, args.unit_size, args.step, args.fresh_check_every)
+    out, t_start = Path(args.out), time.perf_counter()
+
+    # --- world rank 0: lock, clean, scan, manifest; everyone learns the units to do
+    status, lock, scanner, manifest, todo = None, None, None, None, None
+    if rank == 0:
+        try:
+            (out / "shards").mkdir(parents=True, exist_ok=True)
+            lock = open(out / ".campaign.lock", "w")
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            clean_temporaries(out)
+            old = shards.load_manifest(out) if shards.manifest_path(out).is_file() else None
+            if old is not None and (old.get("config") != config or old.get("seed") != args.seed):
+                differ = [k for k in config if (old.get("config") or {}).get(k) != config[k]]
+                differ += ["seed"] if old.get("seed") != args.seed else []
+                raise RuntimeError(f"{out} holds a campaign with another {', '.join(differ)} "
+                                   "(e.g. the FEM code changed); use another --out")
+            scanner = ShardScanner(out, args.samples, config, args.seed)
+            done = scanner.scan()
+            manifest = build_manifest(out, args.samples, config, args.seed, done, old)
+            todo = [u for u in range(*args.unit_range) if u not in done]
+        except BlockingIOError:
+            status = f"another campaign is writing {out}"
+        except (OSError, RuntimeError, shards.ShardError) as exc:
+            status = str(exc)
+    status, todo, commit = world.bcast((status, todo, git_commit() if rank == 0 else None), root=0)
+    if status:
+        if rank == 0:
+            print(f"python -m workflow.campaign: error: {status}", file=sys.stderr)
+        return 1
+
+    n_groups = size // G
+    group = world.Split(color=rank // G, key=rank)
+    mine = todo[rank // G::n_groups]
+    progress = None
+    if rank == 0:
+        done_samples = manifest["samples"] + manifest["failures"]
+        progress = Progress(args.samples, done_samples, args.quiet, args.progress_every)
+        if not args.quiet:
+            print(f"[campaign] {out}: {len(todo)} of {manifest['units_total']} units to do on "
+                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size} mm, "
+                  f"unit size {args.unit_size}, step {args.step}", flush=True)
+
+    state = {"in_unit": 0, "fail_in_unit": 0}
+
+    def on_sample(converged: bool) -> None:
+        state["in_unit"] += 1
+        state["fail_in_unit"] += not converged
+        if rank == 0:
+            progress.line(manifest["samples"] + manifest["failures"] + state["in_unit"],
+                          manifest["failures"] + state["fail_in_unit"])
+
+    units_run, stopped, solver, unit_times = 0, False, None, []
+    budget = args.max_hours * 3600 if args.max_hours else math.inf
+    for unit in mine:
+        # All ranks of a group must agree to start a unit (its solves are collective).
+        elapsed = time.perf_counter() - t_start
+        expected = np.mean(unit_times) if unit_times else 0.0
+        go = group.bcast(elapsed + expected <= budget, root=0)
+        if not go:
+            stopped = True
+            break
+        if solver is None:
+            solver = JointSolver(JointGeometry(mesh_size=mesh_size), group)
+        ids = unit_ids(unit, args.samples, args.unit_size)
+        inputs = unit_walk(args.seed, unit, len(ids), args.step)
+        check = args.fresh_check_every > 0 and unit % args.fresh_check_every == 0
+        state["in_unit"] = state["fail_in_unit"] = 0
+        arrays, figures = solve_unit(solver, ids, inputs, check, on_sample)
+        unit_times.append(figures["wall_s"])
+        if group.rank == 0:
+            meta = {"config": config, "seed": args.seed, "unit": unit, "git_commit": commit,
+                    "mesh": solver.mesh_info(), "ranks": G, "cpu_s": figures["wall_s"] * G,
+                    **figures}
+            shards.write_shard(out / shard_file(unit), arrays, meta)
+        units_run += 1
+        if rank == 0:
+            manifest = build_manifest(out, args.samples, config, args.seed, scanner.scan(), manifest)
+            state["in_unit"] = state["fail_in_unit"] = 0
+            progress.line(manifest["samples"] + manifest["failures"], manifest["failures"],
+                          force=True)
+
+    # --- wait for every group without spinning a core (MPI barriers busy-poll)
+    req = world.Ibarrier()
+    while not req.Test():
+        time.sleep(0.2)
+        if rank == 0:
+            fresh = scanner.scan()
+            if len(fresh) != manifest["units_done"]:
+                manifest = build_manifest(out, args.samples, config, args.seed, fresh, manifest)
+                progress.line(manifest["samples"] + manifest["failures"], manifest["failures"])
+    stopped = world.allreduce(stopped, op=MPI.LOR)
+    units_run = world.allreduce(units_run, op=MPI.SUM)
+    code = 0
+    if rank == 0:
+        manifest = build_manifest(out, args.samples, config, args.seed, scanner.scan(), manifest)
+        wall = time.perf_counter() - t_start
+        solved = manifest["samples"] + manifest["failures"] - progress.done0
+        listed = {e["unit"] for e in manifest["shards"]}
+        range_done = all(u in listed for u in range(*args.unit_range))
+        summary = {
+            "out": str(out), "seed": args.seed, "samples_requested": args.samples,
+            "samples": manifest["samples"], "failures": manifest["failures"],
+            "failure_rate": manifest["failures"] / max(manifest["samples"] + manifest["failures"], 1),
+            "units_total": manifest["units_total"], "units_done": manifest["units_done"],
+            "units_run": units_run, "complete": manifest["complete"],
+            "range_complete": range_done, "stopped_by_budget": stopped,
+            "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
+            "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,
+            "cpu_hours_dataset": manifest["cpu_hours"], "git_commit": commit,
+        }
+        if args.json:
+            print(json.dumps(summary, indent=1))
+        elif not args.quiet:
+            print(f"[campaign] {'complete' if summary['complete'] else 'incomplete'}: "
+                  f"{summary['samples']} samples, {summary['failures']} failures "
+                  f"({100 * summary['failure_rate']:.2f}%), {units_run} units this run in "
+                  f"{wall / 3600:.2f} h ({summary['samples_per_hour']:.0f} samples/h)"
+                  + ("; time budget reached, re-run to resume" if stopped else ""), flush=True)
+        code = 0 if summary["range_complete"] else EXIT_INCOMPLETE
+        lock.close()
+    return world.bcast(code, root=0)
+
+
+def main(argv=None) -> int:
+    return run(parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
