@@ -27,15 +27,17 @@ def create_mesh(geometry: JointGeometry | BeamGeometry, comm: MPI.Comm = MPI.COM
     """Build ``geometry`` with gmsh on rank 0 of ``comm`` and distribute it (collective)."""
     from dolfinx.io import gmshio
 
+    import gmsh
+
     builder = build_joint if isinstance(geometry, JointGeometry) else build_beam
-    model = None
+    error = None
     if comm.rank == 0:
-        model = builder(geometry)
-    # Rank 0 raising in the builder would hang the others in model_to_mesh: share status.
-    if comm.bcast(model is not None if comm.rank == 0 else None, root=0) is False:
-        raise RuntimeError("gmsh geometry build failed on rank 0")
-    if comm.rank != 0:
-        import gmsh
-        model = gmsh.model
-    mesh, cell_tags, facet_tags = gmshio.model_to_mesh(model, comm, 0, gdim=3)
+        try:
+            builder(geometry)
+        except Exception as exc:   # raise on every rank, or the others hang below
+            error = f"geometry build failed: {exc}"
+    error = comm.bcast(error, root=0)
+    if error:
+        raise RuntimeError(error)
+    mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
     return MeshData(mesh, cell_tags, facet_tags, geometry)
