@@ -185,8 +185,13 @@ def build_joint(geo: JointGeometry = JointGeometry()):
     top = [f for f in _surfaces_in_box(gmsh, x_in0, s / 2, 0, x_in1, H - t, Z - t) if f not in sym]
     valley = []
     for (_, x1), (x2, _) in zip(cells[:-1], cells[1:]):
-        valley += _surfaces_in_box(gmsh, x1, Hv, 0, x1, H, Z)
-        valley += _surfaces_in_box(gmsh, x2, Hv, 0, x2, H, Z)
+        left = _surfaces_in_box(gmsh, x1, Hv, 0, x1, H, Z)
+        right = _surfaces_in_box(gmsh, x2, Hv, 0, x2, H, Z)
+        # Translation-periodic face meshes: every node across a valley has an exact
+        # partner, which the solver's node-to-node contact pairs up.
+        shift = [1, 0, 0, x2 - x1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
+        gmsh.model.mesh.setPeriodic(2, right, left, shift)
+        valley += left + right
     groups = {
         "solid": (3, keep_body), "distal_cap": (3, keep_cap),
         "proximal": (2, _surfaces_in_box(gmsh, 0, 0, 0, 0, H, Z)),

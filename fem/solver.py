@@ -32,8 +32,9 @@ Loads (DESIGN.md §3), on the half-model z >= 0, which carries half of each resu
   Its variation is the virtual work f·δu_ref + M δtheta, so the couple is M at ANY end
   rotation (no M cos(phi) error of a dead linear traction; see ``fem.benchmarks rollup``).
 
-Weak form: R(u; v) = ∫ P : grad v dX + ∫_chamber p cofac(F) N·v dA + δPi_ext = 0, with
-u = 0 on the proximal face and u_z = 0 on the symmetry plane. Newton with the exact
+Weak form: R(u; v) = ∫ P : grad v dX + ∫_chamber p cofac(F) N·v dA + δPi_ext + δPi_c = 0,
+with u = 0 on the proximal face and u_z = 0 on the symmetry plane; Pi_c is the penalty
+self-contact of the outer walls across each valley (:mod:`fem.contact`). Newton with the exact
 tangent (MUMPS LU) along a load path with automatic cut-back.
 
 Sensitivities: at a converged state, du/dλ = -K^{-1} ∂R/∂λ for λ in (P, F1, F2, M), one
@@ -58,6 +59,7 @@ from dolfinx.fem.petsc import (apply_lifting, assemble_matrix, assemble_vector, 
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fem.contact import ValleyContact
 from fem.geometry import TAGS, BeamGeometry, JointGeometry, anchor_points
 from fem.mesh import MeshData, create_mesh
 
@@ -128,6 +130,7 @@ class SolverConfig:
     max_step: float = 1.0
     min_step: float = 1.0 / 256     # give up below this path fraction
     grow: float = 1.5               # step growth after an easy step (<= 6 iterations)
+    contact_penalty: float = 100.0  # valley self-contact, MPa/mm of overlap (0: off)
 
 
 @dataclass
@@ -270,6 +273,11 @@ class Solver:
 
         self._R, self._J = fem.form(R), fem.form(Jac)
         self._A = create_matrix(self._J)
+        self.contact = None
+        if TAGS["valley_faces"] in tags and config.contact_penalty > 0:
+            self.contact = ValleyContact(V, ft, mesh_data.geometry, config.contact_penalty)
+            # The pair blocks couple nodes that share no cell: allow them in the pattern.
+            self._A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self._b = create_vector(self._R)
         self._du = fem.Function(V)
         self._chord = fem.Function(V)
@@ -334,6 +342,8 @@ class Solver:
         assemble_vector(b, self._R)
         apply_lifting(b, [self._J], bcs=[self.bcs], x0=[self.u.vector], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.contact:
+            self.contact.add_residual(b, self.u)
         set_bc(b, self.bcs, self.u.vector, -1.0)
         return b.norm()
 
@@ -341,6 +351,8 @@ class Solver:
         """Assemble the tangent K(u) and (re)factorise it."""
         self._A.zeroEntries()
         assemble_matrix(self._A, self._J, bcs=self.bcs)
+        if self.contact:
+            self.contact.add_tangent(self._A, self.u)
         self._A.assemble()
         self.ksp.setOperators(self._A)
         self.ksp.setUp()

@@ -63,10 +63,11 @@ def fem_section(root: Path) -> list[str]:
     sc = _load(root / "fem/self_contact.json")
     out += ["### Self-contact of the bellows (`make self-contact`)", ""]
     if sc:
-        out += [f"Minimum signed gap between facing outer cell walls over the box corners and "
+        out += [f"Penalty self-contact ({sc['contact_penalty_MPa_per_mm']} MPa/mm, `fem.contact`). "
+                f"Minimum signed gap between facing outer cell walls over the box corners and "
                 f"their mirrors: **{sc['min_gap_mm']:.3f} mm** (undeformed "
-                f"{sc['undeformed_gap_mm']} mm); interpenetration: {sc['interpenetration']}; "
-                f"unsolved cases: {sc['unsolved_cases']}.", "",
+                f"{sc['undeformed_gap_mm']} mm; negative is overlap); unsolved cases: "
+                f"{sc['unsolved_cases']}.", "",
                 "| load (P, F1, F2, M) | phi_end (deg) | min gap (mm) |", "|---|---|---|"]
         for c in sc["cases"]:
             gap = f"{c['min_gap_mm']:.3f}" if c.get("converged") else "not converged"

@@ -1,0 +1,128 @@
+"""Frictionless penalty self-contact of the outer bellow walls across each valley.
+
+When the joint bends (or one chamber balloons) the two outer cell walls facing each other
+across a valley (undeformed gap ``valley_width`` = 2.5 mm) close up; without contact they
+interpenetrate by up to 2.4 mm inside the input box (``make self-contact``). The geometry
+meshes the two faces of a valley translation-periodically (:func:`fem.geometry.build_joint`),
+so every node a on the left face has an exact partner b on the right face. Each pair gets
+the one-sided quadratic penalty energy::
+
+    g   = (x_b - x_a) · n                      signed gap (mm), x = X + u
+    Pi_c = sum_pairs  kappa w / 2  <-g>^2      <s> = max(s, 0)
+
+with ``kappa`` the penalty (MPa/mm, i.e. contact pressure per mm of overlap), w the
+face area per node (mm²) and n the unit normal of the best-fit plane through both faces
+of the valley, projected on the bending plane (z-component dropped: the load is planar).
+n is lagged: taken from the current iterate and not differentiated, so the tangent is
+exact up to the small rotation of n within one Newton step. Residual and tangent::
+
+    dPi_c/dx_b = -dPi_c/dx_a = -kappa w <-g> n,    K_bb = K_aa = -K_ab = kappa w H(-g) n n^T
+
+At the production penalty the overlap under the largest contact pressures of the input
+box is a few hundredths of a mm (``results/fem/self_contact.json``).
+
+The pairs are gathered on every rank (a few hundred nodes) and rank 0 adds the
+contributions with global PETSc indices; PETSc moves off-process entries. Every pair's
+4 x 4 block is always inserted (zeros when open), so the sparsity pattern, and with it
+MUMPS' symbolic factorisation, is fixed after the first assembly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from dolfinx import fem
+from petsc4py import PETSc
+from scipy.spatial import cKDTree
+
+from fem.geometry import TAGS, JointGeometry
+
+
+class ValleyContact:
+    """Node-to-node penalty contact between the periodic valley faces of the joint."""
+
+    def __init__(self, V, facet_tags, geometry: JointGeometry, penalty: float):
+        self.comm = V.mesh.comm
+        self.penalty = penalty
+        imap = V.dofmap.index_map
+        nodes = fem.locate_dofs_topological(V, 2, facet_tags.find(TAGS["valley_faces"]))
+        self._owned = nodes[nodes < imap.size_local]
+        gidx = np.concatenate(self.comm.allgather(imap.local_to_global(self._owned)))
+        X = np.vstack(self.comm.allgather(V.tabulate_dof_coordinates()[self._owned]))
+        self._global = gidx.astype(PETSc.IntType)
+        self.X = X
+        # Pairs per valley and side, as indices into the gathered arrays.
+        self.groups = {}
+        cells = geometry.cells()
+        for k, ((_, x1), (x2, _)) in enumerate(zip(cells[:-1], cells[1:])):
+            for side, sign in (("top", 1.0), ("bottom", -1.0)):
+                half = sign * X[:, 1] > 0
+                a = np.flatnonzero(half & (np.abs(X[:, 0] - x1) < 1e-6))
+                b = np.flatnonzero(half & (np.abs(X[:, 0] - x2) < 1e-6))
+                dist, j = cKDTree(X[b]).query(X[a] + [x2 - x1, 0.0, 0.0])
+                if len(a) != len(b) or len(a) == 0 or dist.max() > 1e-6:
+                    raise RuntimeError(f"valley {k} ({side}): faces are not meshed periodically")
+                area = (geometry.height - geometry.valley_height) / 2 * geometry.width / 2
+                self.groups[(k, side)] = (a, b[j], area / len(a))
+
+    def positions(self, u: fem.Function) -> np.ndarray:
+        """Deformed positions of all contact nodes, gathered on every rank. (n, 3) mm."""
+        mine = u.x.array.reshape(-1, 3)[self._owned]
+        return self.X + np.vstack(self.comm.allgather(mine))
+
+    @staticmethod
+    def normal(xa: np.ndarray, xb: np.ndarray) -> np.ndarray:
+        """Unit normal (3,) of the best-fit plane through both faces, in the xy-plane,
+        pointing from face a to face b."""
+        pts = np.vstack([xa - xa.mean(axis=0), xb - xb.mean(axis=0)])
+        if not np.isfinite(pts).all():    # a diverged iterate: let Newton see NaN
+            return np.full(3, np.nan)
+        n = np.linalg.svd(pts, full_matrices=False)[2][-1]
+        n[2] = 0.0
+        n /= np.linalg.norm(n)
+        return n if n @ (xb.mean(axis=0) - xa.mean(axis=0)) > 0 else -n
+
+    def gaps(self, u: fem.Function) -> dict:
+        """Signed gap g (mm) of every pair, per (valley, side): {key: (n_pairs,)}."""
+        x = self.positions(u)
+        out = {}
+        for key, (a, b, _) in self.groups.items():
+            out[key] = (x[b] - x[a]) @ self.normal(x[a], x[b])
+        return out
+
+    def _terms(self, u: fem.Function):
+        """Per pair: global node indices of a and b, normal, k w <-g>, k w H(-g)."""
+        x = self.positions(u)
+        for a, b, w in self.groups.values():
+            n = self.normal(x[a], x[b])
+            g = (x[b] - x[a]) @ n
+            closed = g < 0
+            yield (self._global[a], self._global[b], n,
+                   self.penalty * w * np.where(closed, -g, 0.0),
+                   self.penalty * w * closed)
+
+    def add_residual(self, b: PETSc.Vec, u: fem.Function) -> None:
+        """b += dPi_c/du (collective)."""
+        terms = list(self._terms(u))
+        if self.comm.rank == 0:
+            for ga, gb, n, f, _ in terms:
+                for c in (0, 1):
+                    b.setValues(3 * ga + c, f * n[c], addv=PETSc.InsertMode.ADD)
+                    b.setValues(3 * gb + c, -f * n[c], addv=PETSc.InsertMode.ADD)
+        b.assemblyBegin()
+        b.assemblyEnd()
+
+    def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
+        """A += d²Pi_c/du² in the (x, y) dofs of every pair (collective; A is left
+        flush-assembled, call A.assemble() after)."""
+        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
+        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+        terms = list(self._terms(u))
+        if self.comm.rank == 0:
+            sign = np.array([[1.0, -1.0], [-1.0, 1.0]])
+            for ga, gb, n, _, k in terms:
+                nn = np.outer(n[:2], n[:2])
+                for i in range(len(ga)):
+                    rows = np.array([3 * ga[i], 3 * ga[i] + 1, 3 * gb[i], 3 * gb[i] + 1],
+                                    dtype=PETSc.IntType)
+                    A.setValues(rows, rows, np.kron(sign, k[i] * nn),
+                                addv=PETSc.InsertMode.ADD)
