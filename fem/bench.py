@@ -51,20 +51,22 @@ def run(n_walk: int = 6, step: float = 0.1, seed: int = 0) -> dict:
         solver.sensitivities()
         if not r.converged:
             raise RuntimeError("a continuation benchmark solve did not converge")
-        walk.append((time.perf_counter() - t, r.iterations))
+        walk.append((time.perf_counter() - t, r.iterations, r.factorisations))
     info = solver.mesh_info()
     from_zero_s = statistics.median(r.wall_time for r in zero)
-    cont_s = statistics.median(t for t, _ in walk)
+    cont_s = statistics.median(t for t, _, _ in walk)
     return {
         **info,
         "wall_mesh_size_mm": geo.wall_mesh_size or geo.mesh_size, "wall_thickness_mm": geo.wall,
         "setup_s": setup,
         "solve_from_zero_s": from_zero_s,
         "solve_from_zero_cases": [{"load": r.load.as_array().tolist(), "wall_time_s": r.wall_time,
-                                   "newton_iterations": r.newton_iterations} for r in zero],
+                                   "newton_iterations": r.newton_iterations,
+                                   "factorisations": r.factorisations} for r in zero],
         "newton_iterations": statistics.median(r.iterations for r in zero),
         "continuation_sample_s": cont_s,
-        "continuation_newton_iterations": statistics.median(n for _, n in walk),
+        "continuation_newton_iterations": statistics.median(n for _, n, _ in walk),
+        "continuation_factorisations": statistics.median(f for _, _, f in walk),
         "continuation_step_fraction_of_box": step,
         "paper_seconds_per_sample": PAPER_SECONDS_PER_SAMPLE, "paper_nodes": 16000,
         "speedup_vs_paper_from_zero": PAPER_SECONDS_PER_SAMPLE / from_zero_s,

@@ -149,6 +149,7 @@ class SolveResult:
     newton_iterations: list[int] = field(default_factory=list)
     load_steps: int = 0
     cutbacks: int = 0
+    factorisations: int = 0         # LU factorisations this solve needed
     wall_time: float = 0.0
     reason: str = ""
     extrapolated: bool = False
@@ -169,7 +170,7 @@ class SolveResult:
             "tangent_assumption_error_deg": math.degrees(self.cap_rotation - self.phi_end),
             "newton_iterations": self.newton_iterations, "iterations": self.iterations,
             "load_steps": self.load_steps, "cutbacks": self.cutbacks,
-            "wall_time_s": self.wall_time, "reason": self.reason,
+            "factorisations": self.factorisations, "wall_time_s": self.wall_time, "reason": self.reason,
             "extrapolated": self.extrapolated,
         }
 
@@ -483,7 +484,7 @@ class Solver:
         solver returns to its last converged state (never a non-converged one).
         """
         cfg = self.config
-        t0 = time.perf_counter()
+        t0, lu0 = time.perf_counter(), self.factorisations
         if not continuation or self.state_load is None:
             self.reset()
         start, target = self.state_load.as_array(), load.as_array()
@@ -538,7 +539,8 @@ class Solver:
             load=load, converged=converged, anchors=anchors,
             phi_end=float(math.atan2(d[1], d[0])),
             cap_rotation=float(self.theta_ref.value), newton_iterations=iters,
-            load_steps=steps, cutbacks=cutbacks, wall_time=time.perf_counter() - t0,
+            load_steps=steps, cutbacks=cutbacks, factorisations=self.factorisations - lu0,
+            wall_time=time.perf_counter() - t0,
             reason="" if converged else reason, u=self.u)
         if self.comm.rank == 0:
             log.info("solve %s: converged=%s, %d steps, %d iterations, %.2f s",
