@@ -8,10 +8,18 @@
     R = g(x)                                                        (paper)
     R = (g(x) + S g(B x)) / 2                                       (symmetric)
 
+    equivariant (one pass, exactly symmetric):
+    o = (z_P, z_F2, z_M) (odd under B), q = (z_F1, o_i o_j for i <= j [, |z_P|]) (invariant)
+    h = MLP(q);  [a, c] = W_out h + b_out,  a (10,), c (3, 10)
+    x_k = mean_k + scale_k a_k          (even anchor coordinates)
+    y_k = scale_k sum_j o_j c_jk        (odd: every odd function is sum_j o_j c_j(invariants))
+
 with the y-mirror of DESIGN.md §3: B = diag(-1, 1, -1, -1) on the inputs and S = diag(1, -1)
 on each anchor. The symmetric form satisfies R(Bx) = S R(x) by construction, for any
 weights: g(BBx) = g(x), and a sign flip, a sum and a halving are exact in floating point,
 so the identity holds to the last bit when x and Bx are evaluated in the same layout.
+The equivariant form needs one pass instead of two (half the cost): q is bitwise invariant
+(o_i o_j = (-o_i)(-o_j)) and negating o negates each y_k exactly.
 
 |P| as a feature: P > 0 inflates one chamber and P < 0 the other, so the FEM response has a
 kink at P = 0 (the axial elongation grows like |P|). |P| is mirror-invariant, so the
@@ -85,10 +93,14 @@ class ModelConfig:
     activation: str = "relu"
     residual: bool = False       # h + act(W h + b) between hidden layers of equal width
     symmetric: bool = False      # R = (g(x) + S g(Bx)) / 2
-    abs_pressure: bool = False   # feed |P| / 0.3 as a fifth input
+    abs_pressure: bool = False   # feed |P| / 0.3 as an extra input
+    equivariant: bool = False    # one-pass symmetric form on mirror invariants (docstring)
 
     def __post_init__(self):
         object.__setattr__(self, "hidden", tuple(int(w) for w in self.hidden))
+        if self.symmetric and self.equivariant:
+            raise ValueError("symmetric and equivariant are two ways to the same symmetry: "
+                             "choose one")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation {self.activation!r} not in {sorted(ACTIVATIONS)}")
         if not self.hidden:
@@ -108,9 +120,17 @@ class JointSurrogate(nn.Module):
         self.register_buffer("input_mirror", torch.tensor(INPUT_MIRROR), persistent=False)
         self.register_buffer("output_mirror", torch.tensor(ANCHOR_MIRROR).repeat(N_ANCHORS),
                              persistent=False)
-        widths = (N_INPUTS + config.abs_pressure,) + config.hidden
+        odd = [i for i, b in enumerate(INPUT_MIRROR) if b < 0]
+        self.register_buffer("odd_inputs", torch.tensor(odd), persistent=False)
+        self.register_buffer("even_inputs", torch.tensor([i for i, b in enumerate(INPUT_MIRROR)
+                                                          if b > 0]), persistent=False)
+        pairs = torch.triu_indices(len(odd), len(odd))
+        self.register_buffer("pairs", pairs, persistent=False)
+        n_in = N_INPUTS - len(odd) + pairs.shape[1] if config.equivariant else N_INPUTS
+        widths = (n_in + config.abs_pressure,) + config.hidden
         self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(widths[:-1], widths[1:]))
-        self.head = nn.Linear(widths[-1], 2 * N_ANCHORS)
+        n_out = N_ANCHORS * (1 + len(odd)) if config.equivariant else 2 * N_ANCHORS
+        self.head = nn.Linear(widths[-1], n_out)
         self.act = ACTIVATIONS[config.activation]
 
     def g(self, x: torch.Tensor, dx: torch.Tensor | None = None):
@@ -123,11 +143,15 @@ class JointSurrogate(nn.Module):
         """
         z = x / self.input_scale
         dz = None if dx is None else dx / self.input_scale
+        if self.config.equivariant:
+            o, q, dq = self._invariants(z, dz)
+        else:
+            q, dq = z, dz
         if self.config.abs_pressure:
-            z = torch.cat([z, z[:, :1].abs()], dim=1)
+            q = torch.cat([q, z[:, :1].abs()], dim=1)
             if dz is not None:
-                dz = torch.cat([dz, dz[:, :, :1] * torch.sign(z[:, None, :1])], dim=2)
-        h, dh = z, dz
+                dq = torch.cat([dq, dz[:, :, :1] * torch.sign(z[:, None, :1])], dim=2)
+        h, dh = q, dq
         for i, layer in enumerate(self.layers):
             a, da = self.act(layer(h), dz is not None)
             residual = self.config.residual and i > 0 and a.shape == h.shape
@@ -135,10 +159,46 @@ class JointSurrogate(nn.Module):
             if dz is not None:
                 da = da[:, None, :] * (dh @ layer.weight.T)
                 dh = dh + da if residual else da
+        if self.config.equivariant:
+            return self._equivariant_head(o, h, None if dx is None else dz, dh)
         y = self.output_mean + self.output_scale * self.head(h)
         if dx is None:
             return y
         return y, (dh @ self.head.weight.T) * self.output_scale
+
+    def _invariants(self, z, dz):
+        """Odd inputs o (n, 3) and mirror invariants q = (z_F1, o_i o_j for i <= j) (n, 7),
+        with the tangent dq (n, 4, 7) of q when dz (n, 4, 4) is given."""
+        o = z[:, self.odd_inputs]
+        i, j = self.pairs
+        q = torch.cat([z[:, self.even_inputs], o[:, i] * o[:, j]], dim=1)
+        if dz is None:
+            return o, q, None
+        do = dz[:, :, self.odd_inputs]
+        dq = torch.cat([dz[:, :, self.even_inputs], do[:, :, i] * o[:, None, j] + o[:, None, i] * do[:, :, j]],
+                       dim=2)
+        return o, q, dq
+
+    def _equivariant_head(self, o, h, dz, dh):
+        """Anchors (n, 20) mm from the trunk output h (n, w): even coordinates from a,
+        odd ones as sum_j o_j c_j (module docstring); with tangents (n, 4, 20) if dz."""
+        n, k = h.shape[0], N_ANCHORS
+        even = self.output_mirror > 0
+        out = self.head(h)
+        c = out[:, k:].reshape(n, -1, k)
+        y = torch.empty(n, 2 * k, dtype=h.dtype, device=h.device)
+        y[:, even] = out[:, :k]
+        y[:, ~even] = (o[:, :, None] * c).sum(1)
+        y = self.output_mean * even + self.output_scale * y
+        if dz is None:
+            return y
+        dout = dh @ self.head.weight.T                                       # (n, 4, 40)
+        dc = dout[:, :, k:].reshape(n, -1, o.shape[1], k)
+        do = dz[:, :, self.odd_inputs]
+        dy = torch.empty(n, dz.shape[1], 2 * k, dtype=h.dtype, device=h.device)
+        dy[:, :, even] = dout[:, :, :k]
+        dy[:, :, ~even] = (do[:, :, :, None] * c[:, None] + o[:, None, :, None] * dc).sum(2)
+        return y, dy * self.output_scale
 
     def flat(self, x: torch.Tensor) -> torch.Tensor:
         """Inputs (n, 4) -> anchors (n, 20) mm, symmetrised if the config says so."""

@@ -149,15 +149,21 @@ def test_gradcheck_loaded_model(improved):
     torch.testing.assert_close(jac, jacobian(model, x.detach()), rtol=1e-10, atol=1e-12)
 
 
+def _fresh(**config):
+    torch.manual_seed(0)
+    return JointSurrogate(ModelConfig(hidden=(16, 16), **config),
+                          {"input_scale": INPUT_BOX, "output_mean": [1.0] * 20,
+                           "output_scale": [2.0] * 20}).double()
+
+
 def test_exact_mirror_symmetry(improved):
-    """The symmetrised model satisfies R(Bx) = S R(x) bit for bit, on 1000 random inputs,
-    trained or freshly initialised; its Jacobian transforms as S J(x) B."""
+    """The symmetrised and the equivariant models satisfy R(Bx) = S R(x) bit for bit, on
+    1000 random inputs, trained or freshly initialised; the Jacobian transforms as
+    S J(x) B."""
     x = (torch.rand(1000, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
          * 2 - 1) * torch.as_tensor(INPUT_BOX)
-    fresh = JointSurrogate(ModelConfig(hidden=(16, 16), activation="tanh", symmetric=True),
-                           {"input_scale": INPUT_BOX, "output_mean": [1.0] * 20,
-                            "output_scale": [2.0] * 20}).double()
-    for model in (load_surrogate(improved), fresh):
+    for model in (load_surrogate(improved), _fresh(activation="tanh", symmetric=True),
+                  _fresh(activation="silu", residual=True, equivariant=True, abs_pressure=True)):
         with torch.no_grad():
             assert torch.equal(model(x * B), model(x) * S)
             assert torch.equal(model(torch.zeros(4, dtype=torch.float64))[:, 1],
@@ -165,6 +171,21 @@ def test_exact_mirror_symmetry(improved):
         _, j = model.with_jacobian(x[:50])
         _, jm = model.with_jacobian(x[:50] * B)
         torch.testing.assert_close(jm, j * S.repeat(10)[:, None] * B, rtol=0, atol=1e-13)
+
+
+def test_equivariant_model_derivatives():
+    """The one-pass equivariant model: gradcheck and gradgradcheck in float64, and its
+    forward-mode Jacobian (the Sobolev term's) equals autograd's to round-off."""
+    model = _fresh(activation="silu", residual=True, equivariant=True, abs_pressure=True)
+    x = (torch.rand(4, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(2))
+         * 2 - 1) * torch.as_tensor(INPUT_BOX)
+    assert torch.autograd.gradcheck(model, (x.clone().requires_grad_(True),), eps=1e-6, atol=1e-5)
+    assert torch.autograd.gradgradcheck(model, (x.clone().requires_grad_(True),), eps=1e-6,
+                                        atol=1e-4)
+    _, jac = model.with_jacobian(x)
+    torch.testing.assert_close(jac, jacobian(model, x), rtol=1e-10, atol=1e-12)
+    with pytest.raises(ValueError, match="choose one"):
+        ModelConfig(symmetric=True, equivariant=True)
 
 
 def test_checkpoint_round_trip(tmp_path):
