@@ -68,7 +68,11 @@ EXIT_INCOMPLETE = 3
 #: A harvested sample farther than this (mm) from the from-zero solve is another branch.
 FRESH_TOL_MM = 1e-5
 DEFAULT_UNIT_SIZE = 64
-DEFAULT_STEP = 0.2
+#: Walk step (box-normalised). At the production mesh, with 2 ranks busy, a 16-sample unit
+#: took a mean 13.4 s per harvested sample at 0.1 against 27.2 s at 0.2: the longer step
+#: leaves contact and rotation far enough from the predictor to need cut-backs. A 64-step
+#: unit at 0.1 still walks 6.4 box half-widths, three times across the box.
+DEFAULT_STEP = 0.1
 
 
 def reflect(x: np.ndarray) -> np.ndarray:
