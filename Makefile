@@ -82,7 +82,8 @@ results/fem/joint.png: fem/*.py | $(SETUP)
 # (section owned by workflow/)
 # The datasets are resumable: each campaign stops cleanly after DATASET_HOURS (exit 3,
 # which stops make) and `make dataset` again resumes from the shards. Train and held-out
-# sets use different seeds; ranks = DATASET_RANKS groups of one rank.
+# sets use different seeds; the held-out set uses 16-sample units (more independent walks
+# for its 256 samples); ranks = DATASET_RANKS groups of one rank.
 DATASET_RANKS ?= 2
 DATASET_HOURS ?= 2
 CAMPAIGN      := nice $(MPIRUN) -n $(DATASET_RANKS) $(PY) -m workflow.campaign
@@ -90,7 +91,7 @@ SMOKE_DIR     := build/dataset-smoke
 
 dataset: | $(SETUP) ## FEM datasets: results/data/train (2560, seed 1) + heldout (256, seed 2); re-run resumes
 	$(CAMPAIGN) --samples 2560 --seed 1 --out results/data/train --max-hours $(DATASET_HOURS)
-	$(CAMPAIGN) --samples 256 --seed 2 --out results/data/heldout --max-hours $(DATASET_HOURS)
+	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 --out results/data/heldout --max-hours $(DATASET_HOURS)
 	$(PY) -m workflow.dataset verify results/data/train --require-complete --mirror 2
 	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
 

@@ -79,6 +79,27 @@ def test_walk_is_seeded_in_box_and_rank_free():
     assert not np.allclose(a, campaign.unit_walk(3, 6, 50, 0.2))
 
 
+def test_walk_sweeps_the_box():
+    """The persistent walk keeps the uniform distribution (each box-normalised input has
+    mean 0 and variance 1/3, to sampling error) and, over 40 units of 64 steps of 0.1,
+    occupies >= 85 % of the 4^4 grid cells, well above a plain random walk of the same step
+    (turn -> infinity: a fresh random direction each step), which stays near its start."""
+    def walks(turn):
+        z = np.concatenate([campaign.unit_walk(1, u, 64, 0.1, turn) for u in range(40)])
+        return z / shards.INPUT_BOX
+
+    def occupancy(z):
+        return len({tuple(c) for c in np.floor((z + 1) / 0.5).clip(0, 3).astype(int)}) / 4 ** 4
+
+    z = walks(campaign.WALK_TURN)
+    assert np.abs(z.mean(0)).max() < 0.1 and np.abs(z.var(0) - 1 / 3).max() < 0.05
+    steps = np.diff(z.reshape(40, 64, 4), axis=1)            # within units
+    cos = (steps[:, 1:] * steps[:, :-1]).sum(-1) / np.linalg.norm(steps[:, 1:], axis=-1) \
+        / np.linalg.norm(steps[:, :-1], axis=-1)
+    assert np.median(cos) > 0.9                              # persistent, not a random walk
+    assert occupancy(z) >= 0.85 and occupancy(z) > occupancy(walks(1e9)) + 0.15
+
+
 def test_cli_errors_and_budget_stop(tmp_path):
     """--help exits 0; bad arguments exit 2 with a one-line error; a budget too small for
     any unit exits 3 (resume later) leaving a valid, empty, incomplete manifest."""
