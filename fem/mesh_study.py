@@ -6,7 +6,8 @@ For every mesh size h and corner load, the anchors r_1..r_10 are solved from zer
 error of a mesh is the largest anchor distance to the finest mesh's anchors, relative to
 the largest anchor displacement |r_i - X_i| of that case (percent). The production mesh
 is the coarsest whose error is <= 2 % in every case (the paper accepted 3 % between its
-1.2 and 1.0 mm meshes).
+1.2 and 1.0 mm meshes) and which has at least the paper's 16,000 nodes (mid-side nodes
+included): the issue asks for paper resolution at least, whatever the error allows.
 """
 
 from __future__ import annotations
@@ -28,6 +29,15 @@ from fem.solver import JointSolver, Load
 CORNERS = [Load(0.3, 3, -3, -100), Load(0.3, -3, 3, 100), Load(0.3, 3, 3, -100),
            Load(0.3, -3, -3, 100)]
 TOLERANCE_PERCENT = 2.0
+MIN_NODES = 16_000          # the paper's ANSYS mesh
+
+
+def production_mesh_size(meshes: list[dict]) -> float:
+    """Coarsest mesh size within TOLERANCE_PERCENT of the finest (the last of ``meshes``,
+    ordered coarse to fine) with >= MIN_NODES nodes; the finest if none qualifies."""
+    ok = [m for m in meshes[:-1]
+          if m["max_error_percent"] <= TOLERANCE_PERCENT and m["nodes"] >= MIN_NODES]
+    return ok[0]["mesh_size"] if ok else meshes[-1]["mesh_size"]
 
 
 def run(sizes: list[float], comm=MPI.COMM_WORLD) -> dict:
@@ -54,10 +64,8 @@ def run(sizes: list[float], comm=MPI.COMM_WORLD) -> dict:
             errs.append(100 * np.linalg.norm(a - b, axis=1).max() / scale)
         m["error_vs_finest_percent"] = errs
         m["max_error_percent"] = max(errs)
-    ok = [m for m in meshes[:-1] if m["max_error_percent"] <= TOLERANCE_PERCENT]
-    production = ok[0]["mesh_size"] if ok else finest["mesh_size"]
     return {"corners": [c.as_array().tolist() for c in CORNERS], "tolerance_percent": TOLERANCE_PERCENT,
-            "meshes": meshes, "production_mesh_size": production}
+            "min_nodes": MIN_NODES, "meshes": meshes, "production_mesh_size": production_mesh_size(meshes)}
 
 
 def main(argv=None) -> int:
