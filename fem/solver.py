@@ -555,7 +555,7 @@ class Solver:
         mm/MPa, mm/N, mm/N, mm/(N·mm). Solves with the tangent assembled at the final
         Newton iteration (a quadratically small distance from the converged state;
         re-assembled only when the last step needed no iteration), by GMRES to
-        ``krylov_rtol`` preconditioned with the current LU.
+        ``sensitivity_rtol`` preconditioned with the current LU.
         At P = 0 the pressure derivative is the one-sided (top chamber) one.
         """
         if not self._factor_fresh:
