@@ -17,7 +17,7 @@ APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
-        dataset dataset-smoke bench-campaign train gestures bench-predictor report clean
+        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -123,6 +123,11 @@ results/surrogate/metrics.json: results/surrogate/paper.pt results/surrogate/imp
     surrogate/knn.py $(wildcard $(SURROGATE_HELDOUT)/manifest.json) | $(SETUP)
 	$(PY) -m surrogate.evaluate --report --train-data $(SURROGATE_TRAIN) \
 	  --heldout $(SURROGATE_HELDOUT) --dir results/surrogate
+
+sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the improved surrogate (150 epochs each, 2 jobs)
+results/surrogate/sweep/README.md: $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
+	nice $(PY) -m surrogate.sweep --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) \
+	  --jobs 2 --dir results/surrogate/sweep
 
 # ---------------------------------------------------------------- predictor (issue 5)
 # (section owned by predictor/)

@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from surrogate import KNN, ModelConfig, ModelError, JointSurrogate, load_surrogate, phi_end
-from surrogate import synthetic, train as train_mod
+from surrogate import sweep, synthetic, train as train_mod
 from surrogate.data import (ExtrapolationError, augment_mirror, check_box, load_samples,
                             load_splits, normalisation)
 from surrogate.evaluate import evaluate, jacobian, metrics
@@ -351,3 +351,25 @@ def test_report_writes_metrics_and_figures(data, tmp_path):
     assert report["datasets"]["train"]["config"]["source"] == "synthetic-rod"
     assert "| improved | heldout | 100 |" in (tmp_path / "metrics.md").read_text()
     assert (tmp_path / "comparison.png").stat().st_size > 20_000
+
+
+def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys):
+    """Each variant's record carries the improved config with exactly its overrides (w64x3:
+    hidden 64,64,64; nojac: w_jac 0, the rest as improved); a re-run trains nothing, and a
+    different epoch count invalidates the records."""
+    args = ["--data", str(data[0]), "--heldout", str(data[1]), "--epochs", "2",
+            "--only", "w64x3", "nojac", "--dir", str(tmp_path)]
+    assert sweep.main(args) == 0
+    w64 = json.loads((tmp_path / "w64x3.json").read_text())
+    nojac = json.loads((tmp_path / "nojac.json").read_text())
+    model, cfg = train_mod.CONFIGS["improved"]
+    assert w64["model_config"]["hidden"] == [64, 64, 64]
+    assert nojac["model_config"]["hidden"] == list(model.hidden)
+    assert nojac["train_config"]["w_jac"] == 0 and w64["train_config"]["w_jac"] == cfg.w_jac
+    assert w64["heldout"]["n"] == 100 and w64["val"]["mean_anchor_error_mm"] > 0
+    assert (tmp_path / "README.md").read_text().count("\n| ") == 3   # header + 2 rows
+    capsys.readouterr()
+    assert sweep.main(args) == 0
+    assert "2 of 2 variants done, 0 to train" in capsys.readouterr().out
+    assert sweep.main(args[:5] + ["3"] + args[6:]) == 0
+    assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out

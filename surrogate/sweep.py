@@ -1,0 +1,132 @@
+"""Architecture and loss sweep of the improved surrogate on a campaign dataset.
+
+    python -m surrogate.sweep [--data results/data/train] [--heldout results/data/heldout]
+                              [--epochs 150] [--jobs 2] [--only NAME ...]
+                              [--dir results/surrogate/sweep]
+
+Data flow: for each variant in VARIANTS, the improved config with that variant's
+``--set`` overrides (surrogate.train), trained ``--epochs`` epochs on the train split ->
+metrics on the validation split (which chooses the configuration), on the held-out set
+(reported, never used to choose) and inference speed (surrogate.evaluate.timing) ->
+DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes (a
+file made with other epochs or another dataset size is redone) and ``--jobs`` workers
+never share a file -> DIR/README.md, the table of every finished
+variant. Units: mm, degrees, seconds, samples per second.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict
+from pathlib import Path
+
+import torch
+
+from surrogate.data import load_samples, load_splits
+from surrogate.evaluate import evaluate, timing
+from surrogate.train import CONFIGS, apply_overrides, train
+
+# name -> overrides of the improved config (surrogate.train --set syntax)
+VARIANTS = {
+    "improved": [],
+    "nojac": ["w_jac=0"],
+    "nophi": ["w_phi=0"],
+    "noabsp": ["abs_pressure=false"],
+    "nosym": ["symmetric=false", "mirror_augment=true"],
+    "equivariant": ["symmetric=false", "equivariant=true"],
+    "relu": ["activation=relu"],
+    "tanh": ["activation=tanh"],
+    "noresidual": ["residual=false"],
+    "paperarch": ["hidden=96,192,96", "residual=false"],
+    "w64x3": ["hidden=64,64,64"],
+    "w64x4": ["hidden=64,64,64,64"],
+    "w256x4": ["hidden=256,256,256,256"],
+    "equivariant-w64x3": ["symmetric=false", "equivariant=true", "hidden=64,64,64"],
+}
+
+COLUMNS = [("val", "mean_anchor_error_mm", 4), ("val", "p95_anchor_error_mm", 4),
+           ("val", "phi_end_error_deg", 3), ("val", "jacobian_rel_error", 4),
+           ("heldout", "mean_anchor_error_mm", 4), ("heldout", "phi_end_error_deg", 3)]
+
+
+def run_variant(name: str, data: str, heldout: str, epochs: int, out: str) -> str:
+    """Train and evaluate one variant on one thread; write out (JSON). Returns name."""
+    torch.set_num_threads(1)
+    model_cfg, cfg = apply_overrides(*CONFIGS["improved"], [*VARIANTS[name], f"epochs={epochs}"])
+    splits, _ = load_splits(data)
+    model, history = train(model_cfg, cfg, splits, log=lambda s: None)
+    result = {"name": name, "overrides": VARIANTS[name], "epochs": epochs,
+              "dataset_samples": sum(map(len, splits.values())), "model_config": asdict(model_cfg),
+              "train_config": asdict(cfg), "n": {k: len(v) for k, v in splits.items()},
+              "best_epoch": history["best_epoch"], "train_time_s": history["train_time_s"],
+              "val": evaluate(model, splits["val"]),
+              "heldout": evaluate(model, load_samples(heldout)[0]),
+              "timing": timing(model, repeats=500, seconds=0.5)}
+    tmp = Path(out).with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=1) + "\n")
+    os.replace(tmp, out)
+    return name
+
+
+def table(results: list[dict]) -> str:
+    """Markdown table, one row per finished variant, in VARIANTS order."""
+    head = ["run", "overrides"] + [f"{part} {key.replace('_error', '').replace('_', ' ')}"
+                                   for part, key, _ in COLUMNS]
+    head += ["train s", "batched f32 /s (1 thread)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in results:
+        cells = [r["name"], " ".join(r["overrides"]) or "(none)"]
+        for part, key, digits in COLUMNS:
+            v = r[part][key]
+            cells.append("n/a" if v is None else f"{v:.{digits}f}")
+        cells += [f"{r['train_time_s']:.0f}", f"{r['timing']['batched_samples_per_s_float32']:.2g}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m surrogate.sweep",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", default="results/data/train")
+    ap.add_argument("--heldout", default="results/data/heldout")
+    ap.add_argument("--epochs", type=int, default=150)
+    ap.add_argument("--jobs", type=int, default=1, help="variants trained at once, 1 thread each")
+    ap.add_argument("--only", nargs="*", choices=sorted(VARIANTS), help="these variants only")
+    ap.add_argument("--dir", default="results/surrogate/sweep")
+    args = ap.parse_args(argv)
+    out = Path(args.dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = args.only or list(VARIANTS)
+    samples = len(load_samples(args.data)[0])
+
+    def done(name):
+        path = out / f"{name}.json"
+        if not path.exists():
+            return None
+        r = json.loads(path.read_text())
+        return r if (r["epochs"], r["dataset_samples"]) == (args.epochs, samples) else None
+
+    todo = [n for n in names if done(n) is None]
+    print(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
+          f"{len(todo)} to train ({args.epochs} epochs, {args.jobs} job(s))", flush=True)
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        futures = [pool.submit(run_variant, n, args.data, args.heldout, args.epochs,
+                               str(out / f"{n}.json")) for n in todo]
+        for f in futures:
+            print(f"  {f.result()} done", flush=True)
+    results = [r for r in map(done, VARIANTS) if r is not None]
+    text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep --epochs "
+            f"{args.epochs}` on `{args.data}` (split {results[0]['n']}); held-out: "
+            f"`{args.heldout}`. Validation chooses; held-out is for reference only.\n\n"
+            + table(results))
+    (out / "README.md").write_text(text)
+    print(text, end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
