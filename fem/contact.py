@@ -120,9 +120,10 @@ class ValleyContact:
         if self.comm.rank == 0:
             sign = np.array([[1.0, -1.0], [-1.0, 1.0]])
             for ga, gb, n, _, k in terms:
-                nn = np.outer(n[:2], n[:2])
-                for i in range(len(ga)):
-                    rows = np.array([3 * ga[i], 3 * ga[i] + 1, 3 * gb[i], 3 * gb[i] + 1],
-                                    dtype=PETSc.IntType)
-                    A.setValues(rows, rows, np.kron(sign, k[i] * nn),
-                                addv=PETSc.InsertMode.ADD)
+                # One 4 x 4 block per pair on dofs (a_x, a_y, b_x, b_y), all pairs of the
+                # group in one CSR insertion: rows = the dofs, each row's columns = its pair's.
+                dofs = np.column_stack([3 * ga, 3 * ga + 1, 3 * gb, 3 * gb + 1]).astype(PETSc.IntType)
+                blocks = k[:, None, None] * np.kron(sign, np.outer(n[:2], n[:2]))
+                A.setValuesIJV(np.arange(0, blocks.size + 1, 4, dtype=PETSc.IntType),
+                               np.repeat(dofs, 4, axis=0).reshape(-1), blocks.reshape(-1),
+                               addv=PETSc.InsertMode.ADD, rowmap=dofs.reshape(-1))

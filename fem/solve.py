@@ -6,7 +6,8 @@
 Inputs: P (MPa), F1, F2 (N), M (N·mm); outside |P|<=0.3, |F1|,|F2|<=3, |M|<=100 the load
 is refused unless --allow-extrapolation (then recorded as "extrapolated": true).
 Prints the anchors r_1..r_10 (mm), phi_end and the cap rotation (deg), Newton iterations
-and wall time. Exit status 0 on convergence, 1 if the solve failed, 2 on bad input.
+and wall time; with --jacobian also d(anchors)/d(P, F1, F2, M), shape (20, 4), rows
+(x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm). Exit status 0 on convergence, 1 if the solve failed, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--allow-extrapolation", action="store_true",
                     help="accept loads outside the training box")
     ap.add_argument("--json", action="store_true", help="print JSON only")
+    ap.add_argument("--jacobian", action="store_true",
+                    help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
     ap.add_argument("--xdmf", help="also write the displacement field to this XDMF file")
     ap.add_argument("-v", "--verbose", action="store_true", help="log load steps")
     return ap
@@ -57,6 +60,7 @@ def main(argv=None) -> int:
     geo = replace(JointGeometry(), mesh_size=args.mesh_size)
     solver = JointSolver(geo, comm)
     result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
+    jac = solver.sensitivities() if args.jacobian and result.converged else None
     if args.xdmf and result.converged:
         from dolfinx.io import XDMFFile
         with XDMFFile(comm, args.xdmf, "w") as f:
@@ -65,6 +69,8 @@ def main(argv=None) -> int:
     if comm.rank == 0:
         out = {**result.summary(), "mesh": solver.mesh_info(), "geometry": asdict(geo),
                "ranks": comm.size}
+        if jac is not None:
+            out["jacobian"] = jac.tolist()
         if args.json:
             print(json.dumps(out))
         else:
@@ -76,6 +82,10 @@ def main(argv=None) -> int:
                   f"{out['cap_rotation_deg']:.3f} deg")
             print(f"  Newton iterations {result.newton_iterations}, {result.wall_time:.1f} s, "
                   f"{out['mesh']['nodes']} nodes, {out['mesh']['dofs']} dofs, {comm.size} rank(s)")
+            if jac is not None:
+                print("  d(anchors)/d(P, F1, F2, M), rows x_1, y_1, x_2, ...:")
+                for row in jac:
+                    print("   " + " ".join(f"{v:12.5g}" for v in row))
     return 0 if result.converged else 1
 
 

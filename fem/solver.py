@@ -315,6 +315,7 @@ class Solver:
         self._probe_cells = self._locate(self.probe_points)
         self.state_load: Load | None = Load()      # load of the current converged state
         self.factorisations = 0                    # LU factorisations so far (diagnostics)
+        self._refactor = True                      # factorise before the next tangent solve?
         self._factor_fresh = False                 # last factorisation near current state?
 
     # ------------------------------------------------------------------ helpers
@@ -375,12 +376,17 @@ class Solver:
         self._A.copy(self._P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self.ksp.setOperators(self._A, self._P)
         self.ksp.setUp()
+        self._refactor = False
         self.factorisations += 1
 
     def _solve_tangent(self, b: PETSc.Vec, x: PETSc.Vec, rtol: float | None = None) -> None:
-        """x = K(u)^-1 b with K(u) in _A: GMRES preconditioned by the LU of _P; when
-        that stalls (_P too far from K), refactorise and solve directly."""
-        if self.factorisations == 0:
+        """x = K(u)^-1 b with K(u) in _A: GMRES preconditioned by the LU of _P.
+
+        A preconditioner that needed more than half of ``krylov_max_it`` iterations is
+        drifting away from K: the next call refactorises first, rather than after a failed
+        GMRES run (a full wasted cycle, ~half a factorisation). If GMRES still stalls,
+        refactorise and solve again."""
+        if self._refactor:
             self._factorise(assemble=False)
         self.ksp.setTolerances(rtol=rtol or self.config.krylov_rtol)
         self.ksp.solve(b, x)
@@ -389,6 +395,7 @@ class Solver:
             self.ksp.solve(b, x)
             if self.ksp.getConvergedReason() <= 0:
                 raise PETSc.Error(76)   # the caller cuts the step back
+        self._refactor = self.ksp.getIterationNumber() > self.config.krylov_max_it // 2
 
     def newton(self, reuse_factor: bool = False) -> tuple[int, bool]:
         """Newton iterations at the current load from the current u: (iterations, converged).
@@ -474,6 +481,7 @@ class Solver:
         self.state_load = Load()
         self._set_load(np.zeros(4))
         self._factor_fresh = False
+        self._refactor = True           # the LU belongs to another state
 
     # ------------------------------------------------------------------ solve
     def solve(self, load: Load, continuation: bool = False) -> SolveResult:

@@ -144,13 +144,18 @@ def test_cli_refuses_out_of_box_with_one_line():
 
 @pytest.mark.mpi
 def test_two_ranks_match_serial():
-    """The same case under mpirun -n 2 gives the serial anchors to solver tolerance; the
-    valley contact is active (its pairs straddle the two ranks' partitions)."""
-    args = ["--p", "0.1", "--f2", "2", "--m", "100", "--mesh-size", "4", "--json"]
+    """The same case under mpirun -n 2 gives the serial anchors to solver tolerance, and
+    the serial Jacobian to the sensitivity tolerance (so the distributed tangent, contact
+    blocks included, is the serial one); the valley contact is active (its pairs straddle
+    the two ranks' partitions)."""
+    args = ["--p", "0.1", "--f2", "2", "--m", "100", "--mesh-size", "4", "--json", "--jacobian"]
     serial, parallel = _cli(args), _cli(args, ranks=2)
     assert serial.returncode == 0, serial.stderr
     assert parallel.returncode == 0, parallel.stderr
-    a = np.array(json.loads(serial.stdout.splitlines()[-1])["anchors_mm"])
-    b = np.array(json.loads(parallel.stdout.splitlines()[-1])["anchors_mm"])
-    assert json.loads(parallel.stdout.splitlines()[-1])["ranks"] == 2
-    np.testing.assert_allclose(a, b, atol=1e-6)
+    a, b = (json.loads(p.stdout.splitlines()[-1]) for p in (serial, parallel))
+    assert b["ranks"] == 2
+    np.testing.assert_allclose(a["anchors_mm"], b["anchors_mm"], atol=1e-6)
+    J = np.array(a["jacobian"])
+    assert J.shape == (20, 4) and np.abs(J[:, 3]).max() > 0
+    scale = np.abs(J).max(axis=0)     # per input column: mm/MPa, mm/N, mm/N, mm/(N·mm)
+    np.testing.assert_allclose(np.array(b["jacobian"]) / scale, J / scale, atol=1e-5)
