@@ -7,7 +7,8 @@ Inputs: P (MPa), F1, F2 (N), M (N·mm); outside |P|<=0.3, |F1|,|F2|<=3, |M|<=100
 is refused unless --allow-extrapolation (then recorded as "extrapolated": true).
 Prints the anchors r_1..r_10 (mm), phi_end and the cap rotation (deg), Newton iterations
 and wall time; with --jacobian also d(anchors)/d(P, F1, F2, M), shape (20, 4), rows
-(x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm). Exit status 0 on convergence, 1 if the solve failed, 2 on bad input.
+(x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm). Exit status 0 on
+convergence, 1 if the solve failed, 2 on bad input.
 """
 
 from __future__ import annotations

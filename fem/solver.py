@@ -384,7 +384,7 @@ class Solver:
 
         A preconditioner that needed more than half of ``krylov_max_it`` iterations is
         drifting away from K: the next call refactorises first, rather than after a failed
-        GMRES run (a full wasted cycle, ~half a factorisation). If GMRES still stalls,
+        GMRES run (a wasted 30-iteration cycle, about a third of a factorisation). If GMRES still stalls,
         refactorise and solve again."""
         if self._refactor:
             self._factorise(assemble=False)
