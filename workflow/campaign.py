@@ -113,12 +113,14 @@ def unit_walk(seed: int, unit: int, n: int, step: float, turn: float = WALK_TURN
 
 
 def git_commit() -> str:
-    """HEAD commit of the source tree, with '+dirty' if it has uncommitted changes."""
+    """HEAD commit of the source tree, with '+dirty' if it has uncommitted changes outside
+    results/ (datasets being written are not source changes)."""
     here = Path(__file__).resolve().parent
     try:
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                ":/", ":(top,exclude)results"],
                                cwd=here, capture_output=True, text=True).stdout.strip()
         return sha + ("+dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
