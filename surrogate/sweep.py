@@ -60,7 +60,7 @@ def run_variant(name: str, data: str, heldout: str, epochs: int, out: str) -> st
     splits, _ = load_splits(data)
     model, history = train(model_cfg, cfg, splits, log=lambda s: None)
     result = {"name": name, "overrides": VARIANTS[name], "epochs": epochs,
-              "dataset_samples": sum(map(len, splits.values())), "model_config": asdict(model_cfg),
+              "model_config": asdict(model_cfg),
               "train_config": asdict(cfg), "n": {k: len(v) for k, v in splits.items()},
               "best_epoch": history["best_epoch"], "train_time_s": history["train_time_s"],
               "val": evaluate(model, splits["val"]),
@@ -108,7 +108,7 @@ def main(argv=None) -> int:
         if not path.exists():
             return None
         r = json.loads(path.read_text())
-        return r if (r["epochs"], r["dataset_samples"]) == (args.epochs, samples) else None
+        return r if (r["epochs"], sum(r["n"].values())) == (args.epochs, samples) else None
 
     todo = [n for n in names if done(n) is None]
     print(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
