@@ -150,6 +150,7 @@ class SolveResult:
     load_steps: int = 0
     cutbacks: int = 0
     factorisations: int = 0         # LU factorisations this solve needed
+    krylov_iterations: int = 0      # GMRES iterations over its tangent solves
     wall_time: float = 0.0
     reason: str = ""
     extrapolated: bool = False
@@ -170,7 +171,8 @@ class SolveResult:
             "tangent_assumption_error_deg": math.degrees(self.cap_rotation - self.phi_end),
             "newton_iterations": self.newton_iterations, "iterations": self.iterations,
             "load_steps": self.load_steps, "cutbacks": self.cutbacks,
-            "factorisations": self.factorisations, "wall_time_s": self.wall_time, "reason": self.reason,
+            "factorisations": self.factorisations, "krylov_iterations": self.krylov_iterations,
+            "wall_time_s": self.wall_time, "reason": self.reason,
             "extrapolated": self.extrapolated,
         }
 
@@ -315,6 +317,7 @@ class Solver:
         self._probe_cells = self._locate(self.probe_points)
         self.state_load: Load | None = Load()      # load of the current converged state
         self.factorisations = 0                    # LU factorisations so far (diagnostics)
+        self.krylov_iterations = 0                 # GMRES iterations so far (diagnostics)
         self._refactor = True                      # factorise before the next tangent solve?
         self._factor_fresh = False                 # last factorisation near current state?
 
@@ -390,9 +393,11 @@ class Solver:
             self._factorise(assemble=False)
         self.ksp.setTolerances(rtol=rtol or self.config.krylov_rtol)
         self.ksp.solve(b, x)
+        self.krylov_iterations += self.ksp.getIterationNumber()
         if self.ksp.getConvergedReason() <= 0:
             self._factorise(assemble=False)
             self.ksp.solve(b, x)
+            self.krylov_iterations += self.ksp.getIterationNumber()
             if self.ksp.getConvergedReason() <= 0:
                 raise PETSc.Error(76)   # the caller cuts the step back
         self._refactor = self.ksp.getIterationNumber() > self.config.krylov_max_it // 2
@@ -492,7 +497,7 @@ class Solver:
         solver returns to its last converged state (never a non-converged one).
         """
         cfg = self.config
-        t0, lu0 = time.perf_counter(), self.factorisations
+        t0, lu0, kr0 = time.perf_counter(), self.factorisations, self.krylov_iterations
         if not continuation or self.state_load is None:
             self.reset()
         start, target = self.state_load.as_array(), load.as_array()
@@ -548,6 +553,7 @@ class Solver:
             phi_end=float(math.atan2(d[1], d[0])),
             cap_rotation=float(self.theta_ref.value), newton_iterations=iters,
             load_steps=steps, cutbacks=cutbacks, factorisations=self.factorisations - lu0,
+            krylov_iterations=self.krylov_iterations - kr0,
             wall_time=time.perf_counter() - t0,
             reason="" if converged else reason, u=self.u)
         if self.comm.rank == 0:

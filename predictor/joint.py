@@ -33,6 +33,7 @@ Stand-in stiffnesses (chosen, not measured; documented here so reports can quote
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,7 +113,9 @@ class SurrogateJoint(JointModel):
         self.module = load_surrogate(path).double().eval()
         for p in self.module.parameters():
             p.requires_grad_(False)
-        self.name = f"surrogate:{path.name}"
+        # The content digest ties what was built on this joint (the NN predictors) to
+        # this exact checkpoint: a retrained file under the same name is another joint.
+        self.name = f"surrogate:{path.name}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
         self.length = JOINT_LENGTH
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:

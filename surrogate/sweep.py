@@ -9,7 +9,7 @@ Data flow: for each variant in VARIANTS, the improved config with that variant's
 metrics on the validation split (which chooses the configuration), on the held-out set
 (reported, never used to choose) and inference speed (surrogate.evaluate.timing) ->
 DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes (a
-file made with other epochs or another dataset size is redone) and ``--jobs`` workers
+file made with other epochs or another dataset is redone) and ``--jobs`` workers
 never share a file -> DIR/README.md, the table of every finished
 variant. Units: mm, degrees, seconds, samples per second.
 """
@@ -29,6 +29,7 @@ import torch
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate, timing
 from surrogate.train import CONFIGS, apply_overrides, train
+from workflow.shards import dataset_digest
 
 # name -> overrides of the improved config (surrogate.train --set syntax)
 VARIANTS = {
@@ -60,6 +61,7 @@ def run_variant(name: str, data: str, heldout: str, epochs: int, out: str) -> st
     splits, _ = load_splits(data)
     model, history = train(model_cfg, cfg, splits, log=lambda s: None)
     result = {"name": name, "overrides": VARIANTS[name], "epochs": epochs,
+              "data_sha256": dataset_digest(data),
               "model_config": asdict(model_cfg),
               "train_config": asdict(cfg), "n": {k: len(v) for k, v in splits.items()},
               "best_epoch": history["best_epoch"], "train_time_s": history["train_time_s"],
@@ -101,14 +103,14 @@ def main(argv=None) -> int:
     out = Path(args.dir)
     out.mkdir(parents=True, exist_ok=True)
     names = args.only or list(VARIANTS)
-    samples = len(load_samples(args.data)[0])
+    data_sha256 = dataset_digest(args.data)
 
     def done(name):
         path = out / f"{name}.json"
         if not path.exists():
             return None
         r = json.loads(path.read_text())
-        return r if (r["epochs"], sum(r["n"].values())) == (args.epochs, samples) else None
+        return r if (r["epochs"], r["data_sha256"]) == (args.epochs, data_sha256) else None
 
     todo = [n for n in names if done(n) is None]
     print(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "

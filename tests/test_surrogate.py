@@ -356,7 +356,7 @@ def test_report_writes_metrics_and_figures(data, tmp_path):
 def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys):
     """Each variant's record carries the improved config with exactly its overrides (w64x3:
     hidden 64,64,64; nojac: w_jac 0, the rest as improved); a re-run trains nothing, and a
-    different epoch count invalidates the records."""
+    different epoch count or dataset invalidates the records."""
     args = ["--data", str(data[0]), "--heldout", str(data[1]), "--epochs", "2",
             "--only", "w64x3", "nojac", "--dir", str(tmp_path)]
     assert sweep.main(args) == 0
@@ -372,4 +372,6 @@ def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys)
     assert sweep.main(args) == 0
     assert "2 of 2 variants done, 0 to train" in capsys.readouterr().out
     assert sweep.main(args[:5] + ["3"] + args[6:]) == 0
+    assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out
+    assert sweep.main(["--data", str(data[1])] + args[2:5] + ["3"] + args[6:]) == 0
     assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out

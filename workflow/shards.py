@@ -196,6 +196,13 @@ def write_manifest(root: str | Path, manifest: dict) -> None:
     _atomic_write(manifest_path(root), lambda f: f.write(text))
 
 
+def dataset_digest(root: str | Path) -> str:
+    """sha256 over the manifest's shard checksums: names the dataset's exact content
+    without reading the shards (which load_dataset verifies against the same checksums)."""
+    entries = sorted((e["file"], e["sha256"]) for e in load_manifest(root)["shards"])
+    return hashlib.sha256(json.dumps(entries).encode()).hexdigest()
+
+
 def load_dataset(root: str | Path) -> tuple[dict[str, np.ndarray], dict]:
     """Concatenate every shard listed in the manifest, sorted by sample_id.
 
