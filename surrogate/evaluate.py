@@ -11,9 +11,9 @@ Metrics on n samples with true anchors R (n, 10, 2) mm and predictions R̂:
                            and M weigh alike; samples without an FEM Jacobian are skipped,
                            null when none has one)
 
-Inference time: the median wall time of one no-grad call on a single sample, and the
-throughput of no-grad calls on batches of 4,096 samples (over 1 s), in float64 (the dtype
-of load_surrogate) and in float32, on the threads torch is set to use (default 1).
+Inference time: the median wall time of one no-grad call on a single sample on one
+thread, and the throughput of no-grad calls on batches of 4,096 samples (over 1 s) on one
+thread and on every core, in float64 (the dtype of load_surrogate) and in float32.
 
 One checkpoint on any dataset directory:
     python -m surrogate.evaluate --model PATH --data DIR [--split all|train|val|test] --json
@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -82,15 +83,21 @@ def evaluate(model, samples: Samples) -> dict:
     return metrics(pred, samples.anchors, jacobian(model, x), samples.jacobian)
 
 
-def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0) -> dict:
-    """Inference speed (module docstring): single-sample ms and batched samples/s per dtype."""
-    out = {"threads": torch.get_num_threads(), "batch": batch}
+def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0,
+           threads: tuple[int, ...] | None = None) -> dict:
+    """Inference speed (module docstring): single-sample ms on one thread, and batched
+    samples/s on each of ``threads`` (default: 1 and every core), per dtype. The batched
+    keys without a suffix are for 1 thread; ``..._Nthreads`` for N > 1."""
+    threads = threads or tuple(sorted({1, os.cpu_count() or 1}))
+    saved = torch.get_num_threads()
+    out = {"threads": list(threads), "batch": batch}
     for dtype, tag in ((torch.float64, "float64"), (torch.float32, "float32")):
         m = model.to(dtype)
         x1 = torch.tensor([[0.1, 1.0, 0.5, 10.0]], dtype=dtype)
         xb = (torch.rand(batch, 4, generator=torch.Generator().manual_seed(0), dtype=dtype)
               * 2 - 1) * torch.as_tensor(INPUT_BOX, dtype=dtype)
         with torch.no_grad():
+            torch.set_num_threads(1)
             for _ in range(50):
                 m(x1)
             single = []
@@ -98,14 +105,17 @@ def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0) 
                 t0 = time.perf_counter()
                 m(x1)
                 single.append(time.perf_counter() - t0)
-            m(xb)
-            calls, t0 = 0, time.perf_counter()
-            while time.perf_counter() - t0 < seconds:
+            out[f"single_ms_{tag}"] = 1e3 * float(np.median(single))
+            for n in threads:
+                torch.set_num_threads(n)
                 m(xb)
-                calls += 1
-            rate = calls * batch / (time.perf_counter() - t0)
-        out[f"single_ms_{tag}"] = 1e3 * float(np.median(single))
-        out[f"batched_samples_per_s_{tag}"] = rate
+                calls, t0 = 0, time.perf_counter()
+                while time.perf_counter() - t0 < seconds:
+                    m(xb)
+                    calls += 1
+                key = f"batched_samples_per_s_{tag}" + (f"_{n}threads" if n > 1 else "")
+                out[key] = calls * batch / (time.perf_counter() - t0)
+    torch.set_num_threads(saved)
     model.to(torch.float64)
     return out
 
@@ -160,11 +170,15 @@ def _fmt(v, digits=3):
 def markdown_table(report: dict) -> str:
     """The metrics table for results/REPORT.md (held-out and test rows per model)."""
     rows = ["| model | set | n | mean anchor (mm) | p95 anchor (mm) | tip (mm) | phi_end (deg) "
-            "| Jacobian rel. | train time (s) | single (ms, f64) | batched (samples/s, f64) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| Jacobian rel. | train time (s) | single (ms, f64) | batched (samples/s, f64, 1 thread) "
+            "| batched (samples/s, f32, all cores) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in ("paper", "improved", "knn"):
         entry = report[name]
         t = entry.get("timing", {})
+        cores = max(np.atleast_1d(t.get("threads", 1)))   # older reports stored one int
+        all_cores = t.get(f"batched_samples_per_s_float32_{cores}threads",
+                          t.get("batched_samples_per_s_float32"))
         for part in ("heldout", "test"):
             m = entry[part]
             rows.append(
@@ -172,7 +186,7 @@ def markdown_table(report: dict) -> str:
                 f"| {_fmt(m['p95_anchor_error_mm'])} | {_fmt(m['tip_error_mm'])} "
                 f"| {_fmt(m['phi_end_error_deg'])} | {_fmt(m['jacobian_rel_error'])} "
                 f"| {_fmt(entry.get('train_time_s'), 4)} | {_fmt(t.get('single_ms_float64'))} "
-                f"| {_fmt(t.get('batched_samples_per_s_float64'))} |")
+                f"| {_fmt(t.get('batched_samples_per_s_float64'))} | {_fmt(all_cores)} |")
     return "\n".join(rows) + "\n"
 
 

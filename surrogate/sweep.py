@@ -67,7 +67,7 @@ def run_variant(name: str, data: str, heldout: str, epochs: int, out: str) -> st
               "best_epoch": history["best_epoch"], "train_time_s": history["train_time_s"],
               "val": evaluate(model, splits["val"]),
               "heldout": evaluate(model, load_samples(heldout)[0]),
-              "timing": timing(model, repeats=500, seconds=0.5)}
+              "timing": timing(model, repeats=500, seconds=0.5, threads=(1,))}
     tmp = Path(out).with_suffix(".tmp")
     tmp.write_text(json.dumps(result, indent=1) + "\n")
     os.replace(tmp, out)

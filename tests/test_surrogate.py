@@ -24,6 +24,7 @@ from surrogate.evaluate import evaluate, jacobian, metrics
 from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, save_checkpoint
 from workflow.shards import INPUT_BOX, ShardError, mirror
+from workflow import report as workflow_report
 
 torch.set_num_threads(1)
 PY = sys.executable
@@ -351,6 +352,12 @@ def test_report_writes_metrics_and_figures(data, tmp_path):
     assert report["datasets"]["train"]["config"]["source"] == "synthetic-rod"
     assert "| improved | heldout | 100 |" in (tmp_path / "metrics.md").read_text()
     assert (tmp_path / "comparison.png").stat().st_size > 20_000
+    # REPORT.md's target table reads the same numbers: a 2-epoch model misses 0.1 mm.
+    (tmp_path / "surrogate").mkdir()
+    (tmp_path / "surrogate/metrics.json").write_text((tmp_path / "metrics.json").read_text())
+    mean = report["improved"]["heldout"]["mean_anchor_error_mm"]
+    assert mean > 0.1
+    assert f"| mean anchor error | {mean:.4g} mm | <= 0.1 mm | no |" in workflow_report.report(tmp_path)
 
 
 def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys):
