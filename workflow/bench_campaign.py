@@ -3,7 +3,10 @@
 Data flow: two real campaigns into a temporary directory, at the same mesh and unit size,
 ``mpirun -n 1`` and ``mpirun -n 2`` solving the same two units {0, 1} (one per rank on 2
 ranks), each timed end to end by the campaign itself (mesh build included) -> samples per
-hour and parallel efficiency = rate(2) / (2 rate(1)) for identical work. Then, in this process, a few stored inputs are
+hour and parallel efficiency = rate(2) / (2 rate(1)) for identical work. With one unit
+per rank that efficiency also carries the units' imbalance (the 2-rank run lasts as long as
+its slower unit), so the per-unit efficiency = sum of the units' wall times on 1 rank / the
+same sum on 2 concurrent ranks is reported too: the cost of sharing the machine alone. Then, in this process, a few stored inputs are
 solved again from zero -> seconds per fresh sample, against the median wall time per
 harvested (continuation) sample, Jacobian included, from the campaigns' shards. The
 committed datasets' manifests give the CPU hours they took (sum over units of wall time x
@@ -49,6 +52,12 @@ def run(mpirun: str, ranks: int, out: Path, samples: int, args) -> dict:
     return {**summary, "loadavg_before": load}
 
 
+def unit_walls(root: Path) -> dict[int, float]:
+    """Wall time (s) of each unit of the campaign in root, from its shard's metadata."""
+    return {e["unit"]: shards.read_shard(root / e["file"])[1]["wall_s"]
+            for e in shards.load_manifest(root)["shards"]}
+
+
 def main(argv=None) -> int:
     ap = dataset.OneLineParser(prog="python -m workflow.bench_campaign",
                                description=__doc__.split("\n\n")[0])
@@ -70,6 +79,7 @@ def main(argv=None) -> int:
         one = run(args.mpirun, 1, Path(tmp) / "r1", 2 * args.unit_size, args)
         two = run(args.mpirun, 2, Path(tmp) / "r2", 2 * args.unit_size, args)
         data, _ = shards.load_dataset(Path(tmp) / "r2")
+        walls = [unit_walls(Path(tmp) / r) for r in ("r1", "r2")]
     first = data["sample_id"] % args.unit_size == 0
     harvested = data["wall_time_s"][~first]
 
@@ -101,6 +111,7 @@ def main(argv=None) -> int:
         "samples_per_hour_1rank": sph1,
         "samples_per_hour_2ranks": sph2,
         "parallel_efficiency": sph2 / (2 * sph1),
+        "per_unit_efficiency": sum(walls[0].values()) / sum(walls[1].values()),
         "harvested_sample_s": float(np.median(harvested)),
         "fresh_sample_s": float(np.median(fresh_s)),
         "dataset_cpu_hours": cpu if counted else None,
@@ -114,6 +125,7 @@ def main(argv=None) -> int:
         "setup": {"mesh": solver.mesh_info(), "unit_size": args.unit_size, "walk_step": args.step,
                   "samples_1rank": one["samples"], "samples_2ranks": two["samples"],
                   "wall_s_1rank": one["wall_s"], "wall_s_2ranks": two["wall_s"],
+                  "unit_wall_s_1rank": walls[0], "unit_wall_s_2ranks": walls[1],
                   "loadavg_before": [one["loadavg_before"], two["loadavg_before"]],
                   "cpus": os.cpu_count(), "git_commit": two["git_commit"],
                   "fresh_sample_s": fresh_s, "note": "timings include the mesh build; "
