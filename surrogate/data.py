@@ -8,8 +8,9 @@ Data flow::
         --mirror (train only, paper config)-->  train ∪ mirror(train)
         --normalisation(train)-->  input_scale, output_mean, output_scale
 
-A sample's split is a hash of its id and the dataset seed, so it never changes when the
-campaign adds shards. Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian
+A sample's split is a hash of its walk block (id // 16: consecutive ids are neighbours on
+one continuation walk, and must not straddle train and validation) and the dataset seed,
+so it never changes when the campaign adds shards. Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian
 d anchors.reshape(20) / d inputs (NaN rows where the campaign stored none).
 
 Normalisation (stored inside the model): z = x / INPUT_BOX, so the training box is
@@ -73,7 +74,8 @@ def load_samples(root: str | Path) -> tuple[Samples, dict]:
 
 
 def split(samples: Samples, seed: int) -> dict[str, Samples]:
-    """Split 7:2:1 into train / val / test by the dataset seed (workflow.shards.split_of)."""
+    """Split 7:2:1 into train / val / test by the dataset seed, in blocks of 16 consecutive
+    walk samples (workflow.shards.split_of)."""
     label = torch.as_tensor(split_of(samples.sample_id.numpy(), seed))
     return {name: samples.subset(label == i) for i, name in enumerate(SPLITS)}
 
