@@ -10,8 +10,10 @@ Data flow::
 
 A sample's split is a hash of its walk block (id // 16: consecutive ids are neighbours on
 one continuation walk, and must not straddle train and validation) and the dataset seed,
-so it never changes when the campaign adds shards. Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian
-d anchors.reshape(20) / d inputs (NaN rows where the campaign stored none).
+so it never changes when the campaign adds shards.
+
+Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian d anchors.reshape(20) /
+d inputs (NaN rows where the campaign stored none).
 
 Normalisation (stored inside the model): z = x / INPUT_BOX, so the training box is
 [-1, 1]^4; anchors = output_mean + output_scale * network(z), with the per-coordinate

@@ -176,8 +176,7 @@ def markdown_table(report: dict) -> str:
     for name in ("paper", "improved", "knn"):
         entry = report[name]
         t = entry.get("timing", {})
-        cores = max(np.atleast_1d(t.get("threads", 1)))   # older reports stored one int
-        all_cores = t.get(f"batched_samples_per_s_float32_{cores}threads",
+        all_cores = t.get(f"batched_samples_per_s_float32_{max(t['threads'])}threads",
                           t.get("batched_samples_per_s_float32"))
         for part in ("heldout", "test"):
             m = entry[part]

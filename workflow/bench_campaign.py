@@ -6,9 +6,10 @@ ranks), each timed end to end by the campaign itself (mesh build included) -> sa
 hour and parallel efficiency = rate(2) / (2 rate(1)) for identical work. With one unit
 per rank that efficiency also carries the units' imbalance (the 2-rank run lasts as long as
 its slower unit), so the per-unit efficiency = sum of the units' wall times on 1 rank / the
-same sum on 2 concurrent ranks is reported too: the cost of sharing the machine alone. Then, in this process, a few stored inputs are
-solved again from zero -> seconds per fresh sample, against the median wall time per
-harvested (continuation) sample, Jacobian included, from the campaigns' shards. The
+same sum on 2 concurrent ranks is reported too: the cost of sharing the machine alone.
+Then, in this process, a few stored inputs are solved again from zero -> seconds per
+fresh sample, against the median wall time per harvested (continuation) sample, Jacobian
+included, from the campaigns' shards. The
 committed datasets' manifests give the CPU hours they took (sum over units of wall time x
 ranks per group), against the paper's 7 min x 2,560 samples.
 

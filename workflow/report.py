@@ -129,7 +129,7 @@ def campaign_section(root: Path) -> list[str]:
     return out
 
 
-# Issue 4's targets for the improved surrogate on the held-out set, and the paper's figures.
+# Issue 4's accuracy targets for the improved surrogate on the held-out set.
 SURROGATE_TARGETS = (("mean anchor error", "mean_anchor_error_mm", 0.10, "mm"),
                      ("95th-percentile anchor error", "p95_anchor_error_mm", 0.30, "mm"),
                      ("phi_end error", "phi_end_error_deg", 0.3, "deg"),
@@ -160,8 +160,7 @@ def surrogate_section(root: Path) -> list[str]:
                        + f" | {_num(m[name].get('train_time_s'), '.0f')} |")
     improved = m["improved"]
     held, t = improved["heldout"], improved.get("timing", {})
-    threads = t.get("threads", 1)
-    cores = max(threads) if isinstance(threads, list) else threads   # older files: one int
+    cores = max(t.get("threads", [1]))
     batched = t.get(f"batched_samples_per_s_float32_{cores}threads", t.get("batched_samples_per_s_float32"))
     rows = [(label, f"{_num(held[key])} {unit}".strip(), f"<= {target:g} {unit}".strip(),
              held[key] is not None and held[key] <= target)
