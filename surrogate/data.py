@@ -8,9 +8,10 @@ Data flow::
         --mirror (train only, paper config)-->  train ∪ mirror(train)
         --normalisation(train)-->  input_scale, output_mean, output_scale
 
-A sample's split is a hash of its walk block (id // 16: consecutive ids are neighbours on
-one continuation walk, and must not straddle train and validation) and the dataset seed,
-so it never changes when the campaign adds shards.
+A sample's split is dealt by its walk block (id // 16: consecutive ids are neighbours on
+one continuation walk, and must not straddle train and validation), 7:2:1 exactly in each
+group of 10 blocks, from the dataset seed, so it never changes when the campaign adds
+shards.
 
 Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian d anchors.reshape(20) /
 d inputs (NaN rows where the campaign stored none).

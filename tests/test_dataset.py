@@ -51,14 +51,16 @@ def cli(*args):
 
 
 def test_split_keeps_walk_blocks_whole_and_is_stable():
-    """Each block of SPLIT_BLOCK consecutive ids (a stretch of one walk) has one label; over
-    4,000 blocks the fractions are 7:2:1 within 0.02 (binomial sd <= 0.008); a dataset's
-    first 1,000 ids keep their labels when it grows; another seed gives another split."""
+    """Each block of SPLIT_BLOCK consecutive ids (a stretch of one walk) has one label; the
+    paper's 2,560 samples split exactly 1792/512/256, and so does every group of 10 blocks;
+    a dataset's first 1,000 ids keep their labels when it grows; another seed gives
+    another split."""
     ids = np.arange(4000 * shards.SPLIT_BLOCK)
     label = shards.split_of(ids, seed=1)
     blocks = label.reshape(-1, shards.SPLIT_BLOCK)
     assert (blocks == blocks[:, :1]).all()
-    np.testing.assert_allclose(np.bincount(blocks[:, 0], minlength=3) / 4000, [0.7, 0.2, 0.1], atol=0.02)
+    assert np.bincount(label[:2560]).tolist() == [1792, 512, 256]
+    assert (np.stack([np.bincount(g, minlength=3) for g in blocks[:, 0].reshape(-1, 10)]) == [7, 2, 1]).all()
     np.testing.assert_array_equal(shards.split_of(ids[:1000], seed=1), label[:1000])
     assert (shards.split_of(ids, seed=2) != label).mean() > 0.3
 

@@ -242,24 +242,23 @@ def load_dataset(root: str | Path) -> tuple[dict[str, np.ndarray], dict]:
 SPLIT_BLOCK = 16
 
 
-def split_of(sample_id: np.ndarray, seed: int, fractions=(0.7, 0.2, 0.1),
+def split_of(sample_id: np.ndarray, seed: int, counts=(7, 2, 1),
              block: int = SPLIT_BLOCK) -> np.ndarray:
     """Split label 0 (train), 1 (validation), 2 (test) for each sample id, fixed by seed.
 
-    Each block of ``block`` consecutive ids (id // block) is hashed with the seed
-    (splitmix64) to a uniform number in [0, 1), so whole stretches of a walk fall in one
-    split, and a sample's split never changes when the dataset grows.
-    Shapes: (n,) -> (n,) int.
+    Ids go in blocks of ``block`` consecutive ids (id // block), so whole stretches of a
+    walk fall in one split, and blocks in groups of sum(counts) = 10: in each group a
+    permutation drawn from default_rng([seed, group]) deals counts[k] blocks to split k.
+    So every complete group splits exactly 7:2:1 (2,560 samples: 1792/512/256), and a
+    sample's split never changes when the dataset grows. Shapes: (n,) -> (n,) int.
     """
-    with np.errstate(over="ignore"):
-        z = np.asarray(sample_id, np.uint64) // np.uint64(block)
-        z = z + np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        z = z ^ (z >> np.uint64(31))
-    u = (z >> np.uint64(11)).astype(np.float64) / float(1 << 53)
-    edges = np.cumsum(fractions) / np.sum(fractions)
-    return np.searchsorted(edges, u, side="right").astype(np.int64)
+    blocks = np.asarray(sample_id, np.int64) // block
+    per_group = sum(counts)
+    deal = np.repeat(np.arange(len(counts)), counts)
+    groups, inverse = np.unique(blocks // per_group, return_inverse=True)
+    table = np.stack([np.random.default_rng([seed, int(g)]).permutation(deal) for g in groups]) \
+        if len(groups) else np.empty((0, per_group), np.int64)
+    return table[inverse, blocks % per_group].astype(np.int64)
 
 
 def mirror(inputs: np.ndarray, anchors: np.ndarray, jacobian: np.ndarray | None = None):
