@@ -54,14 +54,14 @@ COLUMNS = [("val", "mean_anchor_error_mm", 4), ("val", "p95_anchor_error_mm", 4)
            ("heldout", "mean_anchor_error_mm", 4), ("heldout", "phi_end_error_deg", 3)]
 
 
-def run_variant(name: str, data: str, heldout: str, epochs: int, out: str) -> str:
+def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: int, out: str) -> str:
     """Train and evaluate one variant on one thread; write out (JSON). Returns name."""
     torch.set_num_threads(1)
     model_cfg, cfg = apply_overrides(*CONFIGS["improved"], [*VARIANTS[name], f"epochs={epochs}"])
     splits, _ = load_splits(data)
     model, history = train(model_cfg, cfg, splits, log=lambda s: None)
     result = {"name": name, "overrides": VARIANTS[name], "epochs": epochs,
-              "data_sha256": dataset_digest(data),
+              "data_sha256": data_sha256,
               "model_config": asdict(model_cfg),
               "train_config": asdict(cfg), "n": {k: len(v) for k, v in splits.items()},
               "best_epoch": history["best_epoch"], "train_time_s": history["train_time_s"],
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     print(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
           f"{len(todo)} to train ({args.epochs} epochs, {args.jobs} job(s))", flush=True)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(run_variant, n, args.data, args.heldout, args.epochs,
+        futures = [pool.submit(run_variant, n, args.data, data_sha256, args.heldout, args.epochs,
                                str(out / f"{n}.json")) for n in todo]
         for f in futures:
             print(f"  {f.result()} done", flush=True)

@@ -256,8 +256,8 @@ def split_of(sample_id: np.ndarray, seed: int, counts=(7, 2, 1),
     per_group = sum(counts)
     deal = np.repeat(np.arange(len(counts)), counts)
     groups, inverse = np.unique(blocks // per_group, return_inverse=True)
-    table = np.stack([np.random.default_rng([seed, int(g)]).permutation(deal) for g in groups]) \
-        if len(groups) else np.empty((0, per_group), np.int64)
+    table = np.array([np.random.default_rng([seed, int(g)]).permutation(deal) for g in groups],
+                     np.int64).reshape(-1, per_group)
     return table[inverse, blocks % per_group].astype(np.int64)
 
 
