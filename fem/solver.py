@@ -525,8 +525,8 @@ class Solver:
                 iters.append(int(n))
                 self._u_saved.x.array[:] = self.u.x.array
                 self.theta_ref.value = theta_saved = self.cap_rotation()
-                # The last factorisation (previous iterate, same load) is the converged
-                # tangent up to a quadratically small error: keep it as the next predictor.
+                # The last tangent (previous iterate, same load) is off from the converged
+                # one by the last correction only: good enough as the next predictor.
                 self._factor_fresh = n > 1
                 if self.comm.rank == 0:
                     log.info("load step %d: path %.4f, %d Newton iterations", steps, s, n)
@@ -566,15 +566,15 @@ class Solver:
         """d(probe x, y)/d(P, F1, F2, M) at the current converged state, shape (2n, 4).
 
         Rows are the probe coordinates flattened as (x_1, y_1, x_2, ...); columns in
-        mm/MPa, mm/N, mm/N, mm/(N·mm). Solves with the tangent assembled at the final
-        Newton iteration (a quadratically small distance from the converged state;
-        re-assembled only when the last step needed no iteration), by GMRES to
-        ``sensitivity_rtol`` preconditioned with the current LU.
+        mm/MPa, mm/N, mm/N, mm/(N·mm). Solves with the tangent re-assembled at the
+        converged state, by GMRES to ``sensitivity_rtol`` preconditioned with the current
+        LU. The tangent left in _A by Newton is that of the iterate before the last
+        correction (and chord steps): it is off by that correction, which depends on the
+        iteration path, so serial and parallel runs would disagree at ~1e-4.
         At P = 0 the pressure derivative is the one-sided (top chamber) one.
         """
-        if not self._factor_fresh:
-            self._tangent()
-            self._factor_fresh = True
+        self._tangent()
+        self._factor_fresh = True       # _A is now the converged tangent at its own load
         P = self.state_load.P
         rhs = []
         if self._forms_p:
