@@ -1,7 +1,7 @@
 """Architecture and loss sweep of the improved surrogate on a campaign dataset.
 
     python -m surrogate.sweep [--data results/data/train] [--heldout results/data/heldout]
-                              [--epochs 150] [--jobs 2] [--only NAME ...]
+                              [--epochs N] [--jobs 2] [--only NAME ...]
                               [--dir results/surrogate/sweep]
 
 Data flow: for each variant in VARIANTS, the improved config with that variant's
@@ -9,7 +9,7 @@ Data flow: for each variant in VARIANTS, the improved config with that variant's
 metrics on the validation split (which chooses the configuration), on the held-out set
 (reported, never used to choose) and inference speed (surrogate.evaluate.timing) ->
 DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes (a
-file made with other epochs or another dataset is redone) and ``--jobs`` workers
+file made with another config, epoch count or dataset is redone) and ``--jobs`` workers
 never share a file -> DIR/README.md, the table of every finished
 variant. Units: mm, degrees, seconds, samples per second.
 """
@@ -35,18 +35,20 @@ from workflow.shards import dataset_digest
 VARIANTS = {
     "improved": [],
     "nojac": ["w_jac=0"],
+    "jac0.05": ["w_jac=0.05"],
     "nophi": ["w_phi=0"],
     "noabsp": ["abs_pressure=false"],
-    "nosym": ["symmetric=false", "mirror_augment=true"],
-    "equivariant": ["symmetric=false", "equivariant=true"],
+    "nosym": ["equivariant=false", "mirror_augment=true"],
+    "symmetric": ["equivariant=false", "symmetric=true"],
     "relu": ["activation=relu"],
     "tanh": ["activation=tanh"],
     "noresidual": ["residual=false"],
     "paperarch": ["hidden=96,192,96", "residual=false"],
     "w64x3": ["hidden=64,64,64"],
     "w64x4": ["hidden=64,64,64,64"],
-    "w256x4": ["hidden=256,256,256,256"],
-    "equivariant-w64x3": ["symmetric=false", "equivariant=true", "hidden=64,64,64"],
+    "w128x4": ["hidden=128,128,128,128"],
+    "symmetric-w64x4": ["equivariant=false", "symmetric=true", "hidden=64,64,64,64"],
+    "symmetric-w128x4": ["equivariant=false", "symmetric=true", "hidden=128,128,128,128"],
 }
 
 COLUMNS = [("val", "mean_anchor_error_mm", 4), ("val", "p95_anchor_error_mm", 4),
@@ -54,13 +56,21 @@ COLUMNS = [("val", "mean_anchor_error_mm", 4), ("val", "p95_anchor_error_mm", 4)
            ("heldout", "mean_anchor_error_mm", 4), ("heldout", "phi_end_error_deg", 3)]
 
 
-def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: int, out: str) -> str:
+def variant_configs(name: str, epochs: int | None) -> tuple:
+    """(ModelConfig, TrainConfig) of a variant: the improved config with its overrides
+    (and ``epochs`` unless None)."""
+    extra = [] if epochs is None else [f"epochs={epochs}"]
+    return apply_overrides(*CONFIGS["improved"], [*VARIANTS[name], *extra])
+
+
+def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: int | None,
+                out: str) -> str:
     """Train and evaluate one variant on one thread; write out (JSON). Returns name."""
     torch.set_num_threads(1)
-    model_cfg, cfg = apply_overrides(*CONFIGS["improved"], [*VARIANTS[name], f"epochs={epochs}"])
+    model_cfg, cfg = variant_configs(name, epochs)
     splits, _ = load_splits(data)
     model, history = train(model_cfg, cfg, splits, log=lambda s: None)
-    result = {"name": name, "overrides": VARIANTS[name], "epochs": epochs,
+    result = {"name": name, "overrides": VARIANTS[name], "epochs": cfg.epochs,
               "data_sha256": data_sha256,
               "model_config": asdict(model_cfg),
               "train_config": asdict(cfg), "n": {k: len(v) for k, v in splits.items()},
@@ -95,7 +105,7 @@ def main(argv=None) -> int:
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="results/data/train")
     ap.add_argument("--heldout", default="results/data/heldout")
-    ap.add_argument("--epochs", type=int, default=150)
+    ap.add_argument("--epochs", type=int, help="default: the improved config's")
     ap.add_argument("--jobs", type=int, default=1, help="variants trained at once, 1 thread each")
     ap.add_argument("--only", nargs="*", choices=sorted(VARIANTS), help="these variants only")
     ap.add_argument("--dir", default="results/surrogate/sweep")
@@ -110,20 +120,23 @@ def main(argv=None) -> int:
         if not path.exists():
             return None
         r = json.loads(path.read_text())
-        return r if (r["epochs"], r["data_sha256"]) == (args.epochs, data_sha256) else None
+        model_cfg, cfg = variant_configs(name, args.epochs)
+        same = [r["model_config"], r["train_config"]] == json.loads(json.dumps([asdict(model_cfg), asdict(cfg)]))
+        return r if same and r["data_sha256"] == data_sha256 else None
 
     todo = [n for n in names if done(n) is None]
     print(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
-          f"{len(todo)} to train ({args.epochs} epochs, {args.jobs} job(s))", flush=True)
+          f"{len(todo)} to train ({args.epochs or 'configured'} epochs, {args.jobs} job(s))", flush=True)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = [pool.submit(run_variant, n, args.data, data_sha256, args.heldout, args.epochs,
                                str(out / f"{n}.json")) for n in todo]
         for f in futures:
             print(f"  {f.result()} done", flush=True)
     results = [r for r in map(done, VARIANTS) if r is not None]
-    text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep --epochs "
-            f"{args.epochs}` on `{args.data}` (split {results[0]['n']}); held-out: "
-            f"`{args.heldout}`. Validation chooses; held-out is for reference only.\n\n"
+    text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep` "
+            f"({results[0]['epochs']} epochs) on `{args.data}` (split {results[0]['n']}); held-out: "
+            f"`{args.heldout}`. Each run is the improved config with the overrides listed. "
+            f"Validation chooses; held-out is for reference only.\n\n"
             + table(results))
     (out / "README.md").write_text(text)
     print(text, end="")

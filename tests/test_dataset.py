@@ -12,6 +12,7 @@ import json
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -151,3 +152,17 @@ def test_cli_usage_errors():
     for args in ([], ["verify", "x", "--mirror", "-1"]):
         r = cli(*args)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+@pytest.mark.parametrize("name, n", [("train", 2560), ("heldout", 256)])
+def test_committed_dataset_verifies_complete(name, n):
+    """The committed FEM datasets (results/data) verify clean and complete: every shard's
+    sha256 and checksum, the unit layout, 0 failures, the paper's 2,560 training samples
+    (256 held out), every input inside the box |P| <= 0.3, |F| <= 3, |M| <= 100."""
+    root = Path(__file__).resolve().parents[1] / "results/data" / name
+    out = cli("verify", root, "--require-complete", "--json")
+    assert out.returncode == 0, out.stdout + out.stderr
+    data, manifest = shards.load_dataset(root)
+    assert manifest["samples"] == n and manifest["failures"] == 0 and manifest["complete"]
+    assert len(data["sample_id"]) == n and np.isfinite(data["jacobian"]).all()
+    assert (np.abs(data["inputs"]) <= shards.INPUT_BOX).all()

@@ -11,6 +11,7 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -121,7 +122,8 @@ def test_corrupt_shard_is_refused(data, tmp_path):
 def test_training_reaches_stated_error(improved, data):
     """100 epochs of a 32-32-32 improved model on the 282 training samples: held-out mean
     anchor error < 0.2 mm, phi_end error < 0.5 deg, Jacobian relative error < 0.1
-    (measured: 0.089 mm, 0.21 deg, 0.051); the checkpoint records the test metrics."""
+    (measured with the equivariant config: 0.047 mm, 0.30 deg, 0.026); the checkpoint
+    records the test metrics."""
     heldout, _ = load_samples(data[1])
     m = evaluate(load_surrogate(improved), heldout)
     assert m["n"] == 100
@@ -130,7 +132,8 @@ def test_training_reaches_stated_error(improved, data):
     assert m["jacobian_rel_error"] < 0.1
     ckpt = load_checkpoint(improved)
     assert ckpt["metrics"]["test"]["mean_anchor_error_mm"] < 0.2
-    assert ckpt["train_config"]["w_jac"] > 0 and ckpt["model_config"]["symmetric"]
+    cfg = ckpt["model_config"]
+    assert ckpt["train_config"]["w_jac"] > 0 and (cfg["symmetric"] or cfg["equivariant"])
     assert (improved.parent / "improved_curve.png").stat().st_size > 10_000
 
 
@@ -364,7 +367,8 @@ def test_report_writes_metrics_and_figures(data, tmp_path):
 def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys):
     """Each variant's record carries the improved config with exactly its overrides (w64x3:
     hidden 64,64,64; nojac: w_jac 0, the rest as improved); a re-run trains nothing, and a
-    different epoch count or dataset invalidates the records."""
+    record of another config (the improved config changed since), epoch count or dataset
+    is redone."""
     args = ["--data", str(data[0]), "--heldout", str(data[1]), "--epochs", "2",
             "--only", "w64x3", "nojac", "--dir", str(tmp_path)]
     assert sweep.main(args) == 0
@@ -379,7 +383,37 @@ def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys)
     capsys.readouterr()
     assert sweep.main(args) == 0
     assert "2 of 2 variants done, 0 to train" in capsys.readouterr().out
+    w64["model_config"]["hidden"] = [32, 32]
+    (tmp_path / "w64x3.json").write_text(json.dumps(w64))
+    assert sweep.main(args) == 0
+    assert "1 of 2 variants done, 1 to train" in capsys.readouterr().out
     assert sweep.main(args[:5] + ["3"] + args[6:]) == 0
     assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out
     assert sweep.main(["--data", str(data[1])] + args[2:5] + ["3"] + args[6:]) == 0
     assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out
+
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+@pytest.mark.skipif(not (RESULTS / "surrogate/metrics.json").is_file(), reason="no committed surrogate")
+def test_committed_models_reproduce_their_metrics_and_meet_targets():
+    """Frozen reference: the committed paper and improved checkpoints, re-evaluated on the
+    committed held-out FEM set, give the errors stored in results/surrogate/metrics.json
+    (to 1e-9 relative: same code, same data), and the improved model meets issue 4's
+    accuracy targets (mean <= 0.10 mm, p95 <= 0.30 mm, phi_end <= 0.3 deg, Jacobian <= 5 %)
+    and is exactly mirror-symmetric on those inputs."""
+    stored = json.loads((RESULTS / "surrogate/metrics.json").read_text())
+    held, _ = load_samples(RESULTS / "data/heldout")
+    keys = ("mean_anchor_error_mm", "p95_anchor_error_mm", "phi_end_error_deg", "jacobian_rel_error")
+    for name in ("paper", "improved"):
+        got = evaluate(load_surrogate(RESULTS / f"surrogate/{name}.pt"), held)
+        for k in keys:
+            assert got[k] == pytest.approx(stored[name]["heldout"][k], rel=1e-9), (name, k)
+    assert got["n"] == 256
+    for k, target in zip(keys, (0.10, 0.30, 0.3, 0.05)):
+        assert got[k] <= target, k
+    model = load_surrogate(RESULTS / "surrogate/improved.pt")
+    x = held.inputs.to(torch.float64)
+    with torch.no_grad():
+        assert torch.equal(model(x * B), model(x) * S)
