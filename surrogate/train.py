@@ -20,16 +20,22 @@ epoch, 500 epochs, mirror augmentation, anchor term only. The paper states neith
 activation nor the batch size; we take ReLU and 32.
 
 The improved config is exactly mirror-symmetric (model.py), so mirror augmentation would
-only duplicate every loss term and is off. It was chosen on the validation split of the
-FEM train set (results/surrogate/sweep/README.md, ``make sweep``) as the most accurate
-variant that meets the 1e6 samples/s inference target: the one-pass equivariant form
+only duplicate every loss term and is off. Its form: the one-pass equivariant network
 (invariants in, odd outputs as odd inputs times invariant coefficients), 3 x 96 SiLU,
-residual, |P| feature. The two-pass symmetrised 4 x 64 fits a little better but reaches
-only ~0.9e6 samples/s on both cores; 4 x 128 fits about as well at a sixth of the speed.
-The Sobolev term (w_jac = 0.2; 0.05 and 0.4 were worse on validation) lowers the anchor
-and Jacobian errors about 1.5x (``nojac`` in the sweep); w_phi = 10 mm/rad counts the end
-slope like an extra anchor on a 100 mm lever (one finger link). 800 epochs with a x0.995
-decay beat 400 with x0.99 by ~1.4x on the validation anchors, and still train in ~2 min.
+residual, |P| feature, chosen as the most accurate form that reaches the 1e6 samples/s
+inference target. Figures below are validation mean anchor errors from ``make sweep``
+(results/surrogate/sweep/README.md, 800 epochs each, FEM train set):
+- the improved config 0.0136 mm; without the Sobolev term 0.0294 mm (Jacobian 5.7 % vs
+  3.0 %); w_jac = 0.05 gave 0.0151 mm (and ``--set w_jac=0.4`` 0.0157 mm);
+- the exactly symmetric two-pass forms fit better but are slower: 4 x 64 0.0102 mm at
+  ~0.6e6 samples/s on one thread (0.9e6 on both cores), 4 x 128 0.0078 mm at ~0.4e6;
+- a plain MLP with mirror augmentation (0.0108 mm) is not exactly symmetric;
+- tanh instead of SiLU gave 0.0116 mm at the same speed, found after the choice
+  (SiLU led the 150-epoch screening): the next candidate;
+- 800 epochs with a x0.995 decay beat 400 with x0.99 (``--set epochs=400 --set
+  lr_decay=0.99``: 0.0170 mm), and still train in ~2 min.
+w_phi = 10 mm/rad counts the end slope like an extra anchor on a 100 mm lever (one
+finger link).
 
 Seeded: the same seed, data and thread count reproduce the same weights.
 """

@@ -187,7 +187,7 @@ def predictor_section(root: Path) -> list[str]:
             ("contact gesture (median)", f"{b['contact_median_ms']:.1f} ms", "10-15 s"),
             ("gravity NN residual", f"{b['gravity_nn_residual_force_mN']:.3g} mN, "
              f"{b['gravity_nn_residual_moment_Nmm']:.3g} N·mm", "< 2 mN, 1.2 N·mm"),
-            ("contact NN residual", f"{b['contact_nn_residual_force_mN']:.3g} mN, "
+            ("contact NN residual (NN + capped LM polish)", f"{b['contact_nn_residual_force_mN']:.3g} mN, "
              f"{b['contact_nn_residual_moment_Nmm']:.3g} N·mm", "> 10 mN, 7 N·mm (failed)"),
             ("NN throughput (batched)", f"{b['nn_batched_per_s']:.3g} gestures/s", "< 0.1 s per query")]
     joint = b.get("joint", "unrecorded")
