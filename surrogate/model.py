@@ -183,7 +183,7 @@ class JointSurrogate(nn.Module):
         """Anchors (n, 20) mm from the trunk output h (n, w): even coordinates from a,
         odd ones as sum_j o_j c_j (module docstring); with tangents (n, 4, 20) if dz.
         The anchors interleave (x_k, y_k), so a stack, not a masked scatter, assembles
-        them (a fifth of the batched cost at width 64)."""
+        them (~10 % faster batched at width 64)."""
         n, k = h.shape[0], N_ANCHORS
         out = self.head(h)
         c = out[:, k:].reshape(n, -1, k)
