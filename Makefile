@@ -124,7 +124,7 @@ results/surrogate/metrics.json: results/surrogate/paper.pt results/surrogate/imp
 	$(PY) -m surrogate.evaluate --report --train-data $(SURROGATE_TRAIN) \
 	  --heldout $(SURROGATE_HELDOUT) --dir results/surrogate
 
-sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the improved surrogate (its 800 epochs each, 2 jobs, ~25 min)
+sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the improved surrogate (its 800 epochs each, 2 jobs, ~20 min)
 results/surrogate/sweep/README.md: $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
 	nice $(PY) -m surrogate.sweep --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) \
 	  --jobs 2 --dir results/surrogate/sweep

@@ -37,9 +37,7 @@ FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
 #: at (0.1, 0.2) and (0.2, 0.1) MPa: every object slips (|f|/N = 0.32-0.54 > mu = 0.3);
 #: at (0.2, 0.3) and (0.3, 0.2) all three hold (|f|/N <= 0.28; gestures.json records it).
 #: Check a case with ``python -m predictor.gesture --p1 0.1 --p2 0.2 --object circle --json``.
-GRASPS = {"circle": [(0.2, 0.3), (0.3, 0.2)],
-          "ellipse": [(0.2, 0.3), (0.3, 0.2)],
-          "rectangle": [(0.2, 0.3), (0.3, 0.2)]}
+GRASPS = {kind: [(0.2, 0.3), (0.3, 0.2)] for kind in ("circle", "ellipse", "rectangle")}
 
 
 def _summary(res, i: int) -> dict:

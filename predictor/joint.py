@@ -7,9 +7,9 @@ float64, batched over any leading shape and differentiable in every input, so th
 equilibrium solver can take exact autograd Jacobians through them.
 
 ``AnalyticJoint`` is the stand-in (``--model analytic``), used before the FEM-trained
-surrogate existed, and the test oracle (its anchors have a closed form). It is a planar beam of length L = 45.45 mm
-cut into 10 segments (one per anchor interval, h = L/10). Segment k (midpoint s_k) has
-constant curvature
+surrogate existed, and the test oracle (its anchors have a closed form). It is a planar
+beam of length L = 45.45 mm cut into 10 segments (one per anchor interval, h = L/10).
+Segment k (midpoint s_k) has constant curvature
 
     kappa_k = (M - c_p·P + F2·(L - s_k)) / EI                          [1/mm]
 
