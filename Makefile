@@ -5,7 +5,7 @@ SHELL := /bin/bash
 VENV  := .venv
 PY    := $(VENV)/bin/python
 SETUP := $(VENV)/.setup-done
-MPIRUN := mpirun --oversubscribe
+MPIRUN := mpirun -q --oversubscribe
 # OpenMPI refuses root without these; we are root on the workstations and in CI.
 export OMPI_ALLOW_RUN_AS_ROOT := 1
 export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
@@ -13,11 +13,14 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export PYVISTA_OFF_SCREEN := true
-APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python3-venv openmpi-bin
+# slurm-wlm + munge: tests/test_slurm.py runs workflow/slurm/campaign.sbatch on a throw-away
+# one-node cluster (the daemons are never started as services).
+APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python3-venv openmpi-bin \
+                slurm-wlm munge
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
-        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor report clean
+        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas inverse report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -28,7 +31,8 @@ help: ## show this help
 setup: $(SETUP) ## install Debian FEniCSx (apt) and the .venv (idempotent)
 
 $(SETUP): pyproject.toml constraints.txt
-	@if ! /usr/bin/python3 -c "import dolfinx, gmsh, scipy" 2>/dev/null || ! command -v mpirun >/dev/null; then \
+	@if ! /usr/bin/python3 -c "import dolfinx, gmsh, scipy" 2>/dev/null || ! command -v mpirun >/dev/null \
+	     || ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then \
 	  echo "[setup] apt-get install $(APT_PACKAGES)"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(APT_PACKAGES); \
 	fi
@@ -60,7 +64,7 @@ test: $(SETUP) ## the test suite (coarse FEM, small data; < 15 min)
 # ---------------------------------------------------------------- fem (issue 2)
 bench-fem: results/bench/fem.json ## FEM timings at the production mesh -> results/bench/fem.json
 results/bench/fem.json: fem/*.py | $(SETUP)
-	$(PY) -m fem.bench --out $@
+	$(PY) -m fem.bench_joint --out $@
 
 mesh-study: results/fem/mesh_study.json ## 4 corner cases x 3 meshes -> results/fem/mesh_study.json
 results/fem/mesh_study.json: fem/*.py | $(SETUP)
@@ -72,7 +76,7 @@ results/fem/self_contact.json: fem/*.py | $(SETUP)
 
 validation: results/fem/validation.json ## FEM vs exact elastica: cantilever alpha<=10, roll-up to 2 pi
 results/fem/validation.json: fem/*.py | $(SETUP)
-	$(PY) -m fem.benchmarks table --out $@
+	$(PY) -m fem.validation table --out $@
 
 joint-render: results/fem/joint.png ## pyvista render of the joint, undeformed + deformed
 results/fem/joint.png: fem/*.py | $(SETUP)
@@ -152,6 +156,22 @@ results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN
 bench-predictor: results/bench/predictor.json ## predictor timings and residuals -> results/bench/predictor.json
 results/bench/predictor.json: $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
 	$(PY) -m predictor.bench --model $(PRED_JOINT) --out $@
+
+# ---------------------------------------------------------------- grasp planning (issue 16)
+# (section owned by predictor/)
+ATLAS_OBJECTS := circle ellipse rectangle
+ATLAS_JSON    := $(foreach o,$(ATLAS_OBJECTS),results/predictor/atlas_$(o).json)
+PLAN_CODE     := $(PRED_CORE) predictor/atlas.py predictor/plot.py
+
+atlas: $(ATLAS_JSON) ## grasp atlas 61x61 of the three objects -> results/predictor/atlas_{circle,ellipse,rectangle}.{png,json}
+results/predictor/atlas_%.json: $(PLAN_CODE) | $(SETUP)
+	nice $(PY) -m predictor.atlas --object $* --grid 61 --model $(PRED_JOINT) \
+	  --plot results/predictor/atlas_$*.png --out $@ --json
+
+inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, two tip targets -> results/predictor/inverse.{json,png}
+results/predictor/inverse.json: $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)
+	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
+	  --out $@ --plot results/predictor/inverse.png --json
 
 report: ## results/REPORT.md from the committed JSON artefacts
 	$(PY) -m workflow.report --out results/REPORT.md

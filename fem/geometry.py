@@ -42,6 +42,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from fem.spec import JOINT_LENGTH, N_ANCHORS
+
 #: Physical-group tags, shared with fem.solver.
 TAGS = {
     "solid": 1, "distal_cap": 2,
@@ -60,7 +62,7 @@ class JointGeometry:
     ``mesh_size``) is used on the chamber walls.
     """
 
-    length: float = 45.45
+    length: float = JOINT_LENGTH
     wall: float = 1.2
     height: float = 20.0           # outer, y in [-height/2, height/2]
     width: float = 14.0            # full; the half-model is z in [0, width/2]
@@ -133,10 +135,15 @@ def _surfaces_in_box(gmsh, xmin, ymin, zmin, xmax, ymax, zmax) -> list[int]:
     return [tag for _, tag in ents]
 
 
-def _add_groups(gmsh, groups: dict[str, tuple[int, list[int]]]) -> None:
-    for name, (dim, tags) in groups.items():
+def _check_groups(groups: dict[str, tuple[int, list[int]]]) -> None:
+    for name, (_, tags) in groups.items():
         if not tags:
             raise RuntimeError(f"geometry: physical group '{name}' is empty")
+
+
+def _add_groups(gmsh, groups: dict[str, tuple[int, list[int]]]) -> None:
+    _check_groups(groups)
+    for name, (dim, tags) in groups.items():
         gmsh.model.addPhysicalGroup(dim, sorted(set(tags)), TAGS[name])
         gmsh.model.setPhysicalName(dim, TAGS[name], name)
 
@@ -198,10 +205,8 @@ def build_joint(geo: JointGeometry = JointGeometry()):
         "distal": (2, _surfaces_in_box(gmsh, L, 0, 0, L, H, Z)),
         "symmetry": (2, sym), "top_chamber": (2, top), "valley_faces": (2, valley),
     }
-    for name, (dim, tags) in groups.items():
-        if not tags:
-            raise RuntimeError(f"geometry: physical group '{name}' is empty")
-    _mesh(gmsh, geo.mesh_size, geo.wall_mesh_size, top)
+    _check_groups(groups)   # the groups are added to the mirrored model
+    _mesh(gmsh, geo.mesh_size, geo.wall_mesh_size, top, geo.wall)
     _mirror_mesh_y(gmsh, groups, {"top_chamber": "bottom_chamber"})
     return gmsh.model
 
@@ -275,11 +280,12 @@ def build_beam(geo: BeamGeometry = BeamGeometry()):
         "distal": (2, _surfaces_in_box(gmsh, Lt, -h, 0, Lt, h, Z)),
         "symmetry": (2, _surfaces_in_box(gmsh, 0, -h, 0, Lt, h, 0)),
     })
-    _mesh(gmsh, geo.mesh_size, None, [])
+    _mesh(gmsh, geo.mesh_size)
     return gmsh.model
 
 
-def _mesh(gmsh, size: float, wall_size: float | None, wall_surfaces: list[int]) -> None:
+def _mesh(gmsh, size: float, wall_size: float | None = None, wall_surfaces: list[int] = (),
+          wall_thickness: float = 0.0) -> None:
     gmsh.option.setNumber("Mesh.MeshSizeMax", size)
     gmsh.option.setNumber("Mesh.MeshSizeMin", 0.25 * size)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
@@ -287,17 +293,24 @@ def _mesh(gmsh, size: float, wall_size: float | None, wall_surfaces: list[int]) 
     gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
     gmsh.option.setNumber("Mesh.Algorithm3D", 1)   # Delaunay: robust on thin walls
     if wall_size is not None and wall_surfaces:
+        # gmsh 4.8 has no "Constant" field: size = wall_size within one wall thickness of
+        # the chamber surfaces (so through the whole wall), growing to ``size`` beyond.
         f = gmsh.model.mesh.field
-        c = f.add("Constant")
-        f.setNumbers(c, "SurfacesList", wall_surfaces)
-        f.setNumber(c, "VIn", wall_size)
-        f.setNumber(c, "VOut", size)
-        f.setAsBackgroundMesh(c)
+        dist = f.add("Distance")
+        f.setNumbers(dist, "SurfacesList", wall_surfaces)
+        ramp = f.add("Threshold")
+        f.setNumber(ramp, "InField", dist)
+        f.setNumber(ramp, "SizeMin", wall_size)
+        f.setNumber(ramp, "SizeMax", size)
+        f.setNumber(ramp, "DistMin", wall_thickness)
+        f.setNumber(ramp, "DistMax", wall_thickness + size)
+        f.setAsBackgroundMesh(ramp)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", min(0.25 * size, 0.5 * wall_size))
     gmsh.model.mesh.generate(3)
     gmsh.model.mesh.optimize("")  # default tetrahedral optimiser (no Netgen in Debian gmsh)
 
 
-def anchor_points(length: float, n: int = 10) -> np.ndarray:
+def anchor_points(length: float, n: int = N_ANCHORS) -> np.ndarray:
     """Material anchor points X_i = (i·L/n, 0, 0), i = 1..n (DESIGN.md §3). Shape (n, 3), mm."""
     x = np.arange(1, n + 1) * length / n
     return np.column_stack([x, np.zeros(n), np.zeros(n)])

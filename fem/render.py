@@ -6,11 +6,13 @@ The half-model is mirrored about z = 0 so the full joint is shown. Left: the und
 joint, cut open at z = 0 to show the two chambers and bellow cells. Right: the deformed
 joint coloured by displacement magnitude |u| (mm), with the 10 anchor points (like the
 paper's Figure 2C). Runs on one rank; needs no display (Plotter(off_screen=True)).
+The PNG is written atomically (screenshot and caption go to a temporary name beside it);
+``--json`` prints the file and the solve's figures (SolveResult.summary).
 """
 
 from __future__ import annotations
 
-import argparse
+import math
 import sys
 from dataclasses import replace
 
@@ -18,7 +20,10 @@ import numpy as np
 import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
 from mpi4py import MPI
 
+from fem import cli
+from fem.files import atomic_path
 from fem.geometry import JointGeometry
+from fem.options import add_load, add_mesh_size, one_rank, parsed_load
 from fem.solver import JointSolver, Load
 
 
@@ -38,7 +43,12 @@ def _grid(solver):
 
 
 def render(solver, result, out: str) -> None:
-    """Write the two-panel PNG for a solved ``result`` of ``solver`` to ``out``."""
+    """Write the two-panel PNG for a solved ``result`` of ``solver`` to ``out`` (atomic)."""
+    with atomic_path(out) as tmp:
+        _render(solver, result, str(tmp))
+
+
+def _render(solver, result, out: str) -> None:
     half, full = _grid(solver)
     deformed = full.copy()
     deformed.points += full.point_data["u"]
@@ -84,25 +94,27 @@ def _caption(path: str, titles: list[str]) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fem.render", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default="results/fem/joint.png")
-    ap.add_argument("--p", type=float, default=0.2)
-    ap.add_argument("--f1", type=float, default=0.0)
-    ap.add_argument("--f2", type=float, default=-1.0)
-    ap.add_argument("--m", type=float, default=20.0)
-    ap.add_argument("--mesh-size", type=float, default=JointGeometry().mesh_size)
-    args = ap.parse_args(argv)
+    ap = cli.Parser(prog="python -m fem.render", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", suffix=".png", default="results/fem/joint.png",
+                  help="PNG file (default results/fem/joint.png)")
+    add_load(ap, default=(0.2, 0.0, -1.0, 20.0))
+    add_mesh_size(ap, JointGeometry().mesh_size)
     comm = MPI.COMM_WORLD
-    if comm.size != 1:
-        print("error: render runs on one rank", file=sys.stderr)
-        return 2
+    one_rank(ap, comm)
+    args = ap.parse_args(argv)
+    load = Load.from_array(parsed_load(ap, args))
     solver = JointSolver(replace(JointGeometry(), mesh_size=args.mesh_size), comm)
-    result = solver.solve(Load(args.p, args.f1, args.f2, args.m))
+    result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
     if not result.converged:
-        print(f"error: solve did not converge: {result.reason}", file=sys.stderr)
+        print(f"{ap.prog}: the solve did not converge: {result.reason}", file=sys.stderr)
         return 1
-    render(solver, result, args.out)
-    print(f"wrote {args.out}")
+    with ap.errors():
+        render(solver, result, args.out)
+    if args.json:
+        cli.print_json({"out": args.out, **result.summary()})
+    else:
+        print(f"wrote {args.out}: phi_end {math.degrees(result.phi_end):.1f} deg, "
+              f"cap {math.degrees(result.cap_rotation):.1f} deg")
     return 0
 
 

@@ -13,12 +13,11 @@ over the node pairs of the two periodic faces (:mod:`fem.contact`; n the best-fi
 normal of the valley). g < 0 is overlap. The production solver carries penalty contact
 (SolverConfig.contact_penalty), so g stays near 0; ``--penalty 0`` switches it off and
 shows how far the walls would interpenetrate without it. Units: mm. One rank.
+``--json`` prints the minimum gap and the figures of every case.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import sys
 from dataclasses import replace
@@ -26,14 +25,20 @@ from dataclasses import replace
 import numpy as np
 from mpi4py import MPI
 
+from fem import cli
+from fem.contact import ValleyContact
+from fem.files import write_json
 from fem.geometry import JointGeometry
 from fem.mesh_study import CORNERS
+from fem.options import add_extrapolation, add_mesh_size, checked_loads, one_rank
 from fem.solver import JointSolver, Load, SolverConfig
-from fem.contact import ValleyContact
+from fem.spec import INPUT_MIRROR
+
+PENALTY_MAX = 1e5  # MPa/mm: 1000 x the production penalty
 
 
 def run(mesh_size: float | None = None, loads: list[Load] | None = None,
-        penalty: float | None = None) -> dict:
+        penalty: float | None = None, allow_extrapolation: bool = False) -> dict:
     """Gaps for ``loads`` (default: CORNERS and their mirrors) on the given mesh."""
     geo = JointGeometry() if mesh_size is None else replace(JointGeometry(), mesh_size=mesh_size)
     config = SolverConfig() if penalty is None else SolverConfig(contact_penalty=penalty)
@@ -42,9 +47,9 @@ def run(mesh_size: float | None = None, loads: list[Load] | None = None,
     contact = solver.contact or ValleyContact(solver.V, mesh.facet_tags, geo, 0.0)
     cases = []
     if loads is None:
-        loads = CORNERS + [Load.from_array(c.as_array() * [-1, 1, -1, -1]) for c in CORNERS]
+        loads = CORNERS + [Load.from_array(c.as_array() * INPUT_MIRROR) for c in CORNERS]
     for load in loads:
-        r = solver.solve(load)
+        r = solver.solve(load, allow_extrapolation=allow_extrapolation)
         entry = {"load": load.as_array().tolist(), "converged": r.converged,
                  "phi_end_deg": float(np.degrees(r.phi_end)),
                  "newton_iterations": r.iterations, "wall_time_s": r.wall_time}
@@ -60,25 +65,28 @@ def run(mesh_size: float | None = None, loads: list[Load] | None = None,
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fem.self_contact", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default="results/fem/self_contact.json")
-    ap.add_argument("--mesh-size", type=float, default=None)
-    ap.add_argument("--penalty", type=float, default=None,
-                    help="contact penalty in MPa/mm (default: the solver's; 0 = no contact)")
-    ap.add_argument("--loads", nargs="+", metavar="P,F1,F2,M",
-                    help="solve these loads instead of the box corners (diagnostics)")
+    ap = cli.Parser(prog="python -m fem.self_contact", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", suffix=".json", default="results/fem/self_contact.json",
+                  help="result file (default results/fem/self_contact.json)")
+    add_mesh_size(ap, None)
+    ap.add_argument("--penalty", type=cli.number(0, PENALTY_MAX, "MPa/mm"), default=None,
+                    help=f"contact penalty, MPa/mm in [0, {PENALTY_MAX:g}] (default: the "
+                         "solver's; 0 = no contact)")
+    ap.add_argument("--loads", type=cli.numbers(4), nargs="+", metavar="P,F1,F2,M",
+                    help="solve these loads (MPa, N, N, N*mm) instead of the box corners")
+    add_extrapolation(ap)
+    one_rank(ap, MPI.COMM_WORLD)
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     loads = None
     if args.loads:
-        try:
-            loads = [Load(*(float(x) for x in spec.split(","))) for spec in args.loads]
-        except (TypeError, ValueError):
-            print(f"error: --loads takes P,F1,F2,M groups, got {args.loads}", file=sys.stderr)
-            return 2
-    out = run(args.mesh_size, loads, args.penalty)
-    with open(args.out, "w") as f:
-        json.dump(out, f, indent=1)
+        loads = [Load.from_array(x) for x in checked_loads(ap, args.loads, args.allow_extrapolation)]
+    logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
+    out = run(args.mesh_size, loads, args.penalty, args.allow_extrapolation)
+    with ap.errors():
+        write_json(args.out, out)
+    if args.json:
+        cli.print_json({**out, "out": args.out})
+        return 0
     for c in out["cases"]:
         print(f"  load {c['load']}: phi_end {c['phi_end_deg']:.1f} deg, min gap "
               f"{c.get('min_gap_mm', float('nan')):.3f} mm")

@@ -30,7 +30,7 @@ Loads (DESIGN.md §3), on the half-model z >= 0, which carries half of each resu
 
   where u + (R - I)(X_ref - X) is the displacement of X_ref carried rigidly by the cap.
   Its variation is the virtual work f·δu_ref + M δtheta, so the couple is M at ANY end
-  rotation (no M cos(phi) error of a dead linear traction; see ``fem.benchmarks rollup``).
+  rotation (no M cos(phi) error of a dead linear traction; see ``fem.validation rollup``).
 
 Weak form: R(u; v) = ∫ P : grad v dX + ∫_chamber p cofac(F) N·v dA + δPi_ext + δPi_c = 0,
 with u = 0 on the proximal face and u_z = 0 on the symmetry plane; Pi_c is the penalty
@@ -62,15 +62,9 @@ from petsc4py import PETSc
 from fem.contact import ValleyContact
 from fem.geometry import TAGS, BeamGeometry, JointGeometry, anchor_points
 from fem.mesh import MeshData, create_mesh
+from fem.spec import INPUT_BOX, check_box, outside_box, phi_end
 
 log = logging.getLogger("softjoint.fem")
-
-#: Half-widths of the input box (DESIGN.md §3) for (P MPa, F1 N, F2 N, M N·mm).
-INPUT_BOX = np.array([0.3, 3.0, 3.0, 100.0])
-
-
-class LoadOutOfRange(ValueError):
-    """A load outside the surrogate's training box without explicit extrapolation."""
 
 
 @dataclass(frozen=True)
@@ -88,15 +82,6 @@ class Load:
     @classmethod
     def from_array(cls, a) -> "Load":
         return cls(*(float(x) for x in a))
-
-    def check_box(self, allow_extrapolation: bool = False) -> None:
-        """Raise LoadOutOfRange when outside |P|<=0.3, |F1|,|F2|<=3, |M|<=100."""
-        a = self.as_array()
-        bad = [f"|{n}|={abs(v):g} > {b:g}" for n, v, b in zip("P F1 F2 M".split(), a, INPUT_BOX)
-               if abs(v) > b * (1 + 1e-12)]
-        if bad and not allow_extrapolation:
-            raise LoadOutOfRange("load outside the input box (" + ", ".join(bad)
-                                 + "); pass allow_extrapolation to go beyond it")
 
 
 @dataclass(frozen=True)
@@ -497,6 +482,8 @@ class Solver:
         solver returns to its last converged state (never a non-converged one).
         """
         cfg = self.config
+        if not np.isfinite(load.as_array()).all():   # would only fail after every cut-back
+            raise ValueError(f"{load} is not finite")
         t0, lu0, kr0 = time.perf_counter(), self.factorisations, self.krylov_iterations
         if not continuation or self.state_load is None:
             self.reset()
@@ -547,10 +534,9 @@ class Solver:
         self.state_load = final
         self._set_load(final.as_array())
         anchors = self.positions()
-        d = anchors[-1] - anchors[-2] if len(anchors) > 1 else np.full(2, np.nan)
         result = SolveResult(
             load=load, converged=converged, anchors=anchors,
-            phi_end=float(math.atan2(d[1], d[0])),
+            phi_end=float(phi_end(anchors)) if len(anchors) > 1 else math.nan,
             cap_rotation=float(self.theta_ref.value), newton_iterations=iters,
             load_steps=steps, cutbacks=cutbacks, factorisations=self.factorisations - lu0,
             krylov_iterations=self.krylov_iterations - kr0,
@@ -622,10 +608,11 @@ class JointSolver(Solver):
 
     def solve(self, load: Load, continuation: bool = False,
               allow_extrapolation: bool = False) -> SolveResult:
-        """Solve one load case. Raises LoadOutOfRange outside the box unless allowed."""
-        load.check_box(allow_extrapolation)
+        """Solve one load case. Raises fem.spec.OutOfBoxError, before any work, for a
+        load that is not finite, or outside the box unless ``allow_extrapolation``."""
+        check_box(load.as_array(), allow_extrapolation)
         result = super().solve(load, continuation)
-        result.extrapolated = bool(np.any(np.abs(load.as_array()) > INPUT_BOX))
+        result.extrapolated = bool(outside_box(load.as_array()))
         return result
 
 

@@ -7,15 +7,14 @@
 - grasps.png: two grasps for each of circle, ellipse and rectangle (Figures 5D-F),
   from the approach gesture statics.Obstacle documents;
 - nn_training.png: validation residual per epoch of the NN predictors (Figures 5B, C, G, H),
-  read from the checkpoints' histories;
-- gestures.json: the figures' numbers (tau, residuals, tips, contact, slip, time).
+  read from the histories of the checkpoints in ``--nn-dir``;
+- gestures.json: the figures' numbers (GestureResult.summary of every case).
 
-Data flow: joint model (--model, default analytic) -> predictor.solve -> predictor.plot.
+Data flow: joint model (--model, default analytic) -> GripperProblem -> predictor.solve ->
+predictor.plot. Every file is written atomically; ``--json`` prints gestures.json.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 from pathlib import Path
 
@@ -25,10 +24,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 
+from fem import cli  # noqa: E402
+from fem.files import dumps, write_text  # noqa: E402
 from predictor.joint import load_joint  # noqa: E402
-from predictor.plot import draw_gesture  # noqa: E402
-from predictor.solve import APPROACH, SolverOptions, solve  # noqa: E402
-from predictor.statics import parse_object  # noqa: E402
+from predictor.nn import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
+from predictor.plot import draw_gesture, save_figure  # noqa: E402
+from predictor.solve import APPROACH, solve  # noqa: E402
+from predictor.statics import GripperProblem, parse_object  # noqa: E402
 
 GRAVITY_CASES = [(-0.1, 0.1), (0.1, -0.1)]
 FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
@@ -38,18 +40,9 @@ FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
 #: at (0.2, 0.3) and (0.3, 0.2) all three hold (|f|/N <= 0.28; gestures.json records it).
 #: Check a case with ``python -m predictor.gesture --p1 0.1 --p2 0.2 --object circle --json``.
 GRASPS = {kind: [(0.2, 0.3), (0.3, 0.2)] for kind in ("circle", "ellipse", "rectangle")}
-
-
-def _summary(res, i: int) -> dict:
-    ok = bool(res.converged[i])
-    return {"pressures_MPa": res.pressures[i].tolist(), "converged": ok,
-            "tau": res.tau[i].tolist() if ok else None,
-            "residual_force_mN": res.residual_force_mN[i].tolist(),
-            "residual_moment_Nmm": res.residual_moment_Nmm[i].tolist(),
-            "tip": res.pose.tip_end[i].tolist() if ok else None,
-            "tip_angle_deg": math.degrees(float(res.pose.phi[i, 1])) if ok else None,
-            "contact_force_N": float(res.normal_force_N[i]), "friction_ratio": float(res.friction_ratio[i]),
-            "slip": bool(res.slip[i]), "iterations": int(res.iterations[i])}
+#: The NN checkpoints drawn in nn_training.png: file, label, contact kind.
+NN_CURVES = (("gravity_nn_paper.pt", "gravity, paper MLP", False), ("gravity_nn.pt", "gravity, improved", False),
+             ("contact_nn.pt", "contact (supervised)", True))
 
 
 def _panel_row(path: Path, results: list, obstacles: list, titles: list, ncols: int) -> None:
@@ -61,25 +54,24 @@ def _panel_row(path: Path, results: list, obstacles: list, titles: list, ncols: 
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, 120)
 
 
-def nn_curves(out: Path) -> None:
-    """nn_training.png from the histories of the NN checkpoints present in ``out``."""
+def load_curves(nn_dir: Path) -> list:
+    """[(label, Predictor)] of the NN_CURVES checkpoints present in ``nn_dir``, each
+    integrity-checked on load (ValueError, one line)."""
+    return [(label, load_predictor(nn_dir / name, contact=contact)) for name, label, contact in NN_CURVES
+            if (nn_dir / name).is_file()]
+
+
+def nn_curves(curves: list, path: Path) -> None:
+    """``path`` (nn_training.png) from the histories of the predictors ``curves`` (load_curves)."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    found = False
-    for name, label in (("gravity_nn_paper.pt", "gravity, paper MLP"), ("gravity_nn.pt", "gravity, improved"),
-                        ("contact_nn.pt", "contact (supervised)")):
-        path = out / name
-        if not path.is_file():
-            continue
-        found = True
-        ck = torch.load(path, map_location="cpu", weights_only=False)
-        h = ck["history"]
+    for label, pred in curves:
+        h = pred.history
         axes[0].semilogy(h["epoch"], h["val_force_mN"], "o-", ms=3, label=label + " (raw NN)")
         axes[1].semilogy(h["epoch"], h["val_moment_Nmm"], "o-", ms=3, label=label + " (raw NN)")
-        polished = ck["metrics"].get("val_polished")
+        polished = pred.metrics.get("val_polished")
         if polished:  # the delivered contact predictor: NN + capped-LM polish
             axes[0].semilogy([h["epoch"][-1]], [polished["force_mN_mean"]], "*", ms=12, label="contact NN + LM polish")
             axes[1].semilogy([h["epoch"][-1]], [polished["moment_Nmm_mean"]], "*", ms=12)
@@ -88,31 +80,33 @@ def nn_curves(out: Path) -> None:
         ax.set_xlabel("epoch (last point: after L-BFGS)")
         ax.set_ylabel(f"mean validation residual ({unit})")
         ax.grid(True, which="both", alpha=0.3)
-    if found:
+    if curves:
         axes[0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "nn_training.png", dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, 120)
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m predictor.figures", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default="results/predictor")
+    ap = cli.Parser(prog="python -m predictor.figures", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", folder=True, default="results/predictor", help="output folder")
     ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR,
+                    help=f"folder of the NN checkpoints for nn_training.png (default {DEFAULT_DIR})")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    joint = load_joint(args.model)
+    with ap.errors():  # every input is read before the solves
+        joint = load_joint(args.model)
+        curves = load_curves(args.nn_dir)
     summary: dict = {"joint": joint.name, "approach_MPa": APPROACH}
 
-    grav = solve(joint, torch.tensor(GRAVITY_CASES, dtype=torch.float64))
-    summary["gravity"] = [_summary(grav, i) for i in range(len(GRAVITY_CASES))]
+    grav = solve(GripperProblem(joint), torch.tensor(GRAVITY_CASES, dtype=torch.float64))
+    summary["gravity"] = [grav.summary(i) for i in range(len(GRAVITY_CASES))]
     _panel_row(out / "gravity.png", [(grav, i) for i in range(2)], [None, None],
                [f"gravity, P = {p} MPa (dashed: no gravity)" for p in GRAVITY_CASES], 2)
 
-    free = solve(joint, torch.tensor(FREE_CASES, dtype=torch.float64), options=SolverOptions(gravity=False))
-    summary["free"] = [_summary(free, i) for i in range(len(FREE_CASES))]
+    free = solve(GripperProblem(joint, gravity=False), torch.tensor(FREE_CASES, dtype=torch.float64))
+    summary["free"] = [free.summary(i) for i in range(len(FREE_CASES))]
     _panel_row(out / "free.png", [(free, i) for i in range(4)], [None] * 4,
                [f"no gravity, P = {p} MPa" for p in FREE_CASES], 4)
 
@@ -120,17 +114,20 @@ def main(argv: list[str] | None = None) -> int:
     summary["grasps"] = {}
     for kind, cases in GRASPS.items():
         obs = parse_object(kind)
-        res = solve(joint, torch.tensor(cases, dtype=torch.float64), obs, start=APPROACH)
-        summary["grasps"][kind] = [_summary(res, i) for i in range(len(cases))]
+        res = solve(GripperProblem(joint, obstacle=obs, approach=APPROACH), torch.tensor(cases, dtype=torch.float64))
+        summary["grasps"][kind] = [res.summary(i) for i in range(len(cases))]
         for i, p in enumerate(cases):
             panels.append((res, i))
             obstacles.append(obs)
             state = ("slip" if bool(res.slip[i]) else "holds") if bool(res.converged[i]) else "NOT CONVERGED"
             titles.append(f"{kind}, P = {p} MPa: N = {float(res.normal_force_N[i]):.2f} N, {state}")
     _panel_row(out / "grasps.png", panels, obstacles, titles, 2)
-    nn_curves(out)
-    (out / "gestures.json").write_text(json.dumps(summary, indent=1))
-    print(f"[gestures] wrote {out}/gravity.png free.png grasps.png nn_training.png gestures.json")
+    nn_curves(curves, out / "nn_training.png")
+    write_text(out / "gestures.json", dumps(summary))  # no trailing newline, as committed
+    if args.json:
+        cli.print_json(summary)
+    else:
+        print(f"[gestures] wrote {out}/gravity.png free.png grasps.png nn_training.png gestures.json")
     return 0
 
 

@@ -4,122 +4,109 @@
         [--approach -0.15,0|zero] [--method newton|lbfgs|nn] [--model PATH] [--nn PATH]
         [--no-gravity] [--plot out.png] [--json]
 
-Data flow: pressures (MPa) + object spec -> joint model (``--model``: surrogate
-checkpoint; default results/surrogate/improved.pt when present, else the analytic
-stand-in) -> predictor.solve (or the NN predictor) -> right-finger figures as JSON:
-converged, tau [[F1 N, F2 N, M N·mm] x 2], residual_force_mN, residual_moment_Nmm (per
-joint), tip [x, y] mm, tip_angle_deg, contact_force_N, slip, iterations, time_ms.
+Data flow: pressures (MPa) + object spec -> GripperProblem (joint model from ``--model``:
+surrogate checkpoint; default results/surrogate/improved.pt when present, else the
+analytic stand-in) -> predictor.solve (or the NN predictor) -> right-finger figures
+(GestureResult.summary plus friction_N, time_ms and the run's settings) as text or as
+strict JSON: converged, tau [[F1 N, F2 N, M N·mm] x 2], residual_force_mN,
+residual_moment_Nmm (per joint), tip [x, y] mm, tip_angle_deg, contact_force_N, slip,
+iterations, time_ms.
 
 Exit codes: 0 converged; 1 not converged (the JSON says so, tau is null); 2 bad input
-(pressure beyond ±0.3 MPa, unknown object spec, missing or corrupt model) with a
-one-line reason on stderr.
+(a pressure that is not a number or beyond ±0.3 MPa, a bad object spec, an unwritable
+--plot, a missing, damaged or other-kind model) with a one-line reason on stderr,
+checked before the solve.
 """
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
 import torch
 
+from fem import cli
+from fem.spec import PRESSURE_LIMIT
 from predictor.joint import load_joint
 from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import parse_object
+from predictor.statics import GripperProblem, parse_object
 
 DEFAULT_SURROGATE = Path("results/surrogate/improved.pt")
+PRESSURE = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
+PRESSURE_PAIR = cli.numbers(2, -PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
 
 
-def _pair(text: str) -> tuple[float, float]:
-    parts = text.split(",")
-    if len(parts) != 2:
-        raise ValueError(f"expected P1,P2 in MPa, got {text!r}")
-    return float(parts[0]), float(parts[1])
+def _approach(text: str):
+    """--approach: ``zero`` or P1,P2 in MPa."""
+    return "zero" if text.strip().lower() == "zero" else PRESSURE_PAIR(text)
 
 
-def run(args: argparse.Namespace) -> tuple[dict, object, object]:
-    """Solve one gesture from parsed arguments. Returns (json dict, result, obstacle)."""
-    for name in ("p1", "p2"):
-        value = getattr(args, name)
-        if not math.isfinite(value) or abs(value) > 0.3:
-            raise ValueError(f"--{name} {value} MPa is outside the surrogate's box |P| <= 0.3 MPa")
+def _object(text: str) -> str:
+    """--object: the spec, checked while parsing (so a bad one is refused before any load)."""
+    try:
+        parse_object(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def run(args: argparse.Namespace):
+    """Solve one gesture from parsed arguments. Returns (json dict, result, problem)."""
     model = args.model or (str(DEFAULT_SURROGATE) if DEFAULT_SURROGATE.is_file() else "analytic")
     joint = load_joint(model)
-    obstacle = parse_object(args.object) if args.object else None
-    start = None if args.approach == "zero" else (_pair(args.approach) if args.approach else APPROACH)
-    if start is not None and max(abs(v) for v in start) > 0.3:
-        raise ValueError(f"--approach {args.approach} is outside |P| <= 0.3 MPa")
     pressures = torch.tensor([[args.p1, args.p2]], dtype=torch.float64)
-    options = SolverOptions(method=args.method if args.method != "nn" else "newton", gravity=not args.no_gravity)
+    obstacle = parse_object(args.object) if args.object else None
     if args.method == "nn":
         from predictor.nn import load_predictor, predict_gesture
 
-        if args.no_gravity or args.approach:
-            raise ValueError("--method nn predicts the trained case only (gravity on, its own approach)")
-
-        predictor = load_predictor(args.nn, joint, obstacle_default=obstacle is not None)
-        res = predict_gesture(predictor, joint, pressures, obstacle)
+        predictor = load_predictor(args.nn, joint, contact=args.object is not None)
+        problem = GripperProblem(joint, obstacle=obstacle, approach=predictor.config.approach)
+        res = predict_gesture(predictor, problem, pressures)
     else:
-        res = solve(joint, pressures, obstacle, options=options, start=start)
-    ok = bool(res.converged[0])
-    out = {
-        "converged": ok,
-        "tau": res.tau[0].tolist() if ok else None,
-        "residual_force_mN": res.residual_force_mN[0].tolist(),
-        "residual_moment_Nmm": res.residual_moment_Nmm[0].tolist(),
-        "tip": res.pose.tip_end[0].tolist() if ok else None,
-        "tip_angle_deg": math.degrees(float(res.pose.phi[0, 1])) if ok else None,
-        "contact_force_N": float(res.normal_force_N[0]),
-        "friction_N": float(res.friction_N[0]),
-        "friction_ratio": float(res.friction_ratio[0]),
-        "slip": bool(res.slip[0]) if obstacle is not None else False,
-        "iterations": int(res.iterations[0]),
-        "time_ms": res.time_ms,
-        "pressures_MPa": [args.p1, args.p2],
-        "method": args.method,
-        "joint": joint.name,
-        "object": args.object,
-        "gravity": not args.no_gravity,
-    }
+        start = None if args.approach == "zero" else (args.approach or APPROACH)
+        problem = GripperProblem(joint, obstacle=obstacle, gravity=not args.no_gravity, approach=start)
+        res = solve(problem, pressures, SolverOptions(method=args.method))
+    out = {**res.summary(0), "friction_N": float(res.friction_N[0]), "time_ms": res.time_ms,
+           "method": args.method, "joint": joint.name, "object": args.object, "gravity": problem.gravity}
     if args.method == "nn":
         out["nn_fallback_to_ramp"] = bool(res.fallback[0])
-    return out, res, obstacle
+    return out, res, problem
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m predictor.gesture", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--p1", type=float, required=True, help="joint-1 pressure, MPa (|P| <= 0.3)")
-    ap.add_argument("--p2", type=float, required=True, help="joint-2 pressure, MPa (|P| <= 0.3)")
-    ap.add_argument("--object", help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
-    ap.add_argument("--approach", help="P1,P2 (MPa) at which the object is brought in (grasp history; "
-                    f"default {APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with the object present")
+    ap = cli.Parser(prog="python -m predictor.gesture", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--p1", type=PRESSURE, required=True, help="joint-1 pressure, MPa (|P| <= 0.3)")
+    ap.add_argument("--p2", type=PRESSURE, required=True, help="joint-2 pressure, MPa (|P| <= 0.3)")
+    ap.add_argument("--object", type=_object,
+                    help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
+    ap.add_argument("--approach", type=_approach, help="P1,P2 (MPa) at which the object is brought in "
+                    f"(grasp history; default {APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with the "
+                    "object present")
     ap.add_argument("--method", choices=("newton", "lbfgs", "nn"), default="newton")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: "
                     f"{DEFAULT_SURROGATE} if present, else analytic)")
     ap.add_argument("--nn", help="NN predictor checkpoint for --method nn (default: results/predictor/"
                     "gravity_nn.pt, or contact_nn.pt with --object)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
-    ap.add_argument("--plot", help="write the gesture PNG here")
-    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    ap.add_output("--plot", suffix=".png", help="write the gesture PNG here")
     args = ap.parse_args(argv)
+    if args.method == "nn" and (args.no_gravity or args.approach is not None):
+        ap.error("--method nn predicts the trained case only (gravity on, its own approach): "
+                 "drop --no-gravity and --approach")
     torch.set_num_threads(1)
-    try:
-        out, res, obstacle = run(args)
-    except (ValueError, OSError, RuntimeError) as exc:
-        print(f"error: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", file=sys.stderr)
-        return 2
-    if args.plot:
-        from predictor.plot import save_gesture
+    with ap.errors():
+        out, res, problem = run(args)
+        if args.plot:
+            from predictor.plot import save_gesture
 
-        save_gesture(args.plot, res, 0, obstacle)
+            save_gesture(args.plot, res, 0, problem.obstacle)
     if args.json:
-        print(json.dumps(out, indent=1))
+        cli.print_json(out)
     else:
         for key, value in out.items():
             print(f"{key:>20}: {value}")
     if not out["converged"]:
-        print("error: the equilibrium solve did not converge; no gesture returned", file=sys.stderr)
+        print(f"{ap.prog}: the equilibrium solve did not converge; no gesture returned", file=sys.stderr)
         return 1
     return 0
 

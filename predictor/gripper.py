@@ -22,11 +22,34 @@ All lengths mm, forces N, angles rad. Batched: pressures (B, 2), tau (B, 2, 3).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 
 import torch
 
-from predictor.joint import JointModel, end_angle
+from fem.spec import PRESSURE_LIMIT, check_box, phi_end
+from predictor.joint import JointModel
+
+#: The gripper's inputs: one pressure per joint, each within the joint's |P| <= 0.3 MPa.
+PRESSURE_NAMES = ("P1", "P2")
+
+
+def check_pressures(pressures) -> None:
+    """Refuse pressures (..., 2) MPa that are not finite or beyond |P| <= PRESSURE_LIMIT
+    (fem.spec.OutOfBoxError, a ValueError, one line naming the value)."""
+    check_box(pressures, names=PRESSURE_NAMES, box=(PRESSURE_LIMIT, PRESSURE_LIMIT), units=("MPa", "MPa"))
+
+
+def nan_unless(ok: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """v (B, ...) with the rows where ok (B,) bool is False set to NaN."""
+    nan = torch.where(ok, 0.0, float("nan"))
+    return v + nan.reshape(-1, *([1] * (v.dim() - 1)))
+
+
+def with_rows(v: torch.Tensor, rows: torch.Tensor, new: torch.Tensor) -> torch.Tensor:
+    """A copy of v (B, ...) whose ``rows`` (B,) bool are replaced by new (rows.sum(), ...)."""
+    v = v.clone()
+    v[rows] = new
+    return v
 
 
 @dataclass(frozen=True)
@@ -67,6 +90,9 @@ def _segment_midpoints(start: torch.Tensor, direction: torch.Tensor, length: flo
     return start[:, None, :] + length * frac[None, :, None] * direction[:, None, :]
 
 
+ANGLE = {"angle": True}  # FingerPose field metadata: an angle (rad), not points (mm)
+
+
 @dataclass
 class FingerPose:
     """Global geometry of one finger, all (B, ...) mm / rad.
@@ -74,25 +100,37 @@ class FingerPose:
     joint1, joint2: (B, 11, 2) polylines, proximal centre then the 10 anchors.
     link, tip: (B, 2, 2) end points. theta: (B, 2) proximal orientation of joints 1, 2.
     phi: (B, 2) distal orientation of joints 1, 2. link_points, tip_points: (B, n, 2)
-    contact sample points (segment midpoints).
+    contact sample points (segment midpoints). The methods below act on every field
+    (``dataclasses.fields``); angle fields carry the ANGLE metadata.
     """
 
     joint1: torch.Tensor
     joint2: torch.Tensor
     link: torch.Tensor
     tip: torch.Tensor
-    theta: torch.Tensor
-    phi: torch.Tensor
+    theta: torch.Tensor = field(metadata=ANGLE)
+    phi: torch.Tensor = field(metadata=ANGLE)
     link_points: torch.Tensor
     tip_points: torch.Tensor
 
+    def _map(self, points, angles=None) -> "FingerPose":
+        """Apply points(v) to every point field and angles(v) (default: points) to the angles."""
+        angles = angles or points
+        return FingerPose(**{f.name: (angles if f.metadata.get("angle") else points)(getattr(self, f.name))
+                             for f in fields(self)})
+
     def mirrored(self) -> "FingerPose":
         """The left finger: X -> -X for points, angle a -> pi - a."""
-        flip = torch.tensor([-1.0, 1.0], dtype=self.joint1.dtype)
-        return FingerPose(
-            self.joint1 * flip, self.joint2 * flip, self.link * flip, self.tip * flip,
-            math.pi - self.theta, math.pi - self.phi, self.link_points * flip, self.tip_points * flip,
-        )
+        return self._map(lambda v: v * v.new_tensor([-1.0, 1.0]), lambda a: math.pi - a)
+
+    def masked(self, ok: torch.Tensor) -> "FingerPose":
+        """NaN in every field where ok (B,) bool is False (a non-converged gesture)."""
+        return self._map(lambda v: nan_unless(ok, v))
+
+    def with_rows(self, rows: torch.Tensor, other: "FingerPose") -> "FingerPose":
+        """A copy whose ``rows`` (B,) bool come from other (a pose of rows.sum() samples)."""
+        return FingerPose(**{f.name: with_rows(getattr(self, f.name), rows, getattr(other, f.name))
+                             for f in fields(self)})
 
     @property
     def tip_end(self) -> torch.Tensor:
@@ -109,7 +147,7 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
     B = pressures.shape[0]
     inputs = torch.cat((pressures[..., None], tau), -1)  # (B, 2, 4)
     anchors = joint(inputs)  # (B, 2, 10, 2) local
-    bend = end_angle(anchors)  # (B, 2)
+    bend = phi_end(anchors)  # (B, 2)
     base = torch.tensor([0.5 * params.base_gap, 0.0], dtype=tau.dtype).expand(B, 2)
     theta1 = torch.full((B,), -0.5 * math.pi, dtype=tau.dtype)
     zero = torch.zeros(B, 1, 2, dtype=tau.dtype)

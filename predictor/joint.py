@@ -30,29 +30,20 @@ Stand-in stiffnesses (chosen, not measured; documented here so reports can quote
   100 N·mm pressure couple, i.e. a free end angle of 87°; 0.1 MPa gives 29°, the tens of
   degrees a pneumatic bellow joint reaches. Gravity (≈0.2 N at ≈100 mm) droops ≈ 10°.
 - EA = 300 N: the bellow is axially soft, 3 N stretches it by 1 % (0.45 mm).
+
+The joint's contract (length, anchors, input box, phi_end) is fem.spec's; this module
+only implements it.
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
-JOINT_LENGTH = 45.45  # mm, fixed by the paper (DESIGN.md §3)
-N_ANCHORS = 10
-# Surrogate training box (DESIGN.md §3): |P| MPa, |F1| N, |F2| N, |M| N·mm.
-INPUT_BOX = (0.3, 3.0, 3.0, 100.0)
-
-
-def end_angle(anchors: torch.Tensor) -> torch.Tensor:
-    """Distal end orientation phi_end = atan2(y10 - y9, x10 - x9) (DESIGN.md §3).
-
-    anchors: (..., 10, 2) mm in the joint frame. Returns (...) rad, 0 when undeformed.
-    """
-    d = anchors[..., -1, :] - anchors[..., -2, :]
-    return torch.atan2(d[..., 1], d[..., 0])
+from fem.files import sha256_file
+from fem.spec import JOINT_LENGTH, N_ANCHORS
 
 
 class JointModel:
@@ -103,19 +94,15 @@ class SurrogateJoint(JointModel):
     """
 
     def __init__(self, path: str | Path):
+        from surrogate import load_surrogate  # the predictor -> surrogate direction only
+
         path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"model checkpoint not found: {path}")
-        try:
-            from surrogate import load_surrogate
-        except ImportError as exc:  # surrogate package not delivered yet
-            raise ValueError(f"cannot load {path}: surrogate.load_surrogate unavailable ({exc})") from None
-        self.module = load_surrogate(path).double().eval()
+        self.module = load_surrogate(path).double().eval()  # ModelError (ValueError), one line
         for p in self.module.parameters():
             p.requires_grad_(False)
         # The content digest ties what was built on this joint (the NN predictors) to
         # this exact checkpoint: a retrained file under the same name is another joint.
-        self.name = f"surrogate:{path.name}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
+        self.name = f"surrogate:{path.name}@{sha256_file(path)[:12]}"
         self.length = JOINT_LENGTH
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:

@@ -25,36 +25,45 @@ Variants (``python -m predictor.nn --variant ...``):
   with a small step cap (a local polish, median ~7 iterations), and samples it cannot
   converge fall back to the full ramp. The raw NN is still far from the 2 mN bound
   (penalty stiffness amplifies its error); the checkpoint records both. Tried and
-  dropped: one plain Newton step from the NN (diverges: 926 -> 60000 mN mean), and
-  fine-tuning the supervised net by L-BFGS on the equilibrium loss (``physics_iters``):
+  dropped (no longer in the code): one plain Newton step from the NN (diverges: 926 ->
+  60000 mN mean), and fine-tuning the supervised net by L-BFGS on the equilibrium loss:
   the raw residual fell to 88 mN / 16 N·mm, the paper's regime, but the net learned to
   lift the finger off the object (contact fraction 42 % -> 27 %) and the polish then
   needed the fallback for 23 % of the queries instead of ~10 %. Corners of the
   pressure box where the ramp's grasp changes branch (the tip slides off the object:
   tau jumps) are left out of the NN's domain: P1 in [-0.15, 0.2], P2 in [-0.05, 0.25].
 
-Checkpoints (DESIGN.md §5): config, normalisation (input 0.3 MPa, TAU_SCALE), training
-config, metrics and per-epoch history; ``load_predictor`` needs only the file.
+Checkpoints (DESIGN.md §5): integrity-checked files (surrogate.checkpoint) of kind
+``softjoint-gravity-nn/1`` (no object) or ``softjoint-contact-nn/1``, whose payload holds
+the training config, normalisation (input 0.3 MPa, TAU_SCALE), the weights, the joint
+name it was trained on, metrics and per-epoch history; ``load_predictor`` needs only the
+file, and refuses a damaged, foreign or other-kind file with one line (CheckpointError).
 """
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import torch
 from torch import nn
 
-from predictor.gripper import GripperParams
+from fem import cli
+from fem.spec import PRESSURE_LIMIT
+from predictor.gripper import check_pressures, nan_unless
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
-from predictor.statics import Obstacle, loss, residual, residual_norms
+from predictor.statics import GripperProblem, Obstacle, loss, residual_norms
+from surrogate import checkpoint
 
 TAU_SCALE = (1.0, 1.0, 30.0, 1.0, 1.0, 30.0)
-P_SCALE = 0.3
+P_SCALE = PRESSURE_LIMIT  # MPa: the network sees P / 0.3, in [-1, 1] over the box
+#: Checkpoint kinds, by whether the predictor was trained with an object.
+GRAVITY_FORMAT = "softjoint-gravity-nn/1"
+CONTACT_FORMAT = "softjoint-contact-nn/1"
+DEFAULT_DIR = Path("results/predictor")
 # LM step cap (scaled units) when polishing a contact NN prediction: small enough that the
 # iterates stay on the NN's branch (0.3, the ramp's cap, let 8 of 55 jump to another one).
 POLISH_STEP = 0.02
@@ -77,13 +86,18 @@ class NNConfig:
     lr: float = 3e-4
     decay: float = 0.94
     lbfgs_iters: int = 0
-    physics_iters: int = 0
     supervised: bool = False
-    p1_range: tuple = (-0.3, 0.3)
-    p2_range: tuple = (-0.3, 0.3)
+    p1_range: tuple = (-PRESSURE_LIMIT, PRESSURE_LIMIT)
+    p2_range: tuple = (-PRESSURE_LIMIT, PRESSURE_LIMIT)
     obstacle: dict | None = None
     approach: tuple | None = None
     seed: int = 0
+
+    def problem(self, joint: JointModel) -> GripperProblem:
+        """The gesture problem this predictor is trained for, on ``joint`` (default finger,
+        contact law and gravity)."""
+        return GripperProblem(joint, obstacle=Obstacle(**self.obstacle) if self.obstacle else None,
+                              approach=self.approach)
 
 
 VARIANTS = {
@@ -126,10 +140,6 @@ class Predictor:
     metrics: dict = field(default_factory=dict)
     history: dict = field(default_factory=dict)
 
-    @property
-    def obstacle(self) -> Obstacle | None:
-        return Obstacle(**self.config.obstacle) if self.config.obstacle else None
-
 
 def sample_pressures(n: int, cfg: NNConfig, gen: torch.Generator) -> torch.Tensor:
     """n pressure pairs (n, 2) MPa, uniform in the config's P1 x P2 ranges."""
@@ -148,18 +158,19 @@ def _stats(res: torch.Tensor) -> dict:
             "moment_Nmm_mean": float(m.mean()), "moment_Nmm_p95": q(m, 0.95), "moment_Nmm_max": float(m.max())}
 
 
-def evaluate(net: GestureNet, joint: JointModel, pressures: torch.Tensor, obstacle: Obstacle | None) -> dict:
+def evaluate(net: GestureNet, problem: GripperProblem, pressures: torch.Tensor) -> dict:
     """Residual statistics of the raw NN tau on pressures (B, 2) (see _stats)."""
     with torch.no_grad():
-        return _stats(residual(joint, GripperParams(), pressures, net(pressures), obstacle).residual)
+        return _stats(problem.residual(pressures, net(pressures)).residual)
 
 
 def evaluate_polished(pred: "Predictor", joint: JointModel, pressures: torch.Tensor) -> dict:
     """The delivered contact predictor (NN + local LM polish, ramp fallback) on pressures:
     residual statistics of the answers plus how many needed the fallback."""
-    res = predict_gesture(pred, joint, pressures, pred.obstacle)
+    problem = pred.config.problem(joint)
+    res = predict_gesture(pred, problem, pressures)
     ok = res.converged
-    stats = _stats(residual(joint, GripperParams(), pressures[ok], res.tau[ok], pred.obstacle).residual)
+    stats = _stats(problem.residual(pressures[ok], res.tau[ok]).residual)
     return {**stats, "converged": int(ok.sum()), "n": len(ok), "fallback": int(res.fallback.sum()),
             "median_polish_iterations": float(res.iterations.double().median()),
             "batch_time_ms": res.time_ms}
@@ -173,44 +184,42 @@ class NNGestureResult(GestureResult):
     fallback: torch.Tensor = None
 
 
-def predict_gesture(pred: Predictor, joint: JointModel, pressures: torch.Tensor,
-                    obstacle: Obstacle | None = None) -> NNGestureResult:
+def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor) -> NNGestureResult:
     """NN gesture in the solver's result format, pressures (B, 2) MPa.
 
-    Gravity: the raw NN tau; ``converged`` means its residual is within the NN bound
-    (2 mN, 1.2 N·mm), other samples get NaN. Contact: the NN tau warm-starts the LM with a
-    small step cap (POLISH_STEP) so the iterates stay on the NN's branch; samples it cannot
-    converge in ``max_iter`` steps are re-solved by the full ramp (``fallback``).
+    ``problem`` must be the one the NN was trained for (``pred.config.problem(joint)``),
+    ValueError otherwise. Gravity: the raw NN tau; ``converged`` means its residual is
+    within the NN bound (2 mN, 1.2 N·mm), other samples get NaN. Contact: the NN tau
+    warm-starts the LM with a small step cap (POLISH_STEP) so the iterates stay on the
+    NN's branch; samples it cannot converge in ``max_iter`` steps are re-solved by the
+    full ramp (``fallback``).
     """
-    if (obstacle is None) != (pred.obstacle is None) or (obstacle is not None and obstacle != pred.obstacle):
-        raise ValueError(f"this NN predictor was trained for object {pred.config.obstacle}, not {obstacle}")
+    trained = pred.config.problem(problem.joint)
+    if problem != trained:
+        diff = "; ".join(f"{f.name} {getattr(trained, f.name)} (given {getattr(problem, f.name)})"
+                         for f in fields(trained) if getattr(problem, f.name) != getattr(trained, f.name))
+        raise ValueError(f"this NN predictor was trained for {diff}")
+    check_pressures(pressures)
     t0 = time.perf_counter()
     with torch.no_grad():
         tau = pred.net(pressures)
     fallback = torch.zeros(pressures.shape[0], dtype=torch.bool)
-    if obstacle is None:
+    if problem.obstacle is None:
         with torch.no_grad():
-            st = residual(joint, GripperParams(), pressures, tau, None)
+            st = problem.residual(pressures, tau)
         f, m = residual_norms(st.residual)
         ok = (f.amax(-1) <= NN_FORCE_TOL_MN) & (m.amax(-1) <= NN_MOMENT_TOL_NMM)
-        nan = torch.where(ok, 0.0, float("nan"))
-        pose = st.pose
-        for name in ("joint1", "joint2", "link", "tip", "theta", "phi", "link_points", "tip_points"):
-            v = getattr(pose, name)
-            setattr(pose, name, v + nan.reshape(-1, *([1] * (v.dim() - 1))))
-        free = residual(joint, GripperParams(), pressures, torch.zeros_like(tau), None, gravity=False).pose
-        return NNGestureResult(pressures, tau + nan[:, None, None], ok, f, m, st.normal_force, st.friction_force,
-                               st.friction_ratio, st.slip, torch.zeros(len(ok), dtype=torch.long),
-                               1e3 * (time.perf_counter() - t0), pose, free, "nn", fallback)
-    res = solve(joint, pressures, obstacle, x0=tau, options=SolverOptions(contact_max_step=POLISH_STEP))
+        c = st.contact
+        return NNGestureResult(
+            pressures=pressures, tau=nan_unless(ok, tau), converged=ok, residual_force_mN=f, residual_moment_Nmm=m,
+            normal_force_N=c.normal, friction_N=c.friction, friction_ratio=c.ratio, slip=c.slip,
+            iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
+            pose=st.pose.masked(ok), free_pose=problem.pose(pressures, torch.zeros_like(tau)), method="nn",
+            fallback=fallback)
+    res = solve(problem, pressures, SolverOptions(contact_max_step=POLISH_STEP), x0=tau)
     fallback = ~res.converged
     if bool(fallback.any()):
-        again = solve(joint, pressures[fallback], obstacle, start=pred.config.approach)
-        for name in ("tau", "converged", "residual_force_mN", "residual_moment_Nmm", "normal_force_N",
-                     "friction_N", "friction_ratio", "slip", "iterations"):
-            getattr(res, name)[fallback] = getattr(again, name)
-        for name in ("joint1", "joint2", "link", "tip", "theta", "phi", "link_points", "tip_points"):
-            getattr(res.pose, name)[fallback] = getattr(again.pose, name)
+        res = res.with_rows(fallback, solve(problem, pressures[fallback]))
     return NNGestureResult(**{**res.__dict__, "time_ms": 1e3 * (time.perf_counter() - t0), "method": "nn+lm"},
                            fallback=fallback)
 
@@ -218,19 +227,20 @@ def predict_gesture(pred: Predictor, joint: JointModel, pressures: torch.Tensor,
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, torch.Tensor]:
     """Iterative-solver tau labels (n, 2, 3) for pressures (n, 2); returns (pressures, tau)
     restricted to converged samples."""
-    res = solve(joint, pressures, Obstacle(**cfg.obstacle), start=cfg.approach, options=SolverOptions())
+    res = solve(cfg.problem(joint), pressures)
     ok = res.converged
-    print(f"[nn] labels: {int(ok.sum())}/{len(ok)} converged in {res.time_ms / 1e3:.1f} s", flush=True)
+    print(f"[nn] labels: {int(ok.sum())}/{len(ok)} converged in {res.time_ms / 1e3:.1f} s", file=sys.stderr,
+          flush=True)
     return pressures[ok], res.tau[ok]
 
 
 def train(cfg: NNConfig, joint: JointModel) -> Predictor:
-    """Train one variant; prints progress; returns the Predictor with history and metrics."""
+    """Train one variant; prints progress on stderr; returns the Predictor with history and
+    metrics."""
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     p_train, p_val = sample_pressures(cfg.n_train, cfg, gen), sample_pressures(cfg.n_val, cfg, gen)
-    obstacle = Obstacle(**cfg.obstacle) if cfg.obstacle else None
-    params = GripperParams()
+    problem = cfg.problem(joint)
     t_start = time.perf_counter()
     label_time = 0.0
     if cfg.supervised:
@@ -247,7 +257,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
             target = tau_train if idx is not None else tau_val
             target = target[idx] if idx is not None else target
             return ((tau - target) / scale).pow(2).sum((-1, -2)).mean()
-        return loss(residual(joint, params, p, tau, obstacle).residual, tau).mean()
+        return loss(problem.residual(p, tau).residual, tau).mean()
 
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, cfg.decay)
@@ -256,12 +266,13 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     def log(epoch: int, train_loss: float) -> None:
         with torch.no_grad():
             val = float(batch_loss(p_val))
-        ev = evaluate(net, joint, p_val, obstacle)
+        ev = evaluate(net, problem, p_val)
         for k, v in (("epoch", epoch), ("train_loss", train_loss), ("val_loss", val),
                      ("val_force_mN", ev["force_mN_mean"]), ("val_moment_Nmm", ev["moment_Nmm_mean"])):
             history[k].append(v)
         print(f"[nn {cfg.variant}] epoch {epoch:4d} train {train_loss:.3e} val {val:.3e} "
-              f"force {ev['force_mN_mean']:.3f} mN moment {ev['moment_Nmm_mean']:.3f} N·mm", flush=True)
+              f"force {ev['force_mN_mean']:.3f} mN moment {ev['moment_Nmm_mean']:.3f} N·mm", file=sys.stderr,
+              flush=True)
 
     n = p_train.shape[0]
     for epoch in range(1, cfg.epochs + 1):
@@ -291,80 +302,87 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
         lbfgs.step(closure)
         with torch.no_grad():
             log(cfg.epochs + 1, float(batch_loss(p_train, all_idx)))
-    if cfg.physics_iters:
-        # Fine-tune the supervised net on the equilibrium loss itself (the paper's loss),
-        # now that it starts near the solution branch.
-        phys = torch.optim.LBFGS(net.parameters(), lr=1.0, max_iter=100, history_size=50,
-                                 tolerance_grad=1e-14, tolerance_change=1e-18, line_search_fn="strong_wolfe")
-
-        def physics_closure():
-            phys.zero_grad()
-            tau = net(p_train)
-            value = loss(residual(joint, params, p_train, tau, obstacle).residual, tau).mean()
-            value.backward()
-            return value
-
-        for k in range(cfg.physics_iters // 100):
-            value = phys.step(physics_closure)
-            log(cfg.epochs + 2 + k, float(value.detach()))
     train_time = time.perf_counter() - t_start
-    metrics = {"val": evaluate(net, joint, p_val, obstacle), "train_time_s": train_time,
+    metrics = {"val": evaluate(net, problem, p_val), "train_time_s": train_time,
                "label_time_s": label_time, "n_train": int(p_train.shape[0]), "n_val": int(p_val.shape[0])}
-    if obstacle is not None:
+    if problem.obstacle is not None:
         metrics["val_polished"] = evaluate_polished(Predictor(net, cfg, joint.name), joint, p_val)
-        with torch.no_grad():
-            metrics["val_contact_fraction"] = float((residual(joint, params, p_val, net(p_val), obstacle)
-                                                     .normal_force > 0).double().mean())
+        metrics["val_contact_fraction"] = contact_fraction(net, problem, p_val)
     return Predictor(net, cfg, joint.name, metrics, history)
 
 
+def contact_fraction(net: GestureNet, problem: GripperProblem, pressures: torch.Tensor) -> float:
+    """Fraction of pressures (B, 2) whose raw NN gesture touches the object."""
+    with torch.no_grad():
+        return float((problem.residual(pressures, net(pressures)).contact.normal > 0).double().mean())
+
+
+def nn_folder(text: str) -> Path:
+    """argparse type: an existing folder of NN predictor checkpoints."""
+    if not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is not a folder")
+    return Path(text)
+
+
+def _format(contact: bool) -> str:
+    return CONTACT_FORMAT if contact else GRAVITY_FORMAT
+
+
 def save_predictor(pred: Predictor, path: str | Path) -> None:
-    """Write the checkpoint (config, normalisation, metrics, history, weights)."""
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    torch.save({"config": asdict(pred.config), "state_dict": pred.net.state_dict(), "joint": pred.joint_name,
-                "normalisation": {"p_scale_MPa": P_SCALE, "tau_scale": TAU_SCALE},
-                "metrics": pred.metrics, "history": pred.history}, path)
+    """Write the checkpoint (config, normalisation, metrics, history, weights) atomically,
+    of kind CONTACT_FORMAT when the config has an object, else GRAVITY_FORMAT."""
+    checkpoint.save(path, _format(pred.config.obstacle is not None), {
+        "config": asdict(pred.config), "state_dict": pred.net.state_dict(), "joint": pred.joint_name,
+        "normalisation": {"p_scale_MPa": P_SCALE, "tau_scale": TAU_SCALE},
+        "metrics": pred.metrics, "history": pred.history})
 
 
-def load_predictor(path: str | Path | None, joint: JointModel, obstacle_default: bool = False) -> Predictor:
-    """Load a checkpoint; path None picks results/predictor/{gravity,contact}_nn.pt.
+def load_predictor(path: str | Path | None, joint: JointModel | None = None, contact: bool = False) -> Predictor:
+    """Load a checkpoint of the gravity (or, with ``contact``, the contact) kind; path
+    None picks results/predictor/{gravity,contact}_nn.pt. ``joint`` None skips the check
+    that the NN was trained on that joint (reading its history only).
 
-    Raises ValueError (one line) for a missing or corrupt file or a joint mismatch.
+    Raises ValueError (one line): a missing, damaged, foreign or other-kind file
+    (surrogate.checkpoint.CheckpointError), or a joint mismatch.
     """
-    path = Path(path) if path else Path("results/predictor") / ("contact_nn.pt" if obstacle_default else "gravity_nn.pt")
-    if not path.is_file():
-        raise ValueError(f"NN predictor checkpoint not found: {path} (run make gestures)")
+    path = Path(path) if path else DEFAULT_DIR / ("contact_nn.pt" if contact else "gravity_nn.pt")
+    ck = checkpoint.load(path, _format(contact), "NN predictor checkpoint")
     try:
-        ck = torch.load(path, map_location="cpu", weights_only=False)
         cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ck["config"].items()})
         net = GestureNet(cfg.widths, cfg.activation)
         net.load_state_dict(ck["state_dict"])
-    except Exception as exc:  # any unreadable file is the same user error
-        raise ValueError(f"corrupt NN predictor checkpoint {path}: {type(exc).__name__}") from None
-    if ck["joint"] != joint.name:
-        raise ValueError(f"{path} was trained with joint {ck['joint']!r}, not {joint.name!r}")
-    return Predictor(net.eval(), cfg, ck["joint"], ck["metrics"], ck["history"])
+        joint_name, metrics, history = ck["joint"], ck["metrics"], ck["history"]
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # intact file, inconsistent payload
+        raise checkpoint.CheckpointError(f"{path}: inconsistent NN predictor checkpoint "
+                                         f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]})") from None
+    if joint is not None and joint_name != joint.name:
+        raise ValueError(f"{path} was trained with joint {joint_name!r}, not {joint.name!r}")
+    return Predictor(net.eval(), cfg, joint_name, metrics, history)
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m predictor.nn", description="train an NN gesture predictor")
+    ap = cli.Parser(prog="python -m predictor.nn", description="train an NN gesture predictor")
     ap.add_argument("--variant", choices=sorted(VARIANTS), required=True)
     ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
-    ap.add_argument("--out", required=True, help="checkpoint path (.pt)")
-    ap.add_argument("--epochs", type=int, help="override the variant's epochs (smoke runs)")
+    ap.add_output("--out", suffix=".pt", required=True, help="checkpoint path (.pt)")
+    ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
+                    help="override the variant's epochs (smoke runs)")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    try:
+    with ap.errors():
         joint = load_joint(args.model)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     cfg = VARIANTS[args.variant]
     if args.epochs:
         cfg = NNConfig(**{**asdict(cfg), "epochs": args.epochs})
     pred = train(cfg, joint)
-    save_predictor(pred, args.out)
-    print(json.dumps({"out": args.out, **pred.metrics}, indent=1))
+    with ap.errors():
+        save_predictor(pred, args.out)
+    out = {"out": args.out, **pred.metrics}
+    if args.json:
+        cli.print_json(out)
+    else:
+        print(f"[nn {cfg.variant}] wrote {args.out}: validation residual {pred.metrics['val']['force_mN_mean']:.3g} mN, "
+              f"{pred.metrics['val']['moment_Nmm_mean']:.3g} N·mm (mean, raw NN)")
     return 0
 
 

@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from fem.files import atomic_path  # noqa: E402
 from predictor.gripper import FingerPose  # noqa: E402
 from predictor.statics import Obstacle  # noqa: E402
 
@@ -59,10 +60,18 @@ def draw_gesture(ax, result, index: int = 0, obstacle: Obstacle | None = None, t
     ax.set_title(title or f"P1={p1:+.2f}, P2={p2:+.2f} MPa{state}", fontsize=9)
 
 
+def save_figure(fig, path, dpi: int) -> None:
+    """Write ``fig`` to ``path`` atomically (fem.files.atomic_path) and close it."""
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
+
+
 def save_gesture(path: str, result, index: int = 0, obstacle: Obstacle | None = None) -> None:
     """One-panel PNG of a gesture."""
     fig, ax = plt.subplots(figsize=(5, 5.5))
     draw_gesture(ax, result, index, obstacle)
     fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    save_figure(fig, path, 130)

@@ -14,8 +14,8 @@ Two methods, both batched over B pressure pairs and both starting from tau = 0:
 - ``lbfgs`` (the paper's reference): torch L-BFGS with strong-Wolfe line search on the
   scalar loss sum_b |r_b|².
 
-With an object the pressures are ramped from 0 (or from the approach gesture, see
-``solve(start=...)``) to the target in ``ramp_steps`` equal sub-steps: the grasp depends on
+With an object the pressures are ramped from 0 (or from the approach gesture,
+``GripperProblem.approach``) to the target in ``ramp_steps`` equal sub-steps: the grasp depends on
 the pressure history (the finger must arrive at the object from the open side). Each step
 starts from the tangent predictor x + dx/dP·ΔP (exact dr/dP from the same autograd pass,
 Jacobians reused from the previous step), converges to a 100x looser tolerance except the
@@ -26,19 +26,24 @@ it fails.
 A sample is converged when |R_F,i| <= tol_force and |R_M,i| <= tol_moment for both
 joints and tau is inside the surrogate's box. Non-converged samples are reported with
 ``converged = False`` and NaN in tau and in the gesture: never returned as an answer.
+
+Data flow: ``solve(problem, pressures, options)`` with a statics.GripperProblem (joint,
+finger, object, contact law, gravity, approach) -> GestureResult (tau, residuals, contact
+figures, pose); ``result.summary(i)`` is sample i as a JSON-ready dict.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 
+import numpy as np
 import torch
 
-from predictor.gripper import FingerPose, GripperParams
-from predictor.joint import INPUT_BOX, JointModel
-from predictor.statics import (MOMENT_SCALE, PENALTY_WEIGHT, ContactParams, Obstacle, range_penalty, residual,
-                               residual_norms, scaled)
+from fem.spec import INPUT_BOX
+from predictor.gripper import FingerPose, check_pressures, nan_unless, with_rows
+from predictor.statics import MOMENT_SCALE, PENALTY_WEIGHT, GripperProblem, range_penalty, residual_norms, scaled
 
 
 @dataclass(frozen=True)
@@ -52,7 +57,7 @@ class SolverOptions:
     cutbacks: how many times a failed Newton sub-step may be halved (L-BFGS: none);
     max_penetration (mm): deeper is treated as tunnelling (a failed step), not as an
     equilibrium; contact_max_step: LM step cap with an object, in scaled units (0.3 N or
-    30 N·mm)."""
+    30 N·mm). (Gravity is part of the problem: GripperProblem.gravity.)"""
 
     method: str = "newton"
     tol_force: float = 1e-7
@@ -65,7 +70,10 @@ class SolverOptions:
     cutbacks: int = 4
     max_penetration: float = 1.0
     contact_max_step: float = 0.3
-    gravity: bool = True
+
+
+#: GestureResult field metadata: fixed by the question (the pressures), not by the solve.
+GIVEN = {"given": True}
 
 
 @dataclass
@@ -77,10 +85,14 @@ class GestureResult:
     iterate; normal_force_N, friction_N (B,) total contact forces on the finger;
     friction_ratio (B,) |f|/N demanded by the object; slip (B,) bool; iterations (B,)
     (summed over ramp steps); time_ms: wall time of the whole batch; pose: FingerPose,
-    NaN where not converged; free_pose: the gravity- and contact-free shape (tau = 0).
+    NaN where not converged; free_pose: the gravity- and contact-free shape (tau = 0);
+    first_contact (B, 2) MPa: the pressures of the first ramp step (or the approach, when
+    the object is brought in) after which the finger touches the object, NaN when it never
+    does (without the ramp, x0 given: the target pressures if the final gesture touches);
+    None without an object.
     """
 
-    pressures: torch.Tensor
+    pressures: torch.Tensor = field(metadata=GIVEN)
     tau: torch.Tensor
     converged: torch.Tensor
     residual_force_mN: torch.Tensor
@@ -92,17 +104,44 @@ class GestureResult:
     iterations: torch.Tensor
     time_ms: float
     pose: FingerPose
-    free_pose: FingerPose
+    free_pose: FingerPose = field(metadata=GIVEN)
     method: str
+    first_contact: torch.Tensor | None = None
+
+    def summary(self, i: int = 0) -> dict:
+        """Sample i as plain JSON types: pressures_MPa, converged, tau (2x3, None unless
+        converged), per-joint residual_force_mN and residual_moment_Nmm, tip [x, y] mm and
+        tip_angle_deg (None unless converged), contact_force_N, friction_ratio, slip and
+        iterations (time excluded: a summary of the same solve is the same)."""
+        ok = bool(self.converged[i])
+        return {"pressures_MPa": self.pressures[i].tolist(), "converged": ok,
+                "tau": self.tau[i].tolist() if ok else None,
+                "residual_force_mN": self.residual_force_mN[i].tolist(),
+                "residual_moment_Nmm": self.residual_moment_Nmm[i].tolist(),
+                "tip": self.pose.tip_end[i].tolist() if ok else None,
+                "tip_angle_deg": math.degrees(float(self.pose.phi[i, 1])) if ok else None,
+                "contact_force_N": float(self.normal_force_N[i]), "friction_ratio": float(self.friction_ratio[i]),
+                "slip": bool(self.slip[i]), "iterations": int(self.iterations[i])}
+
+    def with_rows(self, rows: torch.Tensor, other: "GestureResult") -> "GestureResult":
+        """A copy whose solved rows ``rows`` (B,) bool come from ``other`` (a result for the
+        pressures[rows]); the given fields, time and method stay this result's."""
+        new = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not f.metadata.get("given") and isinstance(v, (torch.Tensor, FingerPose)):
+                mine = getattr(other, f.name)
+                v = v.with_rows(rows, mine) if isinstance(v, FingerPose) else with_rows(v, rows, mine)
+            new[f.name] = v
+        return dataclasses.replace(self, **new)
 
 
-def _residual_fn(joint, params, obstacle, contact, gravity):
+def _residual_fn(problem: GripperProblem):
     """Batched r(x; P): x (B, 6), P (B, 2) -> (B, 12) [scaled equilibrium, penalties]."""
 
     def r(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
         tau = x.reshape(-1, 2, 3)
-        st = residual(joint, params, p, tau, obstacle, contact, gravity)
-        return torch.cat((scaled(st.residual), range_penalty(tau)), -1)
+        return torch.cat((scaled(problem.residual(p, tau).residual), range_penalty(tau)), -1)
 
     return r
 
@@ -117,7 +156,7 @@ def _jacobian_fn(r_fn):
     The same pass gives dr/dP (B, 6, 2) for the ramp's tangent predictor.
     Returns jac(x, p) -> (J (B, 12, 6), r (B, 12), dr/dP (B, 6, 2)).
     """
-    box = torch.tensor(INPUT_BOX[1:] * 2, dtype=torch.float64)
+    box = torch.tensor(np.tile(INPUT_BOX[1:], 2), dtype=torch.float64)
     scale = torch.tensor([1.0, 1.0, MOMENT_SCALE] * 2, dtype=torch.float64)
 
     def jac(x: torch.Tensor, p: torch.Tensor):
@@ -143,7 +182,7 @@ def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
     """Converged mask (B,) from residual vectors r (B, 12)."""
     eq = r[:, :6].reshape(-1, 2, 3)
     force = eq[..., :2].norm(dim=-1).amax(-1)
-    moment = eq[..., 2].abs().amax(-1) * 100.0
+    moment = eq[..., 2].abs().amax(-1) * MOMENT_SCALE
     return (force <= opts.tol_force) & (moment <= opts.tol_moment) & (r[:, 6:].abs().amax(-1) == 0)
 
 
@@ -238,42 +277,33 @@ def _advance(run, x, pa, pb, cutbacks, jac=None):
     return x_new, conv, its, jac_new
 
 
-def solve(
-    joint: JointModel,
-    pressures: torch.Tensor,
-    obstacle: Obstacle | None = None,
-    params: GripperParams = GripperParams(),
-    contact: ContactParams = ContactParams(),
-    options: SolverOptions = SolverOptions(),
-    x0: torch.Tensor | None = None,
-    start: tuple[float, float] | None = None,
-) -> GestureResult:
-    """Equilibrium gesture for a batch of pressure pairs.
+def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions = SolverOptions(),
+          x0: torch.Tensor | None = None) -> GestureResult:
+    """Equilibrium gesture of ``problem`` for a batch of pressure pairs.
 
-    pressures: (B, 2) or (2,) MPa [P1, P2], |P| <= 0.3 (ValueError otherwise).
+    pressures: (B, 2) or (2,) MPa [P1, P2], |P| <= 0.3 (fem.spec.OutOfBoxError otherwise).
     x0: optional warm start (B, 2, 3) (e.g. the NN's prediction); it disables the ramp.
-    start: the approach pressures (MPa) of a grasp: the gripper first settles there with
-    no object, the object is then brought in, and the pressures ramp to the target.
-    Without it the ramp starts at (0, 0) with the object present.
+    With an object the gripper first settles at ``problem.approach`` without it (when
+    given), the object is brought in, and the pressures ramp to the target.
     Returns a GestureResult (see its docstring for shapes and units).
     """
     pressures = torch.as_tensor(pressures, dtype=torch.float64).reshape(-1, 2)
-    if bool((pressures.abs() > 0.3 + 1e-6).any()) or not bool(torch.isfinite(pressures).all()):
-        raise ValueError(f"pressures must be finite and within ±0.3 MPa, got {pressures.tolist()}")
+    check_pressures(pressures)
     if options.method not in ("newton", "lbfgs"):
         raise ValueError(f"unknown method {options.method!r}: use newton or lbfgs")
     B = pressures.shape[0]
     t0 = time.perf_counter()
-    def runner(obs, opts=options):
-        r_fn = _residual_fn(joint, params, obs, contact, opts.gravity)
+
+    def runner(prob: GripperProblem, opts: SolverOptions):
+        r_fn = _residual_fn(prob)
         if opts.method == "newton":
             jac_fn = _jacobian_fn(r_fn)
-            cap = None if obs is None else opts.contact_max_step
+            cap = None if prob.obstacle is None else opts.contact_max_step
             method = lambda x, p, p_prev=None, jac=None: _levenberg_marquardt(  # noqa: E731
                 jac_fn, x, p, opts, cap, p_prev, jac)
         else:
             method = lambda x, p, p_prev=None, jac=None: _lbfgs(r_fn, x, p, opts)  # noqa: E731
-        if obs is None:
+        if prob.obstacle is None:
             return method
 
         def with_depth_check(x, p, p_prev=None, jac=None):
@@ -281,28 +311,41 @@ def solve(
             # spurious equilibrium; refuse it so that _advance cuts the step back.
             x, conv, its, jac = method(x, p, p_prev, jac)
             with torch.no_grad():
-                pen = residual(joint, params, p, x.reshape(-1, 2, 3), obs, contact, options.gravity).penetration
-            return x, conv & (pen <= options.max_penetration), its, jac
+                pen = prob.residual(p, x.reshape(-1, 2, 3)).contact.penetration
+            return x, conv & (pen <= opts.max_penetration), its, jac
 
         return with_depth_check
 
     if options.method == "lbfgs":
         options = dataclasses.replace(options, tol_force=options.lbfgs_tol_force,
                                       tol_moment=options.lbfgs_tol_moment, cutbacks=0)
-    run, run_free = runner(obstacle, options), runner(None, options)
+    run, run_free = runner(problem, options), runner(dataclasses.replace(problem, obstacle=None), options)
     # Intermediate ramp steps only need to stay on the branch: a 100x looser tolerance
     # saves the last (quadratic) Newton iteration of each; the final step uses the full one.
     loose = dataclasses.replace(options, tol_force=100 * options.tol_force, tol_moment=100 * options.tol_moment)
-    run_loose = runner(obstacle, loose)
+    run_loose = runner(problem, loose)
     x = torch.zeros(B, 6, dtype=torch.float64) if x0 is None else x0.reshape(B, 6).double().clone()
     iterations = torch.zeros(B, dtype=torch.long)
     ok = torch.ones(B, dtype=torch.bool)
-    if obstacle is None or x0 is not None:
+    first_contact = torch.full((B, 2), float("nan"), dtype=torch.float64)
+
+    def record_contact(x, p):
+        # One contact evaluation per ramp step (no iterate changes): the first pressures
+        # at which the finger touches the object, for grasp planning (predictor.atlas).
+        with torch.no_grad():
+            new = (problem.residual(p, x.reshape(-1, 2, 3)).contact.normal > 0) & first_contact[:, 0].isnan()
+        first_contact[new] = p[new]
+
+    if problem.obstacle is None or x0 is not None:
         x, ok, iterations, _ = run(x, pressures)
+        if problem.obstacle is not None:
+            record_contact(x, pressures)
     else:
+        start = problem.approach
         p0 = torch.zeros_like(pressures) if start is None else torch.as_tensor(start, dtype=torch.float64).expand(B, 2)
         if start is not None:  # approach: open without the object, then bring it in
             x, ok, iterations, _ = run_free(x, p0)
+        record_contact(x, p0)
         jac = None
         for k in range(1, options.ramp_steps + 1):
             pa = p0 + (pressures - p0) * ((k - 1) / options.ramp_steps)
@@ -311,20 +354,18 @@ def solve(
             x, conv, its, jac = _advance(step_run, x, pa, pb, options.cutbacks, jac)
             ok &= conv
             iterations += its
+            record_contact(x, pb)
     elapsed = 1e3 * (time.perf_counter() - t0)
 
     with torch.no_grad():
         tau = x.reshape(B, 2, 3)
-        st = residual(joint, params, pressures, tau, obstacle, contact, options.gravity)
-        free = residual(joint, params, pressures, torch.zeros_like(tau), None, contact, gravity=False).pose
+        st = problem.residual(pressures, tau)
+        free = problem.pose(pressures, torch.zeros_like(tau))
     force, moment = residual_norms(st.residual)
-    nan = torch.where(ok, 0.0, float("nan"))
-    pose = FingerPose(*(getattr(st.pose, f) + nan.reshape(B, *([1] * (getattr(st.pose, f).dim() - 1))) for f in
-                        ("joint1", "joint2", "link", "tip", "theta", "phi", "link_points", "tip_points")))
     return GestureResult(
-        pressures=pressures, tau=tau + nan[:, None, None], converged=ok,
+        pressures=pressures, tau=nan_unless(ok, tau), converged=ok,
         residual_force_mN=force, residual_moment_Nmm=moment,
-        normal_force_N=st.normal_force, friction_N=st.friction_force, friction_ratio=st.friction_ratio,
-        slip=st.slip, iterations=iterations, time_ms=elapsed, pose=pose, free_pose=free,
-        method=options.method,
+        normal_force_N=st.contact.normal, friction_N=st.contact.friction, friction_ratio=st.contact.ratio,
+        slip=st.contact.slip, iterations=iterations, time_ms=elapsed, pose=st.pose.masked(ok), free_pose=free,
+        method=options.method, first_contact=None if problem.obstacle is None else first_contact,
     )

@@ -22,8 +22,8 @@ the paper. The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with a
 1 N⁻², gamma = 1e-4 (N·mm)⁻² (moments scaled by a 100 mm lever, the finger's size).
 
 Contact (object fixed in the plane, signed distance d < 0 inside, outward normal n):
-- sample points: 12 link midpoints, the 10 joint-2 anchors, 26 tip midpoints; each
-  carries its length w_k (mm);
+- sample points: GripperParams.n_link_points (12) link midpoints, the 10 joint-2 anchors
+  and n_tip_points (65) tip midpoints; each carries its length w_k (mm);
 - normal penalty on the finger: N_k = k_c · max(0, -d_k) · w_k along +n_k (k_c in N/mm²);
 - friction: the object (weight W) hangs in two mirror fingers, so each side lifts W/2.
   With t_k the object's tangent turned upwards (t_y >= 0) and a common ratio f_k = λ N_k,
@@ -33,19 +33,22 @@ Contact (object fixed in the plane, signed distance d < 0 inside, outward normal
   assumes the object is symmetric about X = 0 (off-axis objects: an approximation).
 
 Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
-max(0, |M|-100)/100 per joint, the surrogate's training box.
+max(0, |M|-100)/100 per joint, the surrogate's training box (fem.spec.INPUT_BOX).
+
+Data flow: a GripperProblem (joint model, finger, object, contact law, gravity, approach
+pressures) -> ``problem.residual(pressures, tau)`` -> Statics (residual, pose, ContactState).
 """
 from __future__ import annotations
 
 import functools
 import math
-import re
 from dataclasses import dataclass
 
 import torch
 
-from predictor.gripper import FingerPose, GripperParams, finger_pose, rot
-from predictor.joint import INPUT_BOX, JOINT_LENGTH, N_ANCHORS, JointModel
+from fem.spec import INPUT_BOX, JOINT_LENGTH, N_ANCHORS
+from predictor.gripper import FingerPose, GripperParams, check_pressures, finger_pose, rot
+from predictor.joint import JointModel
 
 MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
 PENALTY_WEIGHT = 10.0  # weight of the out-of-box residuals relative to the equilibrium ones
@@ -126,29 +129,37 @@ def parse_object(spec: str) -> Obstacle:
     """Parse ``kind[:key=value,...]``, e.g. ``circle:r=30,y=-230``, ``ellipse:a=35,b=25,
     deg=20``, ``rectangle:w=60,h=50,x=0,y=-245``. Lengths mm, ``deg`` in degrees.
 
-    Raises ValueError with a one-line reason for an unknown kind, key or value.
+    Raises ValueError with a one-line reason naming the offending item for an unknown kind
+    or key, a key given twice, a value that is not a finite number, or a size <= 0.
     """
     kind, _, rest = spec.strip().partition(":")
     kind = kind.strip().lower()
     if kind not in _KEYS:
         raise ValueError(f"unknown object {kind!r} in {spec!r}: use circle, ellipse or rectangle")
     fields = dict(kind=kind, **_DEFAULTS[kind])
+    seen = set()
     for item in filter(None, (s.strip() for s in rest.split(","))):
-        m = re.fullmatch(r"([a-z]+)\s*=\s*([-+0-9.eE]+)", item)
-        if not m or m.group(1) not in _KEYS[kind]:
+        key, eq, text = (part.strip() for part in item.partition("="))
+        if not eq or key not in _KEYS[kind]:
             raise ValueError(f"bad object field {item!r} in {spec!r}: {kind} takes {', '.join(_KEYS[kind])}")
+        if key in seen:
+            raise ValueError(f"object key {key!r} given twice in {spec!r}: give each key once")
+        seen.add(key)
         try:
-            value = float(m.group(2))
+            value = float(text)
         except ValueError:
-            raise ValueError(f"bad number in {item!r} of object spec {spec!r}") from None
-        if m.group(1) == "deg":
+            value = math.nan
+        if not math.isfinite(value):
+            raise ValueError(f"{key}={text} in object {spec!r} is not a finite number")
+        size = _KEYS[kind][key][0] in ("a", "b")
+        if size and value <= 0:
+            raise ValueError(f"{key}={text} in object {spec!r}: sizes must be positive (mm)")
+        if key == "deg":
             value = math.radians(value)
-        elif m.group(1) in ("w", "h"):
+        elif key in ("w", "h"):
             value *= 0.5  # full width/height -> half
-        for name in _KEYS[kind][m.group(1)]:
+        for name in _KEYS[kind][key]:
             fields[name] = value
-    if fields["a"] <= 0 or fields["b"] <= 0:
-        raise ValueError(f"object sizes must be positive in {spec!r}")
     return Obstacle(**fields)
 
 
@@ -163,26 +174,40 @@ class ContactParams:
 
 
 @dataclass
-class Statics:
-    """Residual and contact state of a batch of right fingers.
+class ContactState:
+    """Contact of a batch of right fingers with the object (module docstring).
 
-    residual: (B, 2, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame).
-    normal_force: (B,) N, sum of N_k. friction_force: (B,) N, sum of |λ_c| N_k.
-    friction_ratio: (B,) λ (unclipped; NaN-free, ±inf replaced by ±1e3 when nothing
-    touches). slip: (B,) bool. penetration: (B,) mm, max(0, -min d).
-    contact_points, contact_forces: (B, K, 2) sample points (mm) and total force (N) on
-    the finger at each.
+    points, forces: (B, K, 2) sample points (mm) and total force (N) on the finger at each;
+    part: (K,) long, 0 = link, 1 = joint 2, 2 = tip. normal: (B,) N, sum of N_k.
+    friction: (B,) N, sum of |λ_c| N_k. ratio: (B,) λ (unclipped; NaN-free, ±inf replaced
+    by ±1e3 when nothing touches). slip: (B,) bool. penetration: (B,) mm, max(0, -min d).
     """
+
+    points: torch.Tensor
+    forces: torch.Tensor
+    part: torch.Tensor
+    normal: torch.Tensor
+    friction: torch.Tensor
+    ratio: torch.Tensor
+    slip: torch.Tensor
+    penetration: torch.Tensor
+
+    @classmethod
+    def none(cls, B: int, dtype: torch.dtype) -> "ContactState":
+        """No object: K = 0 sample points, every figure 0, no slip."""
+        zeros, empty = torch.zeros(B, dtype=dtype), torch.zeros(B, 0, 2, dtype=dtype)
+        return cls(empty, empty, torch.zeros(0, dtype=torch.long), zeros, zeros, zeros,
+                   torch.zeros(B, dtype=torch.bool), zeros)
+
+
+@dataclass
+class Statics:
+    """Residual (B, 2, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame), the pose it
+    was evaluated at and the contact state."""
 
     residual: torch.Tensor
     pose: FingerPose
-    normal_force: torch.Tensor
-    friction_force: torch.Tensor
-    friction_ratio: torch.Tensor
-    slip: torch.Tensor
-    penetration: torch.Tensor
-    contact_points: torch.Tensor
-    contact_forces: torch.Tensor
+    contact: ContactState
 
 
 def _cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -207,12 +232,11 @@ def _sample_layout(n_link: int, n_tip: int, link_length: float, tip_length: floa
     return part, seg
 
 
-def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, contact: ContactParams, weight: float):
+def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, contact: ContactParams,
+                  weight: float) -> ContactState:
     """Penalty + friction forces on the finger's sample points (module docstring).
 
-    weight: object weight W (N). Returns (points (B, K, 2) mm, forces (B, K, 2) N on the
-    finger, part (K,) 0=link 1=joint 2 2=tip, normal (B,) N, friction (B,) N, ratio (B,),
-    slip (B,) bool, penetration (B,) mm).
+    weight: object weight W (N). Returns the ContactState (forces on the finger).
     """
     part, seg = _sample_layout(params.n_link_points, params.n_tip_points, params.link_length, params.tip_length)
     points = torch.cat((pose.link_points, pose.joint2[:, 1:], pose.tip_points), 1)
@@ -228,50 +252,66 @@ def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, c
     forces = normal[..., None] * (n - used[:, None, None] * t)
     slip = (ratio.abs() > contact.mu) | ~holds
     total = normal.sum(-1)
-    return points, forces, part, total, used.abs() * total, ratio, slip, (-d.min(-1).values).clamp_min(0.0)
+    return ContactState(points, forces, part, total, used.abs() * total, ratio, slip,
+                        (-d.min(-1).values).clamp_min(0.0))
 
 
-def residual(
-    joint: JointModel,
-    params: GripperParams,
-    pressures: torch.Tensor,
-    tau: torch.Tensor,
-    obstacle: Obstacle | None = None,
-    contact: ContactParams = ContactParams(),
-    gravity: bool = True,
-) -> Statics:
-    """Equation-1 residual of the right finger.
+@dataclass(frozen=True)
+class GripperProblem:
+    """One gesture problem: everything but the pressures and the unknown tau.
 
-    pressures: (B, 2) MPa; tau: (B, 2, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
-    obstacle None means no object. gravity False drops all weights (the gravity-free
-    gesture). Returns Statics with residual (B, 2, 3) in N, N, N·mm.
+    joint: the joint model (both joints). params: finger dimensions and weights.
+    obstacle: the object, or None. contact: penalty and friction law. gravity: False
+    drops all weights (the gravity-free gesture). approach: (P1, P2) MPa of a grasp's
+    history: the gripper first settles there without the object, the object is then
+    brought in and the pressures ramp to the target; None ramps from (0, 0) with the
+    object present (predictor.solve).
     """
-    pose = finger_pose(joint, params, pressures, tau)
-    B, dt = tau.shape[0], tau.dtype
-    g = 1.0 if gravity else 0.0
-    down = torch.tensor([0.0, -1.0], dtype=dt)
-    # Weights: link, joint 2, tip (joint 1's own weight is not distal to any joint end).
-    w_pts = torch.stack((pose.link.mean(1), pose.joint2[:, 1:].mean(1), pose.tip.mean(1)), 1)
-    w_frc = g * torch.tensor([params.link_weight, params.joint_weight, params.tip_weight], dtype=dt)[:, None] * down
-    w_frc = w_frc.expand(B, 3, 2)
-    w_part = torch.tensor([0, 1, 2])
-    zeros = torch.zeros(B, dtype=dt)
-    if obstacle is None:
-        pts, frc, part = w_pts, w_frc, w_part
-        normal = friction = ratio = penetration = zeros
-        slip = torch.zeros(B, dtype=torch.bool)
-        c_pts = c_frc = torch.zeros(B, 0, 2, dtype=dt)
-    else:
-        c_pts, c_frc, c_part, normal, friction, ratio, slip, penetration = contact_loads(
-            pose, params, obstacle, contact, g * params.object_weight)
-        pts, frc, part = torch.cat((w_pts, c_pts), 1), torch.cat((w_frc, c_frc), 1), torch.cat((w_part, c_part))
-    ends = torch.stack((pose.joint1[:, -1], pose.joint2[:, -1]), 1)  # (B, 2, 2)
-    distal = torch.stack((torch.ones_like(part, dtype=dt), (part == 2).to(dt)), 0)  # (2, K)
-    f_sum = torch.einsum("ik,bkc->bic", distal, frc)
-    m_sum = torch.einsum("ik,bik->bi", distal, _cross(pts[:, None] - ends[:, :, None], frc[:, None]))
-    g_force = rot(pose.theta, tau[..., :2])
-    res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
-    return Statics(res, pose, normal, friction, ratio, slip, penetration, c_pts, c_frc)
+
+    joint: JointModel
+    params: GripperParams = GripperParams()
+    obstacle: Obstacle | None = None
+    contact: ContactParams = ContactParams()
+    gravity: bool = True
+    approach: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        if self.approach is not None:
+            check_pressures(torch.as_tensor(self.approach, dtype=torch.float64).reshape(1, 2))
+
+    def pose(self, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
+        """Forward kinematics of the right finger: pressures (B, 2) MPa, tau (B, 2, 3)."""
+        return finger_pose(self.joint, self.params, pressures, tau)
+
+    def residual(self, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
+        """Equation-1 residual of the right finger.
+
+        pressures: (B, 2) MPa; tau: (B, 2, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
+        Returns Statics with residual (B, 2, 3) in N, N, N·mm.
+        """
+        pose = self.pose(pressures, tau)
+        B, dt, params = tau.shape[0], tau.dtype, self.params
+        g = 1.0 if self.gravity else 0.0
+        down = torch.tensor([0.0, -1.0], dtype=dt)
+        # Weights: link, joint 2, tip (joint 1's own weight is not distal to any joint end).
+        w_pts = torch.stack((pose.link.mean(1), pose.joint2[:, 1:].mean(1), pose.tip.mean(1)), 1)
+        w_frc = g * torch.tensor([params.link_weight, params.joint_weight, params.tip_weight], dtype=dt)[:, None] * down
+        w_frc = w_frc.expand(B, 3, 2)
+        w_part = torch.tensor([0, 1, 2])
+        if self.obstacle is None:
+            contact = ContactState.none(B, dt)
+            pts, frc, part = w_pts, w_frc, w_part
+        else:
+            contact = contact_loads(pose, params, self.obstacle, self.contact, g * params.object_weight)
+            pts, frc = torch.cat((w_pts, contact.points), 1), torch.cat((w_frc, contact.forces), 1)
+            part = torch.cat((w_part, contact.part))
+        ends = torch.stack((pose.joint1[:, -1], pose.joint2[:, -1]), 1)  # (B, 2, 2)
+        distal = torch.stack((torch.ones_like(part, dtype=dt), (part == 2).to(dt)), 0)  # (2, K)
+        f_sum = torch.einsum("ik,bkc->bic", distal, frc)
+        m_sum = torch.einsum("ik,bik->bi", distal, _cross(pts[:, None] - ends[:, :, None], frc[:, None]))
+        g_force = rot(pose.theta, tau[..., :2])
+        res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
+        return Statics(res, pose, contact)
 
 
 def scaled(res: torch.Tensor) -> torch.Tensor:
@@ -283,7 +323,7 @@ def scaled(res: torch.Tensor) -> torch.Tensor:
 def range_penalty(tau: torch.Tensor) -> torch.Tensor:
     """Out-of-box penalty residuals (B, 6): PENALTY_WEIGHT·max(0, |tau| - box)/scale, with
     box (3 N, 3 N, 100 N·mm) and scale (1, 1, MOMENT_SCALE); zero inside the box."""
-    box = torch.tensor(INPUT_BOX[1:], dtype=tau.dtype)
+    box = torch.tensor(INPUT_BOX[1:], dtype=tau.dtype)  # (F1, F2, M) half-widths
     scale = torch.tensor([1.0, 1.0, MOMENT_SCALE], dtype=tau.dtype)
     return (PENALTY_WEIGHT * (tau.abs() - box).clamp_min(0.0) / scale).reshape(tau.shape[0], 6)
 

@@ -2,20 +2,24 @@
 
 Public API (the gripper predictor uses load_surrogate and ModelError):
     load_surrogate(path)   frozen float64 nn.Module, batched, differentiable in its inputs
-    ModelError             (ValueError) missing or corrupt checkpoint, one-line message
-    check_box(x)           refuses inputs outside the training box (ExtrapolationError)
-    phi_end(anchors)       end orientation atan2(y10 - y9, x10 - x9), rad
+    ModelError             (ValueError) missing, damaged, foreign or inconsistent
+                           checkpoint, one-line message
+    check_box(x)           refuses inputs outside the training box or not finite
+                           (OutOfBoxError, a ValueError); fem.spec owns the box
+    phi_end(anchors)       end orientation atan2(y10 - y9, x10 - x9), rad (numpy or torch,
+                           autograd kept); from fem.spec
     ModelConfig, JointSurrogate, KNN
 
-Modules: data (load/split/augment/normalise), model (network + checkpoint), knn (baseline),
-train, evaluate, predict (CLIs: python -m surrogate.<name> --help), synthetic (an analytic
-rod dataset for tests and development; not FEM data).
+Modules: data (load/split/augment/normalise), model (network + integrity-checked
+checkpoint), knn (baseline), train, evaluate, predict, sweep (CLIs: python -m
+surrogate.<name> --help), synthetic (an analytic rod dataset for tests and development;
+not FEM data; also a CLI), checkpoint (the checkpoint container, shared with the predictor).
 Importing this package never imports dolfinx or the predictor.
 """
 
-from surrogate.data import ExtrapolationError, check_box
+from fem.spec import OutOfBoxError, check_box, phi_end
 from surrogate.knn import KNN
-from surrogate.model import JointSurrogate, ModelConfig, ModelError, load_surrogate, phi_end
+from surrogate.model import JointSurrogate, ModelConfig, ModelError, load_surrogate
 
-__all__ = ["load_surrogate", "ModelError", "check_box", "ExtrapolationError", "phi_end",
+__all__ = ["load_surrogate", "ModelError", "check_box", "OutOfBoxError", "phi_end",
            "ModelConfig", "JointSurrogate", "KNN"]

@@ -16,7 +16,7 @@ shards.
 Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian d anchors.reshape(20) /
 d inputs (NaN rows where the campaign stored none).
 
-Normalisation (stored inside the model): z = x / INPUT_BOX, so the training box is
+Normalisation (stored inside the model): z = x / INPUT_BOX (fem.spec), so the training box is
 [-1, 1]^4; anchors = output_mean + output_scale * network(z), with the per-coordinate
 mean and standard deviation of the (mirror-augmented) training anchors.
 """
@@ -29,13 +29,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from workflow.shards import INPUT_BOX, ShardError, load_dataset, mirror, split_of
+from fem.spec import INPUT_BOX, N_ANCHORS, mirror
+from workflow.shards import Manifest, ShardError, load_dataset, split_of
 
 SPLITS = ("train", "val", "test")
-
-
-class ExtrapolationError(ValueError):
-    """An input lies outside the surrogate's training box."""
 
 
 @dataclass
@@ -64,8 +61,9 @@ class Samples:
         return torch.isfinite(self.jacobian).all(dim=(1, 2))
 
 
-def load_samples(root: str | Path) -> tuple[Samples, dict]:
-    """All samples of dataset ``root`` and its manifest. Raises ShardError if unusable."""
+def load_samples(root: str | Path) -> tuple[Samples, Manifest]:
+    """All samples of dataset ``root`` and its manifest (validated on load). Raises
+    ShardError if unusable."""
     arrays, manifest = load_dataset(root)
     if len(arrays["sample_id"]) == 0:
         raise ShardError(f"{root}: the dataset holds no samples")
@@ -83,12 +81,10 @@ def split(samples: Samples, seed: int) -> dict[str, Samples]:
     return {name: samples.subset(label == i) for i, name in enumerate(SPLITS)}
 
 
-def load_splits(root: str | Path) -> tuple[dict[str, Samples], dict]:
+def load_splits(root: str | Path) -> tuple[dict[str, Samples], Manifest]:
     """Load dataset ``root`` and split it; returns ({train, val, test}, manifest)."""
     samples, manifest = load_samples(root)
-    if "seed" not in manifest:
-        raise ShardError(f"{root}: the manifest has no seed, so the split is undefined")
-    parts = split(samples, int(manifest["seed"]))
+    parts = split(samples, manifest.seed)
     for name, part in parts.items():
         if len(part) == 0:
             raise ShardError(f"{root}: the {name} split is empty ({len(samples)} samples)")
@@ -97,11 +93,9 @@ def load_splits(root: str | Path) -> tuple[dict[str, Samples], dict]:
 
 def augment_mirror(samples: Samples) -> Samples:
     """samples ∪ their y-mirror images (DESIGN.md §3); the mirror copies keep their ids."""
-    x, r, j = mirror(samples.inputs.numpy(), samples.anchors.numpy(), samples.jacobian.numpy())
-    return Samples(torch.cat([samples.inputs, torch.as_tensor(x)]),
-                   torch.cat([samples.anchors, torch.as_tensor(r)]),
-                   torch.cat([samples.jacobian, torch.as_tensor(j)]),
-                   torch.cat([samples.sample_id, samples.sample_id]))
+    x, r, j = mirror(samples.inputs, samples.anchors, samples.jacobian)
+    return Samples(torch.cat([samples.inputs, x]), torch.cat([samples.anchors, r]),
+                   torch.cat([samples.jacobian, j]), torch.cat([samples.sample_id, samples.sample_id]))
 
 
 def normalisation(train: Samples) -> dict[str, list[float]]:
@@ -110,27 +104,8 @@ def normalisation(train: Samples) -> dict[str, list[float]]:
     Returns input_scale (4,) = INPUT_BOX, output_mean (20,) mm, output_scale (20,) mm; the
     y means are zero because the statistics include the mirror images.
     """
-    anchors = augment_mirror(train).anchors.reshape(-1, 20)
+    anchors = augment_mirror(train).anchors.reshape(-1, 2 * N_ANCHORS)
     return {"input_scale": INPUT_BOX.tolist(),
             "output_mean": anchors.mean(0).tolist(),
             "output_scale": anchors.std(0).clamp_min(1e-6).tolist()}
 
-
-def outside_box(inputs: torch.Tensor | np.ndarray) -> np.ndarray:
-    """(n, 4) inputs -> (n,) bool: outside the training box |x_k| <= INPUT_BOX_k (+1e-6 relative,
-    so float32 edge values count as inside)."""
-    x = np.asarray(inputs, dtype=np.float64).reshape(-1, 4)
-    return (np.abs(x) > INPUT_BOX * (1 + 1e-6)).any(axis=1)
-
-
-def check_box(inputs, allow_extrapolation: bool = False) -> int:
-    """Number of inputs (..., 4) outside the training box; raises ExtrapolationError if any
-    is outside and not allow_extrapolation."""
-    outside = outside_box(torch.as_tensor(inputs).detach())
-    if outside.any() and not allow_extrapolation:
-        bad = np.asarray(torch.as_tensor(inputs).detach()).reshape(-1, 4)[outside][0]
-        raise ExtrapolationError(
-            f"{outside.sum()} input(s) outside the training box |P|<=0.3 MPa, |F1|,|F2|<=3 N, "
-            f"|M|<=100 N*mm, e.g. [P, F1, F2, M] = {[round(float(v), 6) for v in bad]} "
-            f"(use --allow-extrapolation)")
-    return int(outside.sum())

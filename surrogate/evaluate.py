@@ -17,14 +17,12 @@ thread and on every core, in float64 (the dtype of load_surrogate) and in float3
 
 One checkpoint on any dataset directory:
     python -m surrogate.evaluate --model PATH --data DIR [--split all|train|val|test] --json
-The report (metrics.json, metrics.md, comparison figure):
+The report (metrics.json, metrics.md, comparison figure, each written atomically):
     python -m surrogate.evaluate --report --train-data DIR --heldout DIR --dir results/surrogate
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import sys
@@ -34,10 +32,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from surrogate.data import Samples, check_box, load_samples, load_splits
+from fem import cli
+from fem.files import atomic_path, write_json, write_text
+from fem.spec import INPUT_BOX, N_INPUTS, check_box, phi_end
+from surrogate.data import Samples, load_samples, load_splits
 from surrogate.knn import choose_knn
-from surrogate.model import ModelError, load_checkpoint, load_surrogate, phi_end, wrap
-from workflow.shards import INPUT_BOX, ShardError
+from surrogate.model import load_checkpoint, load_surrogate, wrap
 
 METRIC_KEYS = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm",
                "phi_end_error_deg", "jacobian_rel_error", "n")
@@ -95,7 +95,7 @@ def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0,
     for dtype, tag in ((torch.float64, "float64"), (torch.float32, "float32")):
         m = model.to(dtype)
         x1 = torch.tensor([[0.1, 1.0, 0.5, 10.0]], dtype=dtype)
-        xb = (torch.rand(batch, 4, generator=torch.Generator().manual_seed(0), dtype=dtype)
+        xb = (torch.rand(batch, N_INPUTS, generator=torch.Generator().manual_seed(0), dtype=dtype)
               * 2 - 1) * torch.as_tensor(INPUT_BOX, dtype=dtype)
         with torch.no_grad():
             torch.set_num_threads(1)
@@ -160,8 +160,8 @@ def comparison_figure(path: Path, samples: Samples, models: dict, source: str,
     b.legend(fontsize=8)
     fig.suptitle(f"Joint surrogates against the dataset ({source})")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -211,23 +211,22 @@ def report(train_root: Path, heldout_root: Path, out_dir: Path) -> dict:
     result["knn"] = {"test": evaluate(knn, splits["test"]), "heldout": evaluate(knn, heldout),
                      "train_time_s": choice["fit_time_s"], "choice": choice,
                      "timing": timing(knn, repeats=200)}
-    result["datasets"] = {"train": {"root": str(train_root), "seed": manifest.get("seed"),
-                                    "config": manifest.get("config"),
+    result["datasets"] = {"train": {"root": str(train_root), "seed": manifest.seed,
+                                    "config": manifest.config,
                                     "n": {k: len(v) for k, v in splits.items()}},
-                          "heldout": {"root": str(heldout_root), "seed": heldout_manifest.get("seed"),
-                                      "config": heldout_manifest.get("config"), "n": len(heldout)}}
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(result, indent=1) + "\n")
-    (out_dir / "metrics.md").write_text(markdown_table(result))
-    source = (heldout_manifest.get("config") or {}).get("source", "FEM campaign")
+                          "heldout": {"root": str(heldout_root), "seed": heldout_manifest.seed,
+                                      "config": heldout_manifest.config, "n": len(heldout)}}
+    write_json(out_dir / "metrics.json", result)
+    write_text(out_dir / "metrics.md", markdown_table(result))
+    source = heldout_manifest.config.get("source", "FEM campaign")
     comparison_figure(out_dir / "comparison.png", heldout, models, source)
     return result
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m surrogate.evaluate",
-                                 description="Evaluate a surrogate checkpoint on a dataset, "
-                                             "or write the paper/improved/KNN report.")
+    ap = cli.Parser(prog="python -m surrogate.evaluate",
+                    description="Evaluate a surrogate checkpoint on a dataset, "
+                                "or write the paper/improved/KNN report.")
     ap.add_argument("--model", help="checkpoint (.pt) to evaluate")
     ap.add_argument("--data", help="dataset directory (manifest.json + shards)")
     ap.add_argument("--split", choices=("all", "train", "val", "test"), default="all",
@@ -238,18 +237,23 @@ def main(argv=None) -> int:
                     help="evaluate DIR/paper.pt, DIR/improved.pt and KNN; write the report")
     ap.add_argument("--train-data", default="results/data/train", help="--report: training dataset")
     ap.add_argument("--heldout", default="results/data/heldout", help="--report: held-out dataset")
-    ap.add_argument("--dir", default="results/surrogate", help="--report: checkpoints and outputs")
-    ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
-    ap.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    ap.add_output("--dir", folder=True,
+                  help="--report: checkpoints and outputs (default results/surrogate)")
+    ap.add_argument("--threads", type=cli.number(1, os.cpu_count() or 1, integer=True), default=1,
+                    help="torch CPU threads")
     args = ap.parse_args(argv)
+    if not args.report and None in (args.model, args.data):
+        ap.error("--model and --data are required (or use --report)")
     torch.set_num_threads(args.threads)
-    try:
+    with ap.errors():
         if args.report:
-            result = report(Path(args.train_data), Path(args.heldout), Path(args.dir))
-            print(json.dumps(result, indent=1) if args.json else markdown_table(result), end="")
+            result = report(Path(args.train_data), Path(args.heldout),
+                            Path(args.dir or "results/surrogate"))
+            if args.json:
+                cli.print_json(result)
+            else:
+                print(markdown_table(result), end="")
             return 0
-        if not args.model or not args.data:
-            ap.error("--model and --data are required (or use --report)")
         model = load_surrogate(args.model)
         if args.split == "all":
             samples, _ = load_samples(args.data)
@@ -257,11 +261,8 @@ def main(argv=None) -> int:
             samples = load_splits(args.data)[0][args.split]
         outside = check_box(samples.inputs, args.allow_extrapolation)
         result = evaluate(model, samples) | {"split": args.split, "extrapolated_samples": outside}
-    except (ModelError, ShardError, ValueError, OSError) as exc:
-        print(f"surrogate.evaluate: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
     if args.json:
-        print(json.dumps(result, indent=1))
+        cli.print_json(result)
     else:
         for k, v in result.items():
             print(f"{k:>24s}  {_fmt(v, 4)}")

@@ -14,8 +14,8 @@ import time
 import torch
 from torch import nn
 
+from fem.spec import INPUT_BOX
 from surrogate.data import Samples, augment_mirror
-from workflow.shards import INPUT_BOX
 
 
 class KNN(nn.Module):

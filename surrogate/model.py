@@ -25,26 +25,29 @@ The equivariant form needs one pass instead of two (half the cost): q is bitwise
 kink at P = 0 (the axial elongation grows like |P|). |P| is mirror-invariant, so the
 symmetry is kept.
 
-A checkpoint (torch.save of a dict of plain types and tensors, loadable with
-weights_only=True) holds: format, model_config, normalisation, model_state,
-train_config, metrics, dataset. Loading needs only the file.
+A checkpoint is an integrity-checked file of kind ``softjoint-surrogate/2``
+(surrogate.checkpoint: a header line with the archive's length and sha256, then a
+weights_only torch archive), whose payload holds model_config, normalisation,
+model_state (float64), train_config, metrics and dataset. Loading needs only the file;
+a file with any flipped, missing or added byte, a foreign file or another kind of
+checkpoint is refused with one line (ModelError).
 """
 
 from __future__ import annotations
 
 import math
-import os
-import pickle
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 from torch import nn
 
-from workflow.shards import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS
+from fem.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS
+from surrogate import checkpoint
+from surrogate.checkpoint import CheckpointError
 
-FORMAT = "softjoint-surrogate/1"
+FORMAT = "softjoint-surrogate/2"
+WHAT = "surrogate checkpoint"
 
 
 def _relu(a, slope: bool):
@@ -72,19 +75,14 @@ def _softplus(a, slope: bool):
 ACTIVATIONS = {"relu": _relu, "tanh": _tanh, "silu": _silu, "softplus": _softplus}
 
 
-def phi_end(anchors: torch.Tensor) -> torch.Tensor:
-    """End orientation (...,) rad from anchors (..., 10, 2) mm: atan2 of r_10 - r_9."""
-    d = anchors[..., -1, :] - anchors[..., -2, :]
-    return torch.atan2(d[..., 1], d[..., 0])
-
-
 def wrap(angle: torch.Tensor) -> torch.Tensor:
     """Angles (rad) wrapped to [-pi, pi)."""
     return torch.remainder(angle + math.pi, 2 * math.pi) - math.pi
 
 
-class ModelError(ValueError):
-    """A surrogate checkpoint is missing, corrupt or inconsistent."""
+class ModelError(CheckpointError):
+    """A surrogate checkpoint is missing, damaged, foreign, of another kind or
+    inconsistent (one-line message)."""
 
 
 @dataclass(frozen=True)
@@ -231,11 +229,8 @@ class JointSurrogate(nn.Module):
 
 def save_checkpoint(path: str | Path, model: JointSurrogate, train_config: dict,
                     metrics: dict, dataset: dict) -> None:
-    """Write a self-contained checkpoint atomically (temp file + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    payload = {
-        "format": FORMAT,
+    """Write a self-contained checkpoint of kind FORMAT, atomically (surrogate.checkpoint)."""
+    checkpoint.save(path, FORMAT, {
         "model_config": asdict(model.config),
         "normalisation": model.normalisation,
         "model_state": {k: v.detach().to(torch.float64).clone()
@@ -243,17 +238,7 @@ def save_checkpoint(path: str | Path, model: JointSurrogate, train_config: dict,
         "train_config": train_config,
         "metrics": metrics,
         "dataset": dataset,
-    }
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        torch.save(payload, tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    })
 
 
 def _one_line(exc: BaseException) -> str:
@@ -262,24 +247,15 @@ def _one_line(exc: BaseException) -> str:
 
 
 def load_checkpoint(path: str | Path) -> dict:
-    """Read and check a checkpoint dict (see module docstring); raises ModelError."""
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"{path}: surrogate checkpoint not found")
+    """The payload dict of checkpoint ``path`` (module docstring); raises ModelError."""
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError:
-        raise ModelError(f"{path}: corrupt surrogate checkpoint (not a torch file of tensors "
-                         f"and plain types)") from None
-    except Exception as exc:
-        raise ModelError(f"{path}: corrupt surrogate checkpoint ({_one_line(exc)})") from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
-        found = ckpt.get("format") if isinstance(ckpt, dict) else type(ckpt).__name__
-        raise ModelError(f"{path}: not a softjoint surrogate checkpoint (format {found!r})")
+        ckpt = checkpoint.load(path, FORMAT, WHAT)
+    except CheckpointError as exc:
+        raise ModelError(str(exc)) from None
     missing = [k for k in ("model_config", "normalisation", "model_state", "train_config",
-                           "metrics") if k not in ckpt]
+                           "metrics", "dataset") if k not in ckpt]
     if missing:
-        raise ModelError(f"{path}: checkpoint lacks {missing}")
+        raise ModelError(f"{path}: {WHAT} lacks {missing}")
     return ckpt
 
 

@@ -4,9 +4,11 @@
         --p 0.1 --f1 1 --f2 0 --m 10 [--allow-extrapolation] [--json]
 
 prints the anchors r_1..r_10 (mm, joint frame, relative to the proximal centre) and
-phi_end = atan2(y10 - y9, x10 - x9) (rad and deg). Inputs outside the training box
-|P| <= 0.3 MPa, |F1|, |F2| <= 3 N, |M| <= 100 N·mm are refused unless
---allow-extrapolation is given, which the output records ("extrapolation": true).
+phi_end = atan2(y10 - y9, x10 - x9) (rad and deg). A value that is not a finite number is
+always refused; inputs outside the training box |P| <= 0.3 MPa, |F1|, |F2| <= 3 N,
+|M| <= 100 N·mm (fem.spec) are refused unless --allow-extrapolation is given, which the
+output records ("extrapolation": true). Either refusal is one line, exit 2, before the
+model is loaded.
 JSON keys: model, inputs {P_MPa, F1_N, F2_N, M_Nmm}, extrapolation, anchors_mm (10 x 2),
 phi_end_rad, phi_end_deg.
 
@@ -17,41 +19,36 @@ box check and ``surrogate.phi_end(anchors)``.
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import sys
 
 import torch
 
-from surrogate.data import check_box
-from surrogate.model import ModelError, load_surrogate, phi_end
+from fem import cli
+from fem.spec import INPUT_NAMES, INPUT_UNITS, check_box, phi_end
+from surrogate.model import load_surrogate
+
+HELP = {"p": "pressure P (MPa, signed)", "f1": "axial end force F1 (N)",
+        "f2": "transverse end force F2 (N)", "m": "end moment M (N*mm, CCW positive)"}
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m surrogate.predict",
-                                 description="Predict the joint's anchor points and phi_end.")
+    ap = cli.Parser(prog="python -m surrogate.predict",
+                    description="Predict the joint's anchor points and phi_end.")
     ap.add_argument("--model", default="results/surrogate/improved.pt", help="checkpoint (.pt)")
-    ap.add_argument("--p", type=float, required=True, help="pressure P (MPa, signed)")
-    ap.add_argument("--f1", type=float, required=True, help="axial end force F1 (N)")
-    ap.add_argument("--f2", type=float, required=True, help="transverse end force F2 (N)")
-    ap.add_argument("--m", type=float, required=True, help="end moment M (N*mm, CCW positive)")
+    for name, unit in zip(INPUT_NAMES, INPUT_UNITS):
+        ap.add_argument(f"--{name.lower()}", type=cli.number(unit=unit), required=True,
+                        help=HELP[name.lower()])
     ap.add_argument("--allow-extrapolation", action="store_true",
                     help="accept inputs outside the training box (flagged in the output)")
-    ap.add_argument("--json", action="store_true", help="print JSON")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     x = [args.p, args.f1, args.f2, args.m]
-    try:
-        if not all(math.isfinite(v) for v in x):
-            raise ValueError(f"inputs must be finite numbers, got {x}")
+    with ap.errors():
         outside = check_box([x], args.allow_extrapolation)
         model = load_surrogate(args.model)
-        with torch.no_grad():
-            anchors = model(torch.tensor(x, dtype=torch.float64))
-    except (ModelError, ValueError) as exc:
-        print(f"surrogate.predict: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
+    with torch.no_grad():
+        anchors = model(torch.tensor(x, dtype=torch.float64))
     phi = phi_end(anchors).item()
     out = {"model": args.model,
            "inputs": {"P_MPa": args.p, "F1_N": args.f1, "F2_N": args.f2, "M_Nmm": args.m},
@@ -60,7 +57,7 @@ def main(argv=None) -> int:
            "phi_end_rad": phi,
            "phi_end_deg": math.degrees(phi)}
     if args.json:
-        print(json.dumps(out, indent=1))
+        cli.print_json(out)
     else:
         print(f"inputs P={args.p} MPa F1={args.f1} N F2={args.f2} N M={args.m} N*mm"
               + ("  (EXTRAPOLATION)" if outside else ""))

@@ -2,7 +2,7 @@
 
     python -m surrogate.sweep [--data results/data/train] [--heldout results/data/heldout]
                               [--epochs N] [--jobs 2] [--only NAME ...]
-                              [--dir results/surrogate/sweep]
+                              [--dir results/surrogate/sweep] [--json]
 
 Data flow: for each variant in VARIANTS, the improved config with that variant's
 ``--set`` overrides (surrogate.train), trained ``--epochs`` epochs on the train split ->
@@ -10,13 +10,12 @@ metrics on the validation split (which chooses the configuration), on the held-o
 (reported, never used to choose) and inference speed (surrogate.evaluate.timing) ->
 DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes (a
 file made with another config, epoch count or dataset is redone) and ``--jobs`` workers
-never share a file -> DIR/README.md, the table of every finished
+never share a file -> DIR/README.md (also atomic), the table of every finished
 variant. Units: mm, degrees, seconds, samples per second.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -26,6 +25,8 @@ from pathlib import Path
 
 import torch
 
+from fem import cli
+from fem.files import write_json, write_text
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate, timing
 from surrogate.train import CONFIGS, apply_overrides, train
@@ -78,9 +79,7 @@ def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: in
               "val": evaluate(model, splits["val"]),
               "heldout": evaluate(model, load_samples(heldout)[0]),
               "timing": timing(model, repeats=500, seconds=0.5, threads=(1,))}
-    tmp = Path(out).with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=1) + "\n")
-    os.replace(tmp, out)
+    write_json(out, result)
     return name
 
 
@@ -101,19 +100,24 @@ def table(results: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m surrogate.sweep",
-                                 description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m surrogate.sweep", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="results/data/train")
     ap.add_argument("--heldout", default="results/data/heldout")
-    ap.add_argument("--epochs", type=int, help="default: the improved config's")
-    ap.add_argument("--jobs", type=int, default=1, help="variants trained at once, 1 thread each")
+    ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
+                    help="default: the improved config's")
+    ap.add_argument("--jobs", type=cli.number(1, os.cpu_count() or 1, integer=True), default=1,
+                    help="variants trained at once, 1 thread each")
     ap.add_argument("--only", nargs="*", choices=sorted(VARIANTS), help="these variants only")
-    ap.add_argument("--dir", default="results/surrogate/sweep")
+    ap.add_output("--dir", folder=True, default="results/surrogate/sweep",
+                  help="one NAME.json per variant and README.md")
     args = ap.parse_args(argv)
     out = Path(args.dir)
-    out.mkdir(parents=True, exist_ok=True)
     names = args.only or list(VARIANTS)
-    data_sha256 = dataset_digest(args.data)
+    say = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else \
+        (lambda s: print(s, flush=True))
+    with ap.errors():
+        data_sha256 = dataset_digest(args.data)
+        load_samples(args.heldout)  # a bad held-out set fails now, not after the training
 
     def done(name):
         path = out / f"{name}.json"
@@ -125,21 +129,24 @@ def main(argv=None) -> int:
         return r if same and r["data_sha256"] == data_sha256 else None
 
     todo = [n for n in names if done(n) is None]
-    print(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
-          f"{len(todo)} to train ({args.epochs or 'configured'} epochs, {args.jobs} job(s))", flush=True)
+    say(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
+        f"{len(todo)} to train ({args.epochs or 'configured'} epochs, {args.jobs} job(s))")
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = [pool.submit(run_variant, n, args.data, data_sha256, args.heldout, args.epochs,
                                str(out / f"{n}.json")) for n in todo]
         for f in futures:
-            print(f"  {f.result()} done", flush=True)
+            say(f"  {f.result()} done")
     results = [r for r in map(done, VARIANTS) if r is not None]
     text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep` "
             f"({results[0]['epochs']} epochs) on `{args.data}` (split {results[0]['n']}); held-out: "
             f"`{args.heldout}`. Each run is the improved config with the overrides listed. "
             f"Validation chooses; held-out is for reference only.\n\n"
             + table(results))
-    (out / "README.md").write_text(text)
-    print(text, end="")
+    write_text(out / "README.md", text)
+    if args.json:
+        cli.print_json({"dir": str(out), "trained": todo, "results": results})
+    else:
+        print(text, end="")
     return 0
 
 

@@ -24,12 +24,13 @@ The N equations G(theta; u) = 0 are solved by Newton with load stepping, batched
 samples. The anchors are r_{iN/10}, i = 1..10, and their exact sensitivities follow from
 the implicit function theorem: d theta/du = -G_theta^{-1} G_u.
 
-Usage: ``python -m surrogate.synthetic --out DIR --n 2560 --seed 1``.
+Usage: ``python -m surrogate.synthetic --out DIR --n 2560 --seed 1 [--json]`` (the shards
+and manifest are written atomically by workflow.shards).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,12 +38,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fem import cli
+from fem.spec import INPUT_BOX, JOINT_LENGTH, N_ANCHORS, N_INPUTS, phi_end
 from workflow import shards
 
 
 @dataclass(frozen=True)
 class RodConfig:
-    length_mm: float = 45.45
+    length_mm: float = JOINT_LENGTH
     segments: int = 50          # multiple of 10
     ei0_nmm2: float = 9000.0    # bending stiffness at P = 0, N·mm²
     ea_n: float = 400.0         # axial stiffness, N
@@ -81,7 +84,7 @@ def _residual(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tenso
 
 def _anchors(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tensor:
     """Anchor points r_1..r_10 (10, 2) mm for one sample."""
-    step = c.segments // shards.N_ANCHORS
+    step = c.segments // N_ANCHORS
     return _nodes(theta, u, c)[step - 1::step]
 
 
@@ -123,7 +126,7 @@ def write_dataset(root: str | Path, n: int, seed: int, shard_size: int = 256,
     """Sample n inputs uniformly in the box (seeded), solve, write shards + manifest to root."""
     root = Path(root)
     rng = np.random.default_rng(seed)
-    inputs = rng.uniform(-1, 1, (n, shards.N_INPUTS)) * shards.INPUT_BOX
+    inputs = rng.uniform(-1, 1, (n, N_INPUTS)) * INPUT_BOX
     config = {"source": "synthetic-rod", "rod": asdict(cfg)}
     entries = []
     for unit, start in enumerate(range(0, n, shard_size)):
@@ -131,31 +134,37 @@ def write_dataset(root: str | Path, n: int, seed: int, shard_size: int = 256,
         t0 = time.perf_counter()
         anchors, jac, end_rot, its = solve(x, cfg)
         wall = (time.perf_counter() - t0) / len(x)
-        d = anchors[:, -1] - anchors[:, -2]
         arrays = shards.empty_arrays() | {
             "sample_id": np.arange(start, start + len(x), dtype=np.int64), "inputs": x,
-            "anchors": anchors, "jacobian": jac, "phi_end": np.arctan2(d[:, 1], d[:, 0]),
+            "anchors": anchors, "jacobian": jac, "phi_end": phi_end(anchors),
             "cap_rotation": end_rot, "newton_iterations": its,
             "wall_time_s": np.full(len(x), wall), "converged": np.ones(len(x), bool)}
         file = f"shards/unit-{unit:05d}.npz"
         meta = {"config": config, "seed": seed, "unit": unit, "git_commit": "synthetic"}
         sha = shards.write_shard(root / file, arrays, meta)
-        entries.append({"file": file, "sha256": sha, "n": len(x)})
-    shards.write_manifest(root, {"seed": seed, "config": config, "shards": entries})
+        entries.append(shards.ShardEntry(file=file, sha256=sha, n=len(x)))
+    shards.Manifest(seed=seed, config=config, shards=tuple(entries)).save(root)
     return root
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m surrogate.synthetic",
-                                 description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", required=True, help="dataset directory to write")
-    ap.add_argument("--n", type=int, default=2560, help="number of samples")
-    ap.add_argument("--seed", type=int, default=1)
+def main(argv=None) -> int:
+    ap = cli.Parser(prog="python -m surrogate.synthetic", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", folder=True, required=True, help="dataset directory to write")
+    ap.add_argument("--n", type=cli.number(1, 10**7, integer=True), default=2560,
+                    help="number of samples")
+    ap.add_argument("--seed", type=cli.number(0, 2**63 - 1, integer=True), default=1)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    write_dataset(args.out, args.n, args.seed)
-    print(f"wrote {args.n} synthetic samples to {args.out} in {time.perf_counter() - t0:.1f} s")
+    with ap.errors():
+        write_dataset(args.out, args.n, args.seed)
+    seconds = time.perf_counter() - t0
+    if args.json:
+        cli.print_json({"out": args.out, "n": args.n, "seed": args.seed, "source": "synthetic-rod",
+                        "time_s": seconds})
+    else:
+        print(f"wrote {args.n} synthetic samples to {args.out} in {seconds:.1f} s")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

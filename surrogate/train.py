@@ -1,12 +1,14 @@
 """Train a joint surrogate on a campaign dataset; write its checkpoint and learning curve.
 
-    python -m surrogate.train --config paper|improved [--data DIR] [--out PATH]
-                              [--set key=value ...] [--threads N]
+    python -m surrogate.train --config paper|improved [--data DIR] [--out PATH.pt]
+                              [--set key=value ...] [--threads N] [--quiet] [--json]
 
 Data flow: DIR (shards, verified) -> split 7:2:1 by the dataset seed -> [mirror-augment the
 train split] -> normalisation from train -> Adam on mini-batches -> the epoch with the
 lowest validation loss -> checkpoint (config, normalisation, training config, metrics on
-the validation and test splits, learning history) + learning-curve PNG.
+the validation and test splits, learning history) + learning-curve PNG, both written
+atomically. Every argument, ``--set`` override and the output path are checked before the
+data are read (bad ones exit 2 with one line).
 
 Loss per batch, every term in mm (R anchors (n, 10, 2) mm, phi_end rad, J (n, 20, 4)):
 
@@ -46,6 +48,7 @@ import argparse
 import copy
 import dataclasses
 import math
+import os
 import sys
 import time
 from dataclasses import asdict, dataclass, fields
@@ -53,10 +56,13 @@ from pathlib import Path
 
 import torch
 
+from fem import cli
+from fem.files import atomic_path
+from fem.spec import INPUT_BOX, phi_end
 from surrogate.data import Samples, augment_mirror, load_splits, normalisation
 from surrogate.evaluate import evaluate
-from surrogate.model import JointSurrogate, ModelConfig, phi_end, save_checkpoint, wrap
-from workflow.shards import INPUT_BOX, ShardError
+from surrogate.model import ACTIVATIONS, JointSurrogate, ModelConfig, save_checkpoint, wrap
+from workflow.shards import ShardError
 
 
 @dataclass(frozen=True)
@@ -182,65 +188,102 @@ def learning_curve(history: dict, path: Path, title: str) -> None:
     b.grid(alpha=0.3, which="both")
     fig.suptitle(title)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
-def apply_overrides(model_cfg: ModelConfig, cfg: TrainConfig, pairs: list[str]):
-    """Apply --set key=value to whichever config has the field; returns both configs."""
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        for target in (model_cfg, cfg):
-            names = {f.name: f for f in fields(target)}
-            if key in names:
-                break
-        else:
-            raise ValueError(f"--set {pair}: unknown field {key!r}")
-        current = getattr(target, key)
-        if not sep:
-            raise ValueError(f"--set {pair}: expected key=value")
-        if isinstance(current, bool):
+#: --set fields that take numbers -> cli.number(lo, hi, unit, integer, open_lo) arguments;
+#: hidden takes comma-separated layer widths of at least 1.
+NUMERIC_FIELDS = {"epochs": (1, None, "", True, False), "batch_size": (1, None, "", True, False),
+                  "lr": (0, None, "", False, True), "lr_decay": (0, 1, "", False, True),
+                  "w_phi": (0, None, "mm/rad", False, False), "w_jac": (0, None, "", False, False),
+                  "seed": (0, None, "", True, False)}
+WIDTH = cli.number(1, None, integer=True)
+
+
+def parse_override(pair: str) -> tuple[str, object]:
+    """``key=value`` of a ModelConfig or TrainConfig field -> (key, parsed value).
+
+    Raises ValueError (one line) for a missing ``=``, an unknown key or a value that is not
+    of the field's kind or range (numbers must be finite)."""
+    key, sep, value = pair.partition("=")
+    if not sep:
+        raise ValueError(f"--set {pair}: expected key=value")
+    names = {f.name: f for cfg in (ModelConfig, TrainConfig) for f in fields(cfg)}
+    if key not in names:
+        raise ValueError(f"--set {pair}: unknown field {key!r} (known: {', '.join(names)})")
+    default = names[key].default
+    try:
+        if isinstance(default, bool):
             if value.lower() not in ("true", "false", "1", "0"):
-                raise ValueError(f"--set {pair}: expected true or false")
-            parsed = value.lower() in ("true", "1")
+                raise ValueError("expected true or false")
+            return key, value.lower() in ("true", "1")
+        if key == "hidden":
+            return key, tuple(WIDTH(w) for w in value.split(","))
+        if key == "activation":
+            if value not in ACTIVATIONS:
+                raise ValueError(f"expected one of {', '.join(sorted(ACTIVATIONS))}")
+            return key, value
+        lo, hi, unit, integer, open_lo = NUMERIC_FIELDS[key]
+        return key, cli.number(lo, hi, unit, integer, open_lo)(value)
+    except (ValueError, argparse.ArgumentTypeError) as exc:
+        raise ValueError(f"--set {pair}: {exc}") from None
+
+
+def apply_overrides(model_cfg: ModelConfig, cfg: TrainConfig, pairs: list[str]):
+    """Apply ``key=value`` overrides to whichever config has the field; returns both
+    configs. Raises ValueError for a bad pair (parse_override) or a key given twice."""
+    seen = {}
+    for pair in pairs:
+        key, value = parse_override(pair)
+        if key in seen:
+            raise ValueError(f"--set {key} given twice ({seen[key]}, {pair}): give each key once")
+        seen[key] = pair
+        if key in {f.name for f in fields(ModelConfig)}:
+            model_cfg = dataclasses.replace(model_cfg, **{key: value})
         else:
-            try:
-                parsed = (tuple(int(w) for w in value.split(",")) if isinstance(current, tuple)
-                          else type(current)(value))
-            except ValueError as exc:
-                raise ValueError(f"--set {pair}: {exc}") from None
-        if target is model_cfg:
-            model_cfg = dataclasses.replace(model_cfg, **{key: parsed})
-        else:
-            cfg = dataclasses.replace(cfg, **{key: parsed})
+            cfg = dataclasses.replace(cfg, **{key: value})
     return model_cfg, cfg
 
 
+class _Overrides(argparse._AppendAction):
+    """--set KEY=VALUE, repeatable; a bad pair or a key given twice is a usage error."""
+
+    def __call__(self, parser, namespace, value, option_string=None):
+        try:
+            apply_overrides(ModelConfig(), TrainConfig(), [*(getattr(namespace, self.dest) or []), value])
+        except ValueError as exc:
+            parser.error(str(exc))
+        super().__call__(parser, namespace, value, option_string)
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m surrogate.train",
-                                 description="Train the joint surrogate (paper or improved config).")
+    ap = cli.Parser(prog="python -m surrogate.train",
+                    description="Train the joint surrogate (paper or improved config).")
     ap.add_argument("--config", choices=sorted(CONFIGS), required=True)
     ap.add_argument("--data", default="results/data/train", help="campaign dataset directory")
-    ap.add_argument("--out", help="checkpoint path (default results/surrogate/CONFIG.pt); "
-                                  "the learning curve goes beside it as *_curve.png")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+    ap.add_output("--out", suffix=".pt", help="checkpoint path (default results/surrogate/CONFIG.pt); "
+                                             "the learning curve goes beside it as *_curve.png")
+    ap.add_argument("--set", action=_Overrides, default=[], metavar="KEY=VALUE",
                     help="override a ModelConfig/TrainConfig field, e.g. hidden=64,64 or epochs=50")
-    ap.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    ap.add_argument("--threads", type=cli.number(1, os.cpu_count() or 1, integer=True), default=1,
+                    help="torch CPU threads")
     ap.add_argument("--quiet", action="store_true", help="no progress lines")
     args = ap.parse_args(argv)
+    if args.out is None:  # the default depends on --config: check it as add_output would
+        args.out = f"results/surrogate/{args.config}.pt"
+        if why := cli.check_output(args.out):
+            ap.error(why)
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    out = Path(args.out)
     torch.set_num_threads(args.threads)
-    out = Path(args.out or f"results/surrogate/{args.config}.pt")
-    try:
+    with ap.errors():
         model_cfg, cfg = apply_overrides(*CONFIGS[args.config], args.set)
-        splits, manifest = load_splits(args.data)
-    except ShardError as exc:
-        print(f"surrogate.train: error: {exc} (the campaign writes datasets: make dataset)",
-              file=sys.stderr)
-        return 2
-    except ValueError as exc:
-        print(f"surrogate.train: error: {exc}", file=sys.stderr)
-        return 2
+        try:
+            splits, manifest = load_splits(args.data)
+        except ShardError as exc:
+            raise ShardError(f"{exc}; the campaign writes datasets: make dataset") from None
     log = (lambda s: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     log(f"{args.config}: {model_cfg}\n{cfg}\n"
         f"data {args.data}: " + ", ".join(f"{k} {len(v)}" for k, v in splits.items()))
@@ -248,12 +291,19 @@ def main(argv=None) -> int:
     metrics = {"train_time_s": history["train_time_s"], "best_epoch": history["best_epoch"],
                "threads": args.threads, "val": evaluate(model, splits["val"]),
                "test": evaluate(model, splits["test"]), "history": history}
-    dataset = {"root": str(args.data), "seed": manifest.get("seed"), "config": manifest.get("config"),
+    dataset = {"root": str(args.data), "seed": manifest.seed, "config": manifest.config,
                "n": {k: len(v) for k, v in splits.items()}}
-    save_checkpoint(out, model, {"name": args.config, **asdict(cfg)}, metrics, dataset)
-    source = (manifest.get("config") or {}).get("source", "FEM campaign")
-    learning_curve(history, out.with_name(out.stem + "_curve.png"),
-                   f"{args.config} surrogate: {len(splits['train'])} training samples ({source})")
+    curve = out.with_name(out.stem + "_curve.png")
+    with ap.errors():
+        save_checkpoint(out, model, {"name": args.config, **asdict(cfg)}, metrics, dataset)
+        source = manifest.config.get("source", "FEM campaign")
+        learning_curve(history, curve,
+                       f"{args.config} surrogate: {len(splits['train'])} training samples ({source})")
+    if args.json:
+        cli.print_json({"config": args.config, "checkpoint": str(out), "curve": str(curve),
+                        "train_time_s": history["train_time_s"], "best_epoch": history["best_epoch"],
+                        "val": metrics["val"], "test": metrics["test"]})
+        return 0
     for part in ("val", "test"):
         m = metrics[part]
         jac = "n/a" if m["jacobian_rel_error"] is None else f"{m['jacobian_rel_error']:.4f}"

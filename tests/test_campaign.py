@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from workflow import campaign, dataset, shards
+from fem.spec import INPUT_BOX
+from workflow import campaign, dataset, shards, store
+from workflow.shards import Manifest
 
 PY = sys.executable
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,7 +46,7 @@ def assert_same_samples(a, b):
     """Two datasets hold identical samples and failures (timings aside)."""
     x, _ = shards.load_dataset(a)
     y, _ = shards.load_dataset(b)
-    for k in dataset.REPRODUCIBLE_KEYS:
+    for k in store.REPRODUCIBLE_KEYS:
         np.testing.assert_array_equal(x[k], y[k], err_msg=k)
 
 
@@ -73,8 +75,8 @@ def test_walk_is_seeded_in_box_and_rank_free():
     a = campaign.unit_walk(3, 5, 50, 0.2)
     np.testing.assert_array_equal(a, campaign.unit_walk(3, 5, 50, 0.2))
     np.testing.assert_array_equal(a[:20], campaign.unit_walk(3, 5, 20, 0.2))
-    assert (np.abs(a) <= shards.INPUT_BOX).all()
-    d = np.linalg.norm(np.diff(a / shards.INPUT_BOX, axis=0), axis=1)
+    assert (np.abs(a) <= INPUT_BOX).all()
+    d = np.linalg.norm(np.diff(a / INPUT_BOX, axis=0), axis=1)
     assert (d <= 0.2 + 1e-12).all() and np.mean(np.isclose(d, 0.2)) > 0.8
     assert not np.allclose(a, campaign.unit_walk(3, 6, 50, 0.2))
 
@@ -86,7 +88,7 @@ def test_walk_sweeps_the_box():
     (turn -> infinity: a fresh random direction each step), which stays near its start."""
     def walks(turn):
         z = np.concatenate([campaign.unit_walk(1, u, 64, 0.1, turn) for u in range(40)])
-        return z / shards.INPUT_BOX
+        return z / INPUT_BOX
 
     def occupancy(z):
         return len({tuple(c) for c in np.floor((z + 1) / 0.5).clip(0, 3).astype(int)}) / 4 ** 4
@@ -111,8 +113,37 @@ def test_cli_errors_and_budget_stop(tmp_path):
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
     code, summary = run_campaign(tmp_path / "budget", "--max-hours", "1e-9")
     assert code == campaign.EXIT_INCOMPLETE and summary["stopped_by_budget"]
-    m = shards.load_manifest(tmp_path / "budget")
-    assert m["complete"] is False and m["shards"] == []
+    m = Manifest.load(tmp_path / "budget")
+    assert m.complete is False and m.shards == () and m.units_total == 2
+
+
+def _snapshot(root: Path) -> dict[str, bytes]:
+    """Every file and folder under root (relative path -> bytes, b"/" for a folder)."""
+    return {str(p.relative_to(root)): b"/" if p.is_dir() else p.read_bytes() for p in root.rglob("*")}
+
+
+def test_refused_run_leaves_the_dataset_untouched(tmp_path):
+    """A campaign refused by the compatibility check (another --seed, or another config:
+    here the mesh) exits 2 with one line and leaves an existing dataset folder byte for
+    byte as it was: no .campaign.lock, no shards/ folder, no manifest rewrite; pointed at a
+    folder that does not exist yet, a refused run (--units beyond the unit count) creates
+    nothing either."""
+    held = ROOT / "results/data/heldout"                   # the committed set (seed 2)
+    partial = tmp_path / "heldout"
+    shutil.copytree(held, partial)
+    (partial / "shards" / "unit-00003.npz").unlink()      # an unfinished campaign to resume
+    args = ["--samples", "256", "--unit-size", "16", "--quiet", "--out"]
+    for out, extra, needle in ((held, ["--seed", "3"], "--seed 2, not --seed 3"),
+                               (partial, ["--seed", "3"], "--seed 2, not --seed 3"),
+                               (partial, ["--seed", "2", "--mesh-size", "4"], "another geometry")):
+        before = _snapshot(out)
+        r = subprocess.run([PY, "-m", "workflow.campaign", *args, str(out), *extra], cwd=ROOT,
+                           env=ENV, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr
+        assert _snapshot(out) == before and not (out / ".campaign.lock").exists()
+    r = subprocess.run([PY, "-m", "workflow.campaign", *args, str(tmp_path / "new"), "--seed", "1",
+                        "--units", "16:17"], cwd=ROOT, env=ENV, capture_output=True, text=True)
+    assert r.returncode == 2 and "outside 0:16" in r.stderr and not (tmp_path / "new").exists()
 
 
 @pytest.mark.fem
@@ -124,14 +155,14 @@ def test_kill9_midway_then_resume_is_identical(reference, tmp_path):
     cmd = [PY, "-m", "workflow.campaign", *ARGS, "--out", str(out)]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=ENV, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
-    first = out / dataset.shard_file(0)
+    first = out / store.shard_file(0)
     deadline = time.time() + 600
     while not first.exists() and proc.poll() is None and time.time() < deadline:
         time.sleep(0.2)
     time.sleep(1.0)                       # inside unit 1's first (from-zero) solve (~5 s)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert not (out / dataset.shard_file(1)).exists(), "kill came too late to test resume"
+    assert not (out / store.shard_file(1)).exists(), "kill came too late to test resume"
     (out / "shards" / ".unit-00001.npz.stale.tmp").write_bytes(b"half a shard")
     code, summary = run_campaign(out)
     assert code == 0 and summary["units_run"] == 1 and summary["complete"]
@@ -145,7 +176,7 @@ def test_corrupt_shard_is_detected_and_redone(reference, tmp_path):
     exactly that unit; the result equals the reference and verifies clean."""
     out = tmp_path / "corrupt"
     shutil.copytree(reference, out)
-    path = out / dataset.shard_file(1)
+    path = out / store.shard_file(1)
     blob = bytearray(path.read_bytes())
     blob[len(blob) // 2] ^= 0xFF
     path.write_bytes(bytes(blob))
@@ -164,7 +195,7 @@ def test_harvested_sample_equals_fresh_solve(reference, solver):
     from fem.solver import Load
 
     data, _ = shards.load_dataset(reference)
-    _, meta = shards.read_shard(reference / dataset.shard_file(0))
+    _, meta = shards.read_shard(reference / store.shard_file(0))
     (check,) = meta["fresh_checks"]
     assert check["stored"] == "harvested" and check["max_anchor_diff_mm"] < 1e-6
     i = int(np.flatnonzero(data["sample_id"] == 3)[0])          # unit 1, harvested
@@ -187,7 +218,7 @@ def test_jacobian_matches_central_differences(reference, solver):
     assert solver.solve(Load.from_array(x), continuation=True).converged
     fd = np.empty((20, 4))
     for k in range(4):
-        h = 1e-3 * shards.INPUT_BOX[k]
+        h = 1e-3 * INPUT_BOX[k]
         r = []
         for sign in (1.0, -1.0):
             e = x.copy()

@@ -1,4 +1,5 @@
-"""Tests of the dataset tools (workflow.dataset), on fabricated campaign-layout datasets.
+"""Tests of the dataset format and tools (workflow.shards, workflow.store and the
+workflow.dataset command line), on fabricated campaign-layout datasets.
 
 No FEM here: the shards hold random numbers laid out exactly as workflow.campaign writes
 them (unit u = sample ids [u K, u K + n_u), converged samples as data, the rest as
@@ -17,7 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from workflow import dataset, shards
+from fem.spec import BOX_TOL, INPUT_BOX
+from workflow import shards, store
+from workflow.shards import Manifest, ShardError
 
 PY = sys.executable
 CONFIG = {"source": "fem-campaign", "unit_size": 4, "walk_step": 0.2, "geometry": {"mesh_size": 4.0}}
@@ -26,24 +29,24 @@ CONFIG = {"source": "fem-campaign", "unit_size": 4, "walk_step": 0.2, "geometry"
 def fabricate(root, samples=10, seed=5, units=None, fail_every=7):
     """A campaign-layout dataset of ``samples`` random samples (every fail_every-th id a
     failure) in units of 4, written with the campaign's shard and manifest functions."""
-    n_units = dataset.unit_count(samples, CONFIG["unit_size"])
+    n_units = store.unit_count(samples, CONFIG["unit_size"])
     for u in range(n_units) if units is None else units:
-        ids = dataset.unit_ids(u, samples, CONFIG["unit_size"])
+        ids = store.unit_ids(u, samples, CONFIG["unit_size"])
         rng = np.random.default_rng([seed, u])
         ok = ids[ids % fail_every != 3]
         bad = ids[ids % fail_every == 3]
         n = len(ok)
         arrays = shards.empty_arrays() | {
-            "sample_id": ok, "inputs": rng.uniform(-1, 1, (n, 4)) * shards.INPUT_BOX,
+            "sample_id": ok, "inputs": rng.uniform(-1, 1, (n, 4)) * INPUT_BOX,
             "anchors": rng.normal(size=(n, 10, 2)), "jacobian": rng.normal(size=(n, 20, 4)),
             "phi_end": rng.normal(size=n), "cap_rotation": rng.normal(size=n),
             "newton_iterations": np.full(n, 5), "wall_time_s": rng.uniform(1, 2, n),
             "converged": np.ones(n, bool), "failed_sample_id": bad,
             "failed_inputs": np.zeros((len(bad), 4)), "failed_reason": np.array(["cut-back"] * len(bad))}
         meta = {"config": CONFIG, "seed": seed, "unit": u, "git_commit": "test", "cpu_s": 10.0}
-        shards.write_shard(root / dataset.shard_file(u), arrays, meta)
-    scan = dataset.ShardScanner(root, samples, CONFIG, seed).scan()
-    return dataset.build_manifest(root, samples, CONFIG, seed, scan)
+        shards.write_shard(root / store.shard_file(u), arrays, meta)
+    scan = store.ShardScanner(root, samples, CONFIG, seed).scan()
+    return store.build_manifest(root, samples, CONFIG, seed, scan)
 
 
 def cli(*args):
@@ -70,12 +73,12 @@ def test_info_counts_split_and_coverage(tmp_path):
     """info on a 10-sample dataset (ids 3 a failure): 9 samples, 1 failure (10%), 3 shards,
     a 7:2:1-style split summing to 9, per-input ranges inside the box, complete=True."""
     fabricate(tmp_path)
-    d = dataset.info(tmp_path)
+    d = store.info(tmp_path)
     assert (d["samples"], d["failures"], d["shards"], d["complete"]) == (9, 1, 3, True)
     assert d["failure_rate"] == pytest.approx(0.1)
     assert sum(d["split"].values()) == 9
     for i, c in enumerate(d["coverage"]["per_input"].values()):
-        assert -shards.INPUT_BOX[i] <= c["min"] <= c["max"] <= shards.INPUT_BOX[i]
+        assert -INPUT_BOX[i] <= c["min"] <= c["max"] <= INPUT_BOX[i]
     out = cli("info", tmp_path, "--json")
     assert out.returncode == 0 and json.loads(out.stdout)["samples"] == 9
 
@@ -87,7 +90,7 @@ def test_verify_good_then_corrupt_exit_codes(tmp_path):
     good = cli("verify", tmp_path)
     assert good.returncode == 0, good.stdout + good.stderr
     assert "OK" in good.stdout
-    path = tmp_path / dataset.shard_file(1)
+    path = tmp_path / store.shard_file(1)
     blob = bytearray(path.read_bytes())
     blob[len(blob) // 2] ^= 0xFF
     path.write_bytes(bytes(blob))
@@ -99,22 +102,32 @@ def test_verify_good_then_corrupt_exit_codes(tmp_path):
     assert cli("verify", tmp_path).returncode == 1
 
 
+def set_input(root, value, column=3):
+    """Overwrite input[0, column] of unit 0 in place (shard re-written, manifest rebuilt)."""
+    arrays, meta = shards.read_shard(root / store.shard_file(0))
+    arrays["inputs"][0, column] = value
+    shards.write_shard(root / store.shard_file(0), arrays, meta)
+    store.build_manifest(root, 10, CONFIG, 5, store.ShardScanner(root, 10, CONFIG, 5).scan(),
+                         Manifest.load(root))
+
+
 def test_verify_flags_incomplete_and_out_of_box(tmp_path):
     """A campaign with one of 3 units missing verifies with an 'incomplete' warning (exit 0),
-    and fails (exit 1) with --require-complete. An out-of-box input is an error."""
+    and fails (exit 1) with --require-complete. An input outside the box of fem.spec
+    (|M| = 150 > 100 N·mm, or NaN) is an error; one on the box edge up to fem.spec's
+    relative BOX_TOL (float32 round-off) is not."""
     fabricate(tmp_path, units=[0, 2])
-    r = dataset.verify(tmp_path)
+    r = store.verify(tmp_path)
     assert r["ok"] and any("incomplete" in w for w in r["warnings"])
     assert cli("verify", tmp_path, "--require-complete").returncode == 1
     other = tmp_path / "box"
     fabricate(other)
-    arrays, meta = shards.read_shard(other / dataset.shard_file(0))
-    arrays["inputs"][0, 3] = 150.0                                  # |M| > 100 N·mm
-    shards.write_shard(other / dataset.shard_file(0), arrays, meta)
-    m = shards.load_manifest(other)
-    dataset.build_manifest(other, 10, CONFIG, 5, dataset.ShardScanner(other, 10, CONFIG, 5).scan(), m)
-    r = dataset.verify(other)
-    assert not r["ok"] and any("outside the box" in e for e in r["errors"])
+    set_input(other, 100.0 * (1 + BOX_TOL / 2))
+    assert store.verify(other)["ok"]
+    for value in (150.0, -100.0 * (1 + 2 * BOX_TOL), np.nan):
+        set_input(other, value)
+        r = store.verify(other)
+        assert not r["ok"] and any("1 input(s) non-finite or outside the box" in e for e in r["errors"]), value
 
 
 def test_merge_pieces_equals_whole(tmp_path):
@@ -124,45 +137,126 @@ def test_merge_pieces_equals_whole(tmp_path):
     fabricate(whole)
     fabricate(a, units=[0, 1])
     fabricate(b, units=[1, 2])
-    m = dataset.merge(out, [a, b])
-    assert m["complete"] and m["samples"] == 9
+    m = store.merge(out, [a, b])
+    assert m.complete and m.samples == 9 and m == Manifest.load(out)
     x, _ = shards.load_dataset(out)
     y, _ = shards.load_dataset(whole)
-    for k in dataset.REPRODUCIBLE_KEYS:
+    for k in store.REPRODUCIBLE_KEYS:
         np.testing.assert_array_equal(x[k], y[k])
     fabricate(tmp_path / "c", seed=6)
     r = cli("merge", tmp_path / "d", a, tmp_path / "c")
-    assert r.returncode == 1 and "seed or config differs" in r.stderr
+    assert r.returncode == 2 and "seed or config differs" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "d").exists()
 
 
 def test_scanner_rejects_foreign_and_misplaced_shards(tmp_path):
     """The scanner accepts only shards of this campaign: a unit-1 shard copied over unit 2
     (right checksum, wrong unit) and a shard from another seed are reported, not used."""
     fabricate(tmp_path)
-    shutil.copyfile(tmp_path / dataset.shard_file(1), tmp_path / dataset.shard_file(2))
-    scanner = dataset.ShardScanner(tmp_path, 10, CONFIG, 5)
+    shutil.copyfile(tmp_path / store.shard_file(1), tmp_path / store.shard_file(2))
+    scanner = store.ShardScanner(tmp_path, 10, CONFIG, 5)
     assert sorted(scanner.scan()) == [0, 1] and 2 in scanner.problems
-    assert dataset.ShardScanner(tmp_path, 10, CONFIG, 99).scan() == {}
+    assert store.ShardScanner(tmp_path, 10, CONFIG, 99).scan() == {}
 
 
-def test_cli_usage_errors():
-    """--help exits 0; a missing subcommand or a negative --mirror exits 2 with a one-line
-    error on stderr."""
+def test_temporaries_are_cleaned_and_never_count_as_shards(tmp_path):
+    """A killed writer's temp files (the old ``.NAME.*.tmp`` and fem.files'
+    ``.NAME.*.tmp.npz``) are not reported as unlisted shards, and clean_temporaries removes
+    exactly them."""
+    fabricate(tmp_path)
+    junk = [tmp_path / "shards/.unit-00001.npz.x.tmp", tmp_path / "shards/.unit-00001.ab12.tmp.npz",
+            tmp_path / ".manifest.cd34.tmp.json"]
+    for p in junk:
+        p.write_bytes(b"half a file")
+    assert store.verify(tmp_path)["warnings"] == []
+    assert store.clean_temporaries(tmp_path) == 3 and not any(p.exists() for p in junk)
+    assert store.verify(tmp_path)["ok"]
+
+
+def test_cli_usage_errors(tmp_path):
+    """--help exits 0; a missing subcommand, a negative or NaN --mirror, and a folder that
+    is not a dataset (info, verify, merge) exit 2 with a one-line error on stderr."""
     assert cli("--help").returncode == 0
-    for args in ([], ["verify", "x", "--mirror", "-1"]):
+    for args in ([], ["verify", "x", "--mirror", "-1"], ["verify", "x", "--mirror", "nan"],
+                 ["info", tmp_path], ["verify", tmp_path], ["merge", tmp_path / "m", tmp_path]):
         r = cli(*args)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "m").exists()
+
+
+def _manifest_file(tmp_path, edit) -> Path:
+    """A copy of a valid campaign manifest with ``edit(dict)`` applied."""
+    fabricate(tmp_path)
+    raw = json.loads(Manifest.path(tmp_path).read_text())
+    edit(raw)
+    Manifest.path(tmp_path).write_text(json.dumps(raw))
+    return tmp_path
+
+
+BAD_MANIFESTS = {
+    "not a softjoint dataset": lambda raw: raw.clear() or raw.update(hello=1),
+    "format 'softjoint-dataset/0'": lambda raw: raw.update(format="softjoint-dataset/0"),
+    "no 'seed'": lambda raw: raw.pop("seed"),
+    "'seed' must be a int": lambda raw: raw.update(seed="5"),
+    "'config' must be an object": lambda raw: raw.update(config=[1]),
+    "unknown manifest field(s) ['extra']": lambda raw: raw.update(extra=1),
+    "shards[1]: 'sha256' is not a sha256": lambda raw: raw["shards"][1].update(sha256="abc"),
+    "shards[0]: 'file' must be a path inside": lambda raw: raw["shards"][0].update(file="../x.npz"),
+    "shards[2]: negative count": lambda raw: raw["shards"][2].update(failures=-1),
+    "shards[0]: 'n' must be a int": lambda raw: raw["shards"][0].update(n=True),
+    "'samples' 10 != 9": lambda raw: raw.update(samples=10),
+    "'complete' disagrees": lambda raw: raw.update(complete=False),
+    "a shard is listed twice": lambda raw: raw["shards"].append(raw["shards"][0]),
+    "without its 'unit'": lambda raw: raw["shards"][0].pop("unit"),
+}
+
+
+@pytest.mark.parametrize("needle", BAD_MANIFESTS)
+def test_manifest_is_validated_once_on_load(tmp_path, needle):
+    """Manifest.load refuses a foreign, other-format or invalid manifest with ONE line that
+    names the field (load_dataset, info, verify and merge all read it through Manifest.load)."""
+    root = _manifest_file(tmp_path, BAD_MANIFESTS[needle])
+    with pytest.raises(ShardError) as exc:
+        shards.load_dataset(root)
+    assert needle in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
+
+
+def test_invalid_manifest_on_the_command_line(tmp_path):
+    """info refuses an invalid manifest with one line (exit 2); verify reports it as the
+    dataset's problem (exit 1, in its JSON errors)."""
+    root = _manifest_file(tmp_path, BAD_MANIFESTS["'samples' 10 != 9"])
+    r = cli("info", root)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "'samples' 10 != 9" in r.stderr
+    r = cli("verify", root, "--json")
+    assert r.returncode == 1 and "'samples' 10 != 9" in json.loads(r.stdout)["errors"][0]
+
+
+def test_manifest_corrupt_or_missing(tmp_path):
+    """A manifest that is not JSON is 'corrupt'; a folder without one is 'not a softjoint
+    dataset' (and the message names the folder)."""
+    with pytest.raises(ShardError, match="no manifest.json"):
+        Manifest.load(tmp_path)
+    Manifest.path(tmp_path).write_bytes(b"\x00\xff{")
+    with pytest.raises(ShardError, match="corrupt manifest"):
+        Manifest.load(tmp_path)
+    Manifest.path(tmp_path).write_text("[1, 2]")
+    with pytest.raises(ShardError, match="not a softjoint dataset manifest"):
+        Manifest.load(tmp_path)
 
 
 @pytest.mark.parametrize("name, n", [("train", 2560), ("heldout", 256)])
 def test_committed_dataset_verifies_complete(name, n):
     """The committed FEM datasets (results/data) verify clean and complete: every shard's
     sha256 and checksum, the unit layout, 0 failures, the paper's 2,560 training samples
-    (256 held out), every input inside the box |P| <= 0.3, |F| <= 3, |M| <= 100."""
+    (256 held out), every input inside the box |P| <= 0.3, |F| <= 3, |M| <= 100. Their
+    manifest.json loads into a Manifest and writes back byte for byte."""
     root = Path(__file__).resolve().parents[1] / "results/data" / name
     out = cli("verify", root, "--require-complete", "--json")
     assert out.returncode == 0, out.stdout + out.stderr
     data, manifest = shards.load_dataset(root)
-    assert manifest["samples"] == n and manifest["failures"] == 0 and manifest["complete"]
+    assert manifest.samples == n and manifest.failures == 0 and manifest.complete
+    assert manifest.units_done == manifest.units_total == len(manifest.shards)
     assert len(data["sample_id"]) == n and np.isfinite(data["jacobian"]).all()
-    assert (np.abs(data["inputs"]) <= shards.INPUT_BOX).all()
+    assert (np.abs(data["inputs"]) <= INPUT_BOX).all()
+    text = json.dumps(manifest.to_json(), indent=1, sort_keys=True)
+    assert text == Manifest.path(root).read_text()

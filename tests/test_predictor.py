@@ -6,6 +6,7 @@ checkpoint exists.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -17,15 +18,18 @@ import pytest
 import torch
 from scipy.optimize import fsolve
 
-from predictor.gripper import GripperParams, finger_pose
-from predictor.joint import AnalyticJoint, JointModel, end_angle, load_joint
-from predictor.solve import APPROACH, SolverOptions, _jacobian_fn, _residual_fn, solve
-from predictor.statics import ContactParams, Obstacle, parse_object, range_penalty, residual
+from fem.spec import INPUT_BOX, OutOfBoxError, phi_end
+from predictor.gripper import FingerPose, GripperParams, finger_pose
+from predictor.joint import AnalyticJoint, JointModel, load_joint
+from predictor.solve import APPROACH, GestureResult, SolverOptions, _jacobian_fn, _residual_fn, solve
+from predictor.statics import ContactParams, GripperProblem, Obstacle, parse_object, range_penalty
 
 torch.set_num_threads(1)
 ROOT = Path(__file__).resolve().parents[1]
 J = AnalyticJoint()
 DT = torch.float64
+GRAVITY = GripperProblem(J)
+GRASP = GripperProblem(J, obstacle=Obstacle(), approach=APPROACH)
 
 
 def t(x):
@@ -41,7 +45,7 @@ def test_analytic_joint_pure_moment_is_circular_arc():
     exact = np.stack((np.sin(k * s) / k, (1 - np.cos(k * s)) / k), -1)
     got = J(t([0.1, 0.0, 0.0, 60.0])).numpy()
     np.testing.assert_allclose(got, exact, atol=1e-12)
-    assert float(end_angle(J(t([0.0, 0.0, 0.0, 0.0])))) == 0.0
+    assert float(phi_end(J(t([0.0, 0.0, 0.0, 0.0])))) == 0.0
 
 
 def test_analytic_joint_axial_stretch_and_pressure_sign():
@@ -60,7 +64,7 @@ def test_analytic_joint_mirror_symmetry():
 
 
 def test_load_joint_errors_are_one_line_value_errors(tmp_path):
-    """A missing checkpoint raises ValueError('model checkpoint not found: ...')."""
+    """A missing checkpoint raises ValueError('...: surrogate checkpoint not found')."""
     with pytest.raises(ValueError, match="not found"):
         load_joint(str(tmp_path / "none.pt"))
     assert isinstance(load_joint("analytic"), AnalyticJoint)
@@ -71,7 +75,7 @@ def test_straight_hanging_finger_closed_form():
     """P = (0, 0) under gravity: the finger hangs straight, so tau_1 = (0.19, 0, 0) and
     tau_2 = (0.06, 0, 0) (distal weights along each joint's +x = down) exactly, and the
     tip is at (25, -(45.45(1 + 0.19/300) + 60 + 45.45(1 + 0.06/300) + 65)) mm."""
-    res = solve(J, t([0.0, 0.0]))
+    res = solve(GRAVITY, t([0.0, 0.0]))
     assert bool(res.converged[0])
     np.testing.assert_allclose(res.tau[0].numpy(), [[0.19, 0, 0], [0.06, 0, 0]], atol=1e-9)
     tip_y = -(45.45 * (1 + 0.19 / 300) + 60 + 45.45 * (1 + 0.06 / 300) + 65)
@@ -83,9 +87,9 @@ def test_residual_zero_at_returned_solution():
     gives |R_F| <= 1e-4 mN and |R_M| <= 1e-5 N·mm (the solver's tolerance, 1000x below the
     issue's 0.1 mN / 0.01 N·mm), in at most 6 Newton iterations."""
     p = torch.rand(64, 2, generator=torch.Generator().manual_seed(3), dtype=DT) * 0.6 - 0.3
-    res = solve(J, p)
+    res = solve(GRAVITY, p)
     assert bool(res.converged.all()) and int(res.iterations.max()) <= 6
-    r = residual(J, GripperParams(), p, res.tau).residual
+    r = GRAVITY.residual(p, res.tau).residual
     assert float(r[..., :2].abs().max()) * 1e3 <= 1e-4
     assert float(r[..., 2].abs().max()) <= 1e-5
 
@@ -94,8 +98,8 @@ def test_newton_and_lbfgs_agree():
     """The paper's validation pressures (-0.1, 0.1) and (0.1, -0.1): L-BFGS (paper) and
     Newton-LM give the same tau to 1e-6 N / N·mm and the same tip to 1e-5 mm."""
     p = t([[-0.1, 0.1], [0.1, -0.1]])
-    a = solve(J, p)
-    b = solve(J, p, options=SolverOptions(method="lbfgs"))
+    a = solve(GRAVITY, p)
+    b = solve(GRAVITY, p, SolverOptions(method="lbfgs"))
     assert bool(a.converged.all()) and bool(b.converged.all())
     np.testing.assert_allclose(a.tau.numpy(), b.tau.numpy(), atol=1e-6)
     np.testing.assert_allclose(a.pose.tip_end.numpy(), b.pose.tip_end.numpy(), atol=1e-5)
@@ -158,7 +162,7 @@ def test_matches_independent_scipy_solution(p1, p2):
     """tau and the fingertip from an independent numpy re-implementation solved by
     scipy.optimize.fsolve equal the torch Newton solution to 1e-7 (N, N·mm) and 1e-6 mm."""
     tau, tip = _numpy_equilibrium(p1, p2)
-    res = solve(J, t([p1, p2]))
+    res = solve(GRAVITY, t([p1, p2]))
     np.testing.assert_allclose(res.tau[0].numpy(), tau, atol=1e-7)
     np.testing.assert_allclose(res.pose.tip_end[0].numpy(), tip, atol=1e-6)
 
@@ -177,8 +181,8 @@ def test_two_finger_mirror_symmetry():
     """Solving the LEFT finger directly (base at X = -25 mm, mirrored joint) gives the
     mirror of the right finger: tau_L = (F1, -F2, -M)_R and every point (-X, Y), to 1e-8."""
     p = t([[-0.1, 0.1], [0.2, 0.05]])
-    right = solve(J, p)
-    left = solve(_LeftJoint(), p, params=GripperParams(base_gap=-50.0))
+    right = solve(GRAVITY, p)
+    left = solve(GripperProblem(_LeftJoint(), params=GripperParams(base_gap=-50.0)), p)
     np.testing.assert_allclose(left.tau.numpy(), (right.tau * t([1.0, -1.0, -1.0])).numpy(), atol=1e-8)
     mirror = right.pose.mirrored()
     for name in ("joint1", "link", "joint2", "tip"):
@@ -189,18 +193,17 @@ def test_gradcheck_residual_and_jacobian():
     """torch.autograd.gradcheck: d(residual)/d(tau, P) equals central finite differences
     (gravity, and contact with penetration); the solver's batched Jacobian equals
     torch.autograd.functional.jacobian to 1e-10."""
-    obs = Obstacle(y=-195.0)
     p = t([[0.1, 0.2]])
-    grasp = solve(J, p, obs, start=APPROACH)
-    for obstacle, tau0 in ((None, t([[[0.2, 0.01, -3.0], [0.05, -0.02, 0.4]]])), (obs, grasp.tau)):
-        assert obstacle is None or float(residual(J, GripperParams(), p, tau0, obstacle).normal_force[0]) > 0.1
+    grasp = solve(GRASP, p)
+    for problem, tau0 in ((GRAVITY, t([[[0.2, 0.01, -3.0], [0.05, -0.02, 0.4]]])), (GRASP, grasp.tau)):
+        assert problem.obstacle is None or float(problem.residual(p, tau0).contact.normal[0]) > 0.1
 
         def f(tau, pp):
-            return residual(J, GripperParams(), pp, tau, obstacle).residual
+            return problem.residual(pp, tau).residual
 
         assert torch.autograd.gradcheck(f, (tau0.clone().requires_grad_(True), p.clone().requires_grad_(True)),
                                         eps=1e-7, atol=1e-5, rtol=1e-4)
-        r_fn = _residual_fn(J, GripperParams(), obstacle, ContactParams(), True)
+        r_fn = _residual_fn(problem)
         Jmat, _, _ = _jacobian_fn(r_fn)(tau0.reshape(1, 6), p)
         ref = torch.autograd.functional.jacobian(lambda x: r_fn(x, p)[0, :6], tau0.reshape(1, 6))[:, 0]
         np.testing.assert_allclose(Jmat[0, :6].numpy(), ref.numpy(), atol=1e-10)
@@ -232,12 +235,19 @@ def test_signed_distances():
 
 
 def test_object_spec_errors():
-    """Unknown kinds, keys and numbers are one-line ValueErrors; w/h are full sizes."""
-    for bad in ("blob", "circle:q=3", "circle:r=abc", "ellipse:a=-1"):
-        with pytest.raises(ValueError):
+    """Unknown kinds and keys, a key given twice, a value that is not a finite number and a
+    size <= 0 are one-line ValueErrors naming the offending item; w/h are full sizes."""
+    for bad, needle in (("blob", "'blob'"), ("circle:q=3", "'q=3'"), ("circle:r=abc", "r=abc"),
+                        ("ellipse:a=-1", "a=-1"), ("circle:r=30,r=40", "'r' given twice"),
+                        ("ellipse:a=35,b=25,a=30", "'a' given twice"), ("circle:r=nan", "r=nan"),
+                        ("circle:y=inf", "y=inf"), ("rectangle:w=0", "w=0"), ("circle:r", "'r'")):
+        with pytest.raises(ValueError) as info:
             parse_object(bad)
+        assert needle in str(info.value) and "\n" not in str(info.value), (bad, str(info.value))
     r = parse_object("rectangle:w=60,h=50,y=-200")
     assert (r.a, r.b, r.y) == (30.0, 25.0, -200.0)
+    c = parse_object("circle:r=40, x=5,deg=90")
+    assert (c.a, c.b, c.x, c.angle) == (40.0, 40.0, 5.0, math.pi / 2)
 
 
 def test_zero_contact_force_without_penetration():
@@ -245,30 +255,30 @@ def test_zero_contact_force_without_penetration():
     finger's tip, d = 0) adds exactly zero force: the residual equals the object-free one."""
     p = t([[0.05, -0.1]])
     tau = t([[[0.2, 0.01, -3.0], [0.05, -0.02, 0.4]]])
-    free = residual(J, GripperParams(), p, tau)
+    free = GRAVITY.residual(p, tau)
     for obs in (Obstacle(y=-400.0), Obstacle(kind="rectangle", a=30, b=25, y=-500.0)):
-        st = residual(J, GripperParams(), p, tau, obs)
-        assert float(st.normal_force[0]) == 0.0 and float(st.contact_forces.abs().max()) == 0.0
+        st = GripperProblem(J, obstacle=obs).residual(p, tau)
+        assert float(st.contact.normal[0]) == 0.0 and float(st.contact.forces.abs().max()) == 0.0
         assert torch.equal(st.residual, free.residual)
     straight = t([[0.0, 0.0]])
-    tau0 = solve(J, straight).tau
+    tau0 = solve(GRAVITY, straight).tau
     tip_y = float(finger_pose(J, GripperParams(), straight, tau0).tip_end[0, 1])
     touching = Obstacle(kind="rectangle", a=40.0, b=10.0, y=tip_y - 10.0)
-    assert float(residual(J, GripperParams(), straight, tau0, touching).normal_force[0]) == 0.0
+    assert float(GripperProblem(J, obstacle=touching).residual(straight, tau0).contact.normal[0]) == 0.0
 
 
 def test_grasp_friction_cone_and_hold():
     """Grasp of the default circle at (0.1, 0.2) MPa from the approach gesture: converged,
     in contact (normal force 0.2-0.5 N), every contact point's friction |f_t| <= mu·f_n
     (mu = 0.3), the demanded ratio |λ| < 0.3, so no slip; residual <= 1e-4 mN."""
-    res = solve(J, t([0.1, 0.2]), Obstacle(), start=APPROACH)
+    res = solve(GRASP, t([0.1, 0.2]))
     assert bool(res.converged[0]) and 0.2 < float(res.normal_force_N[0]) < 0.5
     assert not bool(res.slip[0]) and abs(float(res.friction_ratio[0])) < 0.3
     assert float(res.residual_force_mN.max()) <= 1e-4
-    st = residual(J, GripperParams(), res.pressures, res.tau, Obstacle())
-    _, n = Obstacle().signed_distance(st.contact_points)
-    fn = (st.contact_forces * n).sum(-1)
-    ft = (st.contact_forces - fn[..., None] * n).norm(dim=-1)
+    st = GRASP.residual(res.pressures, res.tau).contact
+    _, n = Obstacle().signed_distance(st.points)
+    fn = (st.forces * n).sum(-1)
+    ft = (st.forces - fn[..., None] * n).norm(dim=-1)
     assert bool((ft <= 0.3 * fn + 1e-12).all()) and float(fn.min()) >= 0.0
 
 
@@ -276,8 +286,8 @@ def test_slip_flagged_when_mu_too_small():
     """The (0.2, 0.1) MPa grasp demands |λ| ≈ 0.2: it holds at mu = 0.3 and is flagged as
     slipping at mu = 0.1, with friction clipped to exactly mu·N = 0.1·N."""
     p = t([0.2, 0.1])
-    hold = solve(J, p, Obstacle(), start=APPROACH)
-    slip = solve(J, p, Obstacle(), contact=ContactParams(mu=0.1), start=APPROACH)
+    hold = solve(GRASP, p)
+    slip = solve(GripperProblem(J, obstacle=Obstacle(), contact=ContactParams(mu=0.1), approach=APPROACH), p)
     assert bool(hold.converged[0]) and bool(slip.converged[0])
     assert 0.1 < abs(float(hold.friction_ratio[0])) < 0.3 and not bool(hold.slip[0])
     assert bool(slip.slip[0])
@@ -288,24 +298,99 @@ def test_object_below_tips_slips():
     """The paper-like placement (circle centre 235 mm below the base, ramp from 0 with the
     object present): zero pressure is contact-free, and closing (0.1, 0.1) MPa touches only
     the object's upper shoulder, where mu = 0.3 cannot carry 0.1 N: slip is reported."""
-    obs = parse_object("circle:y=-235")
-    assert float(solve(J, t([0.0, 0.0]), obs).normal_force_N[0]) == 0.0
-    res = solve(J, t([0.1, 0.1]), obs)
+    below = GripperProblem(J, obstacle=parse_object("circle:y=-235"))
+    assert float(solve(below, t([0.0, 0.0])).normal_force_N[0]) == 0.0
+    res = solve(below, t([0.1, 0.1]))
     assert bool(res.converged[0]) and float(res.normal_force_N[0]) > 0 and bool(res.slip[0])
 
 
 def test_nonconverged_is_not_an_answer():
     """With a 1-iteration budget the gravity solve at (0.3, -0.3) cannot reach 1e-4 mN:
     converged is False and tau and the gesture are NaN, never a number."""
-    res = solve(J, t([0.3, -0.3]), options=SolverOptions(max_iter=1))
+    res = solve(GRAVITY, t([0.3, -0.3]), SolverOptions(max_iter=1))
     assert not bool(res.converged[0])
     assert bool(torch.isnan(res.tau).all()) and bool(torch.isnan(res.pose.tip).all())
 
 
 def test_pressure_out_of_range_refused():
-    """|P| > 0.3 MPa is outside the surrogate's box: ValueError."""
-    with pytest.raises(ValueError, match="0.3"):
-        solve(J, t([0.31, 0.0]))
+    """|P| > 0.3 MPa is outside the surrogate's box, and NaN or inf is not a number:
+    fem.spec.OutOfBoxError (a ValueError) naming the value and the allowed 0.3 MPa, for the
+    target pressures and for the approach pressures alike."""
+    for p, needle in (([0.31, 0.0], "P1 = 0.31 is outside"), ([0.0, float("nan")], "P2 = nan is not a finite"),
+                      ([float("-inf"), 0.0], "P1 = -inf is not a finite")):
+        with pytest.raises(OutOfBoxError, match=needle) as info:
+            solve(GRAVITY, t(p))
+        assert "|P1| <= 0.3 MPa" in str(info.value)
+    with pytest.raises(OutOfBoxError, match="P2 = -0.4 is outside"):
+        GripperProblem(J, obstacle=Obstacle(), approach=(0.0, -0.4))
+
+
+# ---------------------------------------------------------------- result objects
+def _old_mirrored(pose):
+    """The hand-written FingerPose.mirrored of issue 5 (the reference for the generic one)."""
+    flip = torch.tensor([-1.0, 1.0], dtype=pose.joint1.dtype)
+    return FingerPose(pose.joint1 * flip, pose.joint2 * flip, pose.link * flip, pose.tip * flip,
+                      math.pi - pose.theta, math.pi - pose.phi, pose.link_points * flip, pose.tip_points * flip)
+
+
+def test_finger_pose_mirrored_and_masked():
+    """mirrored() equals the old hand-written mirror bit for bit (X -> -X for points,
+    a -> pi - a for theta and phi) in every field, mirrored twice is the identity (to
+    1 ulp of pi for angles, exactly for points), and masked(ok) is NaN in every field
+    exactly on the rows where ok is False and unchanged on the others."""
+    p = t([[-0.1, 0.1], [0.2, 0.05], [0.05, -0.2]])
+    pose = solve(GRAVITY, p).pose
+    names = [f.name for f in dataclasses.fields(FingerPose)]
+    assert len(names) == 8 and {"theta", "phi", "link_points", "tip_points"} <= set(names)
+    mirror, old = pose.mirrored(), _old_mirrored(pose)
+    for name in names:
+        assert torch.equal(getattr(mirror, name), getattr(old, name)), name
+        assert not torch.equal(getattr(mirror, name), getattr(pose, name)), name
+        np.testing.assert_allclose(getattr(mirror.mirrored(), name).numpy(), getattr(pose, name).numpy(),
+                                   rtol=0, atol=1e-15 if name in ("theta", "phi") else 0)
+    ok = torch.tensor([True, False, True])
+    masked = pose.masked(ok)
+    for name in names:
+        v, m = getattr(pose, name), getattr(masked, name)
+        assert m.shape == v.shape and bool(torch.isnan(m[1]).all()), name
+        assert torch.equal(m[ok], v[ok]), name
+    rows = torch.tensor([False, True, False])
+    other = pose.mirrored()
+    swapped = pose.with_rows(rows, FingerPose(**{n: getattr(other, n)[rows] for n in names}))
+    for name in names:
+        assert torch.equal(getattr(swapped, name)[1], getattr(other, name)[1]), name
+        assert torch.equal(getattr(swapped, name)[~rows], getattr(pose, name)[~rows]), name
+
+
+def test_gesture_result_summary_and_rows():
+    """summary(i) is plain JSON with the figures of sample i (tau 2x3 and the tip only when
+    converged, degrees for the tip angle); with_rows takes every solved field of the
+    replaced rows from the other result and keeps the pressures, the free pose, the time
+    and the method."""
+    p = t([[-0.1, 0.1], [0.3, -0.3]])
+    good = solve(GRAVITY, p)
+    bad = solve(GRAVITY, p, SolverOptions(max_iter=1))
+    assert bool(good.converged.all()) and not bool(bad.converged[1])
+    s0 = good.summary(0)
+    assert json.loads(json.dumps(s0)) == s0
+    assert list(s0) == ["pressures_MPa", "converged", "tau", "residual_force_mN", "residual_moment_Nmm", "tip",
+                        "tip_angle_deg", "contact_force_N", "friction_ratio", "slip", "iterations"]
+    assert s0["pressures_MPa"] == [-0.1, 0.1] and s0["converged"] is True and s0["slip"] is False
+    assert s0["tau"] == good.tau[0].tolist() and s0["tip"] == good.pose.tip_end[0].tolist()
+    assert s0["tip_angle_deg"] == math.degrees(float(good.pose.phi[0, 1])) and s0["iterations"] == good.iterations[0]
+    s1 = bad.summary(1)
+    assert s1["converged"] is False and s1["tau"] is None and s1["tip"] is None and s1["tip_angle_deg"] is None
+    rows = torch.tensor([False, True])
+    sub = solve(GRAVITY, p[rows])
+    mixed = bad.with_rows(rows, sub)
+    assert mixed.converged.tolist() == [bool(bad.converged[0]), True] and torch.equal(mixed.tau[1], sub.tau[0])
+    assert torch.equal(mixed.pose.tip[1], sub.pose.tip[0]) and torch.equal(mixed.iterations[1], sub.iterations[0])
+    np.testing.assert_array_equal(mixed.pose.tip[0].numpy(), bad.pose.tip[0].numpy())  # NaN == NaN here
+    assert mixed.free_pose is bad.free_pose and mixed.pressures is bad.pressures
+    assert (mixed.time_ms, mixed.method) == (bad.time_ms, bad.method)
+    for f in dataclasses.fields(GestureResult):
+        if isinstance(getattr(bad, f.name), torch.Tensor) and not f.metadata.get("given"):
+            assert torch.equal(getattr(mixed, f.name)[1], getattr(sub, f.name)[0]), f.name
 
 
 # ---------------------------------------------------------------- NN and CLI
@@ -316,9 +401,43 @@ def test_nn_training_reduces_equilibrium_residual():
 
     cfg = NNConfig(n_train=400, n_val=100, epochs=2, lr=3e-3)
     torch.manual_seed(cfg.seed)
-    before = evaluate(GestureNet(cfg.widths, cfg.activation), J, torch.rand(100, 2, dtype=DT) * 0.6 - 0.3, None)
+    before = evaluate(GestureNet(cfg.widths, cfg.activation), GRAVITY, torch.rand(100, 2, dtype=DT) * 0.6 - 0.3)
     pred = train(cfg, J)
     assert pred.metrics["val"]["force_mN_mean"] < before["force_mN_mean"] / 3
+
+
+def test_nn_checkpoint_round_trip_and_refusals(tmp_path):
+    """save_predictor/load_predictor return the same network bit for bit (outputs on 500
+    pressures torch.equal); the file is the gravity kind (no object), so loading it as a
+    contact predictor is refused by name, as are a flipped byte, a plain torch.save file,
+    a joint other than the one it was trained on, and a query with an object: each a
+    one-line ValueError."""
+    from predictor.nn import GRAVITY_FORMAT, NNConfig, load_predictor, predict_gesture, save_predictor, train
+
+    pred = train(NNConfig(n_train=100, n_val=20, epochs=1), J)
+    path = tmp_path / "g.pt"
+    save_predictor(pred, path)
+    assert path.read_bytes().startswith(b'{"bytes":') and GRAVITY_FORMAT.encode() in path.read_bytes()[:200]
+    back = load_predictor(path, J)
+    p = torch.rand(500, 2, dtype=DT) * 0.6 - 0.3
+    with torch.no_grad():
+        assert torch.equal(back.net(p), pred.net(p))
+    assert back.config == pred.config and back.joint_name == "analytic" and back.history == pred.history
+    data = path.read_bytes()
+    bad = tmp_path / "bad.pt"
+    for damaged, needle in ((data[:100] + bytes([data[100] ^ 1]) + data[101:], "damaged"),
+                            (data[:-1], "damaged")):
+        bad.write_bytes(damaged)
+        with pytest.raises(ValueError, match=needle):
+            load_predictor(bad, J)
+    torch.save({"config": {}}, bad)
+    for call, needle in ((lambda: load_predictor(path, J, contact=True), "softjoint-gravity-nn/1"),
+                         (lambda: load_predictor(bad, J), "no valid checkpoint header"),
+                         (lambda: load_predictor(path, _LeftJoint()), "trained with joint"),
+                         (lambda: predict_gesture(back, GRASP, p), "trained for obstacle None")):
+        with pytest.raises(ValueError, match=needle) as info:
+            call()
+        assert "\n" not in str(info.value)
 
 
 def _cli(*args):
@@ -340,7 +459,8 @@ def test_cli_json_and_errors():
     for args in (("--p1", "0.5", "--p2", "0"), ("--p1", "0", "--p2", "0", "--object", "blob"),
                  ("--p1", "0", "--p2", "0", "--model", "/nonexistent.pt")):
         bad = _cli(*args)
-        assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and bad.stderr.startswith("error:")
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
+        assert bad.stderr.startswith("python -m predictor.gesture: error:"), bad.stderr
 
 
 SURROGATE = ROOT / "results/surrogate/improved.pt"
@@ -351,7 +471,7 @@ def test_real_surrogate_gravity_gesture():
     """With the trained surrogate the gravity gesture at (-0.1, 0.1) converges to the same
     tolerance (|R_F| <= 1e-4 mN, |R_M| <= 1e-5 N·mm) and tau is inside the box."""
     joint = load_joint(str(SURROGATE))
-    res = solve(joint, t([[-0.1, 0.1], [0.1, -0.1]]))
+    res = solve(GripperProblem(joint), t([[-0.1, 0.1], [0.1, -0.1]]))
     assert bool(res.converged.all())
     assert float(res.residual_force_mN.max()) <= 1e-4 and float(res.residual_moment_Nmm.max()) <= 1e-5
     assert float(res.tau[..., :2].abs().max()) <= 3 and float(res.tau[..., 2].abs().max()) <= 100
@@ -366,7 +486,7 @@ def test_surrogate_joint_wrapper_with_a_fitted_surrogate(tmp_path):
     from predictor.joint import SurrogateJoint
 
     torch.manual_seed(0)
-    box = t([0.3, 3.0, 3.0, 100.0])
+    box = t(INPUT_BOX)
     x = (torch.rand(1000, 4, dtype=DT) * 2 - 1) * box * t([1.0, 0.3, 0.3, 0.3])
     y = J(x).reshape(-1, 20)
     norm = {"input_scale": box.tolist(), "output_mean": y.mean(0).tolist(), "output_scale": y.std(0).tolist()}
@@ -379,8 +499,8 @@ def test_surrogate_joint_wrapper_with_a_fitted_surrogate(tmp_path):
         opt.step()
     path = tmp_path / "fit.pt"
     model_mod.save_checkpoint(path, net, {}, {}, {})
-    res = solve(SurrogateJoint(path), t([-0.1, 0.1]))
-    ref = solve(J, t([-0.1, 0.1]))
+    res = solve(GripperProblem(SurrogateJoint(path)), t([-0.1, 0.1]))
+    ref = solve(GRAVITY, t([-0.1, 0.1]))
     assert bool(res.converged[0]) and float(res.residual_force_mN.max()) <= 1e-4
     assert float((res.pose.tip_end - ref.pose.tip_end).norm()) < 3.0
     bad = tmp_path / "bad.pt"
@@ -406,14 +526,16 @@ def test_nn_predictor_cli_matches_solver():
     """--method nn with the committed gravity NN at (-0.1, 0.1), on the joint model it was
     trained on (analytic or the committed surrogate): converged (residual within 2 mN /
     1.2 N·mm) and tau within 0.01 N / 1 N·mm of the Newton solution."""
-    trained_on = torch.load(GRAVITY_NN, weights_only=False)["joint"]
+    from predictor.nn import load_predictor
+
+    trained_on = load_predictor(GRAVITY_NN).joint_name
     model = "analytic" if trained_on == "analytic" else str(SURROGATE)
     if model != "analytic" and not (SURROGATE.is_file() and load_joint(model).name == trained_on):
         pytest.skip(f"NN trained on joint model {trained_on!r}, not the committed one")
     out = _cli("--p1", "-0.1", "--p2", "0.1", "--model", model, "--method", "nn", "--json")
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)
-    ref = solve(load_joint(model), t([-0.1, 0.1])).tau[0].numpy()
+    ref = solve(GripperProblem(load_joint(model)), t([-0.1, 0.1])).tau[0].numpy()
     assert got["converged"] and max(got["residual_force_mN"]) <= 2.0
     np.testing.assert_allclose(np.array(got["tau"])[:, :2], ref[:, :2], atol=0.01)
     np.testing.assert_allclose(np.array(got["tau"])[:, 2], ref[:, 2], atol=1.0)

@@ -18,14 +18,15 @@ import numpy as np
 import pytest
 import torch
 
-from surrogate import KNN, ModelConfig, ModelError, JointSurrogate, load_surrogate, phi_end
-from surrogate import sweep, synthetic, train as train_mod
-from surrogate.data import (ExtrapolationError, augment_mirror, check_box, load_samples,
-                            load_splits, normalisation)
+from fem.spec import INPUT_BOX, mirror
+from surrogate import (KNN, ModelConfig, ModelError, JointSurrogate, OutOfBoxError, check_box,
+                       load_surrogate, phi_end)
+from surrogate import checkpoint, model as model_mod, sweep, synthetic, train as train_mod
+from surrogate.data import augment_mirror, load_samples, load_splits, normalisation
 from surrogate.evaluate import evaluate, jacobian, metrics
 from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, save_checkpoint
-from workflow.shards import INPUT_BOX, ShardError, mirror, split_of
+from workflow.shards import ShardError, split_of
 from workflow import report as workflow_report
 
 torch.set_num_threads(1)
@@ -59,9 +60,11 @@ def run(*args):
 
 
 def test_import_does_not_pull_dolfinx_or_predictor():
-    """`import surrogate` loads neither dolfinx, fem, predictor nor matplotlib."""
+    """`import surrogate` loads neither dolfinx, predictor nor matplotlib, and of fem only
+    its plain-Python contract modules (fem.spec, fem.files)."""
     code = ("import sys, surrogate; bad = [m for m in sys.modules if m.split('.')[0] in "
-            "('dolfinx', 'fem', 'predictor', 'matplotlib')]; print(bad)")
+            "('dolfinx', 'predictor', 'matplotlib') or (m.split('.')[0] == 'fem' and m not in "
+            "('fem', 'fem.spec', 'fem.files'))]; print(bad)")
     assert run("-c", code).stdout.strip() == "[]"
 
 
@@ -91,7 +94,7 @@ def test_data_split_augment_normalise(data):
     n = {k: len(v) for k, v in parts.items()}
     assert sum(n.values()) == 400 and min(n.values()) > 0
     for label, k in enumerate(("train", "val", "test")):
-        assert (split_of(parts[k].sample_id.numpy(), manifest["seed"]) == label).all()
+        assert (split_of(parts[k].sample_id.numpy(), manifest.seed) == label).all()
     aug = augment_mirror(parts["train"])
     assert len(aug) == 2 * n["train"]
     torch.testing.assert_close(aug.anchors[n["train"]:], parts["train"].anchors * S)
@@ -99,7 +102,7 @@ def test_data_split_augment_normalise(data):
     mean = np.array(norm["output_mean"]).reshape(10, 2)
     assert np.abs(mean[:, 1]).max() < 1e-9
     assert np.all(np.diff(mean[:, 0]) > 3) and np.abs(mean[:, 0] - 4.545 * np.arange(1, 11)).max() < 5
-    assert manifest["config"]["source"] == "synthetic-rod"
+    assert manifest.config["source"] == "synthetic-rod"
 
 
 def test_corrupt_shard_is_refused(data, tmp_path):
@@ -214,33 +217,41 @@ def test_checkpoint_round_trip(tmp_path):
 
 
 def test_bad_or_missing_checkpoint(tmp_path, improved):
-    """Missing, garbage, truncated, foreign, mismatched and NaN-weight files raise ModelError
-    (a ValueError) with a one-line message; the CLI exits 2 with one stderr line."""
+    """Missing, garbage, truncated, foreign, pre-integrity (a plain torch.save of a valid
+    payload), other-kind, mismatched and NaN-weight files raise ModelError (a ValueError and
+    a CheckpointError) with a one-line message; the CLI exits 2 with one stderr line."""
     garbage = tmp_path / "garbage.pt"
     garbage.write_text("not a checkpoint")
     truncated = tmp_path / "truncated.pt"
     truncated.write_bytes(improved.read_bytes()[:200])
     foreign = tmp_path / "foreign.pt"
     torch.save({"weights": torch.zeros(3)}, foreign)
+    old_format = tmp_path / "old_format.pt"
+    torch.save({"format": "softjoint-surrogate/1", **load_checkpoint(improved)}, old_format)
+    other_kind = tmp_path / "other_kind.pt"
+    checkpoint.save(other_kind, "softjoint-gravity-nn/1", load_checkpoint(improved))
     mismatched = tmp_path / "mismatched.pt"
     ckpt = load_checkpoint(improved)
     ckpt["model_config"]["hidden"] = (16, 16)
-    torch.save(ckpt, mismatched)
+    checkpoint.save(mismatched, model_mod.FORMAT, ckpt)
     nonfinite = tmp_path / "nonfinite.pt"
     ckpt = load_checkpoint(improved)
     ckpt["model_state"]["head.bias"][3] = float("nan")
-    torch.save(ckpt, nonfinite)
-    cases = {tmp_path / "missing.pt": "not found", garbage: "corrupt", truncated: "corrupt",
-             foreign: "not a softjoint surrogate", mismatched: "inconsistent",
-             nonfinite: "non-finite"}
+    checkpoint.save(nonfinite, model_mod.FORMAT, ckpt)
+    cases = {tmp_path / "missing.pt": "not found", garbage: "no valid checkpoint header",
+             truncated: "damaged surrogate checkpoint", foreign: "no valid checkpoint header",
+             old_format: "not a softjoint surrogate checkpoint",
+             other_kind: "a 'softjoint-gravity-nn/1' file, expected a 'softjoint-surrogate/2'",
+             mismatched: "inconsistent", nonfinite: "non-finite"}
     for path, words in cases.items():
         with pytest.raises(ModelError, match=words) as err:
             load_surrogate(path)
-        assert isinstance(err.value, ValueError) and "\n" not in str(err.value)
-    r = run("-m", "surrogate.predict", "--model", str(garbage), "--p", "0", "--f1", "0",
-            "--f2", "0", "--m", "0")
-    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
-    assert "corrupt surrogate checkpoint" in r.stderr
+        assert isinstance(err.value, checkpoint.CheckpointError) and "\n" not in str(err.value)
+    for path in (garbage, old_format, other_kind):
+        r = run("-m", "surrogate.predict", "--model", str(path), "--p", "0", "--f1", "0",
+                "--f2", "0", "--m", "0")
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert str(path) in r.stderr and "Traceback" not in r.stderr and r.stdout == ""
 
 
 def test_predict_cli_and_box(improved):
@@ -262,9 +273,31 @@ def test_predict_cli_and_box(improved):
     assert len(r.stderr.strip().splitlines()) == 1
     r = run(*bad, "--allow-extrapolation")
     assert r.returncode == 0 and json.loads(r.stdout)["extrapolation"] is True
-    with pytest.raises(ExtrapolationError):
+    r = run(*args[:4], "--p", "nan", *args[6:], "--allow-extrapolation")  # NaN: never
+    assert r.returncode == 2 and "'nan' is not a finite number" in r.stderr and r.stdout == ""
+    with pytest.raises(OutOfBoxError, match="F2 = 3.5 is outside the training box"):
         check_box(torch.tensor([[0.0, 0.0, 3.5, 0.0]]))
+    with pytest.raises(OutOfBoxError, match="M = nan is not a finite number"):
+        check_box(torch.tensor([[0.0, 0.0, 0.0, math.nan]]), allow_extrapolation=True)
     assert check_box(torch.tensor([[0.3, -3.0, 3.0, -100.0]])) == 0
+    assert check_box(torch.tensor([[0.31, 0.0, 0.0, 0.0]]), allow_extrapolation=True) == 1
+
+
+def test_overrides_are_checked():
+    """--set applies each key to its config with the field's type; an unknown key, a value
+    of the wrong kind, a non-finite or out-of-range number and a key given twice are
+    refused with one line naming the pair."""
+    mc, tc = train_mod.apply_overrides(*train_mod.CONFIGS["paper"],
+                                       ["hidden=8,4", "lr=0.01", "epochs=7", "residual=true"])
+    assert mc.hidden == (8, 4) and mc.residual is True and tc.lr == 0.01 and tc.epochs == 7
+    for pairs, words in ((["bogus=1"], "unknown field 'bogus'"), (["lr=nan"], "'nan' is not a finite"),
+                         (["lr=inf"], "'inf' is not a finite"), (["lr=0"], "outside (0, inf]"),
+                         (["epochs=2.5"], "not an integer"), (["hidden=8,0"], "0 is outside"),
+                         (["residual=maybe"], "true or false"), (["lr"], "expected key=value"),
+                         (["lr=1", "lr=2"], "--set lr given twice")):
+        with pytest.raises(ValueError) as err:
+            train_mod.apply_overrides(*train_mod.CONFIGS["improved"], pairs)
+        assert words in str(err.value) and pairs[-1] in str(err.value) and "\n" not in str(err.value)
 
 
 def test_evaluate_cli_json(improved, data):
@@ -362,7 +395,7 @@ def test_report_writes_metrics_and_figures(data, tmp_path):
     (tmp_path / "surrogate/metrics.json").write_text((tmp_path / "metrics.json").read_text())
     mean = report["improved"]["heldout"]["mean_anchor_error_mm"]
     assert mean > 0.1
-    assert f"| mean anchor error | {mean:.4g} mm | <= 0.1 mm | no |" in workflow_report.report(tmp_path)
+    assert f"| mean anchor error | {mean:.4g} mm | <= 0.1 mm | no" in workflow_report.report(tmp_path)
 
 
 def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys):

@@ -9,7 +9,7 @@ Data flow::
       --JointSolver on a group of ranks: continuation along the walk--> anchors (n_u, 10, 2) mm,
         Jacobian (n_u, 20, 4) = d anchors / d inputs, per-sample Newton figures
       --group rank 0: workflow.shards.write_shard (atomic)--> DIR/shards/unit-uuuuu.npz
-      --world rank 0: workflow.dataset.build_manifest (scan + verify, atomic)--> DIR/manifest.json
+      --world rank 0: workflow.store.build_manifest (scan + verify, atomic)--> DIR/manifest.json
 
 Work units. Sample ids [u K, u K + n_u) form unit u (K = ``--unit-size``). Its inputs are a
 persistent walk drawn from its own stream ``np.random.default_rng([seed, u])``: a uniform
@@ -43,22 +43,24 @@ solution is stored instead: it is the one a user's single solve returns.
 
 Ranks. ``comm.Split`` forms groups of ``--ranks-per-group`` ranks; the units still to do
 are dealt round-robin to the groups. Only world rank 0 prints and writes the manifest;
-each group's rank 0 writes its shards. Resume: world rank 0 removes left-over temp files,
-scans DIR/shards (checksum + unit layout + config) and rebuilds the manifest; units with a
-missing or invalid shard are (re)done. A ``kill -9`` at any moment loses at most the
-units in progress: shards and manifest only ever appear complete (temp file + rename).
+each group's rank 0 writes its shards. Start and resume: world rank 0 first checks that
+DIR holds no dataset of another seed or config (check_compatible; a refused run creates
+nothing in DIR, not even the lock), then takes DIR/.campaign.lock, removes left-over temp
+files, scans DIR/shards (checksum + unit layout + config) and rebuilds the manifest; units
+with a missing or invalid shard are (re)done. A ``kill -9`` at any moment loses at most
+the units in progress: shards and manifest only ever appear complete (temp file + rename).
 
 Exit codes: 0 the dataset is complete, 3 stopped by ``--max-hours`` (re-run to resume),
-1 error, 2 bad command line. ``--json`` prints the summary as JSON on rank 0.
+1 error (e.g. another campaign holds the lock), 2 bad command line or an ``--out`` that
+holds another campaign (one line on stderr). ``--json`` prints the summary as JSON on
+rank 0.
 """
 
 from __future__ import annotations
 
 import argparse
 import fcntl
-import json
 import math
-import os
 import subprocess
 import sys
 import time
@@ -67,9 +69,13 @@ from pathlib import Path
 
 import numpy as np
 
+from fem import cli
+from fem.options import add_mesh_size
+from fem.spec import INPUT_BOX, N_INPUTS
 from workflow import shards
-from workflow.dataset import (OneLineParser, ShardScanner, build_manifest, clean_temporaries,
-                              shard_file, unit_count, unit_ids)
+from workflow.shards import Manifest, ShardError
+from workflow.store import (ShardScanner, build_manifest, clean_temporaries, shard_file,
+                            unit_count, unit_ids)
 
 EXIT_INCOMPLETE = 3
 #: A harvested sample farther than this (mm) from the from-zero solve is another branch.
@@ -99,17 +105,17 @@ def unit_walk(seed: int, unit: int, n: int, step: float, turn: float = WALK_TURN
     default_rng([seed, unit]). The first k rows do not depend on n (a longer unit extends a
     shorter one)."""
     rng = np.random.default_rng([seed, unit])
-    z = np.empty((n, shards.N_INPUTS))
-    y = rng.uniform(-1.0, 1.0, shards.N_INPUTS)
-    d = rng.normal(size=shards.N_INPUTS)
+    z = np.empty((n, N_INPUTS))
+    y = rng.uniform(-1.0, 1.0, N_INPUTS)
+    d = rng.normal(size=N_INPUTS)
     d /= np.linalg.norm(d)
     for j in range(n):
         if j:
             y = y + step * d
-            d = d + turn * rng.normal(size=shards.N_INPUTS)
+            d = d + turn * rng.normal(size=N_INPUTS)
             d /= np.linalg.norm(d)
         z[j] = reflect(y)
-    return z * shards.INPUT_BOX
+    return z * INPUT_BOX
 
 
 def git_commit() -> str:
@@ -136,7 +142,7 @@ def campaign_config(mesh_size: float, unit_size: int, step: float, fresh_check_e
             "material": asdict(Material()), "solver": asdict(SolverConfig()),
             "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
             "fresh_check_every": fresh_check_every,
-            "input_box": shards.INPUT_BOX.tolist()}
+            "input_box": INPUT_BOX.tolist()}
 
 
 # ---------------------------------------------------------------------------- one unit
@@ -198,62 +204,55 @@ def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
 
 
 # ---------------------------------------------------------------------------- CLI
-class RankZeroParser(OneLineParser):
-    """One-line argparse errors, printed by the launcher's rank 0 only (arguments are
-    parsed before MPI starts, on every rank)."""
-
-    def _print_message(self, message, file=None):
-        rank = next((os.environ[v] for v in ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK",
-                                             "SLURM_PROCID") if v in os.environ), "0")
-        if rank == "0":
-            super()._print_message(message, file)
+def unit_range(text: str) -> tuple[int, int]:
+    """argparse type of ``--units A:B``: two integers 0 <= A < B (B is checked against the
+    campaign's unit count after parsing)."""
+    try:
+        a, b = (int(v) for v in text.split(":"))    # not two integers: ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not A:B (two integers, 0 <= A < B)") from None
+    if not 0 <= a < b:
+        raise argparse.ArgumentTypeError(f"{text} is not a unit range A:B with 0 <= A < B")
+    return a, b
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    ap = RankZeroParser(prog="python -m workflow.campaign",
-                       description="Resumable MPI FEM data campaign of the bellow joint "
-                                   "(run the same command again to resume).")
-    ap.add_argument("--samples", type=int, required=True, help="number of load cases N")
-    ap.add_argument("--seed", type=int, required=True, help="campaign seed (fixes all inputs)")
-    ap.add_argument("--out", required=True, help="dataset directory (manifest.json + shards/)")
-    ap.add_argument("--max-hours", type=float, default=None,
+    ap = cli.Parser(prog="python -m workflow.campaign",
+                    description="Resumable MPI FEM data campaign of the bellow joint "
+                                "(run the same command again to resume).")
+    count = cli.number(1, None, integer=True)
+    ap.add_argument("--samples", type=count, required=True, help="number of load cases N")
+    ap.add_argument("--seed", type=cli.number(0, None, integer=True), required=True,
+                    help="campaign seed >= 0 (fixes all inputs)")
+    ap.add_argument("--out", required=True,
+                    help="dataset directory (manifest.json + shards/); created only once the "
+                         "run is known to be compatible with what it holds")
+    ap.add_argument("--max-hours", type=cli.number(0, None, "h", open_lo=True), default=None,
                     help="time budget: start no unit that would end past it (exit 3 if unfinished)")
-    ap.add_argument("--ranks-per-group", type=int, default=1,
+    ap.add_argument("--ranks-per-group", type=count, default=1,
                     help="MPI ranks per FEM solve (default 1; must divide the rank count)")
-    ap.add_argument("--mesh-size", type=float, default=None,
-                    help="tetrahedron size in mm (default: the FEM's production mesh)")
-    ap.add_argument("--unit-size", type=int, default=DEFAULT_UNIT_SIZE,
+    add_mesh_size(ap, None, "tetrahedron size (default: the FEM's production mesh)")
+    ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
-    ap.add_argument("--step", type=float, default=DEFAULT_STEP,
-                    help=f"random-walk step, box-normalised (default {DEFAULT_STEP})")
-    ap.add_argument("--fresh-check-every", type=int, default=8, metavar="U",
-                    help="re-solve the last sample of every U-th unit from zero (0: never)")
-    ap.add_argument("--units", default=None, metavar="A:B",
+    ap.add_argument("--step", type=cli.number(0, 2, open_lo=True), default=DEFAULT_STEP,
+                    help=f"random-walk step, box-normalised, in (0, 2] (default {DEFAULT_STEP})")
+    ap.add_argument("--fresh-check-every", type=cli.number(0, None, integer=True), default=8,
+                    metavar="U", help="re-solve the last sample of every U-th unit from zero (0: never)")
+    ap.add_argument("--units", type=unit_range, default=None, metavar="A:B",
                     help="only units A..B-1 (split one campaign over independent jobs; "
                          "merge with python -m workflow.dataset merge)")
-    ap.add_argument("--progress-every", type=float, default=60.0,
+    ap.add_argument("--progress-every", type=cli.number(0, None, "s", open_lo=True), default=60.0,
                     help="seconds between progress lines (default 60)")
-    ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--quiet", action="store_true", help="no progress lines")
     args = ap.parse_args(argv)
-    for name, ok in (("--samples", args.samples >= 1), ("--unit-size", args.unit_size >= 1),
-                     ("--ranks-per-group", args.ranks_per_group >= 1),
-                     ("--step", 0 < args.step <= 2), ("--fresh-check-every", args.fresh_check_every >= 0),
-                     ("--max-hours", args.max_hours is None or args.max_hours > 0),
-                     ("--mesh-size", args.mesh_size is None or 0.3 <= args.mesh_size <= 10)):
-        if not ok:
-            ap.error(f"invalid value for {name}")
+    why = cli.check_output(Path(args.out) / "manifest.json")   # checked now, created in run()
+    if why:
+        ap.error(why)
     n_units = unit_count(args.samples, args.unit_size)
-    if args.units is None:
-        args.unit_range = (0, n_units)
-    else:
-        try:
-            a, b = (int(v) for v in args.units.split(":"))
-        except ValueError:
-            ap.error(f"--units expects A:B, got {args.units!r}")
-        if not 0 <= a < b <= n_units:
-            ap.error(f"--units {args.units} outside 0:{n_units}")
-        args.unit_range = (a, b)
+    args.unit_range = args.units or (0, n_units)
+    if args.unit_range[1] > n_units:
+        ap.error(f"--units {args.units[0]}:{args.units[1]} outside 0:{n_units} "
+                 f"({args.samples} samples in units of {args.unit_size})")
     return args
 
 
@@ -276,11 +275,40 @@ class Progress:
               f"{rate:.0f} samples/h, ETA {eta:.2f} h, failures {failures}", flush=True)
 
 
+def check_compatible(out: Path, config: dict, seed: int) -> Manifest | None:
+    """The manifest already in ``out`` (None if there is none). Raises ShardError (one
+    line) if ``out`` holds a dataset this run must not touch: an unreadable manifest, or a
+    campaign with another seed or config (e.g. the FEM code changed)."""
+    if not Manifest.exists(out):
+        return None
+    old = Manifest.load(out)
+    differ = [k for k in sorted(set(config) | set(old.config)) if old.config.get(k) != config.get(k)]
+    if differ:
+        raise ShardError(f"{out} holds a campaign with another {', '.join(differ)} (e.g. the FEM "
+                         "code changed); use another --out")
+    if old.seed != seed:
+        raise ShardError(f"{out} holds a campaign of --seed {old.seed}, not --seed {seed}; "
+                         "use another --out or its seed")
+    return old
+
+
 def run(args) -> int:
+    import os
+
     from mpi4py import MPI
 
     world = MPI.COMM_WORLD
     rank, size = world.rank, world.size
+    # srun without an MPI plugin that this MPI understands (a stock MpiDefault=none, no
+    # --mpi) can start N singletons, each rank 0 of a world of 1: all would write the same
+    # units. SLURM_STEP_NUM_TASKS exists inside srun steps only (not in the batch script);
+    # under mpirun (OMPI_COMM_WORLD_SIZE set) the world is the one mpirun was asked for.
+    tasks = os.environ.get("SLURM_STEP_NUM_TASKS", "") if "SLURM_STEP_ID" in os.environ else ""
+    if size == 1 and tasks.isdigit() and int(tasks) > 1 and "OMPI_COMM_WORLD_SIZE" not in os.environ:
+        if os.environ.get("SLURM_PROCID", "0") == "0":      # every task thinks it is rank 0
+            print(f"python -m workflow.campaign: error: Slurm started {tasks} tasks but MPI sees "
+                  "a world of 1: srun needs --mpi=pmix (set SRUN_MPI)", file=sys.stderr)
+        return 2
     G = args.ranks_per_group
     if size % G:
         if rank == 0:
@@ -294,43 +322,42 @@ def run(args) -> int:
     config = campaign_config(mesh_size, args.unit_size, args.step, args.fresh_check_every)
     out, t_start = Path(args.out), time.perf_counter()
 
-    # --- world rank 0: lock, clean, scan, manifest; everyone learns the units to do
+    # --- world rank 0: check, lock, clean, scan, manifest; everyone learns the units to do.
+    # Nothing is created in ``out`` (not even the lock) for a run it refuses.
     status, lock, scanner, manifest, todo = None, None, None, None, None
     if rank == 0:
         try:
+            check_compatible(out, config, args.seed)
             (out / "shards").mkdir(parents=True, exist_ok=True)
             lock = open(out / ".campaign.lock", "w")
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            old = check_compatible(out, config, args.seed)     # again: a writer may have raced us
             clean_temporaries(out)
-            old = shards.load_manifest(out) if shards.manifest_path(out).is_file() else None
-            if old is not None and (old.get("config") != config or old.get("seed") != args.seed):
-                differ = [k for k in config if (old.get("config") or {}).get(k) != config[k]]
-                differ += ["seed"] if old.get("seed") != args.seed else []
-                raise RuntimeError(f"{out} holds a campaign with another {', '.join(differ)} "
-                                   "(e.g. the FEM code changed); use another --out")
             scanner = ShardScanner(out, args.samples, config, args.seed)
             done = scanner.scan()
             manifest = build_manifest(out, args.samples, config, args.seed, done, old)
             todo = [u for u in range(*args.unit_range) if u not in done]
+        except ShardError as exc:
+            status = (str(exc), cli.EXIT_USAGE)
         except BlockingIOError:
-            status = f"another campaign is writing {out}"
-        except (OSError, RuntimeError, shards.ShardError) as exc:
-            status = str(exc)
+            status = (f"another campaign is writing {out}", 1)
+        except OSError as exc:
+            status = (str(exc), 1)
     status, todo, commit = world.bcast((status, todo, git_commit() if rank == 0 else None), root=0)
     if status:
         if rank == 0:
-            print(f"python -m workflow.campaign: error: {status}", file=sys.stderr)
-        return 1
+            print(f"python -m workflow.campaign: error: {' '.join(status[0].split())}", file=sys.stderr)
+        return status[1]
 
     n_groups = size // G
     group = world.Split(color=rank // G, key=rank)
     mine = todo[rank // G::n_groups]
     progress = None
     if rank == 0:
-        done_samples = manifest["samples"] + manifest["failures"]
-        progress = Progress(args.samples, done_samples, args.quiet, args.progress_every)
+        progress = Progress(args.samples, manifest.samples + manifest.failures, args.quiet,
+                            args.progress_every)
         if not args.quiet:
-            print(f"[campaign] {out}: {len(todo)} of {manifest['units_total']} units to do on "
+            print(f"[campaign] {out}: {len(todo)} of {manifest.units_total} units to do on "
                   f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size} mm, "
                   f"unit size {args.unit_size}, step {args.step}", flush=True)
 
@@ -340,8 +367,8 @@ def run(args) -> int:
         state["in_unit"] += 1
         state["fail_in_unit"] += not converged
         if rank == 0:
-            progress.line(manifest["samples"] + manifest["failures"] + state["in_unit"],
-                          manifest["failures"] + state["fail_in_unit"])
+            progress.line(manifest.samples + manifest.failures + state["in_unit"],
+                          manifest.failures + state["fail_in_unit"])
 
     units_run, stopped, solver, unit_times = 0, False, None, []
     budget = args.max_hours * 3600 if args.max_hours else math.inf
@@ -370,8 +397,7 @@ def run(args) -> int:
         if rank == 0:
             manifest = build_manifest(out, args.samples, config, args.seed, scanner.scan(), manifest)
             state["in_unit"] = state["fail_in_unit"] = 0
-            progress.line(manifest["samples"] + manifest["failures"], manifest["failures"],
-                          force=True)
+            progress.line(manifest.samples + manifest.failures, manifest.failures, force=True)
 
     # --- wait for every group without spinning a core (MPI barriers busy-poll)
     req = world.Ibarrier()
@@ -379,31 +405,31 @@ def run(args) -> int:
         time.sleep(0.2)
         if rank == 0:
             fresh = scanner.scan()
-            if len(fresh) != manifest["units_done"]:
+            if len(fresh) != manifest.units_done:
                 manifest = build_manifest(out, args.samples, config, args.seed, fresh, manifest)
-                progress.line(manifest["samples"] + manifest["failures"], manifest["failures"])
+                progress.line(manifest.samples + manifest.failures, manifest.failures)
     stopped = world.allreduce(stopped, op=MPI.LOR)
     units_run = world.allreduce(units_run, op=MPI.SUM)
     code = 0
     if rank == 0:
         manifest = build_manifest(out, args.samples, config, args.seed, scanner.scan(), manifest)
         wall = time.perf_counter() - t_start
-        solved = manifest["samples"] + manifest["failures"] - progress.done0
-        listed = {e["unit"] for e in manifest["shards"]}
+        solved = manifest.samples + manifest.failures - progress.done0
+        listed = {e.unit for e in manifest.shards}
         range_done = all(u in listed for u in range(*args.unit_range))
         summary = {
             "out": str(out), "seed": args.seed, "samples_requested": args.samples,
-            "samples": manifest["samples"], "failures": manifest["failures"],
-            "failure_rate": manifest["failures"] / max(manifest["samples"] + manifest["failures"], 1),
-            "units_total": manifest["units_total"], "units_done": manifest["units_done"],
-            "units_run": units_run, "complete": manifest["complete"],
+            "samples": manifest.samples, "failures": manifest.failures,
+            "failure_rate": manifest.failures / max(manifest.samples + manifest.failures, 1),
+            "units_total": manifest.units_total, "units_done": manifest.units_done,
+            "units_run": units_run, "complete": manifest.complete,
             "range_complete": range_done, "stopped_by_budget": stopped,
             "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
             "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,
-            "cpu_hours_dataset": manifest["cpu_hours"], "git_commit": commit,
+            "cpu_hours_dataset": manifest.cpu_hours, "git_commit": commit,
         }
         if args.json:
-            print(json.dumps(summary, indent=1))
+            cli.print_json(summary)
         elif not args.quiet:
             print(f"[campaign] {'complete' if summary['complete'] else 'incomplete'}: "
                   f"{summary['samples']} samples, {summary['failures']} failures "

@@ -1,45 +1,52 @@
 """Where a campaign walk spends its time: per-sample Newton, LU and GMRES counts + cProfile.
 
-    python -m workflow.profile_walk [--seed 1] [--unit 39] [--samples 8] [--mesh-size H]
+    python -m workflow.profile_walk [--seed 1] [--unit 39] [--samples 8] [--mesh-size H] [--json]
 
 Data flow: the walk of campaign unit ``--unit`` (workflow.campaign.unit_walk, the
 campaign's default step), solved on one rank as the campaign does: its first sample from
 zero, then continuation; each sample followed by its sensitivities. For every sample after
-the first it prints the wall time (s), the Newton iterations, and the LU factorisations
+the first it reports the wall time (s), the Newton iterations, and the LU factorisations
 and GMRES iterations of the solve and of its sensitivities; then the top functions of a
-cProfile over the continuation samples. Nothing is written.
+cProfile over the continuation samples (by own time, s). Nothing is written.
 """
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import pstats
 import time
 
+from fem import cli
+from fem.options import add_mesh_size
 
-def main(argv=None) -> int:
+
+def parse_args(argv=None):
+    ap = cli.Parser(prog="python -m workflow.profile_walk", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seed", type=cli.number(0, None, integer=True), default=1,
+                    help="campaign seed (default 1)")
+    ap.add_argument("--unit", type=cli.number(0, None, integer=True), default=39,
+                    help="campaign unit whose walk is solved (default 39)")
+    ap.add_argument("--samples", type=cli.number(2, None, integer=True), default=8,
+                    help="walk samples, the first from zero (default 8)")
+    add_mesh_size(ap, None, "tetrahedron size (default: the FEM's production mesh)")
+    ap.add_argument("--top", type=cli.number(1, None, integer=True), default=12,
+                    help="cProfile lines to report (default 12)")
+    return ap.parse_args(argv)
+
+
+def profile_walk(seed: int, unit: int, samples: int, mesh_size: float | None, top: int) -> dict:
+    """Solve the walk as the campaign does; return its figures (times s, counts)."""
     from mpi4py import MPI
 
     from fem.geometry import JointGeometry
     from fem.solver import JointSolver, Load
     from workflow.campaign import DEFAULT_STEP, unit_walk
 
-    ap = argparse.ArgumentParser(prog="python -m workflow.profile_walk",
-                                 description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--unit", type=int, default=39)
-    ap.add_argument("--samples", type=int, default=8)
-    ap.add_argument("--mesh-size", type=float, default=JointGeometry().mesh_size)
-    ap.add_argument("--top", type=int, default=12, help="cProfile lines to print")
-    args = ap.parse_args(argv)
-
-    solver = JointSolver(JointGeometry(mesh_size=args.mesh_size), MPI.COMM_SELF)
-    walk = unit_walk(args.seed, args.unit, args.samples, DEFAULT_STEP)
+    solver = JointSolver(JointGeometry(mesh_size=mesh_size or JointGeometry().mesh_size), MPI.COMM_SELF)
+    walk = unit_walk(seed, unit, samples, DEFAULT_STEP)
     first = solver.solve(Load.from_array(walk[0]))
     solver.sensitivities()
-    print(f"from zero: {first.wall_time:.1f} s, Newton {first.newton_iterations}, "
-          f"{first.factorisations} LU; mesh {solver.mesh_info()['dofs']} dofs")
+    rows = []
     profile = cProfile.Profile()
     profile.enable()
     t0 = time.perf_counter()
@@ -48,13 +55,42 @@ def main(argv=None) -> int:
         t1, lu1, kr1 = time.perf_counter(), solver.factorisations, solver.krylov_iterations
         solver.sensitivities()
         t2 = time.perf_counter()
-        print(f"sample {res.wall_time + t2 - t1:6.2f} s: Newton {res.iterations} its, "
-              f"{res.factorisations} LU, {res.krylov_iterations} GMRES its | sensitivities "
-              f"{t2 - t1:5.2f} s, {solver.factorisations - lu1} LU, "
-              f"{solver.krylov_iterations - kr1} GMRES its")
+        rows.append({"wall_s": res.wall_time + t2 - t1, "converged": res.converged,
+                     "newton_iterations": res.iterations, "factorisations": res.factorisations,
+                     "krylov_iterations": res.krylov_iterations, "sensitivities_s": t2 - t1,
+                     "sensitivities_factorisations": solver.factorisations - lu1,
+                     "sensitivities_krylov_iterations": solver.krylov_iterations - kr1})
     profile.disable()
-    print(f"continuation samples: {time.perf_counter() - t0:.1f} s in all")
-    pstats.Stats(profile).sort_stats("tottime").print_stats(args.top)
+    total = time.perf_counter() - t0
+    stats = pstats.Stats(profile).stats             # {(file, line, name): (cc, calls, own, cum, callers)}
+    hot = [{"function": f"{path}:{line}({name})", "calls": calls, "tottime_s": own, "cumtime_s": cum}
+           for (path, line, name), (_, calls, own, cum, _) in
+           sorted(stats.items(), key=lambda kv: -kv[1][2])[:top]]
+    return {"seed": seed, "unit": unit, "mesh": solver.mesh_info(),
+            "from_zero": {"wall_s": first.wall_time, "converged": first.converged,
+                          "newton_iterations": first.newton_iterations,
+                          "factorisations": first.factorisations},
+            "samples": rows, "continuation_s": total, "profile_top": hot}
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    d = profile_walk(args.seed, args.unit, args.samples, args.mesh_size, args.top)
+    if args.json:
+        cli.print_json(d)
+        return 0
+    z = d["from_zero"]
+    print(f"from zero: {z['wall_s']:.1f} s, Newton {z['newton_iterations']}, "
+          f"{z['factorisations']} LU; mesh {d['mesh']['dofs']} dofs")
+    for r in d["samples"]:
+        print(f"sample {r['wall_s']:6.2f} s: Newton {r['newton_iterations']} its, "
+              f"{r['factorisations']} LU, {r['krylov_iterations']} GMRES its | sensitivities "
+              f"{r['sensitivities_s']:5.2f} s, {r['sensitivities_factorisations']} LU, "
+              f"{r['sensitivities_krylov_iterations']} GMRES its")
+    print(f"continuation samples: {d['continuation_s']:.1f} s in all; top functions by own time:")
+    for h in d["profile_top"]:
+        print(f"  {h['tottime_s']:8.3f} s own, {h['cumtime_s']:8.3f} s cumulative, "
+              f"{h['calls']:>7} calls  {h['function']}")
     return 0
 
 

@@ -1,11 +1,12 @@
 """Joint dataset format (DESIGN.md §5): sharded NPZ plus a JSON manifest.
 
 Everything here is plain numpy + json, so a dataset is readable without this project
-and importing this module never imports dolfinx (the surrogate depends on it).
+and importing this module never imports dolfinx or torch (the surrogate depends on it).
+The joint's contract (input names, units, box, mirror) is ``fem.spec``'s.
 
 Layout of a dataset directory ``DIR``::
 
-    DIR/manifest.json            {"format", "seed", "config", "shards": [...]}
+    DIR/manifest.json            Manifest: {"format", "seed", "config", "shards": [...], ...}
     DIR/shards/unit-00000.npz    one shard per work unit
 
 Arrays of one shard (n stored samples, m failures)::
@@ -24,44 +25,40 @@ Arrays of one shard (n stored samples, m failures)::
     failed_inputs      (m, 4)      float64
     failed_reason      (m,)        str
     meta               ()          str      JSON: config, mesh parameters, git commit, seed, unit
-    checksum           ()          str      sha256 over the arrays above (see _array_digest)
+    checksum           ()          str      sha256 over the arrays above (see array_digest)
 
-Shards are written to a temporary name in the same directory, fsynced and renamed, so a
-killed writer never leaves half a shard under the final name.
-
-Mirror symmetry y -> -y (DESIGN.md §3): (R, P, F1, F2, M) -> (R·diag(1,-1), -P, F1, -F2, -M).
+Shards and the manifest are written atomically (``fem.files``: temporary name in the same
+directory, fsync, rename), so a killed writer never leaves half a file under its name.
+The manifest is validated once, when ``Manifest.load`` reads it; past that point every
+field has its type (see Manifest).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
-import os
-import tempfile
-from pathlib import Path
+import re
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
+from fem.files import atomic_write, sha256_file, write_text
+from fem.spec import N_ANCHORS, N_INPUTS
+
 FORMAT = "softjoint-dataset/1"
-N_ANCHORS = 10
-N_INPUTS = 4
-INPUT_NAMES = ("P", "F1", "F2", "M")
-INPUT_UNITS = ("MPa", "N", "N", "N*mm")
-#: Half-widths of the training box (DESIGN.md §3): |P|<=0.3, |F1|,|F2|<=3, |M|<=100.
-INPUT_BOX = np.array([0.3, 3.0, 3.0, 100.0])
+MANIFEST = "manifest.json"
 
 DATA_KEYS = (
     "sample_id", "inputs", "anchors", "jacobian", "phi_end", "cap_rotation",
     "newton_iterations", "wall_time_s", "converged",
 )
 FAILURE_KEYS = ("failed_sample_id", "failed_inputs", "failed_reason")
-#: Input sign flips and anchor sign flips of the y-mirror.
-INPUT_MIRROR = np.array([-1.0, 1.0, -1.0, -1.0])
-ANCHOR_MIRROR = np.array([1.0, -1.0])
 
 
 class ShardError(ValueError):
-    """A shard or manifest is missing, partial, corrupt or inconsistent."""
+    """A shard or manifest is missing, partial, corrupt, foreign or inconsistent."""
 
 
 def empty_arrays() -> dict[str, np.ndarray]:
@@ -82,7 +79,7 @@ def empty_arrays() -> dict[str, np.ndarray]:
     }
 
 
-def _array_digest(arrays: dict[str, np.ndarray]) -> str:
+def array_digest(arrays: dict[str, np.ndarray]) -> str:
     """sha256 over dtype, shape and bytes of every data and failure array, in fixed order."""
     h = hashlib.sha256()
     for key in DATA_KEYS + FAILURE_KEYS:
@@ -110,30 +107,6 @@ def _check_shapes(arrays: dict[str, np.ndarray], where: str) -> None:
         raise ShardError(f"{where}: failure arrays disagree in length")
 
 
-def file_sha256(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _atomic_write(path: Path, write) -> None:
-    """Call write(fileobj) on a temp file beside ``path``, fsync, then rename over it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_shard(path: str | Path, arrays: dict[str, np.ndarray], meta: dict) -> str:
     """Atomically write one shard; return the sha256 of the written file.
 
@@ -147,9 +120,9 @@ def write_shard(path: str | Path, arrays: dict[str, np.ndarray], meta: dict) -> 
         raise ShardError(f"{path}: refusing to store non-converged samples as data")
     payload = {k: arrays[k] for k in DATA_KEYS + FAILURE_KEYS}
     payload["meta"] = np.array(json.dumps(meta, sort_keys=True))
-    payload["checksum"] = np.array(_array_digest(payload))
-    _atomic_write(path, lambda f: np.savez(f, **payload))
-    return file_sha256(path)
+    payload["checksum"] = np.array(array_digest(payload))
+    atomic_write(path, lambda f: np.savez(f, **payload))
+    return sha256_file(path)
 
 
 def read_shard(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
@@ -160,64 +133,229 @@ def read_shard(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except Exception as exc:  # truncated zip, bad header, ...
+    except Exception as exc:  # truncated zip, bad header, not an NPZ at all, ...
         raise ShardError(f"{path}: unreadable shard ({type(exc).__name__}: {exc})") from None
     _check_shapes(arrays, str(path))
     if "checksum" not in arrays or "meta" not in arrays:
         raise ShardError(f"{path}: no checksum/meta record")
-    if _array_digest(arrays) != str(arrays.pop("checksum")):
+    if array_digest(arrays) != str(arrays.pop("checksum")):
         raise ShardError(f"{path}: checksum mismatch (corrupt shard)")
-    meta = json.loads(str(arrays.pop("meta")))
+    try:
+        meta = json.loads(str(arrays.pop("meta")))
+    except json.JSONDecodeError as exc:
+        raise ShardError(f"{path}: corrupt meta record ({exc})") from None
     return arrays, meta
 
 
-def manifest_path(root: str | Path) -> Path:
-    return Path(root) / "manifest.json"
+# ---------------------------------------------------------------------------- manifest
+_SHA256 = re.compile(r"^[0-9a-f]{64}$")
 
 
-def load_manifest(root: str | Path) -> dict:
-    """The manifest of dataset ``root``; raises ShardError if absent or unreadable."""
-    path = manifest_path(root)
-    if not path.is_file():
-        raise ShardError(f"{root}: no manifest.json (not a softjoint dataset)")
-    try:
-        manifest = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ShardError(f"{path}: corrupt manifest ({exc})") from None
-    if manifest.get("format") != FORMAT:
-        raise ShardError(f"{path}: format {manifest.get('format')!r}, expected {FORMAT!r}")
-    return manifest
+@dataclass(frozen=True)
+class ShardEntry:
+    """One shard listed in a manifest: ``file`` relative to the dataset root (POSIX), the
+    sha256 of the whole file, its n stored samples; for campaign datasets also its work
+    ``unit`` and its number of ``failures`` (None where the writer records none)."""
+
+    file: str
+    sha256: str
+    n: int
+    unit: int | None = None
+    failures: int | None = None
+
+    def to_json(self) -> dict:
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
 
 
-def write_manifest(root: str | Path, manifest: dict) -> None:
-    """Atomically (re)write the manifest of dataset ``root``."""
-    manifest = {**manifest, "format": FORMAT}
-    text = json.dumps(manifest, indent=1, sort_keys=True).encode()
-    _atomic_write(manifest_path(root), lambda f: f.write(text))
+#: Campaign figures of a manifest (workflow.campaign datasets; None for other writers).
+CAMPAIGN_FIELDS = {"samples_requested": int, "units_total": int, "units_done": int,
+                   "complete": bool, "samples": int, "failures": int, "cpu_hours": float,
+                   "git_commits": tuple}
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """DIR/manifest.json: the dataset's seed (fixes the split), the ``config`` every shard
+    was produced with, the shard list, and, for campaign datasets, the campaign figures:
+    samples requested, units total/done, complete, stored samples, failures, CPU hours (sum
+    of unit wall time x ranks), git commits of the writers.
+
+    ``Manifest.load`` validates the file once; ``save`` writes it back byte for byte as
+    ``json.dumps(to_json(), indent=1, sort_keys=True)``, so load -> save is the identity.
+    """
+
+    seed: int
+    config: dict
+    shards: tuple[ShardEntry, ...]
+    samples_requested: int | None = None
+    units_total: int | None = None
+    units_done: int | None = None
+    complete: bool | None = None
+    samples: int | None = None
+    failures: int | None = None
+    cpu_hours: float | None = None
+    git_commits: tuple[str, ...] | None = None
+    format: str = FORMAT
+
+    @staticmethod
+    def path(root: str | Path) -> Path:
+        return Path(root) / MANIFEST
+
+    @classmethod
+    def exists(cls, root: str | Path) -> bool:
+        return cls.path(root).is_file()
+
+    @classmethod
+    def load(cls, root: str | Path) -> "Manifest":
+        """The manifest of dataset ``root``. Raises ShardError (one line) if it is missing,
+        not JSON, of another format, or has a missing, unknown or ill-typed field."""
+        path = cls.path(root)
+        if not path.is_file():
+            raise ShardError(f"{root}: no {MANIFEST} (not a softjoint dataset)")
+        try:
+            raw = json.loads(path.read_bytes())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ShardError(f"{path}: corrupt manifest ({exc})") from None
+        except OSError as exc:
+            raise ShardError(f"{path}: unreadable manifest ({exc.strerror})") from None
+        return cls.from_json(raw, str(path))
+
+    @classmethod
+    def from_json(cls, raw, where: str = MANIFEST) -> "Manifest":
+        """Validate a decoded manifest (see ``load``)."""
+        if not isinstance(raw, dict) or "format" not in raw:
+            raise ShardError(f"{where}: not a softjoint dataset manifest (no 'format' record)")
+        if raw.get("format") != FORMAT:
+            raise ShardError(f"{where}: format {raw.get('format')!r}, expected {FORMAT!r}")
+        unknown = sorted(set(raw) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ShardError(f"{where}: unknown manifest field(s) {unknown}")
+        for key in ("seed", "config", "shards"):
+            if key not in raw:
+                raise ShardError(f"{where}: the manifest has no '{key}'")
+        _typed(raw["seed"], int, f"{where}: 'seed'")
+        if not isinstance(raw["config"], dict):
+            raise ShardError(f"{where}: 'config' must be an object, got {_kind(raw['config'])}")
+        if not isinstance(raw["shards"], list):
+            raise ShardError(f"{where}: 'shards' must be a list, got {_kind(raw['shards'])}")
+        entries = tuple(_entry(e, f"{where}: shards[{i}]") for i, e in enumerate(raw["shards"]))
+        files = [e.file for e in entries]
+        if len(set(files)) != len(files):
+            raise ShardError(f"{where}: a shard is listed twice")
+        figures = {}
+        for key, kind in CAMPAIGN_FIELDS.items():
+            if raw.get(key) is not None:
+                figures[key] = _typed(raw[key], kind, f"{where}: '{key}'")
+        manifest = cls(seed=raw["seed"], config=raw["config"], shards=entries, **figures)
+        manifest._check_figures(where)
+        return manifest
+
+    def _check_figures(self, where: str) -> None:
+        """The stored campaign figures agree with the shard list."""
+        if self.samples is not None and self.samples != self.n:
+            raise ShardError(f"{where}: 'samples' {self.samples} != {self.n} listed in 'shards'")
+        if self.failures is not None and self.failures != sum(e.failures or 0 for e in self.shards):
+            raise ShardError(f"{where}: 'failures' disagrees with the shard list")
+        if self.units_done is not None and self.units_done != len(self.shards):
+            raise ShardError(f"{where}: 'units_done' {self.units_done} != {len(self.shards)} shards")
+        if self.complete is not None and self.units_total is not None \
+                and self.complete != (len(self.shards) == self.units_total):
+            raise ShardError(f"{where}: 'complete' disagrees with units {len(self.shards)}/{self.units_total}")
+        if self.is_campaign and any(e.unit is None for e in self.shards):
+            raise ShardError(f"{where}: a campaign manifest lists a shard without its 'unit'")
+
+    def to_json(self) -> dict:
+        """The manifest as plain JSON types (campaign figures only where recorded)."""
+        out = {"format": self.format, "seed": self.seed, "config": self.config,
+               "shards": [e.to_json() for e in self.shards]}
+        for key in CAMPAIGN_FIELDS:
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = list(value) if isinstance(value, tuple) else value
+        return out
+
+    def save(self, root: str | Path) -> None:
+        """Atomically (re)write DIR/manifest.json."""
+        write_text(self.path(root), json.dumps(self.to_json(), indent=1, sort_keys=True))
+
+    @property
+    def n(self) -> int:
+        """Stored samples listed in the shard entries."""
+        return sum(e.n for e in self.shards)
+
+    @property
+    def is_campaign(self) -> bool:
+        """Written by workflow.campaign (its config fixes a unit layout)."""
+        return "unit_size" in self.config and self.samples_requested is not None
+
+
+def _kind(value) -> str:
+    return "null" if value is None else type(value).__name__
+
+
+def _typed(value, kind, what: str):
+    """``value`` checked to be of JSON kind ``kind`` (int excludes bool; float accepts int;
+    tuple accepts a list of strings) and returned as that Python type."""
+    if kind is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif kind is float:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+    elif kind is tuple:
+        ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+        value = tuple(value) if ok else value
+    else:
+        ok = isinstance(value, kind)
+    if not ok:
+        raise ShardError(f"{what} must be {'a list of strings' if kind is tuple else f'a {kind.__name__}'}"
+                         f", got {value!r:.40}")
+    return value
+
+
+def _entry(raw, where: str) -> ShardEntry:
+    if not isinstance(raw, dict):
+        raise ShardError(f"{where} must be an object, got {_kind(raw)}")
+    names = {f.name for f in dataclasses.fields(ShardEntry)}
+    unknown = sorted(set(raw) - names)
+    if unknown:
+        raise ShardError(f"{where}: unknown field(s) {unknown}")
+    for key in ("file", "sha256", "n"):
+        if key not in raw:
+            raise ShardError(f"{where}: no '{key}'")
+    file = raw["file"]
+    if not isinstance(file, str) or PurePosixPath(file).is_absolute() or ".." in PurePosixPath(file).parts \
+            or not file:
+        raise ShardError(f"{where}: 'file' must be a path inside the dataset, got {file!r:.60}")
+    if not isinstance(raw["sha256"], str) or not _SHA256.match(raw["sha256"]):
+        raise ShardError(f"{where}: 'sha256' is not a sha256 hex digest")
+    counts = {k: _typed(raw[k], int, f"{where}: '{k}'") for k in ("n", "unit", "failures")
+              if raw.get(k) is not None}
+    if any(v < 0 for v in counts.values()):
+        raise ShardError(f"{where}: negative count in {counts}")
+    return ShardEntry(file=file, sha256=raw["sha256"], **counts)
 
 
 def dataset_digest(root: str | Path) -> str:
     """sha256 over the manifest's shard checksums: names the dataset's exact content
     without reading the shards (which load_dataset verifies against the same checksums)."""
-    entries = sorted((e["file"], e["sha256"]) for e in load_manifest(root)["shards"])
+    entries = sorted((e.file, e.sha256) for e in Manifest.load(root).shards)
     return hashlib.sha256(json.dumps(entries).encode()).hexdigest()
 
 
-def load_dataset(root: str | Path) -> tuple[dict[str, np.ndarray], dict]:
+def load_dataset(root: str | Path) -> tuple[dict[str, np.ndarray], Manifest]:
     """Concatenate every shard listed in the manifest, sorted by sample_id.
 
     Verifies each file's sha256 against the manifest and each shard's own checksum, and
     that all shards were produced with the manifest's config. Returns (arrays, manifest).
     """
     root = Path(root)
-    manifest = load_manifest(root)
-    config_key = json.dumps(manifest.get("config"), sort_keys=True)
+    manifest = Manifest.load(root)
+    config_key = json.dumps(manifest.config, sort_keys=True)
     parts = []
-    for entry in manifest["shards"]:
-        path = root / entry["file"]
+    for entry in manifest.shards:
+        path = root / entry.file
         if not path.is_file():
             raise ShardError(f"{path}: listed in the manifest but missing")
-        if file_sha256(path) != entry["sha256"]:
+        if sha256_file(path) != entry.sha256:
             raise ShardError(f"{path}: sha256 differs from the manifest (corrupt shard)")
         arrays, meta = read_shard(path)
         if json.dumps(meta.get("config"), sort_keys=True) != config_key:
@@ -260,17 +398,3 @@ def split_of(sample_id: np.ndarray, seed: int, counts=(7, 2, 1),
                      np.int64).reshape(-1, per_group)
     return table[inverse, blocks % per_group].astype(np.int64)
 
-
-def mirror(inputs: np.ndarray, anchors: np.ndarray, jacobian: np.ndarray | None = None):
-    """Apply the y-mirror (DESIGN.md §3) to a batch.
-
-    inputs (n, 4), anchors (n, 10, 2), jacobian (n, 20, 4) or None -> same shapes.
-    The Jacobian transforms as S·J·B with S = diag(1,-1,...) on the 20 anchor coordinates
-    and B = diag(-1, 1, -1, -1) on the inputs (B is its own inverse).
-    """
-    inputs_m = inputs * INPUT_MIRROR
-    anchors_m = anchors * ANCHOR_MIRROR
-    if jacobian is None:
-        return inputs_m, anchors_m, None
-    s = np.tile(ANCHOR_MIRROR, N_ANCHORS)
-    return inputs_m, anchors_m, jacobian * s[:, None] * INPUT_MIRROR[None, :]

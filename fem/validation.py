@@ -5,33 +5,41 @@ with the SAME Solver as the joint: its end block is the rigid cap, F2 is the dea
 the beam end (L, 0, 0) and M the pure couple of fem.solver. Results are compared with the
 exact elastica of fem.elastica:
 
-* ``cantilever --alpha A``: dead transverse tip load P = A·EI/L² (Bisshopp-Drucker);
-* ``rollup --theta T``: pure end moment M = T·EI/L (circular arc).
+* ``cantilever --alpha A``: dead transverse tip load P = A·EI/L² (Bisshopp-Drucker),
+  A in [0, 10];
+* ``rollup --theta T``: pure end moment M = T·EI/L (circular arc), T in [0, 2 pi].
 
-    python -m fem.benchmarks cantilever --alpha 2 --json
-    python -m fem.benchmarks rollup --theta 6.2832 --json
-    python -m fem.benchmarks table --out results/fem/validation.json   # both sweeps
+    python -m fem.validation cantilever --alpha 2 --json
+    python -m fem.validation rollup --theta 6.2832 --json
+    python -m fem.validation table --out results/fem/validation.json   # both sweeps
 
 JSON keys: cantilever -> u_over_L, w_over_L, theta, exact, error_over_L; rollup ->
-x_over_L, y_over_L, theta, exact, error_over_L. Lengths relative to L, angles in rad.
+x_over_L, y_over_L, theta, exact, error_over_L; table -> both lists and the worst errors
+(``table --json`` prints those and the file written). Lengths relative to L, angles in rad.
 """
+
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import sys
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 from mpi4py import MPI
 
+from fem import cli
 from fem.elastica import cantilever_tip, rollup_tip
+from fem.files import write_json
 from fem.geometry import BeamGeometry
+from fem.options import add_mesh_size, on_root
 
-#: Defaults validated in tests/test_fem_benchmarks.py: L/h = 50, two P2 layers per h.
+#: Defaults validated in tests/test_fem.py: L/h = 50, two P2 layers per h.
 DEFAULT_BEAM = BeamGeometry(length=100.0, thickness=2.0, width=2.0, cap=1.0, mesh_size=1.0)
 E_BEAM = 12.2
+#: Validated load ranges: alpha = P L²/EI in [0, ALPHA_MAX]; T = M L/EI in [0, THETA_MAX]
+#: rad, a full circle (2 pi as printed to 4 decimals, so that 6.2832 is accepted).
+ALPHA_MAX = 10.0
+THETA_MAX = 6.2832
 
 
 def bending_stiffness(geo: BeamGeometry, E: float = E_BEAM) -> float:
@@ -51,8 +59,8 @@ def _solve(geo: BeamGeometry, F2: float, M: float, steps: int, comm):
 
 def cantilever(alpha: float, geo: BeamGeometry = DEFAULT_BEAM, comm=MPI.COMM_WORLD) -> dict:
     """FEM tip of the tip-loaded cantilever at alpha = P L²/EI against the elastica."""
-    if not 0 <= alpha <= 10:
-        raise ValueError(f"alpha = {alpha} outside the validated range [0, 10]")
+    if not 0 <= alpha <= ALPHA_MAX:
+        raise ValueError(f"alpha = {alpha} outside the validated range [0, {ALPHA_MAX:g}]")
     L = geo.length
     P = alpha * bending_stiffness(geo) / L ** 2
     r = _solve(geo, P, 0.0, steps=max(2, math.ceil(alpha)), comm=comm)
@@ -67,8 +75,8 @@ def cantilever(alpha: float, geo: BeamGeometry = DEFAULT_BEAM, comm=MPI.COMM_WOR
 
 def rollup(theta: float, geo: BeamGeometry = DEFAULT_BEAM, comm=MPI.COMM_WORLD) -> dict:
     """FEM tip under a pure end moment M = T·EI/L against the circular arc."""
-    if not 0 <= theta <= 2 * math.pi + 1e-9:
-        raise ValueError(f"theta = {theta} outside the validated range [0, 2 pi]")
+    if not 0 <= theta <= THETA_MAX:
+        raise ValueError(f"theta = {theta} outside the validated range [0, {THETA_MAX:g}] rad")
     L = geo.length
     M = theta * bending_stiffness(geo) / L
     r = _solve(geo, 0.0, M, steps=max(2, math.ceil(2 * theta)), comm=comm)
@@ -96,41 +104,62 @@ def table(geo: BeamGeometry = DEFAULT_BEAM) -> dict:
             "required": {"cantilever": 0.015, "rollup": 0.02}}
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fem.benchmarks", description=__doc__.split("\n\n")[0])
+def build_parser() -> cli.Parser:
+    ap = cli.Parser(prog="python -m fem.validation", json=False,
+                    description="FEM of a slender cantilever against the exact elastica.")
     sub = ap.add_subparsers(dest="case", required=True)
     t = sub.add_parser("table", help="alpha in 0.5..10 and T in pi/2..2 pi, written to --out")
-    t.add_argument("--out", required=True)
-    c = sub.add_parser("cantilever", help="dead tip load, alpha = P L^2/EI in [0, 10]")
-    c.add_argument("--alpha", type=float, required=True)
-    r = sub.add_parser("rollup", help="pure end moment, T = M L/EI in [0, 2 pi]")
-    r.add_argument("--theta", type=float, required=True)
+    t.add_output("--out", suffix=".json", default="results/fem/validation.json",
+                 help="result file (default results/fem/validation.json)")
+    c = sub.add_parser("cantilever", help=f"dead tip load, alpha = P L^2/EI in [0, {ALPHA_MAX:g}]")
+    c.add_argument("--alpha", type=cli.number(0, ALPHA_MAX), required=True,
+                   help=f"alpha = P L^2/EI in [0, {ALPHA_MAX:g}]")
+    r = sub.add_parser("rollup", help=f"pure end moment, T = M L/EI in [0, {THETA_MAX:g}] rad")
+    r.add_argument("--theta", type=cli.number(0, THETA_MAX, "rad"), required=True,
+                   help=f"T = M L/EI in [0, {THETA_MAX:g}] rad")
     for p in (c, r):
-        p.add_argument("--mesh-size", type=float, default=DEFAULT_BEAM.mesh_size, help="mm")
-        p.add_argument("--json", action="store_true", help="print JSON only")
+        add_mesh_size(p, DEFAULT_BEAM.mesh_size, "beam tetrahedron size")
+    return ap
+
+
+def _print_case(out: dict) -> None:
+    keys = ("u_over_L", "w_over_L") if out["case"] == "cantilever" else ("x_over_L", "y_over_L")
+    for k in keys + ("theta",):
+        print(f"{k:10s} FEM {out[k]: .5f}   exact {out['exact'][k]: .5f}")
+    print(f"tip error {100 * out['error_over_L']:.3f}% of L, Newton {out['newton_iterations']}")
+
+
+def main(argv=None) -> int:
+    ap = build_parser()
     args = ap.parse_args(argv)
+    comm = MPI.COMM_WORLD
+    try:
+        with ap.errors():
+            if args.case == "table":
+                out = table()
+                on_root(comm, lambda: write_json(args.out, out))
+            else:
+                geo = replace(DEFAULT_BEAM, mesh_size=args.mesh_size)
+                out = (cantilever(args.alpha, geo, comm) if args.case == "cantilever"
+                       else rollup(args.theta, geo, comm))
+    except RuntimeError as exc:      # the beam did not converge: not the user's fault
+        if comm.rank == 0:
+            print(f"{ap.prog}: {exc}", file=sys.stderr)
+        return 1
+    if comm.rank != 0:
+        return 0
     if args.case == "table":
-        out = table()
-        if MPI.COMM_WORLD.rank == 0:
-            with open(args.out, "w") as f:
-                json.dump(out, f, indent=1)
+        summary = {k: out[k] for k in ("max_cantilever_error_over_L", "max_rollup_error_over_L",
+                                       "required")}
+        if args.json:
+            cli.print_json({**summary, "out": args.out})
+        else:
             print(f"max tip error: cantilever {100 * out['max_cantilever_error_over_L']:.3f}% L, "
                   f"roll-up {100 * out['max_rollup_error_over_L']:.3f}% L -> {args.out}")
-        return 0
-    geo = BeamGeometry(**{**asdict(DEFAULT_BEAM), "mesh_size": args.mesh_size})
-    try:
-        out = cantilever(args.alpha, geo) if args.case == "cantilever" else rollup(args.theta, geo)
-    except (ValueError, RuntimeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    if MPI.COMM_WORLD.rank == 0:
-        if args.json:
-            print(json.dumps(out))
-        else:
-            keys = ("u_over_L", "w_over_L") if args.case == "cantilever" else ("x_over_L", "y_over_L")
-            for k in keys + ("theta",):
-                print(f"{k:10s} FEM {out[k]: .5f}   exact {out['exact'][k]: .5f}")
-            print(f"tip error {100 * out['error_over_L']:.3f}% of L, Newton {out['newton_iterations']}")
+    elif args.json:
+        cli.print_json(out)
+    else:
+        _print_case(out)
     return 0
 
 

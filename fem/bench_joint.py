@@ -1,6 +1,9 @@
-"""FEM timing benchmark at the production mesh -> results/bench/fem.json.
+"""Solver timings of one joint at the production mesh -> results/bench/fem.json.
 
-    python -m fem.bench --out results/bench/fem.json
+    python -m fem.bench_joint --out results/bench/fem.json [--json]
+
+(The accuracy checks are ``fem.validation``; the campaign's throughput is
+``workflow.bench_campaign``.)
 
 Measures on one rank (the machine is noisy: medians of several solves in one run):
 
@@ -11,13 +14,12 @@ Measures on one rank (the machine is noisy: medians of several solves in one run
   random walk, as the campaign harvests samples), with the sensitivities included;
 * mesh figures: ``nodes`` (P2, incl. mid-side nodes), ``dofs``, vertices, element size.
 
-The paper's ANSYS figure is ~7 min per sample at 16,000 nodes (DESIGN.md §6).
+The paper's ANSYS figure is ~7 min per sample at 16,000 nodes (DESIGN.md §6). ``--json``
+prints the headline figures (SUMMARY_KEYS) that the text line shows.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import statistics
 import sys
@@ -26,11 +28,16 @@ import time
 import numpy as np
 from mpi4py import MPI
 
+from fem import cli
+from fem.files import write_json
 from fem.geometry import JointGeometry
-from fem.solver import INPUT_BOX, JointSolver, Load
+from fem.options import one_rank
+from fem.solver import JointSolver, Load
+from fem.spec import INPUT_BOX
 
 FROM_ZERO = [Load(0.2, 1.0, -1.0, 20.0), Load(-0.15, -1.0, 1.5, -40.0), Load(0.1, 2.0, 2.0, 60.0)]
 PAPER_SECONDS_PER_SAMPLE = 7 * 60
+SUMMARY_KEYS = ("nodes", "dofs", "solve_from_zero_s", "continuation_sample_s", "newton_iterations")
 
 
 def run(n_walk: int = 6, step: float = 0.1, seed: int = 0) -> dict:
@@ -76,17 +83,24 @@ def run(n_walk: int = 6, step: float = 0.1, seed: int = 0) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fem.bench", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default="results/bench/fem.json")
-    ap.add_argument("--walk", type=int, default=6, help="continuation samples to time")
-    ap.add_argument("--step", type=float, default=0.1, help="walk step, fraction of the box")
+    ap = cli.Parser(prog="python -m fem.bench_joint", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", suffix=".json", default="results/bench/fem.json",
+                  help="result file (default results/bench/fem.json)")
+    ap.add_argument("--walk", type=cli.number(1, 100, integer=True), default=6,
+                    help="continuation samples to time, in [1, 100] (default 6)")
+    ap.add_argument("--step", type=cli.number(0, 1, open_lo=True), default=0.1,
+                    help="walk step, fraction of the box in (0, 1] (default 0.1)")
+    one_rank(ap, MPI.COMM_WORLD)
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     out = run(args.walk, args.step)
-    with open(args.out, "w") as f:
-        json.dump(out, f, indent=1)
-    print(json.dumps({k: out[k] for k in ("nodes", "dofs", "solve_from_zero_s",
-                                          "continuation_sample_s", "newton_iterations")}))
+    with ap.errors():
+        write_json(args.out, out)
+    summary = {k: out[k] for k in SUMMARY_KEYS}
+    if args.json:
+        cli.print_json({**summary, "out": args.out})
+    else:
+        print(", ".join(f"{k} {v:g}" for k, v in summary.items()) + f" -> {args.out}")
     return 0
 
 

@@ -1,0 +1,82 @@
+"""Command-line pieces shared by the fem tools, on top of :mod:`fem.cli` (no dolfinx).
+
+* ``--mesh-size`` h (mm) in MESH_SIZE_RANGE = [0.3, 10]: finer meshes than 0.3 mm do not
+  fit in memory (the production 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser
+  ones than 10 mm no longer resolve the 2.5 mm valleys of the joint or the 2 mm beam.
+* the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the box
+  |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100 is checked by :func:`fem.spec.check_box` right
+  after parsing (before any mesh), unless ``--allow-extrapolation``.
+* :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
+  under mpirun ``with ap.errors():`` exits every rank with 2 and nothing hangs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fem import cli
+from fem.spec import INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
+
+MESH_SIZE_RANGE = (0.3, 10.0)  # mm
+MESH_SIZE = cli.number(*MESH_SIZE_RANGE, "mm")   # argparse type
+MESH_SIZE_TEXT = f"mm in [{MESH_SIZE_RANGE[0]:g}, {MESH_SIZE_RANGE[1]:g}]"
+LOAD_HELP = ("chamber pressure P, MPa (signed)", "axial end force F1, N",
+             "transverse end force F2, N", "end couple M about +z, N*mm")
+
+
+def add_mesh_size(ap: cli.Parser, default: float | None, what: str = "tetrahedron size") -> None:
+    """``--mesh-size`` in mm (None: the geometry's production default)."""
+    shown = "the production mesh" if default is None else f"{default:g}"
+    ap.add_argument("--mesh-size", type=MESH_SIZE, default=default,
+                    help=f"{what}, {MESH_SIZE_TEXT} (default {shown})")
+
+
+def add_load(ap: cli.Parser, default=(0.0, 0.0, 0.0, 0.0)) -> None:
+    """``--p --f1 --f2 --m`` (finite numbers) and ``--allow-extrapolation``."""
+    for name, unit, text, value in zip(INPUT_NAMES, INPUT_UNITS, LOAD_HELP, default):
+        ap.add_argument(f"--{name.lower()}", type=cli.number(unit=unit), default=value,
+                        help=f"{text} (default {value:g})")
+    add_extrapolation(ap)
+
+
+def add_extrapolation(ap: cli.Parser) -> None:
+    ap.add_argument("--allow-extrapolation", action="store_true",
+                    help="accept loads outside the training box (recorded as extrapolated)")
+
+
+def checked_loads(ap: cli.Parser, loads, allow_extrapolation: bool) -> np.ndarray:
+    """(n, 4) or (4,) loads as float64, or one error line naming the first value
+    outside the box (exit 2)."""
+    x = np.asarray(loads, dtype=np.float64)
+    try:
+        check_box(x, allow_extrapolation)
+    except OutOfBoxError as exc:
+        ap.error(exc)
+    return x
+
+
+def parsed_load(ap: cli.Parser, args) -> np.ndarray:
+    """The (4,) load of :func:`add_load`'s options, box-checked."""
+    return checked_loads(ap, [getattr(args, n.lower()) for n in INPUT_NAMES],
+                         args.allow_extrapolation)
+
+
+def one_rank(ap: cli.Parser, comm) -> None:
+    """Refuse to run under more than one rank (tools that solve on COMM_SELF); call it
+    before parsing, so that no output folder is created."""
+    if comm.size > 1:
+        ap.error(f"runs on one rank, not {comm.size} (start it without mpirun)")
+
+
+def on_root(comm, write) -> None:
+    """Call ``write()`` on rank 0 of ``comm``; a ValueError or OSError it raises is raised
+    on every rank (collective), so all ranks leave ``ap.errors()`` with the same code."""
+    error = None
+    if comm.rank == 0:
+        try:
+            write()
+        except (ValueError, OSError) as exc:
+            error = exc
+    error = comm.bcast(error, root=0) if comm.size > 1 else error
+    if error is not None:
+        raise error

@@ -1,0 +1,280 @@
+"""Bad input on every command line (issue 13): exit 2, one line on stderr, nothing written.
+
+Each row of CASES runs ``python -m MODULE ARGS`` in a subprocess, from the repository root,
+with every output pointed into a fresh folder ``{tmp}``. For each row it asserts:
+
+- exit code 2;
+- exactly one non-empty line on stderr, which contains the row's ``needle`` (the offending
+  value or option, so the user can see what to fix);
+- no traceback anywhere, and valid JSON or nothing on stdout;
+- nothing written: ``{tmp}`` is still empty, and ``git status`` of the repository is the
+  same after the whole table as before it.
+
+The rows run two at a time in a module fixture (about a minute and a half in all).
+
+Rows are grouped by package; ``{tmp}`` in an argument is replaced by the row's folder.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+       "OMP_NUM_THREADS": "1", "PYVISTA_OFF_SCREEN": "true"}
+
+# (module, args, needle): needle must appear in the one stderr line.
+CASES_FEM = [
+    # fem.solve: loads are finite numbers, checked against the box before any mesh
+    ("fem.solve", ["--p", "nan"], "--p: 'nan' is not a finite number"),
+    ("fem.solve", ["--p", "inf"], "--p: 'inf' is not a finite number"),
+    ("fem.solve", ["--p", "abc"], "--p: 'abc' is not a finite number"),
+    ("fem.solve", ["--p", "0.5"], "P = 0.5 is outside the training box"),
+    ("fem.solve", ["--p", "0.1", "--p", "0.2"], "--p given twice"),
+    ("fem.solve", ["--mesh-size", "nan"], "--mesh-size: 'nan' is not a finite number (allowed [0.3, 10] mm)"),
+    ("fem.solve", ["--mesh-size", "inf"], "--mesh-size: 'inf' is not a finite number"),
+    ("fem.solve", ["--mesh-size", "0"], "--mesh-size: 0 is outside [0.3, 10] mm"),
+    ("fem.solve", ["--bogus"], "unrecognized arguments: --bogus"),
+    ("fem.solve", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
+    ("fem.self_contact", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.self_contact", ["--loads", "0.1,0,0", "--out", "{tmp}/x.json"], "expected 4 comma-separated"),
+    ("fem.self_contact", ["--loads", "0,0,0,0", "0,0,0,120", "--out", "{tmp}/x.json"],
+     "M = 120 is outside the training box"),
+    ("fem.mesh_study", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.mesh_study", ["--sizes", "2", "2", "--out", "{tmp}/sub/x.json"], "give each value once"),
+    ("fem.bench_joint", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.bench_joint", ["--walk", "2.5", "--out", "{tmp}/x.json"], "--walk: '2.5' is not an integer"),
+    ("fem.validation", ["table", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.validation", ["cantilever", "--alpha", "nan"], "--alpha: 'nan' is not a finite number (allowed [0, 10])"),
+    ("fem.validation", ["rollup", "--theta", "7"], "--theta: 7 is outside [0, 6.2832] rad"),
+    ("fem.render", ["--out", "{tmp}/x.txt"], "expected a .png file"),
+    ("fem.render", ["--out", "/etc/passwd/x.png"], "cannot create /etc/passwd/x.png"),
+    ("fem.render", ["--m", "200", "--out", "{tmp}/x.png"], "M = 200 is outside the training box"),
+    # --- fem cases (end)
+]
+CASES_WORKFLOW = [
+    # workflow.campaign: every option checked before MPI starts; --out checked, not created
+    ("workflow.campaign", ["--samples", "nan", "--seed", "1", "--out", "{tmp}/d"],
+     "--samples: 'nan' is not an integer (allowed [1, inf])"),
+    ("workflow.campaign", ["--samples", "0", "--seed", "1", "--out", "{tmp}/d"], "--samples: 0 is outside [1, inf]"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--mesh-size", "inf", "--out", "{tmp}/d"],
+     "--mesh-size: 'inf' is not a finite number (allowed [0.3, 10] mm)"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--units", "5", "--out", "{tmp}/d"],
+     "--units: '5' is not A:B"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--units", "3:2", "--out", "{tmp}/d"],
+     "--units: 3:2 is not a unit range A:B with 0 <= A < B"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--units", "0:2", "--out", "{tmp}/d"],
+     "--units 0:2 outside 0:1"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--seed", "2", "--out", "{tmp}/d"], "--seed given twice"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--step", "abc", "--out", "{tmp}/d"],
+     "--step: 'abc' is not a finite number"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--bogus", "--out", "{tmp}/d"],
+     "unrecognized arguments: --bogus"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--out", "/etc/passwd/x"],
+     "cannot create /etc/passwd/x/manifest.json: /etc/passwd is not a folder"),
+    # another seed than the committed held-out set's: refused before the lock is taken
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "3", "--out", "results/data/heldout"],
+     "results/data/heldout holds a campaign of --seed 2, not --seed 3"),
+    # workflow.dataset: a folder that is not a dataset, bad --mirror, merge of a non-dataset
+    ("workflow.dataset", ["info", "/etc"], "/etc: no manifest.json (not a softjoint dataset)"),
+    ("workflow.dataset", ["verify", "/etc"], "/etc: no manifest.json (not a softjoint dataset)"),
+    ("workflow.dataset", ["verify", "--mirror", "-1", "results/data/heldout"], "--mirror: -1 is outside [0, inf]"),
+    ("workflow.dataset", ["verify", "--mirror", "nan", "results/data/heldout"], "--mirror: 'nan' is not an integer"),
+    ("workflow.dataset", ["merge", "{tmp}/m", "/etc"], "/etc: no manifest.json"),
+    ("workflow.dataset", ["merge", "/etc/passwd/m", "results/data/heldout"], "cannot create /etc/passwd/m/manifest.json"),
+    ("workflow.dataset", ["info", "results/data/heldout", "--json", "--json"], "--json given twice"),
+    # workflow.report / bench_campaign / profile_walk: outputs and numbers checked up front
+    ("workflow.report", ["--out", "/etc/passwd/x.md"], "cannot create /etc/passwd/x.md"),
+    ("workflow.report", ["--out", "{tmp}/x.txt"], "expected a .md file"),
+    ("workflow.report", ["--results", "/nonexistent", "--out", "{tmp}/x.md"], "--results /nonexistent: not a folder"),
+    ("workflow.bench_campaign", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("workflow.bench_campaign", ["--fresh", "nan", "--out", "{tmp}/x.json"], "--fresh: 'nan' is not an integer"),
+    ("workflow.bench_campaign", ["--unit-size", "1", "--out", "{tmp}/x.json"], "--unit-size: 1 is outside [2, inf]"),
+    ("workflow.profile_walk", ["--samples", "1"], "--samples: 1 is outside [2, inf]"),
+    ("workflow.profile_walk", ["--mesh-size", "nan"], "--mesh-size: 'nan' is not a finite number"),
+    # --- workflow cases (end)
+]
+CASES_SURROGATE = [
+    # surrogate.predict: finite numbers always; the box unless --allow-extrapolation;
+    # checkpoints of the integrity-checked surrogate kind only
+    ("surrogate.predict", ["--p", "nan", "--f1", "0", "--f2", "0", "--m", "0"],
+     "--p: 'nan' is not a finite number"),
+    ("surrogate.predict", ["--p", "nan", "--f1", "0", "--f2", "0", "--m", "0", "--allow-extrapolation"],
+     "--p: 'nan' is not a finite number"),
+    ("surrogate.predict", ["--p", "0.5", "--f1", "0", "--f2", "0", "--m", "0", "--json"],
+     "P = 0.5 is outside the training box"),
+    ("surrogate.predict", ["--p", "0", "--f1", "0", "--f2", "0", "--m", "inf"],
+     "--m: 'inf' is not a finite number"),
+    ("surrogate.predict", ["--p", "0", "--f1", "0", "--f2", "abc", "--m", "0"],
+     "--f2: 'abc' is not a finite number"),
+    ("surrogate.predict", ["--p", "0", "--f1", "0", "--f2", "0", "--m", "0", "--model", "/etc/hostname"],
+     "/etc/hostname: not a softjoint surrogate checkpoint"),
+    ("surrogate.predict", ["--p", "0", "--f1", "0", "--f2", "0", "--m", "0", "--model", "{tmp}/missing.pt"],
+     "{tmp}/missing.pt: surrogate checkpoint not found"),
+    ("surrogate.predict", ["--p", "0", "--p", "0.1", "--f1", "0", "--f2", "0", "--m", "0"], "--p given twice"),
+    ("surrogate.evaluate", ["--model", "/etc/hostname", "--data", "results/data/heldout", "--json"],
+     "/etc/hostname: not a softjoint surrogate checkpoint"),
+    ("surrogate.evaluate", ["--model", "results/surrogate/improved.pt", "--data", "/etc", "--json"],
+     "/etc: no manifest.json"),
+    ("surrogate.evaluate", ["--report", "--dir", "/etc/passwd/x"], "cannot create /etc/passwd/x"),
+    # surrogate.train: output, overrides and data are checked before any training
+    ("surrogate.train", ["--config", "paper", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
+    ("surrogate.train", ["--config", "paper", "--out", "{tmp}/x.json"], "expected a .pt file"),
+    ("surrogate.train", ["--config", "paper", "--out", "{tmp}/x.pt", "--set", "bogus=1"],
+     "--set bogus=1: unknown field 'bogus'"),
+    ("surrogate.train", ["--config", "paper", "--out", "{tmp}/x.pt", "--set", "lr=nan"],
+     "--set lr=nan: 'nan' is not a finite number"),
+    ("surrogate.train", ["--config", "paper", "--out", "{tmp}/x.pt", "--set", "lr=1", "--set", "lr=2"],
+     "--set lr given twice"),
+    ("surrogate.train", ["--config", "paper", "--out", "{tmp}/x.pt", "--data", "/etc"], "/etc: no manifest.json"),
+    ("surrogate.sweep", ["--dir", "/etc/passwd/sweep"], "cannot create /etc/passwd/sweep"),
+    ("surrogate.sweep", ["--dir", "{tmp}", "--data", "/etc"], "/etc: no manifest.json"),
+    ("surrogate.synthetic", ["--out", "{tmp}/ds", "--n", "0"], "--n: 0 is outside [1, 1e+07]"),
+    ("surrogate.synthetic", ["--out", "/etc/passwd/ds"], "cannot create /etc/passwd/ds"),
+    # --- surrogate cases (end)
+]
+CASES_PREDICTOR = [
+    # predictor.gesture: pressures, approach and object are checked while parsing, the
+    # plot's folder before the solve, the models on load
+    ("predictor.gesture", ["--p1", "nan", "--p2", "0"], "--p1: 'nan' is not a finite number (allowed [-0.3, 0.3] MPa)"),
+    ("predictor.gesture", ["--p1", "0.5", "--p2", "0"], "--p1: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "inf"], "--p2: 'inf' is not a finite number"),
+    ("predictor.gesture", ["--p1", "abc", "--p2", "0"], "--p1: 'abc' is not a finite number"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--approach", "nan,0", "--json"],
+     "--approach: 'nan' is not a finite number"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--approach", "1,2"], "--approach: 1 is outside [-0.3, 0.3] MPa"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=30,r=40"], "'r' given twice"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=nan"], "r=nan in object"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=-5"], "r=-5 in object"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "blob"], "unknown object 'blob'"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--plot", "/etc/passwd/x.png", "--json"],
+     "cannot create /etc/passwd/x.png"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--plot", "{tmp}/x.svg"], "expected a .png file"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--model", "/etc/hostname"],
+     "/etc/hostname: not a softjoint surrogate checkpoint"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--nn", "/etc/hostname", "--plot", "{tmp}/x.png"],
+     "/etc/hostname: not a softjoint NN predictor checkpoint"),
+    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--nn", "results/predictor/gravity_nn.pt",
+                           "--object", "circle"], "a 'softjoint-gravity-nn/1' file, expected a 'softjoint-contact-nn/1'"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--approach", "zero"],
+     "--method nn predicts the trained case only"),
+    ("predictor.gesture", ["--p1", "0", "--p1", "0.1", "--p2", "0"], "--p1 given twice"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
+    # predictor.nn / bench / figures: outputs and inputs refused before any training or solve
+    ("predictor.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
+    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],
+     "--epochs: 'nan' is not an integer"),
+    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "0"], "--epochs: 0 is outside [1, inf]"),
+    ("predictor.nn", ["--variant", "bogus", "--out", "{tmp}/x.pt"], "invalid choice: 'bogus'"),
+    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--model", "/etc/hostname"],
+     "/etc/hostname: not a softjoint surrogate checkpoint"),
+    ("predictor.bench", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("predictor.bench", ["--out", "{tmp}/x.json", "--nn-dir", "/etc"], "/etc/gravity_nn.pt: NN predictor checkpoint not found"),
+    ("predictor.bench", ["--out", "{tmp}/x.json", "--nn-dir", "{tmp}/none"], "--nn-dir: {tmp}/none is not a folder"),
+    ("predictor.figures", ["--out", "/etc/passwd"], "/etc/passwd is a file, not a folder"),
+    ("predictor.figures", ["--out", "/etc/passwd/figs"], "cannot create /etc/passwd/figs"),
+    ("predictor.figures", ["--out", "{tmp}", "--model", "/etc/hostname"], "/etc/hostname: not a softjoint surrogate"),
+    # predictor.atlas / inverse (issue 16): numbers, box, goal, object and outputs refused
+    # while parsing; an object intersecting the fingers where it is brought in, before the grid
+    ("predictor.atlas", ["--object", "circle", "--grid", "nan"], "--grid: 'nan' is not an integer"),
+    ("predictor.atlas", ["--object", "circle", "--grid", "1"], "--grid: 1 is outside [2, 201]"),
+    ("predictor.atlas", ["--object", "circle", "--box", "0.2,0.1,0,0.3"], "expected P1LO < P1HI"),
+    ("predictor.atlas", ["--object", "circle", "--box", "0,0.5,0,0.3"], "--box: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.atlas", ["--object", "circle", "--box", "0,inf,0,0.3"], "--box: 'inf' is not a finite number"),
+    ("predictor.atlas", ["--object", "blob"], "unknown object 'blob'"),
+    ("predictor.atlas", ["--object", "circle:q=1"], "bad object field 'q=1'"),
+    ("predictor.atlas", ["--object", "circle", "--plot", "{tmp}/x.svg"], "expected a .png file"),
+    ("predictor.atlas", ["--object", "circle", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("predictor.atlas", ["--object", "circle:x=40,y=-80", "--out", "{tmp}/x.json"],
+     "the object intersects the fingers at the approach gesture"),
+    ("predictor.atlas", ["--object", "circle", "--model", "/etc/hostname"],
+     "/etc/hostname: not a softjoint surrogate checkpoint"),
+    ("predictor.atlas", ["--grid", "3"], "the following arguments are required: --object"),
+    ("predictor.inverse", ["--goal", "grab"], "goal 'grab': use hold or tip:X,Y[,DEG]"),
+    ("predictor.inverse", ["--goal", "tip:1"], "goal 'tip:1': use hold or tip:X,Y[,DEG]"),
+    ("predictor.inverse", ["--goal", "tip:nan,-200"], "'nan' is not a finite number"),
+    ("predictor.inverse", ["--goal", "hold"], "--goal hold needs an --object"),
+    ("predictor.inverse", ["--goal", "tip:0,-200", "--least-pressure"], "apply to --goal hold only"),
+    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--min-normal", "-1"],
+     "--min-normal: -1 is outside [0, 10] N"),
+    ("predictor.inverse", ["--goal", "hold", "--object", "circle:x=40,y=-80", "--plot", "{tmp}/x.png"],
+     "the object intersects the fingers at the approach gesture"),
+    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--atlas", "/etc/hostname"],
+     "/etc/hostname: not a predictor.atlas JSON"),
+    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--plot", "/etc/passwd/x.png"],
+     "cannot create /etc/passwd/x.png"),
+    ("predictor.inverse", ["--goal", "hold", "--goal", "hold", "--object", "circle"], "--goal given twice"),
+    # --- predictor cases (end)
+]
+CASES = CASES_FEM + CASES_WORKFLOW + CASES_SURROGATE + CASES_PREDICTOR
+
+
+def _git_status() -> str:
+    return subprocess.run(["git", "status", "--porcelain", "--untracked-files=all"], cwd=ROOT,
+                          capture_output=True, text=True).stdout
+
+
+def _run(module: str, args: list[str], out: Path):
+    out.mkdir(parents=True)
+    argv = [a.replace("{tmp}", str(out)) for a in args]
+    return subprocess.run([PY, "-m", module, *argv], cwd=ROOT, env=ENV, capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Every row run once, two at a time (each is a short process, mostly imports), with
+    the repository's git status compared before and after the whole table."""
+    root = tmp_path_factory.mktemp("bad-input")
+    before = _git_status()
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        done = list(pool.map(lambda ic: (_run(ic[1][0], ic[1][1], root / str(ic[0])), root / str(ic[0])),
+                             enumerate(CASES)))
+    assert _git_status() == before, "a bad-input case changed the repository"
+    return done
+
+
+@pytest.mark.parametrize("index", range(len(CASES)),
+                         ids=[f"{m}:{' '.join(a)}"[:80] for m, a, _ in CASES])
+def test_bad_input_exits_2_with_one_line(index, runs):
+    (module, args, needle), (r, out) = CASES[index], runs[index]
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2, f"exit {r.returncode}; stderr:\n{r.stderr[-2000:]}"
+    assert len(lines) == 1, f"{len(lines)} stderr lines:\n{r.stderr[-2000:]}"
+    assert needle.replace("{tmp}", str(out)) in lines[0], lines[0]
+    assert "Traceback" not in r.stdout + r.stderr
+    assert "NaN" not in r.stdout and "Infinity" not in r.stdout
+    assert not any(out.iterdir()), f"wrote {sorted(p.name for p in out.rglob('*'))}"
+
+
+def _help(argv: list[str]):
+    return subprocess.run([PY, "-m", *argv, "--help"], cwd=ROOT, env=ENV, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_every_cli_has_help_and_json():
+    """Every ``python -m`` tool of the four packages answers --help (exit 0) and offers
+    --json (on the tool itself or on each of its subcommands)."""
+    tools = sorted({f"{p.parent.name}.{p.stem}" for p in ROOT.glob("*/*.py")
+                    if p.parent.name in ("fem", "workflow", "surrogate", "predictor")
+                    and "def main(" in p.read_text()})
+    assert len(tools) >= 15, tools
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        helps = dict(zip(tools, pool.map(lambda t: _help([t]), tools)))
+    for tool, r in helps.items():
+        assert r.returncode == 0, f"{tool} --help: exit {r.returncode}\n{r.stderr[-1000:]}"
+        if "--json" in r.stdout:
+            continue
+        # a tool with subcommands ({a,b,c} in its usage): each of them has the flag
+        subs = [s.strip() for s in r.stdout.split("{", 1)[1].split("}", 1)[0].split(",")] if "{" in r.stdout else []
+        assert subs, f"{tool}: no --json and no subcommands"
+        for sub in subs:
+            rs = _help([tool, sub])
+            assert rs.returncode == 0 and "--json" in rs.stdout, f"{tool} {sub}: no --json"

@@ -1,0 +1,100 @@
+"""Integrity of the checkpoint files (issue 13, DESIGN.md §5).
+
+Exact claims checked here:
+- a save/load round trip returns the payload unchanged (tensors bit-equal);
+- for every committed checkpoint (the surrogates and the three NN predictors), the file
+  with ANY single byte changed is refused by the project's own loader with a one-line
+  ValueError: every byte of the header line, 200 seeded random bytes of the archive and
+  its last byte are each flipped in turn; so are the truncated file, the file with one
+  byte appended and the empty file. (The loader compares the whole archive with the
+  header's sha256 and length, so no position can escape; the sample shows it does.)
+- a checkpoint of one kind is refused by the loader of another kind, and a plain
+  ``torch.save`` file (the pre-integrity format) is refused.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from surrogate import checkpoint, load_surrogate
+
+ROOT = Path(__file__).resolve().parents[1]
+SURROGATES = [ROOT / "results/surrogate/paper.pt", ROOT / "results/surrogate/improved.pt"]
+PREDICTORS = {"gravity_nn.pt": False, "gravity_nn_paper.pt": False, "contact_nn.pt": True}
+
+
+def _predictor_loader():
+    from predictor.joint import load_joint
+    from predictor.nn import load_predictor
+
+    joint = load_joint(str(ROOT / "results/surrogate/improved.pt"))
+    return lambda path, contact: load_predictor(path, joint, contact=contact)
+
+
+def _loaders():
+    """(committed path, loader(path)) for every committed checkpoint."""
+    out = [(p, load_surrogate) for p in SURROGATES]
+    load_nn = _predictor_loader()
+    for name, contact in PREDICTORS.items():
+        out.append((ROOT / "results/predictor" / name, lambda p, c=contact: load_nn(p, c)))
+    return out
+
+
+def _refused(loader, path: Path) -> str:
+    with pytest.raises(ValueError) as info:
+        loader(path)
+    message = str(info.value)
+    assert message and "\n" not in message, message
+    return message
+
+
+def test_round_trip_is_exact(tmp_path):
+    payload = {"w": torch.randn(5, 3, dtype=torch.float64), "config": {"widths": (2, 4), "lr": 1e-3},
+               "history": [1.0, 0.5], "name": "x"}
+    path = tmp_path / "a.pt"
+    checkpoint.save(path, "softjoint-test/1", payload)
+    back = checkpoint.load(path, "softjoint-test/1")
+    assert torch.equal(back["w"], payload["w"]) and back["config"] == payload["config"]
+    assert back["history"] == payload["history"] and back["name"] == "x"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.pt"]  # no temp file left behind
+    with pytest.raises(checkpoint.CheckpointError, match="expected a 'softjoint-other/1'"):
+        checkpoint.load(path, "softjoint-other/1")
+    torch.save(payload, tmp_path / "old.pt")
+    with pytest.raises(checkpoint.CheckpointError, match="no valid checkpoint header"):
+        checkpoint.load(tmp_path / "old.pt", "softjoint-test/1")
+
+
+@pytest.mark.parametrize("index", range(2 + len(PREDICTORS)))
+def test_no_flipped_byte_of_a_committed_checkpoint_loads(index, tmp_path):
+    path, loader = _loaders()[index]
+    loader(path)  # the intact file loads
+    data = path.read_bytes()
+    header = data.index(b"\n") + 1
+    rng = np.random.default_rng(index)
+    positions = sorted(set(range(header)) | set(rng.integers(header, len(data), 200).tolist())
+                       | {len(data) - 1})
+    bad = tmp_path / path.name
+    for pos in positions:
+        flipped = bytearray(data)
+        flipped[pos] ^= int(rng.integers(1, 256))
+        bad.write_bytes(bytes(flipped))
+        _refused(loader, bad)
+    for damaged in (data[: len(data) // 2], data + b"\0", b""):
+        bad.write_bytes(damaged)
+        _refused(loader, bad)
+
+
+def test_a_checkpoint_of_another_kind_is_refused(tmp_path):
+    load_nn = _predictor_loader()
+    surrogate = SURROGATES[1]
+    assert "softjoint-" in _refused(lambda p: load_nn(p, False), surrogate)
+    _refused(load_surrogate, ROOT / "results/predictor/gravity_nn.pt")
+    _refused(lambda p: load_nn(p, True), ROOT / "results/predictor/gravity_nn.pt")
+    _refused(lambda p: load_nn(p, False), ROOT / "results/predictor/contact_nn.pt")
+    foreign = tmp_path / "hostname.pt"
+    foreign.write_bytes(b"not a checkpoint\n")
+    _refused(load_surrogate, foreign)
