@@ -1,0 +1,14 @@
+"""Gripper gesture predictor (DESIGN.md §4). The grasp-planning API (predictor.api) is
+re-exported here: load_gripper, solve_gesture, grasp_atlas, inverse_pressures, Gripper,
+Gesture. They are loaded on first use, so that ``python -m predictor.<tool>`` does not
+import its own module twice (and importing predictor stays light: no torch, no dolfinx)."""
+
+__all__ = ["Gesture", "Gripper", "grasp_atlas", "inverse_pressures", "load_gripper", "solve_gesture"]
+
+
+def __getattr__(name):
+    if name in __all__:
+        from predictor import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'predictor' has no attribute {name!r}")

@@ -1,0 +1,71 @@
+"""Grasp planning from Python, without the command line.
+
+    from predictor import load_gripper, solve_gesture, grasp_atlas, inverse_pressures
+    g = load_gripper(object="circle")                 # committed surrogate, default placement
+    gesture = solve_gesture(g, 0.2, 0.3)              # Gesture: .summary() -> dict
+    atlas = grasp_atlas(g, grid=21)                   # predictor.atlas.Atlas: .summary(), .to_json()
+    answer = inverse_pressures(g, goal="hold", atlas=atlas)   # InverseResult: .summary()
+
+Units: pressures MPa, lengths mm (global frame of DESIGN.md §4, right finger), forces N.
+Every call goes through the same solver and history as ``predictor.gesture --object``
+(approach gesture APPROACH, then the pressure ramp); the objects are frozen dataclasses.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import torch
+
+from predictor import atlas as _atlas
+from predictor import inverse as _inverse
+from predictor.solve import GestureResult, SolverOptions, solve
+
+
+@dataclass(frozen=True)
+class Gripper:
+    """A gripper problem (predictor.statics.GripperProblem) and the spec it came from."""
+
+    problem: object
+    object_spec: str | None = None
+
+
+@dataclass(frozen=True)
+class Gesture:
+    """One solved gesture: ``result`` (a one-row GestureResult); summary() as in
+    ``predictor.gesture --json`` (tip mm, tip_angle_deg, contact_force_N, slip, ...)
+    plus ``state`` (predictor.atlas.STATES) and ``first_contact_MPa`` (None without an object)."""
+
+    result: GestureResult
+    state: str
+
+    def summary(self) -> dict:
+        return {**self.result.summary(0), "state": self.state,
+                "first_contact_MPa": None if self.result.first_contact is None else self.result.first_contact[0].tolist()}
+
+
+def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True) -> Gripper:
+    """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate
+    when present); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None:
+    no object). ValueError (one line) for a bad spec, model or a badly placed object."""
+    return Gripper(_atlas.load_problem(model, object, gravity), object)
+
+
+def solve_gesture(gripper: Gripper, p1: float, p2: float) -> Gesture:
+    """The equilibrium gesture at (p1, p2) MPa."""
+    res = solve(gripper.problem, torch.tensor([[p1, p2]], dtype=torch.float64))
+    return Gesture(res, _atlas.STATES[int(_atlas.classify(res, gripper.problem.contact.mu)[0][0])])
+
+
+def grasp_atlas(gripper: Gripper, grid: int = 61, box=_atlas.FULL_BOX,
+                options: SolverOptions = SolverOptions()) -> _atlas.Atlas:
+    """The grid x grid atlas over box (P1lo, P1hi, P2lo, P2hi) MPa (predictor.atlas)."""
+    return _atlas.grasp_atlas(gripper.problem, grid, box, options)
+
+
+def inverse_pressures(gripper: Gripper, goal: str = "hold", min_normal: float = 0.0, least_pressure: bool = False,
+                      atlas: _atlas.Atlas | None = None, box=_atlas.FULL_BOX) -> _inverse.InverseResult:
+    """Pressures for goal "hold" or "tip:X,Y[,DEG]" (mm, degrees), predictor.inverse;
+    atlas: this gripper's atlas for the starts (else a coarse one is solved)."""
+    g = dataclasses.replace(_inverse.parse_goal(goal), min_normal=min_normal, least_pressure=least_pressure)
+    return _inverse.inverse_pressures(_inverse.InverseProblem(gripper.problem, g, box), atlas)

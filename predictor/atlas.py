@@ -1,0 +1,292 @@
+"""Grasp atlas: where the gripper holds, slips or misses an object over its pressure plane.
+
+    python -m predictor.atlas --object SPEC --grid N [--box P1LO,P1HI,P2LO,P2HI]
+        [--model PATH] [--json] [--plot FILE.png] [--out FILE.json]
+
+Every (P1, P2) of an N x N grid over the pressure box (MPa, default the full |P| <= 0.3
+box) is solved along the same history as ``predictor.gesture --object``: the gripper
+settles at the approach gesture APPROACH = (-0.15, 0) MPa without the object, the object
+is brought in, and the pressures ramp straight to the target (predictor.solve). The whole
+grid is ONE batched ``solve`` call (its samples are independent, so each row equals a
+single-sample solve). Each point is classified
+
+    not_converged  the ramp solve failed (no gesture is reported);
+    no_contact     converged, total normal force N = 0;
+    slips          converged, N > 0, friction use u = |f|/(mu N) > 1 (statics: u = |λ|/mu);
+    holds          converged, N > 0, u <= 1;
+
+and records N (N), u, the fingertip (X, Y) mm of the right finger and the first-contact
+pressures along the ramp (GestureResult.first_contact, MPa, NaN when never). The friction
+margin is 1 - u (> 0 where the grasp holds).
+
+Data flow: GripperProblem (joint, object, approach) + grid -> ``grasp_atlas`` -> Atlas
+(arrays (N, N[, 2]) indexed [i, j] = (P1 = p1[i], P2 = p2[j]), plus the GestureResult of
+the flattened grid) -> ``Atlas.to_json()`` / ``save_atlas_figure``.
+
+Exit codes: 0 atlas written; 2 bad input (a bad number, box, object spec, unwritable
+output, an object that intersects the fingers at zero pressure or at the approach
+gesture), one line on stderr, before the grid solve.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from fem import cli
+from fem.files import write_json
+from fem.spec import PRESSURE_LIMIT
+from predictor.gripper import check_pressures
+from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
+from predictor.statics import GripperProblem, Obstacle
+
+STATES = ("no_contact", "holds", "slips", "not_converged")
+NO_CONTACT, HOLDS, SLIPS, NOT_CONVERGED = range(4)
+FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
+#: Issue 16's speed target (s per object, 61 x 61 grid, one thread).
+TARGET_S_PER_OBJECT = 10.0
+
+
+def classify(res: GestureResult, mu: float) -> tuple[np.ndarray, np.ndarray]:
+    """(state codes (B,) int into STATES, friction use u = |λ|/mu (B,), NaN without
+    contact or convergence) of a solve result."""
+    conv = res.converged.numpy()
+    normal = res.normal_force_N.numpy()
+    use = np.abs(res.friction_ratio.numpy()) / mu
+    state = np.where(~conv, NOT_CONVERGED, np.where(normal <= 0, NO_CONTACT,
+                                                    np.where(res.slip.numpy(), SLIPS, HOLDS)))
+    return state, np.where(conv & (normal > 0), use, np.nan)
+
+
+def placement_error(problem: GripperProblem) -> str | None:
+    """Why the object is badly placed, or None: it intersects the fingers where it is
+    brought in, i.e. at the approach gesture (or at zero pressure without one), a
+    gravity-loaded equilibrium without the object. (The default objects do intersect the
+    zero-pressure gesture, by design: statics.Obstacle.)"""
+    if problem.obstacle is None:
+        return None
+    free = GripperProblem(problem.joint, problem.params, None, problem.contact, problem.gravity)
+    p = (0.0, 0.0) if problem.approach is None else tuple(problem.approach)
+    res = solve(free, torch.tensor([p], dtype=torch.float64))
+    with torch.no_grad():
+        pen = float(problem.residual(res.pressures, torch.nan_to_num(res.tau)).contact.penetration[0])
+    if pen > 0:
+        where = "zero pressure" if problem.approach is None else f"the approach gesture ({p[0]:g}, {p[1]:g}) MPa"
+        return (f"the object intersects the fingers at {where} by {pen:.2f} mm: place it lower or "
+                "farther from the fingers")
+    return None
+
+
+@dataclass(frozen=True)
+class Atlas:
+    """Grasp atlas of one object (module docstring). p1, p2: (N,) MPa grid axes; state
+    (N, N) int (STATES); normal_N (N, N); friction_use (N, N) |f|/(mu N), NaN without
+    contact; tip (N, N, 2) mm (right finger, NaN unless converged); first_contact (N, N, 2)
+    MPa; result: the GestureResult of the flattened grid (row i*N + j); time_s: wall time
+    of the batched solve; obstacle, joint, mu, approach (MPa): what was solved."""
+
+    p1: np.ndarray
+    p2: np.ndarray
+    state: np.ndarray
+    normal_N: np.ndarray
+    friction_use: np.ndarray
+    tip: np.ndarray
+    first_contact: np.ndarray
+    result: GestureResult
+    time_s: float
+    obstacle: Obstacle | None
+    joint: str
+    mu: float
+    approach: tuple[float, float] | None = None
+
+    def index(self, p1: float, p2: float) -> int:
+        """Flat row of the grid point nearest to (p1, p2) MPa in ``result``."""
+        i, j = int(np.abs(self.p1 - p1).argmin()), int(np.abs(self.p2 - p2).argmin())
+        return i * len(self.p2) + j
+
+    def best_hold(self) -> int | None:
+        """Flat row of the holding point with the largest friction margin (least u), or None."""
+        use = np.where(self.state == HOLDS, self.friction_use, np.inf).ravel()
+        return int(use.argmin()) if np.isfinite(use.min()) else None
+
+    def counts(self) -> dict:
+        return {name: int((self.state == k).sum()) for k, name in enumerate(STATES)}
+
+    def summary(self) -> dict:
+        """Counts, the best holding point and the time, as plain JSON types."""
+        best = self.best_hold()
+        point = None if best is None else {
+            "pressures_MPa": self.result.pressures[best].tolist(),
+            "friction_use": float(self.friction_use.ravel()[best]),
+            "normal_force_N": float(self.normal_N.ravel()[best])}
+        return {"grid": len(self.p1), "counts": self.counts(), "best_hold": point, "time_s": self.time_s}
+
+    def to_json(self) -> dict:
+        """Everything (grid arrays as nested lists, NaN -> null by the JSON writer)."""
+        ob = self.obstacle
+        tau = self.result.tau.reshape(len(self.p1), len(self.p2), 2, 3)
+        return {**self.summary(), "joint": self.joint, "mu": self.mu,
+                "object": None if ob is None else {"kind": ob.kind, "a_mm": ob.a, "b_mm": ob.b, "x_mm": ob.x,
+                                                   "y_mm": ob.y, "angle_rad": ob.angle},
+                "approach_MPa": self.approach,
+                "states": list(STATES), "p1_MPa": self.p1.tolist(), "p2_MPa": self.p2.tolist(),
+                "state": self.state.tolist(), "normal_force_N": self.normal_N.tolist(),
+                "friction_use": self.friction_use.tolist(), "tip_mm": self.tip.tolist(),
+                "first_contact_MPa": self.first_contact.tolist(), "tau": tau.tolist(),
+                "targets": {"atlas_s_per_object": TARGET_S_PER_OBJECT},
+                "measured": {"atlas_s_per_object": self.time_s, "grid_points": int(self.state.size)}}
+
+
+def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
+                options: SolverOptions = SolverOptions()) -> Atlas:
+    """Solve the grid x grid atlas of ``problem`` (its object and approach) over
+    box = (P1lo, P1hi, P2lo, P2hi) MPa in one batched solve. Returns an Atlas."""
+    p1 = np.linspace(box[0], box[1], grid)
+    p2 = np.linspace(box[2], box[3], grid)
+    pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
+    t0 = time.perf_counter()
+    res = solve(problem, pressures, options)
+    elapsed = time.perf_counter() - t0
+    state, use = classify(res, problem.contact.mu)
+    shape = (grid, grid)
+    first = res.first_contact if res.first_contact is not None else torch.full((grid * grid, 2), float("nan"))
+    return Atlas(p1=p1, p2=p2, state=state.reshape(shape), normal_N=res.normal_force_N.numpy().reshape(shape),
+                 friction_use=use.reshape(shape), tip=res.pose.tip_end.numpy().reshape(*shape, 2),
+                 first_contact=first.numpy().reshape(*shape, 2), result=res, time_s=elapsed,
+                 obstacle=problem.obstacle, joint=problem.joint.name, mu=problem.contact.mu,
+                 approach=problem.approach)
+
+
+def marked_points(atlas: Atlas) -> list[tuple[int, str]]:
+    """A few grid rows to draw as gestures: the best hold, the slip point with the most
+    normal force and the no-contact point nearest the middle of the box."""
+    marks = []
+    best = atlas.best_hold()
+    if best is not None:
+        marks.append((best, "best hold"))
+    flat_state, normal = atlas.state.ravel(), atlas.normal_N.ravel()
+    slips = np.flatnonzero(flat_state == SLIPS)
+    if slips.size:
+        marks.append((int(slips[normal[slips].argmax()]), "slips"))
+    free = np.flatnonzero(flat_state == NO_CONTACT)
+    if free.size:
+        P = atlas.result.pressures.numpy()[free]
+        mid = np.array([atlas.p1.mean(), atlas.p2.mean()])
+        marks.append((int(free[np.abs(P - mid).sum(-1).argmin()]), "no contact"))
+    return marks
+
+
+def save_atlas_figure(path: str, atlas: Atlas) -> None:
+    """PNG: state map and friction-use map of the pressure plane with normal-force contours
+    and the marked points, and the marked points' gestures beside them."""
+    import matplotlib.colors as mcolors
+    import matplotlib.pyplot as plt
+
+    from predictor.plot import draw_gesture, save_figure
+
+    marks = marked_points(atlas)
+    fig, axes = plt.subplots(1, 2 + len(marks), figsize=(4.6 * (2 + len(marks)), 4.8))
+    ext = (atlas.p2[0], atlas.p2[-1], atlas.p1[0], atlas.p1[-1])
+    colours = ["#d9d9d9", "tab:green", "tab:orange", "k"]
+    ax = axes[0]
+    ax.imshow(atlas.state, origin="lower", extent=ext, aspect="auto",
+              cmap=mcolors.ListedColormap(colours), vmin=-0.5, vmax=3.5, interpolation="nearest")
+    ax.legend(handles=[plt.Rectangle((0, 0), 1, 1, color=c) for c in colours], labels=list(STATES),
+              fontsize=7, loc="lower left")
+    ax.set_title(f"{atlas.obstacle.kind if atlas.obstacle else 'no object'}: state", fontsize=9)
+    ax = axes[1]
+    im = ax.imshow(atlas.friction_use, origin="lower", extent=ext, aspect="auto", cmap="RdYlGn_r",
+                   vmin=0.0, vmax=2.0, interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="friction use |f|/(mu N)  (holds <= 1)")
+    ax.set_title("friction use; contours: normal force N", fontsize=9)
+    normal = np.where(atlas.state == NOT_CONVERGED, np.nan, atlas.normal_N)
+    for ax in axes[:2]:
+        if np.nanmax(normal, initial=0.0) > 0:
+            cs = ax.contour(atlas.p2, atlas.p1, normal, levels=6, colors="k", linewidths=0.7)
+            ax.clabel(cs, fontsize=6, fmt="%.2f")
+        for k, (row, label) in enumerate(marks):
+            p1, p2 = atlas.result.pressures[row].tolist()
+            ax.plot(p2, p1, "o", mfc="w", mec="k")
+            ax.annotate(str(k + 1), (p2, p1), xytext=(4, 4), textcoords="offset points", fontsize=8)
+        ax.set_xlabel("P2 (MPa)")
+        ax.set_ylabel("P1 (MPa)")
+    for k, (row, label) in enumerate(marks):
+        draw_gesture(axes[2 + k], atlas.result, row, atlas.obstacle)
+        p1, p2 = atlas.result.pressures[row].tolist()
+        axes[2 + k].set_title(f"{k + 1}: {label}, P = ({p1:+.2f}, {p2:+.2f}) MPa", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path, 110)
+
+
+def object_arg(text: str) -> str:
+    """--object: a spec checked while parsing (predictor.gesture's rule)."""
+    from predictor.gesture import _object
+
+    return _object(text)
+
+
+def box_arg(text: str) -> tuple[float, float, float, float]:
+    """--box P1LO,P1HI,P2LO,P2HI MPa, within |P| <= 0.3, each lo < hi."""
+    box = cli.numbers(4, -PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")(text)
+    if not (box[0] < box[1] and box[2] < box[3]):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected P1LO < P1HI and P2LO < P2HI")
+    return box
+
+
+def load_problem(model: str | None, spec: str | None, gravity: bool = True) -> GripperProblem:
+    """GripperProblem of ``predictor.gesture``'s defaults for a model path (None: the
+    committed surrogate when present, else analytic) and an object spec (None: no object);
+    ValueError (one line) for a badly placed object."""
+    from predictor.gesture import DEFAULT_SURROGATE
+    from predictor.joint import load_joint
+    from predictor.statics import parse_object
+
+    model = model or (str(DEFAULT_SURROGATE) if DEFAULT_SURROGATE.is_file() else "analytic")
+    problem = GripperProblem(load_joint(model), obstacle=parse_object(spec) if spec else None, gravity=gravity,
+                             approach=APPROACH if spec else None)
+    why = placement_error(problem)
+    if why:
+        raise ValueError(why)
+    return problem
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = cli.Parser(prog="python -m predictor.atlas", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--object", type=object_arg, required=True,
+                    help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
+    ap.add_argument("--grid", type=cli.number(2, 201, integer=True), default=61, help="N: N x N grid (default 61)")
+    ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (default the full box)")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate)")
+    ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
+    ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    with ap.errors():
+        problem = load_problem(args.model, args.object)
+        check_pressures(torch.tensor(args.box).reshape(2, 2).T)
+        atlas = grasp_atlas(problem, args.grid, args.box)
+        doc = {**atlas.to_json(), "spec": args.object}
+        if args.out:
+            write_json(args.out, doc)
+        if args.plot:
+            save_atlas_figure(args.plot, atlas)
+    print_figures({**atlas.summary(), "spec": args.object, "joint": atlas.joint}, args.json)
+    return 0
+
+
+def print_figures(out: dict, as_json: bool) -> None:
+    """A planning tool's figures: strict JSON, or one ``key: value`` line each."""
+    if as_json:
+        cli.print_json(out)
+        return
+    width = max(map(len, out))
+    for key, value in out.items():
+        print(f"{key:>{width}}: {value}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

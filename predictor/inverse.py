@@ -1,0 +1,640 @@
+"""Inverse pressures: which (P1, P2) hold an object, or put the fingertip where asked.
+
+    python -m predictor.inverse --goal hold --object SPEC [--min-normal N] [--least-pressure]
+        [--atlas ATLAS.json] [--model PATH] [--json] [--plot FILE.png]
+    python -m predictor.inverse --goal tip:X,Y[,DEG] [--object SPEC] ...
+
+Goals (right finger; lengths mm in the global frame of DESIGN.md §4, pressures MPa):
+
+Every goal is a least-squares one, f = |e|² with a goal residual e:
+
+- ``hold``: the grasp with the largest friction margin, i.e. the least friction use
+  u = |λ|/mu (statics.contact_loads; it holds when u <= 1): e = (u); with
+  ``--min-normal N0`` e gains 10·max(0, 1 - N/N0); with ``--least-pressure`` instead
+  e = (P1/0.3, P2/0.3, √1000·max(0, u - (1 - HOLD_MARGIN))) (+ the normal term): the
+  least pressure that holds with a friction margin of HOLD_MARGIN.
+- ``tip:X,Y[,DEG]``: the fingertip at (X, Y) mm, and its tip angle at DEG degrees (the
+  ``tip_angle_deg`` of ``predictor.gesture --json``, the direction of the rigid tip):
+  e = (x_tip - X, y_tip - Y[, l_tip·(phi_2 - DEG)]) mm. With DEG the goal has three
+  conditions for two pressures: it is met only where the target lies on the reachable
+  surface (within TIP_TOL_MM), else it is answered ``infeasible`` with its least-squares
+  closest gesture.
+
+Gradients go through the equilibrium itself. At a converged gesture the scaled residual
+r(tau, P) = 0 (predictor.solve, 6 equilibrium rows; the range penalties are inactive),
+so by the implicit function theorem
+
+    d tau/dP = -(dr/dtau)⁻¹ dr/dP                                    (6 x 2)
+    de/dP    = ∂e/∂P + ∂e/∂tau · d tau/dP                              (k x 2)
+    df/dP    = ∂f/∂P - λᵀ dr/dP,  (dr/dtau)ᵀ λ = ∂f/∂tau   (adjoint form, one 6 x 6 solve)
+with dr/dtau and dr/dP from the solver's exact
+autograd Jacobian (solve._jacobian_fn) at the converged point: no unrolled iterations.
+Moving P moves the equilibrium by continuation (solve's tangent predictor + LM, cut back
+when a step fails), which keeps the grasp on its branch.
+
+Search: multi-start from the best points of a coarse atlas (predictor.atlas; the
+object's committed atlas with ``--atlas``, else a COARSE x COARSE grid solved on the
+spot), the pressure box as bounds, a projected Gauss-Newton on the goal residual e
+(Levenberg-damped, steps capped at 0.1 MPa, 0.05 with an object, backtracking); the
+starts stop early once one meets the goal exactly (``_exact``). Candidates are verified,
+best first, by a forward solve along the ramp from the approach gesture (predictor.solve,
+the history of ``predictor.gesture``) and refused if that solve disagrees (state, or tip
+farther than VERIFY_TOL_MM); the first robust one is the answer. Robustness: the 8
+neighbours at ±REGULATOR MPa (the regulators' resolution) are solved by continuation
+from the verified gesture (the pressure error of a regulator acts on the settled grasp)
+and the answer is robust when all 9 points keep the goal's state; robust candidates are
+preferred.
+
+Answers: ``feasible`` (exit 0), or ``infeasible`` (exit 1) with the closest achievable
+value (the nearest tip and its error; the best friction use found); exit 2 is bad input
+only (bad numbers, goal, object spec, an object intersecting the fingers where it is
+brought in, unwritable outputs), one line on stderr, before any solve.
+
+Data flow: InverseProblem (GripperProblem + Goal + box) -> ``inverse_pressures`` ->
+InverseResult (status, pressures, achieved values, verification, robustness, timings).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from fem import cli
+from fem.files import write_json
+from predictor.atlas import FULL_BOX, HOLDS, STATES, Atlas, classify, grasp_atlas
+from predictor.solve import (GestureResult, SolverOptions, _advance, _jacobian_fn, _levenberg_marquardt,
+                             _residual_fn, solve)
+from predictor.statics import GripperProblem
+
+REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
+HOLD_MARGIN = 0.2  # friction margin 1 - u required by --least-pressure
+TIP_TOL_MM = 0.1  # a tip goal is reached when |e| <= this (mm)
+VERIFY_TOL_MM = 0.05  # the ramp solve must put the tip within this of the continuation's
+LEAST_PRESSURE_SLACK = 0.01
+COARSE = 5  # coarse start grid without an atlas
+N_STARTS = 3
+START_SEPARATION = 0.05  # MPa (max norm) between two starts
+#: Issue 16's speed targets (ms per single query, one thread).
+TARGET_TIP_MS, TARGET_HOLD_MS = 100.0, 1000.0
+
+
+@dataclass(frozen=True)
+class Goal:
+    """kind: hold | tip. tip: (X, Y) mm; angle_deg: tip angle (deg) or None; min_normal:
+    N (hold); least_pressure: the least-pressure hold instead of the largest margin."""
+
+    kind: str = "hold"
+    tip: tuple[float, float] | None = None
+    angle_deg: float | None = None
+    min_normal: float = 0.0
+    least_pressure: bool = False
+
+
+def parse_goal(text: str) -> Goal:
+    """``hold`` or ``tip:X,Y[,DEG]`` (mm, degrees); ValueError with a one-line reason."""
+    kind, _, rest = text.strip().partition(":")
+    if kind == "hold" and not rest:
+        return Goal("hold")
+    if kind == "tip":
+        parts = rest.split(",")
+        if len(parts) in (2, 3):
+            vals = [cli.number(unit="mm or deg")(p.strip()) for p in parts]
+            return Goal("tip", (vals[0], vals[1]), vals[2] if len(parts) == 3 else None)
+    raise ValueError(f"goal {text!r}: use hold or tip:X,Y[,DEG] (mm, degrees)")
+
+
+@dataclass(frozen=True)
+class InverseProblem:
+    """The question: problem (joint, object, gravity, approach), goal, box (P1lo, P1hi,
+    P2lo, P2hi) MPa, solver options of the forward solves."""
+
+    problem: GripperProblem
+    goal: Goal
+    box: tuple[float, float, float, float] = FULL_BOX
+    options: SolverOptions = SolverOptions()
+
+    def __post_init__(self):
+        if self.goal.kind == "hold" and self.problem.obstacle is None:
+            raise ValueError("--goal hold needs an --object")
+
+
+@dataclass(frozen=True)
+class InverseResult:
+    """status: feasible | infeasible; pressures (P1, P2) MPa of the answer (or of the
+    closest achievable value when infeasible); state (atlas STATES); tip (X, Y) mm and
+    tip_angle_deg; tip_error_mm (tip goals); normal_N, friction_use (|f|/(mu N)); objective
+    f; verified: the ramp solve agreed; robust: the goal's state holds on the ±REGULATOR
+    stencil; stencil_states (9, centre first); candidates: starts tried; time_ms: whole
+    query; reason: one line; gesture: the verifying GestureResult."""
+
+    status: str
+    pressures: tuple[float, float]
+    state: str
+    tip: tuple[float, float]
+    tip_angle_deg: float
+    tip_error_mm: float | None
+    normal_N: float
+    friction_use: float | None
+    objective: float
+    verified: bool
+    robust: bool
+    stencil_states: tuple[str, ...]
+    candidates: int
+    time_ms: float
+    reason: str
+    gesture: GestureResult | None = None
+
+    def summary(self) -> dict:
+        """Plain JSON types (the gesture omitted)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "gesture"}
+
+
+class _Branch:
+    """An equilibrium (P (1, 2), x (1, 6), Jacobians) moved by continuation."""
+
+    def __init__(self, ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
+        prob, opts = ip.problem, ip.options
+        self.problem, self.opts = prob, opts
+        self.jac_fn = _jacobian_fn(_residual_fn(prob))
+        cap = None if prob.obstacle is None else opts.contact_max_step
+        # The search iterates need only stay on the branch (solve's intermediate ramp steps
+        # use the same 100x looser tolerance); refine() converges the answer fully.
+        self.loose = dataclasses.replace(opts, tol_force=100 * opts.tol_force, tol_moment=100 * opts.tol_moment)
+        self.tol = self.loose
+
+        def run(x, p, p_prev=None, jac=None):
+            x, ok, its, jac = _levenberg_marquardt(self.jac_fn, x, p, self.tol, cap, p_prev, jac)
+            if prob.obstacle is not None:  # the solver's tunnelling guard
+                with torch.no_grad():
+                    ok = ok & (prob.residual(p, x.reshape(-1, 2, 3)).contact.penetration <= opts.max_penetration)
+            return x, ok, its, jac
+
+        self.run = run
+        self.p, self.x = p.reshape(1, 2).double(), x.reshape(1, 6).double()
+        J, _, Jp = self.jac_fn(self.x, self.p)
+        self.jac = (J[:, :6], Jp)
+
+    def move(self, p: torch.Tensor) -> bool:
+        """Continue the equilibrium to p (1, 2); False (and unchanged) if it fails."""
+        p = p.reshape(1, 2).double()
+        if torch.equal(p, self.p):
+            return True
+        x, ok, _, jac = _advance(self.run, self.x, self.p, p, self.opts.cutbacks, self.jac)
+        if not bool(ok.all()):
+            return False
+        self.p, self.x, self.jac = p, x, jac
+        return True
+
+    def save(self):
+        return self.p, self.x, self.jac
+
+    def restore(self, state) -> None:
+        self.p, self.x, self.jac = state
+
+    def refine(self) -> bool:
+        """Converge the current point to the full solver tolerance."""
+        self.tol = self.opts
+        x, ok, _, jac = self.run(self.x, self.p)
+        if bool(ok.all()):
+            self.x, self.jac = x, jac
+        return bool(ok.all())
+
+    def neighbours(self, ps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Continue to each of ps (n, 2) from this point, batched: (x (n, 6), converged (n,))."""
+        n = ps.shape[0]
+        x, ok, _, _ = _advance(self.run, self.x.expand(n, 6), self.p.expand(n, 2), ps.double(),
+                               self.opts.cutbacks, tuple(a.expand(n, *a.shape[1:]) for a in self.jac))
+        return x, ok
+
+
+def _goal_terms(ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
+    """(f (), goal residual e (k,) with f = |e|², statics) at p (1, 2), x (1, 6);
+    differentiable in both (module docstring: every goal is a least-squares one)."""
+    prob, goal = ip.problem, ip.goal
+    st = prob.residual(p, x.reshape(1, 2, 3))
+    if goal.kind == "tip":
+        tip = st.pose.tip_end[0]
+        e = [tip[0] - goal.tip[0], tip[1] - goal.tip[1]]
+        if goal.angle_deg is not None:
+            e.append(prob.params.tip_length * (st.pose.phi[0, 1] - math.radians(goal.angle_deg)))
+    else:
+        c = st.contact
+        use = c.ratio[0].abs() / prob.contact.mu
+        if goal.least_pressure:
+            e = [p[0, 0] / 0.3, p[0, 1] / 0.3, math.sqrt(1000.0) * (use - (1.0 - HOLD_MARGIN)).clamp_min(0.0)]
+        else:
+            e = [use]
+        if goal.min_normal > 0:
+            e.append(10.0 * (1.0 - c.normal[0] / goal.min_normal).clamp_min(0.0))
+    e = torch.stack(e)
+    return (e * e).sum(), e, st
+
+
+def gradient(ip: InverseProblem, branch: _Branch):
+    """At the branch's converged point: (f, df/dP (2,), e (k,), de/dP (k, 2)) by the
+    implicit function theorem (module docstring)."""
+    p = branch.p.clone().requires_grad_(True)
+    x = branch.x.clone().requires_grad_(True)
+    J, Jp = branch.jac[0][0], branch.jac[1][0]  # (6, 6), (6, 2)
+    with torch.enable_grad():
+        f, e, _ = _goal_terms(ip, p, x)
+        gx, gp = torch.autograd.grad(f, (x, p), retain_graph=True)
+        df = gp[0] - Jp.T @ torch.linalg.solve(J.T, gx[0])  # adjoint form
+        rows = [torch.autograd.grad(ek, (x, p), retain_graph=True, allow_unused=True) for ek in e]
+        zero = torch.zeros(1, 6, dtype=torch.float64), torch.zeros(1, 2, dtype=torch.float64)
+        rows = [tuple(z if g is None else g for g, z in zip(r, zero)) for r in rows]
+        ex = torch.stack([r[0][0] for r in rows])  # (k, 6)
+        ep = torch.stack([r[1][0] for r in rows])  # (k, 2)
+        de = ep - ex @ torch.linalg.solve(J, Jp)  # d tau/dP = -J⁻¹ dr/dP
+    return float(f.detach()), df.detach(), e.detach(), de
+
+
+def _clip(ip: InverseProblem, p: np.ndarray) -> np.ndarray:
+    return np.clip(p, [ip.box[0], ip.box[2]], [ip.box[1], ip.box[3]])
+
+
+MAX_STEP = 0.1  # MPa: Gauss-Newton step cap (the tip map folds where d tip/dP is singular)
+MAX_STEP_CONTACT = 0.05  # MPa: with an object, continuation steps stay short
+STALL = 1e-3  # stop when a Gauss-Newton step gains less than this fraction of f
+
+
+def _gauss_newton(ip: InverseProblem, branch: _Branch) -> None:
+    """Projected Gauss-Newton (Levenberg-damped, capped, backtracking) on f = |e|² from the
+    branch, within the box: a component at a bound whose step points out is held there
+    and the other one moves alone (sliding along the bound)."""
+    f, _, e, de = gradient(ip, branch)
+    damp = 1e-9
+    cap = MAX_STEP if ip.problem.obstacle is None else MAX_STEP_CONTACT
+    # with contact the friction use is rough in P (USE_RESOLUTION): a few steps gain all there is
+    max_iter = 12 if ip.problem.obstacle is None else 6
+    lo, hi = np.array([ip.box[0], ip.box[2]]), np.array([ip.box[1], ip.box[3]])
+    for _ in range(max_iter):
+        if f <= _exact(ip):
+            return
+        A = de.T @ de + damp * torch.eye(2, dtype=torch.float64)
+        step = -torch.linalg.solve(A, de.T @ e).numpy()
+        p0, here = branch.p[0].numpy().copy(), branch.save()
+        stuck = ((p0 <= lo) & (step < 0)) | ((p0 >= hi) & (step > 0))
+        if stuck.any() and not stuck.all():
+            k = int(np.flatnonzero(~stuck)[0])
+            step = np.zeros(2)
+            step[k] = -float(de[:, k] @ e) / float(de[:, k] @ de[:, k] + damp)
+        step *= min(1.0, cap / max(np.abs(step).max(), 1e-300))
+        for _ in range(6):  # backtrack: the bounds and the contact branch may cut the step
+            p_try = _clip(ip, p0 + step)
+            if np.abs(p_try - p0).max() <= 1e-9:
+                return
+            if branch.move(torch.from_numpy(p_try)):
+                f_try, _, e_try, de_try = gradient(ip, branch)
+                if f_try < f:
+                    stalled = f_try > (1.0 - STALL) * f  # a minimum with e != 0 (a bound, a fold)
+                    f, e, de = f_try, e_try, de_try
+                    break
+                branch.restore(here)
+            step *= 0.5
+        else:
+            return
+        if stalled:
+            return
+
+
+USE_RESOLUTION = 0.02  # friction use below which a hold cannot be bettered meaningfully
+
+
+def _exact(ip: InverseProblem) -> float:
+    """f below which an answer cannot be bettered (stop the search): a tip within
+    0.1 TIP_TOL_MM; a friction use below USE_RESOLUTION (at that level u is rough in P,
+    by ~0.01, as the tip's 65 contact sample points enter and leave contact: measured on
+    the circle along P2 = 0.3 MPa); never for --least-pressure."""
+    if ip.goal.kind == "tip":
+        return (0.1 * TIP_TOL_MM) ** 2
+    return -1.0 if ip.goal.least_pressure else USE_RESOLUTION ** 2
+
+
+def _result_at(ip: InverseProblem, res: GestureResult, i: int) -> dict:
+    """Achieved values of row i of a solve result."""
+    state, use = classify(res, ip.problem.contact.mu)
+    tip = res.pose.tip_end[i].tolist()
+    out = {"pressures": tuple(res.pressures[i].tolist()), "state": STATES[state[i]], "tip": tuple(tip),
+           "tip_angle_deg": math.degrees(float(res.pose.phi[i, 1])), "normal_N": float(res.normal_force_N[i]),
+           "friction_use": None if math.isnan(use[i]) else float(use[i]), "tip_error_mm": None}
+    if ip.goal.kind == "tip":
+        err = math.hypot(tip[0] - ip.goal.tip[0], tip[1] - ip.goal.tip[1])
+        if ip.goal.angle_deg is not None:
+            err = math.hypot(err, ip.problem.params.tip_length * math.radians(out["tip_angle_deg"] - ip.goal.angle_deg))
+        out["tip_error_mm"] = err
+    return out
+
+
+def _meets(ip: InverseProblem, v: dict) -> bool:
+    """Does an achieved value meet the goal?"""
+    if ip.goal.kind == "tip":
+        ok = v["tip_error_mm"] is not None and v["tip_error_mm"] <= TIP_TOL_MM
+        return ok and (ip.problem.obstacle is None or v["state"] != "not_converged")
+    ok = v["state"] == "holds" and v["normal_N"] >= ip.goal.min_normal
+    # least pressure: the margin is a penalty term, met to within LEAST_PRESSURE_SLACK
+    return ok and (not ip.goal.least_pressure or v["friction_use"] <= 1.0 - HOLD_MARGIN + LEAST_PRESSURE_SLACK)
+
+
+def _starts(ip: InverseProblem, atlas: Atlas | None) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """The N_STARTS best converged grid points, START_SEPARATION apart, of the atlas (or of a coarse one)
+    for the goal: (pressures (2,), tau (6,)) each."""
+    if atlas is None:
+        atlas = grasp_atlas(ip.problem, COARSE, ip.box, ip.options)
+    res = atlas.result
+    ok = res.converged
+    if ip.goal.kind == "hold":
+        state, use = atlas.state.ravel(), atlas.friction_use.ravel()
+        score = np.where(state == HOLDS, use, np.where(np.isnan(use), np.inf, 1.0 + use))
+        if ip.goal.least_pressure:
+            lightest = np.abs(res.pressures.numpy()).sum(-1) + (use > 1 - HOLD_MARGIN)
+            score = np.where(state == HOLDS, lightest, score + 10)
+        if ip.goal.min_normal > 0:
+            score = score + 10.0 * (atlas.normal_N.ravel() < ip.goal.min_normal)
+        score = torch.from_numpy(score)
+    else:
+        e = res.pose.tip_end - torch.tensor(ip.goal.tip, dtype=torch.float64)
+        score = e.pow(2).sum(-1)
+        if ip.goal.angle_deg is not None:
+            score = score + (ip.problem.params.tip_length * (res.pose.phi[:, 1] - math.radians(ip.goal.angle_deg))) ** 2
+    score = torch.where(ok, score, torch.inf)
+    chosen = []
+    for i in torch.argsort(score).tolist():
+        if not torch.isfinite(score[i]) or len(chosen) == N_STARTS:
+            break
+        # distinct starts: neighbours of a chosen grid point lead to the same local optimum
+        if all(float((res.pressures[i] - res.pressures[j]).abs().max()) >= START_SEPARATION for j in chosen):
+            chosen.append(i)
+    return [(res.pressures[i], res.tau[i].reshape(6)) for i in chosen]
+
+
+def _verified(ip: InverseProblem, ver: GestureResult, branch: _Branch, f: float) -> dict:
+    """A candidate (the continuation's ``branch``, objective f) against its forward ramp
+    solve ``ver`` (one row): the achieved values, verified (converged, tip within
+    VERIFY_TOL_MM, same contact and hold state) and meets (verified and the goal met)."""
+    v = _result_at(ip, ver, 0)
+    with torch.no_grad():
+        st = ip.problem.residual(branch.p, branch.x.reshape(1, 2, 3))
+    c = st.contact
+    agree = bool(ver.converged[0]) and float((ver.pose.tip_end[0] - st.pose.tip_end[0]).norm()) <= VERIFY_TOL_MM
+    if ip.problem.obstacle is not None:
+        agree = agree and (float(c.normal[0]) > 0) == (v["state"] != "no_contact")
+        agree = agree and (float(c.normal[0]) > 0 and not bool(c.slip[0])) == (v["state"] == "holds")
+    return dict(v, objective=f, verified=agree, meets=agree and _meets(ip, v), index=0, gesture=ver)
+
+
+def _stencil(ip: InverseProblem, ver: GestureResult, cand: dict) -> dict:
+    """Robustness of a candidate: its 8 ±REGULATOR neighbours (clipped to the box) by
+    continuation from the verified ramp gesture (or just its verification state when the
+    ramp solve failed). Returns robust, stencil_states (centre first)."""
+    if not cand["verified"]:
+        return {"robust": False, "stencil_states": (cand["state"],)}
+    i = cand["index"]
+    branch = _Branch(ip, ver.pressures[i], ver.tau[i])
+    d = REGULATOR * torch.tensor([(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
+                                 dtype=torch.float64)
+    ps = torch.from_numpy(_clip(ip, (branch.p + d).numpy()))
+    xs, ok = branch.neighbours(ps)
+    with torch.no_grad():
+        st = ip.problem.residual(ps, xs.reshape(-1, 2, 3))
+    c, mu = st.contact, ip.problem.contact.mu
+    slips = (c.ratio.abs() > mu) | c.slip
+    states = ["not_converged" if not o else "no_contact" if n <= 0 else "slips" if sl else "holds"
+              for o, n, sl in zip(ok.tolist(), c.normal.tolist(), slips.tolist())]
+    # hold goals must keep holding; tip goals must keep their contact state
+    want = "holds" if ip.goal.kind == "hold" else cand["state"]
+    return {"robust": cand["meets"] and all(s == want for s in states),
+            "stencil_states": (cand["state"],) + tuple(states)}
+
+
+def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> InverseResult:
+    """Answer ``ip`` (module docstring); ``atlas``: the object's atlas for the starts (its
+    problem must be ip.problem), else a coarse one is solved. Returns an InverseResult."""
+    t0 = time.perf_counter()
+    starts = _starts(ip, atlas)
+    cands = []
+    for p, x in starts:
+        branch = _Branch(ip, p, x)
+        _gauss_newton(ip, branch)
+        branch.refine()
+        cands.append((branch.p[0].clone(), branch))
+        if gradient(ip, branch)[0] <= _exact(ip):
+            break  # the goal is met exactly (up to verification): more starts cannot beat it
+    if not cands:
+        raise ValueError("no converged start point in the atlas: nothing to search from")
+    # Verify the candidates best first, each by a forward solve along the ramp, and stop at
+    # the first that meets the goal robustly (±REGULATOR stencil): robust answers are
+    # preferred, then goal-meeting ones, then the least objective.
+    scored = []
+    for p, branch in cands:
+        with torch.no_grad():
+            scored.append((float(_goal_terms(ip, branch.p, branch.x)[0]), p, branch))
+    checked = []
+    for f, p, branch in sorted(scored, key=lambda t: t[0]):
+        ver = solve(ip.problem, p[None], ip.options)
+        cand = _verified(ip, ver, branch, f)
+        cand.update(_stencil(ip, ver, cand) if cand["meets"] else
+                    {"robust": False, "stencil_states": (cand["state"],)})
+        checked.append(cand)
+        if cand["robust"]:
+            break
+    cand = min(checked, key=lambda c: (not c["meets"], not c["robust"], c["objective"]))
+    robust, stencil = cand["robust"], cand["stencil_states"]
+    if cand["meets"]:
+        reason = "goal met, verified by the ramp solve" + ("; robust to ±0.01 MPa" if robust else
+                                                          "; NOT robust to the regulators' ±0.01 MPa")
+    elif ip.goal.kind == "tip":
+        reason = (f"unreachable: the closest achievable tip is {cand['tip_error_mm']:.2f} mm away "
+                  f"(tolerance {TIP_TOL_MM} mm)")
+    else:
+        reason = ("no pressure in the box holds the object: best friction use "
+                  f"{cand['friction_use'] if cand['friction_use'] is not None else float('nan'):.3f} (holds <= 1)")
+    return InverseResult(
+        status="feasible" if cand["meets"] else "infeasible", pressures=cand["pressures"], state=cand["state"],
+        tip=cand["tip"], tip_angle_deg=cand["tip_angle_deg"], tip_error_mm=cand["tip_error_mm"],
+        normal_N=cand["normal_N"], friction_use=cand["friction_use"], objective=cand["objective"],
+        verified=cand["verified"], robust=robust, stencil_states=stencil, candidates=len(cands),
+        time_ms=1e3 * (time.perf_counter() - t0), reason=reason, gesture=cand["gesture"])
+
+
+def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
+    """An Atlas (with a GestureResult of its converged tau) from predictor.atlas --out
+    JSON; ValueError (one line) for a file that is not an atlas of this object."""
+    try:
+        doc = json.loads(Path(path).read_text())
+        p1, p2 = np.array(doc["p1_MPa"], float), np.array(doc["p2_MPa"], float)
+        tau = torch.tensor(np.array(doc["tau"], dtype=float), dtype=torch.float64).reshape(-1, 2, 3)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a predictor.atlas JSON ({type(exc).__name__})") from None
+    ob = problem.obstacle
+    want = None if ob is None else [ob.kind, ob.a, ob.b, ob.x, ob.y, ob.angle]
+    got = None if doc.get("object") is None else [doc["object"][k] for k in
+                                                 ("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad")]
+    if want != got or doc.get("joint") != problem.joint.name:
+        raise ValueError(f"{path}: an atlas of another object or joint ({doc.get('object')}, {doc.get('joint')})")
+    pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
+    ok = ~tau.reshape(-1, 6).isnan().any(-1)
+    # Re-evaluate the stored equilibria (no solve): the same figures as the atlas run.
+    with torch.no_grad():
+        st = problem.residual(pressures, torch.nan_to_num(tau))
+    nan = torch.full_like(st.contact.normal, float("nan"))
+    res = GestureResult(pressures=pressures, tau=tau, converged=ok, residual_force_mN=nan, residual_moment_Nmm=nan,
+                        normal_force_N=st.contact.normal, friction_N=st.contact.friction,
+                        friction_ratio=st.contact.ratio, slip=st.contact.slip, iterations=torch.zeros_like(ok).long(),
+                        time_ms=0.0, pose=st.pose.masked(ok), free_pose=st.pose, method="atlas-json")
+    state, use = classify(res, problem.contact.mu)
+    n = len(p1), len(p2)
+    return Atlas(p1, p2, state.reshape(n), res.normal_force_N.numpy().reshape(n), use.reshape(n),
+                 res.pose.tip_end.numpy().reshape(*n, 2), np.array(doc["first_contact_MPa"], float), res,
+                 float(doc.get("time_s", 0.0)), ob, problem.joint.name, problem.contact.mu, problem.approach)
+
+
+def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, GripperProblem]]) -> None:
+    """One gesture panel per answer (its verifying ramp solve), titled with the goal
+    (items: (goal text or label, result, problem)); tip targets are marked x."""
+    import matplotlib.pyplot as plt
+
+    from predictor.plot import draw_gesture, save_figure
+
+    fig, axes = plt.subplots(1, len(items), figsize=(4.4 * len(items), 5.2), squeeze=False)
+    for ax, (label, r, prob) in zip(axes[0], items):
+        i = int(torch.isclose(r.gesture.pressures, torch.tensor(r.pressures, dtype=torch.float64)).all(-1)
+                .nonzero()[0])
+        draw_gesture(ax, r.gesture, i, prob.obstacle)
+        p1, p2 = r.pressures
+        ax.set_title(f"{label}: {r.status}\nP = ({p1:+.3f}, {p2:+.3f}) MPa"
+                     + (f", u = {r.friction_use:.2f}" if r.friction_use is not None else ""), fontsize=8)
+        if label.startswith("tip"):  # the target
+            ax.plot(*parse_goal(label).tip, "kx", ms=9, mew=2)
+    fig.tight_layout()
+    save_figure(fig, path, 110)
+
+
+#: ``make inverse``: the paper's three objects (hold goal) and fingertip targets under
+#: gravity without an object (two reachable ones, one beyond the finger's reach).
+CASE_OBJECTS = ("circle", "ellipse", "rectangle")
+CASE_TIPS = ("tip:40,-212", "tip:9.04,-214.93,-88.37", "tip:0,-400")
+REPEATS = 3  # timings: the median of this many identical queries
+
+
+def atlas_check(res: InverseResult, atlas: Atlas) -> dict:
+    """The answer against the atlas: the state of its nearest grid point, the atlas' best
+    holding friction use, and whether the answer is at least as good."""
+    row = atlas.index(*res.pressures)
+    best = atlas.best_hold()
+    best_use = None if best is None else float(atlas.friction_use.ravel()[best])
+    good = res.friction_use is not None and (best_use is None or res.friction_use <= best_use + 1e-9)
+    return {"nearest_grid_state": STATES[int(atlas.state.ravel()[row])], "atlas_best_friction_use": best_use,
+            "answer_friction_use": res.friction_use, "at_least_as_good": bool(good and res.status == "feasible")}
+
+
+def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
+    """``make inverse``: every case REPEATS times (median time); hold goals start from the
+    object's committed atlas ``atlas_dir/atlas_KIND.json`` when present (the planned use),
+    and are also timed cold (a COARSE x COARSE atlas solved per query)."""
+    from predictor.atlas import load_problem
+
+    cases, figs = [], []
+    for kind in CASE_OBJECTS:
+        problem = load_problem(model, kind)
+        ip = InverseProblem(problem, Goal("hold"))
+        path = atlas_dir / f"atlas_{kind}.json"
+        atlas = atlas_from_json(path, problem) if path.is_file() else None
+        runs = [inverse_pressures(ip, atlas) for _ in range(REPEATS)]
+        cold = inverse_pressures(ip, None)
+        res = runs[0]
+        cases.append({"goal": "hold", "object": kind, **res.summary(),
+                      "time_ms_median": float(np.median([r.time_ms for r in runs])),
+                      "starts_from": str(path) if atlas is not None else f"coarse {COARSE}x{COARSE}",
+                      "cold_time_ms": cold.time_ms, "cold_status": cold.status, "cold_pressures": cold.pressures,
+                      "atlas_check": atlas_check(res, atlas) if atlas is not None else None})
+        figs.append((f"hold {kind}", res, problem))
+    free = load_problem(model, None)
+    for text in CASE_TIPS:
+        ip = InverseProblem(free, parse_goal(text))
+        runs = [inverse_pressures(ip) for _ in range(REPEATS)]
+        res = runs[0]
+        cases.append({"goal": text, "object": None, **res.summary(),
+                      "time_ms_median": float(np.median([r.time_ms for r in runs]))})
+        figs.append((text, res, free))
+    med = lambda sel: float(np.median([c["time_ms_median"] for c in cases if sel(c)]))  # noqa: E731
+    doc = {"joint": free.joint.name, "cases": cases,
+           "targets": {"inverse_tip_ms": TARGET_TIP_MS, "inverse_hold_ms": TARGET_HOLD_MS},
+           "measured": {"inverse_tip_ms": med(lambda c: c["goal"] != "hold"),
+                        "inverse_hold_ms": med(lambda c: c["goal"] == "hold"),
+                        "inverse_hold_cold_ms": float(np.median([c["cold_time_ms"] for c in cases
+                                                                 if c["goal"] == "hold"]))},
+           "tolerances": {"tip_mm": TIP_TOL_MM, "verify_tip_mm": VERIFY_TOL_MM, "regulator_MPa": REGULATOR,
+                          "least_pressure_margin": HOLD_MARGIN}}
+    return doc, figs
+
+
+def main(argv: list[str] | None = None) -> int:
+    from predictor.atlas import box_arg, load_problem, object_arg, print_figures
+
+    def goal_arg(text):
+        try:
+            parse_goal(text)
+        except (ValueError, argparse.ArgumentTypeError) as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+
+    ap = cli.Parser(prog="python -m predictor.inverse", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--goal", type=goal_arg, help="hold | tip:X,Y[,DEG] (mm, degrees)")
+    ap.add_argument("--cases", action="store_true", help="make inverse: the paper's three objects (hold) and "
+                    f"the tip targets {', '.join(CASE_TIPS)}; starts from ATLAS_DIR/atlas_KIND.json")
+    ap.add_argument("--atlas-dir", default="results/predictor", help="--cases: folder of the atlases")
+    ap.add_output("--out", suffix=".json", help="--cases: write the JSON here")
+    ap.add_argument("--object", type=object_arg, help="object spec (required for --goal hold)")
+    ap.add_argument("--min-normal", type=cli.number(0, 10, "N"), default=0.0, help="hold: least normal force, N")
+    ap.add_argument("--least-pressure", action="store_true",
+                    help=f"hold: the least pressure holding with margin {HOLD_MARGIN}")
+    ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (bounds)")
+    ap.add_argument("--atlas", help="the object's predictor.atlas --out JSON for the starts (default: "
+                    f"a {COARSE}x{COARSE} grid solved now)")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate)")
+    ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
+    ap.add_output("--plot", suffix=".png", help="write the answer's gesture here")
+    args = ap.parse_args(argv)
+    if args.cases:
+        torch.set_num_threads(1)
+        with ap.errors():
+            doc, figs = run_cases(args.model, Path(args.atlas_dir))
+            if args.out:
+                write_json(args.out, doc)
+            if args.plot:
+                save_inverse_figure(args.plot, figs)
+        print_figures(doc["measured"], args.json)
+        return 0
+    if args.goal is None:
+        ap.error("give --goal (or --cases)")
+    goal = dataclasses.replace(parse_goal(args.goal), min_normal=args.min_normal, least_pressure=args.least_pressure)
+    if goal.kind == "hold" and not args.object:
+        ap.error("--goal hold needs an --object")
+    if goal.kind == "tip" and (args.min_normal or args.least_pressure):
+        ap.error("--min-normal and --least-pressure apply to --goal hold only")
+    torch.set_num_threads(1)
+    with ap.errors():
+        problem = load_problem(args.model, args.object, gravity=not args.no_gravity)
+        ip = InverseProblem(problem, goal, args.box)
+        atlas = atlas_from_json(args.atlas, problem) if args.atlas else None
+        res = inverse_pressures(ip, atlas)
+        if args.plot:
+            save_inverse_figure(args.plot, [(args.goal, res, problem)])
+    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "joint": problem.joint.name}, args.json)
+    if res.status != "feasible":
+        print(f"{ap.prog}: infeasible: {res.reason}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

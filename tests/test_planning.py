@@ -1,0 +1,151 @@
+"""Grasp planning (issue 16): the atlas, the inverse pressures and the Python API.
+
+Fast: the committed surrogate, small grids over the holding corner of the pressure box
+(P1, P2 in [0.1, 0.3] MPa, where the default circle is held or slips).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from fem.files import dumps
+from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
+from predictor.atlas import HOLDS, NO_CONTACT, STATES, classify
+from predictor.inverse import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
+from predictor.solve import solve
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = str(ROOT / "results/surrogate/improved.pt")
+BOX = (0.1, 0.3, 0.1, 0.3)
+ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def circle():
+    return load_gripper(MODEL, "circle")
+
+
+@pytest.fixture(scope="module")
+def free():
+    return load_gripper(MODEL, None)
+
+
+@pytest.fixture(scope="module")
+def atlas(circle):
+    return grasp_atlas(circle, grid=4, box=BOX)
+
+
+def test_atlas_agrees_with_single_solves(circle, atlas):
+    """Grid rows equal single-sample solves: state, normal force (1e-9 relative), first contact."""
+    assert atlas.counts()["holds"] > 0 and atlas.counts()["slips"] > 0
+    for row in (0, 5, 10, 15):
+        p = atlas.result.pressures[row:row + 1]
+        one = solve(circle.problem, p)
+        state, _ = classify(one, circle.problem.contact.mu)
+        assert STATES[state[0]] == STATES[atlas.state.ravel()[row]]
+        assert float(one.normal_force_N[0]) == pytest.approx(float(atlas.normal_N.ravel()[row]), rel=1e-9)
+        assert torch.allclose(one.first_contact[0], atlas.result.first_contact[row], rtol=0, atol=1e-12,
+                              equal_nan=True)
+        assert solve_gesture(circle, *p[0].tolist()).state == STATES[state[0]]
+
+
+def test_first_contact_lies_on_the_ramp(atlas):
+    """First contact is a point of the straight ramp from the approach gesture to the target."""
+    p0 = torch.tensor(atlas.approach, dtype=torch.float64)
+    for row in range(len(atlas.result.pressures)):
+        fc, target = atlas.result.first_contact[row], atlas.result.pressures[row]
+        if atlas.state.ravel()[row] == NO_CONTACT:
+            assert fc.isnan().all()
+            continue
+        s = float((fc - p0).norm() / (target - p0).norm())
+        assert 0 < s <= 1 + 1e-12
+        assert torch.allclose(fc, p0 + s * (target - p0), atol=1e-12)
+
+
+def test_atlas_json_keys(atlas):
+    doc = json.loads(dumps(atlas.to_json()))
+    for key in ("grid", "counts", "best_hold", "time_s", "joint", "mu", "object", "approach_MPa", "states",
+                "p1_MPa", "p2_MPa", "state", "normal_force_N", "friction_use", "tip_mm", "first_contact_MPa",
+                "tau", "targets", "measured"):
+        assert key in doc, key
+    assert doc["states"] == list(STATES)
+    assert np.array(doc["tip_mm"], dtype=float).shape == (4, 4, 2)
+    assert doc["targets"]["atlas_s_per_object"] == 10.0
+    assert sum(doc["counts"].values()) == 16
+
+
+def test_ift_gradient_matches_finite_differences(circle, free):
+    """df/dP from the implicit function theorem vs central differences (h = 1e-4 MPa) of
+    forward ramp solves: relative error <= 1e-3 (solver tolerance 1e-7 N over h)."""
+    h = 1e-4
+    cases = [(InverseProblem(circle.problem, Goal("hold")), (0.25, 0.2)),
+             (InverseProblem(free.problem, Goal("tip", (20.0, -215.0), -95.0)), (0.05, 0.1))]
+    for ip, p in cases:
+        p = torch.tensor(p, dtype=torch.float64)
+        res = solve(ip.problem, p[None])
+        branch = _Branch(ip, p, res.tau[0])
+        f, df, _, _ = gradient(ip, branch)
+        fd = []
+        for k in range(2):
+            dp = torch.zeros(2, dtype=torch.float64)
+            dp[k] = h
+            vals = []
+            for sign in (1, -1):
+                r = solve(ip.problem, (p + sign * dp)[None])
+                vals.append(gradient(ip, _Branch(ip, p + sign * dp, r.tau[0]))[0])
+            fd.append((vals[0] - vals[1]) / (2 * h))
+        fd = torch.tensor(fd, dtype=torch.float64)
+        assert torch.allclose(df, fd, rtol=1e-3, atol=1e-3 * float(fd.abs().max())), (df, fd)
+
+
+def test_inverse_tip_reaches_a_reachable_target(free):
+    target = solve(free.problem, torch.tensor([[0.05, 0.1]], dtype=torch.float64)).pose.tip_end[0].tolist()
+    ans = inverse_pressures(free, goal=f"tip:{target[0]},{target[1]}")
+    assert ans.status == "feasible" and ans.verified
+    check = solve(free.problem, torch.tensor([ans.pressures], dtype=torch.float64))
+    assert float((check.pose.tip_end[0] - torch.tensor(target)).norm()) <= TIP_TOL_MM
+
+
+def test_unreachable_target_is_infeasible_with_the_closest_value(free):
+    ans = inverse_pressures(free, goal="tip:0,-400")
+    assert ans.status == "infeasible" and "unreachable" in ans.reason
+    check = solve(free.problem, torch.tensor([ans.pressures], dtype=torch.float64))
+    assert check.pose.tip_end[0].tolist() == pytest.approx(list(ans.tip), abs=1e-6)
+    assert ans.tip_error_mm == pytest.approx(math.hypot(ans.tip[0], ans.tip[1] + 400.0), rel=1e-9)
+    assert ans.tip_error_mm > 100.0  # the finger is ~215 mm long
+
+
+def test_inverse_hold_beats_the_atlas(circle, atlas):
+    ans = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
+    assert ans.status == "feasible" and ans.state == "holds" and ans.verified
+    best = atlas.friction_use.ravel()[atlas.best_hold()]
+    assert ans.friction_use <= best + 1e-9
+    check = solve(circle.problem, torch.tensor([ans.pressures], dtype=torch.float64))
+    assert classify(check, circle.problem.contact.mu)[0][0] == HOLDS
+    assert len(ans.stencil_states) == 9
+    json.loads(dumps(ans.summary()))
+
+
+def test_bad_placement_and_cli_exit_codes(tmp_path):
+    with pytest.raises(ValueError, match="intersects the fingers"):
+        load_gripper(MODEL, "circle:x=40,y=-80")
+    r = subprocess.run([sys.executable, "-m", "predictor.inverse", "--goal", "tip:0,-400", "--json"], cwd=ROOT,
+                       env=ENV, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1, r.stderr
+    assert json.loads(r.stdout)["status"] == "infeasible"
+    out = tmp_path / "a.json"
+    r = subprocess.run([sys.executable, "-m", "predictor.atlas", "--object", "circle", "--grid", "2", "--box",
+                        "0.2,0.3,0.2,0.3", "--out", str(out), "--json"], cwd=ROOT, env=ENV, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(out.read_text())["grid"] == 2
