@@ -72,8 +72,10 @@ def placement_error(problem: GripperProblem) -> str | None:
     free = GripperProblem(problem.joint, problem.params, None, problem.contact, problem.gravity)
     p = (0.0, 0.0) if problem.approach is None else tuple(problem.approach)
     res = solve(free, torch.tensor([p], dtype=torch.float64))
+    if not bool(res.converged[0]):  # no gesture to check against: never guess one
+        return f"the gesture without the object at ({p[0]:g}, {p[1]:g}) MPa did not converge"
     with torch.no_grad():
-        pen = float(problem.residual(res.pressures, torch.nan_to_num(res.tau)).contact.penetration[0])
+        pen = float(problem.residual(res.pressures, res.tau).contact.penetration[0])
     if pen > 0:
         where = "zero pressure" if problem.approach is None else f"the approach gesture ({p[0]:g}, {p[1]:g}) MPa"
         return (f"the object intersects the fingers at {where} by {pen:.2f} mm: place it lower or "

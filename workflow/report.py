@@ -304,7 +304,7 @@ def predictor_section(root: Path) -> tuple[list[str], list[Check]]:
         return [] if key not in t else [Target(op, t[key], unit, shown=shown, key=key)]
 
     nn = [*target("nn_mN", "<=", "mN"), *target("nn_Nmm", "<=", "N·mm")]
-    raw = b.get("contact_nn_raw_residual_force_mN") and b or b["details"]  # top level or (older) details
+    raw = b["details"]  # the raw-network figures of the contact NN
     rows = [("gravity gesture, Newton (median)", f"{b['gravity_newton_median_ms']:.1f} ms", "2-3 s",
              target("gravity_newton_ms", "<=", "ms"), [b["gravity_newton_median_ms"]]),
             ("gravity gesture, L-BFGS (median)", f"{b['gravity_lbfgs_median_ms']:.1f} ms", "2-3 s", [], []),

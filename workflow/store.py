@@ -27,9 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem import spec
 from fem.files import atomic_path, sha256_file
-from fem.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, outside_box
+from fem.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, mirror, outside_box
 from workflow.shards import (DATA_KEYS, FAILURE_KEYS, Manifest, ShardEntry, ShardError,
                              array_digest, load_dataset, read_shard, split_of)
 
@@ -215,7 +214,7 @@ def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
                               replace=False))
     cases = []
     for i in pick:
-        x_m, r_m, j_m = spec.mirror(arrays["inputs"][i:i + 1], arrays["anchors"][i:i + 1],
+        x_m, r_m, j_m = mirror(arrays["inputs"][i:i + 1], arrays["anchors"][i:i + 1],
                                     arrays["jacobian"][i:i + 1])
         res = solver.solve(Load.from_array(x_m[0]))
         case = {"sample_id": int(arrays["sample_id"][i]), "converged": res.converged}
