@@ -20,7 +20,7 @@ APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
-        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas inverse report clean
+        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas inverse finger-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -175,6 +175,22 @@ inverse: results/predictor/inverse.json ## inverse pressures: hold the three obj
 results/predictor/inverse.json: $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)
 	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
 	  --out $@ --plot results/predictor/inverse.png --json
+
+# ---------------------------------------------------------------- finger validation (issue 14)
+FINGER_FEM := results/validation/finger_fem
+# The surrogate with the distal cap's rotation head (cap kinematics); it replaces
+# results/surrogate/improved.pt once the NN predictors are retrained on it.
+CAP_JOINT  := results/surrogate/cap/improved.pt
+FINGER_CASES := $(PY) -m fem.finger_cases --out $(FINGER_FEM)
+
+finger-fem: | $(SETUP) ## whole-finger FEM, 16 validation cases at the production mesh (2 processes, ~1 h; resumes) -> results/validation/finger_fem/
+	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
+
+validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
+results/validation/finger.json: $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) $(CAP_JOINT) | $(SETUP)
+	$(MAKE) --no-print-directory finger-fem
+	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(CAP_JOINT) --out $@ --figures results/validation
+
 
 report: ## results/REPORT.md from the committed JSON artefacts
 	$(PY) -m workflow.report --out results/REPORT.md

@@ -40,7 +40,10 @@ from fem.geometry import TAGS, JointGeometry
 class ValleyContact:
     """Node-to-node penalty contact between the periodic valley faces of the joint."""
 
-    def __init__(self, V, facet_tags, geometry: JointGeometry, penalty: float):
+    def __init__(self, V, facet_tags, geometry: JointGeometry, penalty: float,
+                 offsets: tuple[float, ...] = (0.0,)):
+        """``offsets``: x (mm) of the proximal face of every joint in the mesh (a finger
+        holds several); valleys are numbered along x across all joints."""
         self.comm = V.mesh.comm
         self.penalty = penalty
         imap = V.dofmap.index_map
@@ -53,7 +56,8 @@ class ValleyContact:
         # Pairs per valley and side, as indices into the gathered arrays.
         self.groups = {}
         cells = geometry.cells()
-        for k, ((_, x1), (x2, _)) in enumerate(zip(cells[:-1], cells[1:])):
+        valleys = [(x0 + a, x0 + b) for x0 in offsets for (_, a), (b, _) in zip(cells[:-1], cells[1:])]
+        for k, (x1, x2) in enumerate(valleys):
             for side, sign in (("top", 1.0), ("bottom", -1.0)):
                 half = sign * X[:, 1] > 0
                 a = np.flatnonzero(half & (np.abs(X[:, 0] - x1) < 1e-6))

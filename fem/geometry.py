@@ -42,6 +42,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from fem.finger_spec import FingerSpec
 from fem.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.solver.
@@ -115,6 +116,46 @@ class BeamGeometry:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class FingerGeometry:
+    """A whole finger (fem.finger_spec.FingerSpec) as one half-model in its own frame.
+
+    The finger frame is the joint frame of the first joint, extended: x runs along the
+    straight rest finger from the base mount (x = 0) to the fingertip (x = finger.length),
+    y in the bending plane, z >= 0 the half-model. Every joint is the bellow joint of
+    ``joint`` (its mesh size and wall refinement included) with its proximal face at
+    finger.rest_start(k); every rigid part is a solid box of its cross-section
+    (y in [-height/2, height/2], z in [0, width/2]), bonded to its neighbours' end faces
+    (one conforming mesh), meshed at ``rigid_mesh_size`` (mm).
+    """
+
+    finger: FingerSpec
+    joint: JointGeometry = JointGeometry()
+    rigid_mesh_size: float = 6.0
+
+    @property
+    def mesh_size(self) -> float:
+        return self.joint.mesh_size
+
+    def as_dict(self) -> dict:
+        return {"finger": self.finger.summary(), "joint": self.joint.as_dict(),
+                "rigid_mesh_size": self.rigid_mesh_size}
+
+
+def finger_tags(finger: FingerSpec) -> dict[str, int]:
+    """Physical-group tags of a finger model (the contract with fem.finger).
+
+    Shared names keep TAGS' values (``proximal``, ``symmetry``, ``valley_faces``); per
+    part k: ``part{k}`` (a joint's deformable body, or a rigid part), ``cap{k}`` (a joint's
+    distal cap), ``top{k}`` and ``bottom{k}`` (a joint's chamber walls)."""
+    tags = {name: TAGS[name] for name in ("proximal", "symmetry", "valley_faces")}
+    for k, part in enumerate(finger.parts):
+        tags[f"part{k}"] = 100 + k
+        if part.kind == "joint":
+            tags.update({f"cap{k}": 200 + k, f"top{k}": 300 + k, f"bottom{k}": 400 + k})
+    return tags
+
+
 def _init_gmsh(name: str):
     import gmsh
 
@@ -158,27 +199,8 @@ def build_joint(geo: JointGeometry = JointGeometry()):
     """
     gmsh = _init_gmsh("bellow_joint")
     occ = gmsh.model.occ
-    L, t, s = geo.length, geo.wall, geo.spine
-    H, Hv, Z = geo.height / 2, geo.valley_height / 2, geo.width / 2
-    cells = geo.cells()
-
-    # Outer body (y >= 0): a core bar of valley height, plus caps and cells at full height.
-    parts = [occ.addBox(0, 0, 0, L, Hv, Z),
-             occ.addBox(0, 0, 0, geo.cap, H, Z),
-             occ.addBox(L - geo.cap, 0, 0, geo.cap, H, Z)]
-    parts += [occ.addBox(x0, 0, 0, x1 - x0, H, Z) for x0, x1 in cells]
-    body, _ = occ.fuse([(3, parts[0])], [(3, p) for p in parts[1:]])
-
-    # Top chamber cavity: one channel joining the cell pockets.
-    x_in0, x_in1 = geo.cap, L - geo.cap
-    pieces = [occ.addBox(x_in0, s / 2, 0, x_in1 - x_in0, Hv - t - s / 2, Z - t)]
-    for i, (x0, x1) in enumerate(cells):
-        a = x0 if i == 0 else x0 + t
-        b = x1 if i == len(cells) - 1 else x1 - t
-        pieces.append(occ.addBox(a, s / 2, 0, b - a, H - t - s / 2, Z - t))
-    cavity, _ = occ.fuse([(3, pieces[0])], [(3, p) for p in pieces[1:]])
-    solid, _ = occ.cut(body, cavity)
-
+    L, H, Z = geo.length, geo.height / 2, geo.width / 2
+    solid = _joint_quarter(occ, geo)
     # Split off the distal cap as its own volume; the cutter is exactly the (solid) cap
     # block, so the fragments are the cap and the rest, sharing a conforming interface.
     cutter = occ.addBox(L - geo.cap, 0, 0, geo.cap, H, Z)
@@ -189,16 +211,7 @@ def build_joint(geo: JointGeometry = JointGeometry()):
     keep_body = [v for v in vols if v not in keep_cap]
 
     sym = _surfaces_in_box(gmsh, -1, -1, 0, L + 1, H + 1, 0)
-    top = [f for f in _surfaces_in_box(gmsh, x_in0, s / 2, 0, x_in1, H - t, Z - t) if f not in sym]
-    valley = []
-    for (_, x1), (x2, _) in zip(cells[:-1], cells[1:]):
-        left = _surfaces_in_box(gmsh, x1, Hv, 0, x1, H, Z)
-        right = _surfaces_in_box(gmsh, x2, Hv, 0, x2, H, Z)
-        # Translation-periodic face meshes: every node across a valley has an exact
-        # partner, which the solver's node-to-node contact pairs up.
-        shift = [1, 0, 0, x2 - x1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
-        gmsh.model.mesh.setPeriodic(2, right, left, shift)
-        valley += left + right
+    top, valley = _joint_faces(gmsh, geo, 0.0, sym)
     groups = {
         "solid": (3, keep_body), "distal_cap": (3, keep_cap),
         "proximal": (2, _surfaces_in_box(gmsh, 0, 0, 0, 0, H, Z)),
@@ -211,7 +224,53 @@ def build_joint(geo: JointGeometry = JointGeometry()):
     return gmsh.model
 
 
-def _mirror_mesh_y(gmsh, groups: dict[str, tuple[int, list[int]]], swap: dict[str, str]) -> None:
+def _joint_quarter(occ, geo: JointGeometry, x0: float = 0.0) -> list[tuple[int, int]]:
+    """The joint's solid quarter (y >= 0, z >= 0), proximal face at x = x0: OCC dim-tags."""
+    L, t, s = geo.length, geo.wall, geo.spine
+    H, Hv, Z = geo.height / 2, geo.valley_height / 2, geo.width / 2
+    cells = [(x0 + a, x0 + b) for a, b in geo.cells()]
+
+    # Outer body (y >= 0): a core bar of valley height, plus caps and cells at full height.
+    parts = [occ.addBox(x0, 0, 0, L, Hv, Z),
+             occ.addBox(x0, 0, 0, geo.cap, H, Z),
+             occ.addBox(x0 + L - geo.cap, 0, 0, geo.cap, H, Z)]
+    parts += [occ.addBox(a, 0, 0, b - a, H, Z) for a, b in cells]
+    body, _ = occ.fuse([(3, parts[0])], [(3, p) for p in parts[1:]])
+
+    # Top chamber cavity: one channel joining the cell pockets.
+    x_in0, x_in1 = x0 + geo.cap, x0 + L - geo.cap
+    pieces = [occ.addBox(x_in0, s / 2, 0, x_in1 - x_in0, Hv - t - s / 2, Z - t)]
+    for i, (c0, c1) in enumerate(cells):
+        a = c0 if i == 0 else c0 + t
+        b = c1 if i == len(cells) - 1 else c1 - t
+        pieces.append(occ.addBox(a, s / 2, 0, b - a, H - t - s / 2, Z - t))
+    cavity, _ = occ.fuse([(3, pieces[0])], [(3, p) for p in pieces[1:]])
+    solid, _ = occ.cut(body, cavity)
+    return solid
+
+
+def _joint_faces(gmsh, geo: JointGeometry, x0: float, sym: list[int]) -> tuple[list[int], list[int]]:
+    """(top-chamber wall surfaces, valley faces) of the joint at x0, after synchronize.
+
+    The two faces across each valley are meshed translation-periodically: every node has
+    an exact partner, which fem.contact's node-to-node pairs need."""
+    L, t, s = geo.length, geo.wall, geo.spine
+    H, Hv, Z = geo.height / 2, geo.valley_height / 2, geo.width / 2
+    cells = [(x0 + a, x0 + b) for a, b in geo.cells()]
+    box = _surfaces_in_box(gmsh, x0 + geo.cap, s / 2, 0, x0 + L - geo.cap, H - t, Z - t)
+    top = [f for f in box if f not in sym]
+    valley = []
+    for (_, x1), (x2, _) in zip(cells[:-1], cells[1:]):
+        left = _surfaces_in_box(gmsh, x1, Hv, 0, x1, H, Z)
+        right = _surfaces_in_box(gmsh, x2, Hv, 0, x2, H, Z)
+        shift = [1, 0, 0, x2 - x1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
+        gmsh.model.mesh.setPeriodic(2, right, left, shift)
+        valley += left + right
+    return top, valley
+
+
+def _mirror_mesh_y(gmsh, groups: dict[str, tuple[int, list[int]]], swap: dict[str, str],
+                   group_tags: dict[str, int] = TAGS) -> None:
     """Replace the meshed quarter (y >= 0) by a discrete model of it plus its y-mirror.
 
     Nodes on y = 0 are shared; mirrored tetrahedra get two nodes swapped to keep a
@@ -257,8 +316,8 @@ def _mirror_mesh_y(gmsh, groups: dict[str, tuple[int, list[int]]], swap: dict[st
         etags = np.arange(next_elem, next_elem + len(c))
         next_elem += len(c)
         gmsh.model.mesh.addElementsByType(i, 4 if dim == 3 else 2, etags, c.ravel())
-        gmsh.model.addPhysicalGroup(dim, [i], TAGS[name])
-        gmsh.model.setPhysicalName(dim, TAGS[name], name)
+        gmsh.model.addPhysicalGroup(dim, [i], group_tags[name])
+        gmsh.model.setPhysicalName(dim, group_tags[name], name)
 
 
 def build_beam(geo: BeamGeometry = BeamGeometry()):
@@ -284,8 +343,65 @@ def build_beam(geo: BeamGeometry = BeamGeometry()):
     return gmsh.model
 
 
+def build_finger(geo: FingerGeometry):
+    """Build and mesh the finger half-model (FingerGeometry); return the global ``gmsh.model``.
+
+    As in :func:`build_joint`, only y >= 0 is meshed and then mirrored node by node, so
+    the finger keeps the exact y-mirror symmetry. Call on rank 0 only.
+    """
+    gmsh = _init_gmsh("finger")
+    occ = gmsh.model.occ
+    finger, jg = geo.finger, geo.joint
+    H, Z = jg.height / 2, jg.width / 2
+    spans = [(finger.rest_start(k), finger.rest_start(k) + p.length) for k, p in enumerate(finger.parts)]
+    solids, cutters = [], []
+    for part, (x0, x1) in zip(finger.parts, spans):
+        if part.kind == "joint":
+            solids += _joint_quarter(occ, jg, x0)
+            cutters.append((3, occ.addBox(x1 - jg.cap, 0, 0, jg.cap, H, Z)))
+        else:
+            solids.append((3, occ.addBox(x0, 0, 0, part.length, part.height / 2, part.width / 2)))
+    # One fragment of every part and cap cutter: bonded parts share conforming faces.
+    occ.fragment(solids, cutters)
+    occ.synchronize()
+
+    tags = finger_tags(finger)
+    vols = {v: gmsh.model.getBoundingBox(3, v) for _, v in gmsh.model.getEntities(3)}
+    ymax = max(b[4] for b in vols.values())
+    sym = _surfaces_in_box(gmsh, -1, -1, 0, finger.length + 1, ymax + 1, 0)
+    groups = {"proximal": (2, _surfaces_in_box(gmsh, 0, 0, 0, 0, ymax, ymax)),
+              "symmetry": (2, sym), "valley_faces": (2, [])}
+    swap, walls, regions = {}, [], []
+    for k, (part, (x0, x1)) in enumerate(zip(finger.parts, spans)):
+        inside = [v for v, b in vols.items() if b[0] > x0 - _EPS and b[3] < x1 + _EPS]
+        if part.kind == "joint":
+            cap = [v for v in inside if vols[v][0] > x1 - jg.cap - _EPS]
+            groups[f"part{k}"] = (3, [v for v in inside if v not in cap])
+            groups[f"cap{k}"] = (3, cap)
+            top, valley = _joint_faces(gmsh, jg, x0, sym)
+            groups[f"top{k}"] = (2, top)
+            groups["valley_faces"][1].extend(valley)
+            swap[f"top{k}"] = f"bottom{k}"
+            walls += top
+            regions.append((x0, x1))
+        else:
+            groups[f"part{k}"] = (3, inside)
+    _check_groups(groups)
+    _mesh(gmsh, jg.mesh_size, jg.wall_mesh_size, walls, jg.wall,
+          regions=regions, outside_size=geo.rigid_mesh_size)
+    _mirror_mesh_y(gmsh, groups, swap, tags)
+    return gmsh.model
+
+
 def _mesh(gmsh, size: float, wall_size: float | None = None, wall_surfaces: list[int] = (),
-          wall_thickness: float = 0.0) -> None:
+          wall_thickness: float = 0.0, regions: list[tuple[float, float]] = (),
+          outside_size: float | None = None) -> None:
+    """Mesh the model at edge length ``size`` (mm); ``wall_size`` within one wall
+    thickness of ``wall_surfaces``; with ``regions`` ((x0, x1) slabs), ``size`` only inside
+    them and ``outside_size`` elsewhere (the finger's rigid parts)."""
+    if regions:
+        _mesh_regions(gmsh, size, wall_size, wall_surfaces, wall_thickness, regions, outside_size)
+        return
     gmsh.option.setNumber("Mesh.MeshSizeMax", size)
     gmsh.option.setNumber("Mesh.MeshSizeMin", 0.25 * size)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
@@ -293,21 +409,59 @@ def _mesh(gmsh, size: float, wall_size: float | None = None, wall_surfaces: list
     gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
     gmsh.option.setNumber("Mesh.Algorithm3D", 1)   # Delaunay: robust on thin walls
     if wall_size is not None and wall_surfaces:
-        # gmsh 4.8 has no "Constant" field: size = wall_size within one wall thickness of
-        # the chamber surfaces (so through the whole wall), growing to ``size`` beyond.
-        f = gmsh.model.mesh.field
-        dist = f.add("Distance")
-        f.setNumbers(dist, "SurfacesList", wall_surfaces)
-        ramp = f.add("Threshold")
-        f.setNumber(ramp, "InField", dist)
-        f.setNumber(ramp, "SizeMin", wall_size)
-        f.setNumber(ramp, "SizeMax", size)
-        f.setNumber(ramp, "DistMin", wall_thickness)
-        f.setNumber(ramp, "DistMax", wall_thickness + size)
-        f.setAsBackgroundMesh(ramp)
+        gmsh.model.mesh.field.setAsBackgroundMesh(
+            _wall_field(gmsh, wall_surfaces, wall_size, wall_thickness, size, size))
         gmsh.option.setNumber("Mesh.MeshSizeMin", min(0.25 * size, 0.5 * wall_size))
     gmsh.model.mesh.generate(3)
     gmsh.model.mesh.optimize("")  # default tetrahedral optimiser (no Netgen in Debian gmsh)
+
+
+def _wall_field(gmsh, surfaces: list[int], wall_size: float, wall_thickness: float, size: float,
+                far_size: float) -> int:
+    """A size field: wall_size within one wall thickness of ``surfaces`` (so through the
+    whole wall), growing to far_size over the next ``size`` mm. (gmsh 4.8 has no
+    "Constant" field.) Returns its tag."""
+    f = gmsh.model.mesh.field
+    dist = f.add("Distance")
+    f.setNumbers(dist, "SurfacesList", surfaces)
+    ramp = f.add("Threshold")
+    f.setNumber(ramp, "InField", dist)
+    f.setNumber(ramp, "SizeMin", wall_size)
+    f.setNumber(ramp, "SizeMax", far_size)
+    f.setNumber(ramp, "DistMin", wall_thickness)
+    f.setNumber(ramp, "DistMax", wall_thickness + size)
+    return ramp
+
+
+def _mesh_regions(gmsh, size, wall_size, wall_surfaces, wall_thickness, regions, outside_size) -> None:
+    """Background size field: Min over a Box per region (size inside, outside_size
+    beyond) and, with wall_size, the wall Threshold of :func:`_mesh` (growing to
+    outside_size)."""
+    f = gmsh.model.mesh.field
+    fields = []
+    for x0, x1 in regions:
+        box = f.add("Box")
+        # a little beyond the region's end faces: the bonded faces are meshed at ``size``
+        for key, value in (("VIn", size), ("VOut", outside_size), ("XMin", x0 - 0.5 * size),
+                           ("XMax", x1 + 0.5 * size), ("YMin", -1e3), ("YMax", 1e3),
+                           ("ZMin", -1e3), ("ZMax", 1e3)):
+            f.setNumber(box, key, value)
+        fields.append(box)
+    smallest = size
+    if wall_size is not None and wall_surfaces:
+        fields.append(_wall_field(gmsh, wall_surfaces, wall_size, wall_thickness, size, outside_size))
+        smallest = min(size, wall_size)
+    both = f.add("Min")
+    f.setNumbers(both, "FieldsList", fields)
+    f.setAsBackgroundMesh(both)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", outside_size)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.25 * smallest)
+    gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+    gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+    gmsh.model.mesh.generate(3)
+    gmsh.model.mesh.optimize("")
 
 
 def anchor_points(length: float, n: int = N_ANCHORS) -> np.ndarray:

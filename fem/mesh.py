@@ -10,7 +10,10 @@ from dataclasses import dataclass
 
 from mpi4py import MPI
 
-from fem.geometry import BeamGeometry, JointGeometry, build_beam, build_joint
+from fem.geometry import (BeamGeometry, FingerGeometry, JointGeometry, build_beam, build_finger,
+                          build_joint)
+
+BUILDERS = {JointGeometry: build_joint, BeamGeometry: build_beam, FingerGeometry: build_finger}
 
 
 @dataclass
@@ -20,16 +23,16 @@ class MeshData:
     mesh: object
     cell_tags: object
     facet_tags: object
-    geometry: JointGeometry | BeamGeometry
+    geometry: JointGeometry | BeamGeometry | FingerGeometry
 
 
-def create_mesh(geometry: JointGeometry | BeamGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshData:
+def create_mesh(geometry: JointGeometry | BeamGeometry | FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshData:
     """Build ``geometry`` with gmsh on rank 0 of ``comm`` and distribute it (collective)."""
     from dolfinx.io import gmshio
 
     import gmsh
 
-    builder = build_joint if isinstance(geometry, JointGeometry) else build_beam
+    builder = BUILDERS[type(geometry)]
     error = None
     if comm.rank == 0:
         try:

@@ -173,101 +173,88 @@ def neo_hookean_psi(F, mu, lmbda):
     return mu / 2 * (I1 - 3) - mu * ufl.ln(J) + lmbda / 2 * ufl.ln(J) ** 2
 
 
-class Solver:
-    """Large-deflection solver on one mesh; keeps its state for continuation.
+def clamp_and_symmetry(V, facet_tags) -> list:
+    """u = 0 on the ``proximal`` facets and u_z = 0 on the ``symmetry`` plane z = 0."""
+    tdim = V.mesh.topology.dim
+    zero = np.zeros(3, dtype=PETSc.ScalarType)
+    clamp = fem.locate_dofs_topological(V, tdim - 1, facet_tags.find(TAGS["proximal"]))
+    Vz = V.sub(2)
+    sym = fem.locate_dofs_topological(Vz, tdim - 1, facet_tags.find(TAGS["symmetry"]))
+    return [fem.dirichletbc(zero, clamp, V), fem.dirichletbc(PETSc.ScalarType(0), sym, Vz)]
 
-    ``probe_points`` (n, 3) are material points whose deformed (x, y) are reported
-    (the joint's anchors); ``ref_point`` (3,) is where F1, F2 act on the rigid cap.
+
+def displacement_problem(mesh_data: MeshData, config: SolverConfig):
+    """(V, u, v, bcs, dx, ds) of a half-model: P``degree`` vector space, the unknown
+    displacement u (mm), its test function, the clamp and symmetry conditions
+    (:func:`clamp_and_symmetry`) and the tagged measures at ``quadrature_degree``."""
+    mesh, ct, ft = mesh_data.mesh, mesh_data.cell_tags, mesh_data.facet_tags
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    V = fem.VectorFunctionSpace(mesh, ("CG", config.degree))
+    md = {"quadrature_degree": config.quadrature_degree}
+    dx = ufl.Measure("dx", domain=mesh, subdomain_data=ct, metadata=md)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=ft, metadata=md)
+    return V, fem.Function(V, name="u"), ufl.TestFunction(V), clamp_and_symmetry(V, ft), dx, ds
+
+
+def rotation_about_z(F, theta_ref=0.0):
+    """Rotation (rad) about +z of the material at a point, theta = atan2(F_yx - F_xy,
+    F_xx + F_yy): exact for any rigid motion, and the polar rotation's angle for a planar
+    F. Taken relative to ``theta_ref`` (UFL scalar), so it has no branch cut near it."""
+    c, s = ufl.cos(theta_ref), ufl.sin(theta_ref)
+    a, b = F[0, 0] + F[1, 1], F[1, 0] - F[0, 1]
+    return theta_ref + ufl.atan_2(b * c - a * s, a * c + b * s)
+
+
+def follower_pressure(F, v, ds):
+    """Virtual work per unit pressure of a follower load on the deformed surface ``ds``
+    (Nanson: t0 = -p cofac(F) N; this is the residual term divided by p)."""
+    N = ufl.FacetNormal(v.ufl_function_space().mesh)
+    return ufl.inner(ufl.cofac(F) * N, v) * ds
+
+
+def facet_tags_present(facet_tags) -> set:
+    """The facet tag values present on any rank (collective)."""
+    comm = facet_tags.mesh.comm
+    tags = set(np.unique(facet_tags.values)) if facet_tags.values.size else set()
+    return comm.allreduce(tags, op=MPI.BOR) if comm.size > 1 else tags
+
+
+@dataclass
+class PathOutcome:
+    """How a load path went: the load vector reached, Newton figures, and why it stopped."""
+
+    converged: bool
+    reached: np.ndarray
+    newton_iterations: list[int]
+    load_steps: int
+    cutbacks: int
+    reason: str
+
+
+class NewtonSolver:
+    """Load stepping with cut-back and Newton (GMRES on the exact tangent, preconditioned
+    by a recent MUMPS LU) on one residual form: the machinery that the joint
+    (:class:`Solver`) and the whole finger (:class:`fem.finger.FingerSolver`) share.
+
+    A subclass builds the function space V, the unknown u, the residual form R(u; v)
+    whose loads are ``fem.Constant``s, the Dirichlet conditions and an optional contact
+    term (``add_residual``/``add_tangent``, e.g. fem.contact.ValleyContact), then calls
+    ``NewtonSolver.__init__``. It implements ``_set_load(a)`` for a load vector a and sets
+    ``load_scale`` (the full-range magnitude of each entry of a, which sizes the first
+    step). ``_accept()`` / ``_restore()`` keep any state beyond u (the joint's cap rotation).
     """
 
-    def __init__(self, mesh_data: MeshData, ref_point, probe_points,
-                 material: Material = Material(), config: SolverConfig = SolverConfig()):
-        self.mesh_data, self.material, self.config = mesh_data, material, config
-        mesh, ct, ft = mesh_data.mesh, mesh_data.cell_tags, mesh_data.facet_tags
-        self.comm = mesh.comm
-        tdim = mesh.topology.dim
-        mesh.topology.create_connectivity(tdim - 1, tdim)
-        self.V = V = fem.VectorFunctionSpace(mesh, ("CG", config.degree))
-        self.u = u = fem.Function(V, name="u")
+    load_scale: np.ndarray
+
+    def __init__(self, V, u, R, bcs, config: SolverConfig, contact=None):
+        self.V, self.u, self.bcs, self.config, self.contact = V, u, bcs, config, contact
+        self.comm = V.mesh.comm
         self._u_saved = fem.Function(V)
-        v, du = ufl.TestFunction(V), ufl.TrialFunction(V)
-
-        # --- boundary conditions: clamp + symmetry plane
-        clamp_facets = ft.find(TAGS["proximal"])
-        sym_facets = ft.find(TAGS["symmetry"])
-        zero = np.zeros(3, dtype=PETSc.ScalarType)
-        bc_clamp = fem.dirichletbc(zero, fem.locate_dofs_topological(V, tdim - 1, clamp_facets), V)
-        Vz = V.sub(2)
-        bc_sym = fem.dirichletbc(PETSc.ScalarType(0),
-                                 fem.locate_dofs_topological(Vz, tdim - 1, sym_facets), Vz)
-        self.bcs = [bc_clamp, bc_sym]
-
-        # --- measures
-        md = {"quadrature_degree": config.quadrature_degree}
-        dx = ufl.Measure("dx", domain=mesh, subdomain_data=ct, metadata=md)
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=ft, metadata=md)
-        self._dx_cap = dx(TAGS["distal_cap"])
-
-        # --- kinematics and internal energy
-        d = len(u)
-        I = ufl.Identity(d)
-        F = ufl.variable(I + ufl.grad(u))
-        mu, lmbda = _lame(material.E, material.nu)
-        mu_c, lmbda_c = _lame(material.cap_stiffness * material.E, material.cap_nu)
-        psi_body = neo_hookean_psi(F, mu, lmbda)
-        psi_cap = neo_hookean_psi(F, mu_c, lmbda_c)
-        P_body = ufl.diff(psi_body, F)
-        P_cap = ufl.diff(psi_cap, F)
-        R_int = (ufl.inner(P_body, ufl.grad(v)) * dx(TAGS["solid"])
-                 + ufl.inner(P_cap, ufl.grad(v)) * dx(TAGS["distal_cap"]))
-
-        # --- cap rotation, relative to the last converged rotation theta_ref
-        self.theta_ref = fem.Constant(mesh, PETSc.ScalarType(0))
-        c, s = ufl.cos(self.theta_ref), ufl.sin(self.theta_ref)
-        a, b = F[0, 0] + F[1, 1], F[1, 0] - F[0, 1]
-        theta = self.theta_ref + ufl.atan_2(b * c - a * s, a * c + b * s)
-        self._theta_form = fem.form(theta * self._dx_cap)
-        one = fem.Constant(mesh, PETSc.ScalarType(1))
-        self.cap_volume = self._allsum(fem.assemble_scalar(fem.form(one * self._dx_cap)))
-
-        # --- end-load potentials per unit F1, F2, M (the half-model carries half)
-        # Mesh-dependent numbers are Constants, so one compiled form serves every mesh.
-        X = ufl.SpatialCoordinate(mesh)
-        Xref = fem.Constant(mesh, np.asarray(ref_point[:2], dtype=PETSc.ScalarType))
-        Rth = ufl.as_matrix([[ufl.cos(theta), -ufl.sin(theta)], [ufl.sin(theta), ufl.cos(theta)]])
-        arm = Xref - ufl.as_vector([X[0], X[1]])
-        u_ref = ufl.as_vector([u[0], u[1]]) + (Rth - ufl.Identity(2)) * arm
-        w = fem.Constant(mesh, PETSc.ScalarType(-0.5 / self.cap_volume))
-        potentials = [w * u_ref[0] * self._dx_cap, w * u_ref[1] * self._dx_cap,
-                      w * theta * self._dx_cap]
-        self._dR_dload = [ufl.derivative(pi, u, v) for pi in potentials]   # F1, F2, M
-
-        # --- pressure: follower traction on the deformed chamber walls
-        tags = set(np.unique(ft.values)) if ft.values.size else set()
-        tags = self.comm.allreduce(tags, op=MPI.BOR) if self.comm.size > 1 else tags
-        N = ufl.FacetNormal(mesh)
-        self._dR_dp = {}
-        for name in ("top_chamber", "bottom_chamber"):
-            if TAGS[name] in tags:
-                self._dR_dp[name] = ufl.inner(ufl.cofac(F) * N, v) * ds(TAGS[name])
-
-        # --- load constants and full residual
-        self.p = {name: fem.Constant(mesh, PETSc.ScalarType(0)) for name in self._dR_dp}
-        self.f = [fem.Constant(mesh, PETSc.ScalarType(0)) for _ in range(3)]  # F1, F2, M
-        R = R_int
-        for name, form in self._dR_dp.items():
-            R = R + self.p[name] * form
-        for lam, form in zip(self.f, self._dR_dload):
-            R = R + lam * form
-        Jac = ufl.derivative(R, u, du)
-        self._forms_p = {n: fem.form(f) for n, f in self._dR_dp.items()}
-        self._forms_load = [fem.form(f) for f in self._dR_dload]
-
-        self._R, self._J = fem.form(R), fem.form(Jac)
+        self._R = fem.form(R)
+        self._J = fem.form(ufl.derivative(R, u, ufl.TrialFunction(V)))
         self._A = create_matrix(self._J)       # the tangent at the current iterate
-        self.contact = None
-        if TAGS["valley_faces"] in tags and config.contact_penalty > 0:
-            self.contact = ValleyContact(V, ft, mesh_data.geometry, config.contact_penalty)
+        if contact is not None:
             # The pair blocks couple nodes that share no cell: allow them in the pattern.
             self._A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self._b = create_vector(self._R)
@@ -296,15 +283,34 @@ class Solver:
             opts[f"{prefix}mat_mumps_cntl_7"] = config.mumps_blr
         ksp.setFromOptions()
         self.pc = ksp.getPC()
-
-        # --- probes (anchor points) and state
-        self.probe_points = np.asarray(probe_points, dtype=float).reshape(-1, 3)
-        self._probe_cells = self._locate(self.probe_points)
-        self.state_load: Load | None = Load()      # load of the current converged state
+        self.state = np.zeros(len(self.load_scale))  # load vector of the converged state
         self.factorisations = 0                    # LU factorisations so far (diagnostics)
         self.krylov_iterations = 0                 # GMRES iterations so far (diagnostics)
         self._refactor = True                      # factorise before the next tangent solve?
         self._factor_fresh = False                 # last factorisation near current state?
+
+    # ------------------------------------------------------------------ hooks
+    def _set_load(self, a: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _converged_step(self) -> None:
+        """A load step converged: update any state beyond u (before it is saved)."""
+
+    def _save(self) -> None:
+        """Keep the converged state as the fall-back of the next step."""
+        self._u_saved.x.array[:] = self.u.x.array
+
+    def _restore(self) -> None:
+        """A load step failed: return to the last saved state."""
+        self.u.x.array[:] = self._u_saved.x.array
+
+    def reset(self) -> None:
+        """Return to the undeformed, unloaded state."""
+        self.u.x.array[:] = 0.0
+        self.state = np.zeros(len(self.load_scale))
+        self._set_load(self.state)
+        self._factor_fresh = False
+        self._refactor = True           # the LU belongs to another state
 
     # ------------------------------------------------------------------ helpers
     def _allsum(self, x: float) -> float:
@@ -312,7 +318,7 @@ class Solver:
 
     def _locate(self, points: np.ndarray) -> np.ndarray:
         """Owning local cell of each point on this rank, or -1. Shape (n,)."""
-        mesh = self.mesh_data.mesh
+        mesh = self.V.mesh
         tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
         cand = geometry.compute_collisions(tree, points)
         coll = geometry.compute_colliding_cells(mesh, cand, points)
@@ -447,53 +453,28 @@ class Solver:
                 return
             r_prev = r
 
-    def cap_rotation(self) -> float:
-        """Volume-averaged rotation of the distal cap about +z (rad)."""
-        return self._allsum(fem.assemble_scalar(self._theta_form)) / self.cap_volume
+    def mesh_info(self) -> dict:
+        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs."""
+        mesh = self.mesh_data.mesh
+        imap = mesh.topology.index_map(0)
+        cmap = mesh.topology.index_map(mesh.topology.dim)
+        nodes = self.V.dofmap.index_map.size_global
+        return {"vertices": imap.size_global, "cells": cmap.size_global,
+                "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
+                "degree": self.config.degree, "mesh_size": self.mesh_data.geometry.mesh_size}
 
-    def _set_load(self, a: np.ndarray) -> None:
-        P = a[0]
-        if "top_chamber" in self.p:
-            self.p["top_chamber"].value = max(P, 0.0)
-        if "bottom_chamber" in self.p:
-            self.p["bottom_chamber"].value = max(-P, 0.0)
-        for lam, val in zip(self.f, a[1:]):
-            lam.value = val
-
-    def positions(self) -> np.ndarray:
-        """Deformed (x, y) of the probe points (mm), shape (n, 2)."""
-        return (self.probe_points + self.evaluate(self.u))[:, :2]
-
-    def reset(self) -> None:
-        """Return to the undeformed, unloaded state."""
-        self.u.x.array[:] = 0.0
-        self.theta_ref.value = 0.0
-        self.state_load = Load()
-        self._set_load(np.zeros(4))
-        self._factor_fresh = False
-        self._refactor = True           # the LU belongs to another state
-
-    # ------------------------------------------------------------------ solve
-    def solve(self, load: Load, continuation: bool = False) -> SolveResult:
-        """Solve for ``load``; from zero, or (continuation) from the current state.
-
-        The load path is linear from the start load to ``load``. A step whose Newton
-        iteration fails is undone and halved; below ``min_step`` the solve fails and the
-        solver returns to its last converged state (never a non-converged one).
-        """
+    # ------------------------------------------------------------------ load path
+    def _follow(self, start: np.ndarray, target: np.ndarray) -> PathOutcome:
+        """Follow the linear load path start -> target (load vectors) from the current
+        converged state. A step whose Newton iteration fails is undone and halved; below
+        ``min_step`` the path stops at its last converged state (never a non-converged
+        one), which becomes ``self.state``."""
         cfg = self.config
-        if not np.isfinite(load.as_array()).all():   # would only fail after every cut-back
-            raise ValueError(f"{load} is not finite")
-        t0, lu0, kr0 = time.perf_counter(), self.factorisations, self.krylov_iterations
-        if not continuation or self.state_load is None:
-            self.reset()
-        start, target = self.state_load.as_array(), load.as_array()
-        span = np.abs((target - start) / INPUT_BOX).max()
+        span = np.abs((target - start) / self.load_scale).max()
         ds = cfg.first_step or min(cfg.max_step, cfg.box_step / max(span, 1e-300))
         s = 0.0
         iters, cutbacks, steps, reason = [], 0, 0, ""
-        self._u_saved.x.array[:] = self.u.x.array
-        theta_saved = float(self.theta_ref.value)
+        self._save()
         while s < 1.0 - 1e-14:
             s_try = min(1.0, s + ds)
             if not self._factor_fresh:      # tangent of the converged state, own load
@@ -510,8 +491,8 @@ class Solver:
             if ok:
                 s, steps = s_try, steps + 1
                 iters.append(int(n))
-                self._u_saved.x.array[:] = self.u.x.array
-                self.theta_ref.value = theta_saved = self.cap_rotation()
+                self._converged_step()
+                self._save()
                 # The last tangent (previous iterate, same load) is off from the converged
                 # one by the last correction only: good enough as the next predictor.
                 self._factor_fresh = n > 1
@@ -520,8 +501,7 @@ class Solver:
                 ds = min(cfg.max_step, ds * cfg.grow) if n <= 6 else ds
             else:
                 cutbacks += 1
-                self.u.x.array[:] = self._u_saved.x.array
-                self.theta_ref.value = theta_saved
+                self._restore()
                 self._factor_fresh = False
                 ds /= 2
                 if self.comm.rank == 0:
@@ -530,21 +510,145 @@ class Solver:
                     reason = reason or f"no convergence after {cutbacks} cut-backs at path {s:.4f}"
                     break
         converged = s >= 1.0 - 1e-14
-        final = Load.from_array(start + s * (target - start))
-        self.state_load = final
-        self._set_load(final.as_array())
+        self.state = start + s * (target - start)
+        self._set_load(self.state)
+        return PathOutcome(converged, self.state, iters, steps, cutbacks, "" if converged else reason)
+
+
+class Solver(NewtonSolver):
+    """Large-deflection solver of one joint-like body (the bellow joint, the benchmark
+    beam) on one mesh; keeps its state for continuation. Load vector (P, F1, F2, M).
+
+    ``probe_points`` (n, 3) are material points whose deformed (x, y) are reported
+    (the joint's anchors); ``ref_point`` (3,) is where F1, F2 act on the rigid cap.
+    """
+
+    load_scale = np.asarray(INPUT_BOX, dtype=float)
+
+    def __init__(self, mesh_data: MeshData, ref_point, probe_points,
+                 material: Material = Material(), config: SolverConfig = SolverConfig()):
+        self.mesh_data, self.material = mesh_data, material
+        mesh, ft = mesh_data.mesh, mesh_data.facet_tags
+        self.comm = mesh.comm
+        V, u, v, bcs, dx, ds = displacement_problem(mesh_data, config)
+        self._dx_cap = dx(TAGS["distal_cap"])
+
+        # --- kinematics and internal energy
+        F = ufl.variable(ufl.Identity(len(u)) + ufl.grad(u))
+        mu, lmbda = _lame(material.E, material.nu)
+        mu_c, lmbda_c = _lame(material.cap_stiffness * material.E, material.cap_nu)
+        P_body = ufl.diff(neo_hookean_psi(F, mu, lmbda), F)
+        P_cap = ufl.diff(neo_hookean_psi(F, mu_c, lmbda_c), F)
+        R_int = (ufl.inner(P_body, ufl.grad(v)) * dx(TAGS["solid"])
+                 + ufl.inner(P_cap, ufl.grad(v)) * dx(TAGS["distal_cap"]))
+
+        # --- cap rotation, relative to the last converged rotation theta_ref
+        self.theta_ref = fem.Constant(mesh, PETSc.ScalarType(0))
+        self._theta_saved = 0.0
+        theta = rotation_about_z(F, self.theta_ref)
+        self._theta_form = fem.form(theta * self._dx_cap)
+        one = fem.Constant(mesh, PETSc.ScalarType(1))
+        self.cap_volume = self._allsum(fem.assemble_scalar(fem.form(one * self._dx_cap)))
+
+        # --- end-load potentials per unit F1, F2, M (the half-model carries half)
+        # Mesh-dependent numbers are Constants, so one compiled form serves every mesh.
+        X = ufl.SpatialCoordinate(mesh)
+        Xref = fem.Constant(mesh, np.asarray(ref_point[:2], dtype=PETSc.ScalarType))
+        Rth = ufl.as_matrix([[ufl.cos(theta), -ufl.sin(theta)], [ufl.sin(theta), ufl.cos(theta)]])
+        arm = Xref - ufl.as_vector([X[0], X[1]])
+        u_ref = ufl.as_vector([u[0], u[1]]) + (Rth - ufl.Identity(2)) * arm
+        w = fem.Constant(mesh, PETSc.ScalarType(-0.5 / self.cap_volume))
+        potentials = [w * u_ref[0] * self._dx_cap, w * u_ref[1] * self._dx_cap,
+                      w * theta * self._dx_cap]
+        self._dR_dload = [ufl.derivative(pi, u, v) for pi in potentials]   # F1, F2, M
+
+        # --- pressure: follower traction on the deformed chamber walls
+        tags = facet_tags_present(ft)
+        self._dR_dp = {name: follower_pressure(F, v, ds(TAGS[name]))
+                       for name in ("top_chamber", "bottom_chamber") if TAGS[name] in tags}
+
+        # --- load constants and full residual
+        self.p = {name: fem.Constant(mesh, PETSc.ScalarType(0)) for name in self._dR_dp}
+        self.f = [fem.Constant(mesh, PETSc.ScalarType(0)) for _ in range(3)]  # F1, F2, M
+        R = R_int
+        for name, form in self._dR_dp.items():
+            R = R + self.p[name] * form
+        for lam, form in zip(self.f, self._dR_dload):
+            R = R + lam * form
+        self._forms_p = {n: fem.form(f) for n, f in self._dR_dp.items()}
+        self._forms_load = [fem.form(f) for f in self._dR_dload]
+        contact = None
+        if TAGS["valley_faces"] in tags and config.contact_penalty > 0:
+            contact = ValleyContact(V, ft, mesh_data.geometry, config.contact_penalty)
+        super().__init__(V, u, R, bcs, config, contact)
+
+        # --- probes (anchor points)
+        self.probe_points = np.asarray(probe_points, dtype=float).reshape(-1, 3)
+        self._probe_cells = self._locate(self.probe_points)
+
+    @property
+    def state_load(self) -> Load:
+        """Load of the current converged state."""
+        return Load.from_array(self.state)
+
+    def cap_rotation(self) -> float:
+        """Volume-averaged rotation of the distal cap about +z (rad)."""
+        return self._allsum(fem.assemble_scalar(self._theta_form)) / self.cap_volume
+
+    def _set_load(self, a: np.ndarray) -> None:
+        P = a[0]
+        if "top_chamber" in self.p:
+            self.p["top_chamber"].value = max(P, 0.0)
+        if "bottom_chamber" in self.p:
+            self.p["bottom_chamber"].value = max(-P, 0.0)
+        for lam, val in zip(self.f, a[1:]):
+            lam.value = val
+
+    def _converged_step(self) -> None:
+        self.theta_ref.value = self.cap_rotation()
+
+    def _save(self) -> None:
+        super()._save()
+        self._theta_saved = float(self.theta_ref.value)
+
+    def _restore(self) -> None:
+        super()._restore()
+        self.theta_ref.value = self._theta_saved
+
+    def positions(self) -> np.ndarray:
+        """Deformed (x, y) of the probe points (mm), shape (n, 2)."""
+        return (self.probe_points + self.evaluate(self.u))[:, :2]
+
+    def reset(self) -> None:
+        """Return to the undeformed, unloaded state."""
+        self.theta_ref.value = 0.0
+        super().reset()
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, load: Load, continuation: bool = False) -> SolveResult:
+        """Solve for ``load``; from zero, or (continuation) from the current state.
+
+        The load path is linear from the start load to ``load`` (NewtonSolver._follow:
+        cut-back on failure; a failed solve returns to its last converged state).
+        """
+        if not np.isfinite(load.as_array()).all():   # would only fail after every cut-back
+            raise ValueError(f"{load} is not finite")
+        t0, lu0, kr0 = time.perf_counter(), self.factorisations, self.krylov_iterations
+        if not continuation:
+            self.reset()
+        path = self._follow(self.state.copy(), load.as_array())
         anchors = self.positions()
         result = SolveResult(
-            load=load, converged=converged, anchors=anchors,
+            load=load, converged=path.converged, anchors=anchors,
             phi_end=float(phi_end(anchors)) if len(anchors) > 1 else math.nan,
-            cap_rotation=float(self.theta_ref.value), newton_iterations=iters,
-            load_steps=steps, cutbacks=cutbacks, factorisations=self.factorisations - lu0,
+            cap_rotation=float(self.theta_ref.value), newton_iterations=path.newton_iterations,
+            load_steps=path.load_steps, cutbacks=path.cutbacks,
+            factorisations=self.factorisations - lu0,
             krylov_iterations=self.krylov_iterations - kr0,
-            wall_time=time.perf_counter() - t0,
-            reason="" if converged else reason, u=self.u)
+            wall_time=time.perf_counter() - t0, reason=path.reason, u=self.u)
         if self.comm.rank == 0:
             log.info("solve %s: converged=%s, %d steps, %d iterations, %.2f s",
-                     load, converged, steps, result.iterations, result.wall_time)
+                     load, path.converged, path.load_steps, result.iterations, result.wall_time)
         return result
 
     # ------------------------------------------------------------------ sensitivities
@@ -584,18 +688,6 @@ class Solver:
             cols.append(-sign * self.evaluate(w)[:, :2].reshape(-1))
             b.destroy()
         return np.column_stack(cols)
-
-    # ------------------------------------------------------------------ info
-    def mesh_info(self) -> dict:
-        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs."""
-        mesh = self.mesh_data.mesh
-        imap = mesh.topology.index_map(0)
-        cmap = mesh.topology.index_map(mesh.topology.dim)
-        nodes = self.V.dofmap.index_map.size_global
-        return {"vertices": imap.size_global, "cells": cmap.size_global,
-                "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
-                "degree": self.config.degree, "mesh_size": self.mesh_data.geometry.mesh_size}
-
 
 class JointSolver(Solver):
     """The bellow joint: anchors r_1..r_10 (DESIGN.md §3), loads at r_10."""

@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 
+from fem.finger_spec import FingerSpec, load_finger
 from predictor import atlas as _atlas
+from predictor.gripper import GripperParams, default_finger
 from predictor import inverse as _inverse
 from predictor.solve import GestureResult, SolverOptions, solve
 
@@ -44,16 +47,25 @@ class Gesture:
                 "first_contact_MPa": None if self.result.first_contact is None else self.result.first_contact[0].tolist()}
 
 
-def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True) -> Gripper:
+def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True,
+                 finger: str | Path | FingerSpec | None = None, kinematics: str = "tangent",
+                 joint_weight: str = "lumped") -> Gripper:
     """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate
     when present); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None:
-    no object). ValueError (one line) for a bad spec, model or a badly placed object."""
-    return Gripper(_atlas.load_problem(model, object, gravity), object)
+    no object); finger: a finger description file or FingerSpec (None: the paper's,
+    fem/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split"
+    (predictor.gesture's --finger, --kinematics, --joint-weight). ValueError (one line) for
+    a bad spec, finger file, model, option or a badly placed object."""
+    if finger is not None and not isinstance(finger, FingerSpec):
+        finger = load_finger(finger)
+    params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight)
+    return Gripper(_atlas.load_problem(model, object, gravity, params), object)
 
 
-def solve_gesture(gripper: Gripper, p1: float, p2: float) -> Gesture:
-    """The equilibrium gesture at (p1, p2) MPa."""
-    res = solve(gripper.problem, torch.tensor([[p1, p2]], dtype=torch.float64))
+def solve_gesture(gripper: Gripper, *pressures: float) -> Gesture:
+    """The equilibrium gesture at pressures (P1, .., PJ) MPa, one per joint of the finger
+    (p1, p2 for the paper's)."""
+    res = solve(gripper.problem, torch.tensor([pressures], dtype=torch.float64))
     return Gesture(res, _atlas.STATES[int(_atlas.classify(res, gripper.problem.contact.mu)[0][0])])
 
 

@@ -40,7 +40,7 @@ import torch
 from fem import cli
 from fem.files import write_json
 from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import check_pressures
+from predictor.gripper import GripperParams, check_pressures
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
 from predictor.statics import GripperProblem, Obstacle
 
@@ -70,14 +70,15 @@ def placement_error(problem: GripperProblem) -> str | None:
     if problem.obstacle is None:
         return None
     free = GripperProblem(problem.joint, problem.params, None, problem.contact, problem.gravity)
-    p = (0.0, 0.0) if problem.approach is None else tuple(problem.approach)
+    p = (0.0,) * problem.n_joints if problem.approach is None else tuple(problem.approach)
     res = solve(free, torch.tensor([p], dtype=torch.float64))
     if not bool(res.converged[0]):  # no gesture to check against: never guess one
-        return f"the gesture without the object at ({p[0]:g}, {p[1]:g}) MPa did not converge"
+        return f"the gesture without the object at ({', '.join(f'{v:g}' for v in p)}) MPa did not converge"
     with torch.no_grad():
         pen = float(problem.residual(res.pressures, res.tau).contact.penetration[0])
     if pen > 0:
-        where = "zero pressure" if problem.approach is None else f"the approach gesture ({p[0]:g}, {p[1]:g}) MPa"
+        where = ("zero pressure" if problem.approach is None else
+                 f"the approach gesture ({', '.join(f'{v:g}' for v in p)}) MPa")
         return (f"the object intersects the fingers at {where} by {pen:.2f} mm: place it lower or "
                 "farther from the fingers")
     return None
@@ -146,7 +147,11 @@ class Atlas:
 def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
                 options: SolverOptions = SolverOptions()) -> Atlas:
     """Solve the grid x grid atlas of ``problem`` (its object and approach) over
-    box = (P1lo, P1hi, P2lo, P2hi) MPa in one batched solve. Returns an Atlas."""
+    box = (P1lo, P1hi, P2lo, P2hi) MPa in one batched solve. Returns an Atlas. The atlas
+    is the pressure plane of a 2-joint finger (ValueError for another)."""
+    if problem.n_joints != 2:
+        raise ValueError(f"the grasp atlas spans (P1, P2): finger {problem.params.finger.name!r} has "
+                         f"{problem.n_joints} joints")
     p1 = np.linspace(box[0], box[1], grid)
     p2 = np.linspace(box[2], box[3], grid)
     pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
@@ -239,17 +244,22 @@ def box_arg(text: str) -> tuple[float, float, float, float]:
     return box
 
 
-def load_problem(model: str | None, spec: str | None, gravity: bool = True) -> GripperProblem:
+def load_problem(model: str | None, spec: str | None, gravity: bool = True,
+                 params: GripperParams | None = None) -> GripperProblem:
     """GripperProblem of ``predictor.gesture``'s defaults for a model path (None: the
-    committed surrogate when present, else analytic) and an object spec (None: no object);
-    ValueError (one line) for a badly placed object."""
+    committed surrogate when present, else analytic), an object spec (None: no object)
+    and the finger and chain options ``params`` (None: the paper's finger, tangent,
+    lumped); ValueError (one line) for a badly placed object."""
     from predictor.gesture import DEFAULT_SURROGATE
     from predictor.joint import load_joint
+    from predictor.solve import approach_for
     from predictor.statics import parse_object
 
     model = model or (str(DEFAULT_SURROGATE) if DEFAULT_SURROGATE.is_file() else "analytic")
-    problem = GripperProblem(load_joint(model), obstacle=parse_object(spec) if spec else None, gravity=gravity,
-                             approach=APPROACH if spec else None)
+    params = params or GripperParams()
+    approach = (APPROACH if params.n_joints == 2 else approach_for(params.n_joints)) if spec else None
+    problem = GripperProblem(load_joint(model), params, obstacle=parse_object(spec) if spec else None,
+                             gravity=gravity, approach=approach)
     why = placement_error(problem)
     if why:
         raise ValueError(why)

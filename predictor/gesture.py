@@ -2,43 +2,90 @@
 
     python -m predictor.gesture --p1 -0.1 --p2 0.1 [--object circle:r=30,y=-195]
         [--approach -0.15,0|zero] [--method newton|lbfgs|nn] [--model PATH] [--nn PATH]
+        [--finger FILE] [--kinematics tangent|cap] [--joint-weight lumped|split]
         [--no-gravity] [--plot out.png] [--json]
+    python -m predictor.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
 
-Data flow: pressures (MPa) + object spec -> GripperProblem (joint model from ``--model``:
-surrogate checkpoint; default results/surrogate/improved.pt when present, else the
-analytic stand-in) -> predictor.solve (or the NN predictor) -> right-finger figures
+The finger is read from a finger description file (``--finger``, default
+fem/fingers/paper.toml, fem.finger_spec): any chain of J joints and rigid parts. A
+2-joint finger takes ``--p1 --p2`` (or ``--pressures P1,P2``); another takes ``--pressures
+P1,..,PJ`` (MPa, base to tip), and ``--approach`` takes J values too (default: joint 1 at
+-0.15 MPa, the others at 0). ``--kinematics``: how a part leaves a joint, along the chord
+of its last two anchors (tangent, the paper's, default) or along its cap face (cap; needs
+a joint model with a cap-rotation head). ``--joint-weight``: a joint's weight at the mean
+of its anchors (lumped, default) or half at each end (split) (predictor.statics).
+
+Data flow: pressures (MPa) + finger + object spec -> GripperProblem (joint model from
+``--model``: surrogate checkpoint; default results/surrogate/improved.pt when present, else
+the analytic stand-in) -> predictor.solve (or the NN predictor) -> right-finger figures
 (GestureResult.summary plus friction_N, time_ms and the run's settings) as text or as
-strict JSON: converged, tau [[F1 N, F2 N, M N·mm] x 2], residual_force_mN,
-residual_moment_Nmm (per joint), tip [x, y] mm, tip_angle_deg, contact_force_N, slip,
-iterations, time_ms.
+strict JSON: converged, tau [[F1 N, F2 N, M N·mm] x J], residual_force_mN,
+residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last part), tip_angle_deg
+(global direction of the last part, -90 at rest), joint_end_angle_deg (per joint, its
+global exit angle), contact_force_N, slip, iterations, time_ms, finger {name, sha256},
+kinematics, joint_weight.
 
 Exit codes: 0 converged; 1 not converged (the JSON says so, tau is null); 2 bad input
-(a pressure that is not a number or beyond ±0.3 MPa, a bad object spec, an unwritable
---plot, a missing, damaged or other-kind model) with a one-line reason on stderr,
-checked before the solve.
+(a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures for the
+finger, a bad finger file or object spec, an unwritable --plot, a missing, damaged or
+other-kind model, cap kinematics on a joint model without a cap head, an NN checkpoint
+trained for another finger or options) with a one-line reason on stderr, checked before
+the solve.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 import torch
 
 from fem import cli
+from fem.finger_spec import DEFAULT_FINGER, FingerFileError, load_finger
 from fem.spec import PRESSURE_LIMIT
+from predictor.gripper import JOINT_WEIGHTS, KINEMATICS, GripperParams
 from predictor.joint import load_joint
-from predictor.solve import APPROACH, SolverOptions, solve
+from predictor.solve import APPROACH, SolverOptions, approach_for, solve
 from predictor.statics import GripperProblem, parse_object
 
 DEFAULT_SURROGATE = Path("results/surrogate/improved.pt")
 PRESSURE = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
-PRESSURE_PAIR = cli.numbers(2, -PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
+
+
+def _pressure_list(text: str) -> tuple[float, ...]:
+    """P1,P2[,..] MPa, each a finite number within ±0.3 (the count is checked against the finger)."""
+    return tuple(PRESSURE(p.strip()) for p in text.split(","))
 
 
 def _approach(text: str):
-    """--approach: ``zero`` or P1,P2 in MPa."""
-    return "zero" if text.strip().lower() == "zero" else PRESSURE_PAIR(text)
+    """--approach: ``zero`` or P1,..,PJ in MPa."""
+    return "zero" if text.strip().lower() == "zero" else _pressure_list(text)
+
+
+def _finger(text: str):
+    """--finger: a finger description file, read and checked while parsing (one line)."""
+    try:
+        return load_finger(text)
+    except FingerFileError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def pressures_of(args: argparse.Namespace, n_joints: int) -> tuple[float, ...]:
+    """The J target pressures from --p1/--p2 or --pressures; ValueError (one line) when they
+    do not fit the finger's joint count."""
+    name = args.finger.name
+    if args.pressures is not None:
+        if args.p1 is not None or args.p2 is not None:
+            raise ValueError("give either --p1/--p2 or --pressures, not both")
+        if len(args.pressures) != n_joints:
+            raise ValueError(f"--pressures: {len(args.pressures)} values for finger {name!r} of {n_joints} joints")
+        return args.pressures
+    if n_joints != 2:
+        raise ValueError(f"finger {name!r} has {n_joints} joints: give --pressures with {n_joints} values (MPa)")
+    if args.p1 is None or args.p2 is None:
+        raise ValueError("give --p1 and --p2 (MPa), or --pressures P1,P2")
+    return (args.p1, args.p2)
 
 
 def _object(text: str) -> str:
@@ -50,24 +97,48 @@ def _object(text: str) -> str:
     return text
 
 
-def run(args: argparse.Namespace):
-    """Solve one gesture from parsed arguments. Returns (json dict, result, problem)."""
+def prepare(args: argparse.Namespace):
+    """Everything a gesture needs, checked before any solve: (problem, pressures (1, J),
+    joint, NN predictor or None). ValueError (one line) for any bad input."""
+    params = GripperParams(args.finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
+    n_joints = params.n_joints
+    pressures = torch.tensor([pressures_of(args, n_joints)], dtype=torch.float64)
+    if args.approach not in (None, "zero") and len(args.approach) != n_joints:
+        raise ValueError(f"--approach: {len(args.approach)} values for finger {args.finger.name!r} of "
+                         f"{n_joints} joints")
     model = args.model or (str(DEFAULT_SURROGATE) if DEFAULT_SURROGATE.is_file() else "analytic")
     joint = load_joint(model)
-    pressures = torch.tensor([[args.p1, args.p2]], dtype=torch.float64)
     obstacle = parse_object(args.object) if args.object else None
     if args.method == "nn":
-        from predictor.nn import load_predictor, predict_gesture
+        from predictor.nn import load_predictor
 
-        predictor = load_predictor(args.nn, joint, contact=args.object is not None)
-        problem = GripperProblem(joint, obstacle=obstacle, approach=predictor.config.approach)
+        predictor = load_predictor(args.nn, joint, contact=args.object is not None, params=params)
+        problem = GripperProblem(joint, params, obstacle=obstacle, approach=predictor.config.approach)
+        return problem, pressures, joint, predictor
+    if args.approach == "zero":
+        start = None
+    else:
+        start = args.approach or (APPROACH if n_joints == 2 else approach_for(n_joints))
+    problem = GripperProblem(joint, params, obstacle=obstacle, gravity=not args.no_gravity, approach=start)
+    return problem, pressures, joint, None
+
+
+def run(args: argparse.Namespace, prepared=None):
+    """Solve one gesture from parsed arguments (and ``prepare(args)``, when already done).
+    Returns (json dict, result, problem)."""
+    problem, pressures, joint, predictor = prepared or prepare(args)
+    if predictor is not None:
+        from predictor.nn import predict_gesture
+
         res = predict_gesture(predictor, problem, pressures)
     else:
-        start = None if args.approach == "zero" else (args.approach or APPROACH)
-        problem = GripperProblem(joint, obstacle=obstacle, gravity=not args.no_gravity, approach=start)
         res = solve(problem, pressures, SolverOptions(method=args.method))
+    ok = bool(res.converged[0])
     out = {**res.summary(0), "friction_N": float(res.friction_N[0]), "time_ms": res.time_ms,
-           "method": args.method, "joint": joint.name, "object": args.object, "gravity": problem.gravity}
+           "method": args.method, "joint": joint.name, "object": args.object, "gravity": problem.gravity,
+           "finger": {"name": problem.params.finger.name, "sha256": problem.params.finger.digest},
+           "kinematics": problem.params.kinematics, "joint_weight": problem.params.joint_weight,
+           "joint_end_angle_deg": [math.degrees(a) for a in res.pose.phi[0].tolist()] if ok else None}
     if args.method == "nn":
         out["nn_fallback_to_ramp"] = bool(res.fallback[0])
     return out, res, problem
@@ -75,13 +146,22 @@ def run(args: argparse.Namespace):
 
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.gesture", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--p1", type=PRESSURE, required=True, help="joint-1 pressure, MPa (|P| <= 0.3)")
-    ap.add_argument("--p2", type=PRESSURE, required=True, help="joint-2 pressure, MPa (|P| <= 0.3)")
+    ap.add_argument("--p1", type=PRESSURE, help="joint-1 pressure, MPa (|P| <= 0.3)")
+    ap.add_argument("--p2", type=PRESSURE, help="joint-2 pressure, MPa (|P| <= 0.3)")
+    ap.add_argument("--pressures", type=_pressure_list, help="P1,..,PJ MPa, one per joint of the finger, base "
+                    "to tip (instead of --p1 --p2)")
+    ap.add_argument("--finger", type=_finger, default=str(DEFAULT_FINGER),
+                    help="finger description file (TOML, fem.finger_spec; default fem/fingers/paper.toml)")
+    ap.add_argument("--kinematics", choices=KINEMATICS, default="tangent",
+                    help="a part leaves a joint along its last anchors' chord (tangent, the paper's) "
+                    "or its cap face (cap)")
+    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default="lumped",
+                    help="a joint's weight at its anchors' mean (lumped) or half at each end (split)")
     ap.add_argument("--object", type=_object,
                     help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
-    ap.add_argument("--approach", type=_approach, help="P1,P2 (MPa) at which the object is brought in "
-                    f"(grasp history; default {APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with the "
-                    "object present")
+    ap.add_argument("--approach", type=_approach, help="P1,P2[,..] (MPa, one per joint) at which the object is "
+                    f"brought in (grasp history; default {APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with "
+                    "the object present")
     ap.add_argument("--method", choices=("newton", "lbfgs", "nn"), default="newton")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: "
                     f"{DEFAULT_SURROGATE} if present, else analytic)")
@@ -95,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
                  "drop --no-gravity and --approach")
     torch.set_num_threads(1)
     with ap.errors():
-        out, res, problem = run(args)
+        prepared = prepare(args)  # every input checked before the solve
+        out, res, problem = run(args, prepared)
         if args.plot:
             from predictor.plot import save_gesture
 

@@ -1,42 +1,69 @@
-"""Two-finger gripper geometry: dimensions, weights and forward kinematics (DESIGN.md §4).
+"""Two-finger gripper geometry: the finger chain, its weights and forward kinematics (DESIGN.md §4).
 
 Global plane: X horizontal, Y vertical up, gravity along -Y, gripper base on Y = 0.
 The right-hand finger is modelled; the left one is its mirror image X -> -X.
 
-Right finger chain, from the base mount B = (d/2, 0) hanging down (theta_1 = -pi/2):
+The finger is read from a finger description file (fem.finger_spec, default
+fem/fingers/paper.toml): an ordered chain of J bellow joints and rigid parts in any
+order, from the base mount B = (base_gap/2, 0), leaving it at base_angle (-pi/2: down).
+The paper's layout is joint 1 -> rigid link (60 mm) -> joint 2 -> rigid tip (65 mm).
 
-    joint 1 -> rigid link (l_link) -> joint 2 -> rigid tip (l_tip)
-
-Equation 3 of the paper (rotate and translate) places joint i:
+Walking the chain keeps a point O and a direction a (global mm, rad). Equation 3 of the
+paper (rotate and translate) places joint i, whose proximal centre is O_i = O and whose
+proximal orientation is theta_i = a:
 
     r_global = O_i + Rot(theta_i) · r_local,   Rot(a) = [[cos a, -sin a], [sin a, cos a]]
 
-with O_i its proximal centre and theta_i its proximal orientation. Connections are
-tangent (DESIGN.md §4): phi_i = theta_i + phi_end(R_i), the rigid link leaves joint 1's
-distal end r_10 along phi_1, so theta_2 = phi_1, and the tip leaves joint 2 along phi_2.
-For the right finger, a joint's local +y is global +X at rest, so P > 0 (bending to -y)
-closes the finger and P < 0 opens it.
+and then O <- r_10,i (its distal end) and a <- phi_i, the joint's exit angle:
 
-All lengths mm, forces N, angles rad. Batched: pressures (B, 2), tau (B, 2, 3).
+    tangent kinematics (the paper's):  phi_i = theta_i + phi_end(R_i)  (chord of anchors 9-10)
+    cap kinematics (bonded cap face):  phi_i = theta_i + cap_rotation_i (JointModel.anchors_and_cap)
+
+A rigid part of length l goes from O to O + l·(cos a, sin a) and leaves a unchanged, so
+theta_{i+1} = phi_i when a rigid part (or nothing) lies between two joints. For the right
+finger, a joint's local +y is global +X at rest, so P > 0 (bending to -y) closes the finger
+and P < 0 opens it.
+
+Weights (N): a rigid part's at its midpoint; a joint's, with ``joint_weight``
+``lumped`` (the paper's, the default), at the mean of its 10 anchors, or ``split``: half at
+its proximal centre O_i, half at its distal end r_10,i (predictor.statics says which joint
+balances each enters). Contact sample points, in chain order: each rigid part's
+``contact_points`` segment midpoints (each carrying l/n of length) and the 10 anchors of each
+joint with ``contact = true`` (each carrying L/10); the paper's finger gives link (12),
+joint 2 (10), tip (65).
+
+All lengths mm, forces N, angles rad. Batched: pressures (B, J), tau (B, J, 3). The joint
+model is evaluated once per call for all J joints, inputs (B, J, 4). Layouts that depend on
+the finger only (ChainLayout) are cached: the residual runs thousands of times per solve.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 
 import torch
 
-from fem.spec import PRESSURE_LIMIT, check_box, phi_end
+from fem.finger_spec import DEFAULT_FINGER, FingerSpec, JointPart, RigidPart, load_finger
+from fem.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
-#: The gripper's inputs: one pressure per joint, each within the joint's |P| <= 0.3 MPa.
+#: The paper gripper's inputs: one pressure per joint, each within the joint's |P| <= 0.3 MPa.
 PRESSURE_NAMES = ("P1", "P2")
+KINEMATICS = ("tangent", "cap")
+JOINT_WEIGHTS = ("lumped", "split")
+
+
+def pressure_names(n: int) -> tuple[str, ...]:
+    """("P1", ..., "Pn"): the pressures of an n-joint finger, base to tip."""
+    return tuple(f"P{i + 1}" for i in range(n))
 
 
 def check_pressures(pressures) -> None:
-    """Refuse pressures (..., 2) MPa that are not finite or beyond |P| <= PRESSURE_LIMIT
+    """Refuse pressures (..., J) MPa that are not finite or beyond |P| <= PRESSURE_LIMIT
     (fem.spec.OutOfBoxError, a ValueError, one line naming the value)."""
-    check_box(pressures, names=PRESSURE_NAMES, box=(PRESSURE_LIMIT, PRESSURE_LIMIT), units=("MPa", "MPa"))
+    n = int(pressures.shape[-1])
+    check_box(pressures, names=pressure_names(n), box=(PRESSURE_LIMIT,) * n, units=("MPa",) * n)
 
 
 def nan_unless(ok: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -52,26 +79,150 @@ def with_rows(v: torch.Tensor, rows: torch.Tensor, new: torch.Tensor) -> torch.T
     return v
 
 
-@dataclass(frozen=True)
-class GripperParams:
-    """Dimensions (mm), weights (N) and contact discretisation of the gripper.
+@functools.lru_cache(maxsize=4)
+def default_finger() -> FingerSpec:
+    """The paper's finger (fem/fingers/paper.toml), read once."""
+    return load_finger(DEFAULT_FINGER)
 
-    Assumptions (the paper's Figure S4 is unavailable, DESIGN.md §4): link 60 mm, tip
-    65 mm, base mounts 50 mm apart, which give the paper's 50 mm free tip opening and
-    ≈3 mm of tip travel per degree of phi_1. Weights: joint 0.09 N at the mean of its
-    anchors, link 0.04 N and tip 0.06 N at their midpoints, object 0.2 N.
+
+def finger_to_dict(finger: FingerSpec) -> dict:
+    """Plain-JSON description of a finger that ``finger_from_dict`` rebuilds exactly
+    (angles in rad, so the round trip is bit for bit; for checkpoints' configs)."""
+    return {"name": finger.name, "base_gap": finger.base_gap, "base_angle": finger.base_angle,
+            "parts": [{"kind": p.kind, **{k: getattr(p, k) for k in p.__dataclass_fields__}} for p in finger.parts]}
+
+
+def finger_from_dict(d: dict) -> FingerSpec:
+    """The FingerSpec of ``finger_to_dict`` (ValueError/TypeError/KeyError if malformed)."""
+    parts = tuple(JointPart(**{k: v for k, v in p.items() if k != "kind"}) if p["kind"] == "joint" else
+                  RigidPart(**{k: v for k, v in p.items() if k != "kind"}) for p in d["parts"])
+    return FingerSpec(parts, float(d["base_gap"]), float(d["base_angle"]), str(d["name"]))
+
+
+@dataclass(frozen=True, eq=False)
+class ChainLayout:
+    """What the statics needs of a finger's chain, as index tensors (cached per finger and
+    joint-weight option; read-only).
+
+    joint_parts: part index of each joint (J,). Weight loads (Kw of them, those entering at
+    least one joint balance), in chain order: ``weight_source`` (Kw,) indexes the stacked
+    candidate points [rigid midpoints (R), then lumped: joint anchor means (J); split:
+    joint proximal centres (J), joint distal ends (J)], ``weights`` (Kw,) N, ``weight_mask`` (J, Kw) 1.0 where the
+    load enters joint i's balance. Contact sample points (Kc): ``contact_part`` (Kc,) long,
+    the part each lies on; ``contact_length`` (Kc,) mm; ``contact_mask`` (J, Kc).
+    full_mask (J, Kw + Kc): weights then contact points, the order in which
+    GripperProblem.residual stacks the loads.
     """
 
-    link_length: float = 60.0
-    tip_length: float = 65.0
-    base_gap: float = 50.0
-    joint_weight: float = 0.09
-    link_weight: float = 0.04
-    tip_weight: float = 0.06
+    joint_parts: tuple[int, ...]
+    joint_weight: str
+    weight_source: torch.Tensor
+    weights: torch.Tensor
+    weight_mask: torch.Tensor
+    contact_part: torch.Tensor
+    contact_length: torch.Tensor
+    contact_mask: torch.Tensor
+    full_mask: torch.Tensor
+
+
+@functools.lru_cache(maxsize=16)
+def chain_layout(finger: FingerSpec, joint_weight: str = "lumped") -> ChainLayout:
+    """The ChainLayout of ``finger`` (module docstring: where weights act and which joint
+    balances each load enters; a load on part k enters joint i's balance when k is distal
+    to joint i, i.e. k > part index of joint i; a split joint's distal half also enters
+    its own joint's balance, with zero moment arm)."""
+    if joint_weight not in JOINT_WEIGHTS:
+        raise ValueError(f"joint weight {joint_weight!r}: use {' or '.join(JOINT_WEIGHTS)}")
+    jp = finger.joints
+    J = len(jp)
+    R = len(finger.parts) - J
+    loads = []  # (source index, weight, [enters joint i])
+    r = j = 0
+    for k, part in enumerate(finger.parts):
+        distal = [k > jp[i] for i in range(J)]  # part k lies distal to joint i
+        if part.kind == "rigid":
+            loads.append((r, part.weight, distal))
+            r += 1
+        elif joint_weight == "lumped":
+            loads.append((R + j, part.weight, distal))
+            j += 1
+        else:
+            loads.append((R + j, 0.5 * part.weight, distal))
+            loads.append((R + J + j, 0.5 * part.weight, [k >= jp[i] for i in range(J)]))
+            j += 1
+    # A load distal to no joint (on or before joint 1) is carried by the base mount only.
+    loads = [ld for ld in loads if any(ld[2])]
+    c_part, c_len = [], []
+    for k, part in enumerate(finger.parts):
+        n = N_ANCHORS if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
+        if n:
+            c_part += [k] * n
+            c_len += [(JOINT_LENGTH if part.kind == "joint" else part.length) / n] * n
+    mask = lambda rows: torch.tensor(rows, dtype=torch.float64).reshape(J, -1)  # noqa: E731
+    w_mask = mask([[float(ld[2][i]) for ld in loads] for i in range(J)])
+    c_mask = mask([[float(k > jp[i]) for k in c_part] for i in range(J)])
+    return ChainLayout(
+        joint_parts=jp,
+        joint_weight=joint_weight,
+        weight_source=torch.tensor([ld[0] for ld in loads], dtype=torch.long),
+        weights=torch.tensor([ld[1] for ld in loads], dtype=torch.float64),
+        weight_mask=w_mask,
+        contact_part=torch.tensor(c_part, dtype=torch.long),
+        contact_length=torch.tensor(c_len, dtype=torch.float64),
+        contact_mask=c_mask,
+        full_mask=torch.cat((w_mask, c_mask), 1))
+
+
+@dataclass(frozen=True)
+class GripperParams:
+    """The finger (a FingerSpec: chain, lengths, weights, base mounts, contact sampling),
+    the object's weight (N) and the two modelling options of the chain:
+
+    kinematics: ``tangent`` (the paper's, a part leaves joint i along the chord of its last
+    two anchors) or ``cap`` (along the distal cap face, the joint model's cap rotation);
+    joint_weight: ``lumped`` (at the mean of the anchors) or ``split`` (half at each end).
+
+    Paper defaults (DESIGN.md §4, fem/fingers/paper.toml; Figure S4 is unavailable): link
+    60 mm, tip 65 mm, base mounts 50 mm apart, which give the paper's 50 mm free tip
+    opening and ≈3 mm of tip travel per degree of phi_1. Weights: joint 0.09 N, link 0.04 N,
+    tip 0.06 N, object 0.2 N.
+    """
+
+    finger: FingerSpec = field(default_factory=default_finger)
     object_weight: float = 0.2
-    # Contact sample points per rigid part (segment midpoints, so each carries l/n of length).
-    n_link_points: int = 12
-    n_tip_points: int = 65
+    kinematics: str = "tangent"
+    joint_weight: str = "lumped"
+
+    def __post_init__(self):
+        if self.kinematics not in KINEMATICS:
+            raise ValueError(f"kinematics {self.kinematics!r}: use {' or '.join(KINEMATICS)}")
+        if self.joint_weight not in JOINT_WEIGHTS:
+            raise ValueError(f"joint weight {self.joint_weight!r}: use {' or '.join(JOINT_WEIGHTS)}")
+        # Built once per params (not a field: eq, hash and repr ignore it); the residual reads
+        # it on every evaluation.
+        object.__setattr__(self, "_layout", chain_layout(self.finger, self.joint_weight))
+
+    @property
+    def n_joints(self) -> int:
+        return self.finger.n_joints
+
+    @property
+    def layout(self) -> ChainLayout:
+        return self._layout
+
+    @property
+    def base_gap(self) -> float:
+        """mm between the two fingers' base mounts."""
+        return self.finger.base_gap
+
+    @property
+    def tip_length(self) -> float:
+        """Length (mm) of the finger's last part (the rigid tip of the paper's finger)."""
+        return self.finger.parts[-1].length
+
+    def describe(self) -> str:
+        """One line: finger name and the two options (for messages)."""
+        return f"finger {self.finger.name!r}, {self.kinematics} kinematics, {self.joint_weight} joint weights"
 
 
 def rot(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -91,32 +242,35 @@ def _segment_midpoints(start: torch.Tensor, direction: torch.Tensor, length: flo
 
 
 ANGLE = {"angle": True}  # FingerPose field metadata: an angle (rad), not points (mm)
+STATIC = {"static": True}  # FingerPose field metadata: the same for every sample (not a tensor)
 
 
 @dataclass
 class FingerPose:
-    """Global geometry of one finger, all (B, ...) mm / rad.
+    """Global geometry of one finger, all (B, ...) mm / rad, for the chain ``finger``.
 
-    joint1, joint2: (B, 11, 2) polylines, proximal centre then the 10 anchors.
-    link, tip: (B, 2, 2) end points. theta: (B, 2) proximal orientation of joints 1, 2.
-    phi: (B, 2) distal orientation of joints 1, 2. link_points, tip_points: (B, n, 2)
-    contact sample points (segment midpoints). The methods below act on every field
-    (``dataclasses.fields``); angle fields carry the ANGLE metadata.
+    joints: (B, J, 11, 2) polylines, proximal centre then the 10 anchors of each joint.
+    segments: (B, R, 2, 2) start and end point of each rigid part, base to tip.
+    theta: (B, J) proximal orientation of each joint; phi: (B, J) its exit angle (the
+    direction the next part leaves at). points: (B, K, 2) contact sample points in chain
+    order (ChainLayout.contact_part says which part each lies on). finger: the FingerSpec
+    (static). The methods below act on every tensor field (``dataclasses.fields``); angle
+    fields carry the ANGLE metadata. The paper layout's names (joint1, joint2, link, tip,
+    link_points, tip_points) are properties of a joint-rigid-joint-rigid chain.
     """
 
-    joint1: torch.Tensor
-    joint2: torch.Tensor
-    link: torch.Tensor
-    tip: torch.Tensor
+    joints: torch.Tensor
+    segments: torch.Tensor
     theta: torch.Tensor = field(metadata=ANGLE)
     phi: torch.Tensor = field(metadata=ANGLE)
-    link_points: torch.Tensor
-    tip_points: torch.Tensor
+    points: torch.Tensor
+    finger: FingerSpec = field(metadata=STATIC)
 
     def _map(self, points, angles=None) -> "FingerPose":
         """Apply points(v) to every point field and angles(v) (default: points) to the angles."""
         angles = angles or points
-        return FingerPose(**{f.name: (angles if f.metadata.get("angle") else points)(getattr(self, f.name))
+        return FingerPose(**{f.name: getattr(self, f.name) if f.metadata.get("static") else
+                             (angles if f.metadata.get("angle") else points)(getattr(self, f.name))
                              for f in fields(self)})
 
     def mirrored(self) -> "FingerPose":
@@ -129,45 +283,123 @@ class FingerPose:
 
     def with_rows(self, rows: torch.Tensor, other: "FingerPose") -> "FingerPose":
         """A copy whose ``rows`` (B,) bool come from other (a pose of rows.sum() samples)."""
-        return FingerPose(**{f.name: with_rows(getattr(self, f.name), rows, getattr(other, f.name))
+        return FingerPose(**{f.name: getattr(self, f.name) if f.metadata.get("static") else
+                             with_rows(getattr(self, f.name), rows, getattr(other, f.name)) for f in fields(self)})
+
+    def rows(self, index) -> "FingerPose":
+        """The pose of samples ``index`` (a bool mask or indices over B)."""
+        return FingerPose(**{f.name: getattr(self, f.name) if f.metadata.get("static") else getattr(self, f.name)[index]
                              for f in fields(self)})
+
+    # ---- chain-generic views
+    def part_polylines(self) -> list[tuple[str, torch.Tensor]]:
+        """[(kind, (B, n, 2) polyline)] of every part in chain order (joints: 11 points,
+        rigid parts: their 2 end points)."""
+        out, j, r = [], 0, 0
+        for part in self.finger.parts:
+            if part.kind == "joint":
+                out.append(("joint", self.joints[:, j]))
+                j += 1
+            else:
+                out.append(("rigid", self.segments[:, r]))
+                r += 1
+        return out
 
     @property
     def tip_end(self) -> torch.Tensor:
-        """Fingertip position (B, 2) mm."""
-        return self.tip[:, 1]
+        """Fingertip position (B, 2) mm: the end of the last part."""
+        if self.finger.parts[-1].kind == "rigid":
+            return self.segments[:, -1, 1]
+        return self.joints[:, -1, -1]
+
+    @property
+    def tip_angle(self) -> torch.Tensor:
+        """Global direction (B,) rad of the last part (-pi/2 at rest): the last joint's exit
+        angle, which the rigid parts after it keep."""
+        return self.phi[:, -1]
+
+    # ---- the paper layout's names (joint, link, joint, tip)
+    def _paper(self, name: str) -> None:
+        if tuple(p.kind for p in self.finger.parts) != ("joint", "rigid", "joint", "rigid"):
+            raise ValueError(f"FingerPose.{name} names a part of the paper's joint-link-joint-tip chain; finger "
+                             f"{self.finger.name!r} is another chain: use joints, segments, points")
+
+    def _points_of(self, part: int) -> torch.Tensor:
+        sel = (chain_layout(self.finger).contact_part == part).nonzero().flatten()
+        return self.points[:, sel]
+
+    @property
+    def joint1(self) -> torch.Tensor:
+        self._paper("joint1")
+        return self.joints[:, 0]
+
+    @property
+    def joint2(self) -> torch.Tensor:
+        self._paper("joint2")
+        return self.joints[:, 1]
+
+    @property
+    def link(self) -> torch.Tensor:
+        self._paper("link")
+        return self.segments[:, 0]
+
+    @property
+    def tip(self) -> torch.Tensor:
+        self._paper("tip")
+        return self.segments[:, 1]
+
+    @property
+    def link_points(self) -> torch.Tensor:
+        self._paper("link_points")
+        return self._points_of(1)
+
+    @property
+    def tip_points(self) -> torch.Tensor:
+        self._paper("tip_points")
+        return self._points_of(3)
 
 
 def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
-    """Forward kinematics of the right finger.
+    """Forward kinematics of the right finger (module docstring).
 
-    pressures: (B, 2) MPa [P1, P2]; tau: (B, 2, 3) joint loads [F1 N, F2 N, M N·mm] in
+    pressures: (B, J) MPa [P1 .. PJ]; tau: (B, J, 3) joint loads [F1 N, F2 N, M N·mm] in
     each joint's undeformed frame. Returns the FingerPose (global mm, rad).
     """
+    finger = params.finger
     B = pressures.shape[0]
-    inputs = torch.cat((pressures[..., None], tau), -1)  # (B, 2, 4)
-    anchors = joint(inputs)  # (B, 2, 10, 2) local
-    bend = phi_end(anchors)  # (B, 2)
-    base = torch.tensor([0.5 * params.base_gap, 0.0], dtype=tau.dtype).expand(B, 2)
-    theta1 = torch.full((B,), -0.5 * math.pi, dtype=tau.dtype)
+    inputs = torch.cat((pressures[..., None], tau), -1)  # (B, J, 4): one joint-model pass
+    if params.kinematics == "cap":
+        anchors, turn = joint.anchors_and_cap(inputs)  # (B, J, 10, 2) local, (B, J) rad
+    else:
+        anchors = joint(inputs)
+        turn = phi_end(anchors)  # tangent: the chord of the last two anchors
+    pos = torch.tensor([0.5 * finger.base_gap, 0.0], dtype=tau.dtype).expand(B, 2)
+    angle = torch.full((B,), finger.base_angle, dtype=tau.dtype)
     zero = torch.zeros(B, 1, 2, dtype=tau.dtype)
-
-    j1 = base[:, None, :] + rot(theta1[:, None], torch.cat((zero, anchors[:, 0]), 1))
-    phi1 = theta1 + bend[:, 0]
-    link_dir = _unit(phi1)
-    link_end = j1[:, -1] + params.link_length * link_dir
-    theta2 = phi1  # tangent connection
-    j2 = link_end[:, None, :] + rot(theta2[:, None], torch.cat((zero, anchors[:, 1]), 1))
-    phi2 = theta2 + bend[:, 1]
-    tip_dir = _unit(phi2)
-    tip_end = j2[:, -1] + params.tip_length * tip_dir
+    joints, segments, theta, phi, points = [], [], [], [], []
+    for part in finger.parts:  # a loop over the chain's few parts, not over the batch
+        if part.kind == "joint":
+            i = len(joints)
+            poly = pos[:, None, :] + rot(angle[:, None], torch.cat((zero, anchors[:, i]), 1))
+            theta.append(angle)
+            angle = angle + turn[:, i]
+            phi.append(angle)
+            joints.append(poly)
+            if part.contact:
+                points.append(poly[:, 1:])
+            pos = poly[:, -1]
+        else:
+            direction = _unit(angle)
+            end = pos + part.length * direction
+            segments.append(torch.stack((pos, end), 1))
+            if part.contact_points:
+                points.append(_segment_midpoints(pos, direction, part.length, part.contact_points))
+            pos = end
     return FingerPose(
-        joint1=j1,
-        joint2=j2,
-        link=torch.stack((j1[:, -1], link_end), 1),
-        tip=torch.stack((j2[:, -1], tip_end), 1),
-        theta=torch.stack((theta1, theta2), -1),
-        phi=torch.stack((phi1, phi2), -1),
-        link_points=_segment_midpoints(j1[:, -1], link_dir, params.link_length, params.n_link_points),
-        tip_points=_segment_midpoints(j2[:, -1], tip_dir, params.tip_length, params.n_tip_points),
+        joints=torch.stack(joints, 1),
+        segments=torch.stack(segments, 1) if segments else torch.zeros(B, 0, 2, 2, dtype=tau.dtype),
+        theta=torch.stack(theta, -1),
+        phi=torch.stack(phi, -1),
+        points=torch.cat(points, 1) if points else torch.zeros(B, 0, 2, dtype=tau.dtype),
+        finger=finger,
     )

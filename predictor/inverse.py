@@ -124,6 +124,9 @@ class InverseProblem:
     def __post_init__(self):
         if self.goal.kind == "hold" and self.problem.obstacle is None:
             raise ValueError("--goal hold needs an --object")
+        if self.problem.n_joints != 2:
+            raise ValueError(f"the inverse search spans (P1, P2): finger {self.problem.params.finger.name!r} has "
+                             f"{self.problem.n_joints} joints")
 
 
 @dataclass(frozen=True)
@@ -224,7 +227,7 @@ def _goal_terms(ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
         tip = st.pose.tip_end[0]
         e = [tip[0] - goal.tip[0], tip[1] - goal.tip[1]]
         if goal.angle_deg is not None:
-            e.append(prob.params.tip_length * (st.pose.phi[0, 1] - math.radians(goal.angle_deg)))
+            e.append(prob.params.tip_length * (st.pose.tip_angle[0] - math.radians(goal.angle_deg)))
     else:
         c = st.contact
         use = c.ratio[0].abs() / prob.contact.mu
@@ -324,7 +327,7 @@ def _result_at(ip: InverseProblem, res: GestureResult, i: int) -> dict:
     state, use = classify(res, ip.problem.contact.mu)
     tip = res.pose.tip_end[i].tolist()
     out = {"pressures": tuple(res.pressures[i].tolist()), "state": STATES[state[i]], "tip": tuple(tip),
-           "tip_angle_deg": math.degrees(float(res.pose.phi[i, 1])), "normal_N": float(res.normal_force_N[i]),
+           "tip_angle_deg": math.degrees(float(res.pose.tip_angle[i])), "normal_N": float(res.normal_force_N[i]),
            "friction_use": None if math.isnan(use[i]) else float(use[i]), "tip_error_mm": None}
     if ip.goal.kind == "tip":
         err = math.hypot(tip[0] - ip.goal.tip[0], tip[1] - ip.goal.tip[1])
@@ -364,7 +367,7 @@ def _starts(ip: InverseProblem, atlas: Atlas | None) -> list[tuple[torch.Tensor,
         e = res.pose.tip_end - torch.tensor(ip.goal.tip, dtype=torch.float64)
         score = e.pow(2).sum(-1)
         if ip.goal.angle_deg is not None:
-            score = score + (ip.problem.params.tip_length * (res.pose.phi[:, 1] - math.radians(ip.goal.angle_deg))) ** 2
+            score = score + (ip.problem.params.tip_length * (res.pose.tip_angle - math.radians(ip.goal.angle_deg))) ** 2
     score = torch.where(ok, score, torch.inf)
     chosen = []
     for i in torch.argsort(score).tolist():

@@ -31,6 +31,13 @@ Stand-in stiffnesses (chosen, not measured; documented here so reports can quote
   degrees a pneumatic bellow joint reaches. Gravity (≈0.2 N at ≈100 mm) droops ≈ 10°.
 - EA = 300 N: the bellow is axially soft, 3 N stretches it by 1 % (0.45 mm).
 
+Cap kinematics (issue 14, predictor.gripper): ``anchors_and_cap(inputs)`` also returns the
+rotation (rad) of the joint's distal cap face, the section the next rigid part is bonded
+to. AnalyticJoint: the exact end-section angle of its beam, a_10 + kappa_10·h (the start
+angle of the last segment plus its turn). SurrogateJoint: the surrogate's cap-rotation
+head (``module.with_cap``) when the checkpoint has one (``module.has_cap_rotation``),
+otherwise a one-line ValueError (use tangent kinematics).
+
 The joint's contract (length, anchors, input box, phi_end) is fem.spec's; this module
 only implements it.
 """
@@ -56,6 +63,19 @@ class JointModel:
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
+    @property
+    def has_cap_rotation(self) -> bool:
+        """Whether ``anchors_and_cap`` is available (cap kinematics)."""
+        return False
+
+    def anchors_and_cap(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(anchors (..., 10, 2) mm, cap rotation (...) rad) of inputs (..., 4) in one pass."""
+        raise ValueError(no_cap_message(self.name))
+
+
+def no_cap_message(name: str) -> str:
+    return f"joint model {name} has no cap-rotation head: use --kinematics tangent"
+
 
 @dataclass(frozen=True)
 class AnalyticJoint(JointModel):
@@ -71,6 +91,17 @@ class AnalyticJoint(JointModel):
     name: str = "analytic"
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
+        return self._beam(inputs)[0]
+
+    @property
+    def has_cap_rotation(self) -> bool:
+        return True
+
+    def anchors_and_cap(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self._beam(inputs)
+
+    def _beam(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(anchors (..., 10, 2), end-section angle (...) = a_10 + kappa_10·h)."""
         P, F1, F2, M = inputs.unbind(-1)
         h = self.length / N_ANCHORS
         s_mid = (torch.arange(N_ANCHORS, dtype=inputs.dtype) + 0.5) * h  # (10,)
@@ -82,7 +113,7 @@ class AnalyticJoint(JointModel):
         # sinc(x) = sin(x)/x for the chord of an arc; torch.sinc is the normalised one.
         chord = (1.0 + F1 / self.EA)[..., None] * h * torch.sinc(0.5 * turn / math.pi)
         steps = torch.stack((chord * torch.cos(mid), chord * torch.sin(mid)), -1)
-        return torch.cumsum(steps, -2)
+        return torch.cumsum(steps, -2), start[..., -1] + turn[..., -1]
 
 
 class SurrogateJoint(JointModel):
@@ -107,6 +138,16 @@ class SurrogateJoint(JointModel):
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
         return self.module(inputs)
+
+    @property
+    def has_cap_rotation(self) -> bool:
+        # The cap-rotation head is issue 14's; older checkpoints have none.
+        return bool(getattr(self.module, "has_cap_rotation", False))
+
+    def anchors_and_cap(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        if not self.has_cap_rotation:
+            raise ValueError(no_cap_message(self.name))
+        return self.module.with_cap(inputs)
 
 
 def load_joint(spec: str | None) -> JointModel:

@@ -33,6 +33,13 @@ Variants (``python -m predictor.nn --variant ...``):
   pressure box where the ramp's grasp changes branch (the tip slides off the object:
   tau jumps) are left out of the NN's domain: P1 in [-0.15, 0.2], P2 in [-0.05, 0.25].
 
+Fingers (issue 14): the network is (P1..PJ) -> tau (J, 3) for the finger of its config
+(``finger``: predictor.gripper.finger_to_dict, None = the paper's finger, which is what
+checkpoints written before the option record), with its ``kinematics`` and
+``joint_weight`` options (defaults tangent, lumped); ``--finger``, ``--kinematics`` and
+``--joint-weight`` train for others. A predictor answers only for the finger and options
+it was trained for (``load_predictor(..., params=)`` refuses others with one line).
+
 Checkpoints (DESIGN.md §5): integrity-checked files (surrogate.checkpoint) of kind
 ``softjoint-gravity-nn/1`` (no object) or ``softjoint-contact-nn/1``, whose payload holds
 the training config, normalisation (input 0.3 MPa, TAU_SCALE), the weights, the joint
@@ -44,7 +51,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import torch
@@ -52,7 +59,8 @@ from torch import nn
 
 from fem import cli
 from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import check_pressures, nan_unless
+from predictor.gripper import (JOINT_WEIGHTS, KINEMATICS, GripperParams, check_pressures, default_finger,
+                               finger_from_dict, finger_to_dict, nan_unless)
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
 from predictor.statics import GripperProblem, Obstacle, loss, residual_norms
@@ -92,12 +100,28 @@ class NNConfig:
     obstacle: dict | None = None
     approach: tuple | None = None
     seed: int = 0
+    finger: dict | None = None  # predictor.gripper.finger_to_dict; None: the paper's finger
+    kinematics: str = "tangent"
+    joint_weight: str = "lumped"
+
+    def params(self) -> GripperParams:
+        """The finger and chain options this predictor is trained for."""
+        finger = finger_from_dict(self.finger) if self.finger is not None else default_finger()
+        return GripperParams(finger, kinematics=self.kinematics, joint_weight=self.joint_weight)
 
     def problem(self, joint: JointModel) -> GripperProblem:
-        """The gesture problem this predictor is trained for, on ``joint`` (default finger,
-        contact law and gravity)."""
-        return GripperProblem(joint, obstacle=Obstacle(**self.obstacle) if self.obstacle else None,
+        """The gesture problem this predictor is trained for, on ``joint`` (its finger and
+        options; default contact law and gravity)."""
+        return GripperProblem(joint, self.params(), obstacle=Obstacle(**self.obstacle) if self.obstacle else None,
                               approach=self.approach)
+
+    def for_params(self, params: GripperParams) -> "NNConfig":
+        """This config for another finger or options: the finger recorded, the network's
+        input and output widths set to its J pressures and 3J loads (pressure ranges:
+        joint 1 takes p1_range, every other joint p2_range)."""
+        J = params.n_joints
+        return replace(self, finger=finger_to_dict(params.finger), kinematics=params.kinematics,
+                       joint_weight=params.joint_weight, widths=(J,) + tuple(self.widths[1:-1]) + (3 * J,))
 
 
 VARIANTS = {
@@ -113,7 +137,8 @@ VARIANTS = {
 
 
 class GestureNet(nn.Module):
-    """MLP (B, 2) MPa -> tau (B, 2, 3) [N, N, N·mm] with fixed input/output scaling."""
+    """MLP (B, J) MPa -> tau (B, J, 3) [N, N, N·mm] with fixed input/output scaling
+    (J = widths[0]; widths[-1] = 3J)."""
 
     def __init__(self, widths: tuple, activation: str):
         super().__init__()
@@ -124,10 +149,10 @@ class GestureNet(nn.Module):
             if i < len(widths) - 2:
                 layers.append(act())
         self.mlp = nn.Sequential(*layers).double()
-        self.register_buffer("tau_scale", torch.tensor(TAU_SCALE, dtype=torch.float64))
+        self.register_buffer("tau_scale", torch.tensor(TAU_SCALE[:3] * (widths[-1] // 3), dtype=torch.float64))
 
     def forward(self, pressures: torch.Tensor) -> torch.Tensor:
-        return (self.mlp(pressures / P_SCALE) * self.tau_scale).reshape(-1, 2, 3)
+        return (self.mlp(pressures / P_SCALE) * self.tau_scale).reshape(pressures.shape[0], -1, 3)
 
 
 @dataclass
@@ -142,10 +167,12 @@ class Predictor:
 
 
 def sample_pressures(n: int, cfg: NNConfig, gen: torch.Generator) -> torch.Tensor:
-    """n pressure pairs (n, 2) MPa, uniform in the config's P1 x P2 ranges."""
-    u = torch.rand(n, 2, generator=gen, dtype=torch.float64)
-    lo = torch.tensor([cfg.p1_range[0], cfg.p2_range[0]], dtype=torch.float64)
-    hi = torch.tensor([cfg.p1_range[1], cfg.p2_range[1]], dtype=torch.float64)
+    """n pressure tuples (n, J) MPa (J = widths[0]), uniform in the config's ranges: P1 in
+    p1_range, every other joint's in p2_range."""
+    J = cfg.widths[0]
+    u = torch.rand(n, J, generator=gen, dtype=torch.float64)
+    lo = torch.tensor([cfg.p1_range[0]] + [cfg.p2_range[0]] * (J - 1), dtype=torch.float64)
+    hi = torch.tensor([cfg.p1_range[1]] + [cfg.p2_range[1]] * (J - 1), dtype=torch.float64)
     return lo + u * (hi - lo)
 
 
@@ -159,7 +186,7 @@ def _stats(res: torch.Tensor) -> dict:
 
 
 def evaluate(net: GestureNet, problem: GripperProblem, pressures: torch.Tensor) -> dict:
-    """Residual statistics of the raw NN tau on pressures (B, 2) (see _stats)."""
+    """Residual statistics of the raw NN tau on pressures (B, J) (see _stats)."""
     with torch.no_grad():
         return _stats(problem.residual(pressures, net(pressures)).residual)
 
@@ -185,7 +212,7 @@ class NNGestureResult(GestureResult):
 
 
 def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor) -> NNGestureResult:
-    """NN gesture in the solver's result format, pressures (B, 2) MPa.
+    """NN gesture in the solver's result format, pressures (B, J) MPa.
 
     ``problem`` must be the one the NN was trained for (``pred.config.problem(joint)``),
     ValueError otherwise. Gravity: the raw NN tau; ``converged`` means its residual is
@@ -225,7 +252,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
 
 
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    """Iterative-solver tau labels (n, 2, 3) for pressures (n, 2); returns (pressures, tau)
+    """Iterative-solver tau labels (n, J, 3) for pressures (n, J); returns (pressures, tau)
     restricted to converged samples."""
     res = solve(cfg.problem(joint), pressures)
     ok = res.converged
@@ -247,7 +274,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
         p_train, tau_train = _labels(joint, p_train, cfg)
         p_val, tau_val = _labels(joint, p_val, cfg)
         label_time = time.perf_counter() - t_start
-        scale = torch.tensor(TAU_SCALE, dtype=torch.float64).reshape(2, 3)
+        scale = torch.tensor(TAU_SCALE[:3], dtype=torch.float64)
 
     net = GestureNet(cfg.widths, cfg.activation)
 
@@ -312,7 +339,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
 
 
 def contact_fraction(net: GestureNet, problem: GripperProblem, pressures: torch.Tensor) -> float:
-    """Fraction of pressures (B, 2) whose raw NN gesture touches the object."""
+    """Fraction of pressures (B, J) whose raw NN gesture touches the object."""
     with torch.no_grad():
         return float((problem.residual(pressures, net(pressures)).contact.normal > 0).double().mean())
 
@@ -337,27 +364,38 @@ def save_predictor(pred: Predictor, path: str | Path) -> None:
         "metrics": pred.metrics, "history": pred.history})
 
 
-def load_predictor(path: str | Path | None, joint: JointModel | None = None, contact: bool = False) -> Predictor:
+def load_predictor(path: str | Path | None, joint: JointModel | None = None, contact: bool = False,
+                   params: GripperParams | None = None) -> Predictor:
     """Load a checkpoint of the gravity (or, with ``contact``, the contact) kind; path
     None picks results/predictor/{gravity,contact}_nn.pt. ``joint`` None skips the check
-    that the NN was trained on that joint (reading its history only).
+    that the NN was trained on that joint (reading its history only); ``params`` None
+    skips the check that it was trained for that finger, kinematics and joint weights.
 
     Raises ValueError (one line): a missing, damaged, foreign or other-kind file
-    (surrogate.checkpoint.CheckpointError), or a joint mismatch.
+    (surrogate.checkpoint.CheckpointError), a joint mismatch or a finger/options mismatch.
     """
     path = Path(path) if path else DEFAULT_DIR / ("contact_nn.pt" if contact else "gravity_nn.pt")
     ck = checkpoint.load(path, _format(contact), "NN predictor checkpoint")
     try:
         cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ck["config"].items()})
+        trained_params = cfg.params()
         net = GestureNet(cfg.widths, cfg.activation)
         net.load_state_dict(ck["state_dict"])
         joint_name, metrics, history = ck["joint"], ck["metrics"], ck["history"]
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # intact file, inconsistent payload
         raise checkpoint.CheckpointError(f"{path}: inconsistent NN predictor checkpoint "
                                          f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]})") from None
+    if params is not None and params != trained_params:
+        raise ValueError(f"{path} was trained for {trained_params.describe()}, not {params.describe()}")
     if joint is not None and joint_name != joint.name:
         raise ValueError(f"{path} was trained with joint {joint_name!r}, not {joint.name!r}")
     return Predictor(net.eval(), cfg, joint_name, metrics, history)
+
+
+def _finger_arg(text: str):
+    from predictor.gesture import _finger
+
+    return _finger(text)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -367,11 +405,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_output("--out", suffix=".pt", required=True, help="checkpoint path (.pt)")
     ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
                     help="override the variant's epochs (smoke runs)")
+    ap.add_argument("--finger", type=_finger_arg, default=None,
+                    help="finger description file (default: the paper's, fem/fingers/paper.toml)")
+    ap.add_argument("--kinematics", choices=KINEMATICS, default="tangent")
+    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default="lumped")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
+    cfg = VARIANTS[args.variant]
     with ap.errors():
         joint = load_joint(args.model)
-    cfg = VARIANTS[args.variant]
+        params = GripperParams(args.finger or default_finger(), kinematics=args.kinematics,
+                               joint_weight=args.joint_weight)
+        if params != cfg.params() or params.n_joints != cfg.widths[0]:
+            cfg = cfg.for_params(params)
+        if cfg.approach is not None and len(cfg.approach) != params.n_joints:
+            from predictor.solve import approach_for
+
+            cfg = replace(cfg, approach=approach_for(params.n_joints))
+        cfg.problem(joint)  # refuses cap kinematics on a joint without a cap head, before training
     if args.epochs:
         cfg = NNConfig(**{**asdict(cfg), "epochs": args.epochs})
     pred = train(cfg, joint)

@@ -1,7 +1,9 @@
 """Matplotlib drawing of gestures in the paper's colours (Figure 5).
 
 Rigid parts red, joints blue, object green, the gravity-free (tau = 0) shape dashed.
-Both fingers are drawn: the right one solved, the left one its mirror. Units mm.
+Both fingers are drawn: the right one solved, the left one its mirror. Any finger chain
+(FingerPose.part_polylines: every joint's centre line through its anchors, every rigid
+part's segment, in chain order). Units mm.
 """
 from __future__ import annotations
 
@@ -33,8 +35,10 @@ def object_outline(obstacle: Obstacle, n: int = 200) -> np.ndarray:
 def draw_finger(ax, pose: FingerPose, index: int, dashed: bool = False) -> None:
     """Draw sample ``index`` of a FingerPose and its mirror on axes ``ax``."""
     ls, lw = ("--", 1.2) if dashed else ("-", 3.0)
+    colours = {"joint": "tab:blue", "rigid": "tab:red"}
     for p in (pose, pose.mirrored()):
-        for part, colour in ((p.joint1, "tab:blue"), (p.link, "tab:red"), (p.joint2, "tab:blue"), (p.tip, "tab:red")):
+        for kind, part in p.part_polylines():
+            colour = colours[kind]
             xy = part[index].detach().numpy()
             ax.plot(xy[:, 0], xy[:, 1], ls, color=colour, lw=lw, alpha=0.6 if dashed else 1.0,
                     solid_capstyle="round")
@@ -53,11 +57,11 @@ def draw_gesture(ax, result, index: int = 0, obstacle: Obstacle | None = None, t
     ax.set_aspect("equal")
     ax.set_xlabel("X (mm)")
     ax.set_ylabel("Y (mm)")
-    p1, p2 = result.pressures[index].tolist()
+    pressures = ", ".join(f"P{i + 1}={v:+.2f}" for i, v in enumerate(result.pressures[index].tolist()))
     state = "" if bool(result.converged[index]) else "  NOT CONVERGED"
     if obstacle is not None and bool(result.converged[index]):
         state += f"  N={result.normal_force_N[index]:.2f} N" + ("  SLIP" if bool(result.slip[index]) else "  holds")
-    ax.set_title(title or f"P1={p1:+.2f}, P2={p2:+.2f} MPa{state}", fontsize=9)
+    ax.set_title(title or f"{pressures} MPa{state}", fontsize=9)
 
 
 def save_figure(fig, path, dpi: int) -> None:

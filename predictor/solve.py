@@ -1,13 +1,14 @@
 """Iterative gesture predictor: find tau = (tau_1, tau_2) with zero Equation-1 residual.
 
-Unknowns x = (F1, F2, M)_1, (F1, F2, M)_2 per sample, (B, 6) in N, N, N·mm. The residual
-vector is r(x) = [R_F,1, R_M,1/100, R_F,2, R_M,2/100, out-of-box penalties] (12 numbers,
-see predictor.statics); the equilibrium is r = 0 with the penalties inactive.
+Unknowns x = (F1, F2, M)_1, .., (F1, F2, M)_J per sample (J joints of the finger, 2 for the
+paper's), (B, n = 3J) in N, N, N·mm. The residual vector is r(x) = [R_F,1, R_M,1/100, ..,
+R_F,J, R_M,J/100, out-of-box penalties] (2n numbers, see predictor.statics); the
+equilibrium is r = 0 with the penalties inactive.
 
 Two methods, both batched over B pressure pairs and both starting from tau = 0:
 
 - ``newton`` (the fast one): Levenberg-Marquardt on r with the exact Jacobian
-  J = dr/dx (B, 12, 6) from reverse-mode autograd (one batched pass, ``_jacobian_fn``).
+  J = dr/dx (B, 2n, n) from reverse-mode autograd (one batched pass, ``_jacobian_fn``).
   Step (JᵀJ + mu·I) δ = -Jᵀr; mu shrinks ×0.1 on success and grows ×10 on failure, per
   sample, and only unfinished samples are evaluated. Near the root mu -> 1e-12 and the step is Newton's, so the
   convergence is quadratic: 3-6 iterations under gravity.
@@ -23,8 +24,8 @@ last, caps LM steps so the finger cannot jump through the object, refuses equili
 penetrate deeper than ``max_penetration``, and is halved (up to ``cutbacks`` times) when
 it fails.
 
-A sample is converged when |R_F,i| <= tol_force and |R_M,i| <= tol_moment for both
-joints and tau is inside the surrogate's box. Non-converged samples are reported with
+A sample is converged when |R_F,i| <= tol_force and |R_M,i| <= tol_moment for every
+joint and tau is inside the surrogate's box. Non-converged samples are reported with
 ``converged = False`` and NaN in tau and in the gesture: never returned as an answer.
 
 Data flow: ``solve(problem, pressures, options)`` with a statics.GripperProblem (joint,
@@ -34,6 +35,7 @@ figures, pose); ``result.summary(i)`` is sample i as a JSON-ready dict.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass, field, fields
@@ -80,13 +82,13 @@ GIVEN = {"given": True}
 class GestureResult:
     """Batched solve result for the right finger (mirror with ``pose.mirrored()``).
 
-    pressures (B, 2) MPa; tau (B, 2, 3) [F1 N, F2 N, M N·mm], NaN where not converged;
-    converged (B,) bool; residual_force_mN, residual_moment_Nmm (B, 2) at the last
+    pressures (B, J) MPa; tau (B, J, 3) [F1 N, F2 N, M N·mm], NaN where not converged;
+    converged (B,) bool; residual_force_mN, residual_moment_Nmm (B, J) at the last
     iterate; normal_force_N, friction_N (B,) total contact forces on the finger;
     friction_ratio (B,) |f|/N demanded by the object; slip (B,) bool; iterations (B,)
     (summed over ramp steps); time_ms: wall time of the whole batch; pose: FingerPose,
     NaN where not converged; free_pose: the gravity- and contact-free shape (tau = 0);
-    first_contact (B, 2) MPa: the pressures of the first ramp step (or the approach, when
+    first_contact (B, J) MPa: the pressures of the first ramp step (or the approach, when
     the object is brought in) after which the finger touches the object, NaN when it never
     does (without the ramp, x0 given: the target pressures if the final gesture touches);
     None without an object.
@@ -109,17 +111,18 @@ class GestureResult:
     first_contact: torch.Tensor | None = None
 
     def summary(self, i: int = 0) -> dict:
-        """Sample i as plain JSON types: pressures_MPa, converged, tau (2x3, None unless
-        converged), per-joint residual_force_mN and residual_moment_Nmm, tip [x, y] mm and
-        tip_angle_deg (None unless converged), contact_force_N, friction_ratio, slip and
-        iterations (time excluded: a summary of the same solve is the same)."""
+        """Sample i as plain JSON types: pressures_MPa, converged, tau (Jx3, None unless
+        converged), per-joint residual_force_mN and residual_moment_Nmm, tip [x, y] mm (the
+        end of the last part) and tip_angle_deg (the last part's direction; None unless
+        converged), contact_force_N, friction_ratio, slip and iterations (time excluded: a
+        summary of the same solve is the same)."""
         ok = bool(self.converged[i])
         return {"pressures_MPa": self.pressures[i].tolist(), "converged": ok,
                 "tau": self.tau[i].tolist() if ok else None,
                 "residual_force_mN": self.residual_force_mN[i].tolist(),
                 "residual_moment_Nmm": self.residual_moment_Nmm[i].tolist(),
                 "tip": self.pose.tip_end[i].tolist() if ok else None,
-                "tip_angle_deg": math.degrees(float(self.pose.phi[i, 1])) if ok else None,
+                "tip_angle_deg": math.degrees(float(self.pose.tip_angle[i])) if ok else None,
                 "contact_force_N": float(self.normal_force_N[i]), "friction_ratio": float(self.friction_ratio[i]),
                 "slip": bool(self.slip[i]), "iterations": int(self.iterations[i])}
 
@@ -137,59 +140,72 @@ class GestureResult:
 
 
 def _residual_fn(problem: GripperProblem):
-    """Batched r(x; P): x (B, 6), P (B, 2) -> (B, 12) [scaled equilibrium, penalties]."""
+    """Batched r(x; P): x (B, 3J), P (B, J) -> (B, 6J) [scaled equilibrium, penalties]."""
+    n_joints = problem.n_joints
 
     def r(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
-        tau = x.reshape(-1, 2, 3)
+        tau = x.reshape(-1, n_joints, 3)
         return torch.cat((scaled(problem.residual(p, tau).residual), range_penalty(tau)), -1)
 
     return r
 
 
 def _jacobian_fn(r_fn):
-    """Exact batched Jacobian by one reverse pass over 6 copies of each sample.
+    """Exact batched Jacobian by one reverse pass over n = 3J copies of each sample.
 
     Copy k of sample b only feeds output row k, so the gradient of sum_k r[b, k, k]
-    with respect to copy k is row k of dr/dx: J (B, 6, 6) of the equilibrium rows in
-    one forward + one backward of a 6B batch (vmap(jacfwd) was 7x slower here). The
+    with respect to copy k is row k of dr/dx: J (B, n, n) of the equilibrium rows in
+    one forward + one backward of an nB batch (vmap(jacfwd) was 7x slower here). The
     penalty rows are elementwise in x, so their Jacobian is diagonal and written out.
-    The same pass gives dr/dP (B, 6, 2) for the ramp's tangent predictor.
-    Returns jac(x, p) -> (J (B, 12, 6), r (B, 12), dr/dP (B, 6, 2)).
+    The same pass gives dr/dP (B, n, J) for the ramp's tangent predictor.
+    Returns jac(x, p) -> (J (B, 2n, n), r (B, 2n), dr/dP (B, n, J)).
     """
-    box = torch.tensor(np.tile(INPUT_BOX[1:], 2), dtype=torch.float64)
-    scale = torch.tensor([1.0, 1.0, MOMENT_SCALE] * 2, dtype=torch.float64)
 
     def jac(x: torch.Tensor, p: torch.Tensor):
-        B = x.shape[0]
+        B, n = x.shape
+        box, scale = _box_scale(n)
         with torch.enable_grad():
-            xr = x.detach().repeat_interleave(6, 0).requires_grad_(True)
-            pr = p.detach().repeat_interleave(6, 0).requires_grad_(True)
-            r = r_fn(xr, pr).reshape(B, 6, 12)
-            g, gp = torch.autograd.grad(torch.diagonal(r[..., :6], dim1=1, dim2=2).sum(), (xr, pr))
+            xr = x.detach().repeat_interleave(n, 0).requires_grad_(True)
+            pr = p.detach().repeat_interleave(n, 0).requires_grad_(True)
+            r = r_fn(xr, pr).reshape(B, n, 2 * n)
+            g, gp = torch.autograd.grad(torch.diagonal(r[..., :n], dim1=1, dim2=2).sum(), (xr, pr))
         d_pen = PENALTY_WEIGHT * torch.sign(x) * (x.abs() > box).to(x.dtype) / scale
-        J = torch.cat((g.reshape(B, 6, 6), torch.diag_embed(d_pen)), 1)
-        return J, r[:, 0].detach(), gp.reshape(B, 6, 2)
+        J = torch.cat((g.reshape(B, n, n), torch.diag_embed(d_pen)), 1)
+        return J, r[:, 0].detach(), gp.reshape(B, n, p.shape[1])
 
     return jac
 
 
 # Default grasp approach gesture (MPa): open joint 1, bring the object in (statics.Obstacle).
 APPROACH = (-0.15, 0.0)
-STEP_SCALE = torch.tensor([1.0, 1.0, MOMENT_SCALE] * 2, dtype=torch.float64)
+
+
+def approach_for(n_joints: int) -> tuple[float, ...]:
+    """The default approach gesture of an n-joint finger: joint 1 opened as APPROACH's,
+    the other joints at zero (the paper's finger: APPROACH itself)."""
+    return (APPROACH[0],) + (0.0,) * (n_joints - 1)
+
+
+@functools.lru_cache(maxsize=8)
+def _box_scale(n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(box, scale) (n,) of n = 3J unknowns: (3 N, 3 N, 100 N·mm) and (1, 1, MOMENT_SCALE) per joint."""
+    return (torch.tensor(np.tile(INPUT_BOX[1:], n // 3), dtype=torch.float64),
+            torch.tensor([1.0, 1.0, MOMENT_SCALE] * (n // 3), dtype=torch.float64))
 
 
 def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
-    """Converged mask (B,) from residual vectors r (B, 12)."""
-    eq = r[:, :6].reshape(-1, 2, 3)
+    """Converged mask (B,) from residual vectors r (B, 2n)."""
+    n = r.shape[1] // 2
+    eq = r[:, :n].reshape(-1, n // 3, 3)
     force = eq[..., :2].norm(dim=-1).amax(-1)
     moment = eq[..., 2].abs().amax(-1) * MOMENT_SCALE
-    return (force <= opts.tol_force) & (moment <= opts.tol_moment) & (r[:, 6:].abs().amax(-1) == 0)
+    return (force <= opts.tol_force) & (moment <= opts.tol_moment) & (r[:, n:].abs().amax(-1) == 0)
 
 
 def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):
-    """Batched LM from x (B, 6) at pressures p (B, 2).
+    """Batched LM from x (B, n = 3J) at pressures p (B, J).
 
-    Returns (x, converged, iterations, (dr/dx (B, 6, 6), dr/dP (B, 6, 2)) at the final x);
+    Returns (x, converged, iterations, (dr/dx (B, n, n), dr/dP (B, n, J)) at the final x);
     the last item is the next ramp step's ``prev_jac``, which saves one Jacobian per step.
 
     p_prev: the pressures at which x is an equilibrium (a ramp step). The start is then
@@ -199,12 +215,14 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
     max_step caps each step's largest scaled component (N, N·mm/100): with contact it
     keeps the iterates on the branch of the previous ramp step, since a long step can jump
     the finger through the object to a contact-free root."""
-    eye = torch.eye(6, dtype=x.dtype)
+    n = x.shape[1]
+    eye = torch.eye(n, dtype=x.dtype)
+    step_scale = _box_scale(n)[1]
     x = x.clone()
     if p_prev is None:
         J, r, Jp = jac_fn(x, p)
     else:
-        J0, Jp0 = prev_jac if prev_jac is not None else (lambda a: (a[0][:, :6], a[2]))(jac_fn(x, p_prev))
+        J0, Jp0 = prev_jac if prev_jac is not None else (lambda a: (a[0][:, :n], a[2]))(jac_fn(x, p_prev))
         dx = -torch.linalg.solve(J0 + 1e-12 * eye, Jp0 @ (p - p_prev)[..., None])[..., 0]
         x = x + dx
         J, r, Jp = jac_fn(x, p)
@@ -220,7 +238,7 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
         JT = Ja.transpose(1, 2)
         step = -torch.linalg.solve(JT @ Ja + ma[:, None, None] * eye, JT @ ra[..., None])[..., 0]
         if max_step is not None:
-            big = (step / STEP_SCALE).abs().amax(-1, keepdim=True) / max_step
+            big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
             step = step / big.clamp_min(1.0)
         x_try = x[act] + step
         J_try, r_try, Jp_try = jac_fn(x_try, p[act])
@@ -233,11 +251,11 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
         iters[act] += 1
         done[act] = _done(r[act], opts)
         stuck = mu > 1e8
-    return x, done, iters, (J[:, :6], Jp)
+    return x, done, iters, (J[:, :n], Jp)
 
 
 def _lbfgs(loss_fn, x, p, opts):
-    """Paper's L-BFGS on sum_b |r_b|² from x (B, 6). Returns (x, converged, iterations)."""
+    """Paper's L-BFGS on sum_b |r_b|² from x (B, 3J). Returns (x, converged, iterations)."""
     x = x.clone().requires_grad_(True)
     opt = torch.optim.LBFGS([x], lr=1.0, max_iter=opts.lbfgs_max_iter, tolerance_grad=1e-15,
                             tolerance_change=1e-20, history_size=20, line_search_fn="strong_wolfe")
@@ -258,7 +276,7 @@ def _lbfgs(loss_fn, x, p, opts):
 
 
 def _advance(run, x, pa, pb, cutbacks, jac=None):
-    """One ramp step pa -> pb (B, 2) from the equilibrium x at pa (with its Jacobians
+    """One ramp step pa -> pb (B, J) from the equilibrium x at pa (with its Jacobians
     ``jac``, or None); samples that fail are retried as two half steps, recursively up to
     ``cutbacks`` times (as the FEM does). Returns (x, converged, iterations, jac at x)."""
     x_new, conv, its, jac_new = run(x, pb, pa, jac)
@@ -281,13 +299,19 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
           x0: torch.Tensor | None = None) -> GestureResult:
     """Equilibrium gesture of ``problem`` for a batch of pressure pairs.
 
-    pressures: (B, 2) or (2,) MPa [P1, P2], |P| <= 0.3 (fem.spec.OutOfBoxError otherwise).
-    x0: optional warm start (B, 2, 3) (e.g. the NN's prediction); it disables the ramp.
+    pressures: (B, J) or (J,) MPa [P1 .. PJ], |P| <= 0.3 (fem.spec.OutOfBoxError otherwise;
+    ValueError for another count than the finger's J joints).
+    x0: optional warm start (B, J, 3) (e.g. the NN's prediction); it disables the ramp.
     With an object the gripper first settles at ``problem.approach`` without it (when
     given), the object is brought in, and the pressures ramp to the target.
     Returns a GestureResult (see its docstring for shapes and units).
     """
-    pressures = torch.as_tensor(pressures, dtype=torch.float64).reshape(-1, 2)
+    n_joints = problem.n_joints
+    pressures = torch.as_tensor(pressures, dtype=torch.float64)
+    if pressures.shape[-1:] != (n_joints,):
+        raise ValueError(f"{pressures.shape[-1] if pressures.dim() else 1} pressures given for finger "
+                         f"{problem.params.finger.name!r} of {n_joints} joints")
+    pressures = pressures.reshape(-1, n_joints)
     check_pressures(pressures)
     if options.method not in ("newton", "lbfgs"):
         raise ValueError(f"unknown method {options.method!r}: use newton or lbfgs")
@@ -311,7 +335,7 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
             # spurious equilibrium; refuse it so that _advance cuts the step back.
             x, conv, its, jac = method(x, p, p_prev, jac)
             with torch.no_grad():
-                pen = prob.residual(p, x.reshape(-1, 2, 3)).contact.penetration
+                pen = prob.residual(p, x.reshape(-1, n_joints, 3)).contact.penetration
             return x, conv & (pen <= opts.max_penetration), its, jac
 
         return with_depth_check
@@ -324,16 +348,17 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
     # saves the last (quadratic) Newton iteration of each; the final step uses the full one.
     loose = dataclasses.replace(options, tol_force=100 * options.tol_force, tol_moment=100 * options.tol_moment)
     run_loose = runner(problem, loose)
-    x = torch.zeros(B, 6, dtype=torch.float64) if x0 is None else x0.reshape(B, 6).double().clone()
+    n = 3 * n_joints
+    x = torch.zeros(B, n, dtype=torch.float64) if x0 is None else x0.reshape(B, n).double().clone()
     iterations = torch.zeros(B, dtype=torch.long)
     ok = torch.ones(B, dtype=torch.bool)
-    first_contact = torch.full((B, 2), float("nan"), dtype=torch.float64)
+    first_contact = torch.full((B, n_joints), float("nan"), dtype=torch.float64)
 
     def record_contact(x, p):
         # One contact evaluation per ramp step (no iterate changes): the first pressures
         # at which the finger touches the object, for grasp planning (predictor.atlas).
         with torch.no_grad():
-            new = (problem.residual(p, x.reshape(-1, 2, 3)).contact.normal > 0) & first_contact[:, 0].isnan()
+            new = (problem.residual(p, x.reshape(-1, n_joints, 3)).contact.normal > 0) & first_contact[:, 0].isnan()
         first_contact[new] = p[new]
 
     if problem.obstacle is None or x0 is not None:
@@ -342,7 +367,8 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
             record_contact(x, pressures)
     else:
         start = problem.approach
-        p0 = torch.zeros_like(pressures) if start is None else torch.as_tensor(start, dtype=torch.float64).expand(B, 2)
+        p0 = (torch.zeros_like(pressures) if start is None else
+              torch.as_tensor(start, dtype=torch.float64).expand(B, n_joints))
         if start is not None:  # approach: open without the object, then bring it in
             x, ok, iterations, _ = run_free(x, p0)
         record_contact(x, p0)
@@ -358,7 +384,7 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
     elapsed = 1e3 * (time.perf_counter() - t0)
 
     with torch.no_grad():
-        tau = x.reshape(B, 2, 3)
+        tau = x.reshape(B, n_joints, 3)
         st = problem.residual(pressures, tau)
         free = problem.pose(pressures, torch.zeros_like(tau))
     force, moment = residual_norms(st.residual)

@@ -10,20 +10,29 @@ would be right only if the FEM force followed the end's rotation. Our FEM applie
 the undeformed frame ("the coordinate of the force is consistent with the undeformed joint
 coordinate"), so theta_i is used here; the full-finger FEM is the arbiter.
 
-Equation 1, per joint i, with the external loads (F_k at p_k) on all distal parts:
+Equation 1, per joint i of the J joints, with the external loads (F_k at p_k) on the
+parts distal to it:
 
     R_F,i = Rot(theta_i)·(F1, F2)_i - sum_k F_k                       [N]
     R_M,i = M_i - sum_k (p_k - r_10,i) × F_k                          [N·mm]
 
-Joint 1's distal parts: rigid link, joint 2, tip; joint 2's: the tip. Weights act at the
-link and tip midpoints and at the mean of a joint's anchors. Loads on joint 2's own body
-(weight, contact) enter joint 1's balance only: the surrogate takes end loads only, as in
-the paper. The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with alpha = beta =
+A load on part k enters joint i's balance when part k is distal to joint i (k after it in
+the finger's chain, predictor.gripper.ChainLayout): the paper's finger gives joint 1 the
+link, joint 2 and the tip, and joint 2 the tip. Weights act at the rigid parts' midpoints;
+a joint's own weight (GripperParams.joint_weight):
+- ``lumped`` (the paper's, default): at the mean of its anchors; it enters only the
+  balances of the joints proximal to it, as loads on a joint's body do, since the
+  surrogate takes end loads only (as in the paper);
+- ``split``: half at its proximal centre O_i (the joints proximal to it) and half at its
+  distal end r_10,i, which also enters its own balance, with zero moment arm there.
+A load distal to no joint (joint 1's own weight when lumped) is carried by the base mount.
+The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with alpha = beta =
 1 N⁻², gamma = 1e-4 (N·mm)⁻² (moments scaled by a 100 mm lever, the finger's size).
 
 Contact (object fixed in the plane, signed distance d < 0 inside, outward normal n):
-- sample points: GripperParams.n_link_points (12) link midpoints, the 10 joint-2 anchors
-  and n_tip_points (65) tip midpoints; each carries its length w_k (mm);
+- sample points, in chain order: each rigid part's ``contact_points`` midpoints and the 10
+  anchors of each joint with ``contact = true`` (the paper's finger: 12 link midpoints,
+  the 10 joint-2 anchors, 65 tip midpoints); each carries its length w_k (mm), l/n or L/10;
 - normal penalty on the finger: N_k = k_c · max(0, -d_k) · w_k along +n_k (k_c in N/mm²);
 - friction: the object (weight W) hangs in two mirror fingers, so each side lifts W/2.
   With t_k the object's tangent turned upwards (t_y >= 0) and a common ratio f_k = λ N_k,
@@ -35,20 +44,20 @@ Contact (object fixed in the plane, signed distance d < 0 inside, outward normal
 Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
 max(0, |M|-100)/100 per joint, the surrogate's training box (fem.spec.INPUT_BOX).
 
-Data flow: a GripperProblem (joint model, finger, object, contact law, gravity, approach
-pressures) -> ``problem.residual(pressures, tau)`` -> Statics (residual, pose, ContactState).
+Data flow: a GripperProblem (joint model, GripperParams = finger + kinematics + joint
+weights, object, contact law, gravity, approach pressures) -> ``problem.residual(pressures,
+tau)`` with pressures (B, J), tau (B, J, 3) -> Statics (residual (B, J, 3), pose, ContactState).
 """
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import torch
 
-from fem.spec import INPUT_BOX, JOINT_LENGTH, N_ANCHORS
+from fem.spec import INPUT_BOX
 from predictor.gripper import FingerPose, GripperParams, check_pressures, finger_pose, rot
-from predictor.joint import JointModel
+from predictor.joint import JointModel, no_cap_message
 
 MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
 PENALTY_WEIGHT = 10.0  # weight of the out-of-box residuals relative to the equilibrium ones
@@ -178,7 +187,8 @@ class ContactState:
     """Contact of a batch of right fingers with the object (module docstring).
 
     points, forces: (B, K, 2) sample points (mm) and total force (N) on the finger at each;
-    part: (K,) long, 0 = link, 1 = joint 2, 2 = tip. normal: (B,) N, sum of N_k.
+    part: (K,) long, the index in the finger's chain of the part each point lies on (the
+    paper's finger: 1 = link, 2 = joint 2, 3 = tip). normal: (B,) N, sum of N_k.
     friction: (B,) N, sum of |λ_c| N_k. ratio: (B,) λ (unclipped; NaN-free, ±inf replaced
     by ±1e3 when nothing touches). slip: (B,) bool. penetration: (B,) mm, max(0, -min d).
     """
@@ -202,7 +212,7 @@ class ContactState:
 
 @dataclass
 class Statics:
-    """Residual (B, 2, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame), the pose it
+    """Residual (B, J, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame), the pose it
     was evaluated at and the contact state."""
 
     residual: torch.Tensor
@@ -222,24 +232,14 @@ def smooth_penetration(pen: torch.Tensor, delta: float) -> torch.Tensor:
     return torch.where(pen < delta, pen * pen / (2.0 * delta), pen - 0.5 * delta)
 
 
-@functools.lru_cache(maxsize=8)
-def _sample_layout(n_link: int, n_tip: int, link_length: float, tip_length: float):
-    """Part label (K,) (0 link, 1 joint 2, 2 tip) and length w_k (K,) mm of each contact
-    sample point; cached because the solver evaluates it thousands of times (read-only)."""
-    part = torch.cat((torch.zeros(n_link), torch.ones(N_ANCHORS), torch.full((n_tip,), 2.0))).long()
-    seg = torch.cat((torch.full((n_link,), link_length / n_link), torch.full((N_ANCHORS,), JOINT_LENGTH / N_ANCHORS),
-                     torch.full((n_tip,), tip_length / n_tip))).double()
-    return part, seg
-
-
 def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, contact: ContactParams,
                   weight: float) -> ContactState:
     """Penalty + friction forces on the finger's sample points (module docstring).
 
     weight: object weight W (N). Returns the ContactState (forces on the finger).
     """
-    part, seg = _sample_layout(params.n_link_points, params.n_tip_points, params.link_length, params.tip_length)
-    points = torch.cat((pose.link_points, pose.joint2[:, 1:], pose.tip_points), 1)
+    layout = params.layout  # cached: part label and length of each sample point
+    part, seg, points = layout.contact_part, layout.contact_length, pose.points
     d, n = obstacle.signed_distance(points)
     normal = contact.stiffness * smooth_penetration(-d, contact.smoothing) * seg  # (B, K) N
     t = torch.stack((-n[..., 1], n[..., 0]), -1)
@@ -260,12 +260,15 @@ def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, c
 class GripperProblem:
     """One gesture problem: everything but the pressures and the unknown tau.
 
-    joint: the joint model (both joints). params: finger dimensions and weights.
-    obstacle: the object, or None. contact: penalty and friction law. gravity: False
-    drops all weights (the gravity-free gesture). approach: (P1, P2) MPa of a grasp's
-    history: the gripper first settles there without the object, the object is then
-    brought in and the pressures ramp to the target; None ramps from (0, 0) with the
-    object present (predictor.solve).
+    joint: the joint model (every joint). params: the finger (chain, dimensions, weights),
+    its kinematics and joint-weight options (GripperParams). obstacle: the object, or None.
+    contact: penalty and friction law. gravity: False drops all weights (the gravity-free
+    gesture). approach: (P1, .., PJ) MPa of a grasp's history: the gripper first settles
+    there without the object, the object is then brought in and the pressures ramp to the
+    target; None ramps from zero with the object present (predictor.solve).
+
+    Refused with a one-line ValueError: an approach of the wrong length or beyond the box,
+    and cap kinematics on a joint model without a cap-rotation head.
     """
 
     joint: JointModel
@@ -273,40 +276,51 @@ class GripperProblem:
     obstacle: Obstacle | None = None
     contact: ContactParams = ContactParams()
     gravity: bool = True
-    approach: tuple[float, float] | None = None
+    approach: tuple[float, ...] | None = None
 
     def __post_init__(self):
         if self.approach is not None:
-            check_pressures(torch.as_tensor(self.approach, dtype=torch.float64).reshape(1, 2))
+            if len(self.approach) != self.n_joints:
+                raise ValueError(f"approach {tuple(self.approach)} MPa: give {self.n_joints} pressures, one per "
+                                 f"joint of finger {self.params.finger.name!r}")
+            check_pressures(torch.as_tensor(self.approach, dtype=torch.float64).reshape(1, -1))
+        if self.params.kinematics == "cap" and not self.joint.has_cap_rotation:
+            raise ValueError(no_cap_message(self.joint.name))
+
+    @property
+    def n_joints(self) -> int:
+        return self.params.n_joints
 
     def pose(self, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
-        """Forward kinematics of the right finger: pressures (B, 2) MPa, tau (B, 2, 3)."""
+        """Forward kinematics of the right finger: pressures (B, J) MPa, tau (B, J, 3)."""
         return finger_pose(self.joint, self.params, pressures, tau)
 
     def residual(self, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
         """Equation-1 residual of the right finger.
 
-        pressures: (B, 2) MPa; tau: (B, 2, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
-        Returns Statics with residual (B, 2, 3) in N, N, N·mm.
+        pressures: (B, J) MPa; tau: (B, J, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
+        Returns Statics with residual (B, J, 3) in N, N, N·mm.
         """
         pose = self.pose(pressures, tau)
         B, dt, params = tau.shape[0], tau.dtype, self.params
+        layout = params.layout
         g = 1.0 if self.gravity else 0.0
         down = torch.tensor([0.0, -1.0], dtype=dt)
-        # Weights: link, joint 2, tip (joint 1's own weight is not distal to any joint end).
-        w_pts = torch.stack((pose.link.mean(1), pose.joint2[:, 1:].mean(1), pose.tip.mean(1)), 1)
-        w_frc = g * torch.tensor([params.link_weight, params.joint_weight, params.tip_weight], dtype=dt)[:, None] * down
-        w_frc = w_frc.expand(B, 3, 2)
-        w_part = torch.tensor([0, 1, 2])
+        # Weight points: candidates [rigid midpoints, then anchor means (lumped) or proximal
+        # centres and distal ends (split)], picked in chain order by the cached layout.
+        joints = pose.joints
+        at_joints = ((joints[:, :, 1:].mean(2),) if layout.joint_weight == "lumped" else
+                     (joints[:, :, 0], joints[:, :, -1]))
+        w_pts = torch.cat((pose.segments.mean(2),) + at_joints, 1)[:, layout.weight_source]
+        w_frc = (g * layout.weights[:, None] * down).expand(B, -1, 2)
         if self.obstacle is None:
             contact = ContactState.none(B, dt)
-            pts, frc, part = w_pts, w_frc, w_part
+            pts, frc, distal = w_pts, w_frc, layout.weight_mask
         else:
             contact = contact_loads(pose, params, self.obstacle, self.contact, g * params.object_weight)
             pts, frc = torch.cat((w_pts, contact.points), 1), torch.cat((w_frc, contact.forces), 1)
-            part = torch.cat((w_part, contact.part))
-        ends = torch.stack((pose.joint1[:, -1], pose.joint2[:, -1]), 1)  # (B, 2, 2)
-        distal = torch.stack((torch.ones_like(part, dtype=dt), (part == 2).to(dt)), 0)  # (2, K)
+            distal = layout.full_mask
+        ends = joints[:, :, -1]  # (B, J, 2) distal ends r_10
         f_sum = torch.einsum("ik,bkc->bic", distal, frc)
         m_sum = torch.einsum("ik,bik->bi", distal, _cross(pts[:, None] - ends[:, :, None], frc[:, None]))
         g_force = rot(pose.theta, tau[..., :2])
@@ -315,17 +329,17 @@ class GripperProblem:
 
 
 def scaled(res: torch.Tensor) -> torch.Tensor:
-    """(B, 2, 3) residual -> (B, 6) with moments divided by MOMENT_SCALE (loss weights)."""
+    """(B, J, 3) residual -> (B, 3J) with moments divided by MOMENT_SCALE (loss weights)."""
     scale = torch.tensor([1.0, 1.0, 1.0 / MOMENT_SCALE], dtype=res.dtype)
-    return (res * scale).reshape(res.shape[0], 6)
+    return (res * scale).reshape(res.shape[0], -1)
 
 
 def range_penalty(tau: torch.Tensor) -> torch.Tensor:
-    """Out-of-box penalty residuals (B, 6): PENALTY_WEIGHT·max(0, |tau| - box)/scale, with
-    box (3 N, 3 N, 100 N·mm) and scale (1, 1, MOMENT_SCALE); zero inside the box."""
+    """Out-of-box penalty residuals (B, 3J) of tau (B, J, 3): PENALTY_WEIGHT·max(0, |tau| -
+    box)/scale, with box (3 N, 3 N, 100 N·mm) and scale (1, 1, MOMENT_SCALE); zero inside."""
     box = torch.tensor(INPUT_BOX[1:], dtype=tau.dtype)  # (F1, F2, M) half-widths
     scale = torch.tensor([1.0, 1.0, MOMENT_SCALE], dtype=tau.dtype)
-    return (PENALTY_WEIGHT * (tau.abs() - box).clamp_min(0.0) / scale).reshape(tau.shape[0], 6)
+    return (PENALTY_WEIGHT * (tau.abs() - box).clamp_min(0.0) / scale).reshape(tau.shape[0], -1)
 
 
 def loss(res: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
@@ -335,5 +349,5 @@ def loss(res: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
 
 
 def residual_norms(res: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """(B, 2, 3) -> (force mN (B, 2) = 1000·|R_F|, moment N·mm (B, 2) = |R_M|)."""
+    """(B, J, 3) -> (force mN (B, J) = 1000·|R_F|, moment N·mm (B, J) = |R_M|)."""
     return 1000.0 * res[..., :2].norm(dim=-1), res[..., 2].abs()

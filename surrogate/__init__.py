@@ -1,7 +1,9 @@
 """Joint surrogate R = sur(P, F1, F2, M): inputs (..., 4) [MPa, N, N, N·mm] -> anchors (..., 10, 2) mm.
 
 Public API (the gripper predictor uses load_surrogate and ModelError):
-    load_surrogate(path)   frozen float64 nn.Module, batched, differentiable in its inputs
+    load_surrogate(path)   frozen float64 nn.Module, batched, differentiable in its inputs;
+                           model.with_cap(x) -> (anchors (..., 10, 2) mm, distal cap
+                           rotation (...) rad) in one pass where model.has_cap_rotation
     ModelError             (ValueError) missing, damaged, foreign or inconsistent
                            checkpoint, one-line message
     check_box(x)           refuses inputs outside the training box or not finite

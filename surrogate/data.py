@@ -14,11 +14,18 @@ group of 10 blocks, from the dataset seed, so it never changes when the campaign
 shards.
 
 Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian d anchors.reshape(20) /
-d inputs (NaN rows where the campaign stored none).
+d inputs (NaN rows where the campaign stored none), cap_rotation rad (the distal cap's own
+rotation, measured on the cap by the FEM; DESIGN.md §3).
+
+Mirror (DESIGN.md §3, y -> -y): (x, R, J, cap) -> (B x, R S, S J B, -cap); the cap
+rotation is odd, like phi_end.
 
 Normalisation (stored inside the model): z = x / INPUT_BOX (fem.spec), so the training box is
 [-1, 1]^4; anchors = output_mean + output_scale * network(z), with the per-coordinate
-mean and standard deviation of the (mirror-augmented) training anchors.
+mean and standard deviation of the (mirror-augmented) training anchors. A model with a
+cap-rotation head also stores cap_scale (rad): the root mean square of its target, the
+cap rotation itself or its offset wrap(cap_rotation - phi_end(R)) (surrogate.model); the
+mean of an odd quantity over mirror-augmented data is 0, so the RMS is its std.
 """
 
 from __future__ import annotations
@@ -29,7 +36,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem.spec import INPUT_BOX, N_ANCHORS, mirror
+from fem.spec import INPUT_BOX, N_ANCHORS, mirror, phi_end
+from surrogate.model import wrap
 from workflow.shards import Manifest, ShardError, load_dataset, split_of
 
 SPLITS = ("train", "val", "test")
@@ -40,20 +48,21 @@ class Samples:
     """A set of samples as float64 tensors.
 
     inputs (n, 4) [MPa, N, N, N·mm]; anchors (n, 10, 2) mm; jacobian (n, 20, 4), NaN where
-    absent; sample_id (n,) int64.
+    absent; sample_id (n,) int64; cap_rotation (n,) rad.
     """
 
     inputs: torch.Tensor
     anchors: torch.Tensor
     jacobian: torch.Tensor
     sample_id: torch.Tensor
+    cap_rotation: torch.Tensor
 
     def __len__(self) -> int:
         return len(self.inputs)
 
     def subset(self, index) -> "Samples":
         return Samples(self.inputs[index], self.anchors[index], self.jacobian[index],
-                       self.sample_id[index])
+                       self.sample_id[index], self.cap_rotation[index])
 
     @property
     def has_jacobian(self) -> torch.Tensor:
@@ -67,10 +76,10 @@ def load_samples(root: str | Path) -> tuple[Samples, Manifest]:
     arrays, manifest = load_dataset(root)
     if len(arrays["sample_id"]) == 0:
         raise ShardError(f"{root}: the dataset holds no samples")
-    if not (np.isfinite(arrays["inputs"]).all() and np.isfinite(arrays["anchors"]).all()):
-        raise ShardError(f"{root}: non-finite inputs or anchors in the dataset")
+    if not all(np.isfinite(arrays[k]).all() for k in ("inputs", "anchors", "cap_rotation")):
+        raise ShardError(f"{root}: non-finite inputs, anchors or cap rotations in the dataset")
     samples = Samples(*(torch.as_tensor(arrays[k]) for k in
-                        ("inputs", "anchors", "jacobian", "sample_id")))
+                        ("inputs", "anchors", "jacobian", "sample_id", "cap_rotation")))
     return samples, manifest
 
 
@@ -92,20 +101,34 @@ def load_splits(root: str | Path) -> tuple[dict[str, Samples], Manifest]:
 
 
 def augment_mirror(samples: Samples) -> Samples:
-    """samples ∪ their y-mirror images (DESIGN.md §3); the mirror copies keep their ids."""
+    """samples ∪ their y-mirror images (DESIGN.md §3, cap_rotation -> -cap_rotation); the
+    mirror copies keep their ids."""
     x, r, j = mirror(samples.inputs, samples.anchors, samples.jacobian)
     return Samples(torch.cat([samples.inputs, x]), torch.cat([samples.anchors, r]),
-                   torch.cat([samples.jacobian, j]), torch.cat([samples.sample_id, samples.sample_id]))
+                   torch.cat([samples.jacobian, j]), torch.cat([samples.sample_id, samples.sample_id]),
+                   torch.cat([samples.cap_rotation, -samples.cap_rotation]))
 
 
-def normalisation(train: Samples) -> dict[str, list[float]]:
+def cap_offset(samples: Samples) -> torch.Tensor:
+    """(n,) rad: wrap(cap_rotation - phi_end(anchors)), the error of the tangent connection."""
+    return wrap(samples.cap_rotation - phi_end(samples.anchors))
+
+
+def normalisation(train: Samples, cap_target: str | None = None) -> dict[str, list[float]]:
     """Normalisation constants from the training samples (mirror-augmented inside).
 
     Returns input_scale (4,) = INPUT_BOX, output_mean (20,) mm, output_scale (20,) mm; the
-    y means are zero because the statistics include the mirror images.
+    y means are zero because the statistics include the mirror images. With cap_target
+    "absolute" or "offset" (a model with a cap-rotation head) also cap_scale (1,) rad, the
+    RMS of cap_rotation or of cap_offset (module docstring).
     """
-    anchors = augment_mirror(train).anchors.reshape(-1, 2 * N_ANCHORS)
-    return {"input_scale": INPUT_BOX.tolist(),
-            "output_mean": anchors.mean(0).tolist(),
-            "output_scale": anchors.std(0).clamp_min(1e-6).tolist()}
+    augmented = augment_mirror(train)
+    anchors = augmented.anchors.reshape(-1, 2 * N_ANCHORS)
+    out = {"input_scale": INPUT_BOX.tolist(),
+           "output_mean": anchors.mean(0).tolist(),
+           "output_scale": anchors.std(0).clamp_min(1e-6).tolist()}
+    if cap_target is not None:
+        target = {"absolute": augmented.cap_rotation, "offset": cap_offset(augmented)}[cap_target]
+        out["cap_scale"] = [target.square().mean().sqrt().clamp_min(1e-6).item()]
+    return out
 

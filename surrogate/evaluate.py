@@ -10,6 +10,11 @@ Metrics on n samples with true anchors R (n, 10, 2) mm and predictions R̂:
                            (the columns in mm per half-range of each input, so P, F1, F2
                            and M weigh alike; samples without an FEM Jacobian are skipped,
                            null when none has one)
+    cap_rotation_error_deg     = mean_i |wrap(θ̂_i - θ_i)|, θ the distal cap's own rotation
+                                 (the model's cap head; null for a model without one)
+    tangent_error_deg          = mean_i |wrap(phî_i - θ_i)|: the model's phi_end taken for
+                                 the cap rotation (the paper's tangent connection), any model
+with p95_ versions of the angle errors (95th percentile over samples).
 
 Inference time: the median wall time of one no-grad call on a single sample on one
 thread, and the throughput of no-grad calls on batches of 4,096 samples (over 1 s) on one
@@ -40,7 +45,8 @@ from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, load_surrogate, wrap
 
 METRIC_KEYS = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm",
-               "phi_end_error_deg", "jacobian_rel_error", "n")
+               "phi_end_error_deg", "jacobian_rel_error", "cap_rotation_error_deg",
+               "tangent_error_deg", "n")
 
 
 def jacobian(model, x: torch.Tensor) -> torch.Tensor:
@@ -51,9 +57,21 @@ def jacobian(model, x: torch.Tensor) -> torch.Tensor:
     return jac.permute(1, 0, 2)
 
 
+def _angle_errors(name: str, pred: torch.Tensor | None, true: torch.Tensor | None) -> dict:
+    """{name_error_deg, p95_name_error_deg} of |wrap(pred - true)| over (n,) rad angles;
+    None for both when either is missing."""
+    if pred is None or true is None:
+        return {f"{name}_error_deg": None, f"p95_{name}_error_deg": None}
+    d = wrap(pred - true).abs()
+    return {f"{name}_error_deg": math.degrees(d.mean().item()),
+            f"p95_{name}_error_deg": math.degrees(torch.quantile(d, 0.95).item())}
+
+
 def metrics(pred: torch.Tensor, true: torch.Tensor, pred_jac: torch.Tensor | None = None,
-            true_jac: torch.Tensor | None = None) -> dict:
-    """The metric dict (module docstring) from anchors (n, 10, 2) mm and Jacobians (n, 20, 4)."""
+            true_jac: torch.Tensor | None = None, pred_cap: torch.Tensor | None = None,
+            true_cap: torch.Tensor | None = None) -> dict:
+    """The metric dict (module docstring) from anchors (n, 10, 2) mm, Jacobians (n, 20, 4)
+    and cap rotations (n,) rad."""
     e = (pred - true).norm(dim=-1)
     dphi = wrap(phi_end(pred) - phi_end(true)).abs()
     out = {
@@ -65,6 +83,8 @@ def metrics(pred: torch.Tensor, true: torch.Tensor, pred_jac: torch.Tensor | Non
         "n": len(true),
         "max_anchor_error_mm": e.max().item(),
         "p95_phi_end_error_deg": math.degrees(torch.quantile(dphi, 0.95).item()),
+        **_angle_errors("cap_rotation", pred_cap, true_cap),
+        **_angle_errors("tangent", phi_end(pred), true_cap),
     }
     if pred_jac is not None and true_jac is not None:
         ok = torch.isfinite(true_jac).all(dim=(1, 2))
@@ -76,11 +96,16 @@ def metrics(pred: torch.Tensor, true: torch.Tensor, pred_jac: torch.Tensor | Non
 
 
 def evaluate(model, samples: Samples) -> dict:
-    """Metrics of a module (inputs (n, 4) -> anchors (n, 10, 2)) on samples."""
+    """Metrics of a module (inputs (n, 4) -> anchors (n, 10, 2)) on samples; the cap
+    rotation's from ``model.with_cap`` where the model has the head."""
     x = samples.inputs.to(torch.float64)
     with torch.no_grad():
-        pred = model(x)
-    return metrics(pred, samples.anchors, jacobian(model, x), samples.jacobian)
+        if getattr(model, "has_cap_rotation", False):
+            pred, cap = model.with_cap(x)
+        else:
+            pred, cap = model(x), None
+    return metrics(pred, samples.anchors, jacobian(model, x), samples.jacobian, cap,
+                   samples.cap_rotation)
 
 
 def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0,
@@ -172,9 +197,10 @@ def _fmt(v, digits=3):
 def markdown_table(report: dict) -> str:
     """The metrics table for results/REPORT.md (held-out and test rows per model)."""
     rows = ["| model | set | n | mean anchor (mm) | p95 anchor (mm) | tip (mm) | phi_end (deg) "
+            "| cap rotation (deg) | tangent vs cap (deg) "
             "| Jacobian rel. | train time (s) | single (ms, f64) | batched (samples/s, f64, 1 thread) "
             "| batched (samples/s, f32, all cores) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in ("paper", "improved", "knn"):
         entry = report[name]
         t = entry.get("timing", {})
@@ -184,7 +210,8 @@ def markdown_table(report: dict) -> str:
             rows.append(
                 f"| {name} | {part} | {m['n']} | {_fmt(m['mean_anchor_error_mm'])} "
                 f"| {_fmt(m['p95_anchor_error_mm'])} | {_fmt(m['tip_error_mm'])} "
-                f"| {_fmt(m['phi_end_error_deg'])} | {_fmt(m['jacobian_rel_error'])} "
+                f"| {_fmt(m['phi_end_error_deg'])} | {_fmt(m.get('cap_rotation_error_deg'))} "
+                f"| {_fmt(m.get('tangent_error_deg'))} | {_fmt(m['jacobian_rel_error'])} "
                 f"| {_fmt(entry.get('train_time_s'), 4)} | {_fmt(t.get('single_ms_float64'))} "
                 f"| {_fmt(t.get('batched_samples_per_s_float64'))} | {_fmt(all_cores)} |")
     return "\n".join(rows) + "\n"

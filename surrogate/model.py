@@ -14,6 +14,22 @@
     x_k = mean_k + scale_k a_k          (even anchor coordinates)
     y_k = scale_k sum_j o_j c_jk        (odd: every odd function is sum_j o_j c_j(invariants))
 
+Cap-rotation head (optional, ModelConfig.cap_rotation): the distal cap's own rotation theta
+(rad), from the same trunk output h in the same pass, as a second linear head:
+
+    equivariant:  c = cap_scale sum_j o_j d_j(h)      (odd, like y_k; d = W_cap h + b_cap (3,))
+    plain:        c = cap_scale d(h)                  (d (1,))
+    symmetric:    c = (c(x) - c(Bx)) / 2              (odd by construction)
+    theta = c                          cap_target "absolute" (the improved config's)
+    theta = phi_end(R) + c             cap_target "offset": c learns wrap(theta - phi_end),
+                                       the tangent connection's error (~2 deg, DESIGN.md §3),
+                                       but theta inherits the error of phi_end(R)
+
+so theta(Bx) = -theta(x) bit for bit for the equivariant and symmetric forms (phi_end is odd
+in y exactly: atan2(-a, b) = -atan2(a, b) and (-a) - (-b) = -(a - b) in floating point).
+cap_scale (rad) is the RMS of the target over the mirror-augmented training set
+(surrogate.data.normalisation).
+
 with the y-mirror of DESIGN.md §3: B = diag(-1, 1, -1, -1) on the inputs and S = diag(1, -1)
 on each anchor. The symmetric form satisfies R(Bx) = S R(x) by construction, for any
 weights: g(BBx) = g(x), and a sign flip, a sum and a halving are exact in floating point,
@@ -30,7 +46,9 @@ A checkpoint is an integrity-checked file of kind ``softjoint-surrogate/2``
 weights_only torch archive), whose payload holds model_config, normalisation,
 model_state (float64), train_config, metrics and dataset. Loading needs only the file;
 a file with any flipped, missing or added byte, a foreign file or another kind of
-checkpoint is refused with one line (ModelError).
+checkpoint is refused with one line (ModelError). A checkpoint written before the cap head
+existed has no cap_rotation in its model_config: it loads as a model without the head
+(has_cap_rotation False), with the same state keys and the same anchors bit for bit.
 """
 
 from __future__ import annotations
@@ -42,12 +60,14 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from fem.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS
+from fem.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS, phi_end
 from surrogate import checkpoint
 from surrogate.checkpoint import CheckpointError
 
 FORMAT = "softjoint-surrogate/2"
 WHAT = "surrogate checkpoint"
+#: what a cap-rotation head learns (module docstring)
+CAP_TARGETS = ("absolute", "offset")
 
 
 def _relu(a, slope: bool):
@@ -93,6 +113,8 @@ class ModelConfig:
     symmetric: bool = False      # R = (g(x) + S g(Bx)) / 2
     abs_pressure: bool = False   # feed |P| / 0.3 as an extra input
     equivariant: bool = False    # one-pass symmetric form on mirror invariants (docstring)
+    cap_rotation: bool = False   # a head for the distal cap's rotation (docstring)
+    cap_target: str = "absolute" # what that head learns: one of CAP_TARGETS
 
     def __post_init__(self):
         object.__setattr__(self, "hidden", tuple(int(w) for w in self.hidden))
@@ -101,18 +123,21 @@ class ModelConfig:
                              "choose one")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation {self.activation!r} not in {sorted(ACTIVATIONS)}")
+        if self.cap_target not in CAP_TARGETS:
+            raise ValueError(f"cap_target {self.cap_target!r} not in {list(CAP_TARGETS)}")
         if not self.hidden:
             raise ValueError("the MLP needs at least one hidden layer")
 
 
 class JointSurrogate(nn.Module):
-    """Inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] -> anchors (..., 10, 2) mm, joint frame."""
+    """Inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] -> anchors (..., 10, 2) mm, joint frame;
+    with a cap-rotation head, ``with_cap`` also gives the distal cap's rotation (...) rad."""
 
     def __init__(self, config: ModelConfig, normalisation: dict):
         super().__init__()
         self.config = config
-        self.normalisation = {k: [float(v) for v in normalisation[k]]
-                              for k in ("input_scale", "output_mean", "output_scale")}
+        keys = ("input_scale", "output_mean", "output_scale") + ("cap_scale",) * config.cap_rotation
+        self.normalisation = {k: [float(v) for v in normalisation[k]] for k in keys}
         for name, value in self.normalisation.items():
             self.register_buffer(name, torch.tensor(value), persistent=False)
         self.register_buffer("input_mirror", torch.tensor(INPUT_MIRROR), persistent=False)
@@ -129,22 +154,43 @@ class JointSurrogate(nn.Module):
         self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(widths[:-1], widths[1:]))
         n_out = N_ANCHORS * (1 + len(odd)) if config.equivariant else 2 * N_ANCHORS
         self.head = nn.Linear(widths[-1], n_out)
+        if config.cap_rotation:  # built after the anchor head: the same seed draws the same trunk
+            self.cap_head = nn.Linear(widths[-1], len(odd) if config.equivariant else 1)
         self.act = ACTIVATIONS[config.activation]
 
-    def g(self, x: torch.Tensor, dx: torch.Tensor | None = None):
-        """The plain network on inputs x (n, 4) in physical units -> anchors (n, 20) mm.
+    @property
+    def has_cap_rotation(self) -> bool:
+        """The model predicts the distal cap's rotation (``with_cap``)."""
+        return self.config.cap_rotation
 
-        With input tangents dx (n, 4, 4) (row t: d x / d input_t), also returns the output
-        tangents (n, 4, 20), propagated layer by layer (forward-mode AD): for
-        h' = act(W h + b), dh' = act'(W h + b) * (dh W^T). They stay differentiable in the
-        weights, which the Sobolev loss needs.
+    def g(self, x: torch.Tensor, dx: torch.Tensor | None = None, cap: bool = False):
+        """The plain network on inputs x (n, 4) in physical units -> (anchors (n, 20) mm,
+        tangents (n, 4, 20) or None, raw cap output c (n,) rad or None).
+
+        With input tangents dx (n, 4, 4) (row t: d x / d input_t), the output tangents are
+        propagated layer by layer (forward-mode AD): for h' = act(W h + b),
+        dh' = act'(W h + b) * (dh W^T). They stay differentiable in the weights, which the
+        Sobolev loss needs. With cap, c is the cap head's output (module docstring), from
+        the same trunk pass.
         """
+        o, h, dz, dh = self._trunk(x, dx)
+        c = self._cap_head(o, h) if cap else None
+        if self.config.equivariant:
+            y, dy = self._equivariant_head(o, h, dz, dh)
+        else:
+            y = self.output_mean + self.output_scale * self.head(h)
+            dy = None if dz is None else (dh @ self.head.weight.T) * self.output_scale
+        return y, dy, c
+
+    def _trunk(self, x, dx):
+        """Hidden layers: x (n, 4) physical units [, dx (n, 4, 4)] -> (odd inputs o (n, 3) or
+        None, trunk output h (n, w), dz (n, 4, 4) or None, dh (n, 4, w) or None)."""
         z = x / self.input_scale
         dz = None if dx is None else dx / self.input_scale
         if self.config.equivariant:
             o, q, dq = self._invariants(z, dz)
         else:
-            q, dq = z, dz
+            o, q, dq = None, z, dz
         if self.config.abs_pressure:
             q = torch.cat([q, z[:, :1].abs()], dim=1)
             if dz is not None:
@@ -157,12 +203,14 @@ class JointSurrogate(nn.Module):
             if dz is not None:
                 da = da[:, None, :] * (dh @ layer.weight.T)
                 dh = dh + da if residual else da
-        if self.config.equivariant:
-            return self._equivariant_head(o, h, None if dx is None else dz, dh)
-        y = self.output_mean + self.output_scale * self.head(h)
-        if dx is None:
-            return y
-        return y, (dh @ self.head.weight.T) * self.output_scale
+        return o, h, dz, dh
+
+    def _cap_head(self, o, h):
+        """Raw cap output c (n,) rad from the trunk output h (n, w): cap_scale sum_j o_j d_j
+        (equivariant, odd in o) or cap_scale d (module docstring)."""
+        d = self.cap_head(h)
+        d = (o * d).sum(1) if self.config.equivariant else d[:, 0]
+        return self.cap_scale * d
 
     def _invariants(self, z, dz):
         """Odd inputs o (n, 3) and mirror invariants q = (z_F1, o_i o_j for i <= j) (n, 7),
@@ -178,8 +226,8 @@ class JointSurrogate(nn.Module):
         return o, q, dq
 
     def _equivariant_head(self, o, h, dz, dh):
-        """Anchors (n, 20) mm from the trunk output h (n, w): even coordinates from a,
-        odd ones as sum_j o_j c_j (module docstring); with tangents (n, 4, 20) if dz.
+        """(anchors (n, 20) mm, tangents (n, 4, 20) if dz else None) from the trunk output
+        h (n, w): even coordinates from a, odd ones as sum_j o_j c_j (module docstring).
         The anchors interleave (x_k, y_k), so a stack, not a masked scatter, assembles
         them (~10 % faster batched at width 64)."""
         n, k = h.shape[0], N_ANCHORS
@@ -188,7 +236,7 @@ class JointSurrogate(nn.Module):
         y = torch.stack([out[:, :k], (o[:, :, None] * c).sum(1)], dim=-1).reshape(n, 2 * k)
         y = self.output_mean * (self.output_mirror > 0) + self.output_scale * y
         if dz is None:
-            return y
+            return y, None
         dout = dh @ self.head.weight.T                                       # (n, 4, 40)
         dc = dout[:, :, k:].reshape(n, -1, o.shape[1], k)
         do = dz[:, :, self.odd_inputs]
@@ -196,35 +244,53 @@ class JointSurrogate(nn.Module):
         dy = torch.stack([dout[:, :, :k], dodd], dim=-1).reshape(n, dz.shape[1], 2 * k)
         return y, dy * self.output_scale
 
-    def flat(self, x: torch.Tensor) -> torch.Tensor:
-        """Inputs (n, 4) -> anchors (n, 20) mm, symmetrised if the config says so."""
-        if not self.config.symmetric:
-            return self.g(x)
+    def outputs(self, x: torch.Tensor, jacobian: bool = False, cap: bool = False):
+        """One pass: inputs (n, 4) -> (anchors (n, 10, 2) mm, d anchors.reshape(20) / d inputs
+        (n, 20, 4) if jacobian else None, cap rotation (n,) rad if cap else None).
+
+        Symmetric form: R = (g(x) + S g(Bx)) / 2, c = (c(x) - c(Bx)) / 2 and
+        J(x) = (J_g(x) + S J_g(Bx) B) / 2, from the tangents of g at x (seeded with I) and
+        at Bx (seeded with B, since d(Bx)/dx = B). The "offset" cap target adds phi_end of
+        the final anchors. The anchors do not depend on jacobian or cap: the same inputs
+        give the same bits whichever outputs are asked for (the tangent pass aside, whose
+        activations also return their slopes).
+        """
+        if cap and not self.has_cap_rotation:
+            raise ModelError("this surrogate has no cap-rotation head (trained without "
+                             "cap_rotation): its cap rotation is only phi_end(anchors)")
         n = x.shape[0]
-        y = self.g(torch.cat([x, x * self.input_mirror]))
-        return 0.5 * (y[:n] + y[n:] * self.output_mirror)
+        eye = torch.eye(N_INPUTS, dtype=x.dtype).expand(n, N_INPUTS, N_INPUTS) if jacobian else None
+        if not self.config.symmetric:
+            y, dy, c = self.g(x, eye, cap)
+        else:
+            y, dy, c = self.g(torch.cat([x, x * self.input_mirror]),
+                              None if eye is None else torch.cat([eye, eye * self.input_mirror]), cap)
+            y = 0.5 * (y[:n] + y[n:] * self.output_mirror)
+            dy = None if dy is None else 0.5 * (dy[:n] + dy[n:] * self.output_mirror)
+            c = None if c is None else 0.5 * (c[:n] - c[n:])
+        y = y.reshape(n, N_ANCHORS, 2)
+        if c is not None and self.config.cap_target == "offset":
+            c = phi_end(y) + c
+        return y, None if dy is None else dy.transpose(1, 2), c
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Inputs (..., 4) -> anchors (..., 10, 2) mm."""
         batch = x.shape[:-1]
-        return self.flat(x.reshape(-1, N_INPUTS)).reshape(*batch, N_ANCHORS, 2)
+        return self.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, N_ANCHORS, 2)
+
+    def with_cap(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Inputs (..., 4) -> (anchors (..., 10, 2) mm, distal cap rotation (...) rad), from
+        one pass, differentiable in x; the anchors equal forward(x) bit for bit. Raises
+        ModelError (one line) if the model has no cap-rotation head."""
+        batch = x.shape[:-1]
+        y, _, c = self.outputs(x.reshape(-1, N_INPUTS), cap=True)
+        return y.reshape(*batch, N_ANCHORS, 2), c.reshape(batch)
 
     def with_jacobian(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Inputs (n, 4) -> (anchors (n, 10, 2) mm, d anchors.reshape(20) / d inputs (n, 20, 4)).
-
-        Symmetric form: J(x) = (J_g(x) + S J_g(Bx) B) / 2, from the tangents of g at x
-        (seeded with I) and at Bx (seeded with B, since d(Bx)/dx = B).
-        """
-        n = x.shape[0]
-        eye = torch.eye(N_INPUTS, dtype=x.dtype).expand(n, N_INPUTS, N_INPUTS)
-        if not self.config.symmetric:
-            y, dy = self.g(x, eye)
-        else:
-            y, dy = self.g(torch.cat([x, x * self.input_mirror]),
-                           torch.cat([eye, eye * self.input_mirror]))
-            y = 0.5 * (y[:n] + y[n:] * self.output_mirror)
-            dy = 0.5 * (dy[:n] + dy[n:] * self.output_mirror)
-        return y.reshape(n, N_ANCHORS, 2), dy.transpose(1, 2)
+        """Inputs (n, 4) -> (anchors (n, 10, 2) mm, d anchors.reshape(20) / d inputs (n, 20, 4)),
+        by forward-mode tangents (``outputs``)."""
+        y, dy, _ = self.outputs(x, jacobian=True)
+        return y, dy
 
 
 def save_checkpoint(path: str | Path, model: JointSurrogate, train_config: dict,

@@ -3,18 +3,19 @@
     python -m surrogate.predict --model results/surrogate/improved.pt \\
         --p 0.1 --f1 1 --f2 0 --m 10 [--allow-extrapolation] [--json]
 
-prints the anchors r_1..r_10 (mm, joint frame, relative to the proximal centre) and
-phi_end = atan2(y10 - y9, x10 - x9) (rad and deg). A value that is not a finite number is
+prints the anchors r_1..r_10 (mm, joint frame, relative to the proximal centre),
+phi_end = atan2(y10 - y9, x10 - x9) (rad and deg) and, for a model with the cap-rotation
+head, the distal cap's rotation (rad and deg; null otherwise). A value that is not a finite number is
 always refused; inputs outside the training box |P| <= 0.3 MPa, |F1|, |F2| <= 3 N,
 |M| <= 100 N·mm (fem.spec) are refused unless --allow-extrapolation is given, which the
 output records ("extrapolation": true). Either refusal is one line, exit 2, before the
 model is loaded.
 JSON keys: model, inputs {P_MPa, F1_N, F2_N, M_Nmm}, extrapolation, anchors_mm (10 x 2),
-phi_end_rad, phi_end_deg.
+phi_end_rad, phi_end_deg, cap_rotation_rad, cap_rotation_deg.
 
 The batched, differentiable torch API is ``surrogate.load_surrogate(path)`` (a frozen
-float64 module, (..., 4) -> (..., 10, 2) mm), with ``surrogate.check_box(x)`` for the
-box check and ``surrogate.phi_end(anchors)``.
+float64 module, (..., 4) -> (..., 10, 2) mm; ``with_cap`` adds the cap rotation), with
+``surrogate.check_box(x)`` for the box check and ``surrogate.phi_end(anchors)``.
 """
 
 from __future__ import annotations
@@ -48,14 +49,20 @@ def main(argv=None) -> int:
         outside = check_box([x], args.allow_extrapolation)
         model = load_surrogate(args.model)
     with torch.no_grad():
-        anchors = model(torch.tensor(x, dtype=torch.float64))
+        if model.has_cap_rotation:
+            anchors, cap = model.with_cap(torch.tensor(x, dtype=torch.float64))
+            cap = cap.item()
+        else:
+            anchors, cap = model(torch.tensor(x, dtype=torch.float64)), None
     phi = phi_end(anchors).item()
     out = {"model": args.model,
            "inputs": {"P_MPa": args.p, "F1_N": args.f1, "F2_N": args.f2, "M_Nmm": args.m},
            "extrapolation": outside > 0,
            "anchors_mm": anchors.tolist(),
            "phi_end_rad": phi,
-           "phi_end_deg": math.degrees(phi)}
+           "phi_end_deg": math.degrees(phi),
+           "cap_rotation_rad": cap,
+           "cap_rotation_deg": None if cap is None else math.degrees(cap)}
     if args.json:
         cli.print_json(out)
     else:
@@ -64,6 +71,8 @@ def main(argv=None) -> int:
         for i, (ax, ay) in enumerate(out["anchors_mm"], 1):
             print(f"  r_{i:<2d} x {ax:9.4f} mm  y {ay:9.4f} mm")
         print(f"  phi_end {phi:.6f} rad = {math.degrees(phi):.4f} deg")
+        if cap is not None:
+            print(f"  cap rotation {cap:.6f} rad = {math.degrees(cap):.4f} deg")
     return 0
 
 

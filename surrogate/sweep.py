@@ -38,6 +38,8 @@ VARIANTS = {
     "nojac": ["w_jac=0"],
     "jac0.05": ["w_jac=0.05"],
     "nophi": ["w_phi=0"],
+    "nocap": ["cap_rotation=false", "w_cap=0"],
+    "capoffset": ["cap_target=offset"],
     "noabsp": ["abs_pressure=false"],
     "nosym": ["equivariant=false", "mirror_augment=true"],
     "symmetric": ["equivariant=false", "symmetric=true"],
@@ -54,7 +56,9 @@ VARIANTS = {
 
 COLUMNS = [("val", "mean_anchor_error_mm", 4), ("val", "p95_anchor_error_mm", 4),
            ("val", "phi_end_error_deg", 3), ("val", "jacobian_rel_error", 4),
-           ("heldout", "mean_anchor_error_mm", 4), ("heldout", "phi_end_error_deg", 3)]
+           ("val", "cap_rotation_error_deg", 3),
+           ("heldout", "mean_anchor_error_mm", 4), ("heldout", "phi_end_error_deg", 3),
+           ("heldout", "cap_rotation_error_deg", 3)]
 
 
 def variant_configs(name: str, epochs: int | None) -> tuple:

@@ -57,6 +57,16 @@ CASES_FEM = [
     ("fem.render", ["--out", "{tmp}/x.txt"], "expected a .png file"),
     ("fem.render", ["--out", "/etc/passwd/x.png"], "cannot create /etc/passwd/x.png"),
     ("fem.render", ["--m", "200", "--out", "{tmp}/x.png"], "M = 200 is outside the training box"),
+    # fem.finger / fem.finger_cases (issue 14): pressures per joint of the finger file
+    ("fem.finger", ["--p1", "0.5"], "--p1: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("fem.finger", ["--p1", "nan"], "--p1: 'nan' is not a finite number"),
+    ("fem.finger", ["--p3", "0.1"], "--p3 given, but finger 'paper' has 2 joint(s)"),
+    ("fem.finger", ["--finger", "tests/data/fingers/no_joint.toml"], "a finger needs at least one joint part"),
+    ("fem.finger", ["--rigid-mesh-size", "0"], "--rigid-mesh-size: 0 is outside [0.3, 10] mm"),
+    ("fem.finger", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
+    ("fem.finger_cases", ["--cases", "nope", "--out", "{tmp}/f"], "unknown case 'nope'"),
+    ("fem.finger_cases", ["--part", "3/2", "--out", "{tmp}/f"], "--part '3/2': use K/N with 1 <= K <= N"),
+    ("fem.finger_cases", ["--out", "/etc/passwd/f"], "cannot create /etc/passwd/f"),
     # --- fem cases (end)
 ]
 CASES_WORKFLOW = [
@@ -167,6 +177,35 @@ CASES_PREDICTOR = [
      "--method nn predicts the trained case only"),
     ("predictor.gesture", ["--p1", "0", "--p1", "0.1", "--p2", "0"], "--p1 given twice"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
+    # predictor.validate_finger (issue 14): an empty FEM folder, an unwritable output
+    ("predictor.validate_finger", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
+     "no FEM cases in {tmp}/none"),
+    ("predictor.validate_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    # predictor.gesture --finger (issue 14): the finger file is read and checked while
+    # parsing (tests/data/fingers/ holds the bad files), the pressures against its joints
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "{tmp}/none.toml"],
+     "cannot read finger file {tmp}/none.toml: No such file or directory"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/bad_toml.toml"],
+     "tests/data/fingers/bad_toml.toml: not a valid TOML finger file"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/duplicate_key.toml"],
+     "tests/data/fingers/duplicate_key.toml: not a valid TOML finger file (Cannot overwrite a value"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/unknown_key.toml", "--json"],
+     "part 2 (rigid): unknown key 'colour'"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/negative_length.toml"],
+     "part 2 (rigid): length = -60.0 must be > 0.0"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/no_joint.toml"],
+     "a finger needs at least one joint part"),
+    ("predictor.gesture", ["--pressures", "0.1,0,0.1"], "--pressures: 3 values for finger 'paper' of 2 joints"),
+    ("predictor.gesture", ["--pressures", "0.1,0.5"], "--pressures: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--pressures", "0,0"], "give either --p1/--p2 or --pressures"),
+    ("predictor.gesture", ["--p1", "0"], "give --p1 and --p2 (MPa), or --pressures P1,P2"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--approach", "0,0,0"],
+     "--approach: 3 values for finger 'paper' of 2 joints"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--kinematics", "chord"], "invalid choice: 'chord'"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--joint-weight", "half"], "invalid choice: 'half'"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "split"],
+     "was trained for finger 'paper', tangent kinematics, lumped joint weights, not finger 'paper', "
+     "tangent kinematics, split joint weights"),
     # predictor.nn / bench / figures: outputs and inputs refused before any training or solve
     ("predictor.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
     ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],

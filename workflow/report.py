@@ -384,7 +384,113 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
     return out, checks
 
 
-SECTIONS = (fem_section, campaign_section, surrogate_section, predictor_section, planning_section)
+def _finger_budget(root: Path, v: dict, judged: dict) -> list[str]:
+    """The fingertip error budget: discretisation (the finger FEM on a finer mesh, and
+    the joint mesh study), surrogate (held-out set) and finger model (the validation)."""
+    out = ["", "Fingertip error budget (how far each stage can move the fingertip):", "",
+           "| term | figure | source |", "|---|---|---|"]
+    for m in v.get("mesh_check", []):
+        out.append(f"| discretisation: finger FEM, joint mesh {m['production_mesh_size']} -> {m['mesh_size']} mm "
+                   f"({m['production_nodes']:,} -> {m['nodes']:,} nodes), {m['case']} | {m['tip_change_mm']:.2f} mm, "
+                   f"{m['tip_angle_change_deg']:+.2f}° | `python -m fem.finger_cases --mesh-size {m['mesh_size']}` |")
+    study = _load(root / "fem/mesh_study.json")
+    if study:
+        sizes = sorted(m["mesh_size"] for m in study["meshes"])
+        fine, prod = (next(m for m in study["meshes"] if m["mesh_size"] == h) for h in (sizes[0], 1.8))
+        dr = max(math.dist(a, b) for p, f in zip(prod["cases"], fine["cases"])
+                 for a, b in zip(p["anchors"], f["anchors"]))
+        dphi = max(abs(p["phi_end_deg"] - f["phi_end_deg"]) for p, f in zip(prod["cases"], fine["cases"]))
+        out.append(f"| discretisation: one joint at the box corners, mesh 1.8 -> {sizes[0]} mm | anchors {dr:.2f} mm, "
+                   f"phi_end {dphi:.2f}° (at the corners, far beyond the finger's joint loads) | `make mesh-study` |")
+    cap = _load(root / "surrogate/cap/metrics.json")
+    if cap:
+        h = cap["heldout"]
+        out.append(f"| surrogate (held-out, n = {h['n']}) | tip {h['tip_error_mm']:.3f} mm, cap rotation "
+                   f"{h['cap_rotation_error_deg']:.3f}° mean ({h['p95_cap_rotation_error_deg']:.2f}° p95) | "
+                   "results/surrogate/cap/metrics.json |")
+    out.append(f"| finger model + surrogate against the finger FEM ({v['judged_variant']}) | "
+               f"{judged['tip_error_mm_max']:.2f} mm max, {judged['tip_angle_error_deg_max']:.2f}° | this validation |")
+    return out
+
+
+def finger_section(root: Path) -> tuple[list[str], list[Check]]:
+    title = "Whole-finger validation (issue 14)"
+    out, checks = [f"## {title}", ""], []
+    v = _load(root / "validation/finger.json")
+    if not v:
+        return out + _missing("needs the finger FEM of `make finger-fem`", "make validate-finger"), []
+    t, s = v["targets"], v["summary"]
+    judged = v["judged_variant"]
+    fem = v["fem"]
+    mesh = fem[0]["mesh"]
+    out += [f"`make validate-finger` (results/validation/finger.json): the finger FEM (`python -m fem.finger`, "
+            f"finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, joint mesh {mesh['mesh_size']} mm, "
+            "one rank) against the predictor on the same finger file and the joint model "
+            f"{v['joint']}; every predictor figure is a single-query Newton solve (median of "
+            f"{v['repeats']}). Angle errors are predictor minus FEM. The judged variant is "
+            f"**{judged}**; the paper's tangent connection is shown beside it.", "",
+            "| case | FEM tip (X, Y) mm | FEM tip angle | tangent: tip / angle error | cap: tip / angle error "
+            "| cap + split weight | surrogate chain (tau = 0, cap) | FEM | predictor |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    by = {}
+    for e in v["cases"]:
+        by.setdefault(e["case"], {})[e["variant"]] = e
+    failed = [c for c in fem if not c["converged"]]
+    for c in fem:
+        if not c["converged"]:
+            out.append(f"| {c['case']} | FEM did not converge ({c.get('reason') or 'no reason recorded'}; "
+                       f"{c['fem_s']:.0f} s): no answer, not compared | | | | | | | |")
+            continue
+        rows = by.get(c["case"], {})
+        cell = lambda k: (f"{rows[k]['tip_error_mm']:.2f} mm / {rows[k]['tip_angle_error_deg']:+.2f}°"
+                          if k in rows else "n/a")
+        pred = rows.get(judged, {})
+        out.append(f"| {c['case']} | ({c['tip'][0]:.2f}, {c['tip'][1]:.2f}) | {c['tip_angle_deg']:.2f}° | "
+                   f"{cell('predictor_tangent_lumped')} | {cell('predictor_cap_lumped')} | "
+                   f"{cell('predictor_cap_split')} | {cell('chain_cap')} | {c['fem_s']:.0f} s | "
+                   f"{1000 * pred.get('predictor_s', math.nan):.1f} ms |")
+    j, tang = s[judged], s.get("predictor_tangent_lumped")
+    solved = [c for c in fem if c["converged"]]
+    fem_max = max(c["fem_s"] for c in solved)
+    rows = [(f"fingertip error, {judged} (max over {j['cases']} cases)", f"{j['tip_error_mm_max']:.2f} mm",
+             Target("<=", t["tip_error_mm"], "mm"), j["tip_error_mm_max"]),
+            (f"fingertip angle error, {judged} (max)", f"{j['tip_angle_error_deg_max']:.2f}°",
+             Target("<=", t["tip_angle_error_deg"], "deg"), j["tip_angle_error_deg_max"]),
+            ("speed-up of the predictor over the finger FEM (min)", f"{j['speedup_min']:,.0f}x",
+             Target(">=", t["speedup"], "x"), j["speedup_min"]),
+            ("finger FEM per gesture, production mesh, one core (max, wall time)", f"{fem_max:.0f} s",
+             Target("<=", t["fem_s"], "s"), fem_max),
+            ("validation cases the FEM solved (issue 14: 4 free, 2 gravity, >= 8 more)",
+             f"{len(solved)} of {len(fem)} run", Target(">=", t["fem_cases"], "cases"), len(solved))]
+    out += ["", "| figure | measured | paper | target | met |", "|---|---|---|---|---|"]
+    papers = ["", "", "~100x", "20-30 min (ANSYS)", ""]
+    for (label, shown, target, value), paper in zip(rows, papers):
+        checks.append(judge(title, f"finger {label}", [(target, value)]))
+        out.append(f"| {label} | {shown} | {paper} |" + _cells(checks[-1]))
+    if tang:
+        out.append(f"| fingertip error, tangent kinematics (the paper's; max) | {tang['tip_error_mm_max']:.2f} mm, "
+                   f"{tang['tip_angle_error_deg_max']:.2f}° | | | |")
+    cap = _load(root / "surrogate/cap/metrics.json")
+    if cap:
+        h = cap["heldout"]
+        out += ["", f"The cap kinematics' joint model ({cap['model']}) predicts the distal cap's rotation with "
+                f"{h['cap_rotation_error_deg']:.3f}° mean and {h['p95_cap_rotation_error_deg']:.3f}° p95 error on the "
+                f"held-out set (n = {h['n']}); taking the chord angle phi_end for it, as the tangent connection "
+                f"does, is off by {h['tangent_error_deg']:.2f}° mean, {h['p95_tangent_error_deg']:.2f}° p95. Its "
+                f"anchors: {h['mean_anchor_error_mm']:.4f} mm mean (the committed improved.pt: "
+                f"{cap['committed_improved_for_comparison']['mean_anchor_error_mm']:.4f} mm)."]
+    out += _finger_budget(root, v, j)
+    loads = [c["load_average"] for c in solved if c.get("load_average") is not None]
+    out += ["", "The FEM wall times were measured with two cases solving at once, one per core"
+            + (f" (load average {min(loads):.1f} to {max(loads):.1f})" if loads else ", and other jobs on the machine")
+            + "; an idle core is faster. A case the FEM did not solve is a shortfall of the FEM, not of the predictor."]
+    out += ["", "Overlays: the FEM coloured by |u| (pyvista), the predictor's centre lines over it "
+            "(black: cap kinematics, red dashed: tangent).", ""]
+    out += ["".join(f"![{Path(f).stem}](validation/{Path(f).name})\n" for f in v["figures"]), ""]
+    return out, checks
+
+
+SECTIONS = (fem_section, campaign_section, surrogate_section, predictor_section, finger_section, planning_section)
 
 
 def build(root: Path) -> tuple[str, list[str], list[Check]]:

@@ -1,0 +1,330 @@
+"""The whole finger in DOLFINx: the ground truth for the gesture predictor (issue 14).
+
+    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE] --json
+    mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
+
+Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one half-model
+(z >= 0, u_z = 0 on z = 0) of the finger described by a finger file
+(fem.finger_spec; default the paper's, fem/fingers/paper.toml), built by
+fem.geometry.build_finger in the finger frame (x along the straight rest finger from the
+base mount, y in the bending plane). Every joint is the bellow joint of fem.solver (the
+same neo-Hookean NinjaFlex, stiff distal cap, P2 elements, valley self-contact of
+fem.contact); every rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35),
+bonded to its neighbours (one conforming mesh). The base face x = 0 is clamped.
+
+Loads, all ramped together along one load path (load vector a = (P_1 .. P_n, g)):
+
+* chamber pressure of joint j, a follower load on its deformed chamber walls
+  (t0 = -p J F^-T N; P_j > 0 inflates its top chamber, P_j < 0 its bottom one);
+* gravity as a dead body force b_k = g W_k / (2 V_k) e_g on part k (weight W_k from the
+  finger file, V_k its half-model volume: the half-model carries half the weight), with
+  e_g = Rot(-base_angle)·(0, -1) the global -Y in the finger frame, g in [0, 1].
+
+The load stepping, cut-back and Newton/MUMPS machinery is fem.solver.NewtonSolver, shared
+with the joint.
+
+Outputs, in the predictor's global frame (DESIGN.md §4; the right finger, base mount at
+(base_gap/2, 0), finger frame rotated by base_angle): x_global = B + Rot(base_angle)·(x + u)
+for the centre line points (z = 0, y = 0). Per joint: its 10 anchors, proximal centre,
+proximal orientation theta (the rotation of the part it is bonded to), its distal cap's
+orientation (``end_angle``, the direction the next part leaves along) and its chord angle
+from the last two anchors (the paper's tangent connection), plus the joint-frame anchors,
+phi_end and cap rotation comparable with the single-joint FEM. The fingertip is the centre
+of the last part's distal face, ``tip_angle`` the orientation of the last part. Rotations
+of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem import cli
+from fem.contact import ValleyContact
+from fem.finger_spec import FingerFileError, FingerSpec, load_finger
+from fem.geometry import FingerGeometry, JointGeometry, finger_tags
+from fem.mesh import create_mesh
+from fem.options import MESH_SIZE, add_mesh_size
+from fem.solver import (Material, NewtonSolver, SolverConfig, _lame, displacement_problem,
+                        facet_tags_present, follower_pressure, neo_hookean_psi, rotation_about_z)
+from fem.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
+
+log = logging.getLogger("softjoint.fem")
+MAX_JOINTS = 4        # --p1 .. --p4
+
+
+@dataclass(frozen=True)
+class RigidMaterial:
+    """The rigid parts: PLA-like, E (MPa), nu. 290x NinjaFlex, so they bend by
+    ~1e-4 rad under the finger's loads (a 65 mm tip under 20 N·mm)."""
+
+    E: float = 3500.0
+    nu: float = 0.35
+
+
+@dataclass(frozen=True)
+class FingerLoad:
+    """Pressures (MPa, signed, one per joint, base to tip) and gravity on/off."""
+
+    pressures: tuple[float, ...]
+    gravity: bool = True
+
+    def as_array(self) -> np.ndarray:
+        return np.array([*self.pressures, 1.0 if self.gravity else 0.0])
+
+
+@dataclass
+class FingerResult:
+    """One finger solve, global frame (module docstring): mm, rad, s."""
+
+    load: FingerLoad
+    converged: bool
+    tip: np.ndarray                 # (2,)
+    tip_angle: float
+    anchors: np.ndarray             # (n_joints, 10, 2) global
+    proximal: np.ndarray            # (n_joints, 2) global proximal centres
+    theta: np.ndarray               # (n_joints,) proximal orientation
+    end_angle: np.ndarray           # (n_joints,) orientation of the distal cap
+    chord_angle: np.ndarray         # (n_joints,) atan2 of r_10 - r_9
+    local_anchors: np.ndarray       # (n_joints, 10, 2) in each joint's frame
+    newton_iterations: list[int] = field(default_factory=list)
+    load_steps: int = 0
+    cutbacks: int = 0
+    factorisations: int = 0
+    wall_time: float = 0.0
+    cpu_time: float = 0.0           # this process's CPU time: one core's share under load
+    reason: str = ""
+
+    def summary(self) -> dict:
+        """JSON-ready figures (degrees for angles); ``tip`` and ``tip_angle_deg`` mean
+        what they mean in ``predictor.gesture --json``."""
+        deg = lambda a: np.degrees(a).tolist()
+        joints = [{"anchors_mm": np.round(self.anchors[j], 6).tolist(),
+                   "proximal_mm": self.proximal[j].tolist(),
+                   "theta_deg": math.degrees(self.theta[j]),
+                   "end_angle_deg": math.degrees(self.end_angle[j]),
+                   "chord_angle_deg": math.degrees(self.chord_angle[j]),
+                   "cap_rotation_deg": math.degrees(self.end_angle[j] - self.theta[j]),
+                   "phi_end_deg": math.degrees(self.chord_angle[j] - self.theta[j]),
+                   "local_anchors_mm": np.round(self.local_anchors[j], 6).tolist()}
+                  for j in range(len(self.theta))]
+        return {"pressures_MPa": list(self.load.pressures), "gravity": self.load.gravity,
+                "converged": self.converged, "tip": self.tip.tolist(),
+                "tip_angle_deg": math.degrees(self.tip_angle),
+                "joint_end_angle_deg": deg(self.end_angle), "joints": joints,
+                "newton_iterations": self.newton_iterations,
+                "iterations": int(sum(self.newton_iterations)), "load_steps": self.load_steps,
+                "cutbacks": self.cutbacks, "factorisations": self.factorisations,
+                "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
+
+
+def _rot(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+class FingerSolver(NewtonSolver):
+    """Static large-deflection solve of one whole finger (module docstring)."""
+
+    def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
+                 material: Material = Material(), rigid: RigidMaterial = RigidMaterial(),
+                 config: SolverConfig = SolverConfig()):
+        self.finger = finger = geometry.finger
+        self.mesh_data = mesh_data = create_mesh(geometry, comm)
+        mesh, ft = mesh_data.mesh, mesh_data.facet_tags
+        self.comm = mesh.comm
+        tags = finger_tags(finger)
+        joints = finger.joints
+        self.load_scale = np.array([PRESSURE_LIMIT] * len(joints) + [1.0])
+        V, u, v, bcs, dx, ds = displacement_problem(mesh_data, config)
+
+        # --- internal energy: NinjaFlex joints, stiff caps, PLA rigid parts
+        F = ufl.variable(ufl.Identity(3) + ufl.grad(u))
+        stress = {name: ufl.diff(neo_hookean_psi(F, *_lame(E, nu)), F) for name, (E, nu) in {
+            "body": (material.E, material.nu),
+            "cap": (material.cap_stiffness * material.E, material.cap_nu),
+            "rigid": (rigid.E, rigid.nu)}.items()}
+        one = fem.Constant(mesh, PETSc.ScalarType(1))
+        volume = lambda m: self._allsum(fem.assemble_scalar(fem.form(one * m)))
+        R = 0
+        self.g = fem.Constant(mesh, PETSc.ScalarType(0))
+        e_g = _rot(-finger.base_angle) @ np.array([0.0, -1.0])
+        gravity = ufl.as_vector([float(e_g[0]), float(e_g[1]), 0.0])
+        self._rotation_forms = {}       # part k (rigid) or cap of joint k -> (form, volume)
+        for k, part in enumerate(finger.parts):
+            own = dx(tags[f"part{k}"])
+            if part.kind == "joint":
+                cap = dx(tags[f"cap{k}"])
+                R = R + ufl.inner(stress["body"], ufl.grad(v)) * own + ufl.inner(stress["cap"], ufl.grad(v)) * cap
+                whole = own + cap
+                rigid_body = cap
+            else:
+                R = R + ufl.inner(stress["rigid"], ufl.grad(v)) * own
+                whole = own
+                rigid_body = own
+            if part.weight > 0:
+                rho = fem.Constant(mesh, PETSc.ScalarType(part.weight / (2 * volume(whole))))
+                R = R - self.g * rho * ufl.inner(gravity, v) * whole
+            self._rotation_forms[k] = (fem.form(rotation_about_z(F) * rigid_body), volume(rigid_body))
+
+        # --- chamber pressures, per joint
+        present = facet_tags_present(ft)
+        self.p = []
+        for k in joints:
+            pair = {}
+            for side in ("top", "bottom"):
+                if tags[f"{side}{k}"] in present:
+                    pair[side] = fem.Constant(mesh, PETSc.ScalarType(0))
+                    R = R + pair[side] * follower_pressure(F, v, ds(tags[f"{side}{k}"]))
+            self.p.append(pair)
+        contact = None
+        if config.contact_penalty > 0 and tags["valley_faces"] in present:
+            contact = ValleyContact(V, ft, geometry.joint, config.contact_penalty,
+                                    offsets=tuple(finger.rest_start(k) for k in joints))
+        super().__init__(V, u, R, bcs, config, contact)
+
+        # --- probes: every joint's proximal centre and anchors, and the fingertip
+        L = geometry.joint.length
+        points = [[finger.rest_start(k) + i * L / N_ANCHORS, 0.0, 0.0]
+                  for k in joints for i in range(N_ANCHORS + 1)]
+        points.append([finger.length, 0.0, 0.0])
+        self.probe_points = np.array(points)
+        self._probe_cells = self._locate(self.probe_points)
+
+    def _set_load(self, a: np.ndarray) -> None:
+        for pair, P in zip(self.p, a[:-1]):
+            if "top" in pair:
+                pair["top"].value = max(P, 0.0)
+            if "bottom" in pair:
+                pair["bottom"].value = max(-P, 0.0)
+        self.g.value = a[-1]
+
+    def rotation(self, k: int) -> float:
+        """Rotation (rad) about +z of part k's rigid body: a rigid part, or a joint's cap."""
+        form, vol = self._rotation_forms[k]
+        return self._allsum(fem.assemble_scalar(form)) / vol
+
+    def solve(self, load: FingerLoad) -> FingerResult:
+        """Solve one finger gesture from the unloaded state; raises OutOfBoxError
+        (before any work) for a pressure that is not finite or beyond ±PRESSURE_LIMIT."""
+        joints = self.finger.joints
+        if len(load.pressures) != len(joints):
+            raise ValueError(f"{len(load.pressures)} pressures for a finger with {len(joints)} joints")
+        check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(joints))],
+                  box=[PRESSURE_LIMIT] * len(joints), units=["MPa"] * len(joints))
+        t0, c0, lu0 = time.perf_counter(), time.process_time(), self.factorisations
+        self.reset()
+        path = self._follow(self.state.copy(), load.as_array())
+        result = self._result(load, path)
+        result.factorisations = self.factorisations - lu0
+        result.wall_time = time.perf_counter() - t0
+        result.cpu_time = time.process_time() - c0
+        if self.comm.rank == 0:
+            log.info("finger %s: converged=%s, %d steps, %.1f s", load.pressures, path.converged,
+                     path.load_steps, result.wall_time)
+        return result
+
+    def _result(self, load: FingerLoad, path) -> FingerResult:
+        """Global-frame figures of the current state (module docstring)."""
+        finger = self.finger
+        base, turn = np.array([0.5 * finger.base_gap, 0.0]), _rot(finger.base_angle)
+        x = (self.probe_points + self.evaluate(self.u))[:, :2]
+        x = base + x @ turn.T
+        n = N_ANCHORS + 1
+        polylines = x[:-1].reshape(-1, n, 2)
+        rot = {k: self.rotation(k) for k in self._rotation_forms}
+        theta, end = [], []
+        for k in finger.joints:
+            theta.append(finger.base_angle + (rot[k - 1] if k > 0 else 0.0))
+            end.append(finger.base_angle + rot[k])
+        theta, end = np.array(theta), np.array(end)
+        d = polylines[:, -1] - polylines[:, -2]
+        chord = np.arctan2(d[:, 1], d[:, 0])
+        # joint frame: x_local = Rot(-theta)·(x - proximal centre)
+        local = np.stack([(polylines[j, 1:] - polylines[j, 0]) @ _rot(theta[j]) for j in range(len(theta))])
+        last = len(finger.parts) - 1
+        return FingerResult(
+            load=load, converged=path.converged, tip=x[-1], tip_angle=finger.base_angle + rot[last],
+            anchors=polylines[:, 1:], proximal=polylines[:, 0], theta=theta, end_angle=end,
+            chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi, local_anchors=local,
+            newton_iterations=path.newton_iterations, load_steps=path.load_steps,
+            cutbacks=path.cutbacks, reason=path.reason)
+
+
+# ---------------------------------------------------------------------- command line
+def _finger_file(text: str) -> FingerSpec:
+    try:
+        return load_finger(text)
+    except FingerFileError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def build_parser() -> cli.Parser:
+    ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
+    pressure = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
+    for j in range(1, MAX_JOINTS + 1):
+        ap.add_argument(f"--p{j}", type=pressure, default=None,
+                        help=f"joint-{j} pressure, MPa (|P| <= {PRESSURE_LIMIT:g}; default 0)")
+    ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
+    ap.add_argument("--finger", type=_finger_file, default=None,
+                    help="finger description file (default: fem/fingers/paper.toml)")
+    add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
+    ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None,
+                    help="tetrahedron size on the chamber walls, mm (default: --mesh-size)")
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
+    ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log load steps")
+    return ap
+
+
+def main(argv=None) -> int:
+    from fem.solve import write_xdmf
+
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    finger = args.finger or load_finger()
+    n = finger.n_joints
+    given = [j for j in range(1, MAX_JOINTS + 1) if getattr(args, f"p{j}") is not None]
+    if given and max(given) > n:
+        ap.error(f"--p{max(given)} given, but finger {finger.name!r} has {n} joint(s)")
+    load = FingerLoad(tuple(getattr(args, f"p{j}") or 0.0 for j in range(1, n + 1)), not args.no_gravity)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(message)s", force=True)
+    joint = replace(JointGeometry(), mesh_size=args.mesh_size, wall_mesh_size=args.wall_mesh_size)
+    geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
+    comm = MPI.COMM_WORLD
+    with ap.errors():
+        solver = FingerSolver(geometry, comm)
+        result = solver.solve(load)
+        if args.xdmf and result.converged:
+            write_xdmf(args.xdmf, solver)
+    if comm.rank == 0:
+        out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
+               "geometry": geometry.as_dict(), "ranks": comm.size}
+        if args.json:
+            cli.print_json(out)
+        else:
+            print(f"finger {finger.name!r}, P = {list(load.pressures)} MPa, gravity {load.gravity}: "
+                  f"converged={result.converged} {result.reason}")
+            print(f"  tip = ({result.tip[0]:.4f}, {result.tip[1]:.4f}) mm, "
+                  f"tip angle {math.degrees(result.tip_angle):.3f} deg")
+            for j, s in enumerate(out["joints"]):
+                print(f"  joint {j + 1}: end angle {s['end_angle_deg']:.3f} deg, chord {s['chord_angle_deg']:.3f} deg, "
+                      f"cap rotation {s['cap_rotation_deg']:.3f} deg")
+            print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
+                  f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes, {comm.size} rank(s)")
+    return 0 if result.converged else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

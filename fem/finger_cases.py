@@ -1,0 +1,161 @@
+"""The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
+
+    python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8] [--part 1/2]
+
+Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
+* free pressurisation without gravity (the paper's Figure 3): (0.05, 0.05), (0.1, 0.1),
+  (0.05, -0.05), (0.1, -0.1);
+* gravity (Figure 5A): (-0.1, 0.1), (0.1, -0.1);
+* 10 more pairs with gravity spread over the box, among them the grasp region
+  (0.2, 0.2) and (0.3, 0.3), none the mirror image (-P1, -P2) of another: with gravity
+  along the finger at rest the mirror case is the mirror finger (tests/test_finger.py),
+  so it would add no information.
+
+Each case is one ``FingerSolver.solve`` on one mesh built once (the mesh build and the
+form compilation are reported apart from each case's solve time, ``fem_s``). It writes
+``<case>.json`` (FingerResult.summary plus the run's settings) and ``<case>.png``: the
+deformed finger (the full model, mirrored about z = 0), seen along -z in the global plane
+with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista with no
+colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
+lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
+and the |u| colour range. Files are written atomically; a case whose JSON exists for
+the same finger file, mesh and code settings is skipped, so a killed run resumes. A
+solve that does not converge is recorded as such (``converged: false``, no figures).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
+from mpi4py import MPI
+
+from fem import cli
+from fem.files import atomic_path, json_safe, write_json
+from fem.finger import FingerLoad, FingerSolver, _finger_file, _rot
+from fem.finger_spec import load_finger
+from fem.geometry import FingerGeometry, JointGeometry
+from fem.options import MESH_SIZE, add_mesh_size, one_rank
+
+#: (name, P1, P2, gravity)
+CASES = [
+    ("free_0.05_0.05", 0.05, 0.05, False), ("free_0.1_0.1", 0.1, 0.1, False),
+    ("free_0.05_-0.05", 0.05, -0.05, False), ("free_0.1_-0.1", 0.1, -0.1, False),
+    ("gravity_-0.1_0.1", -0.1, 0.1, True), ("gravity_0.1_-0.1", 0.1, -0.1, True),
+    ("gravity_0.2_0.2", 0.2, 0.2, True), ("gravity_0.3_0.3", 0.3, 0.3, True),
+    ("gravity_-0.2_0.1", -0.2, 0.1, True), ("gravity_0.3_-0.3", 0.3, -0.3, True),
+    ("gravity_-0.1_-0.25", -0.1, -0.25, True), ("gravity_0.15_0", 0.15, 0.0, True),
+    ("gravity_0_0.25", 0.0, 0.25, True), ("gravity_-0.15_-0.05", -0.15, -0.05, True),
+    ("gravity_0.25_0.1", 0.25, 0.1, True), ("gravity_0.1_0.3", 0.1, 0.3, True),
+]
+WINDOW = (900, 900)   # render size, pixels
+
+
+def render(solver: FingerSolver, path: Path) -> dict:
+    """The deformed finger in the global plane, coloured by |u|, to ``path`` (PNG, atomic).
+    Returns {"extent_mm": [X0, X1, Y0, Y1], "u_max_mm": ...} for the overlay."""
+    from dolfinx import plot
+
+    finger = solver.finger
+    topology, cell_types, x = plot.create_vtk_mesh(solver.V)
+    u = solver.u.x.array.reshape(-1, 3)
+    grid = pyvista.UnstructuredGrid(topology, cell_types, x)
+    grid.point_data["u"] = u.copy()
+    mirror = grid.copy()
+    mirror.points[:, 2] *= -1
+    mirror.point_data["u"][:, 2] *= -1
+    full = grid.merge(mirror)
+    moved = full.points + full.point_data["u"]
+    turn = _rot(finger.base_angle)
+    xy = moved[:, :2] @ turn.T + [0.5 * finger.base_gap, 0.0]
+    full.points = np.column_stack([xy, moved[:, 2]])
+    full.point_data["|u|"] = np.linalg.norm(full.point_data["u"], axis=1)
+    lo, hi = xy.min(0) - 15.0, xy.max(0) + 15.0
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo).max()
+    extent = [centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half]
+    umax = float(full.point_data["|u|"].max())
+    p = pyvista.Plotter(off_screen=True, window_size=WINDOW, border=False)
+    p.set_background("white")
+    p.add_mesh(full.extract_surface(nonlinear_subdivision=0, algorithm='dataset_surface'), scalars="|u|", cmap="viridis",
+               clim=(0.0, umax), show_scalar_bar=False)
+    p.enable_parallel_projection()
+    p.camera.focal_point = (centre[0], centre[1], 0.0)
+    p.camera.position = (centre[0], centre[1], 1000.0)
+    p.camera.up = (0.0, 1.0, 0.0)
+    p.camera.parallel_scale = half
+    with atomic_path(path) as tmp:
+        p.screenshot(str(tmp))
+    p.close()
+    return {"extent_mm": extent, "u_max_mm": umax, "cmap": "viridis"}
+
+
+def main(argv=None) -> int:
+    ap = cli.Parser(prog="python -m fem.finger_cases", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", folder=True, default="results/validation/finger_fem",
+                  help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
+    ap.add_argument("--finger", type=_finger_file, default=None, help="finger file (default: the paper's)")
+    add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
+    ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None, help="chamber-wall tetrahedron size, mm")
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help="rigid-part tetrahedron size, mm")
+    ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
+    ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
+    ap.add_argument("--suffix", default="", help="appended to each file name (e.g. _h1.2 for a finer mesh)")
+    comm = MPI.COMM_WORLD
+    one_rank(ap, comm)
+    args = ap.parse_args(argv)
+    names = [c[0] for c in CASES]
+    chosen = args.cases.split(",") if args.cases else names
+    for name in chosen:
+        if name not in names:
+            ap.error(f"unknown case {name!r}: use {', '.join(names)}")
+    try:
+        k, n = (int(v) for v in args.part.split("/"))
+        assert 1 <= k <= n
+    except (ValueError, AssertionError):
+        ap.error(f"--part {args.part!r}: use K/N with 1 <= K <= N")
+    cases = [c for c in CASES if c[0] in chosen][k - 1::n]
+    finger = args.finger or load_finger()
+    geometry = FingerGeometry(finger, replace(JointGeometry(), mesh_size=args.mesh_size,
+                                              wall_mesh_size=args.wall_mesh_size), args.rigid_mesh_size)
+    settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
+    out = Path(args.out)
+    todo = []
+    for name, p1, p2, gravity in cases:
+        path = out / f"{name}{args.suffix}.json"
+        if path.is_file():
+            try:
+                if json.loads(path.read_text()).get("settings") == json_safe(settings):
+                    continue
+            except ValueError:
+                pass            # a foreign or damaged file: solve again and replace it
+        todo.append((name, p1, p2, gravity, path))
+    if not todo:
+        print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
+        return 0
+    with ap.errors():
+        t0 = time.perf_counter()
+        solver = FingerSolver(geometry, comm)
+        setup_s = time.perf_counter() - t0
+        for name, p1, p2, gravity, path in todo:
+            res = solver.solve(FingerLoad((p1, p2), gravity))
+            record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
+                      "load_average": os.getloadavg()[0], "setup_s": setup_s,
+                      "mesh": solver.mesh_info(), "settings": settings, "ranks": comm.size}
+            if res.converged:
+                record["render"] = render(solver, path.with_suffix(".png"))
+            out.mkdir(parents=True, exist_ok=True)
+            write_json(path, record)
+            print(f"{name}: converged={res.converged}, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
+                  f"{math.degrees(res.tip_angle):.2f} deg, {res.wall_time:.0f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

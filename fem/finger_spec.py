@@ -1,0 +1,183 @@
+"""The finger description: one file that both the finger FEM and the predictor build from.
+
+A finger is an ordered chain of parts from the base mount to the fingertip (DESIGN.md §4):
+
+* ``joint``: one bellow joint of DESIGN.md §3 (length fem.spec.JOINT_LENGTH, the
+  surrogate's geometry), with its weight (N) and whether its anchors take contact;
+* ``rigid``: a straight segment of ``length`` (mm) and cross-section ``height`` x
+  ``width`` (mm, in and normal to the bending plane), with its weight (N) and the number
+  of contact sample points along it (0: none).
+
+A gripper is two such fingers, mirror images about X = 0, with base mounts ``base_gap``
+(mm) apart on Y = 0; the first part leaves its mount at ``base_angle`` (rad; -pi/2 hangs
+down). At rest the finger is straight: part k starts at arc length ``rest_start(k)`` (mm)
+along that direction.
+
+The file is TOML (format tag ``softjoint-finger/1``); ``fem/fingers/paper.toml`` is the
+paper's gripper and the default. Every error is a FingerFileError (a ValueError) with one
+line naming the file and the offending key. dolfinx-free and torch-free: the predictor
+imports it without FEniCSx.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fem.spec import JOINT_LENGTH
+
+FORMAT = "softjoint-finger/1"
+DEFAULT_FINGER = Path(__file__).with_name("fingers") / "paper.toml"
+MAX_PARTS = 16
+
+
+class FingerFileError(ValueError):
+    """A finger file that cannot be used (one line: file, key, reason)."""
+
+
+@dataclass(frozen=True)
+class JointPart:
+    """A bellow joint: weight (N); contact: its 10 anchors are contact sample points."""
+
+    weight: float = 0.09
+    contact: bool = True
+    kind = "joint"
+
+    @property
+    def length(self) -> float:
+        return JOINT_LENGTH
+
+
+@dataclass(frozen=True)
+class RigidPart:
+    """A straight rigid segment: length, height, width (mm), weight (N), contact points."""
+
+    length: float
+    weight: float
+    height: float = 20.0
+    width: float = 14.0
+    contact_points: int = 0
+    kind = "rigid"
+
+
+@dataclass(frozen=True)
+class FingerSpec:
+    """An ordered chain of parts and the gripper's base mounts (module docstring)."""
+
+    parts: tuple
+    base_gap: float = 50.0
+    base_angle: float = -0.5 * math.pi
+    name: str = "finger"
+    digest: str = field(default="", compare=False)   # sha256 of the file it came from
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        """Indices of the joint parts, base to tip."""
+        return tuple(k for k, p in enumerate(self.parts) if p.kind == "joint")
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joints)
+
+    def rest_start(self, k: int) -> float:
+        """Arc length (mm) from the base mount to the start of part k, straight finger."""
+        return sum(p.length for p in self.parts[:k])
+
+    @property
+    def length(self) -> float:
+        """Straight length from the base mount to the fingertip (mm)."""
+        return self.rest_start(len(self.parts))
+
+    @property
+    def weight(self) -> float:
+        """Weight of one finger (N)."""
+        return sum(p.weight for p in self.parts)
+
+    def summary(self) -> dict:
+        """JSON-ready description (angles in degrees)."""
+        parts = [{"kind": p.kind, **{k: getattr(p, k) for k in p.__dataclass_fields__}} for p in self.parts]
+        return {"name": self.name, "sha256": self.digest, "base_gap": self.base_gap,
+                "base_angle_deg": math.degrees(self.base_angle), "parts": parts}
+
+
+# key -> (type, lower bound, strictly above?) ; bool keys have no bound
+_PART_KEYS = {
+    "joint": {"weight": (float, 0.0, False), "contact": (bool, None, False)},
+    "rigid": {"length": (float, 0.0, True), "weight": (float, 0.0, False), "height": (float, 0.0, True),
+              "width": (float, 0.0, True), "contact_points": (int, 0, False)},
+}
+_REQUIRED = {"joint": (), "rigid": ("length", "weight")}
+_TOP_KEYS = {"format", "name", "base_gap", "base_angle_deg", "part"}
+
+
+def _value(where: str, key: str, value, kind: type, low, strict: bool):
+    """Check one value's type and bound; return it as ``kind``."""
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise FingerFileError(f"{where}: {key} = {value!r} must be true or false")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and not isinstance(value, int)):
+        raise FingerFileError(f"{where}: {key} = {value!r} must be {'an integer' if kind is int else 'a number'}")
+    if not math.isfinite(value):
+        raise FingerFileError(f"{where}: {key} = {value!r} is not a finite number")
+    if low is not None and (value <= low if strict else value < low):
+        raise FingerFileError(f"{where}: {key} = {value!r} must be {'>' if strict else '>='} {low}")
+    return kind(value)
+
+
+def _part(source: str, k: int, table) -> JointPart | RigidPart:
+    where = f"{source}: part {k + 1}"
+    if not isinstance(table, dict):
+        raise FingerFileError(f"{where}: must be a [[part]] table")
+    kind = table.get("kind")
+    if kind not in _PART_KEYS:
+        raise FingerFileError(f"{where}: kind = {kind!r}, use 'joint' or 'rigid'")
+    where = f"{where} ({kind})"
+    keys = _PART_KEYS[kind]
+    for key in table:
+        if key != "kind" and key not in keys:
+            raise FingerFileError(f"{where}: unknown key {key!r} (a {kind} takes {', '.join(keys)})")
+    for key in _REQUIRED[kind]:
+        if key not in table:
+            raise FingerFileError(f"{where}: missing {key!r}")
+    values = {key: _value(where, key, table[key], *keys[key]) for key in table if key != "kind"}
+    return JointPart(**values) if kind == "joint" else RigidPart(**values)
+
+
+def parse_finger(text: str, source: str = "<finger>") -> FingerSpec:
+    """A FingerSpec from TOML text; ``source`` names it in errors."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:   # includes a key given twice
+        raise FingerFileError(f"{source}: not a valid TOML finger file ({exc})") from None
+    for key in doc:
+        if key not in _TOP_KEYS:
+            raise FingerFileError(f"{source}: unknown key {key!r} (use {', '.join(sorted(_TOP_KEYS))})")
+    if doc.get("format") != FORMAT:
+        raise FingerFileError(f"{source}: format = {doc.get('format')!r}, expected {FORMAT!r}")
+    tables = doc.get("part", [])
+    if not isinstance(tables, list) or not tables:
+        raise FingerFileError(f"{source}: no [[part]] tables")
+    if len(tables) > MAX_PARTS:
+        raise FingerFileError(f"{source}: {len(tables)} parts, at most {MAX_PARTS}")
+    parts = tuple(_part(source, k, t) for k, t in enumerate(tables))
+    if not any(p.kind == "joint" for p in parts):
+        raise FingerFileError(f"{source}: a finger needs at least one joint part")
+    name = doc.get("name", Path(source).stem)
+    if not isinstance(name, str) or not name:
+        raise FingerFileError(f"{source}: name = {name!r} must be a non-empty string")
+    gap = _value(source, "base_gap", doc.get("base_gap", 50.0), float, None, False)
+    angle = _value(source, "base_angle_deg", doc.get("base_angle_deg", -90.0), float, None, False)
+    return FingerSpec(parts, gap, math.radians(angle), name, hashlib.sha256(text.encode()).hexdigest())
+
+
+def load_finger(path: str | Path | None = None) -> FingerSpec:
+    """Read a finger file (default: the paper's, ``DEFAULT_FINGER``)."""
+    path = Path(path) if path is not None else DEFAULT_FINGER
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FingerFileError(f"cannot read finger file {path}: {exc.strerror if isinstance(exc, OSError) else exc}") from None
+    return parse_finger(text, str(path))

@@ -1,0 +1,97 @@
+"""Physics tests of the whole-finger FEM (fem.finger) on a coarse mesh, one rank.
+
+Exact references:
+* a finger of one joint and one rigid part is the single joint (fem.solver.JointSolver)
+  loaded at its end by the rigid part's weight: a dead axial force W along the finger and
+  the couple of that force about r_10, M = -l/2 W sin(phi_c) (the part's centre of mass
+  sits l/2 along the cap direction phi_c). Solved by fixed-point iteration on M;
+* the y-mirror: the finger is symmetric about its own axis and gravity acts along that
+  axis at rest, so (P, gravity) and (-P, gravity) give mirror-image fingers about the
+  mount's vertical line X = base_gap / 2;
+* zero pressure, no gravity: nothing moves.
+"""
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("dolfinx")
+from mpi4py import MPI  # noqa: E402
+
+from fem.finger import FingerLoad, FingerSolver  # noqa: E402
+from fem.finger_spec import parse_finger  # noqa: E402
+from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.solver import JointSolver, Load  # noqa: E402
+from fem.spec import JOINT_LENGTH  # noqa: E402
+
+pytestmark = pytest.mark.fem
+COARSE = JointGeometry(mesh_size=4.0)
+W, TIP = 0.5, 65.0          # N, mm: the rigid part's weight and length
+ONE_JOINT = f"""
+format = "softjoint-finger/1"
+name = "one-joint"
+base_gap = 50.0
+[[part]]
+kind = "joint"
+weight = 0.0
+[[part]]
+kind = "rigid"
+length = {TIP}
+weight = {W}
+"""
+
+
+@pytest.fixture(scope="module")
+def finger():
+    return FingerSolver(FingerGeometry(parse_finger(ONE_JOINT), COARSE, 6.0), MPI.COMM_SELF)
+
+
+@pytest.fixture(scope="module")
+def bent(finger):
+    """The one-joint finger at P = 0.15 MPa under gravity, and at P = -0.15 MPa."""
+    plus = finger.solve(FingerLoad((0.15,), True))
+    minus = finger.solve(FingerLoad((-0.15,), True))
+    assert plus.converged and minus.converged
+    return plus, minus
+
+
+def test_zero_load_moves_nothing(finger):
+    """No pressure, no gravity: u = 0 and the tip sits at (25, -JOINT_LENGTH - TIP)."""
+    res = finger.solve(FingerLoad((0.0,), False))
+    assert res.converged
+    assert np.abs(finger.u.x.array).max() == 0.0
+    np.testing.assert_allclose(res.tip, [25.0, -JOINT_LENGTH - TIP], atol=1e-12)
+    assert math.degrees(res.tip_angle) == pytest.approx(-90.0, abs=1e-12)
+
+
+def test_finger_of_one_joint_is_the_joint_under_the_weight_of_its_tip(bent):
+    """The finger FEM against the single-joint FEM on the same coarse mesh size, loaded
+    by the resultant of the distal weight (module docstring). Tolerances: the two meshes
+    of the joint differ (the finger's is graded into its rigid part), which at h = 4 mm
+    moves the anchors by up to ~0.1 mm and the cap by ~0.1 deg."""
+    plus, _ = bent
+    joint = JointSolver(COARSE, MPI.COMM_SELF)
+    M = 0.0
+    for _ in range(4):              # fixed point on the couple of the tip weight
+        res = joint.solve(Load(0.15, W, 0.0, M))
+        M = -0.5 * TIP * W * math.sin(res.cap_rotation)
+    assert res.converged and abs(M) > 3.0          # the couple matters: > 3 N·mm
+    assert abs(-0.5 * TIP * W * math.sin(res.cap_rotation) - M) < 1e-3
+    local = plus.local_anchors[0]
+    assert np.abs(local - res.anchors).max() < 0.15
+    cap = plus.end_angle[0] - plus.theta[0]
+    assert math.degrees(abs(cap - res.cap_rotation)) < 0.15
+    # The rigid tip leaves along the cap: tip = r_10 + TIP (cos, sin)(end angle), global.
+    end = plus.end_angle[0]
+    np.testing.assert_allclose(plus.tip, plus.anchors[0, -1] + TIP * np.array([math.cos(end), math.sin(end)]),
+                               atol=0.02)
+
+
+def test_mirror_pressure_gives_the_mirror_finger(bent):
+    """(P, g) and (-P, g): X - 25 flips sign, Y and the angles about -90 deg mirror, to
+    solver tolerance (the mesh is mirrored node by node)."""
+    plus, minus = bent
+    assert 25.0 - plus.tip[0] > 20.0                 # P > 0 closes the right finger (towards -X)
+    np.testing.assert_allclose(plus.tip[0] - 25.0, -(minus.tip[0] - 25.0), atol=1e-6)
+    np.testing.assert_allclose(plus.tip[1], minus.tip[1], atol=1e-6)
+    np.testing.assert_allclose(plus.tip_angle + math.pi / 2, -(minus.tip_angle + math.pi / 2), atol=1e-8)
