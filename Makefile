@@ -43,35 +43,29 @@ $(SETUP): pyproject.toml constraints.txt
 	@touch $@
 
 # ---------------------------------------------------------------- main commands
-DEMO := build/demo
-DEMO_CASE := --p 0.2 --f1 1 --f2 -1 --m 20
-demo: $(SETUP) ## the main job on the committed defaults: FEM case + render, surrogate, gesture
-	@mkdir -p $(DEMO)
-	@echo "== 1. FEM: one joint load case on the production mesh (DOLFINx)"
-	$(PY) -m fem.solve $(DEMO_CASE)
-	$(PY) -m fem.render $(DEMO_CASE) --out $(DEMO)/joint.png
-	@if [ -f results/surrogate/improved.pt ]; then \
-	  echo "== 2. surrogate: the same case in microseconds"; \
-	  $(PY) -m surrogate.predict --model results/surrogate/improved.pt $(DEMO_CASE); \
-	else echo "== 2. surrogate: no committed model yet (make train)"; fi
-	@echo "== 3. gripper gesture under gravity, (P1, P2) = (-0.1, 0.1) MPa"
-	$(PY) -m predictor.gesture --p1 -0.1 --p2 0.1 --model $(PRED_JOINT) --plot $(DEMO)/gesture.png
-	@echo "demo outputs in $(DEMO)/"
+# One joint FEM against the surrogate, the paper's gravity and grasp gestures, one coarse
+# whole-finger FEM against the predictor: PNGs + summary.{json,md} + a table (workflow/demo.py).
+demo: $(SETUP) ## the main job (~5 min): joint FEM vs surrogate, gestures, finger FEM vs predictor -> results/demo/
+	$(PY) -m workflow.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
 # fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 13.6 min
 # against 18.6 min serially on this 2-core machine.
 test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~15 min with set-up)
-	$(PY) -m pytest -q -ra -n 2 --dist loadfile
+	$(PY) -m pytest -q -ra -n 2 --dist loadfile --durations=15
 
 # ---------------------------------------------------------------- fem (issue 2)
 bench-fem: results/bench/fem.json ## FEM timings at the production mesh -> results/bench/fem.json
 results/bench/fem.json: fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_joint --out $@
 
-mesh-study: results/fem/mesh_study.json ## 4 corner cases x 3 meshes -> results/fem/mesh_study.json
+bench-finger: results/bench/finger.json ## whole-finger FEM timings, 3 gestures on one core (idle machine, ~25 min) -> results/bench/finger.json
+results/bench/finger.json: fem/*.py | $(SETUP)
+	$(PY) -m fem.bench_finger --out $@
+
+mesh-study: results/fem/mesh_study.json ## 4 corners x (production + sqrt-2 family with wall refinement) + Richardson (hours; resumes) -> results/fem/mesh_study.json
 results/fem/mesh_study.json: fem/*.py | $(SETUP)
-	$(PY) -m fem.mesh_study --out $@
+	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --out $@ --work build/mesh_study
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
 results/fem/self_contact.json: fem/*.py | $(SETUP)
@@ -178,18 +172,15 @@ results/predictor/inverse.json: $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py 
 
 # ---------------------------------------------------------------- finger validation (issue 14)
 FINGER_FEM := results/validation/finger_fem
-# The surrogate with the distal cap's rotation head (cap kinematics); it replaces
-# results/surrogate/improved.pt once the NN predictors are retrained on it.
-CAP_JOINT  := results/surrogate/cap/improved.pt
 FINGER_CASES := $(PY) -m fem.finger_cases --out $(FINGER_FEM)
 
-finger-fem: | $(SETUP) ## whole-finger FEM, 16 validation cases at the production mesh (2 processes, ~1 h; resumes) -> results/validation/finger_fem/
+finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases at the production mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
 
 validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
-results/validation/finger.json: $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) $(CAP_JOINT) | $(SETUP)
+results/validation/finger.json: $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)
 	$(MAKE) --no-print-directory finger-fem
-	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(CAP_JOINT) --out $@ --figures results/validation
+	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(PRED_JOINT) --out $@ --figures results/validation
 
 
 report: ## results/REPORT.md from the committed JSON artefacts

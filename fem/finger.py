@@ -127,9 +127,17 @@ class FingerResult:
                 "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
 
 
-def _rot(angle: float) -> np.ndarray:
+def rotation_matrix(angle: float) -> np.ndarray:
+    """(2, 2) counter-clockwise rotation by angle (rad)."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s], [s, c]])
+
+
+#: The joint's controls with a longer Newton budget and a finer last step: a pressure step
+#: swings the 200 mm finger through a large rotation under its weight, so a step often
+#: needs 9-12 iterations (the joint's limit was 12), and near full load in the grasp region
+#: (0.2, 0.2) MPa with gravity a step of 1/256 of the path still failed at that limit.
+FINGER_CONFIG = SolverConfig(max_it=25, min_step=1.0 / 1024)
 
 
 class FingerSolver(NewtonSolver):
@@ -137,7 +145,7 @@ class FingerSolver(NewtonSolver):
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: Material = Material(), rigid: RigidMaterial = RigidMaterial(),
-                 config: SolverConfig = SolverConfig()):
+                 config: SolverConfig = FINGER_CONFIG):
         self.finger = finger = geometry.finger
         self.mesh_data = mesh_data = create_mesh(geometry, comm)
         mesh, ft = mesh_data.mesh, mesh_data.facet_tags
@@ -157,7 +165,7 @@ class FingerSolver(NewtonSolver):
         volume = lambda m: self._allsum(fem.assemble_scalar(fem.form(one * m)))
         R = 0
         self.g = fem.Constant(mesh, PETSc.ScalarType(0))
-        e_g = _rot(-finger.base_angle) @ np.array([0.0, -1.0])
+        e_g = rotation_matrix(-finger.base_angle) @ np.array([0.0, -1.0])
         gravity = ufl.as_vector([float(e_g[0]), float(e_g[1]), 0.0])
         self._rotation_forms = {}       # part k (rigid) or cap of joint k -> (form, volume)
         for k, part in enumerate(finger.parts):
@@ -236,7 +244,7 @@ class FingerSolver(NewtonSolver):
     def _result(self, load: FingerLoad, path) -> FingerResult:
         """Global-frame figures of the current state (module docstring)."""
         finger = self.finger
-        base, turn = np.array([0.5 * finger.base_gap, 0.0]), _rot(finger.base_angle)
+        base, turn = np.array([0.5 * finger.base_gap, 0.0]), rotation_matrix(finger.base_angle)
         x = (self.probe_points + self.evaluate(self.u))[:, :2]
         x = base + x @ turn.T
         n = N_ANCHORS + 1
@@ -250,7 +258,7 @@ class FingerSolver(NewtonSolver):
         d = polylines[:, -1] - polylines[:, -2]
         chord = np.arctan2(d[:, 1], d[:, 0])
         # joint frame: x_local = Rot(-theta)·(x - proximal centre)
-        local = np.stack([(polylines[j, 1:] - polylines[j, 0]) @ _rot(theta[j]) for j in range(len(theta))])
+        local = np.stack([(polylines[j, 1:] - polylines[j, 0]) @ rotation_matrix(theta[j]) for j in range(len(theta))])
         last = len(finger.parts) - 1
         return FingerResult(
             load=load, converged=path.converged, tip=x[-1], tip_angle=finger.base_angle + rot[last],
@@ -261,7 +269,8 @@ class FingerSolver(NewtonSolver):
 
 
 # ---------------------------------------------------------------------- command line
-def _finger_file(text: str) -> FingerSpec:
+def finger_file(text: str) -> FingerSpec:
+    """argparse type: a finger description file (fem.finger_spec), one-line errors."""
     try:
         return load_finger(text)
     except FingerFileError as exc:
@@ -275,7 +284,7 @@ def build_parser() -> cli.Parser:
         ap.add_argument(f"--p{j}", type=pressure, default=None,
                         help=f"joint-{j} pressure, MPa (|P| <= {PRESSURE_LIMIT:g}; default 0)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
-    ap.add_argument("--finger", type=_finger_file, default=None,
+    ap.add_argument("--finger", type=finger_file, default=None,
                     help="finger description file (default: fem/fingers/paper.toml)")
     add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
     ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None,

@@ -6,7 +6,7 @@ Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
 * free pressurisation without gravity (the paper's Figure 3): (0.05, 0.05), (0.1, 0.1),
   (0.05, -0.05), (0.1, -0.1);
 * gravity (Figure 5A): (-0.1, 0.1), (0.1, -0.1);
-* 10 more pairs with gravity spread over the box, among them the grasp region
+* 12 more pairs with gravity spread over the box, among them the grasp region
   (0.2, 0.2) and (0.3, 0.3), none the mirror image (-P1, -P2) of another: with gravity
   along the finger at rest the mirror case is the mirror finger (tests/test_finger.py),
   so it would add no information.
@@ -19,8 +19,9 @@ with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista
 colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
 lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
 and the |u| colour range. Files are written atomically; a case whose JSON exists for
-the same finger file, mesh and code settings is skipped, so a killed run resumes. A
-solve that does not converge is recorded as such (``converged: false``, no figures).
+the same finger file and mesh is skipped, so a killed run resumes. A solve that does not
+converge is recorded as such (``converged: false``, no figures) with the solver controls
+it ran with (``solver``), and is tried again when they change.
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +39,7 @@ from mpi4py import MPI
 
 from fem import cli
 from fem.files import atomic_path, json_safe, write_json
-from fem.finger import FingerLoad, FingerSolver, _finger_file, _rot
+from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, finger_file, rotation_matrix
 from fem.finger_spec import load_finger
 from fem.geometry import FingerGeometry, JointGeometry
 from fem.options import MESH_SIZE, add_mesh_size, one_rank
@@ -53,6 +54,7 @@ CASES = [
     ("gravity_-0.1_-0.25", -0.1, -0.25, True), ("gravity_0.15_0", 0.15, 0.0, True),
     ("gravity_0_0.25", 0.0, 0.25, True), ("gravity_-0.15_-0.05", -0.15, -0.05, True),
     ("gravity_0.25_0.1", 0.25, 0.1, True), ("gravity_0.1_0.3", 0.1, 0.3, True),
+    ("gravity_0.05_-0.2", 0.05, -0.2, True), ("gravity_-0.25_0.2", -0.25, 0.2, True),
 ]
 WINDOW = (900, 900)   # render size, pixels
 
@@ -72,7 +74,7 @@ def render(solver: FingerSolver, path: Path) -> dict:
     mirror.point_data["u"][:, 2] *= -1
     full = grid.merge(mirror)
     moved = full.points + full.point_data["u"]
-    turn = _rot(finger.base_angle)
+    turn = rotation_matrix(finger.base_angle)
     xy = moved[:, :2] @ turn.T + [0.5 * finger.base_gap, 0.0]
     full.points = np.column_stack([xy, moved[:, 2]])
     full.point_data["|u|"] = np.linalg.norm(full.point_data["u"], axis=1)
@@ -99,7 +101,7 @@ def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.finger_cases", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/validation/finger_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
-    ap.add_argument("--finger", type=_finger_file, default=None, help="finger file (default: the paper's)")
+    ap.add_argument("--finger", type=finger_file, default=None, help="finger file (default: the paper's)")
     add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
     ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None, help="chamber-wall tetrahedron size, mm")
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
@@ -125,16 +127,21 @@ def main(argv=None) -> int:
     geometry = FingerGeometry(finger, replace(JointGeometry(), mesh_size=args.mesh_size,
                                               wall_mesh_size=args.wall_mesh_size), args.rigid_mesh_size)
     settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
+    solver_settings = json_safe(asdict(FINGER_CONFIG))
     out = Path(args.out)
     todo = []
     for name, p1, p2, gravity in cases:
         path = out / f"{name}{args.suffix}.json"
         if path.is_file():
             try:
-                if json.loads(path.read_text()).get("settings") == json_safe(settings):
-                    continue
+                done = json.loads(path.read_text())
             except ValueError:
-                pass            # a foreign or damaged file: solve again and replace it
+                done = {}       # a foreign or damaged file: solve again and replace it
+            # A converged case stands while the finger and mesh are the same; a failed one
+            # is tried again once the solver's controls change.
+            if done.get("settings") == json_safe(settings) and (
+                    done.get("converged") or done.get("solver") == solver_settings):
+                continue
         todo.append((name, p1, p2, gravity, path))
     if not todo:
         print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
@@ -147,7 +154,8 @@ def main(argv=None) -> int:
             res = solver.solve(FingerLoad((p1, p2), gravity))
             record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
                       "load_average": os.getloadavg()[0], "setup_s": setup_s,
-                      "mesh": solver.mesh_info(), "settings": settings, "ranks": comm.size}
+                      "mesh": solver.mesh_info(), "settings": settings, "solver": solver_settings,
+                      "ranks": comm.size}
             if res.converged:
                 record["render"] = render(solver, path.with_suffix(".png"))
             out.mkdir(parents=True, exist_ok=True)

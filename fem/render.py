@@ -7,14 +7,14 @@ joint, cut open at z = 0 to show the two chambers and bellow cells. Right: the d
 joint coloured by displacement magnitude |u| (mm), with the 10 anchor points (like the
 paper's Figure 2C). Runs on one rank; needs no display (Plotter(off_screen=True)).
 The PNG is written atomically (screenshot and caption go to a temporary name beside it);
-``--json`` prints the file and the solve's figures (SolveResult.summary).
+``--json`` prints the file and the solve's figures, as ``fem.solve --json`` does.
 """
 
 from __future__ import annotations
 
 import math
 import sys
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
@@ -103,7 +103,8 @@ def main(argv=None) -> int:
     one_rank(ap, comm)
     args = ap.parse_args(argv)
     load = Load.from_array(parsed_load(ap, args))
-    solver = JointSolver(replace(JointGeometry(), mesh_size=args.mesh_size), comm)
+    geo = replace(JointGeometry(), mesh_size=args.mesh_size)
+    solver = JointSolver(geo, comm)
     result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
     if not result.converged:
         print(f"{ap.prog}: the solve did not converge: {result.reason}", file=sys.stderr)
@@ -111,7 +112,8 @@ def main(argv=None) -> int:
     with ap.errors():
         render(solver, result, args.out)
     if args.json:
-        cli.print_json({"out": args.out, **result.summary()})
+        cli.print_json({"out": args.out, **result.summary(), "mesh": solver.mesh_info(), "geometry": asdict(geo),
+                        "ranks": comm.size})
     else:
         print(f"wrote {args.out}: phi_end {math.degrees(result.phi_end):.1f} deg, "
               f"cap {math.degrees(result.cap_rotation):.1f} deg")

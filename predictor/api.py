@@ -20,7 +20,7 @@ import torch
 
 from fem.finger_spec import FingerSpec, load_finger
 from predictor import atlas as _atlas
-from predictor.gripper import GripperParams, default_finger
+from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
 from predictor import inverse as _inverse
 from predictor.solve import GestureResult, SolverOptions, solve
 
@@ -48,8 +48,8 @@ class Gesture:
 
 
 def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True,
-                 finger: str | Path | FingerSpec | None = None, kinematics: str = "tangent",
-                 joint_weight: str = "lumped") -> Gripper:
+                 finger: str | Path | FingerSpec | None = None, kinematics: str = DEFAULT_KINEMATICS,
+                 joint_weight: str = DEFAULT_JOINT_WEIGHT) -> Gripper:
     """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate
     when present); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None:
     no object); finger: a finger description file or FingerSpec (None: the paper's,

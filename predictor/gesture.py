@@ -23,7 +23,9 @@ strict JSON: converged, tau [[F1 N, F2 N, M N·mm] x J], residual_force_mN,
 residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last part), tip_angle_deg
 (global direction of the last part, -90 at rest), joint_end_angle_deg (per joint, its
 global exit angle), contact_force_N, slip, iterations, time_ms, finger {name, sha256},
-kinematics, joint_weight.
+kinematics, joint_weight. With ``--method nn`` also the network's own figures before any
+solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
+answer is the solver's polish of them (polished, contact) or the full ramp's (fallback).
 
 Exit codes: 0 converged; 1 not converged (the JSON says so, tau is null); 2 bad input
 (a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures for the
@@ -44,7 +46,7 @@ import torch
 from fem import cli
 from fem.finger_spec import DEFAULT_FINGER, FingerFileError, load_finger
 from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import JOINT_WEIGHTS, KINEMATICS, GripperParams
+from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams
 from predictor.joint import load_joint
 from predictor.solve import APPROACH, SolverOptions, approach_for, solve
 from predictor.statics import GripperProblem, parse_object
@@ -139,8 +141,10 @@ def run(args: argparse.Namespace, prepared=None):
            "finger": {"name": problem.params.finger.name, "sha256": problem.params.finger.digest},
            "kinematics": problem.params.kinematics, "joint_weight": problem.params.joint_weight,
            "joint_end_angle_deg": [math.degrees(a) for a in res.pose.phi[0].tolist()] if ok else None}
-    if args.method == "nn":
-        out["nn_fallback_to_ramp"] = bool(res.fallback[0])
+    if args.method == "nn":   # the network's own figures, before any solver (issue 15)
+        out.update(raw_residual_force_mN=res.raw_residual_force_mN[0].tolist(),
+                   raw_residual_moment_Nmm=res.raw_residual_moment_Nmm[0].tolist(),
+                   polished=bool(res.polished[0]), fallback=bool(res.fallback[0]))
     return out, res, problem
 
 
@@ -152,10 +156,10 @@ def main(argv: list[str] | None = None) -> int:
                     "to tip (instead of --p1 --p2)")
     ap.add_argument("--finger", type=_finger, default=str(DEFAULT_FINGER),
                     help="finger description file (TOML, fem.finger_spec; default fem/fingers/paper.toml)")
-    ap.add_argument("--kinematics", choices=KINEMATICS, default="tangent",
+    ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
                     help="a part leaves a joint along its last anchors' chord (tangent, the paper's) "
                     "or its cap face (cap)")
-    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default="lumped",
+    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT,
                     help="a joint's weight at its anchors' mean (lumped) or half at each end (split)")
     ap.add_argument("--object", type=_object,
                     help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")

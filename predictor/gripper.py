@@ -52,6 +52,9 @@ from predictor.joint import JointModel
 PRESSURE_NAMES = ("P1", "P2")
 KINEMATICS = ("tangent", "cap")
 JOINT_WEIGHTS = ("lumped", "split")
+#: The defaults: the chain that matches the whole-finger FEM (results/validation/finger.json:
+#: fingertip within 0.5 mm, against 5 mm for the paper's tangent kinematics).
+DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT = "cap", "split"
 
 
 def pressure_names(n: int) -> tuple[str, ...]:
@@ -190,8 +193,8 @@ class GripperParams:
 
     finger: FingerSpec = field(default_factory=default_finger)
     object_weight: float = 0.2
-    kinematics: str = "tangent"
-    joint_weight: str = "lumped"
+    kinematics: str = DEFAULT_KINEMATICS
+    joint_weight: str = DEFAULT_JOINT_WEIGHT
 
     def __post_init__(self):
         if self.kinematics not in KINEMATICS:

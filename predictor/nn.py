@@ -36,7 +36,7 @@ Variants (``python -m predictor.nn --variant ...``):
 Fingers (issue 14): the network is (P1..PJ) -> tau (J, 3) for the finger of its config
 (``finger``: predictor.gripper.finger_to_dict, None = the paper's finger, which is what
 checkpoints written before the option record), with its ``kinematics`` and
-``joint_weight`` options (defaults tangent, lumped); ``--finger``, ``--kinematics`` and
+``joint_weight`` options (default: predictor.gripper's, cap and split); ``--finger``, ``--kinematics`` and
 ``--joint-weight`` train for others. A predictor answers only for the finger and options
 it was trained for (``load_predictor(..., params=)`` refuses others with one line).
 
@@ -59,8 +59,8 @@ from torch import nn
 
 from fem import cli
 from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import (JOINT_WEIGHTS, KINEMATICS, GripperParams, check_pressures, default_finger,
-                               finger_from_dict, finger_to_dict, nan_unless)
+from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
+                               check_pressures, default_finger, finger_from_dict, finger_to_dict, nan_unless)
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
 from predictor.statics import GripperProblem, Obstacle, loss, residual_norms
@@ -101,8 +101,8 @@ class NNConfig:
     approach: tuple | None = None
     seed: int = 0
     finger: dict | None = None  # predictor.gripper.finger_to_dict; None: the paper's finger
-    kinematics: str = "tangent"
-    joint_weight: str = "lumped"
+    kinematics: str = DEFAULT_KINEMATICS
+    joint_weight: str = DEFAULT_JOINT_WEIGHT
 
     def params(self) -> GripperParams:
         """The finger and chain options this predictor is trained for."""
@@ -203,12 +203,51 @@ def evaluate_polished(pred: "Predictor", joint: JointModel, pressures: torch.Ten
             "batch_time_ms": res.time_ms}
 
 
+def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tensor) -> dict:
+    """The raw contact network on pressures (B, J) against its target, the iterative
+    solver's equilibrium along the pressure ramp from the approach gesture (where a final
+    pressure pair has several equilibria, the ramp's is the one meant):
+
+    raw, raw_contact, raw_contact_free: residual statistics (_stats) of the network's own
+    tau over every pressure the solver converged on, and over those whose equilibrium
+    touches the object or not; state_agreement: fraction whose raw grasp state (no contact,
+    holds, slips) is the solver's; raw_tip_error_mm: the raw gesture's fingertip against
+    the solver's (mean / p95 / max)."""
+    problem = pred.config.problem(joint)
+    ref = solve(problem, pressures)
+    ok = ref.converged
+    with torch.no_grad():
+        st = problem.residual(pressures, pred.net(pressures))
+
+    def state(touch, slip):     # 0 no contact, 1 holds, 2 slips
+        return torch.where(touch, torch.where(slip, 2, 1), 0)
+
+    touch = ref.normal_force_N > 0
+    agree = state(st.contact.normal > 0, st.contact.slip) == state(touch, ref.slip)
+    tip = (st.pose.tip_end - ref.pose.tip_end).norm(dim=-1)[ok]
+    cfg = pred.config
+    return {"raw": _stats(st.residual[ok]),
+            "raw_contact": _stats(st.residual[ok & touch]) if bool((ok & touch).any()) else None,
+            "raw_contact_free": _stats(st.residual[ok & ~touch]) if bool((ok & ~touch).any()) else None,
+            "state_agreement": float(agree[ok].double().mean()),
+            "raw_tip_error_mm": {"mean": float(tip.mean()), "p95": float(torch.quantile(tip, 0.95)),
+                                 "max": float(tip.max())},
+            "n": len(ok), "reference_converged": int(ok.sum()), "reference_in_contact": int((ok & touch).sum()),
+            "domain_MPa": {"P1": list(cfg.p1_range), "P2": list(cfg.p2_range)},
+            "reference": "predictor.solve along the pressure ramp from the approach gesture"}
+
+
 @dataclass
 class NNGestureResult(GestureResult):
-    """GestureResult of the NN predictor; fallback (B,) marks samples that the local
-    polish could not converge and that were solved by the full pressure ramp instead."""
+    """GestureResult of the NN predictor. raw_residual_force_mN, raw_residual_moment_Nmm
+    (B, J): Equation 1 at the network's own tau, before any solver; polished (B,): the
+    answer is the LM polish of the network's tau (contact), not the network's; fallback
+    (B,): the polish did not converge and the full pressure ramp solved the sample instead."""
 
     fallback: torch.Tensor = None
+    raw_residual_force_mN: torch.Tensor = None
+    raw_residual_moment_Nmm: torch.Tensor = None
+    polished: torch.Tensor = None
 
 
 def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor) -> NNGestureResult:
@@ -230,11 +269,10 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     t0 = time.perf_counter()
     with torch.no_grad():
         tau = pred.net(pressures)
-    fallback = torch.zeros(pressures.shape[0], dtype=torch.bool)
+        st = problem.residual(pressures, tau)
+    f, m = residual_norms(st.residual)
+    raw = {"raw_residual_force_mN": f, "raw_residual_moment_Nmm": m}
     if problem.obstacle is None:
-        with torch.no_grad():
-            st = problem.residual(pressures, tau)
-        f, m = residual_norms(st.residual)
         ok = (f.amax(-1) <= NN_FORCE_TOL_MN) & (m.amax(-1) <= NN_MOMENT_TOL_NMM)
         c = st.contact
         return NNGestureResult(
@@ -242,13 +280,13 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             normal_force_N=c.normal, friction_N=c.friction, friction_ratio=c.ratio, slip=c.slip,
             iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
             pose=st.pose.masked(ok), free_pose=problem.pose(pressures, torch.zeros_like(tau)), method="nn",
-            fallback=fallback)
+            fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
     res = solve(problem, pressures, SolverOptions(contact_max_step=POLISH_STEP), x0=tau)
     fallback = ~res.converged
     if bool(fallback.any()):
         res = res.with_rows(fallback, solve(problem, pressures[fallback]))
     return NNGestureResult(**{**res.__dict__, "time_ms": 1e3 * (time.perf_counter() - t0), "method": "nn+lm"},
-                           fallback=fallback)
+                           fallback=fallback, polished=~fallback, **raw)
 
 
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, torch.Tensor]:
@@ -377,7 +415,10 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
     path = Path(path) if path else DEFAULT_DIR / ("contact_nn.pt" if contact else "gravity_nn.pt")
     ck = checkpoint.load(path, _format(contact), "NN predictor checkpoint")
     try:
-        cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ck["config"].items()})
+        # Checkpoints written before the chain options record them were trained with the
+        # paper's chain (tangent kinematics, lumped joint weights), not today's defaults.
+        saved = {"kinematics": "tangent", "joint_weight": "lumped", **ck["config"]}
+        cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
         trained_params = cfg.params()
         net = GestureNet(cfg.widths, cfg.activation)
         net.load_state_dict(ck["state_dict"])
@@ -407,8 +448,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="override the variant's epochs (smoke runs)")
     ap.add_argument("--finger", type=_finger_arg, default=None,
                     help="finger description file (default: the paper's, fem/fingers/paper.toml)")
-    ap.add_argument("--kinematics", choices=KINEMATICS, default="tangent")
-    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default="lumped")
+    ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
+    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     cfg = VARIANTS[args.variant]

@@ -21,6 +21,8 @@ predictor minus the FEM cap's orientation), ``fem_s`` (the FEM solve, from its J
 ``predictor_s`` (median of REPEATS single-query solves in this run) and their ratio.
 Targets (issue 14): cap kinematics within 2 mm and 1 deg of the FEM in every gravity and
 free case; speed-up >= 1000x; the FEM <= 10 min per gesture (600 s, one core).
+``--mesh-size H`` validates the cases solved at joint mesh size H instead of the production
+mesh (``make demo`` checks one case it solves live on a coarse mesh).
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ from fem import cli
 from fem.files import atomic_path, write_json
 from fem.finger_spec import load_finger
 from fem.geometry import JointGeometry
-from predictor.gripper import GripperParams
+from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
 from predictor.solve import SolverOptions, solve
 from predictor.statics import GripperProblem
@@ -48,7 +50,11 @@ VARIANTS = [("predictor", "tangent", "lumped"), ("predictor", "tangent", "split"
             ("chain", "tangent", "lumped"), ("chain", "cap", "lumped")]
 #: The variant the targets judge: the predictor's default finger model (chosen on this
 #: validation; the others are shown beside it).
-JUDGED = "predictor_cap_split"
+JUDGED = f"predictor_{DEFAULT_KINEMATICS}_{DEFAULT_JOINT_WEIGHT}"
+#: drawn over each FEM render: the judged variant and the paper's chain
+OVERLAID = {(DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT):
+            f"{DEFAULT_KINEMATICS} kinematics, {DEFAULT_JOINT_WEIGHT} joint weights (default)",
+            ("tangent", "lumped"): "tangent kinematics, lumped weights (paper)"}
 TARGETS = {"tip_error_mm": 2.0, "tip_angle_error_deg": 1.0, "speedup": 1000.0, "fem_s": 600.0,
            "fem_cases": 14}   # 4 free, 2 gravity and at least 8 more pairs with gravity
 
@@ -106,13 +112,13 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict) -> None:
     ax.imshow(plt.imread(fem_png), extent=(x0, x1, y0, y1), zorder=0)
     sm = plt.cm.ScalarMappable(cmap=render["cmap"], norm=plt.Normalize(0.0, render["u_max_mm"]))
     fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, label="FEM |u| (mm)")
-    styles = {"tangent": dict(color="tab:red", ls="--"), "cap": dict(color="black", ls="-")}
+    styles = dict(zip(OVERLAID.values(), (dict(color="black", ls="-"), dict(color="tab:red", ls="--"))))
     for label, pose in poses.items():
         style = styles[label]
         for kind, line in pose.part_polylines():
             xy = line[0].numpy()
             ax.plot(xy[:, 0], xy[:, 1], lw=1.6, **style, label=None)
-        ax.plot([], [], lw=1.6, **style, label=f"predictor, {label} kinematics")
+        ax.plot([], [], lw=1.6, **style, label=f"predictor, {label}")
     fem_tip = case["tip"]
     ax.plot(*fem_tip, "o", mfc="none", mec="tab:orange", mew=2, ms=10, label="FEM fingertip")
     ax.set_xlim(x0, x1)
@@ -176,6 +182,11 @@ def main(argv=None) -> int:
     ap.add_argument("--finger", default=None, help="finger file the FEM cases used (default: the paper's)")
     ap.add_output("--out", suffix=".json", default="results/validation/finger.json", help="output JSON")
     ap.add_output("--figures", folder=True, default="results/validation", help="folder for the overlay PNGs")
+    # make demo validates one case it solved on a coarse mesh just now; the default judges
+    # the production mesh, and a case on any other mesh goes to the mesh check.
+    ap.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"), default=JointGeometry().mesh_size,
+                    help="validate the cases solved at this joint mesh size, mm (default: the production "
+                         "mesh, %(default)g)")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     with ap.errors():
@@ -193,11 +204,12 @@ def main(argv=None) -> int:
             cases.append(case)
         # The validation runs at the production joint mesh; a case solved on another mesh
         # too (fem.finger_cases --suffix) gives the FEM's own discretisation change.
-        production = JointGeometry().mesh_size
+        production = args.mesh_size
         meshes = [c for c in cases if c["mesh"]["mesh_size"] != production]
         cases = [c for c in cases if c["mesh"]["mesh_size"] == production]
         if not cases:
-            raise ValueError(f"no FEM cases in {args.fem}: run `make finger-fem` (python -m fem.finger_cases)")
+            raise ValueError(f"no FEM cases at mesh size {production:g} mm in {args.fem}: "
+                             "run `make finger-fem` (python -m fem.finger_cases)")
         entries, figures = [], []
         for case in cases:
             if not case["converged"]:
@@ -207,8 +219,8 @@ def main(argv=None) -> int:
             for method, kin, jw in VARIANTS:
                 entry, pose = run_variant(joint, finger, case, method, kin, jw)
                 entries.append(entry)
-                if method == "predictor" and jw == "lumped":
-                    poses[kin] = pose
+                if method == "predictor" and (kin, jw) in OVERLAID:
+                    poses[OVERLAID[kin, jw]] = pose
             png = Path(args.fem) / f"{Path(case['case']).name}.png"
             if png.is_file():
                 fig = Path(args.figures) / f"finger_{case['case']}.png"

@@ -202,3 +202,47 @@ def test_wall_refinement_puts_two_elements_through_the_wall():
     coarse, refined = wall_edges(COARSE), wall_edges(JointGeometry(mesh_size=4.0, wall_mesh_size=0.6))
     assert np.median(coarse) > 2.0
     assert np.median(refined) <= 0.9 and np.percentile(refined, 95) <= 1.35
+
+
+def test_richardson_recovers_a_known_order_and_limit():
+    """Exact solution f(h) = f* + C h^p on the meshes h = 2.4, 2.4/r, 2.4/r^2 (r = sqrt 2):
+    the observed order is p and the extrapolated value f*, for a scalar (p = 2) and a vector
+    (p = 1.5, every component the same order). Oscillating changes (f2 - f1 and f3 - f2 of
+    opposite sign, growing) are not asymptotic: the finest value is returned, no order."""
+    from fem.mesh_study import richardson
+
+    r = math.sqrt(2.0)
+    hs = [2.4, 2.4 / r, 2.4 / r ** 2]
+    out = richardson(*[60.0 + 0.3 * h ** 2 for h in hs], r)
+    assert out["asymptotic"] and abs(out["order"] - 2.0) < 1e-12 and abs(out["extrapolated"] - 60.0) < 1e-12
+    star, C = np.array([36.6, 23.3]), np.array([0.1, -0.05])
+    out = richardson(*[star + C * h ** 1.5 for h in hs], r)
+    assert abs(out["order"] - 1.5) < 1e-12
+    np.testing.assert_allclose(out["extrapolated"], star, atol=1e-12)
+    out = richardson(59.0, 59.5, 58.0, r)
+    assert not out["asymptotic"] and out["extrapolated"] == 58.0
+
+
+def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
+    """A synthetic study whose results follow f(h) = f* + C h^2 exactly (anchors shifted by
+    C h^2 along x, phi_end and cap rotation by 0.1 h^2 deg), with the production mesh
+    1.8 mm outside the sqrt(2) family: the family is found, the extrapolation is f*, and
+    the production mesh's error is C 1.8^2 in anchors and 0.1 1.8^2 deg in both angles."""
+    from fem import mesh_study
+
+    X = anchor_points(JointGeometry().length)[:, :2]
+    star = X + np.array([5.0, 2.0])
+
+    def mesh(h, w):
+        e = (w or h) ** 2          # W scales with H inside the family
+        cases = [{"anchors": (star + [0.01 * e, 0.0]).tolist(), "phi_end_deg": 60.0 + 0.1 * e,
+                  "cap_rotation_deg": 58.0 + 0.1 * e} for _ in mesh_study.CORNERS]
+        return {"mesh_size": h, "wall_mesh_size": w, "nodes": int(1e5 / (h * (w or h))), "cases": cases}
+
+    r = math.sqrt(2.0)
+    meshes = [mesh(1.8, None), mesh(2.4, 1.2), mesh(2.4 / r, 1.2 / r), mesh(1.2, 0.6)]
+    out = mesh_study.analyse(meshes, (1.8, None))
+    assert out["asymptotic"] and out["reference"] == "richardson" and out["family"][0] == [2.4, 1.2]
+    assert abs(out["production_error"]["anchor_mm"] - 0.01 * 1.8 ** 2) < 1e-9
+    assert abs(out["production_error"]["phi_end_deg"] - 0.1 * 1.8 ** 2) < 1e-9
+    assert abs(out["production_error"]["cap_rotation_deg"] - 0.1 * 1.8 ** 2) < 1e-9

@@ -33,6 +33,8 @@ ROOT = Path(__file__).resolve().parents[1]
 J = AnalyticJoint()
 DT = torch.float64
 GRAVITY = GripperProblem(J)
+#: the paper's chain (tangent kinematics, lumped joint weights): the predictor before issue 14
+PAPER_CHAIN = GripperParams(kinematics="tangent", joint_weight="lumped")
 GRASP = GripperProblem(J, obstacle=Obstacle(), approach=APPROACH)
 
 
@@ -76,10 +78,10 @@ def test_load_joint_errors_are_one_line_value_errors(tmp_path):
 
 # ---------------------------------------------------------------- statics
 def test_straight_hanging_finger_closed_form():
-    """P = (0, 0) under gravity: the finger hangs straight, so tau_1 = (0.19, 0, 0) and
+    """P = (0, 0) under gravity, the paper's chain: the finger hangs straight, so tau_1 = (0.19, 0, 0) and
     tau_2 = (0.06, 0, 0) (distal weights along each joint's +x = down) exactly, and the
     tip is at (25, -(45.45(1 + 0.19/300) + 60 + 45.45(1 + 0.06/300) + 65)) mm."""
-    res = solve(GRAVITY, t([0.0, 0.0]))
+    res = solve(GripperProblem(J, PAPER_CHAIN), t([0.0, 0.0]))
     assert bool(res.converged[0])
     np.testing.assert_allclose(res.tau[0].numpy(), [[0.19, 0, 0], [0.06, 0, 0]], atol=1e-9)
     tip_y = -(45.45 * (1 + 0.19 / 300) + 60 + 45.45 * (1 + 0.06 / 300) + 65)
@@ -109,12 +111,17 @@ def test_newton_and_lbfgs_agree():
     np.testing.assert_allclose(a.pose.tip_end.numpy(), b.pose.tip_end.numpy(), atol=1e-5)
 
 
-def _numpy_equilibrium(p1: float, p2: float) -> tuple[np.ndarray, np.ndarray]:
+def _numpy_equilibrium(p1: float, p2: float, kinematics: str = "tangent",
+                       joint_weight: str = "lumped") -> tuple[np.ndarray, np.ndarray]:
     """Independent numpy/scipy implementation of the stand-in joint (arc-integrated, not
-    the sinc-chord form), the tangent-connected chain and Equation 1 under gravity."""
+    the sinc-chord form), the chain and Equation 1 under gravity. A part leaves a joint
+    along the chord of its last two anchors (tangent) or along the arc's end tangent, the
+    analytic joint's cap face (cap); a joint's 0.09 N acts at its anchors' mean (lumped)
+    or half at its proximal centre and half at its distal end (split)."""
     L, EI, cp, EA, h = 45.45, 3000.0, 333.0, 300.0, 4.545
 
     def anchors(P, F1, F2, M):
+        """(10, 2) anchors and the end tangent angle of the joint's arcs."""
         pts, a, pos = [], 0.0, np.zeros(2)
         for k in range(10):
             kap = (M - cp * P + F2 * (L - (k + 0.5) * h)) / EI
@@ -124,26 +131,34 @@ def _numpy_equilibrium(p1: float, p2: float) -> tuple[np.ndarray, np.ndarray]:
             pos = pos + (1 + F1 / EA) * d
             pts.append(pos)
             a = b
-        return np.array(pts)
+        return np.array(pts), a
 
     def R(a):
         return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
 
+    def exit_angle(A, cap):
+        return cap if kinematics == "cap" else math.atan2(*(A[-1] - A[-2])[::-1])
+
     def chain(x):
         t1, t2 = x[:3], x[3:]
-        A1, A2 = anchors(p1, *t1), anchors(p2, *t2)
+        (A1, c1), (A2, c2) = anchors(p1, *t1), anchors(p2, *t2)
         th1 = -math.pi / 2
         j1 = np.array([25.0, 0.0]) + A1 @ R(th1).T
-        ph1 = th1 + math.atan2(*(A1[-1] - A1[-2])[::-1])
+        ph1 = th1 + exit_angle(A1, c1)
         link_end = j1[-1] + 60 * np.array([math.cos(ph1), math.sin(ph1)])
         j2 = link_end + A2 @ R(ph1).T
-        ph2 = ph1 + math.atan2(*(A2[-1] - A2[-2])[::-1])
+        ph2 = ph1 + exit_angle(A2, c2)
         tip_end = j2[-1] + 65 * np.array([math.cos(ph2), math.sin(ph2)])
         return j1, link_end, j2, tip_end, th1, ph1
 
     def eq(x):
         j1, link_end, j2, tip_end, th1, th2 = chain(x)
-        loads = [((j1[-1] + link_end) / 2, 0.04, 1), (j2.mean(0), 0.09, 1), ((j2[-1] + tip_end) / 2, 0.06, 2)]
+        # (point, weight N, reach: the load enters the balance of joints i < reach)
+        loads = [((j1[-1] + link_end) / 2, 0.04, 1), ((j2[-1] + tip_end) / 2, 0.06, 2)]
+        if joint_weight == "lumped":
+            loads.append((j2.mean(0), 0.09, 1))
+        else:   # joint 1's proximal half sits on the base; its distal half, zero arm
+            loads += [(j1[-1], 0.045, 1), (link_end, 0.045, 1), (j2[-1], 0.045, 2)]
         out = []
         for i, (end, th) in enumerate(((j1[-1], th1), (j2[-1], th2))):
             F = R(th) @ x[3 * i:3 * i + 2]
@@ -161,12 +176,14 @@ def _numpy_equilibrium(p1: float, p2: float) -> tuple[np.ndarray, np.ndarray]:
     return x.reshape(2, 3), chain(x)[3]
 
 
+@pytest.mark.parametrize("chain", [("tangent", "lumped"), ("cap", "split")], ids=["paper", "default"])
 @pytest.mark.parametrize("p1,p2", [(-0.1, 0.1), (0.1, -0.1), (0.25, 0.2), (-0.3, -0.05)])
-def test_matches_independent_scipy_solution(p1, p2):
+def test_matches_independent_scipy_solution(p1, p2, chain):
     """tau and the fingertip from an independent numpy re-implementation solved by
-    scipy.optimize.fsolve equal the torch Newton solution to 1e-7 (N, N·mm) and 1e-6 mm."""
-    tau, tip = _numpy_equilibrium(p1, p2)
-    res = solve(GRAVITY, t([p1, p2]))
+    scipy.optimize.fsolve equal the torch Newton solution to 1e-7 (N, N·mm) and 1e-6 mm,
+    for the paper's chain and for the default one (cap kinematics, split joint weights)."""
+    tau, tip = _numpy_equilibrium(p1, p2, *chain)
+    res = solve(GripperProblem(J, GripperParams(kinematics=chain[0], joint_weight=chain[1])), t([p1, p2]))
     np.testing.assert_allclose(res.tau[0].numpy(), tau, atol=1e-7)
     np.testing.assert_allclose(res.pose.tip_end[0].numpy(), tip, atol=1e-6)
 
@@ -176,9 +193,14 @@ class _LeftJoint(JointModel):
     top chamber is then on -y): R_L(P, F1, F2, M) = diag(1,-1)·R(P, F1, -F2, -M)."""
 
     name = "left"
+    has_cap_rotation = True
 
     def __call__(self, inputs):
         return J(inputs * t([1.0, 1.0, -1.0, -1.0])) * t([1.0, -1.0])
+
+    def anchors_and_cap(self, inputs):
+        anchors, cap = J.anchors_and_cap(inputs * t([1.0, 1.0, -1.0, -1.0]))
+        return anchors * t([1.0, -1.0]), -cap
 
 
 def test_two_finger_mirror_symmetry():
@@ -513,8 +535,8 @@ def test_surrogate_joint_wrapper_with_a_fitted_surrogate(tmp_path):
         opt.step()
     path = tmp_path / "fit.pt"
     model_mod.save_checkpoint(path, net, {}, {}, {})
-    res = solve(GripperProblem(SurrogateJoint(path)), t([-0.1, 0.1]))
-    ref = solve(GRAVITY, t([-0.1, 0.1]))
+    res = solve(GripperProblem(SurrogateJoint(path), PAPER_CHAIN), t([-0.1, 0.1]))   # no cap head: tangent
+    ref = solve(GripperProblem(J, PAPER_CHAIN), t([-0.1, 0.1]))
     assert bool(res.converged[0]) and float(res.residual_force_mN.max()) <= 1e-4
     assert float((res.pose.tip_end - ref.pose.tip_end).norm()) < 3.0
     bad = tmp_path / "bad.pt"
@@ -539,7 +561,10 @@ GRAVITY_NN = ROOT / "results/predictor/gravity_nn.pt"
 def test_nn_predictor_cli_matches_solver():
     """--method nn with the committed gravity NN at (-0.1, 0.1), on the joint model it was
     trained on (analytic or the committed surrogate): converged (residual within 2 mN /
-    1.2 N·mm) and tau within 0.01 N / 1 N·mm of the Newton solution."""
+    1.2 N·mm), tau within 0.01 N / 1 N·mm of the Newton solution and its raw residual is
+    its residual (no solver); with the contact NN at (0.1, 0.2) on the circle the answer is
+    the solver's polish (or the ramp's) within 1e-4 mN, and the raw network's larger
+    residual is reported beside it."""
     from predictor.nn import load_predictor
 
     trained_on = load_predictor(GRAVITY_NN).joint_name
@@ -553,6 +578,16 @@ def test_nn_predictor_cli_matches_solver():
     assert got["converged"] and max(got["residual_force_mN"]) <= 2.0
     np.testing.assert_allclose(np.array(got["tau"])[:, :2], ref[:, :2], atol=0.01)
     np.testing.assert_allclose(np.array(got["tau"])[:, 2], ref[:, 2], atol=1.0)
+    # gravity: the answer is the network's own, so its raw residual is the residual
+    assert (got["raw_residual_force_mN"], got["raw_residual_moment_Nmm"]) == \
+        (got["residual_force_mN"], got["residual_moment_Nmm"])
+    assert not got["polished"] and not got["fallback"]
+    # contact: the raw network's residual is reported beside the polished answer's
+    out = _cli("--p1", "0.1", "--p2", "0.2", "--object", "circle", "--model", model, "--method", "nn", "--json")
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["polished"] != got["fallback"] and max(got["residual_force_mN"]) <= 1e-4
+    assert len(got["raw_residual_force_mN"]) == 2 and max(got["raw_residual_force_mN"]) > max(got["residual_force_mN"])
 
 
 # ---------------------------------------------------------------- issue 14: the generic finger chain
@@ -601,17 +636,17 @@ THREE_P = t([[0.1, -0.05, 0.2], [-0.2, 0.15, 0.05], [0.05, 0.1, -0.1]])
 
 
 def _reference_problem(joint, case: str) -> GripperProblem:
-    return {"gravity": GripperProblem(joint), "free": GripperProblem(joint, gravity=False),
-            "circle": GripperProblem(joint, obstacle=Obstacle(), approach=APPROACH)}[case]
+    return {"gravity": GripperProblem(joint, PAPER_CHAIN), "free": GripperProblem(joint, PAPER_CHAIN, gravity=False),
+            "circle": GripperProblem(joint, PAPER_CHAIN, obstacle=Obstacle(), approach=APPROACH)}[case]
 
 
-@pytest.mark.parametrize("model", ["analytic", "results/surrogate/improved.pt"])
+@pytest.mark.parametrize("model", ["analytic", "results/surrogate/paper.pt"])
 def test_paper_finger_reproduces_the_frozen_predictor(model):
     """The paper's finger (fem/fingers/paper.toml) through the generic chain, with tangent
     kinematics and lumped weights, reproduces the predictor as it was before issue 14 (its
     hard-wired joint-link-joint-tip chain, frozen at commit bbc0df4 into
-    tests/data/predictor_reference.json), on the analytic joint and on the committed
-    surrogate: gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1) and one
+    tests/data/predictor_reference.json by tests/data/freeze_predictor_reference.py), on
+    the analytic joint and on the committed paper surrogate: gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1) and one
     circle grasp from the approach gesture. tau to 1e-9 N / N·mm, the tip and every pose
     point (both joints, link, tip, contact sample points) to 1e-9 mm, theta and phi to
     1e-12 rad, the same Newton iteration count, and at a fixed off-equilibrium tau the
@@ -620,8 +655,7 @@ def test_paper_finger_reproduces_the_frozen_predictor(model):
     if model != "analytic" and not (ROOT / model).is_file():
         pytest.skip("no committed surrogate checkpoint")
     joint = load_joint(model if model == "analytic" else str(ROOT / model))
-    if joint.name != ref["joint"]:
-        pytest.skip(f"the surrogate was retrained ({joint.name}) since the reference was frozen ({ref['joint']})")
+    assert joint.name == ref["joint"], "the paper surrogate changed: freeze the reference again"
     for case in ref["cases"]:
         problem = _reference_problem(joint, case["case"])
         res = solve(problem, t([case["pressures_MPa"]]))
@@ -792,7 +826,7 @@ def test_cap_kinematics_exit_angle_is_the_analytic_end_angle():
     np.testing.assert_allclose(torch.atan2(d[:, 1], d[:, 0]).numpy(), pose.phi[:, 0].numpy(), rtol=0, atol=1e-12)
     anchors, cap = J.anchors_and_cap(inputs)
     assert torch.equal(anchors, J(inputs)) and cap.shape == (8, 2)
-    tangent = finger_pose(J, GripperParams(), p, tau)
+    tangent = finger_pose(J, PAPER_CHAIN, p, tau)
     assert float((tangent.phi - tangent.theta - phi_end(anchors)).abs().max()) <= 1e-15
     # the chord of anchors 9-10 lags the end section by about half the last segment's turn
     lag = cap - phi_end(anchors)
@@ -838,7 +872,7 @@ def test_cap_kinematics_needs_a_cap_head():
 
     with pytest.raises(ValueError, match="joint model nohead has no cap-rotation head: use --kinematics tangent"):
         GripperProblem(NoHead(), GripperParams(kinematics="cap"))
-    GripperProblem(NoHead(), GripperParams())  # tangent needs no head
+    GripperProblem(NoHead(), PAPER_CHAIN)  # tangent needs no head
 
     class Head(torch.nn.Module):
         has_cap_rotation = True
@@ -894,7 +928,7 @@ def test_split_joint_weight_moment_arms():
     force balance only (zero arm)."""
     p = t([[0.15, -0.1]])
     tau = t([[[0.2, 0.05, -10.0], [0.06, -0.02, 2.0]]])
-    lumped = GripperProblem(J).residual(p, tau)
+    lumped = GripperProblem(J, GripperParams(joint_weight="lumped")).residual(p, tau)
     split = GripperProblem(J, GripperParams(joint_weight="split")).residual(p, tau)
     pose = lumped.pose
     ends = pose.joints[0, :, -1].numpy()
@@ -953,7 +987,7 @@ def test_cli_finger_kinematics_and_joint_weight(tmp_path):
     np.testing.assert_allclose(got["tip"], ref.pose.tip_end[0].numpy(), rtol=0, atol=1e-9)
     assert png.stat().st_size > 10_000
     paper = json.loads(_cli("--p1", "-0.1", "--p2", "0.1", "--model", "analytic", "--json").stdout)
-    assert paper["finger"]["name"] == "paper" and (paper["kinematics"], paper["joint_weight"]) == ("tangent", "lumped")
+    assert paper["finger"]["name"] == "paper" and (paper["kinematics"], paper["joint_weight"]) == ("cap", "split")
     assert paper["tip_angle_deg"] == paper["joint_end_angle_deg"][1]
     bad = _cli("--finger", str(path), "--p1", "0", "--p2", "0", "--model", "analytic")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1
@@ -964,10 +998,10 @@ def test_nn_for_another_finger(tmp_path):
     """An NN config moved to the three-joint finger (NNConfig.for_params) trains a 3 -> 9
     network; its checkpoint records the finger and options and loads back with them, and
     loading it for the paper finger (or other options) is refused with one line; an old
-    config without the fields means the paper finger, tangent, lumped."""
+    checkpoint without the fields means the paper finger and chain (tangent, lumped)."""
     from predictor.nn import NNConfig, load_predictor, save_predictor, train
 
-    params = GripperParams(THREE_FINGER, joint_weight="split")
+    params = GripperParams(THREE_FINGER, kinematics="tangent", joint_weight="split")
     cfg = NNConfig(n_train=60, n_val=20, epochs=1).for_params(params)
     assert cfg.widths[0] == 3 and cfg.widths[-1] == 9 and cfg.params() == params
     pred = train(cfg, J)
@@ -977,9 +1011,24 @@ def test_nn_for_another_finger(tmp_path):
     back = load_predictor(path, J, params=params)
     assert back.config.params() == params
     with pytest.raises(ValueError, match="was trained for finger 'three', tangent kinematics, split joint weights, "
-                                         "not finger 'paper', tangent kinematics, lumped joint weights"):
+                                         "not finger 'paper', cap kinematics, split joint weights"):
         load_predictor(path, J, params=GripperParams())
     assert NNConfig().params() == GripperParams()
+    # a checkpoint written before the chain options were recorded: the paper's chain
+    from dataclasses import asdict
+
+    from predictor.nn import _format
+    from surrogate import checkpoint
+
+    old = train(NNConfig(n_train=60, n_val=20, epochs=1), J)
+    old_path = tmp_path / "old.pt"
+    payload = {"config": {k: v for k, v in asdict(old.config).items() if k not in ("kinematics", "joint_weight")},
+               "state_dict": old.net.state_dict(), "joint": old.joint_name, "metrics": old.metrics,
+               "history": old.history}
+    checkpoint.save(old_path, _format(False), payload)
+    with pytest.raises(ValueError, match="not finger 'paper', cap kinematics"):
+        load_predictor(old_path, J, params=GripperParams())
+    assert load_predictor(old_path, J, params=PAPER_CHAIN).config.params() == PAPER_CHAIN
 
 
 def test_surrogate_cap_head_drives_cap_kinematics(tmp_path):

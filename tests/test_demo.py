@@ -1,0 +1,128 @@
+"""make demo (workflow.demo): the pure part that turns the steps' JSON into table rows.
+
+Hand-made step JSONs with known answers (anchors offset by a 3-4-5 vector, fingertips
+offset by 6-8-10, ...); no FEM, no model, no subprocess.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from workflow import demo
+
+ANCHORS = [[4.5 * i, -0.5 * i] for i in range(1, 11)]
+
+
+def joint_fem():
+    return {"load": {"P": 0.2, "F1": 1.0, "F2": -1.0, "M": 20.0}, "converged": True,
+            "anchors_mm": ANCHORS, "phi_end_deg": -23.0, "cap_rotation_deg": -25.0,
+            "wall_time_s": 120.0, "geometry": {"mesh_size": 1.8}}
+
+
+def surrogate(offset=(3.0, 4.0), last_offset=None):
+    anchors = [[x + offset[0], y + offset[1]] for x, y in ANCHORS]
+    if last_offset:
+        anchors[-1] = [ANCHORS[-1][0] + last_offset[0], ANCHORS[-1][1] + last_offset[1]]
+    return {"anchors_mm": anchors, "phi_end_deg": -22.5, "cap_rotation_deg": -25.25}
+
+
+def gesture(p1, p2, tip, angle, obj=None, normal=0.0, ratio=0.0, slip=False):
+    return {"pressures_MPa": [p1, p2], "converged": True, "tip": tip, "tip_angle_deg": angle,
+            "time_ms": 40.0, "kinematics": "cap", "joint_weight": "split", "object": obj,
+            "contact_force_N": normal, "friction_ratio": ratio, "slip": slip}
+
+
+def finger_case(name, tip, angle, h, fem_s):
+    p1, p2 = (float(v) for v in name.split("_")[1:])
+    return {"case": name, "pressures_MPa": [p1, p2], "gravity": True, "converged": True, "tip": tip,
+            "tip_angle_deg": angle, "fem_s": fem_s, "mesh": {"mesh_size": h}}
+
+
+def validation(case, tip, angle):
+    entry = {"case": case, "variant": "predictor_cap_split", "tip_mm": tip, "tip_angle_deg": angle,
+             "predictor_s": 0.02, "kinematics": "cap", "joint_weight": "split"}
+    other = {**entry, "variant": "predictor_tangent_lumped", "tip_mm": [0.0, 0.0],
+             "kinematics": "tangent", "joint_weight": "lumped"}
+    return {"judged_variant": "predictor_cap_split", "cases": [other, entry]}
+
+
+def data():
+    committed = finger_case("gravity_0.1_-0.1", [7.0, -214.0], -88.0, 1.8, 490.0)
+    coarse = finger_case("gravity_0.1_-0.1", [7.0 + 6.0, -214.0 - 8.0], -87.5, 4.0, 150.0)
+    return {
+        "joint": {"fem": joint_fem(), "surrogate": surrogate(), "surrogate_wall_s": 3.0},
+        "gravity": [
+            {"fem": finger_case("gravity_-0.1_0.1", [40.0, -210.0], -92.0, 1.8, 500.0), "fem_file": "a.json",
+             "gesture": gesture(-0.1, 0.1, [40.0 + 0.3, -210.0 - 0.4], -91.0)},
+            {"fem": committed, "fem_file": "b.json", "gesture": gesture(0.1, -0.1, [7.0, -214.0 + 2.0], -88.25)},
+        ],
+        "grasp": gesture(0.1, 0.2, [27.0, -214.5], -99.9, obj="circle", normal=0.227, ratio=0.27),
+        "finger": {"fem": coarse, "validation": validation("gravity_0.1_-0.1", [13.0 - 0.6, -222.0 + 0.8], -87.0),
+                   "committed": committed, "committed_file": "b.json"},
+    }
+
+
+def test_rows_errors_and_times():
+    rows = demo.table_rows(data())
+    assert [r["case"] for r in rows] == [
+        "joint P=0.2 F1=1 F2=-1 M=20", "gravity (-0.1, 0.1) MPa", "gravity (0.1, -0.1) MPa",
+        "grasp circle (0.1, 0.2) MPa", "finger gravity (0.1, -0.1) MPa", "finger FEM h=4 vs h=1.8 (committed)"]
+    joint, g1, g2, grasp, finger, mesh = rows
+    # every anchor offset by (3, 4): exactly 5 mm, max and mean
+    assert joint["errors"]["anchor_max_mm"] == pytest.approx(5.0, abs=1e-12)
+    assert joint["errors"]["anchor_mean_mm"] == pytest.approx(5.0, abs=1e-12)
+    assert joint["errors"]["phi_end_deg"] == pytest.approx(0.5)
+    assert joint["errors"]["cap_rotation_deg"] == pytest.approx(-0.25)
+    assert (joint["fem_s"], joint["model_s"]) == (120.0, 3.0)
+    assert "process wall" in joint["model"]
+    assert g1["errors"]["tip_mm"] == pytest.approx(0.5) and g1["errors"]["tip_angle_deg"] == pytest.approx(1.0)
+    assert g2["errors"]["tip_mm"] == pytest.approx(2.0) and g2["errors"]["tip_angle_deg"] == pytest.approx(-0.25)
+    assert g1["fem"] == g2["fem"] == "FEM (committed, production mesh)"
+    assert (g1["fem_s"], g1["model_s"]) == (500.0, 0.04)
+    assert grasp["fem"] == "n/a" and grasp["errors"] is None and grasp["fem_s"] is None
+    assert grasp["grasp"] == {"normal_force_N": 0.227, "friction_ratio": 0.27, "state": "holds"}
+    # the judged variant, not the first entry of the case
+    assert finger["errors"]["tip_mm"] == pytest.approx(1.0) and finger["errors"]["tip_angle_deg"] == pytest.approx(0.5)
+    assert finger["fem"] == "finger FEM h=4 (now)" and finger["model"] == "predictor (cap/split)"
+    assert (finger["fem_s"], finger["model_s"]) == (150.0, 0.02)
+    # the coarse mesh against the committed production mesh: a 6-8-10 offset
+    assert mesh["errors"]["tip_mm"] == pytest.approx(10.0) and mesh["errors"]["tip_angle_deg"] == pytest.approx(0.5)
+    assert (mesh["fem_s"], mesh["model_s"]) == (490.0, 150.0)
+
+
+def test_max_and_mean_differ_and_grasp_states():
+    d = data()
+    d["joint"]["surrogate"] = surrogate(offset=(0.0, 0.0), last_offset=(6.0, 8.0))
+    joint = demo.table_rows(d)[0]
+    assert joint["errors"]["anchor_max_mm"] == pytest.approx(10.0)
+    assert joint["errors"]["anchor_mean_mm"] == pytest.approx(1.0)
+    assert demo.grasp_state(gesture(0.1, 0.2, [0, 0], 0, "circle", normal=0.3, slip=True)) == "slips"
+    assert demo.grasp_state(gesture(0.1, 0.2, [0, 0], 0, "circle", normal=0.0)) == "no contact"
+
+
+def test_missing_judged_entry_is_refused():
+    d = data()
+    d["finger"]["validation"]["cases"] = d["finger"]["validation"]["cases"][:1]
+    with pytest.raises(ValueError, match="predictor_cap_split"):
+        demo.table_rows(d)
+
+
+def test_tables_show_every_row_and_figure():
+    rows = demo.table_rows(data())
+    text = demo.text_table(rows)
+    assert len(text.splitlines()) == 2 + len(rows)
+    assert "n/a" in text and "5.000 mm" in text
+    md = demo.markdown(rows, [{"title": "t", "command": "python -m x", "wall_s": 1.0}], 60.0)
+    assert "[joint.png](joint.png)" in md and "![" in md
+    assert md.count("\n| ") >= len(rows) + 2
+
+
+def test_workflow_does_not_import_upper_layers():
+    """workflow sits below surrogate and predictor: the demo runs their command lines
+    (a fresh interpreter, since other test files import those packages)."""
+    code = ("import sys, workflow.demo; print([m for m in sys.modules if m.split('.')[0] in "
+            "('surrogate', 'predictor', 'torch', 'dolfinx')])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "[]", out.stderr

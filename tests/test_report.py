@@ -1,0 +1,107 @@
+"""workflow.report (results/REPORT.md): pictures, tables and sources, on JSON only (no solve,
+no training; a second or two).
+
+- On the committed results/: every linked picture or file exists, every table row has its
+  header's number of cells and no empty met cell, no heading repeats within its section,
+  and nothing is read from the retired results/surrogate/cap/.
+- On an empty or partial results folder the report still builds, naming the make target
+  of every missing picture instead of linking it.
+- The finger section takes the judged variant from finger.json, and the surrogate's cap
+  rotation (mean, p95, held-out) and the tangent assumption's error from metrics.json.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from workflow import report as workflow_report
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+committed = pytest.mark.skipif(not (RESULTS / "validation/finger.json").is_file()
+                               or not (RESULTS / "surrogate/metrics.json").is_file(),
+                               reason="no committed finger validation / surrogate metrics")
+
+
+def _cells(line: str) -> list[str]:
+    """The cells of a Markdown table row (escaped pipes stay inside their cell)."""
+    return [c.strip() for c in re.split(r"(?<!\\)\|", line.strip())[1:-1]]
+
+
+def _tables(text: str):
+    """(header cells, [row cells, ...]) of every table in ``text``."""
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        if line.startswith("|") and i + 1 < len(lines) and lines[i + 1].startswith("|---"):
+            if i > 0 and lines[i - 1].strip():
+                raise AssertionError(f"table without a blank line before it: {line[:60]}")
+            rows = []
+            for row in lines[i + 2:]:
+                if not row.startswith("|"):
+                    break
+                rows.append(_cells(row))
+            yield _cells(line), rows
+
+
+@committed
+def test_committed_report_links_tables_and_sources():
+    text, sections, checks = workflow_report.build(RESULTS)
+    assert len(sections) == len(set(sections)) == len(workflow_report.SECTIONS)
+    for part in text.split("\n## ")[1:]:
+        subs = [ln for ln in part.splitlines() if ln.startswith("### ")]
+        assert len(subs) == len(set(subs)), subs
+    links = LINK.findall(text)
+    missing = [p for p in links if not (RESULTS / p).is_file()]
+    assert not missing, missing
+    images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
+    for must in ("fem/joint.png", "surrogate/comparison.png", "predictor/nn_training.png",
+                 "predictor/grasps.png", "predictor/gravity.png"):
+        assert must in images or not (RESULTS / must).is_file(), must
+    assert sum(p.startswith("validation/finger_") for p in images) >= 3
+    for header, rows in _tables(text):
+        for row in rows:
+            assert len(row) == len(header), (header, row)
+            if header[-1] == "met":
+                assert row[-1], (header, row)   # judged, or "shown, not judged"
+    assert "surrogate/cap/" not in text and "cap/metrics.json" not in text
+    assert checks and all(c.verdict for c in checks)
+
+
+@committed
+def test_finger_judged_variant_and_cap_figures_come_from_the_json(tmp_path):
+    for rel in ("validation/finger.json", "surrogate/metrics.json"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(RESULTS / rel, tmp_path / rel)
+    v = json.loads((tmp_path / "validation/finger.json").read_text())
+    other = next(k for k in v["summary"] if k != v["judged_variant"] and k.startswith("predictor_"))
+    v["judged_variant"] = other
+    (tmp_path / "validation/finger.json").write_text(json.dumps(v))
+    text = workflow_report.report(tmp_path)
+    s = v["summary"][other]
+    assert f"| fingertip error, {other} (max over {s['cases']} cases) | {s['tip_error_mm_max']:.2f} mm |" in text
+    assert f"(`{other}`)**" in text
+    held = json.loads((tmp_path / "surrogate/metrics.json").read_text())["improved"]["heldout"]
+    row = (f"| improved | {held['n']} | {held['phi_end_error_deg']:.3f}° / {held['p95_phi_end_error_deg']:.3f}° | "
+           f"{held['cap_rotation_error_deg']:.3f}° / {held['p95_cap_rotation_error_deg']:.3f}° | "
+           f"{held['tangent_error_deg']:.3f}° / {held['p95_tangent_error_deg']:.3f}° |")
+    assert row in text
+    # the overlays are not in tmp_path: named with their make target, not linked
+    assert "(not generated yet: `make validate-finger`)" in text
+    assert not [p for p in LINK.findall(text) if not (tmp_path / p).is_file()]
+
+
+def test_report_builds_without_artefacts(tmp_path):
+    text, sections, checks = workflow_report.build(tmp_path)
+    assert len(sections) == len(workflow_report.SECTIONS) and not checks
+    assert not LINK.findall(text)
+    for target in ("make joint-render", "make gestures", "make atlas", "make inverse"):
+        assert f"(not generated yet: `{target}`)" in text, target
+
+
+def test_not_judged_rows_say_so():
+    assert workflow_report._cells(None).strip() == f"| {workflow_report.NOT_JUDGED} |"

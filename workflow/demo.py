@@ -1,0 +1,433 @@
+"""make demo: the project end to end in a few minutes, FEM against every model.
+
+    python -m workflow.demo --out results/demo [--finger-mesh-size 4] [--json]
+
+What runs, one subprocess at a time (``sys.executable -m ...``, so at most one FEM runs):
+
+1. ``fem.render --json``: the joint FEM of (P, F1, F2, M) = (0.2 MPa, 1 N, -1 N, 20 N·mm)
+   on the production mesh, rendered -> ``joint.png`` (its JSON is ``fem.solve --json``'s);
+2. ``surrogate.predict --json``: the same case on the committed surrogate;
+3. and 4. ``predictor.gesture --json --plot``: the paper's gravity gestures (-0.1, 0.1)
+   and (0.1, -0.1) MPa -> ``gesture_<P1>_<P2>.png``, against the committed whole-finger
+   FEM of the same gestures on the production mesh (results/validation/finger_fem, made
+   by ``make finger-fem``; not solved now);
+5. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
+   a grasp: normal force, friction use |f|/N and hold/slip are shown instead);
+6. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
+   on a coarse joint mesh -> ``finger_fem/<case>.json`` and its render;
+7. ``predictor.validate_finger --mesh-size H``: the predictor against it ->
+   ``finger.json`` and the overlay ``finger_<case>.png``.
+
+Data flow: each step's JSON (its stdout, or the file it writes) -> ``table_rows`` (pure:
+the errors, times and labels of every row) -> ``summary.json``, ``summary.md`` (the same
+table, PNGs linked) and the table on stdout. Each step prints ``[demo k/N] what ...
+(elapsed s)`` before it starts, a heartbeat while it runs and its result after.
+
+Layering: workflow sits below surrogate and predictor, so it runs their command lines
+and reads their JSON; of fem it imports only the plain-Python fem.cli, fem.files and
+fem.geometry. Exit 0 when every step succeeded; otherwise one line names the failed
+step and the exit is 1. The summary is written (atomically) only at the end, and the
+previous summary is removed at the start, so no summary ever describes another run.
+Units: mm, deg, N, MPa, s.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shlex
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fem import cli
+from fem.files import write_json, write_text
+from fem.geometry import JointGeometry
+
+ROOT = Path(__file__).resolve().parents[1]
+SURROGATE = "results/surrogate/improved.pt"
+COMMITTED_FINGER_FEM = "results/validation/finger_fem"
+JOINT_CASE = {"p": 0.2, "f1": 1.0, "f2": -1.0, "m": 20.0}        # MPa, N, N, N·mm
+GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the paper's Figure 5A
+GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
+FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.finger_cases name
+FINGER_PRESSURES = (0.1, -0.1)
+HEARTBEAT_S = 30.0
+
+
+class StepFailed(RuntimeError):
+    """A step that did not succeed; the message is the one line the demo prints."""
+
+
+@dataclass
+class Step:
+    """One command line: ``python -m module *args``. Its figures are its stdout JSON, or
+    the JSON file ``reads`` (relative to the repository) when the tool writes one."""
+
+    key: str
+    title: str
+    module: str
+    args: list[str]
+    reads: str | None = None
+    wall_s: float | None = None
+    data: dict = field(default_factory=dict)
+
+    def argv(self) -> list[str]:
+        return [sys.executable, "-m", self.module, *self.args]
+
+    def command(self) -> str:
+        return shlex.join(["python", "-m", self.module, *self.args])
+
+
+def _g(v: float) -> str:
+    return f"{v:g}"
+
+
+def gesture_name(p1: float, p2: float) -> str:
+    return f"{_g(p1)}_{_g(p2)}"
+
+
+def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
+    """The demo's steps, in order; ``out`` is the output folder relative to the repository."""
+    case = [a for k, v in JOINT_CASE.items() for a in (f"--{k}", _g(v))]
+    steps = [
+        Step("joint_fem", "joint FEM, production mesh, and its render (fem.render)", "fem.render",
+             [*case, "--out", f"{out}/joint.png", "--json"]),
+        Step("surrogate", "joint surrogate, same case (surrogate.predict)", "surrogate.predict",
+             ["--model", SURROGATE, *case, "--json"]),
+    ]
+    for p1, p2 in GRAVITY_GESTURES:
+        name = gesture_name(p1, p2)
+        steps.append(Step(f"gesture_{name}", f"gravity gesture ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
+                          "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--json",
+                                                "--plot", f"{out}/gesture_{name}.png"]))
+    p1, p2, obj = GRASP
+    steps.append(Step("grasp", f"grasp of a {obj} at ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
+                      "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--object", obj, "--json",
+                                            "--plot", f"{out}/grasp.png"]))
+    h = _g(finger_mesh_size)
+    steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.finger_cases)",
+                      "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h],
+                      reads=f"{out}/finger_fem/{FINGER_CASE}.json"))
+    steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
+                      "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h,
+                                                    "--out", f"{out}/finger.json", "--figures", out, "--json"],
+                      reads=f"{out}/finger.json"))
+    return steps
+
+
+# ---------------------------------------------------------------- the pure part: rows
+
+def anchor_errors(fem: list, model: list) -> tuple[float, float]:
+    """(max, mean) distance between matching anchor points, mm."""
+    d = [math.dist(a, b) for a, b in zip(fem, model, strict=True)]
+    return max(d), statistics.fmean(d)
+
+
+def joint_row(fem: dict, sur: dict, sur_wall_s: float) -> dict:
+    """The joint FEM (fem.solve JSON) against the surrogate (surrogate.predict JSON, which
+    reports no time: its process wall time stands in)."""
+    amax, amean = anchor_errors(fem["anchors_mm"], sur["anchors_mm"])
+    errors = {"anchor_max_mm": amax, "anchor_mean_mm": amean,
+              "phi_end_deg": sur["phi_end_deg"] - fem["phi_end_deg"]}
+    if sur.get("cap_rotation_deg") is not None:
+        errors["cap_rotation_deg"] = sur["cap_rotation_deg"] - fem["cap_rotation_deg"]
+    load = fem["load"]
+    text = f"anchors max {amax:.3f}, mean {amean:.3f} mm; phi_end {errors['phi_end_deg']:+.2f} deg"
+    if "cap_rotation_deg" in errors:
+        text += f"; cap {errors['cap_rotation_deg']:+.2f} deg"
+    return {"case": f"joint P={_g(load['P'])} F1={_g(load['F1'])} F2={_g(load['F2'])} M={_g(load['M'])}",
+            "fem": f"joint FEM h={_g(fem['geometry']['mesh_size'])} (now)",
+            "model": "surrogate (time: process wall)",
+            "errors": errors, "error": text, "fem_s": fem["wall_time_s"], "model_s": sur_wall_s,
+            "produced_by": {"fem": "joint_fem: anchors_mm, phi_end_deg, cap_rotation_deg",
+                            "model": "surrogate: anchors_mm, phi_end_deg, cap_rotation_deg",
+                            "errors": "model minus FEM; anchors: distance per anchor point",
+                            "fem_s": "joint_fem: wall_time_s (the solve)",
+                            "model_s": "surrogate: wall time of the whole process (it reports no time)"},
+            "figures": ["joint.png"]}
+
+
+def finger_errors(fem: dict, model_tip: list, model_angle_deg: float) -> dict:
+    """Fingertip distance (mm) and tip angle (model minus FEM, deg)."""
+    return {"tip_mm": math.dist(model_tip, fem["tip"]), "tip_angle_deg": model_angle_deg - fem["tip_angle_deg"]}
+
+
+def _tip_text(e: dict) -> str:
+    return f"tip {e['tip_mm']:.2f} mm, tip angle {e['tip_angle_deg']:+.2f} deg"
+
+
+def _predictor_label(d: dict) -> str:
+    return f"predictor ({d['kinematics']}/{d['joint_weight']})"
+
+
+def gravity_row(fem: dict, gesture: dict, fem_file: str) -> dict:
+    """A gravity gesture (predictor.gesture JSON) against the committed finger FEM."""
+    p1, p2 = gesture["pressures_MPa"]
+    errors = finger_errors(fem, gesture["tip"], gesture["tip_angle_deg"])
+    return {"case": f"gravity ({_g(p1)}, {_g(p2)}) MPa", "fem": "FEM (committed, production mesh)",
+            "model": _predictor_label(gesture), "errors": errors, "error": _tip_text(errors),
+            "fem_s": fem["fem_s"], "model_s": gesture["time_ms"] / 1000.0,
+            "produced_by": {"fem": f"{fem_file}: tip, tip_angle_deg (make finger-fem)",
+                            "model": f"gesture_{gesture_name(p1, p2)}: tip, tip_angle_deg",
+                            "errors": "model minus FEM", "fem_s": f"{fem_file}: fem_s",
+                            "model_s": f"gesture_{gesture_name(p1, p2)}: time_ms"},
+            "figures": [f"gesture_{gesture_name(p1, p2)}.png"]}
+
+
+def grasp_state(g: dict) -> str:
+    if g["contact_force_N"] <= 0:
+        return "no contact"
+    return "slips" if g["slip"] else "holds"
+
+
+def grasp_row(g: dict) -> dict:
+    """A grasp (predictor.gesture --object JSON): no FEM, so the contact figures."""
+    p1, p2 = g["pressures_MPa"]
+    figures = {"normal_force_N": g["contact_force_N"], "friction_ratio": g["friction_ratio"],
+               "state": grasp_state(g)}
+    return {"case": f"grasp {g['object']} ({_g(p1)}, {_g(p2)}) MPa", "fem": "n/a", "model": _predictor_label(g),
+            "errors": None, "grasp": figures,
+            "error": f"n/a; normal {figures['normal_force_N']:.3f} N, |f|/N {figures['friction_ratio']:.3f}, "
+                     f"{figures['state']}",
+            "fem_s": None, "model_s": g["time_ms"] / 1000.0,
+            "produced_by": {"grasp": "grasp: contact_force_N, friction_ratio, slip", "model_s": "grasp: time_ms"},
+            "figures": ["grasp.png"]}
+
+
+def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: str) -> list[dict]:
+    """The finger FEM solved now (fem.finger_cases JSON) against the predictor
+    (predictor.validate_finger JSON, its judged variant), and the same FEM against the
+    committed production-mesh FEM of the case: the coarse mesh's own error."""
+    h, h0 = _g(fem["mesh"]["mesh_size"]), _g(committed["mesh"]["mesh_size"])
+    judged = validation["judged_variant"]
+    entry = next((e for e in validation["cases"] if e["case"] == fem["case"] and e["variant"] == judged), None)
+    if entry is None:
+        raise ValueError(f"predictor.validate_finger has no {judged} entry for {fem['case']}")
+    p1, p2 = fem["pressures_MPa"]
+    pred = finger_errors(fem, entry["tip_mm"], entry["tip_angle_deg"])
+    mesh = finger_errors(committed, fem["tip"], fem["tip_angle_deg"])
+    return [
+        {"case": f"finger gravity ({_g(p1)}, {_g(p2)}) MPa", "fem": f"finger FEM h={h} (now)",
+         "model": _predictor_label(entry), "errors": pred, "error": _tip_text(pred),
+         "fem_s": fem["fem_s"], "model_s": entry["predictor_s"],
+         "produced_by": {"fem": "finger_fem: tip, tip_angle_deg", "model": f"validate: {judged} tip_mm, tip_angle_deg",
+                         "errors": "model minus FEM", "fem_s": "finger_fem: fem_s (the solve, not the mesh build)",
+                         "model_s": "validate: predictor_s (median of its repeats)"},
+         "figures": [f"finger_{fem['case']}.png", f"finger_fem/{fem['case']}.png"]},
+        {"case": f"finger FEM h={h} vs h={h0} (committed)", "fem": f"finger FEM h={h0} (committed)",
+         "model": f"finger FEM h={h} (now)", "errors": mesh, "error": _tip_text(mesh),
+         "fem_s": committed["fem_s"], "model_s": fem["fem_s"],
+         "produced_by": {"fem": f"{committed_file}: tip, tip_angle_deg", "model": "finger_fem: tip, tip_angle_deg",
+                         "errors": f"h={h} minus h={h0}", "fem_s": f"{committed_file}: fem_s",
+                         "model_s": "finger_fem: fem_s"},
+         "figures": []},
+    ]
+
+
+def table_rows(data: dict) -> list[dict]:
+    """Every row of the demo's table from the steps' JSON: ``data`` holds
+    joint {fem, surrogate, surrogate_wall_s}, gravity [{fem, fem_file, gesture}, ...],
+    grasp, finger {fem, validation, committed, committed_file}."""
+    j, f = data["joint"], data["finger"]
+    return [joint_row(j["fem"], j["surrogate"], j["surrogate_wall_s"]),
+            *(gravity_row(g["fem"], g["gesture"], g["fem_file"]) for g in data["gravity"]),
+            grasp_row(data["grasp"]),
+            *finger_rows(f["fem"], f["validation"], f["committed"], f["committed_file"])]
+
+
+COLUMNS = [("case", "case"), ("fem", "FEM"), ("model", "model"), ("error", "error (model - FEM)"),
+           ("fem_s", "FEM s"), ("model_s", "model s")]
+
+
+def _cell(row: dict, key: str) -> str:
+    v = row[key]
+    if key in ("fem_s", "model_s"):
+        return "n/a" if v is None else f"{v:.1f}" if v >= 1 else f"{v:.3f}"
+    return str(v)
+
+
+def text_table(rows: list[dict]) -> str:
+    cells = [[head for _, head in COLUMNS]] + [[_cell(r, k) for k, _ in COLUMNS] for r in rows]
+    widths = [max(len(c[i]) for c in cells) for i in range(len(COLUMNS))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip() for line in cells]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+LEGEND = ("errors: model minus FEM (mm, deg); FEM s: the FEM's solve time from its JSON; model s: the "
+          "model's solve time from its JSON, except the surrogate's (it reports none: its process wall "
+          "time, start-up included)")
+
+
+def markdown(rows: list[dict], steps: list[dict], total_s: float) -> str:
+    head = [h for _, h in COLUMNS] + ["figures"]
+    out = ["# softjoint demo", "",
+           f"`make demo` (python -m workflow.demo), {total_s:.0f} s in all. {LEGEND}.", "",
+           "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        links = ", ".join(f"[{Path(p).name}]({p})" for p in r["figures"]) or "-"
+        cells = [_cell(r, k).replace("|", "\\|") for k, _ in COLUMNS]   # a bare | would split the cell
+        out.append("| " + " | ".join(cells + [links]) + " |")
+    out += ["", "## Steps", "", "| step | command | wall s |", "|---|---|---|"]
+    out += [f"| {s['title']} | `{s['command']}` | {s['wall_s']:.1f} |" for s in steps]
+    out += ["", "## Figures", ""]
+    for r in rows:
+        out += [f"![{r['case']}: {Path(p).name}]({p})" for p in r["figures"]]
+    return "\n".join(out) + "\n"
+
+
+# ---------------------------------------------------------------- running the steps
+
+def _brief(step: Step) -> str:
+    """The one-line result of a step."""
+    d = step.data
+    if step.key == "joint_fem":
+        return (f"phi_end {d['phi_end_deg']:.2f} deg, cap {d['cap_rotation_deg']:.2f} deg, "
+                f"solve {d['wall_time_s']:.0f} s")
+    if step.key == "surrogate":
+        return f"phi_end {d['phi_end_deg']:.2f} deg"
+    if step.key.startswith("gesture_") or step.key == "grasp":
+        tip = d["tip"]
+        text = f"tip ({tip[0]:.2f}, {tip[1]:.2f}) mm, {d['tip_angle_deg']:.2f} deg, {d['time_ms']:.0f} ms"
+        return text + (f", {grasp_state(d)} with {d['contact_force_N']:.3f} N" if step.key == "grasp" else "")
+    if step.key == "finger_fem":
+        tip = d["tip"]
+        return f"tip ({tip[0]:.2f}, {tip[1]:.2f}) mm, {d['tip_angle_deg']:.2f} deg, solve {d['fem_s']:.0f} s"
+    s = d["summary"][d["judged_variant"]]
+    return (f"{d['judged_variant']}: tip error {s['tip_error_mm_max']:.2f} mm, "
+            f"angle {s['tip_angle_error_deg_max']:.2f} deg")
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return lines[-1] if lines else "no message"
+
+
+def run_step(step: Step, k: int, n: int, t0: float, env: dict, log=sys.stdout) -> None:
+    """Run one step (heartbeat every HEARTBEAT_S on ``log``), then read its JSON into step.data."""
+    tag = f"[demo {k}/{n}]"
+    print(f"{tag} {step.title} ... ({time.perf_counter() - t0:.0f} s)", file=log, flush=True)
+    print(f"{' ' * len(tag)} $ {step.command()}", file=log, flush=True)
+    start = time.perf_counter()
+    proc = subprocess.Popen(step.argv(), cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        while True:
+            try:
+                stdout, stderr = proc.communicate(timeout=HEARTBEAT_S)
+                break
+            except subprocess.TimeoutExpired:
+                print(f"{tag} still running ({time.perf_counter() - t0:.0f} s)", file=log, flush=True)
+    finally:
+        if proc.poll() is None:   # interrupted: do not leave a FEM running on its own
+            proc.kill()
+            proc.wait()
+    step.wall_s = time.perf_counter() - start
+    name = f"step {k}/{n} ({step.title})"
+    if proc.returncode != 0:
+        raise StepFailed(f"{name} failed with exit {proc.returncode}: {_last_line(stderr)}")
+    try:
+        step.data = json.loads(Path(ROOT, step.reads).read_text() if step.reads else stdout)
+    except (OSError, ValueError) as exc:
+        raise StepFailed(f"{name} gave no JSON figures: {' '.join(str(exc).split())}") from None
+    if step.data.get("converged") is False:
+        raise StepFailed(f"{name} did not converge: {step.data.get('reason') or 'no reason given'}")
+    try:
+        brief = _brief(step)
+    except (KeyError, TypeError, IndexError) as exc:
+        raise StepFailed(f"{name} JSON lacks {exc}") from None
+    print(f"{tag} -> {brief} [{step.wall_s:.0f} s]", file=log, flush=True)
+
+
+def load_committed(name: str) -> tuple[dict, str]:
+    """A committed whole-finger FEM case at the production mesh: (JSON, its path)."""
+    rel = f"{COMMITTED_FINGER_FEM}/{name}.json"
+    try:
+        case = json.loads(Path(ROOT, rel).read_text())
+    except (OSError, ValueError):
+        raise StepFailed(f"committed finger FEM {rel} missing or unreadable: run `make finger-fem`") from None
+    production = JointGeometry().mesh_size
+    if not case.get("converged") or case.get("mesh", {}).get("mesh_size") != production:
+        raise StepFailed(f"committed finger FEM {rel} is not a converged case on the production mesh "
+                         f"h={_g(production)}: run `make finger-fem`")
+    return case, rel
+
+
+def _relative(path: Path) -> str:
+    """``path`` relative to the repository (the steps run there), else absolute."""
+    path = path.resolve()
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
+    """Every step, then the summary files and the table (or, ``as_json``, the summary as
+    JSON on stdout and the progress on stderr). 0 if every step succeeded, else 1."""
+    t0 = time.perf_counter()
+    log = sys.stderr if as_json else sys.stdout
+    rel = _relative(out)
+    steps = build_steps(rel, finger_mesh_size)
+    by_key = {s.key: s for s in steps}
+    env = dict(os.environ)
+    # One thread per process: the demo shares the machine, and the FEM is serial here.
+    for var, value in (("OMP_NUM_THREADS", "1"), ("OPENBLAS_NUM_THREADS", "1"), ("PYVISTA_OFF_SCREEN", "true")):
+        env.setdefault(var, value)
+    try:
+        # Checked first: the committed FEM the gravity rows compare with.
+        committed = {gesture_name(*p): load_committed(f"gravity_{gesture_name(*p)}") for p in GRAVITY_GESTURES}
+        finger_committed = load_committed(FINGER_CASE)
+        if not Path(ROOT, SURROGATE).is_file():
+            raise StepFailed(f"no committed surrogate {SURROGATE}: run `make train`")
+        # No stale summary may describe this run's figures; and fem.finger_cases skips a case
+        # whose JSON exists, so the live finger FEM removes its own last result first.
+        for old in (out / "summary.json", out / "summary.md", out / "finger_fem" / f"{FINGER_CASE}.json"):
+            old.unlink(missing_ok=True)
+        for k, step in enumerate(steps, 1):
+            run_step(step, k, len(steps), t0, env, log)
+        rows = table_rows({
+            "joint": {"fem": by_key["joint_fem"].data, "surrogate": by_key["surrogate"].data,
+                      "surrogate_wall_s": by_key["surrogate"].wall_s},
+            "gravity": [{"fem": committed[gesture_name(*p)][0], "fem_file": committed[gesture_name(*p)][1],
+                         "gesture": by_key[f"gesture_{gesture_name(*p)}"].data} for p in GRAVITY_GESTURES],
+            "grasp": by_key["grasp"].data,
+            "finger": {"fem": by_key["finger_fem"].data, "validation": by_key["validate"].data,
+                       "committed": finger_committed[0], "committed_file": finger_committed[1]}})
+    except StepFailed as exc:
+        print(f"[demo] FAILED: {exc}", file=sys.stderr, flush=True)
+        return 1
+    except (KeyError, TypeError, ValueError) as exc:
+        print(f"[demo] FAILED: building the table: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+        return 1
+    total = time.perf_counter() - t0
+    step_log = [{"key": s.key, "title": s.title, "command": s.command(), "wall_s": s.wall_s} for s in steps]
+    summary = {"out": rel, "total_s": total, "finger_mesh_size_mm": finger_mesh_size,
+               "load_average_1min": os.getloadavg()[0], "units": "mm, deg, N, MPa, s",
+               "rows": rows, "steps": step_log}
+    write_json(out / "summary.json", summary)
+    write_text(out / "summary.md", markdown(rows, step_log, total))
+    if as_json:
+        cli.print_json(summary)
+    else:
+        print(f"\n{text_table(rows)}\n{LEGEND}\n", flush=True)
+    print(f"[demo] all {len(steps)} steps done in {total:.0f} s: {rel}/summary.md, summary.json and the PNGs",
+          file=log, flush=True)
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = cli.Parser(prog="python -m workflow.demo", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", folder=True, default="results/demo", help="output folder (default results/demo)")
+    ap.add_argument("--finger-mesh-size", type=cli.number(0.3, 10, "mm"), default=4.0,
+                    help="joint mesh size of the live finger FEM, mm (default 4: coarse, for time)")
+    args = ap.parse_args(argv)
+    return run(Path(args.out), args.finger_mesh_size, args.json)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
