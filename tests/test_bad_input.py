@@ -182,7 +182,7 @@ CASES_PREDICTOR = [
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
     # predictor.validate_finger (issue 14): an empty FEM folder, an unwritable output
     ("predictor.validate_finger", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
-     "no FEM cases in {tmp}/none"),
+     "no FEM cases at mesh size 1.8 mm in {tmp}/none"),
     ("predictor.validate_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     # predictor.gesture --finger (issue 14): the finger file is read and checked while
     # parsing (tests/data/fingers/ holds the bad files), the pressures against its joints
@@ -206,9 +206,9 @@ CASES_PREDICTOR = [
      "--approach: 3 values for finger 'paper' of 2 joints"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--kinematics", "chord"], "invalid choice: 'chord'"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--joint-weight", "half"], "invalid choice: 'half'"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "split"],
-     "was trained for finger 'paper', tangent kinematics, lumped joint weights, not finger 'paper', "
-     "tangent kinematics, split joint weights"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "lumped"],
+     "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'paper', "
+     "cap kinematics, lumped joint weights"),
     # predictor.nn / bench / figures: outputs and inputs refused before any training or solve
     ("predictor.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
     ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],
