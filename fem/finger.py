@@ -136,7 +136,8 @@ def rotation_matrix(angle: float) -> np.ndarray:
 #: The joint's controls with a longer Newton budget and a finer last step: a pressure step
 #: swings the 200 mm finger through a large rotation under its weight, so a step often
 #: needs 9-12 iterations (the joint's limit was 12), and near full load in the grasp region
-#: (0.2, 0.2) MPa with gravity a step of 1/256 of the path still failed at that limit.
+#: (0.2, 0.2) MPa with gravity a step of 1/256 of the path still failed at that limit
+#: (with these controls it converges).
 FINGER_CONFIG = SolverConfig(max_it=25, min_step=1.0 / 1024)
 
 

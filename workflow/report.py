@@ -670,8 +670,9 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
                         "`python -m predictor.validate_finger` (joint model "
                         f"{_joint(root, v.get('joint'))}): the finger FEM render "
                         "(`python -m fem.finger_cases`, coloured by |u|) with the predictor's centre lines drawn over "
-                        "it for lumped joint weights (black: cap kinematics, red dashed: tangent); orange circle, "
-                        "the FEM fingertip.", "make validate-finger")
+                        f"it (black: the judged variant, `{v.get('judged_variant')}`; red dashed: the paper's "
+                        "chain, tangent kinematics with lumped joint weights); orange circle, the FEM fingertip.",
+                        "make validate-finger")
     rest = [c for c in figures if c not in shown]
     links = [f"[{c}]({figures[c]})" if (root / figures[c]).is_file() else f"{c} (not generated yet: "
              "`make validate-finger`)" for c in rest]
