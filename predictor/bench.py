@@ -27,7 +27,6 @@ import os
 import platform
 import statistics
 import time
-from pathlib import Path
 
 import torch
 
@@ -89,7 +88,6 @@ def main(argv: list[str] | None = None) -> int:
     grav_nn = evaluate(grav_pred.net, grav_nn_problem, p_val)
     paper_nn = evaluate(paper_pred.net, paper_pred.config.problem(joint), p_val)
     pc_val = sample_pressures(400, cont_pred.config, torch.Generator().manual_seed(78))
-    cont_raw = evaluate(cont_pred.net, cont_problem, pc_val)
     cont_vs_solver = evaluate_contact(cont_pred, joint, pc_val)
     cont_pol = evaluate_polished(cont_pred, joint, pc_val)
     cont_single = []
@@ -147,10 +145,8 @@ def main(argv: list[str] | None = None) -> int:
             "gravity_newton_batched_1000_ms": batched_ms,
             "gravity_newton_batched_converged": int(batch.converged.sum()),
             "gravity_nn_improved": grav_nn, "gravity_nn_paper_mlp": paper_nn,
-            "contact_nn_raw": cont_raw, "contact_nn_polished": cont_pol, "contact_nn_vs_solver": cont_vs_solver,
+            "contact_nn_polished": cont_pol, "contact_nn_vs_solver": cont_vs_solver,
             "contact_nn_validation_contact_fraction": in_contact,
-            "contact_nn_raw_residual_force_mN": cont_raw["force_mN_mean"],
-            "contact_nn_raw_residual_moment_Nmm": cont_raw["moment_Nmm_mean"],
         },
         "paper": {"gravity_lbfgs_s": "2-3", "contact_lbfgs_s": "10-15", "gravity_nn_residual_mN": 2.0,
                   "gravity_nn_residual_Nmm": 1.2, "contact_nn_residual_mN": ">10",

@@ -54,7 +54,6 @@ JOINT_CASE = {"p": 0.2, "f1": 1.0, "f2": -1.0, "m": 20.0}        # MPa, N, N, NÂ
 GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the paper's Figure 5A
 GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
 FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.finger_cases name
-FINGER_PRESSURES = (0.1, -0.1)
 HEARTBEAT_S = 30.0
 
 
