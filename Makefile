@@ -14,9 +14,10 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export PYVISTA_OFF_SCREEN := true
 # slurm-wlm + munge: tests/test_slurm.py runs workflow/slurm/campaign.sbatch on a throw-away
-# one-node cluster (the daemons are never started as services).
+# one-node cluster (the daemons are never started as services). libopenblas0-serial: without
+# it (--no-install-recommends) MUMPS and numpy get the reference BLAS, 4x slower LU.
 APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python3-venv openmpi-bin \
-                slurm-wlm munge
+                slurm-wlm munge libopenblas0-serial
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
@@ -32,7 +33,8 @@ setup: $(SETUP) ## install Debian FEniCSx (apt) and the .venv (idempotent)
 
 $(SETUP): pyproject.toml constraints.txt
 	@if ! /usr/bin/python3 -c "import dolfinx, gmsh, scipy" 2>/dev/null || ! command -v mpirun >/dev/null \
-	     || ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then \
+	     || ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null \
+	     || ! dpkg -s libopenblas0-serial >/dev/null 2>&1; then \
 	  echo "[setup] apt-get install $(APT_PACKAGES)"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(APT_PACKAGES); \
 	fi
@@ -59,7 +61,7 @@ bench-fem: results/bench/fem.json ## FEM timings at the production mesh -> resul
 results/bench/fem.json: fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_joint --out $@
 
-bench-finger: results/bench/finger.json ## whole-finger FEM timings, 3 gestures on one core (idle machine, ~25 min) -> results/bench/finger.json
+bench-finger: results/bench/finger.json ## whole-finger FEM timings, 4 gestures on one core (idle machine, ~30 min) -> results/bench/finger.json
 results/bench/finger.json: fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_finger --out $@
 

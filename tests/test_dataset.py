@@ -113,13 +113,17 @@ def set_input(root, value, column=3):
 
 def test_verify_flags_incomplete_and_out_of_box(tmp_path):
     """A campaign with one of 3 units missing verifies with an 'incomplete' warning (exit 0),
-    and fails (exit 1) with --require-complete. An input outside the box of fem.spec
+    and fails (exit 1) with --require-complete; --require-units A:B (a job-array slice)
+    passes for 0:1 and 2:3 and fails naming unit 1 for 0:3. An input outside the box of fem.spec
     (|M| = 150 > 100 N·mm, or NaN) is an error; one on the box edge up to fem.spec's
     relative BOX_TOL (float32 round-off) is not."""
     fabricate(tmp_path, units=[0, 2])
     r = store.verify(tmp_path)
     assert r["ok"] and any("incomplete" in w for w in r["warnings"])
     assert cli("verify", tmp_path, "--require-complete").returncode == 1
+    assert [cli("verify", tmp_path, "--require-units", u).returncode for u in ("0:1", "2:3")] == [0, 0]
+    r = cli("verify", tmp_path, "--require-units", "0:3")
+    assert r.returncode == 1 and "units missing from the slice 0:3: [1]" in r.stdout, r.stdout
     other = tmp_path / "box"
     fabricate(other)
     set_input(other, 100.0 * (1 + BOX_TOL / 2))

@@ -369,6 +369,30 @@ def test_script_refuses_bad_array_settings(tmp_path):
     assert not (tmp_path / "out").exists() and not list(tmp_path.glob("out.part*"))
 
 
+def test_a_step_that_srun_calls_done_but_never_ran_is_launched_again(tmp_path):
+    """An srun that prints "task 0 launch failed" and exits 0 without running the campaign
+    (seen on the CI cluster with two array tasks launching at once): the script does not
+    believe the 0, launches the step SRUN_TRIES = 2 times, then fails with one line (exit 1,
+    not 2: the settings were fine) and leaves no OUT. Outside Slurm, srun is a stub on PATH."""
+    bin_dir, calls = tmp_path / "bin", tmp_path / "calls"
+    bin_dir.mkdir()
+    (bin_dir / "srun").write_text("#!/bin/bash\necho \"$*\" >> " + str(calls) + "\n"
+                                  "echo 'srun: error: task 0 launch failed: Unspecified error' >&2\n")
+    (bin_dir / "srun").chmod(0o755)
+    env = {**BASE_ENV, **job_env(tmp_path / "out", SRUN_TRIES="2", UNITS="0:1"),
+           "PATH": f"{bin_dir}:{BASE_ENV['PATH']}"}
+    r = subprocess.run(["bash", str(SCRIPT)], cwd=ROOT, capture_output=True, text=True, env=env,
+                       timeout=120)
+    launches = calls.read_text().splitlines()
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert len(launches) == 2 and all("-m workflow.campaign" in c and "--units 0:1" in c
+                                      for c in launches), launches
+    assert "try 2 of 2" in r.stdout, r.stdout
+    errors = [line for line in r.stderr.splitlines() if line.startswith("campaign.sbatch: error")]
+    assert errors == [f"campaign.sbatch: error: srun exited 0 2 time(s) but {tmp_path / 'out'} is not done"], r.stderr
+    assert not (tmp_path / "out").exists()
+
+
 # ---------------------------------------------------------------------------- on the cluster
 def test_spent_budget_exits_3_on_two_pmix_ranks(cluster, tmp_path):
     """MAX_HOURS=1e-9: the campaign starts on a PMIx world of 2 ranks, solves nothing and

@@ -1,7 +1,7 @@
 """Dataset tools (DESIGN.md §5): inspect, verify and merge FEM campaign datasets.
 
     python -m workflow.dataset info ROOT [--json]
-    python -m workflow.dataset verify ROOT [--mirror N] [--require-complete] [--json]
+    python -m workflow.dataset verify ROOT [--mirror N] [--require-complete | --require-units A:B] [--json]
     python -m workflow.dataset merge OUT SOURCE [SOURCE ...] [--json]
 
 The command line only: the work is ``workflow.store`` (info, verify, merge), on datasets
@@ -20,6 +20,7 @@ import sys
 
 from fem import cli
 from workflow import store
+from workflow.campaign import unit_range
 from workflow.shards import MANIFEST, Manifest
 
 EXIT_PROBLEMS = 1
@@ -63,8 +64,12 @@ def parser() -> cli.Parser:
     p_ver.add_argument("--mirror", type=cli.number(0, None, "samples", integer=True), default=0,
                        metavar="N", help="also solve the y-mirror of N stored samples with the FEM "
                                          "and check the mirror relation (DESIGN.md §3); default 0")
-    p_ver.add_argument("--require-complete", action="store_true",
-                       help="treat an unfinished campaign as an error")
+    need = p_ver.add_mutually_exclusive_group()
+    need.add_argument("--require-complete", action="store_true",
+                      help="treat an unfinished campaign as an error")
+    need.add_argument("--require-units", type=unit_range, default=None, metavar="A:B",
+                      help="treat a missing unit among A..B-1 as an error (one slice of a "
+                           "campaign, e.g. a job-array task's --units)")
     p_mrg = sub.add_parser("merge", help="merge pieces of one campaign into OUT")
     p_mrg.add_argument("out", help="output dataset directory")
     p_mrg.add_argument("sources", nargs="+", help="dataset directories of the same campaign")
@@ -86,6 +91,13 @@ def main(argv=None) -> int:
             d = store.verify(args.root, mirror=args.mirror)
         if args.require_complete and any(w.startswith("incomplete") for w in d["warnings"]):
             d["ok"], d["errors"] = False, d["errors"] + ["incomplete campaign"]
+        if args.require_units and d["ok"]:
+            done = {e.unit for e in Manifest.load(args.root).shards}
+            missing = [u for u in range(*args.require_units) if u not in done]
+            if missing:
+                d["ok"] = False
+                d["errors"] = d["errors"] + [f"units missing from the slice "
+                                             f"{args.require_units[0]}:{args.require_units[1]}: {missing}"]
         cli.print_json(d) if args.json else _print_verify(args.root, d)
         return 0 if d["ok"] else EXIT_PROBLEMS
     why = cli.check_output(f"{args.out}/{MANIFEST}")   # not created: the sources are checked first
