@@ -105,3 +105,54 @@ def test_report_builds_without_artefacts(tmp_path):
 
 def test_not_judged_rows_say_so():
     assert workflow_report._cells(None).strip() == f"| {workflow_report.NOT_JUDGED} |"
+
+
+def test_mesh_study_judges_the_production_mesh_only(tmp_path):
+    """A mesh_study.json as fem.mesh_study writes it (figures made up): the production mesh
+    1.8 mm, 3.5 % anchor error against the Richardson extrapolation, is judged against
+    the recorded 2 % and 16,000 nodes ("no, over by 1.5 %"); the family's meshes are shown,
+    not judged."""
+    def mesh(h, w, nodes, percent):
+        err = {"anchor_mm": percent / 10, "anchor_percent": percent, "tip_mm": percent / 20,
+               "phi_end_deg": percent / 5, "cap_rotation_deg": percent / 4}
+        return {"mesh_size": h, "wall_mesh_size": w, "nodes": nodes, "max_error": err}
+
+    study = {"wall_mm": 1.2, "tolerance_percent": 2.0, "min_nodes": 16000,
+             "meshes": [mesh(1.8, None, 17351, 3.5), mesh(2.4, 1.2, 27908, 3.0),
+                        mesh(1.697, 0.849, 60000, 1.5), mesh(1.2, 0.6, 136875, 0.75)],
+             "family": [[2.4, 1.2], [1.697, 0.849], [1.2, 0.6]], "reference": "richardson",
+             "asymptotic": True, "extrapolation": [{"anchors": {"order": 2.0}}] * 4,
+             "production_mesh": [1.8, None], "production_error": None}
+    study["production_error"] = study["meshes"][0]["max_error"]
+    (tmp_path / "fem").mkdir()
+    (tmp_path / "fem/mesh_study.json").write_text(json.dumps(study))
+    text, _, checks = workflow_report.build(tmp_path)
+    (check,) = [c for c in checks if "production mesh" in c.figure]
+    assert check.figure == "production mesh 1.8 mm against the Richardson extrapolation"
+    assert check.verdict == "no, over by 1.5 %"
+    rows = {r[0]: r for h, rows in _tables(text) if h[0] == "mesh H:W (mm)" for r in rows}
+    assert rows["1.8"][-1] == check.verdict and rows["1.8"][3] == "3.50"
+    assert all(rows[m][-1] == workflow_report.NOT_JUDGED for m in ("2.4:1.2", "1.697:0.849", "1.2:0.6"))
+    assert "family 2.4:1.2, 1.697:0.849, 1.2:0.6 (in the asymptotic range)" in text
+    assert "orders of convergence of the anchors per corner: 2.00, 2.00, 2.00, 2.00" in text
+
+
+def test_finger_fem_time_is_judged_on_the_bench(tmp_path):
+    """With results/bench/finger.json (made-up times 200 and 700 s against the 600 s target)
+    the finger FEM row judges the bench's slowest case ("no, over by 100 s"), and the
+    validation run's slowest FEM time is shown beside it, not judged."""
+    (tmp_path / "validation").mkdir()
+    shutil.copy(RESULTS / "validation/finger.json", tmp_path / "validation/finger.json")
+    (tmp_path / "bench").mkdir()
+    cases = [{"case": "free_0.1_0.1", "wall_time_s": 200.0, "load_average_before": 0.1},
+             {"case": "gravity_0.2_0.2", "wall_time_s": 700.0, "load_average_before": 1.0}]
+    (tmp_path / "bench/finger.json").write_text(json.dumps(
+        {"cases": cases, "finger_fem_median_s": 450.0, "finger_fem_max_s": 700.0, "target_s": 600.0}))
+    text, _, checks = workflow_report.build(tmp_path)
+    (check,) = [c for c in checks if "finger FEM per gesture" in c.figure]
+    assert "`make bench-finger`, max over free_0.1_0.1, gravity_0.2_0.2" in check.figure
+    assert check.verdict == "no, over by 100 s"
+    validation_max = max(c["fem_s"] for c in json.loads((RESULTS / "validation/finger.json").read_text())["fem"]
+                         if c["converged"])
+    row = next(r for h, rows in _tables(text) for r in rows if r[0].startswith("finger FEM per gesture in the validation"))
+    assert row[1] == f"{validation_max:.0f} s" and row[-1] == workflow_report.NOT_JUDGED

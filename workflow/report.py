@@ -32,7 +32,7 @@ import math
 import operator
 import re
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from fem import cli
@@ -210,25 +210,7 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
     ms = _load(root / "fem/mesh_study.json")
     out += ["### Mesh convergence (`make mesh-study`)", ""]
     if ms:
-        error = Target("<=", ms["tolerance_percent"], "%")
-        nodes = Target(">=", ms.get("min_nodes", 0), "nodes", shown=f"{ms.get('min_nodes', 0):,}")
-        out += ["Four corners of the input box, solved from zero on each mesh; error = largest "
-                "anchor distance to the finest mesh over the largest anchor displacement.", "",
-                "| h (mm) | P2 nodes | dofs | error per corner (%) | max (%) | target | met |",
-                "|---|---|---|---|---|---|---|"]
-        for m in ms["meshes"]:  # the rule picks the production mesh: only it is judged
-            errs = ", ".join(f"{e:.2f}" for e in m["error_vs_finest_percent"])
-            check = None
-            if m["mesh_size"] == ms["production_mesh_size"]:
-                check = judge(title, f"production mesh h = {m['mesh_size']} mm",
-                              [(error, m["max_error_percent"]), (nodes, m["nodes"])])
-                checks.append(check)
-            out.append(f"| {m['mesh_size']} | {m['nodes']} | {m['dofs']} | {errs} | "
-                       f"{m['max_error_percent']:.2f} |" + _cells(check))
-        out += ["", f"Production mesh: h = {ms['production_mesh_size']} mm "
-                f"(the coarsest within {ms['tolerance_percent']} % of the finest, the paper "
-                f"accepted {PAPER['mesh_change_percent']} %, with at least {ms.get('min_nodes', 0):,} nodes, "
-                f"the paper's resolution). The other meshes are shown, not judged.", ""]
+        out += _mesh_study(ms, title, checks)
     else:
         out += _missing("mesh convergence", "make mesh-study")
 
@@ -277,6 +259,59 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
 #: Issue 3's throughput targets (bench_campaign records whether they are met).
 CAMPAIGN_TARGETS = (Target(">=", 400, key="samples_per_hour_2ranks"),
                     Target(">=", 0.85, "%", 100, key="parallel_efficiency"))
+
+
+MESH_REFERENCE = {"richardson": "the Richardson extrapolation", "finest mesh": "the finest mesh"}
+
+
+def _mesh_label(h: float, w: float | None) -> str:
+    """A mesh as fem.mesh_study names it: "H" or "H:W" (mm)."""
+    return f"{h:g}" + (f":{w:g}" if w else "")
+
+
+def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
+    """The mesh study (fem.mesh_study): every mesh's worst error over the four corners
+    against the reference (Richardson extrapolation of the refined family, or the finest
+    mesh); the production mesh is judged."""
+    error = Target("<=", ms["tolerance_percent"], "%")
+    nodes = Target(">=", ms["min_nodes"], "nodes", shown=f"{ms['min_nodes']:,}")
+    prod = tuple(ms["production_mesh"])
+    if ms["reference"] == "richardson":
+        ref = (f"the Richardson extrapolation (h -> 0) of the family "
+               f"{', '.join(_mesh_label(*m) for m in ms['family'])} "
+               f"({'in' if ms['asymptotic'] else 'NOT in'} the asymptotic range)")
+    else:
+        ref = ("the finest mesh: no three meshes refined by one ratio, so no extrapolation, and every "
+               "error below is a difference from that mesh, a lower bound on the true error")
+    out = [f"Four corners of the input box, solved from zero on each mesh `H[:W]` (tetrahedron size H, "
+           f"W on the {ms['wall_mm']} mm chamber walls; W = {ms['wall_mm'] / 2:g} puts two P2 elements "
+           f"through the wall). Reference: {ref}. Errors are the worst over the corners: the "
+           "largest anchor distance (mm, and % of the largest anchor displacement), phi_end and the cap "
+           "rotation.", "",
+           "| mesh H:W (mm) | P2 nodes | anchors (mm) | anchors (%) | tip (mm) | phi_end (°) | cap rotation (°) | target | met |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for m in ms["meshes"]:
+        e, check = m["max_error"], None
+        label = _mesh_label(m["mesh_size"], m["wall_mesh_size"])
+        if (m["mesh_size"], m["wall_mesh_size"]) == prod:
+            check = judge(title, f"production mesh {label} mm against {MESH_REFERENCE[ms['reference']]}",
+                          [(error, e["anchor_percent"]), (nodes, m["nodes"])])
+            if ms["reference"] != "richardson":     # a difference from the finest mesh bounds
+                check = replace(check, met=False,   # the error from below: not a verdict
+                                verdict=f"not established: {e['anchor_percent']:.2f} % is a lower bound "
+                                        "(no extrapolation yet)")
+            checks.append(check)
+        out.append(f"| {label} | {m['nodes']:,} | {e['anchor_mm']:.4f} | {e['anchor_percent']:.2f} | "
+                   f"{e['tip_mm']:.4f} | {e['phi_end_deg']:.3f} | {e['cap_rotation_deg']:.3f} |" + _cells(check))
+    if ms["reference"] == "richardson":
+        orders = [_num(x["anchors"]["order"], ".2f") for x in ms["extrapolation"]]
+        out += ["", f"Observed orders of convergence of the anchors per corner: {', '.join(orders)} "
+                "(P2 on smooth fields: 2; contact and curved walls lower it)."]
+    out += ["", f"Production mesh: {_mesh_label(*prod)} mm, the "
+            "one the datasets were generated on; judged against the tolerance (the paper accepted "
+            f"{PAPER['mesh_change_percent']} %) and the paper's resolution. The other meshes are shown, "
+            "not judged.", ""]
+    return out
 
 
 def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
@@ -623,15 +658,12 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    f"({m['production_nodes']:,} -> {m['nodes']:,} nodes), {m['case']} | {m['tip_change_mm']:.2f} mm, "
                    f"{m['tip_angle_change_deg']:+.2f}° | `python -m fem.finger_cases --mesh-size {m['mesh_size']}` |")
     study = _load(root / "fem/mesh_study.json")
-    if study:
-        sizes = sorted(m["mesh_size"] for m in study["meshes"])
-        h = study["production_mesh_size"]
-        fine, prod = (next(m for m in study["meshes"] if m["mesh_size"] == s) for s in (sizes[0], h))
-        dr = max(math.dist(a, b) for p, f in zip(prod["cases"], fine["cases"])
-                 for a, b in zip(p["anchors"], f["anchors"]))
-        dphi = max(abs(p["phi_end_deg"] - f["phi_end_deg"]) for p, f in zip(prod["cases"], fine["cases"]))
-        out.append(f"| discretisation: one joint at the box corners, mesh {h} -> {sizes[0]} mm | anchors {dr:.2f} mm, "
-                   f"phi_end {dphi:.2f}° (at the corners, far beyond the finger's joint loads) | `make mesh-study` |")
+    if study and study.get("production_error"):
+        e = study["production_error"]
+        out.append(f"| discretisation: one joint at the box corners, production mesh {_mesh_label(*study['production_mesh'])} mm "
+                   f"against {MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, phi_end "
+                   f"{e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst corner; the corners "
+                   "load a joint far more than the finger's cases do) | `make mesh-study` |")
     surrogate = _load(root / "surrogate/metrics.json")
     held = (surrogate or {}).get("improved", {}).get("heldout", {})
     if held.get("cap_rotation_error_deg") is not None:
@@ -641,6 +673,17 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    "(`make train`) |")
     out.append(f"| finger model + surrogate against the finger FEM ({judged}) | "
                f"{j['tip_error_mm_max']:.2f} mm max, {j['tip_angle_error_deg_max']:.2f}° | this validation |")
+    finger_mesh = max((m["tip_change_mm"] for m in v.get("mesh_check", [])), default=None)
+    if finger_mesh is not None:
+        largest = "discretisation" if finger_mesh > j["tip_error_mm_max"] else "the finger model"
+        out += ["", f"Largest term at the fingertip: **{largest}** (the finger FEM moves its tip by "
+                f"{finger_mesh:.3f} mm on the finer joint mesh; predictor and FEM differ by up to "
+                f"{j['tip_error_mm_max']:.2f} mm). "
+                + ("So the datasets are not regenerated on a finer mesh for the finger's sake"
+                   if largest != "discretisation" else "So a finer-mesh dataset would pay off")
+                + (". The joint study at the box corners is incomplete (no extrapolation yet; its figure is a "
+                   "lower bound) and decides it for loads near the corners." if study and study["reference"] != "richardson"
+                   else ".")]
     return out
 
 
@@ -679,6 +722,25 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
     if links:
         out += ["The other overlays: " + ", ".join(links) + ".", ""]
     return out
+
+
+def _finger_fem_time(root: Path, validation_max: float, target_s: float) -> list[tuple]:
+    """The finger FEM's time per gesture: judged on `make bench-finger` (an idle machine,
+    one rank, the cases it names), with the validation run's slowest case shown beside it
+    (that run shares the machine with other jobs); judged on the validation if no bench."""
+    b = _load(root / "bench/finger.json")
+    where = "(max over the validation's cases; timed while the machine ran other jobs)"
+    if not b:
+        return [(f"finger FEM per gesture, production mesh, one core {where}", f"{validation_max:.0f} s",
+                 Target("<=", target_s, "s"), validation_max, PAPER["finger_fem"])]
+    shown = (f"finger FEM per gesture in the validation run {where}", f"{validation_max:.0f} s")
+    cases = ", ".join(c["case"] for c in b["cases"])
+    load = max(c["load_average_before"] for c in b["cases"])
+    return [(f"finger FEM per gesture, production mesh, one core (`make bench-finger`, max over {cases}; "
+             f"load average up to {load:.1f} at the start of a case)",
+             f"{b['finger_fem_max_s']:.0f} s (median {b['finger_fem_median_s']:.0f} s)",
+             Target("<=", b["target_s"], "s"), b["finger_fem_max_s"], PAPER["finger_fem"]),
+            (*shown, None, None, "")]
 
 
 def finger_section(root: Path) -> tuple[list[str], list[Check]]:
@@ -742,14 +804,14 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
             (f"speed-up of {judged} over the finger FEM (min; both timed in finger.json)",
              f"{j['speedup_min']:,.0f}x", Target(">=", t["speedup"], "x"), j["speedup_min"],
              PAPER["predictor_speedup"]),
-            ("finger FEM per gesture, production mesh, one core (max, wall time)", f"{fem_max:.0f} s",
-             Target("<=", t["fem_s"], "s"), fem_max, PAPER["finger_fem"]),
+            *_finger_fem_time(root, fem_max, t["fem_s"]),
             (f"validation cases the FEM solved ({n_free} free, {len(solved) - n_free} with gravity)",
              f"{len(solved)} of {len(fem)} run", Target(">=", t["fem_cases"], "cases"), len(solved), "")]
     out += ["", "| figure | measured | paper | target | met |", "|---|---|---|---|---|"]
     for label_, shown, target, value, was in rows:
-        checks.append(judge(title, f"finger {label_}", [(target, value)]))
-        out.append(f"| {label_} | {shown} | {was} |" + _cells(checks[-1]))
+        check = judge(title, f"finger {label_}", [(target, value)]) if target else None
+        checks += [check] if check else []
+        out.append(f"| {label_} | {shown} | {was} |" + _cells(check))
     out += ["", "Every variant over the solved cases (finger.json summary; only the judged one is held to the "
             "targets):", "", "| variant | cases | tip error max / mean | tip angle error max | joint-end angle "
             "error max | speed-up min | met |", "|---|---|---|---|---|---|---|"]
