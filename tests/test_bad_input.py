@@ -14,7 +14,8 @@ The first row of every module runs in a subprocess of its own, as a user runs it
 other rows of a package run one after another inside one Python process
 (tests/data/run_cli_rows.py: runpy with file descriptors 1 and 2 caught), which imports
 torch or dolfinx once instead of once per row: 2-3 s of imports against a fraction of a
-second of work for most rows (the table took 270 s as 149 subprocesses, 67 s this way).
+second of work for most rows (in the full suite the table took 272 s as 149 subprocesses,
+49 s this way).
 
 Rows are grouped by package; ``{tmp}`` in an argument is replaced by the row's folder.
 """

@@ -20,7 +20,9 @@ processes it started afterwards. On it, a coarse campaign (6 samples in 3 units 
 
 Without the cluster: ``workflow.campaign`` inside an srun step of 2 tasks that sees a world
 of 1 (no MPI plugin) exits 2 with one line from task 0 only and creates nothing; the script
-run by bash refuses inconsistent job-array settings (exit 2, one line) before any srun.
+run by bash refuses inconsistent job-array settings (exit 2, one line) before any srun, and
+does not believe an srun stub that exits 0 without running the campaign (it launches the
+step again, SRUN_TRIES times, then exits 1).
 
 If slurm-wlm/munge are absent and apt-get cannot install them, or the daemons do not come
 up, the cluster tests are skipped with the reason. Seed 3411 keeps the from-zero solves

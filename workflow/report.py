@@ -725,9 +725,10 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
 
 
 def _finger_fem_time(root: Path, validation_max: float, target_s: float) -> list[tuple]:
-    """The finger FEM's time per gesture: judged on `make bench-finger` (an idle machine,
-    one rank, the cases it names), with the validation run's slowest case shown beside it
-    (that run shares the machine with other jobs); judged on the validation if no bench."""
+    """The finger FEM's time per gesture: judged on `make bench-finger` (one rank, the
+    cases it names, with the load average it recorded), the validation run's slowest case
+    shown beside it (that run shares the machine with other jobs); judged on the
+    validation when there is no bench."""
     b = _load(root / "bench/finger.json")
     where = "(max over the validation's cases; timed while the machine ran other jobs)"
     if not b:
