@@ -147,6 +147,10 @@ def main(argv: list[str] | None = None) -> int:
             "gravity_nn_improved": grav_nn, "gravity_nn_paper_mlp": paper_nn,
             "contact_nn_polished": cont_pol, "contact_nn_vs_solver": cont_vs_solver,
             "contact_nn_validation_contact_fraction": in_contact,
+            # the pressures each network was trained on and is validated over here
+            "nn_domain_MPa": {name: {"p1": list(pred.config.p1_range), "p2": list(pred.config.p2_range)}
+                              for name, pred in (("gravity_nn", grav_pred), ("gravity_nn_paper", paper_pred),
+                                                 ("contact_nn", cont_pred))},
         },
         "paper": {"gravity_lbfgs_s": "2-3", "contact_lbfgs_s": "10-15", "gravity_nn_residual_mN": 2.0,
                   "gravity_nn_residual_Nmm": 1.2, "contact_nn_residual_mN": ">10",

@@ -458,6 +458,13 @@ def predictor_section(root: Path) -> tuple[list[str], list[Check]]:
     return out, checks
 
 
+def _domain(b: dict, name: str) -> str:
+    """ ", over P1 in [a, b], P2 in [c, d] MPa": the pressures network ``name`` was trained on
+    and validated over (bench details.nn_domain_MPa), or "" if not recorded."""
+    d = b["details"].get("nn_domain_MPa", {}).get(name)
+    return f", over P1 in [{d['p1'][0]:g}, {d['p1'][1]:g}], P2 in [{d['p2'][0]:g}, {d['p2'][1]:g}] MPa" if d else ""
+
+
 def _p95_max(r: dict | None) -> str:
     """ "; p95 F mN, M N·mm; max F, M" of a residual record (predictor.nn.evaluate)."""
     if not r:
@@ -490,15 +497,17 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
              [], []),
             ("contact gesture (median)", f"{b['contact_median_ms']:.1f} ms", was("contact_lbfgs_s", "s"),
              target("contact_ms", "<=", "ms"), [b["contact_median_ms"]]),
-            ("gravity NN residual, gravity_nn.pt (\"improved\"), raw network, mean",
+            ("gravity NN residual, gravity_nn.pt (\"improved\"), raw network, mean" + _domain(b, "gravity_nn"),
              f"{b['gravity_nn_residual_force_mN']:.3g} mN, {b['gravity_nn_residual_moment_Nmm']:.3g} N·mm"
              + _p95_max(b["details"].get("gravity_nn_improved")),
              f"< {was('gravity_nn_residual_mN', 'mN')}, {was('gravity_nn_residual_Nmm', 'N·mm')}",
              nn, [b["gravity_nn_residual_force_mN"], b["gravity_nn_residual_moment_Nmm"]]),
-            *([("gravity NN residual, gravity_nn_paper.pt (the paper's MLP), raw network, mean",
+            *([("gravity NN residual, gravity_nn_paper.pt (the paper's MLP), raw network, mean"
+                + _domain(b, "gravity_nn_paper"),
                 f"{paper_mlp['force_mN_mean']:.3g} mN, {paper_mlp['moment_Nmm_mean']:.3g} N·mm" + _p95_max(paper_mlp),
                 "", [], [])] if (paper_mlp := b["details"].get("gravity_nn_paper_mlp")) else []),
-            ("contact NN residual, raw network (no solver), mean", f"{b['contact_nn_raw_residual_force_mN']:.4g} mN, "
+            ("contact NN residual, raw network (no solver), mean" + _domain(b, "contact_nn"),
+             f"{b['contact_nn_raw_residual_force_mN']:.4g} mN, "
              f"{b['contact_nn_raw_residual_moment_Nmm']:.4g} N·mm",
              f"{was('contact_nn_residual_mN', 'mN')}, {was('contact_nn_residual_Nmm', 'N·mm')} (failed)",
              raw_nn, [b["contact_nn_raw_residual_force_mN"], b["contact_nn_raw_residual_moment_Nmm"]]),
