@@ -61,7 +61,7 @@ bench-fem: results/bench/fem.json ## FEM timings at the production mesh -> resul
 results/bench/fem.json: fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_joint --out $@
 
-bench-finger: results/bench/finger.json ## whole-finger FEM timings, 4 gestures on one core (idle machine, ~30 min) -> results/bench/finger.json
+bench-finger: results/bench/finger.json ## whole-finger FEM timings, 4 gestures on one core (idle machine, ~18 min) -> results/bench/finger.json
 results/bench/finger.json: fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_finger --out $@
 

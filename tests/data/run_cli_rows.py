@@ -26,12 +26,19 @@ import tempfile
 import traceback
 
 
+def _read(f) -> str:
+    f.seek(0)
+    return f.read().decode(errors="replace")
+
+
 def run_row(module: str, args: list[str]) -> dict:
     """One command line, in-process; its exit code and captured output."""
     saved = {fd: os.dup(fd) for fd in (1, 2)}
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        sys.stdout.flush(), sys.stderr.flush()
-        os.dup2(out.fileno(), 1), os.dup2(err.fileno(), 2)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.dup2(out.fileno(), 1)
+        os.dup2(err.fileno(), 2)
         sys.argv = [module, *args]
         sys.modules.pop(module, None)   # an earlier row's import: run the module afresh, as -m does
         try:
@@ -48,13 +55,12 @@ def run_row(module: str, args: list[str]) -> dict:
             traceback.print_exc()
             code = 1
         finally:
-            sys.stdout.flush(), sys.stderr.flush()
+            sys.stdout.flush()
+            sys.stderr.flush()
             for fd, copy in saved.items():
                 os.dup2(copy, fd)
                 os.close(copy)
-        out.seek(0), err.seek(0)
-        return {"returncode": code, "stdout": out.read().decode(errors="replace"),
-                "stderr": err.read().decode(errors="replace")}
+        return {"returncode": code, "stdout": _read(out), "stderr": _read(err)}
 
 
 def main() -> int:
