@@ -228,7 +228,9 @@ def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
     """A synthetic study whose results follow f(h) = f* + C h^2 exactly (anchors shifted by
     C h^2 along x, phi_end and cap rotation by 0.1 h^2 deg), with the production mesh
     1.8 mm outside the sqrt(2) family: the family is found, the extrapolation is f*, and
-    the production mesh's error is C 1.8^2 in anchors and 0.1 1.8^2 deg in both angles."""
+    the production mesh's error is C 1.8^2 in anchors and 0.1 1.8^2 deg in both angles.
+    The finest family is chosen, and one is found with the production mesh between its
+    members in size (3.394:1.697 > 1.8 > 2.4:1.2)."""
     from fem import mesh_study
 
     X = anchor_points(JointGeometry().length)[:, :2]
@@ -247,3 +249,8 @@ def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
     assert abs(out["production_error"]["anchor_mm"] - 0.01 * 1.8 ** 2) < 1e-9
     assert abs(out["production_error"]["phi_end_deg"] - 0.1 * 1.8 ** 2) < 1e-9
     assert abs(out["production_error"]["cap_rotation_deg"] - 0.1 * 1.8 ** 2) < 1e-9
+    coarse = mesh(2.4 * r, 1.2 * r)
+    assert mesh_study.analyse([coarse] + meshes, (1.8, None))["family"] == [[2.4, 1.2], [2.4 / r, 1.2 / r], [1.2, 0.6]]
+    out = mesh_study.analyse([coarse] + meshes[:3], (1.8, None))
+    assert out["family"] == [[2.4 * r, 1.2 * r], [2.4, 1.2], [2.4 / r, 1.2 / r]] and out["asymptotic"]
+    assert abs(out["production_error"]["phi_end_deg"] - 0.1 * 1.8 ** 2) < 1e-9

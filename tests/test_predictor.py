@@ -219,7 +219,8 @@ def test_two_finger_mirror_symmetry():
 def test_gradcheck_residual_and_jacobian():
     """torch.autograd.gradcheck: d(residual)/d(tau, P) equals central finite differences
     (gravity, and contact with penetration); the solver's batched Jacobian equals
-    torch.autograd.functional.jacobian to 1e-10."""
+    torch.autograd.functional.jacobian of the eager residual to 1e-7 relative (it is central
+    differences of the traced residual), and the traced residual equals the eager one."""
     p = t([[0.1, 0.2]])
     grasp = solve(GRASP, p)
     for problem, tau0 in ((GRAVITY, t([[[0.2, 0.01, -3.0], [0.05, -0.02, 0.4]]])), (GRASP, grasp.tau)):
@@ -231,9 +232,13 @@ def test_gradcheck_residual_and_jacobian():
         assert torch.autograd.gradcheck(f, (tau0.clone().requires_grad_(True), p.clone().requires_grad_(True)),
                                         eps=1e-7, atol=1e-5, rtol=1e-4)
         r_fn = _residual_fn(problem)
-        Jmat, _, _ = _jacobian_fn(r_fn)(tau0.reshape(1, 6), p)
-        ref = torch.autograd.functional.jacobian(lambda x: r_fn(x, p)[0, :6], tau0.reshape(1, 6))[:, 0]
-        np.testing.assert_allclose(Jmat[0, :6].numpy(), ref.numpy(), atol=1e-10)
+        x0 = tau0.reshape(1, 6)
+        Jmat, r0, Jp = _jacobian_fn(problem)(x0, p)
+        ref = torch.autograd.functional.jacobian(lambda x: r_fn(x, p)[0, :6], x0)[:, 0]
+        ref_p = torch.autograd.functional.jacobian(lambda q: r_fn(x0, q)[0, :6], p)[:, 0]
+        np.testing.assert_allclose(r0[0].numpy(), r_fn(x0, p)[0].numpy(), rtol=0, atol=1e-14)
+        np.testing.assert_allclose(Jmat[0, :6].numpy(), ref.numpy(), atol=1e-7 * float(ref.abs().max()))
+        np.testing.assert_allclose(Jp[0].numpy(), ref_p.numpy(), atol=1e-7 * float(ref_p.abs().max()))
 
 
 def test_range_penalty_zero_inside_box():
@@ -648,8 +653,9 @@ def test_paper_finger_reproduces_the_frozen_predictor(model):
     tests/data/predictor_reference.json by tests/data/freeze_predictor_reference.py), on
     the analytic joint and on the committed paper surrogate: gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1) and one
     circle grasp from the approach gesture. tau to 1e-9 N / N·mm, the tip and every pose
-    point (both joints, link, tip, contact sample points) to 1e-9 mm, theta and phi to
-    1e-12 rad, the same Newton iteration count, and at a fixed off-equilibrium tau the
+    point (both joints, link, tip, contact sample points) to 1e-9 mm, the angles to
+    1e-10 rad (the last Newton iterate moves by ~1e-12 with the solver's Jacobian, which
+    is now central differences), the same Newton iteration count, and at a fixed off-equilibrium tau the
     Equation-1 residual and the contact forces to 1e-9 N / N·mm."""
     ref = json.loads(REFERENCE.read_text())["models"][model]
     if model != "analytic" and not (ROOT / model).is_file():
@@ -662,9 +668,9 @@ def test_paper_finger_reproduces_the_frozen_predictor(model):
         assert bool(res.converged[0]) and int(res.iterations[0]) == case["iterations"], case["case"]
         np.testing.assert_allclose(res.tau[0].numpy(), case["tau"], rtol=0, atol=1e-9)
         np.testing.assert_allclose(res.pose.tip_end[0].numpy(), case["tip"], rtol=0, atol=1e-9)
-        assert abs(float(res.pose.tip_angle[0]) - case["tip_angle_rad"]) <= 1e-12
+        assert abs(float(res.pose.tip_angle[0]) - case["tip_angle_rad"]) <= 1e-10
         for name, value in case["pose"].items():
-            atol = 1e-12 if name in ("theta", "phi") else 1e-9
+            atol = 1e-10 if name in ("theta", "phi") else 1e-9
             np.testing.assert_allclose(getattr(res.pose, name)[0].numpy(), np.array(value), rtol=0, atol=atol,
                                        err_msg=f"{case['case']} {name}")
         st = problem.residual(res.pressures, t([case["tau_off"]]))
@@ -1060,3 +1066,31 @@ def test_surrogate_cap_head_drives_cap_kinematics(tmp_path):
     np.testing.assert_allclose((pose.phi - pose.theta).numpy(), cap.numpy(), rtol=0, atol=1e-15)
     with pytest.raises(ValueError, match="has no cap-rotation head: use --kinematics tangent"):
         GripperProblem(SurrogateJoint(paths[False]), GripperParams(kinematics="cap"))
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and (ROOT / "results/predictor/contact_nn.pt").is_file()),
+                    reason="no committed surrogate or NN checkpoints")
+def test_bench_writes_every_required_key(tmp_path):
+    """``python -m predictor.bench --quick`` (a few samples per figure, the committed models)
+    writes every top-level figure issues 5 and 15 require as a finite number, a target for
+    each judged one (the gravity Newton at issue 15's 2 ms), and figures that agree with
+    their details: the batched rates are converged gestures over measured seconds, and
+    the fast contact path's misses and times add up to its cases."""
+    from predictor import bench
+
+    out = tmp_path / "bench.json"
+    run = subprocess.run([sys.executable, "-m", "predictor.bench", "--quick", "--model", str(SURROGATE),
+                          "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    b = json.loads(out.read_text())
+    for key in bench.REQUIRED_KEYS:
+        assert isinstance(b[key], (int, float)) and math.isfinite(b[key]), key
+    assert b["sizes"] == bench.QUICK
+    assert b["targets"]["gravity_newton_ms"] == 2 and b["targets"]["contact_fast_ms"] == 50
+    assert b["targets"]["contact_batched_per_s"] == 1e4 and b["targets"]["gravity_batched_per_s"] == 1e5
+    cb = b["details"]["contact_batched"]
+    assert cb["converged"] <= cb["n"] and abs(b["contact_batched_per_s"] - cb["converged"] / cb["s"]) < 1e-9
+    fast = b["details"]["contact_fast"]
+    assert fast["n"] == bench.QUICK["contact"] and 0 <= fast["misses"] < fast["n"]
+    assert 0.0 <= b["contact_nn_state_agreement"] <= 1.0
+    assert b["contact_nn_raw_p95_force_mN"] >= 0.0 and b["gravity_batched_per_s"] > 0.0

@@ -111,7 +111,8 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
     """A mesh_study.json as fem.mesh_study writes it (figures made up): the production mesh
     1.8 mm, 3.5 % anchor error against the Richardson extrapolation, is judged against
     the recorded 2 % and 16,000 nodes ("no, over by 1.5 %"); the family's meshes are shown,
-    not judged."""
+    not judged. Out of the asymptotic range (reference: the finest mesh) the error is a
+    lower bound: a miss when it already exceeds the tolerance, no verdict below it."""
     def mesh(h, w, nodes, percent):
         err = {"anchor_mm": percent / 10, "anchor_percent": percent, "tip_mm": percent / 20,
                "phi_end_deg": percent / 5, "cap_rotation_deg": percent / 4}
@@ -133,8 +134,18 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
     rows = {r[0]: r for h, rows in _tables(text) if h[0] == "mesh H:W (mm)" for r in rows}
     assert rows["1.8"][-1] == check.verdict and rows["1.8"][3] == "3.50"
     assert all(rows[m][-1] == workflow_report.NOT_JUDGED for m in ("2.4:1.2", "1.697:0.849", "1.2:0.6"))
-    assert "family 2.4:1.2, 1.697:0.849, 1.2:0.6 (in the asymptotic range)" in text
+    assert "family 2.4:1.2, 1.697:0.849, 1.2:0.6, in the asymptotic range" in text
     assert "orders of convergence of the anchors per corner: 2.00, 2.00, 2.00, 2.00" in text
+    study.update(asymptotic=False, reference="finest mesh", extrapolation=[{"anchors": {"order": None}}] * 4)
+    for percent, verdict in ((3.5, "no, over by at least 1.50 % (3.50 % is a lower bound)"),
+                             (1.5, "not established: 1.50 % is a lower bound (no extrapolation in the asymptotic range)")):
+        study["meshes"][0] = mesh(1.8, None, 17351, percent)
+        (tmp_path / "fem/mesh_study.json").write_text(json.dumps(study))
+        text, _, checks = workflow_report.build(tmp_path)
+        (check,) = [c for c in checks if "production mesh" in c.figure]
+        assert check.figure == "production mesh 1.8 mm against the finest mesh" and not check.met
+        assert check.verdict == verdict
+    assert "family 2.4:1.2, 1.697:0.849, 1.2:0.6 is NOT in the asymptotic range" in text
 
 
 def test_finger_fem_time_is_judged_on_the_bench(tmp_path):
