@@ -21,9 +21,10 @@ computed per corner for the anchors (a vector: one order from the norms), phi_en
 cap rotation. The family is in the asymptotic range when, for every corner and result, the
 changes shrink (|f3 - f2| < |f2 - f1|) and p lies in [0.5, 4] (P2 elements: p = 2 for
 smooth fields; contact and the curved walls lower it); otherwise the study says so and the
-finest mesh is the reference (the error of a coarser mesh is then bounded below only). Every mesh's error
-against the reference is reported: the largest anchor distance (mm and percent of the
-largest anchor displacement), and the phi_end and cap-rotation differences (deg).
+finest mesh is the reference (the error of a coarser mesh is then bounded below only).
+Every mesh's error against the reference is reported: the largest anchor distance (mm and
+percent of the largest anchor displacement), and the phi_end and cap-rotation differences
+(deg).
 
 The production mesh is the one the datasets were generated on (JointGeometry's default
 mesh_size); the study reports its error, it does not choose it.

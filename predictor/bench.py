@@ -185,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         "details": {
             "gravity_newton": newton, "gravity_lbfgs": lbfgs, "contact_newton": contact,
             "contact_cases": p_contact.tolist(), "contact_approach_MPa": APPROACH,
-            "contact_lbfgs_one_case": lbfgs_contact and {
+            "contact_lbfgs_one_case": None if lbfgs_contact is None else {
                 "pressures_MPa": p_contact[4].tolist(), "ms": lbfgs_contact.time_ms,
                 "converged": bool(lbfgs_contact.converged[0]),
                 "residual_force_mN": lbfgs_contact.residual_force_mN[0].tolist(),

@@ -21,9 +21,9 @@ Variants (``python -m predictor.nn --variant ...``):
   the penalty (dR/dtau ~ k_c × contact length), which is where the paper stalled. What
   works: (1) supervision from the batched iterative solver (labels are cheap: one
   batched solve), SiLU MLP 2 -> 128 -> 128 -> 128 -> 6, Adam + L-BFGS on the label loss;
-  (2) the NN's tau warm-starts the exact-Jacobian LM
-  with a small step cap (a local polish, median ~7 iterations), and samples it cannot
-  converge fall back to the full ramp. The raw NN is still far from the 2 mN bound
+  (2) the NN's tau warm-starts the LM (Jacobian by differences, the exact one
+  where that stalls) with a small step cap (a local polish, median ~7 iterations), and
+  samples it cannot converge fall back to the full ramp. The raw NN is still far from the 2 mN bound
   (penalty stiffness amplifies its error); the checkpoint records both. Tried and
   dropped (no longer in the code): one plain Newton step from the NN (diverges: 926 ->
   60000 mN mean), and fine-tuning the supervised net by L-BFGS on the equilibrium loss:
