@@ -155,10 +155,9 @@ def main(argv: list[str] | None = None) -> int:
             tau_only_s = min(tau_only_s, time.perf_counter() - t0)
     # The delivered path (predictor.nn.predict_gesture): network, kinematics and the
     # residual check that refuses an answer outside the NN bound.
-    g_problem = grav_pred.config.problem(joint)
-    predict_gesture(grav_pred, g_problem, p_big[:10])
-    delivered_s = min(predict_gesture(grav_pred, g_problem, p_big).time_ms for _ in range(3)) / 1e3
-    single = [predict_gesture(grav_pred, g_problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
+    predict_gesture(grav_pred, grav_nn_problem, p_big[:10])
+    delivered_s = min(predict_gesture(grav_pred, grav_nn_problem, p_big).time_ms for _ in range(3)) / 1e3
+    single = [predict_gesture(grav_pred, grav_nn_problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
 
     out = {
         "gravity_newton_median_ms": newton["median_ms"],

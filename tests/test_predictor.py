@@ -1075,7 +1075,9 @@ def test_bench_writes_every_required_key(tmp_path):
     writes every top-level figure issues 5 and 15 require as a finite number, a target for
     each judged one (the gravity Newton at issue 15's 2 ms), and figures that agree with
     their details: the batched rates are converged gestures over measured seconds, and
-    the fast contact path's misses and times add up to its cases."""
+    the fast contact path's misses and times add up to its cases. Physics: every gravity
+    Newton solve converged to the solver's 1e-4 mN / 1e-5 N·mm, and the polished contact
+    NN (a solver result) to the issue's 0.1 mN / 0.01 N·mm."""
     from predictor import bench
 
     out = tmp_path / "bench.json"
@@ -1094,3 +1096,7 @@ def test_bench_writes_every_required_key(tmp_path):
     assert fast["n"] == bench.QUICK["contact"] and 0 <= fast["misses"] < fast["n"]
     assert 0.0 <= b["contact_nn_state_agreement"] <= 1.0
     assert b["contact_nn_raw_p95_force_mN"] >= 0.0 and b["gravity_batched_per_s"] > 0.0
+    g = b["details"]["gravity_newton"]
+    assert g["converged"] == g["n"] == bench.QUICK["gravity"]
+    assert g["max_residual_force_mN"] <= 1e-4 and g["max_residual_moment_Nmm"] <= 1e-5
+    assert b["contact_nn_residual_force_mN"] <= 0.1 and b["contact_nn_residual_moment_Nmm"] <= 0.01

@@ -264,11 +264,6 @@ CAMPAIGN_TARGETS = (Target(">=", 400, key="samples_per_hour_2ranks"),
 MESH_REFERENCE = {"richardson": "the Richardson extrapolation", "finest mesh": "the finest mesh"}
 
 
-def _extrapolated(ms: dict) -> bool:
-    """Does the mesh study's reference extrapolate (a family in the asymptotic range)?"""
-    return ms["reference"] == "richardson"
-
-
 def _mesh_label(h: float, w: float | None) -> str:
     """A mesh as fem.mesh_study names it: "H" or "H:W" (mm)."""
     return f"{h:g}" + (f":{w:g}" if w else "")
@@ -281,7 +276,7 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     error = Target("<=", ms["tolerance_percent"], "%")
     nodes = Target(">=", ms["min_nodes"], "nodes", shown=f"{ms['min_nodes']:,}")
     prod = tuple(ms["production_mesh"])
-    extrapolated = _extrapolated(ms)
+    extrapolated = ms["reference"] == "richardson"   # a family in the asymptotic range
     if extrapolated:
         ref = (f"the Richardson extrapolation (h -> 0) of the family "
                f"{', '.join(_mesh_label(*m) for m in ms['family'])}, in the asymptotic range")
@@ -735,7 +730,7 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                 + ("So the datasets are not regenerated on a finer mesh for the finger's sake"
                    if largest != "discretisation" else "So a finer-mesh dataset would pay off")
                 + (". The joint study at the box corners has no extrapolation in the asymptotic range (its figure "
-                   "is a lower bound) and decides it for loads near the corners." if study and not _extrapolated(study)
+                   "is a lower bound) and decides it for loads near the corners." if study and study["reference"] != "richardson"
                    else ".")]
     return out
 
