@@ -21,7 +21,7 @@ APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
-        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas inverse finger-fem validate-finger report clean
+        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas atlas-reference inverse finger-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -166,6 +166,12 @@ atlas: $(ATLAS_JSON) ## grasp atlas 61x61 of the three objects -> results/predic
 results/predictor/atlas_%.json: $(PLAN_CODE) | $(SETUP)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --model $(PRED_JOINT) \
 	  --plot results/predictor/atlas_$*.png --out $@ --json
+
+ATLAS_RAMP    := $(foreach o,$(ATLAS_OBJECTS),results/predictor/ramp/atlas_$(o).json)
+atlas-reference: $(ATLAS_RAMP) ## the atlases with every point ramped on its own (the sweep's reference, ~10 min) -> results/predictor/ramp/
+results/predictor/ramp/atlas_%.json: $(PLAN_CODE) | $(SETUP)
+	@mkdir -p $(@D)
+	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --model $(PRED_JOINT) --out $@ --json
 
 inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, two tip targets -> results/predictor/inverse.{json,png}
 results/predictor/inverse.json: $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)

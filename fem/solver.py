@@ -99,6 +99,12 @@ class Material:
     cap_nu: float = 0.3
 
 
+#: MUMPS ICNTL(14): % allowed over its workspace estimate. Its default failed the 1.2:0.6
+#: mesh on 2 ranks (INFOG(1) = -20, reception buffer too small). Memory only, so not a
+#: SolverConfig field: a campaign's solver (its config, in every manifest) is unchanged.
+MUMPS_WORKSPACE_PERCENT = 100
+
+
 @dataclass(frozen=True)
 class SolverConfig:
     """Discretisation and Newton / load-stepping controls."""
@@ -276,6 +282,7 @@ class NewtonSolver:
         opts[f"{prefix}ksp_max_it"] = config.krylov_max_it
         opts[f"{prefix}pc_type"] = "lu"
         opts[f"{prefix}pc_factor_mat_solver_type"] = "mumps"
+        opts[f"{prefix}mat_mumps_icntl_14"] = MUMPS_WORKSPACE_PERCENT
         if config.mumps_blr:
             # Block low-rank LU: ~40 % faster factorisations at the production mesh; the
             # tangent is then exact to ~1e-8, which Newton (exact residual) absorbs.
@@ -362,6 +369,15 @@ class NewtonSolver:
         if self.contact:
             self.contact.add_tangent(self._A, self.u)
         self._A.assemble()
+
+    def _mumps_status(self) -> str:
+        """MUMPS' own error figures after a failed factorisation (INFOG(1) < 0: -9/-8
+        workspace too small, -10 singular; INFOG(2): its detail), for the failure reason."""
+        try:
+            F = self.pc.getFactorMatrix()
+            return f"MUMPS INFOG(1) = {F.getMumpsInfog(1)}, INFOG(2) = {F.getMumpsInfog(2)}"
+        except PETSc.Error:
+            return "no MUMPS factor"
 
     def _factorise(self, assemble: bool = True) -> None:
         """Assemble K(u) (unless _A already holds it) and factorise it as the new _P."""
@@ -487,7 +503,7 @@ class NewtonSolver:
                 ok = ok and bool(np.isfinite(self.u.x.array).all())
             except PETSc.Error as exc:      # MUMPS failure on a singular/NaN tangent
                 n, ok = self.config.max_it, False
-                reason = str(exc).splitlines()[0]
+                reason = f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
             if ok:
                 s, steps = s_try, steps + 1
                 iters.append(int(n))

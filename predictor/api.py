@@ -70,9 +70,10 @@ def solve_gesture(gripper: Gripper, *pressures: float) -> Gesture:
 
 
 def grasp_atlas(gripper: Gripper, grid: int = 61, box=_atlas.FULL_BOX,
-                options: SolverOptions = SolverOptions()) -> _atlas.Atlas:
-    """The grid x grid atlas over box (P1lo, P1hi, P2lo, P2hi) MPa (predictor.atlas)."""
-    return _atlas.grasp_atlas(gripper.problem, grid, box, options)
+                options: SolverOptions = SolverOptions(), path: str = "sweep") -> _atlas.Atlas:
+    """The grid x grid atlas over box (P1lo, P1hi, P2lo, P2hi) MPa (predictor.atlas;
+    path: sweep or ramp)."""
+    return _atlas.grasp_atlas(gripper.problem, grid, box, options, path)
 
 
 def inverse_pressures(gripper: Gripper, goal: str = "hold", min_normal: float = 0.0, least_pressure: bool = False,

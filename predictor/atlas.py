@@ -1,14 +1,25 @@
 """Grasp atlas: where the gripper holds, slips or misses an object over its pressure plane.
 
     python -m predictor.atlas --object SPEC --grid N [--box P1LO,P1HI,P2LO,P2HI]
-        [--model PATH] [--json] [--plot FILE.png] [--out FILE.json]
+        [--path sweep|ramp] [--model PATH] [--json] [--plot FILE.png] [--out FILE.json]
 
 Every (P1, P2) of an N x N grid over the pressure box (MPa, default the full |P| <= 0.3
 box) is solved along the same history as ``predictor.gesture --object``: the gripper
 settles at the approach gesture APPROACH = (-0.15, 0) MPa without the object, the object
-is brought in, and the pressures ramp straight to the target (predictor.solve). The whole
-grid is ONE batched ``solve`` call (its samples are independent, so each row equals a
-single-sample solve). Each point is classified
+is brought in, and the pressures ramp straight to the target (predictor.solve). Two
+ways to walk that path (``--path``):
+
+- ``sweep`` (default, ``sweep_solve``): by continuation outward from the approach, ring
+  by ring, each point starting from its ray's previous grid point (one step of the
+  path per point instead of the ramp's 12);
+- ``ramp`` (the reference): every point ramped on its own in one batched ``solve``, so
+  each row equals a single-sample solve.
+
+Where the equilibrium along the ray is unique both give the same gesture; they can
+differ where the path decides the branch (near the boundaries between states), as two
+ramps of different step counts do. ``make atlas-reference`` writes the reference atlases
+(results/predictor/ramp) and REPORT counts the points where the two agree. Without an
+object there is no history and the grid is one batched solve. Each point is classified
 
     not_converged  the ramp solve failed (no gesture is reported);
     no_contact     converged, total normal force N = 0;
@@ -30,6 +41,7 @@ gesture), one line on stderr, before the grid solve.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -41,12 +53,19 @@ from fem import cli
 from fem.files import write_json
 from fem.spec import PRESSURE_LIMIT
 from predictor.gripper import GripperParams, check_pressures
-from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
+from predictor.solve import (APPROACH, GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
+                             gesture_result, solve)
 from predictor.statics import GripperProblem, Obstacle
 
 STATES = ("no_contact", "holds", "slips", "not_converged")
 NO_CONTACT, HOLDS, SLIPS, NOT_CONVERGED = range(4)
 FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
+#: How an atlas point was solved (Atlas.how): continued from its ray's previous grid
+#: point, ramped from the approach (no predecessor, or the ``ramp`` path), or ramped after
+#: its continuation failed.
+HOW = ("swept", "ramped", "retried")
+SWEPT, RAMPED, RETRIED = range(3)
+PATHS = ("sweep", "ramp")
 #: Issue 16's speed target (s per object, 61 x 61 grid, one thread).
 TARGET_S_PER_OBJECT = 10.0
 
@@ -90,7 +109,9 @@ class Atlas:
     (N, N) int (STATES); normal_N (N, N); friction_use (N, N) |f|/(mu N), NaN without
     contact; tip (N, N, 2) mm (right finger, NaN unless converged); first_contact (N, N, 2)
     MPa; result: the GestureResult of the flattened grid (row i*N + j); time_s: wall time
-    of the batched solve; obstacle, joint, mu, approach (MPa): what was solved."""
+    of the grid's solve; obstacle, joint, mu, approach (MPa): what was solved; path: sweep
+    or ramp (grasp_atlas); how (N, N) int: SWEPT, RAMPED or RETRIED per point (None: all
+    ramped)."""
 
     p1: np.ndarray
     p2: np.ndarray
@@ -105,6 +126,8 @@ class Atlas:
     joint: str
     mu: float
     approach: tuple[float, float] | None = None
+    path: str = "ramp"
+    how: np.ndarray | None = None
 
     def index(self, p1: float, p2: float) -> int:
         """Flat row of the grid point nearest to (p1, p2) MPa in ``result``."""
@@ -126,7 +149,10 @@ class Atlas:
             "pressures_MPa": self.result.pressures[best].tolist(),
             "friction_use": float(self.friction_use.ravel()[best]),
             "normal_force_N": float(self.normal_N.ravel()[best])}
-        return {"grid": len(self.p1), "counts": self.counts(), "best_hold": point, "time_s": self.time_s}
+        how = np.full(self.state.shape, RAMPED) if self.how is None else self.how
+        how = {name: int((how == k).sum()) for k, name in enumerate(HOW)}
+        return {"grid": len(self.p1), "counts": self.counts(), "best_hold": point, "time_s": self.time_s,
+                "path": self.path, "solved_by": how}
 
     def to_json(self) -> dict:
         """Everything (grid arrays as nested lists, NaN -> null by the JSON writer)."""
@@ -137,7 +163,8 @@ class Atlas:
                                                    "y_mm": ob.y, "angle_rad": ob.angle},
                 "approach_MPa": self.approach,
                 "states": list(STATES), "p1_MPa": self.p1.tolist(), "p2_MPa": self.p2.tolist(),
-                "state": self.state.tolist(), "normal_force_N": self.normal_N.tolist(),
+                "state": self.state.tolist(), "how": None if self.how is None else self.how.tolist(),
+                "normal_force_N": self.normal_N.tolist(),
                 "friction_use": self.friction_use.tolist(), "tip_mm": self.tip.tolist(),
                 "first_contact_MPa": self.first_contact.tolist(), "tau": tau.tolist(),
                 "targets": {"atlas_s_per_object": TARGET_S_PER_OBJECT},
@@ -145,18 +172,27 @@ class Atlas:
 
 
 def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
-                options: SolverOptions = SolverOptions()) -> Atlas:
+                options: SolverOptions = SolverOptions(), path: str = "sweep") -> Atlas:
     """Solve the grid x grid atlas of ``problem`` (its object and approach) over
-    box = (P1lo, P1hi, P2lo, P2hi) MPa in one batched solve. Returns an Atlas. The atlas
-    is the pressure plane of a 2-joint finger (ValueError for another)."""
+    box = (P1lo, P1hi, P2lo, P2hi) MPa. path: ``sweep`` (continuation outward from the
+    approach, ``sweep_solve``) or ``ramp`` (every point ramped on its own, one batched
+    ``solve``: the reference). Returns an Atlas. The atlas is the pressure plane of a
+    2-joint finger (ValueError for another)."""
     if problem.n_joints != 2:
         raise ValueError(f"the grasp atlas spans (P1, P2): finger {problem.params.finger.name!r} has "
                          f"{problem.n_joints} joints")
+    if path not in PATHS:
+        raise ValueError(f"unknown atlas path {path!r}: use {' or '.join(PATHS)}")
     p1 = np.linspace(box[0], box[1], grid)
     p2 = np.linspace(box[2], box[3], grid)
     pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
     t0 = time.perf_counter()
-    res = solve(problem, pressures, options)
+    if problem.obstacle is None:
+        path = "ramp"                                      # no history: one batched solve
+    if path == "sweep":
+        res, how = sweep_solve(problem, pressures, np.array([p1[1] - p1[0], p2[1] - p2[0]]), options)
+    else:
+        res, how = solve(problem, pressures, options), np.full(grid * grid, RAMPED)
     elapsed = time.perf_counter() - t0
     state, use = classify(res, problem.contact.mu)
     shape = (grid, grid)
@@ -165,7 +201,89 @@ def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
                  friction_use=use.reshape(shape), tip=res.pose.tip_end.numpy().reshape(*shape, 2),
                  first_contact=first.numpy().reshape(*shape, 2), result=res, time_s=elapsed,
                  obstacle=problem.obstacle, joint=problem.joint.name, mu=problem.contact.mu,
-                 approach=problem.approach)
+                 approach=problem.approach, path=path, how=how.reshape(shape))
+
+
+def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.ndarray,
+                options: SolverOptions = SolverOptions()) -> tuple[GestureResult, np.ndarray]:
+    """Every grid point of pressures (M, 2) MPa (grid spacing (2,) MPa) along a path from
+    the approach p0, by continuation from the grid point before it.
+
+    Ring s holds the points s grid steps from p0 (Chebyshev distance, rounded up); rings
+    are solved in order, each as one batch. A point q of ring s continues (one ramp step
+    of predictor.solve: tangent predictor from its predecessor's Jacobians, LM with the
+    solve's Jacobians in turn (solve.attempts), depth check, cut-backs) from the converged
+    point nearest to p0 + (q - p0)(s - 1)/s, the ray's point one ring back, if that lies
+    within one grid step of it. So each point's
+    path follows its own straight ray from p0 within half a grid step (exactly on it
+    where p0 is a grid node): the reference ramp's path (``solve``), in steps of one grid
+    spacing instead of 1/12 of the ray. A point with no such predecessor, and a swept
+    point that fails, is ramped from the approach as in ``solve`` (the reference); if it
+    fails there too it is not converged.
+
+    Returns (GestureResult of the M points, how (M,) int: SWEPT, RAMPED or RETRIED). Its
+    first contact is the first point along the path that touches the object (a ramped
+    point's: its ramp's).
+    """
+    t0 = time.perf_counter()
+    Q = pressures.numpy()
+    M, J = Q.shape
+    n = 3 * J
+    p0 = np.asarray(problem.approach if problem.approach is not None else (0.0,) * J)
+    ring = np.ceil(np.abs((Q - p0) / spacing).max(1) - 1e-9).astype(int)
+    x = torch.full((M, n), float("nan"), dtype=torch.float64)
+    jx, jp = torch.zeros(M, n, n, dtype=torch.float64), torch.zeros(M, n, J, dtype=torch.float64)
+    ok = torch.zeros(M, dtype=torch.bool)
+    iterations = torch.zeros(M, dtype=torch.long)
+    pred = np.full(M, -1)
+    first = np.full((M, J), np.nan)          # the ramped points' own first contact
+    how = np.full(M, SWEPT)
+    runs = [_runner(problem, dataclasses.replace(options, jacobian=k)) for k in attempts(problem, options)]
+    jac_fn = _jacobian_fn(problem, True, options.jacobian)
+
+    def ramp(rows):
+        # the reference path; its Jacobians at the solution start the points beyond it
+        r = solve(problem, pressures[rows], options)
+        x[rows], ok[rows], iterations[rows] = r.tau.reshape(len(rows), n), r.converged, r.iterations
+        first[rows] = r.first_contact.numpy()
+        good = rows[r.converged.numpy()]
+        if len(good):
+            J_, _, Jp_ = jac_fn(x[good], pressures[good])
+            jx[good], jp[good] = J_[:, :n], Jp_
+
+    for s in np.unique(ring):
+        rows = np.nonzero(ring == s)[0]
+        done = np.nonzero(ok.numpy())[0]
+        if s > 0 and len(done):
+            ideal = p0 + (Q[rows] - p0) * ((s - 1) / s)
+            dist = np.abs((ideal[:, None] - Q[done][None]) / spacing).max(-1)   # (rows, done) grid steps
+            k = dist.argmin(1)
+            pred[rows] = np.where(dist[np.arange(len(rows)), k] <= 1.0, done[k], -1)
+        cont = rows[pred[rows] >= 0]
+        for run in runs:                            # the solve's Jacobians in turn (solve.attempts)
+            if len(cont) == 0:
+                break
+            pc = pred[cont]
+            xs, conv, its, (J_, Jp_) = _advance(run, x[pc], pressures[pc], pressures[cont], options.cutbacks,
+                                                (jx[pc], jp[pc]))
+            x[cont], ok[cont], jx[cont], jp[cont] = xs, conv, J_, Jp_
+            iterations[cont] += its
+            cont = cont[~conv.numpy()]
+        new = rows[pred[rows] < 0]
+        if len(new):
+            how[new] = RAMPED
+            ramp(new)
+    retry = np.nonzero((how == SWEPT) & ~ok.numpy())[0]
+    if len(retry):
+        how[retry], pred[retry] = RETRIED, -1
+        ramp(retry)
+    res = gesture_result(problem, pressures, x, ok, iterations, t0, options.method, None)
+    touch = res.normal_force_N.numpy() > 0
+    for i in np.argsort(ring, kind="stable"):   # along each path, predecessors first
+        if pred[i] >= 0:
+            first[i] = first[pred[i]] if not np.isnan(first[pred[i], 0]) else (Q[i] if touch[i] else np.nan)
+    res.first_contact = torch.from_numpy(first)
+    return res, how
 
 
 def marked_points(atlas: Atlas) -> list[tuple[int, str]]:
@@ -272,6 +390,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
     ap.add_argument("--grid", type=cli.number(2, 201, integer=True), default=61, help="N: N x N grid (default 61)")
     ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (default the full box)")
+    ap.add_argument("--path", choices=PATHS, default="sweep",
+                    help="sweep: continuation outward from the approach (default); ramp: every point "
+                    "ramped on its own (the reference)")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate)")
     ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
     ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
@@ -280,7 +401,7 @@ def main(argv: list[str] | None = None) -> int:
     with ap.errors():
         problem = load_problem(args.model, args.object)
         check_pressures(torch.tensor(args.box).reshape(2, 2).T)
-        atlas = grasp_atlas(problem, args.grid, args.box)
+        atlas = grasp_atlas(problem, args.grid, args.box, path=args.path)
         doc = {**atlas.to_json(), "spec": args.object}
         if args.out:
             write_json(args.out, doc)

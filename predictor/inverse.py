@@ -26,10 +26,10 @@ so by the implicit function theorem
 
     d tau/dP = -(dr/dtau)⁻¹ dr/dP                                    (6 x 2)
     de/dP    = ∂e/∂P + ∂e/∂tau · d tau/dP                              (k x 2)
-    df/dP    = ∂f/∂P - λᵀ dr/dP,  (dr/dtau)ᵀ λ = ∂f/∂tau   (adjoint form, one 6 x 6 solve)
+    df/dP    = 2 eᵀ de/dP                                            (2)
 with dr/dtau and dr/dP from the solver's Jacobian (solve._jacobian_fn: exact with an
-object, central differences to ~1e-10 relative without) at the converged point: no
-unrolled iterations.
+object, central differences to ~1e-10 relative without) at the converged point, and
+∂e/∂(tau, P) the same way (``_goal_derivatives``): no unrolled iterations.
 Moving P moves the equilibrium by continuation (solve's tangent predictor + LM, cut back
 when a step fails), which keeps the grasp on its branch.
 
@@ -58,10 +58,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -70,8 +72,9 @@ import torch
 
 from fem import cli
 from fem.files import write_json
+from fem.spec import INPUT_BOX
 from predictor.atlas import FULL_BOX, HOLDS, STATES, Atlas, classify, grasp_atlas
-from predictor.solve import (GestureResult, SolverOptions, _advance, _jacobian_fn, _levenberg_marquardt,
+from predictor.solve import (GestureResult, SolverOptions, _advance, _box_scale, _jacobian_fn, _levenberg_marquardt,
                              solve)
 from predictor.statics import GripperProblem
 
@@ -97,6 +100,13 @@ class Goal:
     angle_deg: float | None = None
     min_normal: float = 0.0
     least_pressure: bool = False
+
+    @property
+    def terms(self) -> int:
+        """k, the length of the goal residual e (``_goal_terms``)."""
+        if self.kind == "tip":
+            return 2 + (self.angle_deg is not None)
+        return (3 if self.least_pressure else 1) + (self.min_normal > 0)
 
 
 def parse_goal(text: str) -> Goal:
@@ -220,45 +230,77 @@ class _Branch:
 
 
 def _goal_terms(ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
-    """(f (), goal residual e (k,) with f = |e|², statics) at p (1, 2), x (1, 6);
+    """(f (B,), goal residual e (B, k) with f = |e|², statics) at p (B, 2), x (B, 6);
     differentiable in both (module docstring: every goal is a least-squares one)."""
     prob, goal = ip.problem, ip.goal
-    st = prob.residual(p, x.reshape(1, 2, 3))
+    st = prob.residual(p, x.reshape(-1, 2, 3))
     if goal.kind == "tip":
-        tip = st.pose.tip_end[0]
-        e = [tip[0] - goal.tip[0], tip[1] - goal.tip[1]]
+        tip = st.pose.tip_end
+        e = [tip[:, 0] - goal.tip[0], tip[:, 1] - goal.tip[1]]
         if goal.angle_deg is not None:
-            e.append(prob.params.tip_length * (st.pose.tip_angle[0] - math.radians(goal.angle_deg)))
+            e.append(prob.params.tip_length * (st.pose.tip_angle - math.radians(goal.angle_deg)))
     else:
         c = st.contact
-        use = c.ratio[0].abs() / prob.contact.mu
+        use = c.ratio.abs() / prob.contact.mu
         if goal.least_pressure:
-            e = [p[0, 0] / 0.3, p[0, 1] / 0.3, math.sqrt(1000.0) * (use - (1.0 - HOLD_MARGIN)).clamp_min(0.0)]
+            e = [p[:, 0] / 0.3, p[:, 1] / 0.3, math.sqrt(1000.0) * (use - (1.0 - HOLD_MARGIN)).clamp_min(0.0)]
         else:
             e = [use]
         if goal.min_normal > 0:
-            e.append(10.0 * (1.0 - c.normal[0] / goal.min_normal).clamp_min(0.0))
-    e = torch.stack(e)
-    return (e * e).sum(), e, st
+            e.append(10.0 * (1.0 - c.normal / goal.min_normal).clamp_min(0.0))
+    e = torch.stack(e, -1)
+    return (e * e).sum(-1), e, st
 
 
 def gradient(ip: InverseProblem, branch: _Branch):
     """At the branch's converged point: (f, df/dP (2,), e (k,), de/dP (k, 2)) by the
-    implicit function theorem (module docstring)."""
-    p = branch.p.clone().requires_grad_(True)
-    x = branch.x.clone().requires_grad_(True)
+    implicit function theorem (module docstring), df/dP = 2 eᵀ de/dP, with ∂e/∂(x, P)
+    (``_goal_derivatives``)."""
     J, Jp = branch.jac[0][0], branch.jac[1][0]  # (6, 6), (6, 2)
+    e, ex, ep = _goal_derivatives(ip, branch.x, branch.p)
+    de = ep - ex @ torch.linalg.solve(J, Jp)  # d tau/dP = -J⁻¹ dr/dP
+    return float(e @ e), 2.0 * de.T @ e, e, de
+
+
+def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
+    """(e (k,), ∂e/∂x (k, 6), ∂e/∂P (k, 2)) at x (1, 6), p (1, 2). As the solver's
+    Jacobian (solve._jacobian_fn): without an object, central differences of the traced
+    goal residual in one pass (the pose is smooth; steps 1e-6 of (1 N, 1 N, 100 N·mm) and
+    of 0.3 MPa); with one, exact, by one reverse pass over k copies of the point (copy i
+    feeds row i only: the contact law has kinks)."""
+    k = ip.goal.terms
+    if ip.problem.obstacle is None:
+        h = 1e-6 * torch.cat((_box_scale(6)[1], torch.full((2,), INPUT_BOX[0], dtype=torch.float64)))
+        steps = torch.diag(h)                                                        # (8, 8)
+        y = torch.cat((x, p), 1)
+        Y = torch.cat((y, y + steps, y - steps))                                     # (17, 8)
+        with torch.inference_mode():
+            E = _traced_goal_fn(ip)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())
+        d = ((E[1:9] - E[9:]) / (2 * h[:, None])).T.clone()                          # (k, 8)
+        return E[0].clone(), d[:, :6], d[:, 6:]
     with torch.enable_grad():
-        f, e, _ = _goal_terms(ip, p, x)
-        gx, gp = torch.autograd.grad(f, (x, p), retain_graph=True)
-        df = gp[0] - Jp.T @ torch.linalg.solve(J.T, gx[0])  # adjoint form
-        rows = [torch.autograd.grad(ek, (x, p), retain_graph=True, allow_unused=True) for ek in e]
-        zero = torch.zeros(1, 6, dtype=torch.float64), torch.zeros(1, 2, dtype=torch.float64)
-        rows = [tuple(z if g is None else g for g, z in zip(r, zero)) for r in rows]
-        ex = torch.stack([r[0][0] for r in rows])  # (k, 6)
-        ep = torch.stack([r[1][0] for r in rows])  # (k, 2)
-        de = ep - ex @ torch.linalg.solve(J, Jp)  # d tau/dP = -J⁻¹ dr/dP
-    return float(f.detach()), df.detach(), e.detach(), de
+        xr = x.expand(k, 6).clone().requires_grad_(True)
+        pr = p.expand(k, 2).clone().requires_grad_(True)
+        e = _goal_terms(ip, pr, xr)[1]                                # (k, k): row i of copy i
+        ex, ep = torch.autograd.grad(e.diagonal().sum(), (xr, pr), allow_unused=True)
+    ex = torch.zeros(k, 6, dtype=torch.float64) if ex is None else ex
+    ep = torch.zeros(k, 2, dtype=torch.float64) if ep is None else ep
+    return e[0].detach(), ex, ep
+
+
+@functools.lru_cache(maxsize=16)
+def _traced_goal_fn(ip: InverseProblem):
+    """e(x (B, 6), p (B, 2)) -> (B, k) recorded by torch.jit.trace (see
+    solve._traced_residual_fn: Python dispatch dominates one evaluation); the eager
+    function if the record is not bit-identical."""
+    fn = lambda x, p: _goal_terms(ip, p, x)[1]  # noqa: E731
+    gen = torch.Generator().manual_seed(0)
+    x = (torch.rand(4, 6, generator=gen, dtype=torch.float64) - 0.5) * _box_scale(6)[0]
+    p = (torch.rand(4, 2, generator=gen, dtype=torch.float64) - 0.5) * INPUT_BOX[0]
+    with torch.inference_mode(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traced = torch.jit.trace(fn, (x, p), check_trace=False)
+        return traced if torch.equal(traced(x[:3], p[:3]), fn(x[:3], p[:3])) else fn
 
 
 def _clip(ip: InverseProblem, p: np.ndarray) -> np.ndarray:
@@ -440,7 +482,7 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
     scored = []
     for p, branch in cands:
         with torch.no_grad():
-            scored.append((float(_goal_terms(ip, branch.p, branch.x)[0]), p, branch))
+            scored.append((float(_goal_terms(ip, branch.p, branch.x)[0][0]), p, branch))
     checked = []
     for f, p, branch in sorted(scored, key=lambda t: t[0]):
         ver = solve(ip.problem, p[None], ip.options)
@@ -498,7 +540,8 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
     n = len(p1), len(p2)
     return Atlas(p1, p2, state.reshape(n), res.normal_force_N.numpy().reshape(n), use.reshape(n),
                  res.pose.tip_end.numpy().reshape(*n, 2), np.array(doc["first_contact_MPa"], float), res,
-                 float(doc.get("time_s", 0.0)), ob, problem.joint.name, problem.contact.mu, problem.approach)
+                 float(doc.get("time_s", 0.0)), ob, problem.joint.name, problem.contact.mu, problem.approach,
+                 doc.get("path", "ramp"), None if doc.get("how") is None else np.array(doc["how"], int))
 
 
 def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, GripperProblem]]) -> None:

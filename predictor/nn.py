@@ -282,13 +282,9 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
             pose=st.pose.masked(ok), free_pose=problem.pose(pressures, torch.zeros_like(tau)), method="nn",
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
-    # The polish: the capped LM from the NN's tau with the Jacobian by differences (3x
-    # faster per query); where that stalls at a kink of the contact law, with the exact one.
-    res = solve(problem, pressures, SolverOptions(contact_max_step=POLISH_STEP, jacobian="differences"), x0=tau)
-    retry = ~res.converged
-    if bool(retry.any()):
-        res = res.with_rows(retry, solve(problem, pressures[retry], SolverOptions(contact_max_step=POLISH_STEP),
-                                         x0=tau[retry]))
+    # The polish: the capped LM from the NN's tau, with the Jacobian by differences and,
+    # where that stalls at a kink of the contact law, the exact one (solve.attempts).
+    res = solve(problem, pressures, SolverOptions(contact_max_step=POLISH_STEP), x0=tau)
     fallback = ~res.converged
     if bool(fallback.any()):
         res = res.with_rows(fallback, solve(problem, pressures[fallback]))

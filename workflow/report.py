@@ -627,23 +627,36 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
     if atlases:
         first = atlases[0][1]
         out += [f"Every (P1, P2) of a {first['grid']} x {first['grid']} grid over the "
-                "pressure box, each solved along the pressure ramp from the approach gesture "
-                f"({', '.join(f'{v:g}' for v in first['approach_MPa'])} MPa), in one batched "
-                f"solve; friction use = |f|/(mu N), mu = {first['mu']}. Joint model: "
+                "pressure box, each solved along the straight pressure path from the approach gesture "
+                f"({', '.join(f'{v:g}' for v in first['approach_MPa'])} MPa): by continuation outward from "
+                "it (`--path sweep`, each point from its ray's previous grid point; a point without one, or "
+                "whose continuation fails, is ramped on its own), checked against the reference that ramps "
+                "every point on its own (`--path ramp`, `make atlas-reference`): the 'same state' column. "
+                f"Friction use = |f|/(mu N), mu = {first['mu']}. Joint model: "
                 f"{_joint(root, first.get('joint'), 'make atlas')}. The time is predictor.atlas's own wall time "
                 "for the whole grid (atlas_<object>.json, not a benchmark); the paper's column is its contact "
                 f"gesture time ({paper.get('contact_lbfgs_s', 'n/a')} s, bench/predictor.json) times the grid.", "",
                 "| object | no contact | holds | slips | not converged | best hold (P1, P2) MPa "
-                "| its friction use | time (atlas_<object>.json) | paper | target | met |",
-                "|---|---|---|---|---|---|---|---|---|---|---|"]
+                "| its friction use | swept / ramped / retried | same state as the ramp reference "
+                "| time (atlas_<object>.json) | paper | target | met |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for kind, a in atlases:
             c, best = a["counts"], a.get("best_hold") or {}
             checks.append(judge(title, f"atlas {kind}", [(Target("<=", a["targets"]["atlas_s_per_object"], "s"),
                                                           a["measured"]["atlas_s_per_object"])]))
             hold_p = ", ".join(f"{v:.3f}" for v in best.get("pressures_MPa", [])) or "none"
             paper_h = f"~{per_gesture * a['measured']['grid_points'] / 3600:.0f} h" if per_gesture else "n/a"
+            by = a.get("solved_by") or {}
+            how = " / ".join(str(by.get(k, "?")) for k in ("swept", "ramped", "retried")) if by else "all ramped"
+            ref = _load(root / f"predictor/ramp/atlas_{kind}.json")
+            same = "n/a (make atlas-reference)"
+            if ref and ref.get("grid") == a["grid"]:
+                pairs = [(u, v) for ru, rv in zip(ref["state"], a["state"]) for u, v in zip(ru, rv)]
+                differ = sum(u != v for u, v in pairs)
+                same = f"{1 - differ / len(pairs):.2%} ({differ} differ)"
             out.append(f"| {kind} | {c['no_contact']} | {c['holds']} | {c['slips']} | {c['not_converged']} | "
-                       f"{hold_p} | {_num(best.get('friction_use'))} | {a['measured']['atlas_s_per_object']:.1f} s "
+                       f"{hold_p} | {_num(best.get('friction_use'))} | {how} | {same} | "
+                       f"{a['measured']['atlas_s_per_object']:.1f} s "
                        f"| {paper_h} |" + _cells(checks[-1]))
         out.append("")
     else:
