@@ -253,7 +253,8 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
 
     for s in np.unique(ring):
         rows = np.nonzero(ring == s)[0]
-        done = np.nonzero(ok.numpy())[0]
+        # a predecessor within one step of the ray's point on ring s - 1 lies on ring s - 2 or s - 1
+        done = np.nonzero(ok.numpy() & (ring >= s - 2))[0]
         if s > 0 and len(done):
             ideal = p0 + (Q[rows] - p0) * ((s - 1) / s)
             dist = np.abs((ideal[:, None] - Q[done][None]) / spacing).max(-1)   # (rows, done) grid steps
@@ -279,9 +280,10 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
         ramp(retry)
     res = gesture_result(problem, pressures, x, ok, iterations, t0, options.method, None)
     touch = res.normal_force_N.numpy() > 0
-    for i in np.argsort(ring, kind="stable"):   # along each path, predecessors first
-        if pred[i] >= 0:
-            first[i] = first[pred[i]] if not np.isnan(first[pred[i], 0]) else (Q[i] if touch[i] else np.nan)
+    for s in np.unique(ring):                   # along each path, ring by ring
+        rows = np.nonzero((ring == s) & (pred >= 0))[0]
+        before = first[pred[rows]]
+        first[rows] = np.where(np.isnan(before[:, :1]), np.where(touch[rows, None], Q[rows], np.nan), before)
     res.first_contact = torch.from_numpy(first)
     return res, how
 

@@ -209,7 +209,7 @@ def _autograd_jacobian(r_fn):
     The same pass gives dr/dP (B, n, J) for the ramp's tangent predictor.
     """
 
-    def jac(x: torch.Tensor, p: torch.Tensor):
+    def jac(x: torch.Tensor, p: torch.Tensor, dp: bool = True):   # dr/dP comes with the same pass
         B, n = x.shape
         with torch.enable_grad():
             xr = x.detach().repeat_interleave(n, 0).requires_grad_(True)
@@ -228,14 +228,18 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
     (1 + 2n + 2J rows of one batch; without ``pressure`` the P rows are skipped and dr/dP
     is None), with h_k = rel_step × (1 N, 1 N, 100 N·mm) and h_P = rel_step × 0.3 MPa.
     For a smooth residual truncation (h²) and round-off (eps/h) errors are both ~1e-10
-    relative, far below what Newton's quadratic convergence needs.
+    relative, far below what Newton's quadratic convergence needs. ``jac(x, p, dp=False)``
+    skips the P rows too, and ``jac.dp(x, p)`` gives dr/dP alone (2J rows a sample): LM
+    iterates without it and takes it once at its last iterate, not 2J of 1 + 2n + 2J rows
+    on every iterate.
     """
 
-    def jac(x: torch.Tensor, p: torch.Tensor):
+    hp = rel_step * INPUT_BOX[0]
+
+    def jac(x: torch.Tensor, p: torch.Tensor, dp: bool = True):
         B, n = x.shape
-        m = p.shape[1] if pressure else 0
+        m = p.shape[1] if pressure and dp else 0
         hx = rel_step * _box_scale(n)[1]
-        hp = rel_step * INPUT_BOX[0]
         ex, ep = torch.diag(hx), hp * torch.eye(p.shape[1], dtype=x.dtype)[:m]   # (n, n), (m, J)
         X = torch.cat((x[:, None], x[:, None] + ex, x[:, None] - ex, x[:, None].expand(B, 2 * m, n)), 1)
         P = torch.cat((p[:, None].expand(B, 1 + 2 * n, p.shape[1]), p[:, None] + ep, p[:, None] - ep), 1)
@@ -246,6 +250,16 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
         gp = (R[:, 1 + 2 * n:1 + 2 * n + m, :n] - R[:, 1 + 2 * n + m:, :n]).transpose(1, 2) / (2 * hp) if m else None
         return torch.cat((g, _penalty_jacobian(x)), 1), R[:, 0], gp
 
+    def jac_p(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+        # dr/dP (B, n, J) alone (2J rows a sample): LM needs it at its last iterate only
+        B, n = x.shape
+        ep = hp * torch.eye(p.shape[1], dtype=x.dtype)
+        P = torch.cat((p[:, None] + ep, p[:, None] - ep), 1)
+        with torch.inference_mode():
+            R = r_fn(x.repeat_interleave(2 * p.shape[1], 0), P.reshape(-1, p.shape[1])).reshape(B, 2, -1, 2 * n)
+        return ((R[:, 0, :, :n] - R[:, 1, :, :n]).transpose(1, 2) / (2 * hp)).clone()
+
+    jac.dp = jac_p if pressure else None
     return jac
 
 
@@ -298,13 +312,11 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
     eye = torch.eye(n, dtype=x.dtype)
     step_scale = _box_scale(n)[1]
     x = x.clone()
-    if p_prev is None:
-        J, r, Jp = jac_fn(x, p)
-    else:
+    if p_prev is not None:
         J0, Jp0 = prev_jac if prev_jac is not None else (lambda a: (a[0][:, :n], a[2]))(jac_fn(x, p_prev))
         dx = -torch.linalg.solve(J0 + 1e-12 * eye, Jp0 @ (p - p_prev)[..., None])[..., 0]
         x = x + dx
-        J, r, Jp = jac_fn(x, p)
+    J, r, Jp = jac_fn(x, p, dp=False)    # dr/dP: at the last iterate only (below)
     mu = torch.full((x.shape[0],), 1e-6, dtype=x.dtype)
     iters = torch.zeros(x.shape[0], dtype=torch.long)
     done = _done(r, opts)
@@ -320,7 +332,7 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
             big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
             step = step / big.clamp_min(1.0)
         x_try = x[act] + step
-        J_try, r_try, Jp_try = jac_fn(x_try, p[act])
+        J_try, r_try, Jp_try = jac_fn(x_try, p[act], dp=False)
         better = r_try.pow(2).sum(-1) < ra.pow(2).sum(-1)
         x[act] = torch.where(better[:, None], x_try, x[act])
         r[act] = torch.where(better[:, None], r_try, ra)
@@ -331,6 +343,8 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
         iters[act] += 1
         done[act] = _done(r[act], opts)
         stuck = mu > 1e8
+    if Jp is None and getattr(jac_fn, "dp", None) is not None:
+        Jp = jac_fn.dp(x, p)
     return x, done, iters, (J[:, :n], Jp)
 
 
