@@ -63,7 +63,6 @@ import json
 import math
 import sys
 import time
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,7 +74,7 @@ from fem.files import write_json
 from fem.spec import INPUT_BOX
 from predictor.atlas import FULL_BOX, HOLDS, STATES, Atlas, classify, grasp_atlas
 from predictor.solve import (GestureResult, SolverOptions, _advance, _box_scale, _jacobian_fn, _levenberg_marquardt,
-                             solve)
+                             solve, traced)
 from predictor.statics import GripperProblem
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
@@ -290,17 +289,8 @@ def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
 
 @functools.lru_cache(maxsize=16)
 def _traced_goal_fn(ip: InverseProblem):
-    """e(x (B, 6), p (B, 2)) -> (B, k) recorded by torch.jit.trace (see
-    solve._traced_residual_fn: Python dispatch dominates one evaluation); the eager
-    function if the record is not bit-identical."""
-    fn = lambda x, p: _goal_terms(ip, p, x)[1]  # noqa: E731
-    gen = torch.Generator().manual_seed(0)
-    x = (torch.rand(4, 6, generator=gen, dtype=torch.float64) - 0.5) * _box_scale(6)[0]
-    p = (torch.rand(4, 2, generator=gen, dtype=torch.float64) - 0.5) * INPUT_BOX[0]
-    with torch.inference_mode(), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        traced = torch.jit.trace(fn, (x, p), check_trace=False)
-        return traced if torch.equal(traced(x[:3], p[:3]), fn(x[:3], p[:3])) else fn
+    """e(x (B, 6), p (B, 2)) -> (B, k), recorded by solve.traced."""
+    return traced(lambda x, p: _goal_terms(ip, p, x)[1], 6, 2)
 
 
 def _clip(ip: InverseProblem, p: np.ndarray) -> np.ndarray:
