@@ -21,8 +21,9 @@ contact predictor, the NN's tau polished by the capped LM (ramp fallback for the
 cannot converge: ``contact_nn_polished_fallback_rate``); the raw network, no solver, is
 ``contact_nn_raw_*``: its residual over the pressures where the ramp solver converged
 (``details.contact_nn_vs_solver`` splits it into contact and contact-free equilibria),
-its grasp state's agreement with the solver's (no contact / holds / slips) and its
-fingertip error against the solver's. The paper's numbers are recorded beside ours.
+its grasp state's agreement with the solver's (no contact / holds / slips; the state its
+classifier gives, ``details.contact_nn_vs_solver.state_by``) and its fingertip error
+against the solver's. The paper's numbers are recorded beside ours.
 
 The JSON file is written atomically (strict JSON); ``--json`` prints its top-level figures.
 """

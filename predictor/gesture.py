@@ -25,7 +25,8 @@ residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last part), tip_a
 global exit angle), contact_force_N, slip, iterations, time_ms, finger {name, sha256},
 kinematics, joint_weight. With ``--method nn`` also the network's own figures before any
 solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
-answer is the solver's polish of them (polished, contact) or the full ramp's (fallback).
+answer is the solver's polish of them (polished, contact) or the full ramp's (fallback);
+with an object raw_state, the network's own grasp state (no_contact, holds or slips).
 
 Exit codes: 0 converged; 1 not converged (the JSON says so, tau is null); 2 bad input
 (a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures for the
@@ -130,7 +131,7 @@ def run(args: argparse.Namespace, prepared=None):
     Returns (json dict, result, problem)."""
     problem, pressures, joint, predictor = prepared or prepare(args)
     if predictor is not None:
-        from predictor.nn import predict_gesture
+        from predictor.nn import GRASP_STATES, predict_gesture
 
         res = predict_gesture(predictor, problem, pressures)
     else:
@@ -144,7 +145,8 @@ def run(args: argparse.Namespace, prepared=None):
     if args.method == "nn":   # the network's own figures, before any solver (issue 15)
         out.update(raw_residual_force_mN=res.raw_residual_force_mN[0].tolist(),
                    raw_residual_moment_Nmm=res.raw_residual_moment_Nmm[0].tolist(),
-                   polished=bool(res.polished[0]), fallback=bool(res.fallback[0]))
+                   polished=bool(res.polished[0]), fallback=bool(res.fallback[0]),
+                   raw_state=None if res.raw_state is None else GRASP_STATES[int(res.raw_state[0])])
     return out, res, problem
 
 

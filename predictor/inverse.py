@@ -74,7 +74,7 @@ from fem.files import write_json
 from fem.spec import INPUT_BOX
 from predictor.atlas import FULL_BOX, HOLDS, STATES, Atlas, classify, grasp_atlas
 from predictor.solve import (GestureResult, SolverOptions, _advance, _box_scale, _jacobian_fn, _levenberg_marquardt,
-                             solve, traced)
+                             solve, touch, traced)
 from predictor.statics import GripperProblem
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
@@ -186,8 +186,7 @@ class _Branch:
         def run(x, p, p_prev=None, jac=None):
             x, ok, its, jac = _levenberg_marquardt(self.jac_fn, x, p, self.tol, cap, p_prev, jac)
             if prob.obstacle is not None:  # the solver's tunnelling guard
-                with torch.no_grad():
-                    ok = ok & (prob.residual(p, x.reshape(-1, 2, 3)).contact.penetration <= opts.max_penetration)
+                ok = ok & (touch(prob, x, p)[1] <= opts.max_penetration)
             return x, ok, its, jac
 
         self.run = run

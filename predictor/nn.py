@@ -10,28 +10,35 @@ Variants (``python -m predictor.nn --variant ...``):
 - ``gravity-paper``: the paper's 2 -> 32 -> 64 -> 64 -> 32 -> 6 ReLU MLP, 4000 training and
   800 validation pairs uniform in [-0.3, 0.3]², Adam, batch 20, lr 3e-4 decayed ×0.94 per
   epoch, 75 epochs, equilibrium loss only.
-- ``gravity-improved``: 2 -> 64 -> 64 -> 64 -> 6 with SiLU (smooth, so the residual can go
-  to zero instead of stalling on ReLU's kinks), Adam with batch 100 and lr 3e-3 decayed
-  ×0.9 for 30 epochs, then 3000 iterations of full-batch L-BFGS on the same equilibrium
-  loss (the loss is a smooth least-squares problem: a quasi-Newton method on all 4000
-  pairs at once is what takes it from ~1 mN down).
+- ``gravity-improved``: 2 -> 128 -> 128 -> 128 -> 6 with SiLU (smooth, so the residual
+  can go to zero instead of stalling on ReLU's kinks), supervised by the Newton solver's
+  equilibria at 20,000 pressures (labels: one batched solve, seconds), Adam with batch
+  200 and lr 3e-3 decayed ×0.95 for 60 epochs, then 500 iterations of full-batch L-BFGS.
+  Tried and dropped: the same kind of net (2 -> 64 x 3 -> 6) trained on the equilibrium
+  loss alone (Adam, then 3000 L-BFGS iterations on 4000 pairs) stayed worse than the
+  paper's MLP (0.52 against 0.39 mN, 0.078 against 0.034 N·mm).
 - ``contact``: the grasp of the circle (r = 30 mm, 0.2 N, centre Y = -195 mm, approach
   P = (-0.15, 0), see statics.Obstacle) for (P1, P2) in [-0.15, 0.2] x [-0.05, 0.25],
-  which contains gestures with (about 40 %) and without contact. The equilibrium loss alone is as stiff as
-  the penalty (dR/dtau ~ k_c × contact length), which is where the paper stalled. What
-  works: (1) supervision from the batched iterative solver (labels are cheap: one
-  batched solve), SiLU MLP 2 -> 128 -> 128 -> 128 -> 6, Adam + L-BFGS on the label loss;
-  (2) the NN's tau warm-starts the LM (Jacobian by differences, the exact one
-  where that stalls) with a small step cap (a local polish, median ~7 iterations), and
-  samples it cannot converge fall back to the full ramp. The raw NN is still far from the 2 mN bound
-  (penalty stiffness amplifies its error); the checkpoint records both. Tried and
-  dropped (no longer in the code): one plain Newton step from the NN (diverges: 926 ->
-  60000 mN mean), and fine-tuning the supervised net by L-BFGS on the equilibrium loss:
-  the raw residual fell to 88 mN / 16 N·mm, the paper's regime, but the net learned to
-  lift the finger off the object (contact fraction 42 % -> 27 %) and the polish then
-  needed the fallback for 23 % of the queries instead of ~10 %. Corners of the
-  pressure box where the ramp's grasp changes branch (the tip slides off the object:
-  tau jumps) are left out of the NN's domain: P1 in [-0.15, 0.2], P2 in [-0.05, 0.25].
+  which contains gestures without contact (about 24 %), holding (11 %) and slipping (65 %).
+  The equilibrium loss alone is as stiff as the penalty (dR/dtau ~ k_c × contact
+  length), which is where the paper stalled. What works: supervision from the batched
+  iterative solver along the pressure ramp (labels are cheap: one batched solve of 20,000
+  pressures), and a ContactNet: a grasp-state classifier (SiLU 2 -> 128 -> 128 -> 128 ->
+  3, cross-entropy, Adam) and one SiLU 2 -> 128 -> 128 -> 128 -> 6 head per state (Adam +
+  L-BFGS on its state's labels), so that no head has to round off a kink of the contact
+  law. The delivered gesture warm-starts the LM from the network's tau (Jacobian by
+  differences, the exact one where that stalls) with a small step cap (a local polish),
+  and samples it cannot converge fall back to the full ramp. The raw tau stays far from
+  the 2 mN bound wherever the finger touches (the penalty stiffness amplifies a 0.1 mm
+  pose error into ~1 N); the checkpoint records both. Tried and dropped (no longer in the
+  code): one MLP for all states (2,000 labels: fingertip 0.25 mm from the solver's, state
+  by its tau's contact 39 %); Newton steps from the network's tau, plain or with a
+  4-point line search (they jump branches: fingertip 2.4-7.6 mm off after one step); and
+  fine-tuning on the equilibrium loss: the raw residual fell to 88 mN / 16 N·mm, the
+  paper's regime, but the net learned to lift the finger off the object (contact fraction
+  42 % -> 27 %) and the polish then needed the fallback for 23 % of the queries. Corners
+  of the pressure box where the ramp's grasp changes branch (the tip slides off the
+  object: tau jumps) are left out of the NN's domain.
 
 Fingers (issue 14): the network is (P1..PJ) -> tau (J, 3) for the finger of its config
 (``finger``: predictor.gripper.finger_to_dict, None = the paper's finger, which is what
@@ -49,6 +56,7 @@ file, and refuses a damaged, foreign or other-kind file with one line (Checkpoin
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -95,6 +103,7 @@ class NNConfig:
     decay: float = 0.94
     lbfgs_iters: int = 0
     supervised: bool = False
+    state_heads: bool = False  # ContactNet: a grasp-state classifier and one tau head per state
     p1_range: tuple = (-PRESSURE_LIMIT, PRESSURE_LIMIT)
     p2_range: tuple = (-PRESSURE_LIMIT, PRESSURE_LIMIT)
     obstacle: dict | None = None
@@ -126,13 +135,13 @@ class NNConfig:
 
 VARIANTS = {
     "gravity-paper": NNConfig(),
-    "gravity-improved": NNConfig(variant="gravity-improved", widths=(2, 64, 64, 64, 6), activation="silu",
-                                 epochs=30, batch=100, lr=3e-3, decay=0.9, lbfgs_iters=3000),
-    "contact": NNConfig(variant="contact", widths=(2, 128, 128, 128, 6), activation="silu", n_train=2000,
-                        n_val=400, epochs=150,
-                        batch=100, lr=3e-3, decay=0.97, lbfgs_iters=400, supervised=True,
-                        p1_range=(-0.15, 0.2), p2_range=(-0.05, 0.25), obstacle=asdict(Obstacle()),
-                        approach=APPROACH),
+    "gravity-improved": NNConfig(variant="gravity-improved", widths=(2, 128, 128, 128, 6), activation="silu",
+                                 n_train=20000, epochs=60, batch=200, lr=3e-3, decay=0.95, lbfgs_iters=500,
+                                 supervised=True),
+    "contact": NNConfig(variant="contact", widths=(2, 128, 128, 128, 6), activation="silu", n_train=20000,
+                        n_val=400, epochs=60, batch=200, lr=3e-3, decay=0.95, lbfgs_iters=500, supervised=True,
+                        state_heads=True, p1_range=(-0.15, 0.2), p2_range=(-0.05, 0.25),
+                        obstacle=asdict(Obstacle()), approach=APPROACH),
 }
 
 
@@ -155,11 +164,49 @@ class GestureNet(nn.Module):
         return (self.mlp(pressures / P_SCALE) * self.tau_scale).reshape(pressures.shape[0], -1, 3)
 
 
+#: Grasp states of a contact equilibrium, the codes of predictor.atlas.STATES.
+GRASP_STATES = ("no_contact", "holds", "slips")
+
+
+def grasp_state(normal: torch.Tensor, slip: torch.Tensor) -> torch.Tensor:
+    """State codes (B,) into GRASP_STATES from the normal force (B,) N and slip flags (B,)."""
+    return torch.where(normal > 0, torch.where(slip, 2, 1), 0)
+
+
+class ContactNet(nn.Module):
+    """A grasp-state classifier and one GestureNet per state: (B, J) MPa -> tau (B, J, 3)
+    from the head of the predicted state (``state``: codes into GRASP_STATES).
+
+    Inside one state's region of the pressure plane the equilibrium is smooth; across the
+    borders (contact onset, the friction cone's edge, the approach's branch) it has kinks
+    that a single MLP rounds off, over a band as wide as its resolution. Here each head
+    fits one smooth piece and the classifier (widths[:-1] -> 3 logits, same activation)
+    puts the borders where the solver's labels do.
+    """
+
+    def __init__(self, widths: tuple, activation: str):
+        super().__init__()
+        self.classifier = GestureNet(tuple(widths[:-1]) + (3,), activation).mlp
+        self.heads = nn.ModuleList(GestureNet(widths, activation) for _ in GRASP_STATES)
+
+    def state(self, pressures: torch.Tensor) -> torch.Tensor:
+        return self.classifier(pressures / P_SCALE).argmax(-1)
+
+    def forward(self, pressures: torch.Tensor) -> torch.Tensor:
+        taus = torch.stack([head(pressures) for head in self.heads])
+        return taus[self.state(pressures), torch.arange(pressures.shape[0])]
+
+
+def network(cfg: NNConfig) -> nn.Module:
+    """The untrained network of a config: ContactNet with ``state_heads``, else GestureNet."""
+    return (ContactNet if cfg.state_heads else GestureNet)(cfg.widths, cfg.activation)
+
+
 @dataclass
 class Predictor:
     """A trained network plus what it was trained for (joint name, object, approach)."""
 
-    net: GestureNet
+    net: nn.Module  # GestureNet, or ContactNet (config.state_heads)
     config: NNConfig
     joint_name: str
     metrics: dict = field(default_factory=dict)
@@ -185,7 +232,7 @@ def _stats(res: torch.Tensor) -> dict:
             "moment_Nmm_mean": float(m.mean()), "moment_Nmm_p95": q(m, 0.95), "moment_Nmm_max": float(m.max())}
 
 
-def evaluate(net: GestureNet, problem: GripperProblem, pressures: torch.Tensor) -> dict:
+def evaluate(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor) -> dict:
     """Residual statistics of the raw NN tau on pressures (B, J) (see _stats)."""
     with torch.no_grad():
         return _stats(problem.residual(pressures, net(pressures)).residual)
@@ -210,26 +257,27 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
 
     raw, raw_contact, raw_contact_free: residual statistics (_stats) of the network's own
     tau over every pressure the solver converged on, and over those whose equilibrium
-    touches the object or not; state_agreement: fraction whose raw grasp state (no contact,
-    holds, slips) is the solver's; raw_tip_error_mm: the raw gesture's fingertip against
-    the solver's (mean / p95 / max)."""
+    touches the object or not; state_agreement: fraction whose grasp state by the network
+    (no contact, holds, slips: its classifier's, ContactNet, or else the contact of its
+    tau) is the solver's, and state_agreement_of_tau that of its tau's contact alone;
+    raw_tip_error_mm: the raw gesture's fingertip against the solver's (mean / p95 / max)."""
     problem = pred.config.problem(joint)
     ref = solve(problem, pressures)
     ok = ref.converged
     with torch.no_grad():
         st = problem.residual(pressures, pred.net(pressures))
-
-    def state(touch, slip):     # 0 no contact, 1 holds, 2 slips
-        return torch.where(touch, torch.where(slip, 2, 1), 0)
-
+        of_tau = grasp_state(st.contact.normal, st.contact.slip)
+        by_net = pred.net.state(pressures) if isinstance(pred.net, ContactNet) else of_tau
     touch = ref.normal_force_N > 0
-    agree = state(st.contact.normal > 0, st.contact.slip) == state(touch, ref.slip)
+    truth = grasp_state(ref.normal_force_N, ref.slip)
     tip = (st.pose.tip_end - ref.pose.tip_end).norm(dim=-1)[ok]
     cfg = pred.config
     return {"raw": _stats(st.residual[ok]),
             "raw_contact": _stats(st.residual[ok & touch]) if bool((ok & touch).any()) else None,
             "raw_contact_free": _stats(st.residual[ok & ~touch]) if bool((ok & ~touch).any()) else None,
-            "state_agreement": float(agree[ok].double().mean()),
+            "state_agreement": float((by_net == truth)[ok].double().mean()),
+            "state_agreement_of_tau": float((of_tau == truth)[ok].double().mean()),
+            "state_by": "classifier" if isinstance(pred.net, ContactNet) else "contact of the raw tau",
             "raw_tip_error_mm": {"mean": float(tip.mean()), "p95": float(torch.quantile(tip, 0.95)),
                                  "max": float(tip.max())},
             "n": len(ok), "reference_converged": int(ok.sum()), "reference_in_contact": int((ok & touch).sum()),
@@ -242,12 +290,15 @@ class NNGestureResult(GestureResult):
     """GestureResult of the NN predictor. raw_residual_force_mN, raw_residual_moment_Nmm
     (B, J): Equation 1 at the network's own tau, before any solver; polished (B,): the
     answer is the LM polish of the network's tau (contact), not the network's; fallback
-    (B,): the polish did not converge and the full pressure ramp solved the sample instead."""
+    (B,): the polish did not converge and the full pressure ramp solved the sample instead;
+    raw_state (B,) codes into GRASP_STATES: the grasp state by the network itself (its
+    classifier; the contact of its tau for a network without one), None without an object."""
 
     fallback: torch.Tensor = None
     raw_residual_force_mN: torch.Tensor = None
     raw_residual_moment_Nmm: torch.Tensor = None
     polished: torch.Tensor = None
+    raw_state: torch.Tensor = None
 
 
 def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor) -> NNGestureResult:
@@ -284,6 +335,8 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
     # The polish: the capped LM from the NN's tau, with the Jacobian by differences and,
     # where that stalls at a kink of the contact law, the exact one (solve.attempts).
+    raw["raw_state"] = (pred.net.state(pressures) if isinstance(pred.net, ContactNet) else
+                        grasp_state(st.contact.normal, st.contact.slip))
     res = solve(problem, pressures, SolverOptions(contact_max_step=POLISH_STEP), x0=tau)
     fallback = ~res.converged
     if bool(fallback.any()):
@@ -292,19 +345,66 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
                            fallback=fallback, polished=~fallback, **raw)
 
 
-def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    """Iterative-solver tau labels (n, J, 3) for pressures (n, J); returns (pressures, tau)
-    restricted to converged samples."""
+def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, ...]:
+    """Iterative-solver labels for pressures (n, J): (pressures, tau (n, J, 3), grasp
+    state (n,) codes into GRASP_STATES), restricted to the converged samples."""
     res = solve(cfg.problem(joint), pressures)
     ok = res.converged
     print(f"[nn] labels: {int(ok.sum())}/{len(ok)} converged in {res.time_ms / 1e3:.1f} s", file=sys.stderr,
           flush=True)
-    return pressures[ok], res.tau[ok]
+    return pressures[ok], res.tau[ok], grasp_state(res.normal_force_N, res.slip)[ok]
+
+
+def _fit(module: nn.Module, batch_loss, n: int, cfg: NNConfig, gen: torch.Generator, log=None,
+         lbfgs: bool = True) -> float:
+    """Train ``module`` on batch_loss(idx) (a scalar over samples idx (b,) of n; idx None:
+    all): cfg.epochs of Adam over shuffled mini-batches of cfg.batch (lr cfg.lr decayed
+    x cfg.decay per epoch), calling log(epoch, mean loss) 25 times, then (``lbfgs``)
+    cfg.lbfgs_iters of full-batch L-BFGS. Returns the final mean loss."""
+    opt = torch.optim.Adam(module.parameters(), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.ExponentialLR(opt, cfg.decay)
+    total = math.nan
+    for epoch in range(1, cfg.epochs + 1):
+        perm = torch.randperm(n, generator=gen)
+        total = 0.0
+        for i in range(0, n, cfg.batch):
+            idx = perm[i:i + cfg.batch]
+            opt.zero_grad()
+            value = batch_loss(idx)
+            value.backward()
+            opt.step()
+            total += value.item() * len(idx)
+        total /= n
+        sched.step()
+        if log and (epoch % max(1, cfg.epochs // 25) == 0 or epoch == cfg.epochs):
+            log(epoch, total)
+    if lbfgs and cfg.lbfgs_iters:
+        opt = torch.optim.LBFGS(module.parameters(), lr=1.0, max_iter=cfg.lbfgs_iters, history_size=50,
+                                tolerance_grad=1e-14, tolerance_change=1e-18, line_search_fn="strong_wolfe")
+
+        def closure():
+            opt.zero_grad()
+            value = batch_loss(None)
+            value.backward()
+            return value
+
+        opt.step(closure)
+        with torch.no_grad():
+            total = float(batch_loss(None))
+        if log:
+            log(cfg.epochs + 1, total)
+    return total
 
 
 def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     """Train one variant; prints progress on stderr; returns the Predictor with history and
-    metrics."""
+    metrics.
+
+    Equilibrium loss (unsupervised) or, with ``supervised``, the scaled squared error to
+    the solver's labels. With ``state_heads`` (ContactNet) the classifier learns the
+    states (cross-entropy, Adam only), then each head the labels of its own state; the
+    history has one point per stage (classifier, then the heads in GRASP_STATES order) at
+    its cumulative epoch."""
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     p_train, p_val = sample_pressures(cfg.n_train, cfg, gen), sample_pressures(cfg.n_val, cfg, gen)
@@ -312,28 +412,27 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     t_start = time.perf_counter()
     label_time = 0.0
     if cfg.supervised:
-        p_train, tau_train = _labels(joint, p_train, cfg)
-        p_val, tau_val = _labels(joint, p_val, cfg)
+        p_train, tau_train, s_train = _labels(joint, p_train, cfg)
+        p_val, tau_val, _ = _labels(joint, p_val, cfg)
         label_time = time.perf_counter() - t_start
-        scale = torch.tensor(TAU_SCALE[:3], dtype=torch.float64)
+    scale = torch.tensor(TAU_SCALE[:3], dtype=torch.float64)
+    net = network(cfg)
 
-    net = GestureNet(cfg.widths, cfg.activation)
+    def label_loss(module, p, target):
+        return ((module(p) - target) / scale).pow(2).sum((-1, -2)).mean()
 
-    def batch_loss(p: torch.Tensor, idx: torch.Tensor | None = None) -> torch.Tensor:
+    def equilibrium_loss(p):
         tau = net(p)
-        if cfg.supervised:
-            target = tau_train if idx is not None else tau_val
-            target = target[idx] if idx is not None else target
-            return ((tau - target) / scale).pow(2).sum((-1, -2)).mean()
         return loss(problem.residual(p, tau).residual, tau).mean()
 
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    sched = torch.optim.lr_scheduler.ExponentialLR(opt, cfg.decay)
+    def pick(t, idx):
+        return t if idx is None else t[idx]
+
     history = {"epoch": [], "train_loss": [], "val_loss": [], "val_force_mN": [], "val_moment_Nmm": []}
 
     def log(epoch: int, train_loss: float) -> None:
         with torch.no_grad():
-            val = float(batch_loss(p_val))
+            val = float(label_loss(net, p_val, tau_val) if cfg.supervised else equilibrium_loss(p_val))
         ev = evaluate(net, problem, p_val)
         for k, v in (("epoch", epoch), ("train_loss", train_loss), ("val_loss", val),
                      ("val_force_mN", ev["force_mN_mean"]), ("val_moment_Nmm", ev["moment_Nmm_mean"])):
@@ -342,34 +441,23 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
               f"force {ev['force_mN_mean']:.3f} mN moment {ev['moment_Nmm_mean']:.3f} N·mm", file=sys.stderr,
               flush=True)
 
-    n = p_train.shape[0]
-    for epoch in range(1, cfg.epochs + 1):
-        perm = torch.randperm(n, generator=gen)
-        total = 0.0
-        for i in range(0, n, cfg.batch):
-            idx = perm[i:i + cfg.batch]
-            opt.zero_grad()
-            value = batch_loss(p_train[idx], idx)
-            value.backward()
-            opt.step()
-            total += value.item() * len(idx)
-        sched.step()
-        if epoch % max(1, cfg.epochs // 25) == 0 or epoch == cfg.epochs:
-            log(epoch, total / n)
-    if cfg.lbfgs_iters:
-        lbfgs = torch.optim.LBFGS(net.parameters(), lr=1.0, max_iter=cfg.lbfgs_iters, history_size=50,
-                                  tolerance_grad=1e-14, tolerance_change=1e-18, line_search_fn="strong_wolfe")
-        all_idx = torch.arange(n)
-
-        def closure():
-            lbfgs.zero_grad()
-            value = batch_loss(p_train, all_idx)
-            value.backward()
-            return value
-
-        lbfgs.step(closure)
-        with torch.no_grad():
-            log(cfg.epochs + 1, float(batch_loss(p_train, all_idx)))
+    if not cfg.state_heads:
+        _fit(net, lambda idx: (label_loss(net, pick(p_train, idx), pick(tau_train, idx)) if cfg.supervised
+                               else equilibrium_loss(pick(p_train, idx))), p_train.shape[0], cfg, gen, log)
+    else:
+        if not cfg.supervised:
+            raise ValueError("state_heads needs the solver's labels (supervised)")
+        final = _fit(net.classifier, lambda idx: nn.functional.cross_entropy(
+            net.classifier(pick(p_train, idx) / P_SCALE), pick(s_train, idx)), p_train.shape[0], cfg, gen,
+            lbfgs=False)
+        epochs = cfg.epochs
+        log(epochs, final)
+        for k, head in enumerate(net.heads):
+            pk, tk = p_train[s_train == k], tau_train[s_train == k]
+            if len(pk):   # a state the domain never reaches keeps an untrained head it never picks
+                final = _fit(head, lambda idx: label_loss(head, pick(pk, idx), pick(tk, idx)), len(pk), cfg, gen)
+                epochs += cfg.epochs
+                log(epochs, final)
     train_time = time.perf_counter() - t_start
     metrics = {"val": evaluate(net, problem, p_val), "train_time_s": train_time,
                "label_time_s": label_time, "n_train": int(p_train.shape[0]), "n_val": int(p_val.shape[0])}
@@ -379,7 +467,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     return Predictor(net, cfg, joint.name, metrics, history)
 
 
-def contact_fraction(net: GestureNet, problem: GripperProblem, pressures: torch.Tensor) -> float:
+def contact_fraction(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor) -> float:
     """Fraction of pressures (B, J) whose raw NN gesture touches the object."""
     with torch.no_grad():
         return float((problem.residual(pressures, net(pressures)).contact.normal > 0).double().mean())
@@ -423,7 +511,7 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
         saved = {"kinematics": "tangent", "joint_weight": "lumped", **ck["config"]}
         cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
         trained_params = cfg.params()
-        net = GestureNet(cfg.widths, cfg.activation)
+        net = network(cfg)
         net.load_state_dict(ck["state_dict"])
         joint_name, metrics, history = ck["joint"], ck["metrics"], ck["history"]
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # intact file, inconsistent payload

@@ -49,7 +49,8 @@ import torch
 
 from fem.spec import INPUT_BOX
 from predictor.gripper import FingerPose, check_pressures, nan_unless, with_rows
-from predictor.statics import MOMENT_SCALE, PENALTY_WEIGHT, GripperProblem, range_penalty, residual_norms, scaled
+from predictor.statics import (MOMENT_SCALE, PENALTY_WEIGHT, GripperProblem, contact_loads, range_penalty,
+                               residual_norms, scaled)
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,29 @@ def _traced_residual_fn(problem: GripperProblem):
     """``_residual_fn(problem)`` recorded by ``traced``: one per problem (0.3 s), valid
     for any batch size."""
     return traced(_residual_fn(problem), 3 * problem.n_joints, problem.n_joints)
+
+
+@functools.lru_cache(maxsize=16)
+def _traced_contact_fn(problem: GripperProblem):
+    """c(x (B, 3J), p (B, J)) -> (B, 2) [total normal force N, penetration mm] of the
+    object on the finger, recorded by ``traced``: the ramp asks for it after every step
+    (the depth check, the first contact), where the whole eager residual cost 3x more."""
+    n_joints, weight = problem.n_joints, problem.params.object_weight if problem.gravity else 0.0
+
+    def c(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+        st = contact_loads(problem.pose(p, x.reshape(-1, n_joints, 3)), problem.params, problem.obstacle,
+                           problem.contact, weight)
+        return torch.stack((st.normal, st.penetration), -1)
+
+    return traced(c, 3 * n_joints, n_joints)
+
+
+def touch(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(normal force N (B,), penetration mm (B,)) of the object on the finger at unknowns
+    x (B, 3J) and pressures p (B, J) (``_traced_contact_fn``)."""
+    with torch.inference_mode():
+        c = _traced_contact_fn(problem)(x, p)
+    return c[:, 0].clone(), c[:, 1].clone()
 
 
 def traced(fn, n: int, J: int):
@@ -408,9 +432,7 @@ def _runner(prob: GripperProblem, opts: SolverOptions):
         # A step so large that the finger passes into (or through) the object finds a
         # spurious equilibrium; refuse it so that _advance cuts the step back.
         x, conv, its, jac = method(x, p, p_prev, jac)
-        with torch.no_grad():
-            pen = prob.residual(p, x.reshape(-1, prob.n_joints, 3)).contact.penetration
-        return x, conv & (pen <= opts.max_penetration), its, jac
+        return x, conv & (touch(prob, x, p)[1] <= opts.max_penetration), its, jac
 
     return with_depth_check
 
@@ -482,8 +504,7 @@ def _solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solve
     def record_contact(x, p):
         # One contact evaluation per ramp step (no iterate changes): the first pressures
         # at which the finger touches the object, for grasp planning (predictor.atlas).
-        with torch.no_grad():
-            new = (problem.residual(p, x.reshape(-1, n_joints, 3)).contact.normal > 0) & first_contact[:, 0].isnan()
+        new = (touch(problem, x, p)[0] > 0) & first_contact[:, 0].isnan()
         first_contact[new] = p[new]
 
     if problem.obstacle is None or x0 is not None:

@@ -138,14 +138,17 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict) -> None:
 
 def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:
     """The FEM's fingertip change between the production mesh and another mesh, per case
-    solved on both: the discretisation term of the fingertip error budget."""
+    solved on both: the discretisation term of the fingertip error budget (wall_mesh_size:
+    the other mesh's chamber-wall size, mm, None where it has none of its own)."""
     base = {c["case"]: c for c in cases if c["converged"]}
     out = []
     for o in others:
         c = base.get(o["case"])
         if c is None or not o["converged"]:
             continue
-        out.append({"case": o["case"], "mesh_size": o["mesh"]["mesh_size"], "nodes": o["mesh"]["nodes"],
+        wall = o.get("settings", {}).get("geometry", {}).get("joint", {}).get("wall_mesh_size")
+        out.append({"case": o["case"], "mesh_size": o["mesh"]["mesh_size"], "wall_mesh_size": wall,
+                    "nodes": o["mesh"]["nodes"],
                     "production_mesh_size": c["mesh"]["mesh_size"], "production_nodes": c["mesh"]["nodes"],
                     "tip_change_mm": math.dist(o["tip"], c["tip"]),
                     "tip_angle_change_deg": o["tip_angle_deg"] - c["tip_angle_deg"],

@@ -531,8 +531,11 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
              raw_p95, [b["contact_nn_raw_p95_force_mN"], b["contact_nn_raw_p95_moment_Nmm"]]),
             ("contact NN residual, raw network, contact-free equilibria (mean)",
              _num((vs["raw_contact_free"] or {}).get("force_mN_mean"), ".3g") + " mN", "n/a", [], []),
-            ("contact NN grasp state = the ramp solver's (no contact / holds / slips)",
-             f"{100 * b['contact_nn_state_agreement']:.1f} % of {vs['reference_converged']}", "n/a",
+            (f"contact NN grasp state ({vs.get('state_by', 'contact of the raw tau')}) = the ramp solver's "
+             "(no contact / holds / slips)",
+             f"{100 * b['contact_nn_state_agreement']:.1f} % of {vs['reference_converged']}"
+             + (f" (its tau's contact: {100 * vs['state_agreement_of_tau']:.1f} %)"
+                if "state_agreement_of_tau" in vs else ""), "n/a",
              [Target(">=", t["contact_nn_state_agreement"], "%", scale=100.0, key="contact_nn_state_agreement")]
              if "contact_nn_state_agreement" in t else [], [b["contact_nn_state_agreement"]]),
             ("contact NN fingertip vs the ramp solver's (raw network, mean)",
@@ -715,9 +718,12 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
     out = ["", "Fingertip error budget (how far each stage can move the fingertip):", "",
            "| term | figure | source |", "|---|---|---|"]
     for m in v.get("mesh_check", []):
-        out.append(f"| discretisation: finger FEM, joint mesh {m['production_mesh_size']} -> {m['mesh_size']} mm "
-                   f"({m['production_nodes']:,} -> {m['nodes']:,} nodes), {m['case']} | {m['tip_change_mm']:.2f} mm, "
-                   f"{m['tip_angle_change_deg']:+.2f}° | `python -m fem.finger_cases --mesh-size {m['mesh_size']}` |")
+        wall = m.get("wall_mesh_size")
+        out.append(f"| discretisation: finger FEM, joint mesh {m['production_mesh_size']} -> "
+                   f"{_mesh_label(m['mesh_size'], wall)} mm ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
+                   f"{m['case']} | {m['tip_change_mm']:.2f} mm, {m['tip_angle_change_deg']:+.2f}° | "
+                   f"`python -m fem.finger_cases --mesh-size {m['mesh_size']}"
+                   + (f" --wall-mesh-size {wall}`" if wall else "`") + " |")
     study = _load(root / "fem/mesh_study.json")
     if study and study.get("production_error"):
         e = study["production_error"]
