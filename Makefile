@@ -21,7 +21,7 @@ APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
-        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas atlas-reference inverse finger-fem validate-finger report clean
+        dataset dataset-smoke bench-campaign train sweep gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse finger-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -172,6 +172,11 @@ atlas-reference: $(ATLAS_RAMP) ## the atlases with every point ramped on its own
 results/predictor/ramp/atlas_%.json: $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --model $(PRED_JOINT) --out $@ --json
+
+atlas-reference-fine: results/predictor/ramp_fine/atlas_rectangle.json ## the rectangle's reference ramp with 48 sub-steps instead of 12: its path resolution (~9 min) -> results/predictor/ramp_fine/
+results/predictor/ramp_fine/atlas_%.json: $(PLAN_CODE) | $(SETUP)
+	@mkdir -p $(@D)
+	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
 
 inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, two tip targets -> results/predictor/inverse.{json,png}
 results/predictor/inverse.json: $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)

@@ -395,6 +395,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--path", choices=PATHS, default="sweep",
                     help="sweep: continuation outward from the approach (default); ramp: every point "
                     "ramped on its own (the reference)")
+    ap.add_argument("--ramp-steps", type=cli.number(1, 1000, integer=True), default=SolverOptions.ramp_steps,
+                    help=f"pressure sub-steps of a ramped point (default {SolverOptions.ramp_steps}; --path ramp "
+                    "with more steps checks the reference's own path resolution)")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate)")
     ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
     ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
@@ -403,8 +406,8 @@ def main(argv: list[str] | None = None) -> int:
     with ap.errors():
         problem = load_problem(args.model, args.object)
         check_pressures(torch.tensor(args.box).reshape(2, 2).T)
-        atlas = grasp_atlas(problem, args.grid, args.box, path=args.path)
-        doc = {**atlas.to_json(), "spec": args.object}
+        atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
+        doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps}
         if args.out:
             write_json(args.out, doc)
         if args.plot:

@@ -238,6 +238,7 @@ CASES_PREDICTOR = [
     ("predictor.atlas", ["--object", "circle", "--box", "0,inf,0,0.3"], "--box: 'inf' is not a finite number"),
     ("predictor.atlas", ["--object", "blob"], "unknown object 'blob'"),
     ("predictor.atlas", ["--object", "circle", "--path", "zigzag"], "--path: invalid choice: 'zigzag'"),
+    ("predictor.atlas", ["--object", "circle", "--ramp-steps", "0"], "--ramp-steps: 0 is outside [1, 1000]"),
     ("predictor.atlas", ["--object", "circle:q=1"], "bad object field 'q=1'"),
     ("predictor.atlas", ["--object", "circle", "--plot", "{tmp}/x.svg"], "expected a .png file"),
     ("predictor.atlas", ["--object", "circle", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),

@@ -662,6 +662,8 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                        f"{a['measured']['atlas_s_per_object']:.1f} s "
                        f"| {paper_h} |" + _cells(checks[-1]))
         out.append("")
+        for kind, a in atlases:
+            out += _finer_ramp(root, kind, a)
     else:
         out += _missing("grasp atlas", "make atlas")
     for kind in kinds:
@@ -710,6 +712,27 @@ def _variant_label(e: dict) -> str:
     if e["method"] == "chain":
         return f"surrogate chain (tau = 0), {e['kinematics']} kinematics"
     return f"{e['kinematics']} kinematics, {e['joint_weight']} joint weights"
+
+
+def _finer_ramp(root: Path, kind: str, a: dict) -> list[str]:
+    """The reference's own path resolution: the sweep ``a`` and the ramp reference against
+    a ramp with more sub-steps (results/predictor/ramp_fine/, make atlas-reference-fine),
+    on the points that converge on all three."""
+    fine, ref = (_load(root / f"predictor/{d}/atlas_{kind}.json") for d in ("ramp_fine", "ramp"))
+    if not (fine and ref and fine.get("grid") == ref.get("grid") == a["grid"]):
+        return []
+    fine_s, ref_s, sweep_s = (sum(x["state"], []) for x in (fine, ref, a))
+    failed = fine["states"].index("not_converged")
+    common = [i for i in range(len(fine_s)) if failed not in (fine_s[i], ref_s[i], sweep_s[i])]
+    sweep = sum(sweep_s[i] != fine_s[i] for i in common)
+    coarse = sum(ref_s[i] != fine_s[i] for i in common)
+    steps, ref_steps = fine.get("ramp_steps"), ref.get("ramp_steps", 12)  # older files: the solver's default, 12
+    return [f"Path resolution, {kind}: the ramp with {steps} sub-steps instead of {ref_steps} "
+            f"(`make atlas-reference-fine`) converges at {len(fine_s) - fine['counts']['not_converged']} of "
+            f"{len(fine_s)} points. On the {len(common)} points that converge on all three paths, the sweep's "
+            f"state differs from the {steps}-step ramp's at {sweep} and the {ref_steps}-step reference's at "
+            f"{coarse}" + (": the sweep is closer to the finer ramp than the reference is, so most of their "
+                           "disagreement is the reference's coarse path." if sweep < coarse else "."), ""]
 
 
 def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
