@@ -170,7 +170,8 @@ def _traced_residual_fn(problem: GripperProblem):
 def _traced_contact_fn(problem: GripperProblem):
     """c(x (B, 3J), p (B, J)) -> (B, 2) [total normal force N, penetration mm] of the
     object on the finger, recorded by ``traced``: the ramp asks for it after every step
-    (the depth check, the first contact), where the whole eager residual cost 3x more."""
+    (the depth check, the first contact), where the whole eager residual (pose, weights,
+    Equation 1) costs several times more."""
     n_joints, weight = problem.n_joints, problem.params.object_weight if problem.gravity else 0.0
 
     def c(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
