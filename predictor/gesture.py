@@ -45,9 +45,10 @@ from pathlib import Path
 import torch
 
 from fem import cli
-from fem.finger_spec import DEFAULT_FINGER, FingerFileError, load_finger
+from fem.finger_spec import DEFAULT_FINGER
 from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams
+from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
+                               finger_arg)
 from predictor.joint import load_joint
 from predictor.solve import APPROACH, SolverOptions, approach_for, solve
 from predictor.statics import GripperProblem, parse_object
@@ -64,14 +65,6 @@ def _pressure_list(text: str) -> tuple[float, ...]:
 def _approach(text: str):
     """--approach: ``zero`` or P1,..,PJ in MPa."""
     return "zero" if text.strip().lower() == "zero" else _pressure_list(text)
-
-
-def _finger(text: str):
-    """--finger: a finger description file, read and checked while parsing (one line)."""
-    try:
-        return load_finger(text)
-    except FingerFileError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def pressures_of(args: argparse.Namespace, n_joints: int) -> tuple[float, ...]:
@@ -156,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--p2", type=PRESSURE, help="joint-2 pressure, MPa (|P| <= 0.3)")
     ap.add_argument("--pressures", type=_pressure_list, help="P1,..,PJ MPa, one per joint of the finger, base "
                     "to tip (instead of --p1 --p2)")
-    ap.add_argument("--finger", type=_finger, default=str(DEFAULT_FINGER),
+    ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
                     help="finger description file (TOML, fem.finger_spec; default fem/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
                     help="a part leaves a joint along its last anchors' chord (tangent, the paper's) "

@@ -38,13 +38,14 @@ the finger only (ChainLayout) are cached: the residual runs thousands of times p
 """
 from __future__ import annotations
 
+import argparse
 import functools
 import math
 from dataclasses import dataclass, field, fields
 
 import torch
 
-from fem.finger_spec import DEFAULT_FINGER, FingerSpec, JointPart, RigidPart, load_finger
+from fem.finger_spec import DEFAULT_FINGER, FingerFileError, FingerSpec, JointPart, RigidPart, load_finger
 from fem.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
@@ -86,6 +87,15 @@ def with_rows(v: torch.Tensor, rows: torch.Tensor, new: torch.Tensor) -> torch.T
 def default_finger() -> FingerSpec:
     """The paper's finger (fem/fingers/paper.toml), read once."""
     return load_finger(DEFAULT_FINGER)
+
+
+def finger_arg(text: str) -> FingerSpec:
+    """argparse type of --finger: a finger description file, read and checked while
+    parsing (one line)."""
+    try:
+        return load_finger(text)
+    except FingerFileError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def finger_to_dict(finger: FingerSpec) -> dict:

@@ -68,7 +68,8 @@ from torch import nn
 from fem import cli
 from fem.spec import PRESSURE_LIMIT
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
-                               check_pressures, default_finger, finger_from_dict, finger_to_dict, nan_unless)
+                               check_pressures, default_finger, finger_arg, finger_from_dict, finger_to_dict,
+                               nan_unless)
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
 from predictor.statics import GripperProblem, Obstacle, loss, residual_norms
@@ -524,12 +525,6 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
     return Predictor(net.eval(), cfg, joint_name, metrics, history)
 
 
-def _finger_arg(text: str):
-    from predictor.gesture import _finger
-
-    return _finger(text)
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.nn", description="train an NN gesture predictor")
     ap.add_argument("--variant", choices=sorted(VARIANTS), required=True)
@@ -537,7 +532,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_output("--out", suffix=".pt", required=True, help="checkpoint path (.pt)")
     ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
                     help="override the variant's epochs (smoke runs)")
-    ap.add_argument("--finger", type=_finger_arg, default=None,
+    ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: the paper's, fem/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
