@@ -55,10 +55,7 @@ from fem.spec import PRESSURE_LIMIT
 from predictor.gripper import GripperParams, check_pressures
 from predictor.solve import (APPROACH, GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
                              gesture_result, solve)
-from predictor.statics import GripperProblem, Obstacle
-
-STATES = ("no_contact", "holds", "slips", "not_converged")
-NO_CONTACT, HOLDS, SLIPS, NOT_CONVERGED = range(4)
+from predictor.statics import HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state
 FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
 #: How an atlas point was solved (Atlas.how): continued from its ray's previous grid
 #: point, ramped from the approach (no predecessor, or the ``ramp`` path), or ramped after
@@ -74,11 +71,9 @@ def classify(res: GestureResult, mu: float) -> tuple[np.ndarray, np.ndarray]:
     """(state codes (B,) int into STATES, friction use u = |λ|/mu (B,), NaN without
     contact or convergence) of a solve result."""
     conv = res.converged.numpy()
-    normal = res.normal_force_N.numpy()
     use = np.abs(res.friction_ratio.numpy()) / mu
-    state = np.where(~conv, NOT_CONVERGED, np.where(normal <= 0, NO_CONTACT,
-                                                    np.where(res.slip.numpy(), SLIPS, HOLDS)))
-    return state, np.where(conv & (normal > 0), use, np.nan)
+    state = np.where(~conv, NOT_CONVERGED, grasp_state(res.normal_force_N, res.slip).numpy())
+    return state, np.where(conv & (res.normal_force_N.numpy() > 0), use, np.nan)
 
 
 def placement_error(problem: GripperProblem) -> str | None:

@@ -51,7 +51,7 @@ from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_W
                                finger_arg)
 from predictor.joint import load_joint
 from predictor.solve import APPROACH, SolverOptions, approach_for, solve
-from predictor.statics import GripperProblem, parse_object
+from predictor.statics import STATES, GripperProblem, parse_object
 
 DEFAULT_SURROGATE = Path("results/surrogate/improved.pt")
 PRESSURE = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
@@ -124,7 +124,7 @@ def run(args: argparse.Namespace, prepared=None):
     Returns (json dict, result, problem)."""
     problem, pressures, joint, predictor = prepared or prepare(args)
     if predictor is not None:
-        from predictor.nn import GRASP_STATES, predict_gesture
+        from predictor.nn import predict_gesture
 
         res = predict_gesture(predictor, problem, pressures)
     else:
@@ -139,7 +139,7 @@ def run(args: argparse.Namespace, prepared=None):
         out.update(raw_residual_force_mN=res.raw_residual_force_mN[0].tolist(),
                    raw_residual_moment_Nmm=res.raw_residual_moment_Nmm[0].tolist(),
                    polished=bool(res.polished[0]), fallback=bool(res.fallback[0]),
-                   raw_state=None if res.raw_state is None else GRASP_STATES[int(res.raw_state[0])])
+                   raw_state=None if res.raw_state is None else STATES[int(res.raw_state[0])])
     return out, res, problem
 
 

@@ -72,7 +72,8 @@ from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_W
                                nan_unless)
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
-from predictor.statics import GripperProblem, Obstacle, loss, residual_norms
+from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, grasp_state, loss,
+                               residual_norms)
 from surrogate import checkpoint
 
 TAU_SCALE = (1.0, 1.0, 30.0, 1.0, 1.0, 30.0)
@@ -165,18 +166,9 @@ class GestureNet(nn.Module):
         return (self.mlp(pressures / P_SCALE) * self.tau_scale).reshape(pressures.shape[0], -1, 3)
 
 
-#: Grasp states of a contact equilibrium, the codes of predictor.atlas.STATES.
-GRASP_STATES = ("no_contact", "holds", "slips")
-
-
-def grasp_state(normal: torch.Tensor, slip: torch.Tensor) -> torch.Tensor:
-    """State codes (B,) into GRASP_STATES from the normal force (B,) N and slip flags (B,)."""
-    return torch.where(normal > 0, torch.where(slip, 2, 1), 0)
-
-
 class ContactNet(nn.Module):
     """A grasp-state classifier and one GestureNet per state: (B, J) MPa -> tau (B, J, 3)
-    from the head of the predicted state (``state``: codes into GRASP_STATES).
+    from the head of the predicted state (``state``: codes of statics.STATES).
 
     Inside one state's region of the pressure plane the equilibrium is smooth; across the
     borders (contact onset, the friction cone's edge, the approach's branch) it has kinks
@@ -188,14 +180,32 @@ class ContactNet(nn.Module):
     def __init__(self, widths: tuple, activation: str):
         super().__init__()
         self.classifier = GestureNet(tuple(widths[:-1]) + (3,), activation).mlp
-        self.heads = nn.ModuleList(GestureNet(widths, activation) for _ in GRASP_STATES)
+        self.heads = nn.ModuleList(GestureNet(widths, activation) for _ in (NO_CONTACT, HOLDS, SLIPS))
 
     def state(self, pressures: torch.Tensor) -> torch.Tensor:
         return self.classifier(pressures / P_SCALE).argmax(-1)
 
+    def tau_and_state(self, pressures: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(tau (B, J, 3), state (B,)): each pressure through its state's head only."""
+        state = self.state(pressures)
+        tau = pressures.new_empty(pressures.shape[0], pressures.shape[1], 3)
+        for k, head in enumerate(self.heads):
+            rows = state == k
+            if bool(rows.any()):
+                tau[rows] = head(pressures[rows])
+        return tau, state
+
     def forward(self, pressures: torch.Tensor) -> torch.Tensor:
-        taus = torch.stack([head(pressures) for head in self.heads])
-        return taus[self.state(pressures), torch.arange(pressures.shape[0])]
+        return self.tau_and_state(pressures)[0]
+
+
+def raw_answer(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor):
+    """The network's own answer, no solver: (tau (B, J, 3), Statics at it, grasp state
+    (B,) codes: its classifier's for a ContactNet, else its tau's contact)."""
+    with torch.no_grad():
+        tau, state = net.tau_and_state(pressures) if isinstance(net, ContactNet) else (net(pressures), None)
+        st = problem.residual(pressures, tau)
+    return tau, st, grasp_state(st.contact.normal, st.contact.slip) if state is None else state
 
 
 def network(cfg: NNConfig) -> nn.Module:
@@ -265,10 +275,8 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
     problem = pred.config.problem(joint)
     ref = solve(problem, pressures)
     ok = ref.converged
-    with torch.no_grad():
-        st = problem.residual(pressures, pred.net(pressures))
-        of_tau = grasp_state(st.contact.normal, st.contact.slip)
-        by_net = pred.net.state(pressures) if isinstance(pred.net, ContactNet) else of_tau
+    _, st, by_net = raw_answer(pred.net, problem, pressures)
+    of_tau = grasp_state(st.contact.normal, st.contact.slip)
     touch = ref.normal_force_N > 0
     truth = grasp_state(ref.normal_force_N, ref.slip)
     tip = (st.pose.tip_end - ref.pose.tip_end).norm(dim=-1)[ok]
@@ -292,7 +300,7 @@ class NNGestureResult(GestureResult):
     (B, J): Equation 1 at the network's own tau, before any solver; polished (B,): the
     answer is the LM polish of the network's tau (contact), not the network's; fallback
     (B,): the polish did not converge and the full pressure ramp solved the sample instead;
-    raw_state (B,) codes into GRASP_STATES: the grasp state by the network itself (its
+    raw_state (B,) codes of statics.STATES: the grasp state by the network itself (its
     classifier; the contact of its tau for a network without one), None without an object."""
 
     fallback: torch.Tensor = None
@@ -320,9 +328,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
         raise ValueError(f"this NN predictor was trained for {diff}")
     check_pressures(pressures)
     t0 = time.perf_counter()
-    with torch.no_grad():
-        tau = pred.net(pressures)
-        st = problem.residual(pressures, tau)
+    tau, st, raw_state = raw_answer(pred.net, problem, pressures)
     f, m = residual_norms(st.residual)
     raw = {"raw_residual_force_mN": f, "raw_residual_moment_Nmm": m}
     if problem.obstacle is None:
@@ -336,8 +342,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
     # The polish: the capped LM from the NN's tau, with the Jacobian by differences and,
     # where that stalls at a kink of the contact law, the exact one (solve.attempts).
-    raw["raw_state"] = (pred.net.state(pressures) if isinstance(pred.net, ContactNet) else
-                        grasp_state(st.contact.normal, st.contact.slip))
+    raw["raw_state"] = raw_state
     res = solve(problem, pressures, SolverOptions(contact_max_step=POLISH_STEP), x0=tau)
     fallback = ~res.converged
     if bool(fallback.any()):
@@ -348,7 +353,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
 
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, ...]:
     """Iterative-solver labels for pressures (n, J): (pressures, tau (n, J, 3), grasp
-    state (n,) codes into GRASP_STATES), restricted to the converged samples."""
+    state (n,) codes of statics.STATES), restricted to the converged samples."""
     res = solve(cfg.problem(joint), pressures)
     ok = res.converged
     print(f"[nn] labels: {int(ok.sum())}/{len(ok)} converged in {res.time_ms / 1e3:.1f} s", file=sys.stderr,
@@ -404,7 +409,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     Equilibrium loss (unsupervised) or, with ``supervised``, the scaled squared error to
     the solver's labels. With ``state_heads`` (ContactNet) the classifier learns the
     states (cross-entropy, Adam only), then each head the labels of its own state; the
-    history has one point per stage (classifier, then the heads in GRASP_STATES order) at
+    history has one point per stage (classifier, then the heads in statics.STATES order) at
     its cumulative epoch."""
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)

@@ -182,6 +182,18 @@ class ContactParams:
     mu: float = 0.3
 
 
+#: Grasp states of an equilibrium with an object, and their codes (predictor.atlas adds
+#: NOT_CONVERGED for a solve that did not converge).
+STATES = ("no_contact", "holds", "slips", "not_converged")
+NO_CONTACT, HOLDS, SLIPS, NOT_CONVERGED = range(4)
+
+
+def grasp_state(normal: torch.Tensor, slip: torch.Tensor) -> torch.Tensor:
+    """State codes (B,) (NO_CONTACT, HOLDS or SLIPS) from the normal force (B,) N and the
+    slip flags (B,) of ContactState."""
+    return torch.where(normal > 0, torch.where(slip, SLIPS, HOLDS), NO_CONTACT)
+
+
 @dataclass
 class ContactState:
     """Contact of a batch of right fingers with the object (module docstring).
