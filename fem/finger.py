@@ -53,7 +53,7 @@ from fem.contact import ValleyContact
 from fem.finger_spec import FingerFileError, FingerSpec, load_finger
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
 from fem.mesh import create_mesh
-from fem.options import MESH_SIZE, add_mesh_size
+from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size
 from fem.solver import (Material, NewtonSolver, SolverConfig, _lame, displacement_problem,
                         facet_tags_present, follower_pressure, neo_hookean_psi, rotation_about_z)
 from fem.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
@@ -288,8 +288,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--finger", type=finger_file, default=None,
                     help="finger description file (default: fem/fingers/paper.toml)")
     add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
-    ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None,
-                    help="tetrahedron size on the chamber walls, mm (default: --mesh-size)")
+    add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")

@@ -42,7 +42,7 @@ from fem.files import atomic_path, json_safe, write_json
 from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, finger_file, rotation_matrix
 from fem.finger_spec import load_finger
 from fem.geometry import FingerGeometry, JointGeometry
-from fem.options import MESH_SIZE, add_mesh_size, one_rank
+from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size, one_rank
 
 #: (name, P1, P2, gravity)
 CASES = [
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
                   help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
     ap.add_argument("--finger", type=finger_file, default=None, help="finger file (default: the paper's)")
     add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
-    ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None, help="chamber-wall tetrahedron size, mm")
+    add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help="rigid-part tetrahedron size, mm")
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))

@@ -31,6 +31,12 @@ def add_mesh_size(ap: cli.Parser, default: float | None, what: str = "tetrahedro
                     help=f"{what}, {MESH_SIZE_TEXT} (default {shown})")
 
 
+def add_wall_mesh_size(ap: cli.Parser) -> None:
+    """``--wall-mesh-size`` W in mm on the 1.2 mm chamber walls (None: ``--mesh-size``)."""
+    ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None,
+                    help=f"tetrahedron size on the chamber walls, {MESH_SIZE_TEXT} (default: --mesh-size)")
+
+
 def add_load(ap: cli.Parser, default=(0.0, 0.0, 0.0, 0.0)) -> None:
     """``--p --f1 --f2 --m`` (finite numbers) and ``--allow-extrapolation``."""
     for name, unit, text, value in zip(INPUT_NAMES, INPUT_UNITS, LOAD_HELP, default):

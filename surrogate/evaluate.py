@@ -21,7 +21,7 @@ thread, and the throughput of no-grad calls on batches of 4,096 samples (over 1 
 thread and on every core, in float64 (the dtype of load_surrogate) and in float32.
 
 One checkpoint on any dataset directory:
-    python -m surrogate.evaluate --model PATH --data DIR [--split all|train|val|test] --json
+    python -m surrogate.evaluate --model PATH --data DIR [--split all|train|val|test] [--out F] --json
 The report (metrics.json, metrics.md, comparison figure, each written atomically):
     python -m surrogate.evaluate --report --train-data DIR --heldout DIR --dir results/surrogate
 """
@@ -266,6 +266,8 @@ def main(argv=None) -> int:
     ap.add_argument("--heldout", default="results/data/heldout", help="--report: held-out dataset")
     ap.add_output("--dir", folder=True,
                   help="--report: checkpoints and outputs (default results/surrogate)")
+    ap.add_output("--out", suffix=".json", help="also write the one-checkpoint figures as JSON "
+                                                "(atomically), with the model and data paths")
     ap.add_argument("--threads", type=cli.number(1, os.cpu_count() or 1, integer=True), default=1,
                     help="torch CPU threads")
     args = ap.parse_args(argv)
@@ -288,6 +290,8 @@ def main(argv=None) -> int:
             samples = load_splits(args.data)[0][args.split]
         outside = check_box(samples.inputs, args.allow_extrapolation)
         result = evaluate(model, samples) | {"split": args.split, "extrapolated_samples": outside}
+        if args.out:
+            write_json(args.out, result | {"model": args.model, "data": args.data})
     if args.json:
         cli.print_json(result)
     else:

@@ -26,9 +26,10 @@ PY = sys.executable
 CONFIG = {"source": "fem-campaign", "unit_size": 4, "walk_step": 0.2, "geometry": {"mesh_size": 4.0}}
 
 
-def fabricate(root, samples=10, seed=5, units=None, fail_every=7):
+def fabricate(root, samples=10, seed=5, units=None, fail_every=7, config=CONFIG, edit=None):
     """A campaign-layout dataset of ``samples`` random samples (every fail_every-th id a
-    failure) in units of 4, written with the campaign's shard and manifest functions."""
+    failure) in units of 4, written with the campaign's shard and manifest functions;
+    ``edit(arrays)`` changes a unit's arrays before they are written."""
     n_units = store.unit_count(samples, CONFIG["unit_size"])
     for u in range(n_units) if units is None else units:
         ids = store.unit_ids(u, samples, CONFIG["unit_size"])
@@ -43,10 +44,12 @@ def fabricate(root, samples=10, seed=5, units=None, fail_every=7):
             "newton_iterations": np.full(n, 5), "wall_time_s": rng.uniform(1, 2, n),
             "converged": np.ones(n, bool), "failed_sample_id": bad,
             "failed_inputs": np.zeros((len(bad), 4)), "failed_reason": np.array(["cut-back"] * len(bad))}
-        meta = {"config": CONFIG, "seed": seed, "unit": u, "git_commit": "test", "cpu_s": 10.0}
+        if edit:
+            edit(arrays)
+        meta = {"config": config, "seed": seed, "unit": u, "git_commit": "test", "cpu_s": 10.0}
         shards.write_shard(root / store.shard_file(u), arrays, meta)
-    scan = store.ShardScanner(root, samples, CONFIG, seed).scan()
-    return store.build_manifest(root, samples, CONFIG, seed, scan)
+    scan = store.ShardScanner(root, samples, config, seed).scan()
+    return store.build_manifest(root, samples, config, seed, scan)
 
 
 def cli(*args):
@@ -175,6 +178,35 @@ def test_temporaries_are_cleaned_and_never_count_as_shards(tmp_path):
     assert store.verify(tmp_path)["warnings"] == []
     assert store.clean_temporaries(tmp_path) == 3 and not any(p.exists() for p in junk)
     assert store.verify(tmp_path)["ok"]
+
+
+def test_compare_two_meshes_of_one_walk(tmp_path):
+    """Exact: the other mesh's anchors all moved by (0.3, 0.4) mm -> 0.5 mm at every anchor;
+    its phi_end by +0.1 rad -> 5.7296 deg; its cap rotation by 2 pi - 0.02 rad, which wraps
+    to 1.1459 deg. Units 0 and 2 only: ids 0-2 and 8-9 (3 failed), 5 common samples. Another
+    walk (seed) or other loads under the same ids are refused with one line, exit 2."""
+    def moved(a):
+        a["anchors"] = a["anchors"] + [0.3, 0.4]
+        a["phi_end"] = a["phi_end"] + 0.1
+        a["cap_rotation"] = a["cap_rotation"] + 2 * np.pi - 0.02
+    fine = CONFIG | {"geometry": {"mesh_size": 2.0, "wall_mesh_size": 1.0}}
+    fabricate(tmp_path / "ref")
+    fabricate(tmp_path / "fine", units=[0, 2], config=fine, edit=moved)
+    out = tmp_path / "cmp.json"
+    r = cli("compare", tmp_path / "ref", tmp_path / "fine", "--out", out, "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(out.read_text())
+    assert d == json.loads(r.stdout) and d["samples"] == 5 and d["ref_samples"] == 9
+    assert d["other_mesh"] == {"mesh_size": 2.0, "wall_mesh_size": 1.0}
+    for key, exact in (("anchor_mm", 0.5), ("tip_mm", 0.5), ("phi_end_deg", np.degrees(0.1)),
+                       ("cap_rotation_deg", np.degrees(0.02))):
+        assert np.allclose(list(d[key].values()), exact, atol=1e-9), key
+    fabricate(tmp_path / "seed6", seed=6, config=fine)
+    fabricate(tmp_path / "loads", config=fine, edit=lambda a: a.update(inputs=a["inputs"] * 0.5))
+    for other, needle in (("seed6", "another campaign walk"), ("loads", "different loads")):
+        r = cli("compare", tmp_path / "ref", tmp_path / other, "--out", tmp_path / "x.json")
+        assert r.returncode == 2 and needle in r.stderr and r.stderr.count("\n") == 1, r.stderr
+        assert not (tmp_path / "x.json").exists()
 
 
 def test_cli_usage_errors(tmp_path):

@@ -70,7 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from fem import cli
-from fem.options import add_mesh_size
+from fem.options import add_mesh_size, add_wall_mesh_size
 from fem.spec import INPUT_BOX, N_INPUTS
 from workflow import shards
 from workflow.shards import Manifest, ShardError
@@ -133,12 +133,12 @@ def git_commit() -> str:
         return "unknown"
 
 
-def campaign_config(mesh_size: float, unit_size: int, step: float, fresh_check_every: int) -> dict:
-    """The manifest's ``config``: everything that determines the samples (not N, not ranks)."""
-    from fem.geometry import JointGeometry
+def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int) -> dict:
+    """The manifest's ``config``: everything that determines the samples (not N, not ranks);
+    ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included)."""
     from fem.solver import Material, SolverConfig
 
-    return {"source": "fem-campaign", "geometry": JointGeometry(mesh_size=mesh_size).as_dict(),
+    return {"source": "fem-campaign", "geometry": geometry.as_dict(),
             "material": asdict(Material()), "solver": asdict(SolverConfig()),
             "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
             "fresh_check_every": fresh_check_every,
@@ -232,6 +232,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--ranks-per-group", type=count, default=1,
                     help="MPI ranks per FEM solve (default 1; must divide the rank count)")
     add_mesh_size(ap, None, "tetrahedron size (default: the FEM's production mesh)")
+    add_wall_mesh_size(ap)
     ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
     ap.add_argument("--step", type=cli.number(0, 2, open_lo=True), default=DEFAULT_STEP,
@@ -319,7 +320,8 @@ def run(args) -> int:
     from fem.solver import JointSolver
 
     mesh_size = args.mesh_size or JointGeometry().mesh_size
-    config = campaign_config(mesh_size, args.unit_size, args.step, args.fresh_check_every)
+    geometry = JointGeometry(mesh_size=mesh_size, wall_mesh_size=args.wall_mesh_size)
+    config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every)
     out, t_start = Path(args.out), time.perf_counter()
 
     # --- world rank 0: check, lock, clean, scan, manifest; everyone learns the units to do.
@@ -358,7 +360,8 @@ def run(args) -> int:
                             args.progress_every)
         if not args.quiet:
             print(f"[campaign] {out}: {len(todo)} of {manifest.units_total} units to do on "
-                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size} mm, "
+                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size}"
+                  f"{':' + str(args.wall_mesh_size) if args.wall_mesh_size else ''} mm, "
                   f"unit size {args.unit_size}, step {args.step}", flush=True)
 
     state = {"in_unit": 0, "fail_in_unit": 0}
@@ -381,7 +384,7 @@ def run(args) -> int:
             stopped = True
             break
         if solver is None:
-            solver = JointSolver(JointGeometry(mesh_size=mesh_size), group)
+            solver = JointSolver(geometry, group)
         ids = unit_ids(unit, args.samples, args.unit_size)
         inputs = unit_walk(args.seed, unit, len(ids), args.step)
         check = args.fresh_check_every > 0 and unit % args.fresh_check_every == 0
@@ -425,6 +428,7 @@ def run(args) -> int:
             "units_run": units_run, "complete": manifest.complete,
             "range_complete": range_done, "stopped_by_budget": stopped,
             "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
+            "wall_mesh_size": args.wall_mesh_size,
             "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,
             "cpu_hours_dataset": manifest.cpu_hours, "git_commit": commit,
         }

@@ -3,8 +3,12 @@
     python -m workflow.dataset info ROOT [--json]
     python -m workflow.dataset verify ROOT [--mirror N] [--require-complete | --require-units A:B] [--json]
     python -m workflow.dataset merge OUT SOURCE [SOURCE ...] [--json]
+    python -m workflow.dataset compare REF OTHER [--out FILE] [--json]
 
-The command line only: the work is ``workflow.store`` (info, verify, merge), on datasets
+``compare``: how far OTHER's samples lie from REF's where both solved the same load (two
+campaigns of one walk on different meshes: the discretisation change over the walk).
+
+The command line only: the work is ``workflow.store`` (info, verify, merge, compare), on datasets
 in the format of ``workflow.shards``. Imports neither dolfinx nor torch; only
 ``verify --mirror N`` builds a FEM solver (N solves on one rank).
 
@@ -19,6 +23,7 @@ from __future__ import annotations
 import sys
 
 from fem import cli
+from fem.files import write_json
 from workflow import store
 from workflow.campaign import unit_range
 from workflow.shards import MANIFEST, Manifest
@@ -73,7 +78,21 @@ def parser() -> cli.Parser:
     p_mrg = sub.add_parser("merge", help="merge pieces of one campaign into OUT")
     p_mrg.add_argument("out", help="output dataset directory")
     p_mrg.add_argument("sources", nargs="+", help="dataset directories of the same campaign")
+    p_cmp = sub.add_parser("compare", help="per-sample differences of two campaigns of one walk "
+                                           "(e.g. two meshes)")
+    p_cmp.add_argument("ref", help="reference dataset directory")
+    p_cmp.add_argument("other", help="dataset directory of the same walk")
+    p_cmp.add_output("--out", suffix=".json", help="also write the figures as JSON (atomically)")
     return ap
+
+
+def _print_compare(d: dict) -> None:
+    print(f"{d['other']} against {d['ref']}: {d['samples']} common samples "
+          f"(of {d['other_samples']} and {d['ref_samples']})")
+    for key, unit in (("anchor_mm", "mm"), ("tip_mm", "mm"), ("phi_end_deg", "deg"),
+                      ("cap_rotation_deg", "deg")):
+        s = d[key]
+        print(f"  {key:>16}: mean {s['mean']:.4f}, p95 {s['p95']:.4f}, max {s['max']:.4f} {unit}")
 
 
 def main(argv=None) -> int:
@@ -100,6 +119,13 @@ def main(argv=None) -> int:
                                              f"{args.require_units[0]}:{args.require_units[1]}: {missing}"]
         cli.print_json(d) if args.json else _print_verify(args.root, d)
         return 0 if d["ok"] else EXIT_PROBLEMS
+    if args.cmd == "compare":
+        with ap.errors():
+            d = store.compare(args.ref, args.other)
+            if args.out:
+                write_json(args.out, d)
+        cli.print_json(d) if args.json else _print_compare(d)
+        return 0
     why = cli.check_output(f"{args.out}/{MANIFEST}")   # not created: the sources are checked first
     if why:
         ap.error(why)

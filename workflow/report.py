@@ -754,6 +754,21 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    f"against {MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, phi_end "
                    f"{e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst corner; the corners "
                    "load a joint far more than the finger's cases do) | `make mesh-study` |")
+    c, fine = _load(root / "fem/heldout_mesh.json"), _load(root / "surrogate/heldout_fine.json")
+    mesh = lambda m: _mesh_label(m["mesh_size"], m["wall_mesh_size"])
+    if c:
+        out.append(f"| discretisation: one joint over the held-out walk, the committed set ({mesh(c['ref_mesh'])} mm) -> "
+                   f"{mesh(c['other_mesh'])} mm, {c['samples']} of {c['ref_samples']} samples"
+                   f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
+                   f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
+                   f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
+                   "| `make dataset-fine` (results/fem/heldout_mesh.json) |")
+    if c and fine:
+        out.append(f"| surrogate improved.pt (trained on {mesh(c['ref_mesh'])} mm) against the {fine['n']} held-out samples "
+                   f"on {mesh(c['other_mesh'])} mm | tip "
+                   f"{fine['tip_error_mm']:.3f} mm, cap rotation {fine['cap_rotation_error_deg']:.3f}° mean "
+                   f"({fine['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
+                   "| results/surrogate/heldout_fine.json (`make dataset-fine`) |")
     surrogate = _load(root / "surrogate/metrics.json")
     held = (surrogate or {}).get("improved", {}).get("heldout", {})
     if held.get("cap_rotation_error_deg") is not None:
@@ -774,6 +789,20 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                 + (". The joint study at the box corners has no extrapolation in the asymptotic range (its figure "
                    "is a lower bound) and decides it for loads near the corners." if study and study["reference"] != "richardson"
                    else ".")]
+    if c and held.get("tip_error_mm"):
+        ratio = c["tip_mm"]["mean"] / held["tip_error_mm"]
+        out += ["", f"Over the held-out walk the mesh change moves the tip {ratio:.1f}x as far as the surrogate "
+                f"errs on its own mesh ({c['tip_mm']['mean']:.3f} against {held['tip_error_mm']:.3f} mm mean, "
+                f"{c['samples']} samples): the surrogate is more accurate than the data it learned from."]
+        cost, train = c["cpu_s_per_sample"], _load(root / "data/train/manifest.json")
+        if train:
+            hours = cost["other"] * train["samples"] / 3600
+            # not a ratio to the committed set's CPU time: that was solved by older solver code
+            out[-1] += (f" The finer mesh took {cost['other']:.1f} CPU s per sample on this walk (its manifest; "
+                        "units of 16, one sample in 16 solved from zero): the "
+                        f"{train['samples']:,}-sample train set on it would take at most about {hours:.0f} CPU hours "
+                        f"({hours / 2:.0f} h on this 2-core machine, about {hours / 64:.1f} h on the 2 x 32 tasks of "
+                        "`workflow/slurm/campaign.sbatch`; its units of 64 solve fewer samples from zero).")
     return out
 
 
