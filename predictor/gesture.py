@@ -1,7 +1,7 @@
 """Command line: the gripper's static gesture for pressures (P1, P2).
 
     python -m predictor.gesture --p1 -0.1 --p2 0.1 [--object circle:r=30,y=-195]
-        [--approach -0.15,0|zero] [--method newton|lbfgs|nn] [--model PATH] [--nn PATH]
+        [--approach -0.15,0|zero] [--method newton|lbfgs|nn [--polish]] [--model PATH] [--nn PATH]
         [--finger FILE] [--kinematics tangent|cap] [--joint-weight lumped|split]
         [--no-gravity] [--plot out.png] [--json]
     python -m predictor.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
@@ -25,7 +25,8 @@ residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last part), tip_a
 global exit angle), contact_force_N, slip, iterations, time_ms, finger {name, sha256},
 kinematics, joint_weight. With ``--method nn`` also the network's own figures before any
 solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
-answer is the solver's polish of them (polished, contact) or the full ramp's (fallback);
+answer is the solver's polish of them (polished: contact, or gravity with ``--polish``, one
+Newton step from the network's tau) or the full ramp's (fallback; gravity: the LM's);
 with an object raw_state, the network's own grasp state (no_contact, holds or slips).
 
 Exit codes: 0 converged; 1 not converged (the JSON says so, tau is null); 2 bad input
@@ -126,7 +127,7 @@ def run(args: argparse.Namespace, prepared=None):
     if predictor is not None:
         from predictor.nn import predict_gesture
 
-        res = predict_gesture(predictor, problem, pressures)
+        res = predict_gesture(predictor, problem, pressures, polish=args.polish)
     else:
         res = solve(problem, pressures, SolverOptions(method=args.method))
     ok = bool(res.converged[0])
@@ -166,9 +167,14 @@ def main(argv: list[str] | None = None) -> int:
                     f"{DEFAULT_SURROGATE} if present, else analytic)")
     ap.add_argument("--nn", help="NN predictor checkpoint for --method nn (default: results/predictor/"
                     "gravity_nn.pt, or contact_nn.pt with --object)")
+    ap.add_argument("--polish", action="store_true", help="--method nn under gravity: finish the network's tau "
+                    "with a Newton step to the iterative solver's tolerances (the contact NN's answer is always "
+                    "polished)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
     ap.add_output("--plot", suffix=".png", help="write the gesture PNG here")
     args = ap.parse_args(argv)
+    if args.polish and args.method != "nn":
+        ap.error("--polish finishes an NN prediction: use it with --method nn")
     if args.method == "nn" and (args.no_gravity or args.approach is not None):
         ap.error("--method nn predicts the trained case only (gravity on, its own approach): "
                  "drop --no-gravity and --approach")

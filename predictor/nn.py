@@ -71,7 +71,7 @@ from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_W
                                check_pressures, default_finger, finger_arg, finger_from_dict, finger_to_dict,
                                nan_unless)
 from predictor.joint import JointModel, load_joint
-from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
+from predictor.solve import APPROACH, GestureResult, SolverOptions, newton_polish, solve
 from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, grasp_state, loss,
                                residual_norms)
 from surrogate import checkpoint
@@ -298,8 +298,10 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
 class NNGestureResult(GestureResult):
     """GestureResult of the NN predictor. raw_residual_force_mN, raw_residual_moment_Nmm
     (B, J): Equation 1 at the network's own tau, before any solver; polished (B,): the
-    answer is the LM polish of the network's tau (contact), not the network's; fallback
-    (B,): the polish did not converge and the full pressure ramp solved the sample instead;
+    answer is a solver's polish of the network's tau (contact; gravity with ``polish``),
+    not the network's; fallback (B,): the polish did not converge and the full pressure
+    ramp solved the sample instead (gravity: the Newton step's check failed and the LM went
+    on from it);
     raw_state (B,) codes of statics.STATES: the grasp state by the network itself (its
     classifier; the contact of its tau for a network without one), None without an object."""
 
@@ -310,12 +312,15 @@ class NNGestureResult(GestureResult):
     raw_state: torch.Tensor = None
 
 
-def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor) -> NNGestureResult:
+def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor,
+                    polish: bool = False) -> NNGestureResult:
     """NN gesture in the solver's result format, pressures (B, J) MPa.
 
     ``problem`` must be the one the NN was trained for (``pred.config.problem(joint)``),
     ValueError otherwise. Gravity: the raw NN tau; ``converged`` means its residual is
-    within the NN bound (2 mN, 1.2 N·mm), other samples get NaN. Contact: the NN tau
+    within the NN bound (2 mN, 1.2 N·mm), other samples get NaN. Gravity with ``polish``:
+    the NN tau finished by one Newton step (solve.newton_polish; the LM where its check
+    fails, ``fallback``) to the iterative solver's tolerances. Contact: the NN tau
     warm-starts the LM with a small step cap (POLISH_STEP) so the iterates stay on the
     NN's branch, with the Jacobian by differences and then, for the samples that did not
     converge, the exact one; samples neither converges in ``max_iter`` steps are
@@ -328,6 +333,14 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
         raise ValueError(f"this NN predictor was trained for {diff}")
     check_pressures(pressures)
     t0 = time.perf_counter()
+    if polish and problem.obstacle is None:
+        with torch.no_grad():
+            tau = pred.net(pressures)
+        res, start = newton_polish(problem, pressures, tau, t0=t0)
+        f, m = residual_norms(start)   # the network's own residual, from the step's pass
+        return NNGestureResult(**{**res.__dict__, "method": "nn+newton"},
+                               fallback=res.iterations > 1, polished=res.converged, raw_residual_force_mN=f,
+                               raw_residual_moment_Nmm=m)
     tau, st, raw_state = raw_answer(pred.net, problem, pressures)
     f, m = residual_norms(st.residual)
     raw = {"raw_residual_force_mN": f, "raw_residual_moment_Nmm": m}

@@ -184,6 +184,7 @@ CASES_PREDICTOR = [
                            "--object", "circle"], "a 'softjoint-gravity-nn/1' file, expected a 'softjoint-contact-nn/1'"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--approach", "zero"],
      "--method nn predicts the trained case only"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--polish"], "--polish finishes an NN prediction"),
     ("predictor.gesture", ["--p1", "0", "--p1", "0.1", "--p2", "0"], "--p1 given twice"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
     # predictor.validate_finger (issue 14): an empty FEM folder, an unwritable output

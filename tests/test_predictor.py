@@ -100,6 +100,33 @@ def test_residual_zero_at_returned_solution():
     assert float(r[..., 2].abs().max()) <= 1e-5
 
 
+def test_newton_polish_finishes_a_near_start_in_one_step():
+    """Warm starts 1e-4 N (and 0.01 N·mm) off the Newton equilibria of 32 random pressures,
+    the setting of a network's tau: one Newton step (solve.newton_polish) lands within the
+    solver's 1e-4 mN / 1e-5 N·mm on every sample (quadratic convergence: 1e-4 -> ~1e-8 N),
+    on the cold solve's tau to 1e-6 N and 1e-4 N·mm (that solve's own accuracy at its
+    1e-4 mN / 1e-5 N·mm), and the start's residual it returns is Equation 1
+    recomputed at the start. From tau = 0 at (0.3, -0.3) one step is not enough: the
+    check refuses it, the LM goes on (iterations > 1) to the same equilibrium. With an
+    object it refuses to run (the contact law is not smooth)."""
+    from predictor.solve import newton_polish
+
+    p = torch.rand(32, 2, generator=torch.Generator().manual_seed(8), dtype=DT) * 0.6 - 0.3
+    cold = solve(GRAVITY, p)
+    start = cold.tau + t([1e-4, -1e-4, 0.01])
+    res, r0 = newton_polish(GRAVITY, p, start)
+    assert bool(res.converged.all()) and int(res.iterations.max()) == 1
+    assert float(res.residual_force_mN.max()) <= 1e-4 and float(res.residual_moment_Nmm.max()) <= 1e-5
+    assert float((res.tau - cold.tau)[..., :2].abs().max()) <= 1e-6
+    assert float((res.tau - cold.tau)[..., 2].abs().max()) <= 1e-4
+    torch.testing.assert_close(r0, GRAVITY.residual(p, start).residual, rtol=0, atol=1e-12)
+    far, _ = newton_polish(GRAVITY, t([[0.3, -0.3]]), torch.zeros(1, 2, 3, dtype=DT))
+    assert bool(far.converged[0]) and int(far.iterations[0]) > 1
+    assert float((far.tau - solve(GRAVITY, t([0.3, -0.3])).tau).abs().max()) <= 1e-4
+    with pytest.raises(ValueError, match="without an object"):
+        newton_polish(GRASP, p[:1], start[:1])
+
+
 def test_newton_and_lbfgs_agree():
     """The paper's validation pressures (-0.1, 0.1) and (0.1, -0.1): L-BFGS (paper) and
     Newton-LM give the same tau to 1e-6 N / N·mm and the same tip to 1e-5 mm."""
@@ -603,6 +630,14 @@ def test_nn_predictor_cli_matches_solver():
     assert (got["raw_residual_force_mN"], got["raw_residual_moment_Nmm"]) == \
         (got["residual_force_mN"], got["residual_moment_Nmm"])
     assert not got["polished"] and not got["fallback"]
+    # gravity, --polish: one Newton step from the same tau reaches the solver's tolerance
+    # and the cold solve's tau; the raw figures are the network's, as above
+    out = _cli("--p1", "-0.1", "--p2", "0.1", "--model", model, "--method", "nn", "--polish", "--json")
+    assert out.returncode == 0, out.stderr
+    pol = json.loads(out.stdout)
+    assert pol["converged"] and pol["polished"] and max(pol["residual_force_mN"]) <= 1e-4
+    np.testing.assert_allclose(np.array(pol["tau"]), ref, atol=1e-6)
+    assert pol["raw_residual_force_mN"] == pytest.approx(got["raw_residual_force_mN"], rel=1e-9, abs=1e-12)
     # contact: the raw network's residual is reported beside the polished answer's
     out = _cli("--p1", "0.1", "--p2", "0.2", "--object", "circle", "--model", model, "--method", "nn", "--json")
     assert out.returncode == 0, out.stderr
