@@ -16,8 +16,10 @@ one Newton step, over the gravity cases), ``contact_batched_per_s`` (converged r
 per second in one batch), ``gravity_batched_per_s`` and ``nn_single_query_ms`` (the
 delivered NN path, predictor.nn.predict_gesture: network, kinematics and its residual
 check). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
-on every core (``batched_threads``), one thread's beside them in the details; every other
-figure on one thread.
+in float32 on every core (``batched_dtype``, ``batched_threads``; the network and the
+joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
+float64 on one thread and on every core beside them in the details; every other figure
+on one thread in float64.
 
 NN residuals are means over fresh random validation pressures of the worst joint per
 sample (p95 and max are recorded beside them). ``contact_nn_residual_*`` is the delivered
@@ -122,10 +124,13 @@ def _gravity_fast(pred, problem, pressures):
             "method": "gravity NN warm start + one Newton step (LM where its check fails)"}
 
 
-def _gravity_throughput(pred, gravity, problem, pressures, threads: int) -> dict:
-    """Best of 3 batched runs on ``threads`` torch threads over pressures (N, 2): the NN
-    alone, the NN with the kinematics (``gravity.pose``), and the delivered path
-    (predict_gesture: network, kinematics, the residual check). Gestures per second."""
+def _gravity_throughput(pred, gravity, problem, pressures, threads: int, dtype=torch.float64) -> dict:
+    """Best of 3 batched runs on ``threads`` torch threads over pressures (N, 2) in
+    ``dtype`` (float32: Predictor.astype, GripperProblem.astype): the NN alone, the NN with
+    the kinematics (``gravity.pose``), and the delivered path (predict_gesture: network,
+    kinematics, the residual check). Gestures per second."""
+    pred, gravity, problem, pressures = (pred.astype(dtype), gravity.astype(dtype), problem.astype(dtype),
+                                         pressures.to(dtype))
     torch.set_num_threads(threads)
     try:
         with torch.no_grad():
@@ -144,8 +149,8 @@ def _gravity_throughput(pred, gravity, problem, pressures, threads: int) -> dict
     finally:
         torch.set_num_threads(1)
     n = len(pressures)
-    return {"threads": threads, "nn_and_kinematics_per_s": n / batched_s, "nn_only_per_s": n / tau_only_s,
-            "delivered_per_s": n / delivered_s}
+    return {"threads": threads, "dtype": str(dtype).removeprefix("torch."), "nn_and_kinematics_per_s": n / batched_s,
+            "nn_only_per_s": n / tau_only_s, "delivered_per_s": n / delivered_s}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -198,8 +203,10 @@ def main(argv: list[str] | None = None) -> int:
     # run is the one least disturbed). The delivered path (predictor.nn.predict_gesture)
     # adds the residual check that refuses an answer outside the NN bound.
     p_big = torch.rand(n["throughput"], 2, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
+    cores = os.cpu_count() or 1
     one = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, 1)
-    every = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, os.cpu_count() or 1)
+    every64 = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, cores)
+    every = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, cores, torch.float32)
     single = [predict_gesture(grav_pred, grav_nn_problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
 
     out = {
@@ -211,11 +218,12 @@ def main(argv: list[str] | None = None) -> int:
         "contact_nn_residual_force_mN": cont_pol["force_mN_mean"],
         "contact_nn_residual_moment_Nmm": cont_pol["moment_Nmm_mean"],
         "gravity_fast_median_ms": gravity_fast["median_ms"],
-        # batched figures on every core (``batched_threads``); one thread's in details
+        # batched figures in float32 on every core (``batched_threads``, ``batched_dtype``);
+        # float64 on one thread and on every core in details.gravity_nn_throughput
         "nn_batched_per_s": every["nn_and_kinematics_per_s"],
         "nn_single_query_ms": statistics.median(single),
         "gravity_batched_per_s": every["delivered_per_s"],
-        "batched_threads": every["threads"],
+        "batched_threads": every["threads"], "batched_dtype": every["dtype"],
         "contact_fast_median_ms": fast["median_ms"],
         "contact_batched_per_s": int(cbatch.converged.sum()) / contact_batched_s,
         "nn_tau_only_batched_per_s": every["nn_only_per_s"],
@@ -236,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
                 "residual_force_mN": lbfgs_contact.residual_force_mN[0].tolist(),
                 "residual_moment_Nmm": lbfgs_contact.residual_moment_Nmm[0].tolist()},
             "contact_fast": fast, "gravity_fast": gravity_fast,
-            "gravity_nn_throughput": {"one_thread": one, "every_core": every},
+            "gravity_nn_throughput": {"one_thread": one, "every_core_float64": every64, "every_core": every},
             "contact_batched": {"n": len(cbatch.converged), "converged": int(cbatch.converged.sum()),
                                 "s": contact_batched_s, "method": "newton ramp from the approach, one batch"},
             "gravity_newton_batched_1000_ms": batched_ms,

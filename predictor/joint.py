@@ -43,6 +43,7 @@ only implements it.
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,6 +72,12 @@ class JointModel:
     def anchors_and_cap(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(anchors (..., 10, 2) mm, cap rotation (...) rad) of inputs (..., 4) in one pass."""
         raise ValueError(no_cap_message(self.name))
+
+    def astype(self, dtype: torch.dtype) -> "JointModel":
+        """This joint model evaluating inputs of ``dtype`` (float32 for batched throughput;
+        float64, the default, for the solvers). A model whose formulas follow their inputs'
+        dtype is returned as it is."""
+        return self
 
 
 def no_cap_message(name: str) -> str:
@@ -148,6 +155,12 @@ class SurrogateJoint(JointModel):
         if not self.has_cap_rotation:
             raise ValueError(no_cap_message(self.name))
         return self.module.with_cap(inputs)
+
+    def astype(self, dtype: torch.dtype) -> "SurrogateJoint":
+        """A copy whose network (weights and normalisation) is in ``dtype``, same name."""
+        other = copy.copy(self)
+        other.module = copy.deepcopy(self.module).to(dtype)
+        return other
 
 
 def load_joint(spec: str | None) -> JointModel:

@@ -56,6 +56,7 @@ file, and refuses a damaged, foreign or other-kind file with one line (Checkpoin
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 import sys
 import time
@@ -222,6 +223,12 @@ class Predictor:
     joint_name: str
     metrics: dict = field(default_factory=dict)
     history: dict = field(default_factory=dict)
+
+    def astype(self, dtype: torch.dtype) -> "Predictor":
+        """A copy whose network is in ``dtype``: with ``problem.astype(dtype)`` and pressures
+        of that dtype, predict_gesture runs in it (float32: the batched throughput mode;
+        float64, as trained and loaded, otherwise)."""
+        return replace(self, net=copy.deepcopy(self.net).to(dtype))
 
 
 def sample_pressures(n: int, cfg: NNConfig, gen: torch.Generator) -> torch.Tensor:

@@ -50,6 +50,7 @@ tau)`` with pressures (B, J), tau (B, J, 3) -> Statics (residual (B, J, 3), pose
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -251,7 +252,7 @@ def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, c
     weight: object weight W (N). Returns the ContactState (forces on the finger).
     """
     layout = params.layout  # cached: part label and length of each sample point
-    part, seg, points = layout.contact_part, layout.contact_length, pose.points
+    part, seg, points = layout.contact_part, layout.contact_length.to(pose.points.dtype), pose.points
     d, n = obstacle.signed_distance(points)
     normal = contact.stiffness * smooth_penetration(-d, contact.smoothing) * seg  # (B, K) N
     t = torch.stack((-n[..., 1], n[..., 0]), -1)
@@ -303,6 +304,12 @@ class GripperProblem:
     def n_joints(self) -> int:
         return self.params.n_joints
 
+    def astype(self, dtype: torch.dtype) -> "GripperProblem":
+        """This problem with its joint model in ``dtype`` (JointModel.astype): pressures and
+        tau of that dtype then flow through the kinematics and statics in it (float32 for
+        batched throughput; the solvers work in float64)."""
+        return dataclasses.replace(self, joint=self.joint.astype(dtype))
+
     def pose(self, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
         """Forward kinematics of the right finger: pressures (B, J) MPa, tau (B, J, 3)."""
         return finger_pose(self.joint, self.params, pressures, tau)
@@ -324,7 +331,7 @@ class GripperProblem:
         at_joints = ((joints[:, :, 1:].mean(2),) if layout.joint_weight == "lumped" else
                      (joints[:, :, 0], joints[:, :, -1]))
         w_pts = torch.cat((pose.segments.mean(2),) + at_joints, 1)[:, layout.weight_source]
-        w_frc = (g * layout.weights[:, None] * down).expand(B, -1, 2)
+        w_frc = (g * layout.weights.to(dt)[:, None] * down).expand(B, -1, 2)
         if self.obstacle is None:
             contact = ContactState.none(B, dt)
             pts, frc, distal = w_pts, w_frc, layout.weight_mask
@@ -333,6 +340,7 @@ class GripperProblem:
             pts, frc = torch.cat((w_pts, contact.points), 1), torch.cat((w_frc, contact.forces), 1)
             distal = layout.full_mask
         ends = joints[:, :, -1]  # (B, J, 2) distal ends r_10
+        distal = distal.to(dt)
         f_sum = torch.einsum("ik,bkc->bic", distal, frc)
         m_sum = torch.einsum("ik,bik->bi", distal, _cross(pts[:, None] - ends[:, :, None], frc[:, None]))
         g_force = rot(pose.theta, tau[..., :2])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -646,6 +647,32 @@ def test_nn_predictor_cli_matches_solver():
     assert len(got["raw_residual_force_mN"]) == 2 and max(got["raw_residual_force_mN"]) > max(got["residual_force_mN"])
 
 
+@pytest.mark.skipif(not (SURROGATE.is_file() and GRAVITY_NN.is_file()), reason="no committed surrogate and NN")
+def test_float32_batched_gravity_nn_agrees_with_float64():
+    """The float32 throughput mode (Predictor.astype, GripperProblem.astype) on 2,000
+    pressures of the committed gravity NN's domain: computed in float32 throughout, and
+    against float64 the same samples pass the NN bound, tau agrees to 1e-4 N / N·mm, the
+    fingertip to 1e-3 mm and the residuals to 1e-3 mN / N·mm (float32's 6e-8 relative
+    rounding on ~200 mm and ~1 N is 1e-5 of those)."""
+    from predictor.nn import load_predictor, predict_gesture, sample_pressures
+
+    pred = load_predictor(GRAVITY_NN, load_joint(SURROGATE))
+    if pred.joint_name != load_joint(SURROGATE).name:
+        pytest.skip("the gravity NN was trained on another joint model")
+    problem = pred.config.problem(load_joint(SURROGATE))
+    p = sample_pressures(2000, pred.config, torch.Generator().manual_seed(11))
+    a = predict_gesture(pred, problem, p)
+    b = predict_gesture(pred.astype(torch.float32), problem.astype(torch.float32), p.float())
+    assert b.tau.dtype == b.pose.tip_end.dtype == b.residual_force_mN.dtype == torch.float32
+    assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 1990
+    ok = a.converged
+    assert float((a.tau[ok] - b.tau[ok].double()).abs().max()) <= 1e-4
+    assert float((a.pose.tip_end[ok] - b.pose.tip_end[ok].double()).abs().max()) <= 1e-3
+    assert float((a.residual_force_mN - b.residual_force_mN.double()).abs().max()) <= 1e-3
+    assert float((a.residual_moment_Nmm - b.residual_moment_Nmm.double()).abs().max()) <= 1e-3
+    assert AnalyticJoint().astype(torch.float32) == AnalyticJoint()
+
+
 # ---------------------------------------------------------------- issue 14: the generic finger chain
 REFERENCE = ROOT / "tests/data/predictor_reference.json"
 THREE = """
@@ -1147,6 +1174,12 @@ def test_bench_writes_every_required_key(tmp_path):
     assert fast["n"] == bench.QUICK["contact"] and 0 <= fast["misses"] < fast["n"]
     assert 0.0 <= b["contact_nn_state_agreement"] <= 1.0
     assert b["contact_nn_raw_p95_force_mN"] >= 0.0 and b["gravity_batched_per_s"] > 0.0
+    assert (b["batched_dtype"], b["batched_threads"]) == ("float32", os.cpu_count())
+    thr = b["details"]["gravity_nn_throughput"]
+    assert thr["one_thread"]["dtype"] == "float64" and thr["one_thread"]["threads"] == 1
+    assert b["gravity_batched_per_s"] == thr["every_core"]["delivered_per_s"]
+    gf = b["details"]["gravity_fast"]
+    assert gf["n"] == bench.QUICK["gravity"] and gf["misses"] == 0 and gf["max_residual_force_mN"] <= 1e-4
     g = b["details"]["gravity_newton"]
     assert g["converged"] == g["n"] == bench.QUICK["gravity"]
     assert g["max_residual_force_mN"] <= 1e-4 and g["max_residual_moment_Nmm"] <= 1e-5

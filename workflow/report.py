@@ -494,12 +494,13 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
         v = paper[key]
         return f"{format(v, 'g') if isinstance(v, (int, float)) else v} {unit}".strip()
 
-    n_threads = b.get("batched_threads")
-    threads = f" on {n_threads} thread(s)" if n_threads else ""
+    n_threads, dtype = b.get("batched_threads"), b.get("batched_dtype", "float64")
+    threads = f" ({dtype}, {n_threads} thread(s))" if n_threads else ""
     single_thread = b["details"].get("gravity_nn_throughput", {}).get("one_thread")
 
     def one_thread(key):
-        return f" (one thread: {single_thread[key]:.3g})" if single_thread and n_threads != 1 else ""
+        return (f" (float64, one thread: {single_thread[key]:.3g})"
+                if single_thread and (n_threads, dtype) != (1, "float64") else "")
 
     nn = [*target("nn_mN", "<=", "mN"), *target("nn_Nmm", "<=", "N·mm")]
     raw_nn = [*target("contact_nn_raw_mN", "<=", "mN"), *target("contact_nn_raw_Nmm", "<=", "N·mm")]
