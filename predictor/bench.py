@@ -226,6 +226,8 @@ def main(argv: list[str] | None = None) -> int:
         "batched_threads": every["threads"], "batched_dtype": every["dtype"],
         "contact_fast_median_ms": fast["median_ms"],
         "contact_batched_per_s": int(cbatch.converged.sum()) / contact_batched_s,
+        # the contact NN's polish in one batch over its validation pressures (a solver result)
+        "contact_fast_batched_per_s": cont_pol["converged"] / (cont_pol["batch_time_ms"] / 1e3),
         "nn_tau_only_batched_per_s": every["nn_only_per_s"],
         # the raw contact network against the ramp solver (issue 15): no solver at inference
         "contact_nn_raw_residual_force_mN": cont_vs_solver["raw"]["force_mN_mean"],
