@@ -375,20 +375,21 @@ def test_a_step_that_srun_calls_done_but_never_ran_is_launched_again(tmp_path):
     """An srun that prints "task 0 launch failed" and exits 0 without running the campaign
     (seen on the CI cluster with two array tasks launching at once): the script does not
     believe the 0, launches the step SRUN_TRIES = 2 times, then fails with one line (exit 1,
-    not 2: the settings were fine) and leaves no OUT. Outside Slurm, srun is a stub on PATH."""
+    not 2: the settings were fine) and leaves no OUT; the settings reach the campaign's
+    command line (UNITS, WALL_MESH_SIZE). Outside Slurm, srun is a stub on PATH."""
     bin_dir, calls = tmp_path / "bin", tmp_path / "calls"
     bin_dir.mkdir()
     (bin_dir / "srun").write_text("#!/bin/bash\necho \"$*\" >> " + str(calls) + "\n"
                                   "echo 'srun: error: task 0 launch failed: Unspecified error' >&2\n")
     (bin_dir / "srun").chmod(0o755)
-    env = {**BASE_ENV, **job_env(tmp_path / "out", SRUN_TRIES="2", UNITS="0:1"),
+    env = {**BASE_ENV, **job_env(tmp_path / "out", SRUN_TRIES="2", UNITS="0:1", WALL_MESH_SIZE="2"),
            "PATH": f"{bin_dir}:{BASE_ENV['PATH']}"}
     r = subprocess.run(["bash", str(SCRIPT)], cwd=ROOT, capture_output=True, text=True, env=env,
                        timeout=120)
     launches = calls.read_text().splitlines()
     assert r.returncode == 1, (r.stdout, r.stderr)
     assert len(launches) == 2 and all("-m workflow.campaign" in c and "--units 0:1" in c
-                                      for c in launches), launches
+                                      and "--wall-mesh-size 2" in c for c in launches), launches
     assert "try 2 of 2" in r.stdout, r.stdout
     errors = [line for line in r.stderr.splitlines() if line.startswith("campaign.sbatch: error")]
     assert errors == [f"campaign.sbatch: error: srun exited 0 2 time(s) but {tmp_path / 'out'} is not done"], r.stderr
