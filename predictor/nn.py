@@ -72,7 +72,7 @@ from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_W
                                check_pressures, default_finger, finger_arg, finger_from_dict, finger_to_dict,
                                nan_unless)
 from predictor.joint import JointModel, load_joint
-from predictor.solve import APPROACH, GestureResult, SolverOptions, newton_polish, solve
+from predictor.solve import APPROACH, GestureResult, SolverOptions, newton_polish, solve, statics_at
 from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, grasp_state, loss,
                                residual_norms)
 from surrogate import checkpoint
@@ -205,7 +205,7 @@ def raw_answer(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor)
     (B,) codes: its classifier's for a ContactNet, else its tau's contact)."""
     with torch.no_grad():
         tau, state = net.tau_and_state(pressures) if isinstance(net, ContactNet) else (net(pressures), None)
-        st = problem.residual(pressures, tau)
+        st = statics_at(problem, pressures, tau)
     return tau, st, grasp_state(st.contact.normal, st.contact.slip) if state is None else state
 
 

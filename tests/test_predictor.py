@@ -128,6 +128,25 @@ def test_newton_polish_finishes_a_near_start_in_one_step():
         newton_polish(GRASP, p[:1], start[:1])
 
 
+def test_traced_statics_is_the_eager_statics_bit_for_bit():
+    """solve.statics_at, the traced statics of an answer without an object, gives exactly
+    problem.residual's residual and pose on 50 random (P, tau) in the box (the record was
+    checked on 3), for the paper's finger and a three-joint one; float32 and an object take
+    the eager path."""
+    from predictor.solve import statics_at
+
+    gen = torch.Generator().manual_seed(12)
+    for problem in (GRAVITY, GripperProblem(J, GripperParams(THREE_FINGER))):
+        nj = problem.n_joints
+        p = torch.rand(50, nj, generator=gen, dtype=DT) * 0.6 - 0.3
+        tau = (2 * torch.rand(50, nj, 3, generator=gen, dtype=DT) - 1) * t([3.0, 3.0, 100.0])
+        got, ref = statics_at(problem, p, tau), problem.residual(p, tau)
+        assert torch.equal(got.residual, ref.residual)
+        for name in ("joints", "segments", "theta", "phi", "points"):
+            assert torch.equal(getattr(got.pose, name), getattr(ref.pose, name)), name
+    assert torch.equal(statics_at(GRASP, p[:, :2], tau[:, :2]).residual, GRASP.residual(p[:, :2], tau[:, :2]).residual)
+
+
 def test_newton_and_lbfgs_agree():
     """The paper's validation pressures (-0.1, 0.1) and (0.1, -0.1): L-BFGS (paper) and
     Newton-LM give the same tau to 1e-6 N / N·mm and the same tip to 1e-5 mm."""
