@@ -582,6 +582,11 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
            f"joint model: {_joint(root, b.get('joint'), 'make bench-predictor')}.", "",
            "| figure | ours | paper | target | met |", "|---|---|---|---|---|"]
     out += [f"| {a} | {c} | {d} |" + _cells(check) for (a, c, d, _, _), check in zip(rows, found)]
+    if "gravity_fast_median_ms" in b:
+        out += ["", "Same-run ratios, steadier than the times on this shared machine (environment.md: the same "
+                "code's times vary between runs; the load average at the start is in the JSON): gravity fastest path / "
+                f"Newton from tau = 0 = {b['gravity_fast_median_ms'] / b['gravity_newton_median_ms']:.2f}; contact "
+                f"fastest path / ramp = {b['contact_fast_median_ms'] / b['contact_median_ms']:.2f}."]
     imp, mlp = b["details"].get("gravity_nn_improved"), b["details"].get("gravity_nn_paper_mlp")
     if imp and mlp:
         worse = [k for k in ("force_mN_mean", "moment_Nmm_mean") if imp[k] > mlp[k]]
