@@ -84,62 +84,45 @@ def _median_solve_ms(problem, pressures, options=SolverOptions()):
             "median_iterations": statistics.median(iters)}
 
 
-def _contact_fast(pred, problem, pressures, tol_force_mN=0.1, tol_moment_Nmm=0.01):
-    """The fastest contact path to a residual <= 0.1 mN and 0.01 N·mm, one query at a time
-    over ``pressures`` (n, 2): the contact NN's tau polished by the capped LM, the ramp
-    solve where the polish fails (predictor.nn.predict_gesture). A query that misses the
-    residual bound or does not converge counts as a miss, not as a time."""
-    predict_gesture(pred, problem, pressures[:1])  # warm-up
-    times, misses, fallbacks = [], 0, 0
-    for p in pressures:
-        res = predict_gesture(pred, problem, p[None])
-        ok = (bool(res.converged[0]) and float(res.residual_force_mN.max()) <= tol_force_mN
-              and float(res.residual_moment_Nmm.max()) <= tol_moment_Nmm)
-        misses += not ok
-        fallbacks += int(res.fallback[0])
-        if ok:
-            times.append(res.time_ms)
-    return {"median_ms": statistics.median(times) if times else math.nan, "n": len(pressures), "misses": misses,
-            "ramp_fallbacks": fallbacks, "method": "contact NN warm start + capped LM polish (ramp solve fallback)"}
-
-
-def _gravity_fast(pred, problem, pressures):
-    """The fastest gravity path to the iterative solver's tolerances, one query at a time
-    over ``pressures`` (n, 2): the gravity NN's tau finished by one Newton step
-    (predictor.nn.predict_gesture with ``polish``; the LM from there where the step's
-    check fails). A query that does not converge counts as a miss, not as a time."""
-    predict_gesture(pred, problem, pressures[:1], polish=True)  # warm-up
+def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_moment_Nmm: float,
+               polish: bool = False) -> dict:
+    """Median single-query time (ms) of predictor.nn.predict_gesture over ``pressures``
+    (n, J), a network's tau finished by a solver (contact: the capped LM polish, the ramp
+    where it fails; gravity with ``polish``: one Newton step, the LM where its check
+    fails), and its worst residuals. A query that does not converge or misses tol_force_mN
+    / tol_moment_Nmm counts as a miss, not as a time; ``fallbacks``: queries the fallback
+    solved."""
+    predict_gesture(pred, problem, pressures[:1], polish=polish)  # warm-up
     times, misses, fallbacks, force, moment = [], 0, 0, 0.0, 0.0
     for p in pressures:
-        res = predict_gesture(pred, problem, p[None], polish=True)
+        res = predict_gesture(pred, problem, p[None], polish=polish)
         fallbacks += int(res.fallback[0])
-        if not bool(res.converged[0]):
+        f, m = float(res.residual_force_mN.max()), float(res.residual_moment_Nmm.max())
+        if not (bool(res.converged[0]) and f <= tol_force_mN and m <= tol_moment_Nmm):
             misses += 1
             continue
         times.append(res.time_ms)
-        force = max(force, float(res.residual_force_mN.max()))
-        moment = max(moment, float(res.residual_moment_Nmm.max()))
+        force, moment = max(force, f), max(moment, m)
     return {"median_ms": statistics.median(times) if times else math.nan, "n": len(pressures), "misses": misses,
-            "lm_fallbacks": fallbacks, "max_residual_force_mN": force, "max_residual_moment_Nmm": moment,
-            "method": "gravity NN warm start + one Newton step (LM where its check fails)"}
+            "fallbacks": fallbacks, "max_residual_force_mN": force, "max_residual_moment_Nmm": moment,
+            "tolerance": [tol_force_mN, tol_moment_Nmm], "method": method}
 
 
-def _gravity_throughput(pred, gravity, problem, pressures, threads: int, dtype=torch.float64) -> dict:
+def _gravity_throughput(pred, problem, pressures, threads: int, dtype=torch.float64) -> dict:
     """Best of 3 batched runs on ``threads`` torch threads over pressures (N, 2) in
     ``dtype`` (float32: Predictor.astype, GripperProblem.astype): the NN alone, the NN with
-    the kinematics (``gravity.pose``), and the delivered path (predict_gesture: network,
+    the kinematics (``problem.pose``), and the delivered path (predict_gesture: network,
     kinematics, the residual check). Gestures per second."""
-    pred, gravity, problem, pressures = (pred.astype(dtype), gravity.astype(dtype), problem.astype(dtype),
-                                         pressures.to(dtype))
+    pred, problem, pressures = pred.astype(dtype), problem.astype(dtype), pressures.to(dtype)
     torch.set_num_threads(threads)
     try:
         with torch.no_grad():
-            gravity.pose(pressures[:10], pred.net(pressures[:10]))
+            problem.pose(pressures[:10], pred.net(pressures[:10]))
             batched_s = tau_only_s = math.inf
             for _ in range(3):
                 t0 = time.perf_counter()
                 tau = pred.net(pressures)
-                gravity.pose(pressures, tau)
+                problem.pose(pressures, tau)
                 batched_s = min(batched_s, time.perf_counter() - t0)
                 t0 = time.perf_counter()
                 pred.net(pressures)
@@ -191,12 +174,14 @@ def main(argv: list[str] | None = None) -> int:
     cont_vs_solver = evaluate_contact(cont_pred, joint, pc_val)
     cont_pol = evaluate_polished(cont_pred, joint, pc_val)
     in_contact = contact_fraction(cont_pred.net, cont_problem, pc_val)
-    fast = _contact_fast(cont_pred, cont_problem, p_contact)
+    fast = _fast_path(cont_pred, cont_problem, p_contact, "contact NN warm start + capped LM polish "
+                      "(ramp solve fallback)", 0.1, 0.01)
     t0 = time.perf_counter()
     cbatch = solve(grasp, p_contact.repeat(n["contact_batch"] // len(p_contact), 1))
     contact_batched_s = time.perf_counter() - t0
 
-    gravity_fast = _gravity_fast(grav_pred, grav_nn_problem, p_grav)
+    gravity_fast = _fast_path(grav_pred, grav_nn_problem, p_grav, "gravity NN warm start + one Newton step "
+                              "(LM where its check fails)", 1e-4, 1e-5, polish=True)
 
     # NN throughput: pressures -> tau -> full gesture (forward kinematics), no autograd, on
     # one thread and on every core (best of 3 each: the machine is shared, and the best
@@ -204,9 +189,9 @@ def main(argv: list[str] | None = None) -> int:
     # adds the residual check that refuses an answer outside the NN bound.
     p_big = torch.rand(n["throughput"], 2, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
     cores = os.cpu_count() or 1
-    one = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, 1)
-    every64 = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, cores)
-    every = _gravity_throughput(grav_pred, gravity, grav_nn_problem, p_big, cores, torch.float32)
+    one = _gravity_throughput(grav_pred, grav_nn_problem, p_big, 1)
+    every64 = _gravity_throughput(grav_pred, grav_nn_problem, p_big, cores)
+    every = _gravity_throughput(grav_pred, grav_nn_problem, p_big, cores, torch.float32)
     single = [predict_gesture(grav_pred, grav_nn_problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
 
     out = {

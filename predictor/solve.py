@@ -348,9 +348,14 @@ def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
     """Converged mask (B,) from residual vectors r (B, 2n)."""
     n = r.shape[1] // 2
     eq = r[:, :n].reshape(-1, n // 3, 3)
-    force = eq[..., :2].norm(dim=-1).amax(-1)
-    moment = eq[..., 2].abs().amax(-1) * MOMENT_SCALE
-    return (force <= opts.tol_force) & (moment <= opts.tol_moment) & (r[:, n:].abs().amax(-1) == 0)
+    return _within(eq[..., :2].norm(dim=-1), eq[..., 2].abs() * MOMENT_SCALE, r[:, n:], opts)
+
+
+def _within(force: torch.Tensor, moment: torch.Tensor, penalty: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
+    """Converged mask (B,): every joint's |R_F| (B, J) N and |R_M| (B, J) N·mm within the
+    tolerances, and no out-of-box penalty (B, 3J)."""
+    return ((force.amax(-1) <= opts.tol_force) & (moment.amax(-1) <= opts.tol_moment)
+            & (penalty.abs().amax(-1) == 0))
 
 
 def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):
@@ -535,9 +540,8 @@ def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Te
     x1 = x0 - torch.linalg.solve(JT @ J, JT @ r0[..., None])[..., 0]
     res = gesture_result(problem, pressures, x1, torch.ones(B, dtype=torch.bool), torch.ones(B, dtype=torch.long),
                          t0, "newton-polish", None)
-    res.converged = ((res.residual_force_mN <= 1e3 * options.tol_force).all(-1)
-                     & (res.residual_moment_Nmm <= options.tol_moment).all(-1)
-                     & (range_penalty(x1.reshape(B, n_joints, 3)) == 0).all(-1))
+    res.converged = _within(res.residual_force_mN / 1e3, res.residual_moment_Nmm,
+                            range_penalty(x1.reshape(B, n_joints, 3)), options)
     if not bool(res.converged.all()):   # the LM's answer (or its NaN) replaces those rows
         bad = ~res.converged
         more = solve(problem, pressures[bad], options, x0=x1[bad].reshape(-1, n_joints, 3))

@@ -689,7 +689,10 @@ def test_float32_batched_gravity_nn_agrees_with_float64():
     assert float((a.pose.tip_end[ok] - b.pose.tip_end[ok].double()).abs().max()) <= 1e-3
     assert float((a.residual_force_mN - b.residual_force_mN.double()).abs().max()) <= 1e-3
     assert float((a.residual_moment_Nmm - b.residual_moment_Nmm.double()).abs().max()) <= 1e-3
-    assert AnalyticJoint().astype(torch.float32) == AnalyticJoint()
+    # the analytic joint follows its inputs' dtype: its float32 anchors are float64's to 1e-4 mm
+    inputs = t([[0.2, 1.0, -2.0, 50.0], [-0.3, -3.0, 3.0, -100.0]])
+    a32 = AnalyticJoint().astype(torch.float32)(inputs.float())
+    assert a32.dtype == torch.float32 and float((a32.double() - J(inputs)).abs().max()) <= 1e-4
 
 
 # ---------------------------------------------------------------- issue 14: the generic finger chain

@@ -509,7 +509,7 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
     rows = [("gravity gesture, Newton (median)", f"{b['gravity_newton_median_ms']:.1f} ms", was("gravity_lbfgs_s", "s"),
              target("gravity_newton_ms", "<=", "ms"), [b["gravity_newton_median_ms"]]),
             *([(f"gravity gesture, fastest path: {gfast['method']}; median over the same cases, "
-                f"{gfast['misses']} of {gfast['n']} missed 1e-4 mN, 1e-5 N·mm ({gfast['lm_fallbacks']} needed the LM)",
+                f"{gfast['misses']} of {gfast['n']} missed 1e-4 mN, 1e-5 N·mm ({gfast['fallbacks']} needed the LM)",
                 f"{b['gravity_fast_median_ms']:.2f} ms", was("gravity_lbfgs_s", "s"),
                 target("gravity_fast_ms", "<=", "ms"), [b["gravity_fast_median_ms"]])]
               if (gfast := b["details"].get("gravity_fast")) else []),
