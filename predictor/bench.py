@@ -19,7 +19,9 @@ check). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are
 in float32 on every core (``batched_dtype``, ``batched_threads``; the network and the
 joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
 float64 on one thread and on every core beside them in the details; every other figure
-on one thread in float64.
+on one thread in float64. ``gravity_newton_median_ms`` is the default solve from tau = 0
+(Newton steps, predictor.solve.newton_polish); ``gravity_lm_median_ms`` the LM it replaced,
+over the same pressures in the same run.
 
 NN residuals are means over fresh random validation pressures of the worst joint per
 sample (p95 and max are recorded beside them). ``contact_nn_residual_*`` is the delivered
@@ -156,6 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     gen = torch.Generator().manual_seed(2026)
     p_grav = torch.rand(n["gravity"], 2, generator=gen, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
     newton = _median_solve_ms(gravity, p_grav)
+    lm = _median_solve_ms(gravity, p_grav, options=SolverOptions(method="lm"))  # the solver before Newton steps
     lbfgs = _median_solve_ms(gravity, p_grav[:n["lbfgs"]], options=SolverOptions(method="lbfgs"))
     g = torch.tensor([0.05, 0.15, 0.25], dtype=torch.float64)
     p_contact = torch.cartesian_prod(g, g)[:n["contact"]]  # closing pressures: all end in contact
@@ -197,6 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     out = {
         "gravity_newton_median_ms": newton["median_ms"],
         "gravity_lbfgs_median_ms": lbfgs["median_ms"],
+        "gravity_lm_median_ms": lm["median_ms"],
         "contact_median_ms": contact["median_ms"],
         "gravity_nn_residual_force_mN": grav_nn["force_mN_mean"],
         "gravity_nn_residual_moment_Nmm": grav_nn["moment_Nmm_mean"],
@@ -223,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         "contact_nn_raw_tip_error_mm": cont_vs_solver["raw_tip_error_mm"]["mean"],
         "contact_nn_polished_fallback_rate": cont_pol["fallback"] / cont_pol["n"],
         "details": {
-            "gravity_newton": newton, "gravity_lbfgs": lbfgs, "contact_newton": contact,
+            "gravity_newton": newton, "gravity_lm": lm, "gravity_lbfgs": lbfgs, "contact_newton": contact,
             "contact_cases": p_contact.tolist(), "contact_approach_MPa": APPROACH,
             "contact_lbfgs_one_case": None if lbfgs_contact is None else {
                 "pressures_MPa": p_contact[4].tolist(), "ms": lbfgs_contact.time_ms,

@@ -240,8 +240,9 @@ class GripperParams:
 
 def rot(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     """Rotate vectors v (..., 2) by angle (...) rad, counter-clockwise."""
-    c, s = torch.cos(angle)[..., None], torch.sin(angle)[..., None]
-    return torch.cat((c * v[..., :1] - s * v[..., 1:], s * v[..., :1] + c * v[..., 1:]), -1)
+    c, s = torch.cos(angle), torch.sin(angle)
+    x, y = v[..., 0], v[..., 1]   # few tensor operations: the traced residual is dispatch-bound
+    return torch.stack((c * x - s * y, s * x + c * y), -1)
 
 
 def _unit(angle: torch.Tensor) -> torch.Tensor:

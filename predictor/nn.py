@@ -33,7 +33,11 @@ Variants (``python -m predictor.nn --variant ...``):
   pose error into ~1 N); the checkpoint records both. Tried and dropped (no longer in the
   code): one MLP for all states (2,000 labels: fingertip 0.25 mm from the solver's, state
   by its tau's contact 39 %); Newton steps from the network's tau, plain or with a
-  4-point line search (they jump branches: fingertip 2.4-7.6 mm off after one step); and
+  4-point line search (they jump branches: fingertip 2.4-7.6 mm off after one step; on
+  today's ContactNet one full Gauss-Newton step with the exact Jacobian takes the mean
+  fingertip error from 0.066 to 8 mm: bench-predictor, details.contact_nn_vs_solver.
+  newton_step_from_raw; the raw pose's error is as large as the equilibrium penetration,
+  0.057 mm mean, so the linearised contact set is wrong); and
   fine-tuning on the equilibrium loss: the raw residual fell to 88 mN / 16 N·mm, the
   paper's regime, but the net learned to lift the finger off the object (contact fraction
   42 % -> 27 %) and the polish then needed the fallback for 23 % of the queries. Corners
@@ -72,7 +76,7 @@ from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_W
                                check_pressures, default_finger, finger_arg, finger_from_dict, finger_to_dict,
                                nan_unless)
 from predictor.joint import JointModel, load_joint
-from predictor.solve import APPROACH, GestureResult, SolverOptions, newton_polish, solve, statics_at
+from predictor.solve import APPROACH, GestureResult, SolverOptions, newton_polish, newton_step, solve, statics_at
 from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, grasp_state, loss,
                                residual_norms)
 from surrogate import checkpoint
@@ -278,15 +282,24 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
     touches the object or not; state_agreement: fraction whose grasp state by the network
     (no contact, holds, slips: its classifier's, ContactNet, or else the contact of its
     tau) is the solver's, and state_agreement_of_tau that of its tau's contact alone;
-    raw_tip_error_mm: the raw gesture's fingertip against the solver's (mean / p95 / max)."""
+    raw_tip_error_mm: the raw gesture's fingertip against the solver's (mean / p95 / max);
+    reference_penetration_mm: the solver's own penetration of the object at its contact
+    equilibria (mean / p95), the scale the raw pose must hit for the penalty force to
+    balance; newton_step_from_raw: the residual (_stats) and fingertip error (mean, mm)
+    after one full Gauss-Newton step from the raw tau (exact Jacobian), a closed-form step
+    the issue allows (the contact law's kinks make it jump branches)."""
     problem = pred.config.problem(joint)
     ref = solve(problem, pressures)
     ok = ref.converged
-    _, st, by_net = raw_answer(pred.net, problem, pressures)
+    tau, st, by_net = raw_answer(pred.net, problem, pressures)
     of_tau = grasp_state(st.contact.normal, st.contact.slip)
     touch = ref.normal_force_N > 0
     truth = grasp_state(ref.normal_force_N, ref.slip)
     tip = (st.pose.tip_end - ref.pose.tip_end).norm(dim=-1)[ok]
+    depth = problem.residual(pressures[ok & touch], ref.tau[ok & touch]).contact.penetration
+    x1 = newton_step(problem, pressures, tau)
+    st1 = problem.residual(pressures, x1)
+    tip1 = (st1.pose.tip_end - ref.pose.tip_end).norm(dim=-1)[ok]
     cfg = pred.config
     return {"raw": _stats(st.residual[ok]),
             "raw_contact": _stats(st.residual[ok & touch]) if bool((ok & touch).any()) else None,
@@ -296,6 +309,8 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
             "state_by": "classifier" if isinstance(pred.net, ContactNet) else "contact of the raw tau",
             "raw_tip_error_mm": {"mean": float(tip.mean()), "p95": float(torch.quantile(tip, 0.95)),
                                  "max": float(tip.max())},
+            "reference_penetration_mm": {"mean": float(depth.mean()), "p95": float(torch.quantile(depth, 0.95))},
+            "newton_step_from_raw": {**_stats(st1.residual[ok]), "tip_error_mm_mean": float(tip1.mean())},
             "n": len(ok), "reference_converged": int(ok.sum()), "reference_in_contact": int((ok & touch).sum()),
             "domain_MPa": {"P1": list(cfg.p1_range), "P2": list(cfg.p2_range)},
             "reference": "predictor.solve along the pressure ramp from the approach gesture"}

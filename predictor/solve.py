@@ -5,9 +5,16 @@ paper's), (B, n = 3J) in N, N, N·mm. The residual vector is r(x) = [R_F,1, R_M,
 R_F,J, R_M,J/100, out-of-box penalties] (2n numbers, see predictor.statics); the
 equilibrium is r = 0 with the penalties inactive.
 
-Two methods, both batched over B pressure pairs and both starting from tau = 0:
+Methods, all batched over B pressure pairs and starting from tau = 0:
 
-- ``newton`` (the fast one): Levenberg-Marquardt on r with the Jacobian J = dr/dx
+- ``newton`` (the default): without an object, from tau = 0 a fixed-point (Picard) step
+  (tau <- the loads distal to each joint at the current pose), then Newton steps
+  x -= (dR/dx)⁻¹ R on the equilibrium rows (dR/dx by central differences), all recorded
+  as one graph with the answer's statics (``_cold_newton``: Picard and two Newton steps
+  land within the tolerances across the box); the answer's own residual is the check,
+  and where it fails more Newton steps (``newton_polish``), then the LM below, go on.
+  With an object: the LM below.
+- ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
   (B, 2n, n) in one batched pass (``_jacobian_fn``): central differences of the traced
   residual (~1e-10 relative: Newton's quadratic convergence is kept); with an object the
   samples that fail so are solved again with the exact reverse-mode Jacobian (the
@@ -48,19 +55,20 @@ import numpy as np
 import torch
 
 from fem.spec import INPUT_BOX
-from predictor.gripper import FingerPose, check_pressures, nan_unless, with_rows
+from predictor.gripper import FingerPose, check_pressures, nan_unless, rot, with_rows
 from predictor.statics import (MOMENT_SCALE, PENALTY_WEIGHT, ContactState, GripperProblem, Statics, contact_loads,
                                range_penalty, residual_norms, scaled)
 
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """method: newton | lbfgs. Newton tolerances in N and N·mm (1e-4 mN, 1e-5 N·mm: 1000x
-    below the issue's 0.1 mN / 0.01 N·mm target; one extra Newton step costs ~2 ms).
+    """method: newton | lm | lbfgs (module docstring). Newton and LM tolerances in N and
+    N·mm (1e-4 mN, 1e-5 N·mm: 1000x below the issue's 0.1 mN / 0.01 N·mm target; one
+    extra Newton step costs ~0.5 ms).
     L-BFGS (the paper's reference) runs to its own stall (lbfgs_max_iter iterations per
     ramp step at most) and is accepted at the issue's target (lbfgs_tol_*): on stiff
     contact steps it stalls near 0.02 mN, short of the Newton tolerance. max_iter: LM
-    iterations per ramp step. ramp_steps: pressure sub-steps when an object is present;
+    iterations per ramp step (without an object: Newton steps and LM iterations in all). ramp_steps: pressure sub-steps when an object is present;
     cutbacks: how many times a failed Newton sub-step may be halved (L-BFGS: none);
     max_penetration (mm): deeper is treated as tunnelling (a failed step), not as an
     equilibrium; contact_max_step: LM step cap with an object, in scaled units (0.3 N or
@@ -208,12 +216,9 @@ def traced(fn, n: int, J: int):
         return record if same else fn
 
 
-@functools.lru_cache(maxsize=16)
-def _traced_statics_fn(problem: GripperProblem):
+def _statics_fn(problem: GripperProblem):
     """s(x (B, 3J), p (B, J)) -> (residual (B, J, 3), then the FingerPose's tensor fields
-    joints, segments, theta, phi, points) of a problem without an object, recorded by
-    ``traced``: the answer's statics (``gesture_result``) in a third of the eager time
-    (0.43 against 1.21 ms for one query on this machine), bit for bit the same."""
+    joints, segments, theta, phi, points) of a problem without an object."""
     n_joints = problem.n_joints
 
     def s(x: torch.Tensor, p: torch.Tensor):
@@ -221,7 +226,23 @@ def _traced_statics_fn(problem: GripperProblem):
         q = st.pose
         return st.residual, q.joints, q.segments, q.theta, q.phi, q.points
 
-    return traced(s, 3 * n_joints, n_joints)
+    return s
+
+
+@functools.lru_cache(maxsize=16)
+def _traced_statics_fn(problem: GripperProblem):
+    """``_statics_fn`` recorded by ``traced``: the answer's statics (``gesture_result``) in a
+    third of the eager time (0.43 against 1.21 ms for one query on this machine), bit for
+    bit the same."""
+    return traced(_statics_fn(problem), 3 * problem.n_joints, problem.n_joints)
+
+
+def _as_statics(problem: GripperProblem, out) -> Statics:
+    """The Statics of ``_statics_fn``'s tuple (cloned: out of inference mode)."""
+    res, joints, segments, theta, phi, points = (v.clone() for v in out)
+    pose = FingerPose(joints=joints, segments=segments, theta=theta, phi=phi, points=points,
+                      finger=problem.params.finger)
+    return Statics(res, pose, ContactState.none(len(res), res.dtype))
 
 
 def statics_at(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
@@ -231,11 +252,7 @@ def statics_at(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tens
     if problem.obstacle is not None or tau.dtype != torch.float64:
         return problem.residual(pressures, tau)
     with torch.inference_mode():
-        out = _traced_statics_fn(problem)(tau.reshape(len(tau), -1), pressures)
-    res, joints, segments, theta, phi, points = (v.clone() for v in out)   # leave inference mode
-    pose = FingerPose(joints=joints, segments=segments, theta=theta, phi=phi, points=points,
-                      finger=problem.params.finger)
-    return Statics(res, pose, ContactState.none(len(tau), tau.dtype))
+        return _as_statics(problem, _traced_statics_fn(problem)(tau.reshape(len(tau), -1), pressures))
 
 
 def _jacobian_fn(problem: GripperProblem, pressure: bool = True, kind: str = "auto"):
@@ -456,7 +473,7 @@ def _runner(prob: GripperProblem, opts: SolverOptions):
     """The solver of one ramp step: run(x (B, n), p (B, J), p_prev=None, jac=None) ->
     (x, converged (B,), iterations (B,), Jacobians at x or None), by opts.method; with an
     object, an equilibrium deeper than opts.max_penetration counts as failed."""
-    if opts.method == "newton":
+    if opts.method in ("newton", "lm"):
         jac_fn = _jacobian_fn(prob, prob.obstacle is not None, opts.jacobian)  # dr/dP: the ramp's predictor
         cap = None if prob.obstacle is None else opts.contact_max_step
         method = lambda x, p, p_prev=None, jac=None: _levenberg_marquardt(  # noqa: E731
@@ -493,9 +510,14 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
                          f"{problem.params.finger.name!r} of {n_joints} joints")
     pressures = pressures.reshape(-1, n_joints)
     check_pressures(pressures)
-    if options.method not in ("newton", "lbfgs"):
-        raise ValueError(f"unknown method {options.method!r}: use newton or lbfgs")
+    if options.method not in ("newton", "lm", "lbfgs"):
+        raise ValueError(f"unknown method {options.method!r}: use newton, lm or lbfgs")
     t0 = time.perf_counter()
+    if options.method == "newton" and problem.obstacle is None and options.jacobian != "exact":
+        if x0 is None and options.max_iter >= 3:
+            return _cold_newton(problem, pressures, options, t0)
+        start = torch.zeros(len(pressures), n_joints, 3, dtype=torch.float64) if x0 is None else x0
+        return newton_polish(problem, pressures, start, options, t0)[0]
     if options.method == "lbfgs":
         options = dataclasses.replace(options, tol_force=options.lbfgs_tol_force,
                                       tol_moment=options.lbfgs_tol_moment, cutbacks=0)
@@ -512,43 +534,205 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
                           None if problem.obstacle is None else first_contact)
 
 
+#: Quadratic convergence of Newton under gravity, |R_k+1| <= |R_k|² / QUADRATIC (N, N·mm):
+#: from tau = 0 on 2,000 pressures the worst force went 235 -> 16.5 -> 0.023 mN -> 8e-9 mN
+#: (|R_k+1| ~ |R_k|² / 12 N) and the moment 14 -> 0.16 -> 4e-5 N·mm (/ 600 N·mm). A
+#: residual within sqrt(tol × QUADRATIC) therefore needs one last step, checked by the
+#: answer's own residual instead of another Jacobian.
+QUADRATIC = (10.0, 100.0)
+NEWTON_STEPS = 8   # Newton steps before the LM takes over
+
+
+def _bounds(options: SolverOptions) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(tol, gate) in (N, N·mm): the solver's tolerances and the one-step gate sqrt(tol × QUADRATIC)."""
+    return ((options.tol_force, options.tol_moment),
+            (math.sqrt(options.tol_force * QUADRATIC[0]), math.sqrt(options.tol_moment * QUADRATIC[1])))
+
+
+def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
+    """step(x (B, n), p (B, J)) -> (x_next (B, n), R (B, J, 3) at x [N, N, N·mm], stepped
+    (B,) bool, last (B,) bool): one Newton step on the equilibrium rows of a problem
+    without an object,
+
+        x_next = x - (dR/dx)⁻¹ R(x),   dR/dx (B, n, n) by central differences of R
+                                          (steps as ``_difference_jacobian``'s).
+
+    tol, gate: (N, N·mm) bounds on every joint's |R_F| and |R_M|. Where R(x) is within tol
+    already, or dR/dx is singular, x_next = x (not ``stepped``); ``last``: those, and the x
+    whose R(x) is within the one-step gate, whose x_next is the candidate answer."""
+    n_joints, n = problem.n_joints, 3 * problem.n_joints
+    h = 1e-6 * _box_scale(n)[1]
+    offsets = torch.cat((torch.zeros(1, n, dtype=h.dtype), torch.diag(h), -torch.diag(h)))   # (1 + 2n, n)
+
+    def step(x: torch.Tensor, p: torch.Tensor):
+        B = x.shape[0]
+        X = x[:, None] + offsets
+        R = problem.residual(p.repeat_interleave(1 + 2 * n, 0), X.reshape(-1, n_joints, 3)).residual
+        R = R.reshape(B, 1 + 2 * n, n)
+        r, J = R[:, 0], (R[:, 1:1 + n] - R[:, 1 + n:]).transpose(1, 2) / (2 * h)
+        dx, info = torch.linalg.solve_ex(J, r[..., None])
+        eq = r.reshape(B, n_joints, 3)
+        force, moment = eq[..., :2].norm(dim=-1).amax(-1), eq[..., 2].abs().amax(-1)
+        stepped = (info == 0) & ((force > tol[0]) | (moment > tol[1]))
+        last = ~stepped | ((force <= gate[0]) & (moment <= gate[1]))
+        return torch.where(stepped[:, None], x - dx[..., 0], x), eq, stepped, last
+
+    return step
+
+
+def _picard_fn(problem: GripperProblem, tol: tuple[float, float]):
+    """picard(x (B, n), p (B, J)) -> (x_next (B, n), moved (B,) bool): one fixed-point
+    (Picard) step of a problem without an object, tau <- the loads that balance the parts
+    distal to each joint at the pose of tau,
+
+        tau_F <- tau_F - rot(-theta_i) R_F,i,   tau_M <- tau_M - R_M,i
+
+    (Equation 1 is R_F = rot(theta_i) tau_F - F_distal, R_M = tau_M - M_distal); x_next = x
+    (not ``moved``) where R(x) is within tol (N, N·mm) already. From tau = 0 it moves the
+    start from the weights' full moment (~14 N·mm) to what the finger's own deflection
+    changes in it (~2 N·mm), so that Newton needs two steps instead of three."""
+    n_joints = problem.n_joints
+
+    def picard(x: torch.Tensor, p: torch.Tensor):
+        st = problem.residual(p, x.reshape(-1, n_joints, 3))
+        r = st.residual
+        moved = (r[..., :2].norm(dim=-1).amax(-1) > tol[0]) | (r[..., 2].abs().amax(-1) > tol[1])
+        dx = torch.cat((rot(-st.pose.theta, r[..., :2]), r[..., 2:]), -1).reshape(x.shape)
+        return torch.where(moved[:, None], x - dx, x), moved
+
+    return picard
+
+
+@functools.lru_cache(maxsize=16)
+def _traced_newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
+    """``_newton_fn`` recorded by ``traced``: Jacobian, solve and update in one call (0.5
+    ms for one query on this machine, the residual's dispatch being most of it)."""
+    return traced(_newton_fn(problem, tol, gate), 3 * problem.n_joints, problem.n_joints)
+
+
+@functools.lru_cache(maxsize=16)
+def _traced_cold_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
+    """cold(x (B, n), p (B, J)) -> (x (B, n), iterations (B,), then ``_statics_fn``'s tuple
+    at x): the cold solve's usual path as one recorded graph, from x = 0 a Picard step and
+    two Newton steps, then the answer's statics. From tau = 0 in the box the first Newton
+    step lands within the one-step gate on every one of 2,000 pressures (the committed
+    surrogate and the analytic joint: 0.29 and 0.67 mN at worst), so the second is the
+    last; the answer's check decides (``_cold_newton``)."""
+    picard, step, statics = _picard_fn(problem, tol), _newton_fn(problem, tol, gate), _statics_fn(problem)
+
+    def cold(x: torch.Tensor, p: torch.Tensor):
+        x, moved = picard(x, p)
+        x, _, first, _ = step(x, p)
+        x, _, second, _ = step(x, p)
+        return (x, moved.long() + first + second) + statics(x, p)
+
+    return traced(cold, 3 * problem.n_joints, problem.n_joints)
+
+
+def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=None) -> GestureResult:
+    """The GestureResult at x (B, n) checked at the solver's tolerances (tau in the box,
+    every joint's residual within tol_force and tol_moment), the check inside ``time_ms``;
+    the rows it refuses (B,) bool are replaced by ``fallback(rows)``, a GestureResult of
+    those rows."""
+    res = gesture_result(problem, pressures, x, torch.ones(len(x), dtype=torch.bool), iterations, t0, "newton",
+                         None, statics)
+    t_check = time.perf_counter()   # the check is part of the answer's time (the free pose is not)
+    res.converged = (((x.abs() <= _box_scale(x.shape[1])[0]).all(-1))
+                     & (res.residual_force_mN.amax(-1) <= 1e3 * options.tol_force)
+                     & (res.residual_moment_Nmm.amax(-1) <= options.tol_moment))
+    bad = ~res.converged
+    res.time_ms += 1e3 * (time.perf_counter() - t_check)
+    if bool(bad.any()):
+        res = res.with_rows(bad, fallback(bad))
+        res.time_ms = 1e3 * (time.perf_counter() - t0)
+    return res
+
+
+def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, t0: float) -> GestureResult:
+    """``solve``'s default without an object, from tau = 0: the one graph of
+    ``_traced_cold_fn`` (Picard, two Newton steps, the statics), then the check; rows it
+    refuses go on with ``newton_polish`` from where they are (and the LM after it)."""
+    B, n_joints = pressures.shape
+    with torch.inference_mode():
+        x, iterations, *out = _traced_cold_fn(problem, *_bounds(options))(
+            torch.zeros(B, 3 * n_joints, dtype=torch.float64), pressures)
+        st = _as_statics(problem, out)
+    x, iterations = x.clone(), iterations.clone()
+
+    def fallback(bad):
+        more = newton_polish(problem, pressures[bad], x[bad].reshape(-1, n_joints, 3),
+                             dataclasses.replace(options, max_iter=options.max_iter - 3), t0)[0]
+        more.iterations += iterations[bad]
+        return more
+
+    return _checked(problem, pressures, x, iterations, options, t0, fallback, st)
+
+
 def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor,
                   options: SolverOptions = SolverOptions(), t0: float | None = None) -> tuple[GestureResult, torch.Tensor]:
-    """Finish a warm start that is already near the root (a network's tau), without an
-    object: one Newton step
+    """Newton without an object from x0 (a network's tau: the gravity NN's polish; ``solve``
+    with x0; the cold solve's rows its check refused):
 
-        x1 = x0 - (JᵀJ)⁻¹ Jᵀ r(x0),   J = dr/dx at x0 by central differences of the traced
-                                          residual (``_difference_jacobian``)
+        x_k+1 = x_k - (dR/dx)⁻¹ R(x_k)   (``_traced_newton_fn``)
 
-    then the answer's own residual check (``gesture_result``) at the solver's tolerances.
-    From the gravity NN's start (~0.2 mN) the step lands near 1e-5 mN: Newton converges
-    quadratically, so one step does what the LM's damped first steps (mu = 1e-6 against
-    JᵀJ ~ 1e-4 in the moment columns) take two for. Samples the check refuses go on with
-    the LM from x1 (``solve(..., x0=x1)``); the result's ``iterations`` count the step.
+    Each sample steps until R(x_k) is within the one-step gate sqrt(tol × QUADRATIC);
+    x_k+1 is then its candidate, checked by the answer's own residual (``gesture_result``)
+    at the solver's tolerances: from the gravity NN's tau (~0.2 mN) one step, from a start
+    within the tolerances none. Samples the check refuses (not gated within NEWTON_STEPS,
+    a singular Jacobian, out of the box) go on with the LM (``method="lm"``) from their
+    last iterate, within what is left of ``options.max_iter`` (NaN when nothing is);
+    ``iterations`` counts both.
 
     pressures (B, J) MPa; x0 (B, J, 3) [N, N, N·mm]; t0: perf_counter time the caller's
     query began (default: now), for ``time_ms``. Returns (GestureResult, the residual at x0
-    (B, J, 3) N, N, N·mm: the start's own, from the same pass)."""
+    (B, J, 3) N, N, N·mm: the start's own, from the first step's pass)."""
     if problem.obstacle is not None:
         raise ValueError("newton_polish is for the smooth residual without an object: use solve(..., x0=)")
     t0 = time.perf_counter() if t0 is None else t0
     B, n_joints = pressures.shape
-    n = 3 * n_joints
-    x0 = x0.reshape(B, n).double()
-    J, r0, _ = _difference_jacobian(_traced_residual_fn(problem), pressure=False)(x0, pressures, dp=False)
+    step = _traced_newton_fn(problem, *_bounds(options))
+    x = x0.reshape(B, -1).double().clone()
+    iterations = torch.zeros(B, dtype=torch.long)
+    active, r0 = torch.arange(B), None
+    with torch.inference_mode():
+        for _ in range(min(NEWTON_STEPS, max(options.max_iter, 0))):
+            every = len(active) == B
+            x_next, r, stepped, last = step(x if every else x[active], pressures if every else pressures[active])
+            r0 = r if r0 is None else r0
+            if every:
+                x = x_next
+            else:
+                x[active] = x_next
+            iterations[active] += stepped
+            if bool(last.all()):
+                break
+            active = active[~last]
+    x, iterations = x.clone(), iterations.clone()   # leave inference mode
+    r0 = problem.residual(pressures, x0.reshape(B, n_joints, 3)).residual if r0 is None else r0.clone()
+
+    def fallback(bad):   # the LM's answer within the rest of max_iter, or NaN
+        budget = options.max_iter - int(iterations[bad].max())
+        if budget <= 0:
+            return gesture_result(problem, pressures[bad], x[bad], torch.zeros(int(bad.sum()), dtype=torch.bool),
+                                  iterations[bad], t0, "newton", None)
+        more = solve(problem, pressures[bad], dataclasses.replace(options, method="lm", max_iter=budget),
+                     x0=x[bad].reshape(-1, n_joints, 3))
+        more.iterations += iterations[bad]
+        return more
+
+    return _checked(problem, pressures, x, iterations, options, t0, fallback), r0
+
+
+def newton_step(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+    """One full Gauss-Newton step tau - (JᵀJ)⁻¹Jᵀr with the exact Jacobian
+    (``_autograd_jacobian``), no damping, cap or check: pressures (B, J) MPa, tau (B, J, 3)
+    -> (B, J, 3). For measuring what a closed-form step does to a network's tau
+    (predictor.nn.evaluate_contact), not an answer."""
+    B, n_joints = pressures.shape
+    J, r, _ = _autograd_jacobian(_residual_fn(problem))(tau.reshape(B, -1), pressures)
     JT = J.transpose(1, 2)
-    x1 = x0 - torch.linalg.solve(JT @ J, JT @ r0[..., None])[..., 0]
-    res = gesture_result(problem, pressures, x1, torch.ones(B, dtype=torch.bool), torch.ones(B, dtype=torch.long),
-                         t0, "newton-polish", None)
-    res.converged = _within(res.residual_force_mN / 1e3, res.residual_moment_Nmm,
-                            range_penalty(x1.reshape(B, n_joints, 3)), options)
-    if not bool(res.converged.all()):   # the LM's answer (or its NaN) replaces those rows
-        bad = ~res.converged
-        more = solve(problem, pressures[bad], options, x0=x1[bad].reshape(-1, n_joints, 3))
-        more.iterations += 1
-        res = res.with_rows(bad, more)
-        res.time_ms = 1e3 * (time.perf_counter() - t0)
-    return res, r0[:, :n].reshape(B, n_joints, 3) * torch.tensor([1.0, 1.0, MOMENT_SCALE], dtype=r0.dtype)
+    dx = torch.linalg.solve(JT @ J + 1e-12 * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])[..., 0]
+    return (tau.reshape(B, -1) - dx).reshape(B, n_joints, 3).detach()
 
 
 def attempts(problem: GripperProblem, options: SolverOptions) -> tuple[str, ...]:
@@ -558,7 +742,7 @@ def attempts(problem: GripperProblem, options: SolverOptions) -> tuple[str, ...]
     for the samples that failed (a difference that straddles a kink of the contact law can
     stall LM: a three-joint grasp did). Both end at the same equilibria (tested on the
     three objects' holds, slips and misses)."""
-    if options.method == "newton" and options.jacobian == "auto" and problem.obstacle is not None:
+    if options.method in ("newton", "lm") and options.jacobian == "auto" and problem.obstacle is not None:
         return ("differences", "exact")
     return (options.jacobian,)
 
@@ -609,21 +793,24 @@ def _solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solve
 
 def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Tensor, ok: torch.Tensor,
                    iterations: torch.Tensor, t0: float, method: str,
-                   first_contact: torch.Tensor | None) -> GestureResult:
+                   first_contact: torch.Tensor | None, statics: Statics | None = None) -> GestureResult:
     """The GestureResult of solved unknowns x (B, 3J) at pressures (B, J) MPa: residual,
-    contact and pose at x, NaN where ok (B,) is False; time_ms from perf_counter t0 up to
-    the answer (the free pose, a drawing aid, is outside it)."""
+    contact and pose at x (``statics``, when the caller has them already), NaN where ok
+    (B,) is False; time_ms from perf_counter t0 up to the answer (the free pose, a drawing
+    aid, is outside it)."""
     B, n_joints = pressures.shape
     with torch.no_grad():
         tau = x.reshape(B, n_joints, 3)
-        st = statics_at(problem, pressures, tau)
+        st = statics_at(problem, pressures, tau) if statics is None else statics
         elapsed = 1e3 * (time.perf_counter() - t0)
         free = problem.pose(pressures, torch.zeros_like(tau))
     force, moment = residual_norms(st.residual)
+    every = bool(ok.all())   # nothing to mask (the usual case: saves ~0.1 ms a query)
     return GestureResult(
-        pressures=pressures, tau=nan_unless(ok, tau), converged=ok,
+        pressures=pressures, tau=tau if every else nan_unless(ok, tau), converged=ok,
         residual_force_mN=force, residual_moment_Nmm=moment,
         normal_force_N=st.contact.normal, friction_N=st.contact.friction, friction_ratio=st.contact.ratio,
-        slip=st.contact.slip, iterations=iterations, time_ms=elapsed, pose=st.pose.masked(ok), free_pose=free,
+        slip=st.contact.slip, iterations=iterations, time_ms=elapsed, pose=st.pose if every else st.pose.masked(ok),
+        free_pose=free,
         method=method, first_contact=first_contact,
     )
