@@ -68,8 +68,8 @@ class SolverOptions:
     L-BFGS (the paper's reference) runs to its own stall (lbfgs_max_iter iterations per
     ramp step at most) and is accepted at the issue's target (lbfgs_tol_*): on stiff
     contact steps it stalls near 0.02 mN, short of the Newton tolerance. max_iter: LM
-    iterations per ramp step (without an object: Newton steps and LM iterations in all). ramp_steps: pressure sub-steps when an object is present;
-    cutbacks: how many times a failed Newton sub-step may be halved (L-BFGS: none);
+    iterations per ramp step (without an object: Picard, Newton and LM steps in all).
+    ramp_steps: pressure sub-steps when an object is present; cutbacks: how many times a failed Newton sub-step may be halved (L-BFGS: none);
     max_penetration (mm): deeper is treated as tunnelling (a failed step), not as an
     equilibrium; contact_max_step: LM step cap with an object, in scaled units (0.3 N or
     30 N·mm). jacobian: auto (central differences; with an object, exact for the samples
