@@ -365,14 +365,21 @@ def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
     """Converged mask (B,) from residual vectors r (B, 2n)."""
     n = r.shape[1] // 2
     eq = r[:, :n].reshape(-1, n // 3, 3)
-    return _within(eq[..., :2].norm(dim=-1), eq[..., 2].abs() * MOMENT_SCALE, r[:, n:], opts)
+    return _within(eq[..., :2].norm(dim=-1), eq[..., 2].abs() * MOMENT_SCALE, r[:, n:].abs().amax(-1) == 0, opts)
 
 
-def _within(force: torch.Tensor, moment: torch.Tensor, penalty: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
+def _within(force: torch.Tensor, moment: torch.Tensor, in_box: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
     """Converged mask (B,): every joint's |R_F| (B, J) N and |R_M| (B, J) N·mm within the
-    tolerances, and no out-of-box penalty (B, 3J)."""
-    return ((force.amax(-1) <= opts.tol_force) & (moment.amax(-1) <= opts.tol_moment)
-            & (penalty.abs().amax(-1) == 0))
+    tolerances, and tau in the surrogate's box (in_box (B,) bool: no out-of-box penalty)."""
+    return (force.amax(-1) <= opts.tol_force) & (moment.amax(-1) <= opts.tol_moment) & in_box
+
+
+def _lm_step(J: torch.Tensor, r: torch.Tensor, mu) -> torch.Tensor:
+    """The damped Gauss-Newton step -(JᵀJ + mu·I)⁻¹ Jᵀ r (B, n) of J (B, m, n), r (B, m),
+    mu (B,) or a number."""
+    JT = J.transpose(1, 2)
+    mu = torch.as_tensor(mu, dtype=J.dtype).reshape(-1, 1, 1)
+    return -torch.linalg.solve(JT @ J + mu * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])[..., 0]
 
 
 def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):
@@ -406,8 +413,7 @@ def _levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_ja
         if act.numel() == 0:
             break
         Ja, ra, ma = J[act], r[act], mu[act]
-        JT = Ja.transpose(1, 2)
-        step = -torch.linalg.solve(JT @ Ja + ma[:, None, None] * eye, JT @ ra[..., None])[..., 0]
+        step = _lm_step(Ja, ra, ma)
         if max_step is not None:
             big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
             step = step / big.clamp_min(1.0)
@@ -514,7 +520,7 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
         raise ValueError(f"unknown method {options.method!r}: use newton, lm or lbfgs")
     t0 = time.perf_counter()
     if options.method == "newton" and problem.obstacle is None and options.jacobian != "exact":
-        if x0 is None and options.max_iter >= 3:
+        if x0 is None and options.max_iter >= COLD_STEPS:
             return _cold_newton(problem, pressures, options, t0)
         start = torch.zeros(len(pressures), n_joints, 3, dtype=torch.float64) if x0 is None else x0
         return newton_polish(problem, pressures, start, options, t0)[0]
@@ -541,12 +547,18 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
 #: answer's own residual instead of another Jacobian.
 QUADRATIC = (10.0, 100.0)
 NEWTON_STEPS = 8   # Newton steps before the LM takes over
+COLD_STEPS = 3     # the cold graph's Picard and two Newton steps (``_traced_cold_fn``)
 
 
 def _bounds(options: SolverOptions) -> tuple[tuple[float, float], tuple[float, float]]:
     """(tol, gate) in (N, N·mm): the solver's tolerances and the one-step gate sqrt(tol × QUADRATIC)."""
     return ((options.tol_force, options.tol_moment),
             (math.sqrt(options.tol_force * QUADRATIC[0]), math.sqrt(options.tol_moment * QUADRATIC[1])))
+
+
+def _worst(eq: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Worst joint's |R_F| N and |R_M| N·mm (B,) of residuals eq (B, J, 3)."""
+    return eq[..., :2].norm(dim=-1).amax(-1), eq[..., 2].abs().amax(-1)
 
 
 def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
@@ -572,7 +584,7 @@ def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[fl
         r, J = R[:, 0], (R[:, 1:1 + n] - R[:, 1 + n:]).transpose(1, 2) / (2 * h)
         dx, info = torch.linalg.solve_ex(J, r[..., None])
         eq = r.reshape(B, n_joints, 3)
-        force, moment = eq[..., :2].norm(dim=-1).amax(-1), eq[..., 2].abs().amax(-1)
+        force, moment = _worst(eq)
         stepped = (info == 0) & ((force > tol[0]) | (moment > tol[1]))
         last = ~stepped | ((force <= gate[0]) & (moment <= gate[1]))
         return torch.where(stepped[:, None], x - dx[..., 0], x), eq, stepped, last
@@ -596,7 +608,8 @@ def _picard_fn(problem: GripperProblem, tol: tuple[float, float]):
     def picard(x: torch.Tensor, p: torch.Tensor):
         st = problem.residual(p, x.reshape(-1, n_joints, 3))
         r = st.residual
-        moved = (r[..., :2].norm(dim=-1).amax(-1) > tol[0]) | (r[..., 2].abs().amax(-1) > tol[1])
+        force, moment = _worst(r)
+        moved = (force > tol[0]) | (moment > tol[1])
         dx = torch.cat((rot(-st.pose.theta, r[..., :2]), r[..., 2:]), -1).reshape(x.shape)
         return torch.where(moved[:, None], x - dx, x), moved
 
@@ -637,9 +650,8 @@ def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=N
     res = gesture_result(problem, pressures, x, torch.ones(len(x), dtype=torch.bool), iterations, t0, "newton",
                          None, statics)
     t_check = time.perf_counter()   # the check is part of the answer's time (the free pose is not)
-    res.converged = (((x.abs() <= _box_scale(x.shape[1])[0]).all(-1))
-                     & (res.residual_force_mN.amax(-1) <= 1e3 * options.tol_force)
-                     & (res.residual_moment_Nmm.amax(-1) <= options.tol_moment))
+    res.converged = _within(res.residual_force_mN / 1e3, res.residual_moment_Nmm,
+                            (x.abs() <= _box_scale(x.shape[1])[0]).all(-1), options)
     bad = ~res.converged
     res.time_ms += 1e3 * (time.perf_counter() - t_check)
     if bool(bad.any()):
@@ -661,7 +673,7 @@ def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: Solv
 
     def fallback(bad):
         more = newton_polish(problem, pressures[bad], x[bad].reshape(-1, n_joints, 3),
-                             dataclasses.replace(options, max_iter=options.max_iter - 3), t0)[0]
+                             dataclasses.replace(options, max_iter=options.max_iter - COLD_STEPS), t0)[0]
         more.iterations += iterations[bad]
         return more
 
@@ -730,9 +742,7 @@ def newton_step(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Ten
     (predictor.nn.evaluate_contact), not an answer."""
     B, n_joints = pressures.shape
     J, r, _ = _autograd_jacobian(_residual_fn(problem))(tau.reshape(B, -1), pressures)
-    JT = J.transpose(1, 2)
-    dx = torch.linalg.solve(JT @ J + 1e-12 * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])[..., 0]
-    return (tau.reshape(B, -1) - dx).reshape(B, n_joints, 3).detach()
+    return (tau.reshape(B, -1) + _lm_step(J, r, 1e-12)).reshape(B, n_joints, 3).detach()
 
 
 def attempts(problem: GripperProblem, options: SolverOptions) -> tuple[str, ...]:
