@@ -10,9 +10,10 @@ load average at the start is recorded with the figures. Keys required by issue 5
     contact_nn_residual_force_mN, contact_nn_residual_moment_Nmm, nn_batched_per_s
 
 and by issue 15 (``REQUIRED_KEYS`` lists them all): the raw contact network's figures,
-``contact_fast_median_ms`` (the contact NN's warm start polished by the capped LM, over the
-bench's contact cases), ``gravity_fast_median_ms`` (the gravity NN's warm start finished by
-one Newton step, over the gravity cases), ``contact_batched_per_s`` (converged ramp solves
+``contact_fast_median_ms`` (the contact NN's warm start finished by Newton steps kept on
+its branch, else by the capped LM, over the bench's contact cases),
+``gravity_fast_median_ms`` (the gravity NN's warm start finished by one Newton step, over
+the gravity cases), ``contact_batched_per_s`` (converged ramp solves
 per second in one batch), ``gravity_batched_per_s`` and ``nn_single_query_ms`` (the
 delivered NN path, predictor.nn.predict_gesture: network, kinematics and its residual
 check). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
@@ -25,8 +26,8 @@ over the same pressures in the same run.
 
 NN residuals are means over fresh random validation pressures of the worst joint per
 sample (p95 and max are recorded beside them). ``contact_nn_residual_*`` is the delivered
-contact predictor, the NN's tau polished by the capped LM (ramp fallback for the few it
-cannot converge: ``contact_nn_polished_fallback_rate``); the raw network, no solver, is
+contact predictor, the NN's tau finished by Newton steps or the capped LM (ramp fallback
+for the few neither converges: ``contact_nn_polished_fallback_rate``); the raw network, no solver, is
 ``contact_nn_raw_*``: its residual over the pressures where the ramp solver converged
 (``details.contact_nn_vs_solver`` splits it into contact and contact-free equilibria),
 its grasp state's agreement with the solver's (no contact / holds / slips; the state its
@@ -89,16 +90,17 @@ def _median_solve_ms(problem, pressures, options=SolverOptions()):
 def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_moment_Nmm: float,
                polish: bool = False) -> dict:
     """Median single-query time (ms) of predictor.nn.predict_gesture over ``pressures``
-    (n, J), a network's tau finished by a solver (contact: the capped LM polish, the ramp
-    where it fails; gravity with ``polish``: one Newton step, the LM where its check
-    fails), and its worst residuals. A query that does not converge or misses tol_force_mN
+    (n, J), a network's tau finished by a solver (contact: Newton steps kept on the
+    network's branch, else the capped LM polish, the ramp where it fails; gravity with
+    ``polish``: one Newton step, the LM where its check fails), and its worst residuals. A query that does not converge or misses tol_force_mN
     / tol_moment_Nmm counts as a miss, not as a time; ``fallbacks``: queries the fallback
-    solved."""
+    solved; ``newton_from_nn``: contact queries the Newton steps answered."""
     predict_gesture(pred, problem, pressures[:1], polish=polish)  # warm-up
-    times, misses, fallbacks, force, moment = [], 0, 0, 0.0, 0.0
+    times, misses, fallbacks, stepped, force, moment = [], 0, 0, 0, 0.0, 0.0
     for p in pressures:
         res = predict_gesture(pred, problem, p[None], polish=polish)
         fallbacks += int(res.fallback[0])
+        stepped += 0 if res.stepped is None else int(res.stepped[0])
         f, m = float(res.residual_force_mN.max()), float(res.residual_moment_Nmm.max())
         if not (bool(res.converged[0]) and f <= tol_force_mN and m <= tol_moment_Nmm):
             misses += 1
@@ -106,7 +108,8 @@ def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_m
         times.append(res.time_ms)
         force, moment = max(force, f), max(moment, m)
     return {"median_ms": statistics.median(times) if times else math.nan, "n": len(pressures), "misses": misses,
-            "fallbacks": fallbacks, "max_residual_force_mN": force, "max_residual_moment_Nmm": moment,
+            "fallbacks": fallbacks, "newton_from_nn": stepped, "max_residual_force_mN": force,
+            "max_residual_moment_Nmm": moment,
             "tolerance": [tol_force_mN, tol_moment_Nmm], "method": method}
 
 
@@ -177,8 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     cont_vs_solver = evaluate_contact(cont_pred, joint, pc_val)
     cont_pol = evaluate_polished(cont_pred, joint, pc_val)
     in_contact = contact_fraction(cont_pred.net, cont_problem, pc_val)
-    fast = _fast_path(cont_pred, cont_problem, p_contact, "contact NN warm start + capped LM polish "
-                      "(ramp solve fallback)", 0.1, 0.01)
+    fast = _fast_path(cont_pred, cont_problem, p_contact, "contact NN warm start + Newton steps on its branch "
+                      "(else the capped LM polish, then the ramp)", 0.1, 0.01)
     t0 = time.perf_counter()
     cbatch = solve(grasp, p_contact.repeat(n["contact_batch"] // len(p_contact), 1))
     contact_batched_s = time.perf_counter() - t0
@@ -226,6 +229,7 @@ def main(argv: list[str] | None = None) -> int:
         "contact_nn_state_agreement": cont_vs_solver["state_agreement"],
         "contact_nn_raw_tip_error_mm": cont_vs_solver["raw_tip_error_mm"]["mean"],
         "contact_nn_polished_fallback_rate": cont_pol["fallback"] / cont_pol["n"],
+        "contact_nn_newton_rate": cont_pol["newton_from_nn"] / cont_pol["n"],
         "details": {
             "gravity_newton": newton, "gravity_lm": lm, "gravity_lbfgs": lbfgs, "contact_newton": contact,
             "contact_cases": p_contact.tolist(), "contact_approach_MPa": APPROACH,

@@ -72,8 +72,9 @@ def nn_curves(curves: list, path: Path) -> None:
         axes[0].semilogy(h["epoch"], h["val_force_mN"], "o-", ms=3, label=label + " (raw NN)")
         axes[1].semilogy(h["epoch"], h["val_moment_Nmm"], "o-", ms=3, label=label + " (raw NN)")
         polished = pred.metrics.get("val_polished")
-        if polished:  # the delivered contact predictor: NN + capped-LM polish
-            axes[0].semilogy([h["epoch"][-1]], [polished["force_mN_mean"]], "*", ms=12, label="contact NN + LM polish")
+        if polished:  # the delivered contact predictor: NN + Newton steps or the capped-LM polish
+            axes[0].semilogy([h["epoch"][-1]], [polished["force_mN_mean"]], "*", ms=12,
+                             label="contact NN + Newton / LM polish")
             axes[1].semilogy([h["epoch"][-1]], [polished["moment_Nmm_mean"]], "*", ms=12)
     for ax, bound, unit in ((axes[0], 2.0, "mN"), (axes[1], 1.2, "N·mm")):
         ax.axhline(bound, color="k", ls=":", label=f"paper's gravity NN ({bound} {unit})")

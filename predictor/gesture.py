@@ -140,6 +140,7 @@ def run(args: argparse.Namespace, prepared=None):
         out.update(raw_residual_force_mN=res.raw_residual_force_mN[0].tolist(),
                    raw_residual_moment_Nmm=res.raw_residual_moment_Nmm[0].tolist(),
                    polished=bool(res.polished[0]), fallback=bool(res.fallback[0]),
+                   newton_from_nn=None if res.stepped is None else bool(res.stepped[0]),
                    raw_state=None if res.raw_state is None else STATES[int(res.raw_state[0])])
     return out, res, problem
 

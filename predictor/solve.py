@@ -563,11 +563,14 @@ def _worst(eq: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
     """step(x (B, n), p (B, J)) -> (x_next (B, n), R (B, J, 3) at x [N, N, N·mm], stepped
-    (B,) bool, last (B,) bool): one Newton step on the equilibrium rows of a problem
-    without an object,
+    (B,) bool, last (B,) bool): one Newton step on the equilibrium rows,
 
         x_next = x - (dR/dx)⁻¹ R(x),   dR/dx (B, n, n) by central differences of R
                                           (steps as ``_difference_jacobian``'s).
+
+    With an object R includes the penalty contact, which is C1 (statics.smooth_penetration):
+    a difference straddling a sample point's contact onset is off by O(h), which slows the
+    last steps there, and the caller's check catches it.
 
     tol, gate: (N, N·mm) bounds on every joint's |R_F| and |R_M|. Where R(x) is within tol
     already, or dR/dx is singular, x_next = x (not ``stepped``); ``last``: those, and the x
@@ -642,6 +645,13 @@ def _traced_cold_fn(problem: GripperProblem, tol: tuple[float, float], gate: tup
     return traced(cold, 3 * problem.n_joints, problem.n_joints)
 
 
+def meets_tolerances(res: GestureResult, x: torch.Tensor, options: SolverOptions) -> torch.Tensor:
+    """The solver's convergence rule on the rows of a result at unknowns x (B, 3J): (B,)
+    bool, every joint's residual within options' tolerances and x in the surrogate's box."""
+    return _within(res.residual_force_mN / 1e3, res.residual_moment_Nmm,
+                   (x.abs() <= _box_scale(x.shape[1])[0]).all(-1), options)
+
+
 def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=None) -> GestureResult:
     """The GestureResult at x (B, n) checked at the solver's tolerances (tau in the box,
     every joint's residual within tol_force and tol_moment), the check inside ``time_ms``;
@@ -650,8 +660,7 @@ def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=N
     res = gesture_result(problem, pressures, x, torch.ones(len(x), dtype=torch.bool), iterations, t0, "newton",
                          None, statics)
     t_check = time.perf_counter()   # the check is part of the answer's time (the free pose is not)
-    res.converged = _within(res.residual_force_mN / 1e3, res.residual_moment_Nmm,
-                            (x.abs() <= _box_scale(x.shape[1])[0]).all(-1), options)
+    res.converged = meets_tolerances(res, x, options)
     bad = ~res.converged
     res.time_ms += 1e3 * (time.perf_counter() - t_check)
     if bool(bad.any()):
@@ -683,17 +692,13 @@ def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: Solv
 def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor,
                   options: SolverOptions = SolverOptions(), t0: float | None = None) -> tuple[GestureResult, torch.Tensor]:
     """Newton without an object from x0 (a network's tau: the gravity NN's polish; ``solve``
-    with x0; the cold solve's rows its check refused):
-
-        x_k+1 = x_k - (dR/dx)⁻¹ R(x_k)   (``_traced_newton_fn``)
-
-    Each sample steps until R(x_k) is within the one-step gate sqrt(tol × QUADRATIC);
-    x_k+1 is then its candidate, checked by the answer's own residual (``gesture_result``)
-    at the solver's tolerances: from the gravity NN's tau (~0.2 mN) one step, from a start
-    within the tolerances none. Samples the check refuses (not gated within NEWTON_STEPS,
-    a singular Jacobian, out of the box) go on with the LM (``method="lm"``) from their
-    last iterate, within what is left of ``options.max_iter`` (NaN when nothing is);
-    ``iterations`` counts both.
+    with x0; the cold solve's rows its check refused): ``newton_iterate``, whose last
+    iterate is checked by the answer's own residual (``gesture_result``) at the solver's
+    tolerances: from the gravity NN's tau (~0.2 mN) one step, from a start within the
+    tolerances none. Samples the check refuses (not gated within NEWTON_STEPS, a singular
+    Jacobian, out of the box) go on with the LM (``method="lm"``) from their last iterate,
+    within what is left of ``options.max_iter`` (NaN when nothing is); ``iterations``
+    counts both.
 
     pressures (B, J) MPa; x0 (B, J, 3) [N, N, N·mm]; t0: perf_counter time the caller's
     query began (default: now), for ``time_ms``. Returns (GestureResult, the residual at x0
@@ -701,6 +706,32 @@ def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Te
     if problem.obstacle is not None:
         raise ValueError("newton_polish is for the smooth residual without an object: use solve(..., x0=)")
     t0 = time.perf_counter() if t0 is None else t0
+    n_joints = pressures.shape[1]
+    x, iterations, r0 = newton_iterate(problem, pressures, x0, options)
+
+    def fallback(bad):   # the LM's answer within the rest of max_iter, or NaN
+        budget = options.max_iter - int(iterations[bad].max())
+        if budget <= 0:
+            return gesture_result(problem, pressures[bad], x[bad], torch.zeros(int(bad.sum()), dtype=torch.bool),
+                                  iterations[bad], t0, "newton", None)
+        more = solve(problem, pressures[bad], dataclasses.replace(options, method="lm", max_iter=budget),
+                     x0=x[bad].reshape(-1, n_joints, 3))
+        more.iterations += iterations[bad]
+        return more
+
+    return _checked(problem, pressures, x, iterations, options, t0, fallback), r0
+
+
+def newton_iterate(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor,
+                   options: SolverOptions = SolverOptions()) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Full Newton steps from x0, x_k+1 = x_k - (dR/dx)⁻¹ R(x_k) (``_traced_newton_fn``),
+    each sample until R(x_k) is within the one-step gate sqrt(tol × QUADRATIC), at most
+    min(NEWTON_STEPS, options.max_iter) steps; nothing is checked here: the caller checks
+    the last iterate (``newton_polish``; with an object, predictor.nn's branch check, since
+    undamped steps can land on another equilibrium).
+
+    pressures (B, J) MPa; x0 (B, J, 3) [N, N, N·mm]. Returns (x (B, 3J), Newton steps taken
+    (B,) long, the residual at x0 (B, J, 3) from the first step's pass)."""
     B, n_joints = pressures.shape
     step = _traced_newton_fn(problem, *_bounds(options))
     x = x0.reshape(B, -1).double().clone()
@@ -721,18 +752,7 @@ def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Te
             active = active[~last]
     x, iterations = x.clone(), iterations.clone()   # leave inference mode
     r0 = problem.residual(pressures, x0.reshape(B, n_joints, 3)).residual if r0 is None else r0.clone()
-
-    def fallback(bad):   # the LM's answer within the rest of max_iter, or NaN
-        budget = options.max_iter - int(iterations[bad].max())
-        if budget <= 0:
-            return gesture_result(problem, pressures[bad], x[bad], torch.zeros(int(bad.sum()), dtype=torch.bool),
-                                  iterations[bad], t0, "newton", None)
-        more = solve(problem, pressures[bad], dataclasses.replace(options, method="lm", max_iter=budget),
-                     x0=x[bad].reshape(-1, n_joints, 3))
-        more.iterations += iterations[bad]
-        return more
-
-    return _checked(problem, pressures, x, iterations, options, t0, fallback), r0
+    return x, iterations, r0
 
 
 def newton_step(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:

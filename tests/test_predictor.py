@@ -1204,8 +1204,9 @@ def test_bench_writes_every_required_key(tmp_path):
     each judged one (the gravity Newton at issue 15's 2 ms), and figures that agree with
     their details: the batched rates are converged gestures over measured seconds, and
     the fast contact path's misses and times add up to its cases. Physics: every gravity
-    Newton solve converged to the solver's 1e-4 mN / 1e-5 N·mm, and the polished contact
-    NN (a solver result) to the issue's 0.1 mN / 0.01 N·mm."""
+    Newton solve converged to the solver's 1e-4 mN / 1e-5 N·mm, the polished contact NN (a
+    solver result) to the issue's 0.1 mN / 0.01 N·mm, and no answer of the Newton steps
+    from the contact NN that the branch check kept is another equilibrium than the ramp's."""
     from predictor import bench
 
     out = tmp_path / "bench.json"
@@ -1234,6 +1235,9 @@ def test_bench_writes_every_required_key(tmp_path):
     assert g["converged"] == g["n"] == bench.QUICK["gravity"]
     assert g["max_residual_force_mN"] <= 1e-4 and g["max_residual_moment_Nmm"] <= 1e-5
     assert b["contact_nn_residual_force_mN"] <= 0.1 and b["contact_nn_residual_moment_Nmm"] <= 0.01
+    steps = b["details"]["contact_nn_vs_solver"]["newton_from_raw"]   # no kept answer off the ramp's branch
+    assert steps["kept_elsewhere"] == 0 and steps["kept"] <= steps["converged_to_ramp_equilibrium"]
+    assert 0.0 <= b["contact_nn_newton_rate"] <= 1.0 and fast["newton_from_nn"] + fast["fallbacks"] <= fast["n"]
 
 
 def test_contact_net_answers_from_the_head_of_its_state(tmp_path):
@@ -1281,3 +1285,29 @@ def test_contact_nn_state_and_contact_free_residual_on_a_fixed_set():
     free = ev["raw_contact_free"]
     assert free is not None and free["force_mN_max"] <= 2.0 and free["moment_Nmm_max"] <= 1.2
     assert ev["raw_tip_error_mm"]["mean"] <= 0.3
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and CONTACT_NN.is_file()), reason="no committed contact NN")
+def test_contact_nn_newton_answers_are_the_ramps_equilibria(monkeypatch):
+    """The delivered contact NN path on 24 fixed pressures of its domain (seed 11): every
+    answer converges to the solver's tolerances; the answers of the Newton steps from the
+    network's tau (``stepped``: most of them; 77-86 % on the 400 validation pressures) are
+    the ramp solver's equilibria (tau within 1e-4 N, 1e-4 N·mm), not another branch's.
+    With the branch check made impossible (BRANCH_TIP_MM = -1) nothing is stepped and
+    the capped LM answers the same equilibria."""
+    import predictor.nn as nnmod
+
+    joint = load_joint(SURROGATE)
+    pred = nnmod.load_predictor(CONTACT_NN, joint, contact=True)
+    problem = pred.config.problem(joint)
+    p = nnmod.sample_pressures(24, pred.config, torch.Generator().manual_seed(11))
+    ref = solve(problem, p)
+    res = nnmod.predict_gesture(pred, problem, p)
+    assert bool(ref.converged.all()) and bool(res.converged.all())
+    assert int(res.stepped.sum()) >= 12 and res.method == "nn+newton"
+    assert torch.allclose(res.tau, ref.tau, rtol=0, atol=1e-4)
+    assert bool((res.iterations[res.stepped] >= 1).all())
+    monkeypatch.setattr(nnmod, "BRANCH_TIP_MM", -1.0)
+    lm = nnmod.predict_gesture(pred, problem, p[:6])
+    assert not bool(lm.stepped.any()) and bool(lm.converged.all())
+    assert torch.allclose(lm.tau, ref.tau[:6], rtol=0, atol=1e-4)

@@ -521,7 +521,9 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
             ("contact gesture (median)", f"{b['contact_median_ms']:.1f} ms", was("contact_lbfgs_s", "s"),
              target("contact_ms", "<=", "ms"), [b["contact_median_ms"]]),
             *([(f"contact gesture, fastest path: {fast['method']}; median over the same cases, "
-                f"{fast['misses']} of {fast['n']} missed 0.1 mN, 0.01 N·mm",
+                f"{fast['misses']} of {fast['n']} missed 0.1 mN, 0.01 N·mm"
+                + (f"; {fast['newton_from_nn']} answered by the Newton steps, {fast['fallbacks']} by the ramp"
+                   if "newton_from_nn" in fast else ""),
                 f"{b['contact_fast_median_ms']:.1f} ms", was("contact_lbfgs_s", "s"),
                 target("contact_fast_ms", "<=", "ms"), [b["contact_fast_median_ms"]]),
                ("contact gestures, batched ramp solve (converged per second)",
@@ -569,10 +571,19 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                 "fingertip vs the ramp solver's", f"{step1['force_mN_mean']:.4g} mN, {step1['moment_Nmm_mean']:.4g} "
                 f"N·mm; {step1['tip_error_mm_mean']:.3g} mm", "n/a", [], [])]
               if (step1 := vs.get("newton_step_from_raw")) else []),
+            *([("contact NN + full Newton steps from its tau (predictor.solve.newton_iterate: the delivered path's "
+                "first stage, a solver): where they converge", f"{steps['converged']} of {vs['reference_converged']}: "
+                f"{steps['converged_to_ramp_equilibrium']} at the ramp's equilibrium (fingertip within "
+                f"{_num(steps['tip_shift_mm_max_at_ramp_equilibrium'], '.3g')} mm of the network's), "
+                f"{steps['converged_elsewhere']} elsewhere (nearest "
+                f"{_num(steps['tip_shift_mm_min_elsewhere'], '.3g')} mm away); kept by the {steps['branch_tip_mm']:g} mm branch check: {steps['kept']}, of them elsewhere: "
+                f"{steps['kept_elsewhere']}", "n/a", [], [])]
+              if (steps := vs.get("newton_from_raw")) else []),
             # The polished figure is the solver's, not the network's: shown, not judged.
-            ("contact NN + capped LM polish (solver result)", f"{b['contact_nn_residual_force_mN']:.3g} mN, "
-             f"{b['contact_nn_residual_moment_Nmm']:.3g} N·mm; ramp fallback "
-             f"{100 * b['contact_nn_polished_fallback_rate']:.1f} %", "", [], []),
+            ("contact NN + Newton steps kept on its branch, else the capped LM polish (solver result)",
+             f"{b['contact_nn_residual_force_mN']:.3g} mN, {b['contact_nn_residual_moment_Nmm']:.3g} N·mm; "
+             + (f"Newton answered {100 * b['contact_nn_newton_rate']:.1f} %, " if "contact_nn_newton_rate" in b
+                else "") + f"ramp fallback {100 * b['contact_nn_polished_fallback_rate']:.1f} %", "", [], []),
             ("gravity NN single query (network, kinematics, residual check)", f"{b['nn_single_query_ms']:.3g} ms",
              was("nn_query_s", "s"), target("nn_single_ms", "<=", "ms"), [b["nn_single_query_ms"]]),
             (f"gravity NN throughput, batched{threads}: network and kinematics",
@@ -652,7 +663,8 @@ def _gestures(root: Path) -> list[str]:
                    "`make gestures` (`python -m predictor.figures`, read from the histories in "
                    "results/predictor/gravity_nn_paper.pt, gravity_nn.pt and contact_nn.pt, trained by "
                    "`python -m predictor.nn`): mean validation force and moment residual per epoch, the paper's "
-                   "gravity NN dotted; the star, the contact NN after the LM polish.", "make gestures")
+                   "gravity NN dotted; the star, the contact NN after its polish (Newton steps or the capped LM).",
+                   "make gestures")
     return out
 
 
