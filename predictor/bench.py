@@ -21,13 +21,15 @@ in float32 on every core (``batched_dtype``, ``batched_threads``; the network an
 joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
 float64 on one thread and on every core beside them in the details; every other figure
 on one thread in float64. ``gravity_newton_median_ms`` is the default solve from tau = 0
-(Newton steps, predictor.solve.newton_polish); ``gravity_lm_median_ms`` the LM it replaced,
+(a Picard step and Newton steps in one recorded graph, predictor.solve._cold_newton);
+``gravity_lm_median_ms`` the LM it replaced,
 over the same pressures in the same run.
 
 NN residuals are means over fresh random validation pressures of the worst joint per
 sample (p95 and max are recorded beside them). ``contact_nn_residual_*`` is the delivered
 contact predictor, the NN's tau finished by Newton steps or the capped LM (ramp fallback
-for the few neither converges: ``contact_nn_polished_fallback_rate``); the raw network, no solver, is
+for the few neither converges: ``contact_nn_polished_fallback_rate``; share the Newton
+steps answered: ``contact_nn_newton_rate``); the raw network, no solver, is
 ``contact_nn_raw_*``: its residual over the pressures where the ramp solver converged
 (``details.contact_nn_vs_solver`` splits it into contact and contact-free equilibria),
 its grasp state's agreement with the solver's (no contact / holds / slips; the state its
@@ -92,8 +94,9 @@ def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_m
     """Median single-query time (ms) of predictor.nn.predict_gesture over ``pressures``
     (n, J), a network's tau finished by a solver (contact: Newton steps kept on the
     network's branch, else the capped LM polish, the ramp where it fails; gravity with
-    ``polish``: one Newton step, the LM where its check fails), and its worst residuals. A query that does not converge or misses tol_force_mN
-    / tol_moment_Nmm counts as a miss, not as a time; ``fallbacks``: queries the fallback
+    ``polish``: one Newton step, the LM where its check fails), and its worst residuals. A
+    query that does not converge or misses tol_force_mN / tol_moment_Nmm counts as a miss,
+    not as a time; ``fallbacks``: queries the fallback
     solved; ``newton_from_nn``: contact queries the Newton steps answered."""
     predict_gesture(pred, problem, pressures[:1], polish=polish)  # warm-up
     times, misses, fallbacks, stepped, force, moment = [], 0, 0, 0, 0.0, 0.0

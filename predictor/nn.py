@@ -46,7 +46,8 @@ Variants (``python -m predictor.nn --variant ...``):
   code): one MLP for all states (2,000 labels: fingertip 0.25 mm from the solver's, state
   by its tau's contact 39 %); a fixed number of closed-form Newton steps as the
   network's own answer (one full Gauss-Newton step takes the mean fingertip error from
-  0.066 to 8 mm: bench-predictor, details.contact_nn_vs_solver.newton_step_from_raw;
+  0.038 to 3.1 mm, the previous checkpoint's from 0.066 to 8 mm: bench-predictor,
+  details.contact_nn_vs_solver.newton_step_from_raw;
   the steps converge in one or two only from close to the equilibrium, and need several
   from the rest, so they are a solver here, checked as one); and
   fine-tuning on the equilibrium loss: the raw residual fell to 88 mN / 16 N·mm, the
@@ -540,8 +541,11 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     scale = torch.tensor(TAU_SCALE[:3], dtype=torch.float64)
     net = network(cfg)
 
+    def tau_error(tau, target):
+        return ((tau - target) / scale).pow(2).sum((-1, -2)).mean()
+
     def label_loss(module, p, target):
-        return ((module(p) - target) / scale).pow(2).sum((-1, -2)).mean()
+        return tau_error(module(p), target)
 
     def equilibrium_loss(p):
         tau = net(p)
@@ -576,19 +580,17 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
         log(epochs, final)
         for k, head in enumerate(net.heads):
             pk, tk = p_train[s_train == k], tau_train[s_train == k]
+            # The contact states' heads also fit the label's contact points (pose_weight, mm²):
+            # while slipping a small tau error moves the fingertip far, and the penalty answers
+            # the pose. Not the contact-free head: there it cost tau accuracy (the raw
+            # contact-free residual rose from 0.12 to 0.95 mN in bench-predictor).
             with torch.no_grad():
-                # the pose term where the penalty contact amplifies pose errors: the contact
-                # states' heads (on the contact-free head it cost tau accuracy: the raw
-                # contact-free residual rose from 0.12 to 0.95 mN in bench-predictor)
                 points = problem.pose(pk, tk).points if cfg.pose_weight and len(pk) and k != NO_CONTACT else None
 
             def head_loss(idx, head=head, pk=pk, tk=tk, points=points):
-                # The scaled tau error, plus (pose_weight) the contact points' miss in mm²: while
-                # slipping a small tau error moves the fingertip far, and the contact law
-                # answers the pose, not tau.
-                p, t = pick(pk, idx), pick(tk, idx)
+                p = pick(pk, idx)
                 tau = head(p)
-                value = ((tau - t) / scale).pow(2).sum((-1, -2)).mean()
+                value = tau_error(tau, pick(tk, idx))
                 if points is not None:
                     miss = (problem.pose(p, tau).points - pick(points, idx)).pow(2).sum(-1).mean(-1).mean()
                     value = value + cfg.pose_weight * miss

@@ -13,7 +13,8 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
   as one graph with the answer's statics (``_cold_newton``: Picard and two Newton steps
   land within the tolerances across the box); the answer's own residual is the check,
   and where it fails more Newton steps (``newton_polish``), then the LM below, go on.
-  With an object: the LM below.
+  With an object: the LM below (predictor.nn starts the same Newton steps,
+  ``newton_iterate``, from the contact network's tau and checks their branch itself).
 - ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
   (B, 2n, n) in one batched pass (``_jacobian_fn``): central differences of the traced
   residual (~1e-10 relative: Newton's quadratic convergence is kept); with an object the
@@ -69,7 +70,8 @@ class SolverOptions:
     ramp step at most) and is accepted at the issue's target (lbfgs_tol_*): on stiff
     contact steps it stalls near 0.02 mN, short of the Newton tolerance. max_iter: LM
     iterations per ramp step (without an object: Picard, Newton and LM steps in all).
-    ramp_steps: pressure sub-steps when an object is present; cutbacks: how many times a failed Newton sub-step may be halved (L-BFGS: none);
+    ramp_steps: pressure sub-steps when an object is present; cutbacks: how many times a
+    failed Newton sub-step may be halved (L-BFGS: none);
     max_penetration (mm): deeper is treated as tunnelling (a failed step), not as an
     equilibrium; contact_max_step: LM step cap with an object, in scaled units (0.3 N or
     30 N·mm). jacobian: auto (central differences; with an object, exact for the samples
@@ -314,9 +316,9 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
     def jac(x: torch.Tensor, p: torch.Tensor, dp: bool = True):
         B, n = x.shape
         m = p.shape[1] if pressure and dp else 0
-        hx = rel_step * _box_scale(n)[1]
-        ex, ep = torch.diag(hx), hp * torch.eye(p.shape[1], dtype=x.dtype)[:m]   # (n, n), (m, J)
-        X = torch.cat((x[:, None], x[:, None] + ex, x[:, None] - ex, x[:, None].expand(B, 2 * m, n)), 1)
+        hx, offsets = _central_offsets(n, rel_step)
+        ep = hp * torch.eye(p.shape[1], dtype=x.dtype)[:m]   # (m, J)
+        X = torch.cat((x[:, None] + offsets, x[:, None].expand(B, 2 * m, n)), 1)
         P = torch.cat((p[:, None].expand(B, 1 + 2 * n, p.shape[1]), p[:, None] + ep, p[:, None] - ep), 1)
         with torch.inference_mode():
             R = r_fn(X.reshape(-1, n), P.reshape(B * (1 + 2 * n + 2 * m), -1)).reshape(B, -1, 2 * n)
@@ -336,6 +338,13 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
 
     jac.dp = jac_p if pressure else None
     return jac
+
+
+def _central_offsets(n: int, rel_step: float = 1e-6) -> tuple[torch.Tensor, torch.Tensor]:
+    """(h (n,), offsets (1 + 2n, n)): the steps h_k = rel_step × (1 N, 1 N, 100 N·mm) and
+    the rows 0, +h_k e_k, -h_k e_k at which a central difference evaluates the residual."""
+    h = rel_step * _box_scale(n)[1]
+    return h, torch.cat((torch.zeros(1, n, dtype=h.dtype), torch.diag(h), -torch.diag(h)))
 
 
 def _penalty_jacobian(x: torch.Tensor) -> torch.Tensor:
@@ -566,7 +575,7 @@ def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[fl
     (B,) bool, last (B,) bool): one Newton step on the equilibrium rows,
 
         x_next = x - (dR/dx)⁻¹ R(x),   dR/dx (B, n, n) by central differences of R
-                                          (steps as ``_difference_jacobian``'s).
+                                          (``_central_offsets``, as ``_difference_jacobian``).
 
     With an object R includes the penalty contact, which is C1 (statics.smooth_penetration):
     a difference straddling a sample point's contact onset is off by O(h), which slows the
@@ -576,8 +585,7 @@ def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[fl
     already, or dR/dx is singular, x_next = x (not ``stepped``); ``last``: those, and the x
     whose R(x) is within the one-step gate, whose x_next is the candidate answer."""
     n_joints, n = problem.n_joints, 3 * problem.n_joints
-    h = 1e-6 * _box_scale(n)[1]
-    offsets = torch.cat((torch.zeros(1, n, dtype=h.dtype), torch.diag(h), -torch.diag(h)))   # (1 + 2n, n)
+    h, offsets = _central_offsets(n)
 
     def step(x: torch.Tensor, p: torch.Tensor):
         B = x.shape[0]
