@@ -163,7 +163,7 @@ results/predictor/gravity_nn_paper.pt: $(PRED_CORE) | $(SETUP) ## train the pape
 results/predictor/gravity_nn.pt: $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels (SiLU + L-BFGS, ~2 min)
 	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
 
-results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier + one head per state) on 20,000 ramp-solver labels (~25 min)
+results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
 	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
 
 bench-predictor: results/bench/predictor.json ## predictor timings and residuals -> results/bench/predictor.json

@@ -34,7 +34,9 @@ steps answered: ``contact_nn_newton_rate``); the raw network, no solver, is
 (``details.contact_nn_vs_solver`` splits it into contact and contact-free equilibria),
 its grasp state's agreement with the solver's (no contact / holds / slips; the state its
 classifier gives, ``details.contact_nn_vs_solver.state_by``) and its fingertip error
-against the solver's. The paper's numbers are recorded beside ours.
+against the solver's; ``details.contact_nn_vs_solver.newton_step_from_raw`` is the raw
+tau after one closed-form Gauss-Newton step (no iteration or check), the fixed step the
+issue allows beside the raw network. The paper's numbers are recorded beside ours.
 
 The JSON file is written atomically (strict JSON); ``--json`` prints its top-level figures.
 """

@@ -42,7 +42,7 @@ FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
 GRASPS = {kind: [(0.2, 0.3), (0.3, 0.2)] for kind in ("circle", "ellipse", "rectangle")}
 #: The NN checkpoints drawn in nn_training.png: file, label, contact kind.
 NN_CURVES = (("gravity_nn_paper.pt", "gravity, paper MLP", False), ("gravity_nn.pt", "gravity, improved", False),
-             ("contact_nn.pt", "contact (points: classifier, then a head per state)", True))
+             ("contact_nn.pt", "contact (points: classifier, then per state a head and its correction stages)", True))
 
 
 def _panel_row(path: Path, results: list, obstacles: list, titles: list, ncols: int) -> None:

@@ -239,10 +239,12 @@ class GripperParams:
 
 
 def rot(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """Rotate vectors v (..., 2) by angle (...) rad, counter-clockwise."""
-    c, s = torch.cos(angle), torch.sin(angle)
-    x, y = v[..., 0], v[..., 1]   # few tensor operations: the traced residual is dispatch-bound
-    return torch.stack((c * x - s * y, s * x + c * y), -1)
+    """Rotate vectors v (..., 2) by angle (...) rad, counter-clockwise: v as x + iy times
+    e^(i angle). Six tensor operations, two of them views, instead of eleven for cos, sin
+    and the products: the traced residual is dispatch-bound. Complex autograd keeps it
+    differentiable in both."""
+    z = torch.view_as_complex(v.contiguous()) * torch.polar(torch.ones_like(angle), angle)
+    return torch.view_as_real(z)
 
 
 def _unit(angle: torch.Tensor) -> torch.Tensor:

@@ -330,7 +330,7 @@ class GripperProblem:
         joints = pose.joints
         at_joints = ((joints[:, :, 1:].mean(2),) if layout.joint_weight == "lumped" else
                      (joints[:, :, 0], joints[:, :, -1]))
-        w_pts = torch.cat((pose.segments.mean(2),) + at_joints, 1)[:, layout.weight_source]
+        w_pts = torch.cat((pose.segments.mean(2),) + at_joints, 1).index_select(1, layout.weight_source)
         w_frc = (g * layout.weights.to(dt)[:, None] * down).expand(B, -1, 2)
         if self.obstacle is None:
             contact = ContactState.none(B, dt)
@@ -341,8 +341,10 @@ class GripperProblem:
             distal = layout.full_mask
         ends = joints[:, :, -1]  # (B, J, 2) distal ends r_10
         distal = distal.to(dt)
-        f_sum = torch.einsum("ik,bkc->bic", distal, frc)
-        m_sum = torch.einsum("ik,bik->bi", distal, _cross(pts[:, None] - ends[:, :, None], frc[:, None]))
+        # Sums over the K load points distal to each joint as products and sums: einsum
+        # or a broadcast matmul costs several times more dispatch on these small tensors.
+        f_sum = (distal[:, :, None] * frc[:, None]).sum(2)
+        m_sum = (distal * _cross(pts[:, None] - ends[:, :, None], frc[:, None])).sum(-1)
         g_force = rot(pose.theta, tau[..., :2])
         res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
         return Statics(res, pose, contact)

@@ -535,6 +535,38 @@ def test_nn_training_reduces_equilibrium_residual():
     assert pred.metrics["val"]["force_mN_mean"] < before["force_mN_mean"] / 3
 
 
+def test_correction_stage_cuts_a_fitted_heads_error_fourfold():
+    """Multi-stage training (predictor.nn._fit_stage) on labels with an exact solution,
+    tau(P) = (sin 3P1 cos 2P2, P1 P2, 20 tanh(P1 - P2)) per joint (the second joint's
+    halved): a small head fitted by Adam and L-BFGS leaves an error e; the correction
+    stage's tau_scale is e's RMS per output, and head + stage leave less than a quarter
+    of e's RMS in every output, on the training pressures and on 300 others (0.11-0.17
+    on the others when written)."""
+    from predictor.nn import VARIANTS, _fit, _fit_stage, network
+
+    def exact(p):
+        one = torch.stack((torch.sin(3 * p[:, 0] / 0.3) * torch.cos(2 * p[:, 1] / 0.3), p[:, 0] * p[:, 1] / 0.09,
+                           20 * torch.tanh((p[:, 0] - p[:, 1]) / 0.3)), -1)
+        return torch.stack((one, 0.5 * one), 1)
+
+    cfg = dataclasses.replace(VARIANTS["contact"], widths=(2, 24, 24, 6), refine_hidden=(24, 24), refine_stages=1,
+                              epochs=40, batch=50, lbfgs_iters=400, refine_epochs=40, refine_lbfgs_iters=400)
+    torch.manual_seed(0)
+    gen = torch.Generator().manual_seed(0)
+    net = network(cfg)
+    p, q = ((2 * torch.rand(n, 2, generator=gen, dtype=DT) - 1) * 0.3 for n in (600, 300))
+    scale = torch.tensor([1.0, 1.0, 30.0], dtype=DT)
+    _fit(net.heads[1], lambda i: ((net.heads[1](p if i is None else p[i]) - exact(p if i is None else p[i]))
+                                  / scale).pow(2).sum((-1, -2)).mean(), len(p), cfg, gen)
+    rms = lambda x, stages: (net.head_tau(1, x, stages) - exact(x)).pow(2).mean(0).sqrt()  # noqa: E731
+    with torch.no_grad():
+        before_p, before_q = rms(p, 0), rms(q, 0)
+    _fit_stage(net, 1, 0, p, exact(p), cfg, gen)
+    with torch.no_grad():
+        assert torch.allclose(net.refine[1][0].tau_scale, before_p.flatten(), rtol=1e-12, atol=0)
+        assert bool((rms(p, None) < before_p / 4).all()) and bool((rms(q, None) < before_q / 4).all())
+
+
 def test_nn_checkpoint_round_trip_and_refusals(tmp_path):
     """save_predictor/load_predictor return the same network bit for bit (outputs on 500
     pressures torch.equal); the file is the gravity kind (no object), so loading it as a
@@ -1242,8 +1274,8 @@ def test_bench_writes_every_required_key(tmp_path):
 
 def test_contact_net_answers_from_the_head_of_its_state(tmp_path):
     """ContactNet's tau for each pressure is exactly the output of the head its classifier
-    picks (random weights, so every state occurs on 200 pressures), and its checkpoint
-    round-trips bit for bit."""
+    picks plus that head's correction stages (random weights, so every state occurs on 200
+    pressures and every stage adds something), and its checkpoint round-trips bit for bit."""
     from predictor.nn import VARIANTS, ContactNet, Predictor, load_predictor, network, save_predictor
 
     cfg = VARIANTS["contact"]
@@ -1256,7 +1288,11 @@ def test_contact_net_answers_from_the_head_of_its_state(tmp_path):
         state, tau = net.state(p), net(p)
         assert set(state.tolist()) == {0, 1, 2}
         for k, head in enumerate(net.heads):
-            assert torch.equal(tau[state == k], head(p[state == k]))
+            rows = p[state == k]
+            assert torch.equal(tau[state == k], net.head_tau(k, rows))
+            stages = [stage(rows) for stage in net.refine[k]]
+            assert len(stages) == cfg.refine_stages and all(bool(c.abs().min() > 0) for c in stages)
+            assert torch.allclose(tau[state == k], head(rows) + sum(stages), rtol=0, atol=1e-12)
     save_predictor(Predictor(net, cfg, J.name), tmp_path / "c.pt")
     back = load_predictor(tmp_path / "c.pt", J, contact=True)
     with torch.no_grad():
@@ -1267,13 +1303,16 @@ CONTACT_NN = ROOT / "results/predictor/contact_nn.pt"
 
 
 @pytest.mark.skipif(not (SURROGATE.is_file() and CONTACT_NN.is_file()), reason="no committed contact NN")
-def test_contact_nn_state_and_contact_free_residual_on_a_fixed_set():
-    """The committed contact NN on 60 fixed pressures of its domain (seed 5), against the
-    ramp solver (the reference): its classifier's grasp state is the solver's on at least
-    57 (the bench's 400 give the >= 99 % figure); where the equilibrium is contact-free its
-    raw tau is within the issue's 2 mN / 1.2 N·mm with no solver, and its fingertip is
-    within 0.3 mm of the solver's on average (the contact equilibria's raw residual is
-    far above the bound: the bench reports it)."""
+def test_contact_nn_raw_residual_and_state_on_a_fixed_set():
+    """The committed contact NN on 60 fixed pressures of its domain (seed 5; 50 end in
+    contact), against the ramp solver (the reference): its classifier's grasp state is the
+    solver's on at least 57 (the bench's 400 give the >= 99 % figure); with no solver its
+    raw tau is within the issue's p95 bounds (10 mN, 5 N·mm) and mean moment bound (1.2
+    N·mm) over every equilibrium, within 2 mN / 1.2 N·mm at every contact-free one, and its
+    fingertip within 5 µm of the solver's on average; its mean force (2.14 mN when written)
+    is held under 3 mN, the issue's 2 mN being missed on the bench's 400 (REPORT). With
+    one closed-form Gauss-Newton step (exact Jacobian, no iteration or check, which the
+    issue allows) mean and p95 are within all four bounds."""
     from predictor.nn import evaluate_contact, load_predictor, sample_pressures
 
     joint = load_joint(SURROGATE)
@@ -1282,16 +1321,20 @@ def test_contact_nn_state_and_contact_free_residual_on_a_fixed_set():
     ev = evaluate_contact(pred, joint, p)
     assert ev["reference_converged"] == 60 and ev["state_by"] == "classifier"
     assert ev["state_agreement"] >= 57 / 60
-    free = ev["raw_contact_free"]
+    raw, free, step = ev["raw"], ev["raw_contact_free"], ev["newton_step_from_raw"]
+    assert raw["force_mN_p95"] <= 10.0 and raw["moment_Nmm_p95"] <= 5.0 and raw["moment_Nmm_mean"] <= 1.2
+    assert raw["force_mN_mean"] <= 3.0
     assert free is not None and free["force_mN_max"] <= 2.0 and free["moment_Nmm_max"] <= 1.2
-    assert ev["raw_tip_error_mm"]["mean"] <= 0.3
+    assert ev["raw_tip_error_mm"]["mean"] <= 0.005
+    assert step["force_mN_mean"] <= 2.0 and step["moment_Nmm_mean"] <= 1.2
+    assert step["force_mN_p95"] <= 10.0 and step["moment_Nmm_p95"] <= 5.0
 
 
 @pytest.mark.skipif(not (SURROGATE.is_file() and CONTACT_NN.is_file()), reason="no committed contact NN")
 def test_contact_nn_newton_answers_are_the_ramps_equilibria(monkeypatch):
     """The delivered contact NN path on 24 fixed pressures of its domain (seed 11): every
     answer converges to the solver's tolerances; the answers of the Newton steps from the
-    network's tau (``stepped``: most of them; 77-86 % on the 400 validation pressures) are
+    network's tau (``stepped``: most of them; 95 % on the 400 validation pressures) are
     the ramp solver's equilibria (tau within 1e-4 N, 1e-4 N·mm), not another branch's.
     With the branch check made impossible (BRANCH_TIP_MM = -1) nothing is stepped and
     the capped LM answers the same equilibria."""
@@ -1306,7 +1349,10 @@ def test_contact_nn_newton_answers_are_the_ramps_equilibria(monkeypatch):
     assert bool(ref.converged.all()) and bool(res.converged.all())
     assert int(res.stepped.sum()) >= 12 and res.method == "nn+newton"
     assert torch.allclose(res.tau, ref.tau, rtol=0, atol=1e-4)
-    assert bool((res.iterations[res.stepped] >= 1).all())
+    # a stepped answer took Newton steps, or the network's own tau met the tolerances already
+    # (contact-free raw residuals reach 1e-4 mN)
+    raw_done = (res.raw_residual_force_mN.amax(-1) <= 1e-4) & (res.raw_residual_moment_Nmm.amax(-1) <= 1e-5)
+    assert bool(((res.iterations >= 1) | raw_done)[res.stepped].all())
     monkeypatch.setattr(nnmod, "BRANCH_TIP_MM", -1.0)
     lm = nnmod.predict_gesture(pred, problem, p[:6])
     assert not bool(lm.stepped.any()) and bool(lm.converged.all())
