@@ -36,16 +36,19 @@ Variants (``python -m predictor.nn --variant ...``):
   (multi-stage training, ``_fit_stage``): SiLU 2 -> 64 -> 64 -> 64 -> 6 MLPs, each fitted
   (200 Adam epochs, lr decayed x0.99, then 1500 L-BFGS iterations) to the tau error the
   head and the stages before it leave on the state's labels, divided by that error's
-  RMS, so that its loss starts near 6 (one per output). In the committed checkpoint's
-  history the first stage ends at 1.3e-3 (holds), 7.2e-4 (slips) and 8.7e-5 (no
-  contact), the second at 5.2, 6.0 and 1.9: a stage resolves what the head's own
+  RMS, so that its loss starts near 6 (one per output). Every network (classifier,
+  heads, stages) sees |P| beside P (``abs_pressure``, ``features``): the joint surrogate
+  takes |P| as an input, so the equilibria have kinks along P1 = 0 and P2 = 0, where the
+  largest raw residuals of the networks without it lay. In the committed checkpoint's
+  history the first stage's loss ends at 2.1e-3 (holds) and 1.8e-3 (slips), the
+  second's at 4.8 for both: a stage resolves what the head's own
   optimisation no longer does, once (a third stage, tried in an exploratory run, fitted
-  nothing more; the floor is likely the C1 kinks of the smoothed penalty where contact
-  sample points enter). With them (bench-predictor) the raw fingertip error fell from
-  0.038 mm to 0.6 µm and the raw residual from 135 to 2.5 mN mean (p95 615 -> 8.2 mN,
-  moment 19.4 -> 0.35 N·mm): the issue's p95 and moment bounds are met with no solver,
-  the 2 mN mean not quite; one closed-form Gauss-Newton step from the raw tau
-  (``evaluate_contact``'s ``newton_step_from_raw``) gives 0.055 mN mean.
+  nothing more). bench-predictor, the checkpoint before the stages, then with the stages
+  alone, then with |P| as well: raw residual 135 -> 2.49 -> 1.04 mN mean (p95 615 -> 8.2
+  -> 3.1 mN; moment 19.4 -> 0.35 -> 0.15 N·mm), raw fingertip error 0.038 mm -> 0.6 µm ->
+  0.3 µm: the issue's raw bounds (2 mN, 1.2 N·mm mean; 10 mN, 5 N·mm p95) are met with
+  no solver; one closed-form Gauss-Newton step from the raw tau (``evaluate_contact``'s
+  ``newton_step_from_raw``) gives 0.0056 mN mean.
   The delivered gesture starts full Newton steps from the network's tau
   (solve.newton_iterate) and keeps their answer where it converges on the network's
   branch (``_newton_on_branch``: fingertip within BRANCH_TIP_MM, the classifier's grasp
@@ -150,6 +153,7 @@ class NNConfig:
     refine_epochs: int = 200
     refine_decay: float = 0.99
     refine_lbfgs_iters: int = 1500
+    abs_pressure: bool = False  # the networks see |P| beside P (``features``)
     p1_range: tuple = (-PRESSURE_LIMIT, PRESSURE_LIMIT)
     p2_range: tuple = (-PRESSURE_LIMIT, PRESSURE_LIMIT)
     obstacle: dict | None = None
@@ -186,7 +190,7 @@ VARIANTS = {
                                  supervised=True),
     "contact": NNConfig(variant="contact", widths=(2, 128, 128, 128, 6), activation="silu", n_train=20000,
                         n_val=400, epochs=60, batch=200, lr=3e-3, decay=0.95, lbfgs_iters=500, supervised=True,
-                        state_heads=True, pose_weight=1.0, refine_stages=2, p1_range=(-0.15, 0.2),
+                        state_heads=True, pose_weight=1.0, refine_stages=2, abs_pressure=True, p1_range=(-0.15, 0.2),
                         p2_range=(-0.05, 0.25),
                         obstacle=asdict(Obstacle()), approach=APPROACH),
 }
@@ -194,21 +198,32 @@ VARIANTS = {
 
 class GestureNet(nn.Module):
     """MLP (B, J) MPa -> tau (B, J, 3) [N, N, N·mm] with fixed input/output scaling
-    (J = widths[0]; widths[-1] = 3J)."""
+    (J = widths[0]; widths[-1] = 3J); with ``abs_pressure`` it sees |P| beside P
+    (``features``)."""
 
-    def __init__(self, widths: tuple, activation: str):
+    def __init__(self, widths: tuple, activation: str, abs_pressure: bool = False):
         super().__init__()
         act = {"relu": nn.ReLU, "silu": nn.SiLU, "tanh": nn.Tanh}[activation]
+        self.abs_pressure = abs_pressure
         layers: list[nn.Module] = []
         for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
-            layers.append(nn.Linear(a, b))
+            layers.append(nn.Linear(a * (1 + abs_pressure) if i == 0 else a, b))
             if i < len(widths) - 2:
                 layers.append(act())
         self.mlp = nn.Sequential(*layers).double()
         self.register_buffer("tau_scale", torch.tensor(TAU_SCALE[:3] * (widths[-1] // 3), dtype=torch.float64))
 
     def forward(self, pressures: torch.Tensor) -> torch.Tensor:
-        return (self.mlp(pressures / P_SCALE) * self.tau_scale).reshape(pressures.shape[0], -1, 3)
+        return (self.mlp(features(pressures, self.abs_pressure)) * self.tau_scale).reshape(pressures.shape[0], -1, 3)
+
+
+def features(pressures: torch.Tensor, abs_pressure: bool) -> torch.Tensor:
+    """A network's input: P / 0.3 (B, J), and with ``abs_pressure`` |P| / 0.3 beside it (B,
+    2J). The joint surrogate takes |P| as an input too (its config's abs_pressure), so its
+    response has a kink at P = 0, and the equilibria inherit one along every P_i = 0: the
+    raw contact network's largest residuals lay there until it saw |P|."""
+    z = pressures / P_SCALE
+    return torch.cat((z, z.abs()), -1) if abs_pressure else z
 
 
 class ContactNet(nn.Module):
@@ -225,17 +240,23 @@ class ContactNet(nn.Module):
     head k: its tau is the head's plus every stage's (``head_tau``).
     """
 
-    def __init__(self, widths: tuple, activation: str, refine_hidden: tuple = (), refine_stages: int = 0):
+    def __init__(self, widths: tuple, activation: str, refine_hidden: tuple = (), refine_stages: int = 0,
+                 abs_pressure: bool = False):
         super().__init__()
         states = (NO_CONTACT, HOLDS, SLIPS)
-        self.classifier = GestureNet(tuple(widths[:-1]) + (3,), activation).mlp
-        self.heads = nn.ModuleList(GestureNet(widths, activation) for _ in states)
+        self.abs_pressure = abs_pressure
+        self.classifier = GestureNet(tuple(widths[:-1]) + (3,), activation, abs_pressure).mlp
+        self.heads = nn.ModuleList(GestureNet(widths, activation, abs_pressure) for _ in states)
         stage = (widths[0],) + tuple(refine_hidden) + (widths[-1],)
-        self.refine = nn.ModuleList(nn.ModuleList(GestureNet(stage, activation) for _ in range(refine_stages))
-                                    for _ in states)
+        self.refine = nn.ModuleList(nn.ModuleList(GestureNet(stage, activation, abs_pressure)
+                                                  for _ in range(refine_stages)) for _ in states)
+
+    def logits(self, pressures: torch.Tensor) -> torch.Tensor:
+        """The classifier's (B, 3) logits of the grasp states."""
+        return self.classifier(features(pressures, self.abs_pressure))
 
     def state(self, pressures: torch.Tensor) -> torch.Tensor:
-        return self.classifier(pressures / P_SCALE).argmax(-1)
+        return self.logits(pressures).argmax(-1)
 
     def head_tau(self, k: int, pressures: torch.Tensor, stages: int | None = None) -> torch.Tensor:
         """tau (B, J, 3) of state k's head and its first ``stages`` corrections (None: all)."""
@@ -270,8 +291,8 @@ def raw_answer(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor)
 def network(cfg: NNConfig) -> nn.Module:
     """The untrained network of a config: ContactNet with ``state_heads``, else GestureNet."""
     if cfg.state_heads:
-        return ContactNet(cfg.widths, cfg.activation, cfg.refine_hidden, cfg.refine_stages)
-    return GestureNet(cfg.widths, cfg.activation)
+        return ContactNet(cfg.widths, cfg.activation, cfg.refine_hidden, cfg.refine_stages, cfg.abs_pressure)
+    return GestureNet(cfg.widths, cfg.activation, cfg.abs_pressure)
 
 
 @dataclass
@@ -637,7 +658,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
         if not cfg.supervised:
             raise ValueError("state_heads needs the solver's labels (supervised)")
         final = _fit(net.classifier, lambda idx: nn.functional.cross_entropy(
-            net.classifier(pick(p_train, idx) / P_SCALE), pick(s_train, idx)), p_train.shape[0], cfg, gen,
+            net.logits(pick(p_train, idx)), pick(s_train, idx)), p_train.shape[0], cfg, gen,
             lbfgs=False)
         epochs = cfg.epochs
         log(epochs, final)
