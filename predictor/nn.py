@@ -576,6 +576,12 @@ def _fit(module: nn.Module, batch_loss, n: int, cfg: NNConfig, gen: torch.Genera
     return total
 
 
+def tau_error(tau: torch.Tensor, target: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+    """Mean over samples of the squared error of tau (n, J, 3) against target (n, J, 3),
+    each output divided by scale ((3,) or (J, 3)) and summed: the supervised loss."""
+    return ((tau - target) / scale).pow(2).sum((-1, -2)).mean()
+
+
 def _fit_stage(net: ContactNet, k: int, s: int, p: torch.Tensor, tau: torch.Tensor, cfg: NNConfig,
                gen: torch.Generator) -> float:
     """Fit correction stage s of state k's head (multi-stage training, Wang and Lai 2024)
@@ -596,7 +602,7 @@ def _fit_stage(net: ContactNet, k: int, s: int, p: torch.Tensor, tau: torch.Tens
 
     def stage_loss(idx):
         q, e = (p, err) if idx is None else (p[idx], err[idx])
-        return ((stage(q) - e) / scale).pow(2).sum((-1, -2)).mean()
+        return tau_error(stage(q), e, scale)
 
     return _fit(stage, stage_loss, len(p), replace(cfg, epochs=cfg.refine_epochs, decay=cfg.refine_decay,
                                                    lbfgs_iters=cfg.refine_lbfgs_iters), gen)
@@ -625,11 +631,8 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     scale = torch.tensor(TAU_SCALE[:3], dtype=torch.float64)
     net = network(cfg)
 
-    def tau_error(tau, target):
-        return ((tau - target) / scale).pow(2).sum((-1, -2)).mean()
-
     def label_loss(module, p, target):
-        return tau_error(module(p), target)
+        return tau_error(module(p), target, scale)
 
     def equilibrium_loss(p):
         tau = net(p)
@@ -674,7 +677,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
             def head_loss(idx, head=head, pk=pk, tk=tk, points=points):
                 p = pick(pk, idx)
                 tau = head(p)
-                value = tau_error(tau, pick(tk, idx))
+                value = tau_error(tau, pick(tk, idx), scale)
                 if points is not None:
                     miss = (problem.pose(p, tau).points - pick(points, idx)).pow(2).sum(-1).mean(-1).mean()
                     value = value + cfg.pose_weight * miss
