@@ -15,9 +15,10 @@ export OPENBLAS_NUM_THREADS := 1
 export PYVISTA_OFF_SCREEN := true
 # slurm-wlm + munge: tests/test_slurm.py runs workflow/slurm/campaign.sbatch on a throw-away
 # one-node cluster (the daemons are never started as services). libopenblas0-serial: without
-# it (--no-install-recommends) MUMPS and numpy get the reference BLAS, 4x slower LU.
+# it (--no-install-recommends) MUMPS and numpy get the reference BLAS, 4x slower LU. g++:
+# torch.compile's C++ (bench-predictor --graphs compile; dolfinx pulls in only g++-12).
 APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python3-venv openmpi-bin \
-                slurm-wlm munge libopenblas0-serial
+                slurm-wlm munge libopenblas0-serial g++
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
@@ -34,7 +35,7 @@ setup: $(SETUP) ## install Debian FEniCSx (apt) and the .venv (idempotent)
 $(SETUP): pyproject.toml constraints.txt
 	@if ! /usr/bin/python3 -c "import dolfinx, gmsh, scipy" 2>/dev/null || ! command -v mpirun >/dev/null \
 	     || ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null \
-	     || ! dpkg -s libopenblas0-serial >/dev/null 2>&1; then \
+	     || ! dpkg -s libopenblas0-serial >/dev/null 2>&1 || ! command -v g++ >/dev/null; then \
 	  echo "[setup] apt-get install $(APT_PACKAGES)"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(APT_PACKAGES); \
 	fi
@@ -166,9 +167,9 @@ results/predictor/gravity_nn.pt: $(PRED_CORE) | $(SETUP) ## train the improved g
 results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
 	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
 
-bench-predictor: results/bench/predictor.json ## predictor timings and residuals -> results/bench/predictor.json
+bench-predictor: results/bench/predictor.json ## predictor timings and residuals, torch.compile graphs (~10 min) -> results/bench/predictor.json
 results/bench/predictor.json: $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
-	$(PY) -m predictor.bench --model $(PRED_JOINT) --out $@
+	$(PY) -m predictor.bench --model $(PRED_JOINT) --graphs compile --out $@
 
 # ---------------------------------------------------------------- grasp planning (issue 16)
 # (section owned by predictor/)

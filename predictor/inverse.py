@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import json
 import math
 import sys
@@ -74,7 +73,7 @@ from fem.files import write_json
 from fem.spec import INPUT_BOX
 from predictor.atlas import FULL_BOX, HOLDS, STATES, Atlas, classify, grasp_atlas
 from predictor.solve import (GestureResult, SolverOptions, _advance, _box_scale, _jacobian_fn, _levenberg_marquardt,
-                             solve, touch, traced)
+                             graph_cache, solve, touch, traced)
 from predictor.statics import GripperProblem
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
@@ -286,7 +285,7 @@ def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
     return e[0].detach(), ex, ep
 
 
-@functools.lru_cache(maxsize=16)
+@graph_cache
 def _traced_goal_fn(ip: InverseProblem):
     """e(x (B, 6), p (B, 2)) -> (B, k), recorded by solve.traced."""
     return traced(lambda x, p: _goal_terms(ip, p, x)[1], 6, 2)

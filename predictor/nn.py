@@ -102,7 +102,7 @@ from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_W
 from predictor.joint import JointModel, load_joint
 from predictor.solve import (APPROACH, GestureResult, SolverOptions, gesture_result, meets_tolerances,
                              newton_iterate, newton_polish, newton_step, solve, statics_at)
-from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, grasp_state, loss,
+from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, Statics, grasp_state, loss,
                                residual_norms)
 from surrogate import checkpoint
 
@@ -122,6 +122,7 @@ NN_MOMENT_TOL_NMM = 1.2
 # the network's (``_newton_on_branch``; bench-predictor's details.contact_nn_vs_solver.
 # newton_from_raw gives the largest shift to the ramp's equilibrium and the smallest to another).
 BRANCH_TIP_MM = 1.0
+BRANCH_ROUNDS = 3    # newton_iterate calls from the contact network's tau (``_newton_on_branch``)
 
 
 @dataclass(frozen=True)
@@ -379,7 +380,7 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
     truth = grasp_state(ref.normal_force_N, ref.slip)
     tip = (st.pose.tip_end - ref.pose.tip_end).norm(dim=-1)[ok]
     depth = problem.residual(pressures[ok & touch], ref.tau[ok & touch]).contact.penetration
-    kept_res, kept = _newton_on_branch(problem, pressures, tau, st.pose.tip_end, by_net, time.perf_counter())
+    kept_res, kept = _newton_on_branch(problem, pressures, tau, st, by_net, time.perf_counter())
     conv = meets_tolerances(kept_res, kept_res.tau.reshape(len(tau), -1), SolverOptions()) & ok
     shift = (kept_res.pose.tip_end - st.pose.tip_end).norm(dim=-1)
     on_ref = (kept_res.tau - ref.tau).abs().amax((-1, -2)) <= 1e-4
@@ -439,7 +440,7 @@ class NNGestureResult(GestureResult):
 
 
 def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor,
-                    polish: bool = False) -> NNGestureResult:
+                    polish: bool = False, options: SolverOptions = SolverOptions()) -> NNGestureResult:
     """NN gesture in the solver's result format, pressures (B, J) MPa.
 
     ``problem`` must be the one the NN was trained for (``pred.config.problem(joint)``),
@@ -452,7 +453,10 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     tau with the LM under a small step cap (POLISH_STEP) so the iterates stay on the NN's
     branch, with the Jacobian by differences and then, for the samples that did not
     converge, the exact one; samples neither converges in ``max_iter`` steps are
-    re-solved by the full ramp (``fallback``).
+    re-solved by the full ramp (``fallback``). ``options``: the solvers' tolerances and
+    limits (default: the solver's 1e-4 mN, 1e-5 N·mm); a batch job content with the issue's
+    0.1 mN, 0.01 N·mm (``SolverOptions(tol_force=1e-4, tol_moment=1e-2)``) mostly takes one
+    Newton step instead of two or three.
     """
     trained = pred.config.problem(problem.joint)
     if problem != trained:
@@ -464,7 +468,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     if polish and problem.obstacle is None:
         with torch.no_grad():
             tau = pred.net(pressures)
-        res, start = newton_polish(problem, pressures, tau, t0=t0)
+        res, start = newton_polish(problem, pressures, tau, options, t0=t0)
         f, m = residual_norms(start)   # the network's own residual, from the step's pass
         return NNGestureResult(**{**res.__dict__, "method": "nn+newton"},
                                fallback=res.iterations > 1, polished=res.converged, raw_residual_force_mN=f,
@@ -482,24 +486,25 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             pose=st.pose.masked(ok), free_pose=problem.pose(pressures, torch.zeros_like(tau)), method="nn",
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
     raw["raw_state"] = raw_state
-    res, stepped = _newton_on_branch(problem, pressures, tau, st.pose.tip_end, raw_state, t0)
+    res, stepped = _newton_on_branch(problem, pressures, tau, st, raw_state, t0, options)
     rest = ~stepped
     fallback = torch.zeros_like(stepped)
     if bool(rest.any()):
         # The capped LM from the NN's tau (Jacobian by differences, and the exact one where
         # that stalls at a kink of the contact law: solve.attempts), then the full ramp.
-        lm = solve(problem, pressures[rest], SolverOptions(contact_max_step=POLISH_STEP), x0=tau[rest])
+        lm = solve(problem, pressures[rest], replace(options, contact_max_step=POLISH_STEP), x0=tau[rest])
         fallback[rest] = ~lm.converged
         if bool((~lm.converged).any()):
-            lm = lm.with_rows(~lm.converged, solve(problem, pressures[rest][~lm.converged]))
+            lm = lm.with_rows(~lm.converged, solve(problem, pressures[rest][~lm.converged], options))
         lm.iterations += res.iterations[rest]   # the Newton steps tried first count too
         res = res.with_rows(rest, lm)
     return NNGestureResult(**{**res.__dict__, "time_ms": 1e3 * (time.perf_counter() - t0), "method": "nn+newton"},
                            fallback=fallback, polished=~fallback, stepped=stepped, **raw)
 
 
-def _newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, raw_tip: torch.Tensor,
-                      raw_state: torch.Tensor, t0: float) -> tuple[GestureResult, torch.Tensor]:
+def _newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, raw: Statics,
+                      raw_state: torch.Tensor, t0: float,
+                      options: SolverOptions = SolverOptions()) -> tuple[GestureResult, torch.Tensor]:
     """Full Newton steps from the contact network's tau (solve.newton_iterate) and which of
     their answers to keep: (GestureResult, stepped (B,) bool).
 
@@ -508,21 +513,39 @@ def _newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: tor
     ramp's equilibria lie within a fraction of a mm of the network's fingertip
     (``_branch_figures``, in bench-predictor). An answer is kept (``stepped``) when it
     meets the solver's tolerances and stays on the network's branch: fingertip within
-    BRANCH_TIP_MM of the network's raw_tip (B, 2) mm, the grasp state of its classifier
-    raw_state (B,), penetration within max_penetration. pressures (B, J) MPa; tau (B, J, 3)
-    the network's; t0: perf_counter time the query began."""
-    options = SolverOptions()
-    x, steps, _ = newton_iterate(problem, pressures, tau, options)
-    st = problem.residual(pressures, x.reshape(tau.shape))
-    c = st.contact
-    touches = c.normal > 0
-    first = torch.where(touches[:, None], pressures, torch.full_like(pressures, float("nan")))
-    res = gesture_result(problem, pressures, x, torch.ones_like(touches), steps, t0, "nn+newton", first, st)
-    stepped = (meets_tolerances(res, x, options) & (grasp_state(c.normal, c.slip) == raw_state)
-               & ((st.pose.tip_end - raw_tip).norm(dim=-1) <= BRANCH_TIP_MM)
-               & (c.penetration <= options.max_penetration))
-    res.converged = stepped
-    return res, stepped
+    BRANCH_TIP_MM of the network's, the grasp state of its classifier raw_state (B,),
+    penetration within max_penetration. The network's own tau is the answer (0 steps)
+    where it meets them already; an answer on the branch but short of the tolerances (a
+    step that straddled a kink of the contact law contracts less) goes on from where it
+    is, up to BRANCH_ROUNDS calls of newton_iterate in all. pressures (B, J) MPa; tau (B,
+    J, 3) the network's and raw its Statics; t0: perf_counter time the query began."""
+    B, n_joints = pressures.shape
+    rows, x, steps, st, res = torch.arange(B), tau.reshape(B, -1), torch.zeros(B, dtype=torch.long), raw, None
+    for k in range(BRANCH_ROUNDS + 1):
+        p = pressures[rows]
+        if k:   # Newton steps from where these rows are
+            x, more, _ = newton_iterate(problem, p, x.reshape(-1, n_joints, 3), options)
+            steps = steps + more
+            st = statics_at(problem, p, x.reshape(-1, n_joints, 3))
+        c = st.contact
+        first = torch.where((c.normal > 0)[:, None], p, torch.full_like(p, float("nan")))
+        part = gesture_result(problem, p, x, torch.ones_like(c.slip), steps, t0, "nn+newton", first, st,
+                              None if res is None else res.free_pose.rows(rows))
+        on_branch = ((grasp_state(c.normal, c.slip) == raw_state[rows])
+                     & ((st.pose.tip_end - raw.pose.tip_end[rows]).norm(dim=-1) <= BRANCH_TIP_MM)
+                     & (c.penetration <= options.max_penetration))
+        part.converged = meets_tolerances(part, x, options) & on_branch
+        if res is None:
+            res = part
+        else:
+            mask = torch.zeros(B, dtype=torch.bool)
+            mask[rows] = True
+            res = res.with_rows(mask, part)
+        again = ~part.converged if k == 0 else on_branch & ~part.converged
+        if not bool(again.any()):
+            break
+        rows, x, steps = rows[again], x[again], steps[again]
+    return res, res.converged.clone()
 
 
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, ...]:

@@ -9,7 +9,7 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
 
 - ``newton`` (the default): without an object, from tau = 0 a fixed-point (Picard) step
   (tau <- the loads distal to each joint at the current pose), then Newton steps
-  x -= (dR/dx)⁻¹ R on the equilibrium rows (dR/dx by central differences), all recorded
+  x -= (dR/dx)⁻¹ R on the equilibrium rows (dR/dx by forward differences), all recorded
   as one graph with the answer's statics (``_cold_newton``: Picard and two Newton steps
   land within the tolerances across the box); the answer's own residual is the check,
   and where it fails more Newton steps (``newton_polish``), then the LM below, go on.
@@ -158,6 +158,36 @@ class GestureResult:
         return dataclasses.replace(self, **new)
 
 
+#: How ``traced`` records a graph (``use_graphs``): "trace", torch.jit.trace (the default:
+#: 0.3 s to record); "compile", torch.compile to inductor's C++ with a C++ wrapper, which
+#: fuses the ~150 small operations of a residual into a few loops: ~3x faster for one
+#: query and ~2x for a batch on this machine (environment.md), but the first use of each
+#: graph compiles for 15-40 s (cached on disk: ~14 s in a later process). For batch jobs
+#: and benchmarks, not for one-off queries.
+GRAPHS = ("trace", "compile")
+_graphs = "trace"
+_GRAPH_CACHES: list = []
+
+
+def graph_cache(builder):
+    """functools.lru_cache for a builder of recorded graphs (one per problem): emptied by
+    ``use_graphs``, so that its next call records with the new backend."""
+    cached = functools.lru_cache(maxsize=16)(builder)
+    _GRAPH_CACHES.append(cached)
+    return cached
+
+
+def use_graphs(mode: str) -> None:
+    """Record graphs from now on by ``mode`` (one of GRAPHS), process-wide; ValueError
+    (one line) for another."""
+    global _graphs
+    if mode not in GRAPHS:
+        raise ValueError(f"graphs {mode!r}: use one of {', '.join(GRAPHS)}")
+    _graphs = mode
+    for cached in _GRAPH_CACHES:
+        cached.cache_clear()
+
+
 def _residual_fn(problem: GripperProblem):
     """Batched r(x; P): x (B, 3J), P (B, J) -> (B, 6J) [scaled equilibrium, penalties]."""
     n_joints = problem.n_joints
@@ -169,14 +199,14 @@ def _residual_fn(problem: GripperProblem):
     return r
 
 
-@functools.lru_cache(maxsize=16)
+@graph_cache
 def _traced_residual_fn(problem: GripperProblem):
     """``_residual_fn(problem)`` recorded by ``traced``: one per problem (0.3 s), valid
     for any batch size."""
     return traced(_residual_fn(problem), 3 * problem.n_joints, problem.n_joints)
 
 
-@functools.lru_cache(maxsize=16)
+@graph_cache
 def _traced_contact_fn(problem: GripperProblem):
     """c(x (B, 3J), p (B, J)) -> (B, 2) [total normal force N, penetration mm] of the
     object on the finger, recorded by ``traced``: the ramp asks for it after every step
@@ -201,37 +231,78 @@ def touch(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> tuple[to
 
 
 def traced(fn, n: int, J: int):
-    """fn(x (B, n), p (B, J)) recorded by torch.jit.trace, for inference only (no
-    autograd): one evaluation of the gesture residual is ~150 small tensor operations,
-    whose Python dispatch costs more than their arithmetic, and the recorded graph runs
-    them 2-3x faster with identical results (no data-dependent Python branches; the joint
-    model's weights become constants of the graph). fn itself if the record does not
-    reproduce it bit for bit on random x in the box and P in [-0.3, 0.3] MPa."""
+    """fn(x (B, n), p (B, J)) recorded for inference only (no autograd): one evaluation of
+    the gesture residual is ~150 small tensor operations, whose Python dispatch costs more
+    than their arithmetic. By torch.jit.trace (the default), the recorded graph runs them
+    2-3x faster with identical results (no data-dependent Python branches; the joint
+    model's weights become constants of the graph); fn itself if the record does not
+    reproduce it bit for bit on random x in the box and P in [-0.3, 0.3] MPa. With
+    ``use_graphs("compile")``, torch.compile (dynamic batch size), kept where it agrees
+    with fn (``_agree``), else the trace."""
     gen = torch.Generator().manual_seed(0)
     x = (2 * torch.rand(4, n, generator=gen, dtype=torch.float64) - 1) * _box_scale(n)[0]
     p = (2 * torch.rand(4, J, generator=gen, dtype=torch.float64) - 1) * INPUT_BOX[0]
+    failed = None
     with torch.inference_mode(), warnings.catch_warnings():
         warnings.simplefilter("ignore")   # the tracer's notes on constants; checked below
+        if _graphs == "compile":
+            record = _compiled(fn)
+            try:
+                if all(_agree(a, b) for a, b in zip(_tensors(record(x[:1], p[:1])), _tensors(fn(x[:1], p[:1])))):
+                    return record
+                failed = "its graph disagrees with the eager one"
+            except Exception as exc:   # e.g. no C++ compiler: the trace below still works
+                failed = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        theirs = _tensors(fn(x[:3], p[:3]))
         record = torch.jit.trace(fn, (x, p), check_trace=False)
-        mine, theirs = record(x[:3], p[:3]), fn(x[:3], p[:3])   # a tensor, or a tuple of them
-        same = (all(map(torch.equal, mine, theirs)) if isinstance(mine, tuple) else torch.equal(mine, theirs))
-        return record if same else fn
+        chosen = record if all(map(torch.equal, _tensors(record(x[:3], p[:3])), theirs)) else fn
+    if failed:
+        warnings.warn(f"torch.compile not used ({failed}): the graph is recorded by torch.jit.trace")
+    return chosen
+
+
+def _compiled(fn):
+    """torch.compile of fn(x, p) with a dynamic batch size, its inputs passed as inference
+    tensors: a compiled graph is specialised to its inputs' dispatch keys, and callers
+    pass both kinds (a clone of a few rows is cheaper than a second compile)."""
+    record = torch.compile(fn, dynamic=True, options={"cpp_wrapper": True, "cpp.dynamic_threads": True})
+
+    def run(x: torch.Tensor, p: torch.Tensor):
+        with torch.inference_mode():
+            return record(x if x.is_inference() else x.clone(), p if p.is_inference() else p.clone())
+
+    run.__wrapped__ = record
+    return run
+
+
+def _agree(a: torch.Tensor, b: torch.Tensor) -> bool:
+    """A compiled graph's output a against fn's b: within 1e-6 relative for floats (inductor
+    reorders sums, ~1e-15, which a difference quotient's 1/h turns into ~1e-8), equal
+    otherwise."""
+    return torch.allclose(a, b, rtol=1e-6, atol=1e-9) if a.is_floating_point() else torch.equal(a, b)
+
+
+def _tensors(out) -> tuple:
+    """A graph's output, a tensor or a tuple of them, as a tuple."""
+    return out if isinstance(out, tuple) else (out,)
 
 
 def _statics_fn(problem: GripperProblem):
     """s(x (B, 3J), p (B, J)) -> (residual (B, J, 3), then the FingerPose's tensor fields
-    joints, segments, theta, phi, points) of a problem without an object."""
-    n_joints = problem.n_joints
+    joints, segments, theta, phi, points, then with an object the ContactState's forces,
+    normal, friction, ratio, slip, penetration)."""
+    n_joints, contact = problem.n_joints, problem.obstacle is not None
 
     def s(x: torch.Tensor, p: torch.Tensor):
         st = problem.residual(p, x.reshape(-1, n_joints, 3))
-        q = st.pose
-        return st.residual, q.joints, q.segments, q.theta, q.phi, q.points
+        q, c = st.pose, st.contact
+        out = (st.residual, q.joints, q.segments, q.theta, q.phi, q.points)
+        return out + (c.forces, c.normal, c.friction, c.ratio, c.slip, c.penetration) if contact else out
 
     return s
 
 
-@functools.lru_cache(maxsize=16)
+@graph_cache
 def _traced_statics_fn(problem: GripperProblem):
     """``_statics_fn`` recorded by ``traced``: the answer's statics (``gesture_result``) in a
     third of the eager time (0.43 against 1.21 ms for one query on this machine), bit for
@@ -241,17 +312,19 @@ def _traced_statics_fn(problem: GripperProblem):
 
 def _as_statics(problem: GripperProblem, out) -> Statics:
     """The Statics of ``_statics_fn``'s tuple (cloned: out of inference mode)."""
-    res, joints, segments, theta, phi, points = (v.clone() for v in out)
+    res, joints, segments, theta, phi, points, *contact = (v.clone() for v in out)
     pose = FingerPose(joints=joints, segments=segments, theta=theta, phi=phi, points=points,
                       finger=problem.params.finger)
-    return Statics(res, pose, ContactState.none(len(res), res.dtype))
+    if not contact:
+        return Statics(res, pose, ContactState.none(len(res), res.dtype))
+    return Statics(res, pose, ContactState(points, contact[0], problem.params.layout.contact_part, *contact[1:]))
 
 
 def statics_at(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
-    """problem.residual(pressures (B, J), tau (B, J, 3)): traced without an object in
-    float64 (``_traced_statics_fn``, recorded in float64), eager otherwise (an object's
-    contact state is more than tensors; float32 is the throughput mode's)."""
-    if problem.obstacle is not None or tau.dtype != torch.float64:
+    """problem.residual(pressures (B, J), tau (B, J, 3)) by its recorded graph in float64
+    (``_traced_statics_fn``, recorded in float64; float32 is the throughput mode's,
+    eager)."""
+    if tau.dtype != torch.float64:
         return problem.residual(pressures, tau)
     with torch.inference_mode():
         return _as_statics(problem, _traced_statics_fn(problem)(tau.reshape(len(tau), -1), pressures))
@@ -316,7 +389,7 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
     def jac(x: torch.Tensor, p: torch.Tensor, dp: bool = True):
         B, n = x.shape
         m = p.shape[1] if pressure and dp else 0
-        hx, offsets = _central_offsets(n, rel_step)
+        hx, offsets = _difference_offsets(n, rel_step)
         ep = hp * torch.eye(p.shape[1], dtype=x.dtype)[:m]   # (m, J)
         X = torch.cat((x[:, None] + offsets, x[:, None].expand(B, 2 * m, n)), 1)
         P = torch.cat((p[:, None].expand(B, 1 + 2 * n, p.shape[1]), p[:, None] + ep, p[:, None] - ep), 1)
@@ -340,11 +413,13 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
     return jac
 
 
-def _central_offsets(n: int, rel_step: float = 1e-6) -> tuple[torch.Tensor, torch.Tensor]:
-    """(h (n,), offsets (1 + 2n, n)): the steps h_k = rel_step × (1 N, 1 N, 100 N·mm) and
-    the rows 0, +h_k e_k, -h_k e_k at which a central difference evaluates the residual."""
+def _difference_offsets(n: int, rel_step: float, central: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+    """(h (n,), offsets (1 + 2n or 1 + n, n)): the steps h_k = rel_step × (1 N, 1 N, 100
+    N·mm) and the rows 0, +h_k e_k (and -h_k e_k when ``central``) at which a difference
+    quotient evaluates the residual."""
     h = rel_step * _box_scale(n)[1]
-    return h, torch.cat((torch.zeros(1, n, dtype=h.dtype), torch.diag(h), -torch.diag(h)))
+    rows = (torch.zeros(1, n, dtype=h.dtype), torch.diag(h)) + ((-torch.diag(h),) if central else ())
+    return h, torch.cat(rows)
 
 
 def _penalty_jacobian(x: torch.Tensor) -> torch.Tensor:
@@ -556,6 +631,7 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
 #: answer's own residual instead of another Jacobian.
 QUADRATIC = (10.0, 100.0)
 NEWTON_STEPS = 8   # Newton steps before the LM takes over
+NEWTON_REL_STEP = 1e-7   # forward-difference step of the Newton Jacobian (~sqrt(eps))
 COLD_STEPS = 3     # the cold graph's Picard and two Newton steps (``_traced_cold_fn``)
 
 
@@ -574,25 +650,28 @@ def _newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[fl
     """step(x (B, n), p (B, J)) -> (x_next (B, n), R (B, J, 3) at x [N, N, N·mm], stepped
     (B,) bool, last (B,) bool): one Newton step on the equilibrium rows,
 
-        x_next = x - (dR/dx)⁻¹ R(x),   dR/dx (B, n, n) by central differences of R
-                                          (``_central_offsets``, as ``_difference_jacobian``).
+        x_next = x - (dR/dx)⁻¹ R(x),   dR/dx (B, n, n) by forward differences of R,
+                                          steps NEWTON_REL_STEP × (1 N, 1 N, 100 N·mm).
 
-    With an object R includes the penalty contact, which is C1 (statics.smooth_penetration):
-    a difference straddling a sample point's contact onset is off by O(h), which slows the
-    last steps there, and the caller's check catches it.
+    Forward, not central, differences: 1 + n residuals a row instead of 1 + 2n (half the
+    arithmetic of a batch), and their ~1e-7 relative error (truncation h, round-off
+    eps/h) only adds a 1e-7 contraction to Newton's quadratic one. With an object R
+    includes the penalty contact, which is C1 (statics.smooth_penetration): a difference
+    straddling a sample point's contact onset is off by O(h), which slows the last steps
+    there, and the caller's check catches it.
 
     tol, gate: (N, N·mm) bounds on every joint's |R_F| and |R_M|. Where R(x) is within tol
     already, or dR/dx is singular, x_next = x (not ``stepped``); ``last``: those, and the x
     whose R(x) is within the one-step gate, whose x_next is the candidate answer."""
     n_joints, n = problem.n_joints, 3 * problem.n_joints
-    h, offsets = _central_offsets(n)
+    h, offsets = _difference_offsets(n, NEWTON_REL_STEP, central=False)
 
     def step(x: torch.Tensor, p: torch.Tensor):
         B = x.shape[0]
         X = x[:, None] + offsets
-        R = problem.residual(p.repeat_interleave(1 + 2 * n, 0), X.reshape(-1, n_joints, 3)).residual
-        R = R.reshape(B, 1 + 2 * n, n)
-        r, J = R[:, 0], (R[:, 1:1 + n] - R[:, 1 + n:]).transpose(1, 2) / (2 * h)
+        R = problem.residual(p.repeat_interleave(1 + n, 0), X.reshape(-1, n_joints, 3)).residual
+        R = R.reshape(B, 1 + n, n)
+        r, J = R[:, 0], (R[:, 1:] - R[:, :1]).transpose(1, 2) / h
         dx, info = torch.linalg.solve_ex(J, r[..., None])
         eq = r.reshape(B, n_joints, 3)
         force, moment = _worst(eq)
@@ -627,14 +706,14 @@ def _picard_fn(problem: GripperProblem, tol: tuple[float, float]):
     return picard
 
 
-@functools.lru_cache(maxsize=16)
+@graph_cache
 def _traced_newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
     """``_newton_fn`` recorded by ``traced``: Jacobian, solve and update in one call (0.5
     ms for one query on this machine, the residual's dispatch being most of it)."""
     return traced(_newton_fn(problem, tol, gate), 3 * problem.n_joints, problem.n_joints)
 
 
-@functools.lru_cache(maxsize=16)
+@graph_cache
 def _traced_cold_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
     """cold(x (B, n), p (B, J)) -> (x (B, n), iterations (B,), then ``_statics_fn``'s tuple
     at x): the cold solve's usual path as one recorded graph, from x = 0 a Picard step and
@@ -831,17 +910,18 @@ def _solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solve
 
 def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Tensor, ok: torch.Tensor,
                    iterations: torch.Tensor, t0: float, method: str,
-                   first_contact: torch.Tensor | None, statics: Statics | None = None) -> GestureResult:
+                   first_contact: torch.Tensor | None, statics: Statics | None = None,
+                   free: FingerPose | None = None) -> GestureResult:
     """The GestureResult of solved unknowns x (B, 3J) at pressures (B, J) MPa: residual,
     contact and pose at x (``statics``, when the caller has them already), NaN where ok
     (B,) is False; time_ms from perf_counter t0 up to the answer (the free pose, a drawing
-    aid, is outside it)."""
+    aid, is outside it; ``free`` when the caller has it)."""
     B, n_joints = pressures.shape
     with torch.no_grad():
         tau = x.reshape(B, n_joints, 3)
         st = statics_at(problem, pressures, tau) if statics is None else statics
         elapsed = 1e3 * (time.perf_counter() - t0)
-        free = problem.pose(pressures, torch.zeros_like(tau))
+        free = problem.pose(pressures, torch.zeros_like(tau)) if free is None else free
     force, moment = residual_norms(st.residual)
     every = bool(ok.all())   # nothing to mask (the usual case: saves ~0.1 ms a query)
     return GestureResult(

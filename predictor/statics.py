@@ -341,10 +341,11 @@ class GripperProblem:
             distal = layout.full_mask
         ends = joints[:, :, -1]  # (B, J, 2) distal ends r_10
         distal = distal.to(dt)
-        # Sums over the K load points distal to each joint as products and sums: einsum
-        # or a broadcast matmul costs several times more dispatch on these small tensors.
+        # Sums over the K load points distal to each joint: F_i = sum_k d_ik f_k and
+        # M_i = sum_k d_ik (p_k - e_i) x f_k = sum_k d_ik (p_k x f_k) - e_i x F_i: no
+        # (B, J, K, 2) moment arms are formed (the same sums to ~1e-15 N·mm).
         f_sum = (distal[:, :, None] * frc[:, None]).sum(2)
-        m_sum = (distal * _cross(pts[:, None] - ends[:, :, None], frc[:, None])).sum(-1)
+        m_sum = (distal * _cross(pts, frc)[:, None]).sum(-1) - _cross(ends, f_sum)
         g_force = rot(pose.theta, tau[..., :2])
         res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
         return Statics(res, pose, contact)
@@ -356,10 +357,15 @@ def scaled(res: torch.Tensor) -> torch.Tensor:
     return (res * scale).reshape(res.shape[0], -1)
 
 
+#: (F1, F2, M) half-widths of the box as floats (torch.compile guards a numpy array
+#: read inside a graph by its dispatch keys, and fails under inference mode).
+_TAU_BOX = tuple(float(v) for v in INPUT_BOX[1:])
+
+
 def range_penalty(tau: torch.Tensor) -> torch.Tensor:
     """Out-of-box penalty residuals (B, 3J) of tau (B, J, 3): PENALTY_WEIGHT·max(0, |tau| -
     box)/scale, with box (3 N, 3 N, 100 N·mm) and scale (1, 1, MOMENT_SCALE); zero inside."""
-    box = torch.tensor(INPUT_BOX[1:], dtype=tau.dtype)  # (F1, F2, M) half-widths
+    box = torch.tensor(_TAU_BOX, dtype=tau.dtype)
     scale = torch.tensor([1.0, 1.0, MOMENT_SCALE], dtype=tau.dtype)
     return (PENALTY_WEIGHT * (tau.abs() - box).clamp_min(0.0) / scale).reshape(tau.shape[0], -1)
 
