@@ -413,10 +413,11 @@ def _difference_jacobian(r_fn, pressure: bool = True, rel_step: float = 1e-6):
     return jac
 
 
+@functools.lru_cache(maxsize=8)
 def _difference_offsets(n: int, rel_step: float, central: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
     """(h (n,), offsets (1 + 2n or 1 + n, n)): the steps h_k = rel_step × (1 N, 1 N, 100
     N·mm) and the rows 0, +h_k e_k (and -h_k e_k when ``central``) at which a difference
-    quotient evaluates the residual."""
+    quotient evaluates the residual; cached (read only), as every LM Jacobian asks for them."""
     h = rel_step * _box_scale(n)[1]
     rows = (torch.zeros(1, n, dtype=h.dtype), torch.diag(h)) + ((-torch.diag(h),) if central else ())
     return h, torch.cat(rows)
