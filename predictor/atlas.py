@@ -302,9 +302,10 @@ def marked_points(atlas: Atlas) -> list[tuple[int, str]]:
     return marks
 
 
-def save_atlas_figure(path: str, atlas: Atlas) -> None:
+def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
     """PNG: state map and friction-use map of the pressure plane with normal-force contours
-    and the marked points, and the marked points' gestures beside them."""
+    and the marked points, and the marked points' gestures beside them (atlas of
+    ``problem``)."""
     import matplotlib.colors as mcolors
     import matplotlib.pyplot as plt
 
@@ -337,7 +338,7 @@ def save_atlas_figure(path: str, atlas: Atlas) -> None:
         ax.set_xlabel("P2 (MPa)")
         ax.set_ylabel("P1 (MPa)")
     for k, (row, label) in enumerate(marks):
-        draw_gesture(axes[2 + k], atlas.result, row, atlas.obstacle)
+        draw_gesture(axes[2 + k], atlas.result, row, problem)
         p1, p2 = atlas.result.pressures[row].tolist()
         axes[2 + k].set_title(f"{k + 1}: {label}, P = ({p1:+.2f}, {p2:+.2f}) MPa", fontsize=9)
     fig.tight_layout()
@@ -406,7 +407,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.out:
             write_json(args.out, doc)
         if args.plot:
-            save_atlas_figure(args.plot, atlas)
+            save_atlas_figure(args.plot, atlas, problem)
     print_figures({**atlas.summary(), "spec": args.object, "joint": atlas.joint}, args.json)
     return 0
 

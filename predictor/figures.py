@@ -45,12 +45,12 @@ NN_CURVES = (("gravity_nn_paper.pt", "gravity, paper MLP", False), ("gravity_nn.
              ("contact_nn.pt", "contact (points: classifier, then per state a head and its correction stages)", True))
 
 
-def _panel_row(path: Path, results: list, obstacles: list, titles: list, ncols: int) -> None:
+def _panel_row(path: Path, results: list, problems: list, titles: list, ncols: int) -> None:
     n = len(results)
     nrows = math.ceil(n / ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 4.6 * nrows), squeeze=False)
-    for ax, (res, i), obs, title in zip(axes.flat, results, obstacles, titles):
-        draw_gesture(ax, res, i, obs, title)
+    for ax, (res, i), problem, title in zip(axes.flat, results, problems, titles):
+        draw_gesture(ax, res, i, problem, title)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     fig.tight_layout()
@@ -101,28 +101,31 @@ def main(argv: list[str] | None = None) -> int:
         curves = load_curves(args.nn_dir)
     summary: dict = {"joint": joint.name, "approach_MPa": APPROACH}
 
-    grav = solve(GripperProblem(joint), torch.tensor(GRAVITY_CASES, dtype=torch.float64))
+    gravity = GripperProblem(joint)
+    grav = solve(gravity, torch.tensor(GRAVITY_CASES, dtype=torch.float64))
     summary["gravity"] = [grav.summary(i) for i in range(len(GRAVITY_CASES))]
-    _panel_row(out / "gravity.png", [(grav, i) for i in range(2)], [None, None],
+    _panel_row(out / "gravity.png", [(grav, i) for i in range(2)], [gravity] * 2,
                [f"gravity, P = {p} MPa (dashed: no gravity)" for p in GRAVITY_CASES], 2)
 
-    free = solve(GripperProblem(joint, gravity=False), torch.tensor(FREE_CASES, dtype=torch.float64))
+    weightless = GripperProblem(joint, gravity=False)
+    free = solve(weightless, torch.tensor(FREE_CASES, dtype=torch.float64))
     summary["free"] = [free.summary(i) for i in range(len(FREE_CASES))]
-    _panel_row(out / "free.png", [(free, i) for i in range(4)], [None] * 4,
+    _panel_row(out / "free.png", [(free, i) for i in range(4)], [weightless] * 4,
                [f"no gravity, P = {p} MPa" for p in FREE_CASES], 4)
 
-    panels, obstacles, titles = [], [], []
+    panels, problems, titles = [], [], []
     summary["grasps"] = {}
     for kind, cases in GRASPS.items():
         obs = parse_object(kind)
-        res = solve(GripperProblem(joint, obstacle=obs, approach=APPROACH), torch.tensor(cases, dtype=torch.float64))
+        grasp = GripperProblem(joint, obstacle=obs, approach=APPROACH)
+        res = solve(grasp, torch.tensor(cases, dtype=torch.float64))
         summary["grasps"][kind] = [res.summary(i) for i in range(len(cases))]
         for i, p in enumerate(cases):
             panels.append((res, i))
-            obstacles.append(obs)
+            problems.append(grasp)
             state = ("slip" if bool(res.slip[i]) else "holds") if bool(res.converged[i]) else "NOT CONVERGED"
             titles.append(f"{kind}, P = {p} MPa: N = {float(res.normal_force_N[i]):.2f} N, {state}")
-    _panel_row(out / "grasps.png", panels, obstacles, titles, 2)
+    _panel_row(out / "grasps.png", panels, problems, titles, 2)
     nn_curves(curves, out / "nn_training.png")
     write_text(out / "gestures.json", dumps(summary))  # no trailing newline, as committed
     if args.json:

@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.plot:
             from predictor.plot import save_gesture
 
-            save_gesture(args.plot, res, 0, problem.obstacle)
+            save_gesture(args.plot, res, 0, problem)
     if args.json:
         cli.print_json(out)
     else:

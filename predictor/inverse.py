@@ -523,7 +523,7 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
     res = GestureResult(pressures=pressures, tau=tau, converged=ok, residual_force_mN=nan, residual_moment_Nmm=nan,
                         normal_force_N=st.contact.normal, friction_N=st.contact.friction,
                         friction_ratio=st.contact.ratio, slip=st.contact.slip, iterations=torch.zeros_like(ok).long(),
-                        time_ms=0.0, pose=st.pose.masked(ok), free_pose=st.pose, method="atlas-json")
+                        time_ms=0.0, pose=st.pose.masked(ok), method="atlas-json")
     state, use = classify(res, problem.contact.mu)
     n = len(p1), len(p2)
     return Atlas(p1, p2, state.reshape(n), res.normal_force_N.numpy().reshape(n), use.reshape(n),
@@ -543,7 +543,7 @@ def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, Gripper
     for ax, (label, r, prob) in zip(axes[0], items):
         i = int(torch.isclose(r.gesture.pressures, torch.tensor(r.pressures, dtype=torch.float64)).all(-1)
                 .nonzero()[0])
-        draw_gesture(ax, r.gesture, i, prob.obstacle)
+        draw_gesture(ax, r.gesture, i, prob)
         p1, p2 = r.pressures
         ax.set_title(f"{label}: {r.status}\nP = ({p1:+.3f}, {p2:+.3f}) MPa"
                      + (f", u = {r.friction_use:.2f}" if r.friction_use is not None else ""), fontsize=8)

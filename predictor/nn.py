@@ -483,7 +483,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             pressures=pressures, tau=nan_unless(ok, tau), converged=ok, residual_force_mN=f, residual_moment_Nmm=m,
             normal_force_N=c.normal, friction_N=c.friction, friction_ratio=c.ratio, slip=c.slip,
             iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
-            pose=st.pose.masked(ok), free_pose=problem.pose(pressures, torch.zeros_like(tau)), method="nn",
+            pose=st.pose.masked(ok), method="nn",
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
     raw["raw_state"] = raw_state
     res, stepped = _newton_on_branch(problem, pressures, tau, st, raw_state, t0, options)
@@ -529,8 +529,7 @@ def _newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: tor
             st = statics_at(problem, p, x.reshape(-1, n_joints, 3))
         c = st.contact
         first = torch.where((c.normal > 0)[:, None], p, torch.full_like(p, float("nan")))
-        part = gesture_result(problem, p, x, torch.ones_like(c.slip), steps, t0, "nn+newton", first, st,
-                              None if res is None else res.free_pose.rows(rows))
+        part = gesture_result(problem, p, x, torch.ones_like(c.slip), steps, t0, "nn+newton", first, st)
         on_branch = ((grasp_state(c.normal, c.slip) == raw_state[rows])
                      & ((st.pose.tip_end - raw.pose.tip_end[rows]).norm(dim=-1) <= BRANCH_TIP_MM)
                      & (c.penetration <= options.max_penetration))

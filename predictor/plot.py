@@ -14,10 +14,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
 from fem.files import atomic_path  # noqa: E402
 from predictor.gripper import FingerPose  # noqa: E402
-from predictor.statics import Obstacle  # noqa: E402
+from predictor.statics import GripperProblem, Obstacle  # noqa: E402
 
 
 def object_outline(obstacle: Obstacle, n: int = 200) -> np.ndarray:
@@ -44,9 +45,13 @@ def draw_finger(ax, pose: FingerPose, index: int, dashed: bool = False) -> None:
                     solid_capstyle="round")
 
 
-def draw_gesture(ax, result, index: int = 0, obstacle: Obstacle | None = None, title: str | None = None) -> None:
-    """Draw solve result ``index``: gesture, gravity-free shape (dashed) and object."""
-    draw_finger(ax, result.free_pose, index, dashed=True)
+def draw_gesture(ax, result, index: int, problem: GripperProblem, title: str | None = None) -> None:
+    """Draw solve result ``index`` of ``problem``: gesture, the gravity- and load-free
+    shape (tau = 0, dashed) and the object."""
+    p = result.pressures[index:index + 1]
+    with torch.no_grad():
+        draw_finger(ax, problem.pose(p, torch.zeros(*p.shape, 3, dtype=p.dtype)), 0, dashed=True)
+    obstacle = problem.obstacle
     if bool(result.converged[index]):
         draw_finger(ax, result.pose, index)
     if obstacle is not None:
@@ -73,9 +78,9 @@ def save_figure(fig, path, dpi: int) -> None:
         plt.close(fig)
 
 
-def save_gesture(path: str, result, index: int = 0, obstacle: Obstacle | None = None) -> None:
-    """One-panel PNG of a gesture."""
+def save_gesture(path: str, result, index: int, problem: GripperProblem) -> None:
+    """One-panel PNG of gesture ``index`` of a result of ``problem``."""
     fig, ax = plt.subplots(figsize=(5, 5.5))
-    draw_gesture(ax, result, index, obstacle)
+    draw_gesture(ax, result, index, problem)
     fig.tight_layout()
     save_figure(fig, path, 130)

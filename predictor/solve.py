@@ -12,7 +12,9 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
   x -= (dR/dx)⁻¹ R on the equilibrium rows (dR/dx by forward differences), all recorded
   as one graph with the answer's statics (``_cold_newton``: Picard and two Newton steps
   land within the tolerances across the box); the answer's own residual is the check,
-  and where it fails more Newton steps (``newton_polish``), then the LM below, go on.
+  and where it fails more Newton steps, then the LM below, go on (``_newton_then_lm``).
+  From a given x0 (a network's tau) one Newton step and its statics, also one graph
+  (``newton_polish``).
   With an object: the LM below (predictor.nn starts the same Newton steps,
   ``newton_iterate``, from the contact network's tau and checks their branch itself).
 - ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
@@ -105,8 +107,8 @@ class GestureResult:
     iterate; normal_force_N, friction_N (B,) total contact forces on the finger;
     friction_ratio (B,) |f|/N demanded by the object; slip (B,) bool; iterations (B,)
     (summed over ramp steps); time_ms: wall time of the whole batch, up to its residual and
-    pose (not the free pose); pose: FingerPose, NaN where not converged; free_pose: the
-    gravity- and contact-free shape (tau = 0);
+    pose; pose: FingerPose, NaN where not converged (the load-free shape, tau = 0, is
+    ``problem.pose(pressures, 0)``: predictor.plot draws it);
     first_contact (B, J) MPa: the pressures of the first ramp step (or the approach, when
     the object is brought in) after which the finger touches the object, NaN when it never
     does (without the ramp, x0 given: the target pressures if the final gesture touches);
@@ -125,7 +127,6 @@ class GestureResult:
     iterations: torch.Tensor
     time_ms: float
     pose: FingerPose
-    free_pose: FingerPose = field(metadata=GIVEN)
     method: str
     first_contact: torch.Tensor | None = None
 
@@ -733,6 +734,21 @@ def _traced_cold_fn(problem: GripperProblem, tol: tuple[float, float], gate: tup
     return traced(cold, 3 * problem.n_joints, problem.n_joints)
 
 
+@graph_cache
+def _traced_warm_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
+    """warm(x0 (B, n), p (B, J)) -> (x (B, n), stepped (B,) bool, R(x0) (B, J, 3), then
+    ``_statics_fn``'s tuple at x): ``newton_polish``'s usual path as one recorded graph,
+    a Newton step from a warm start (a network's tau) and the answer's statics: one call
+    where a step and a statics graph took two, with their Python around them."""
+    step, statics = _newton_fn(problem, tol, gate), _statics_fn(problem)
+
+    def warm(x: torch.Tensor, p: torch.Tensor):
+        x, r0, stepped, _ = step(x, p)
+        return (x, stepped, r0) + statics(x, p)
+
+    return traced(warm, 3 * problem.n_joints, problem.n_joints)
+
+
 def meets_tolerances(res: GestureResult, x: torch.Tensor, options: SolverOptions) -> torch.Tensor:
     """The solver's convergence rule on the rows of a result at unknowns x (B, 3J): (B,)
     bool, every joint's residual within options' tolerances and x in the surrogate's box."""
@@ -747,7 +763,7 @@ def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=N
     those rows."""
     res = gesture_result(problem, pressures, x, torch.ones(len(x), dtype=torch.bool), iterations, t0, "newton",
                          None, statics)
-    t_check = time.perf_counter()   # the check is part of the answer's time (the free pose is not)
+    t_check = time.perf_counter()   # the check is part of the answer's time
     res.converged = meets_tolerances(res, x, options)
     bad = ~res.converged
     res.time_ms += 1e3 * (time.perf_counter() - t_check)
@@ -760,7 +776,7 @@ def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=N
 def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, t0: float) -> GestureResult:
     """``solve``'s default without an object, from tau = 0: the one graph of
     ``_traced_cold_fn`` (Picard, two Newton steps, the statics), then the check; rows it
-    refuses go on with ``newton_polish`` from where they are (and the LM after it)."""
+    refuses go on with Newton steps from where they are, then the LM (``_newton_then_lm``)."""
     B, n_joints = pressures.shape
     with torch.inference_mode():
         x, iterations, *out = _traced_cold_fn(problem, *_bounds(options))(
@@ -769,8 +785,8 @@ def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: Solv
     x, iterations = x.clone(), iterations.clone()
 
     def fallback(bad):
-        more = newton_polish(problem, pressures[bad], x[bad].reshape(-1, n_joints, 3),
-                             dataclasses.replace(options, max_iter=options.max_iter - COLD_STEPS), t0)[0]
+        more = _newton_then_lm(problem, pressures[bad], x[bad],
+                               dataclasses.replace(options, max_iter=options.max_iter - COLD_STEPS), t0, NEWTON_STEPS)
         more.iterations += iterations[bad]
         return more
 
@@ -780,22 +796,46 @@ def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: Solv
 def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor,
                   options: SolverOptions = SolverOptions(), t0: float | None = None) -> tuple[GestureResult, torch.Tensor]:
     """Newton without an object from x0 (a network's tau: the gravity NN's polish; ``solve``
-    with x0; the cold solve's rows its check refused): ``newton_iterate``, whose last
-    iterate is checked by the answer's own residual (``gesture_result``) at the solver's
-    tolerances: from the gravity NN's tau (~0.2 mN) one step, from a start within the
-    tolerances none. Samples the check refuses (not gated within NEWTON_STEPS, a singular
-    Jacobian, out of the box) go on with the LM (``method="lm"``) from their last iterate,
-    within what is left of ``options.max_iter`` (NaN when nothing is); ``iterations``
-    counts both.
+    with x0): the first Newton step and the statics of its answer in one recorded graph
+    (``_traced_warm_fn``), checked by that answer's own residual at the solver's
+    tolerances (``_checked``): from the gravity NN's tau (~0.2 mN) the one step is the
+    answer, from a start within the tolerances no step is taken. Samples the check refuses
+    (a start outside the one-step gate, a singular Jacobian, out of the box) go on from
+    their iterate with up to NEWTON_STEPS - 1 more steps and the LM (``_newton_then_lm``);
+    ``iterations`` counts them all.
 
     pressures (B, J) MPa; x0 (B, J, 3) [N, N, N·mm]; t0: perf_counter time the caller's
     query began (default: now), for ``time_ms``. Returns (GestureResult, the residual at x0
-    (B, J, 3) N, N, N·mm: the start's own, from the first step's pass)."""
+    (B, J, 3) N, N, N·mm: the start's own, from the step's pass)."""
     if problem.obstacle is not None:
         raise ValueError("newton_polish is for the smooth residual without an object: use solve(..., x0=)")
     t0 = time.perf_counter() if t0 is None else t0
+    B, n_joints = pressures.shape
+    if options.max_iter < 1:   # no step allowed: the start's own check
+        return _newton_then_lm(problem, pressures, x0.reshape(B, -1).double(), options, t0, 0), \
+            problem.residual(pressures, x0.reshape(B, n_joints, 3)).residual
+    with torch.inference_mode():
+        x, stepped, r0, *out = _traced_warm_fn(problem, *_bounds(options))(x0.reshape(B, -1).double(), pressures)
+        st = _as_statics(problem, out)
+    x, iterations, r0 = x.clone(), stepped.long(), r0.clone()
+
+    def fallback(bad):
+        more = _newton_then_lm(problem, pressures[bad], x[bad], dataclasses.replace(options, max_iter=options.max_iter - 1),
+                               t0, NEWTON_STEPS - 1)
+        more.iterations += iterations[bad]
+        return more
+
+    return _checked(problem, pressures, x, iterations, options, t0, fallback, st), r0
+
+
+def _newton_then_lm(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor, options: SolverOptions,
+                    t0: float, steps: int) -> GestureResult:
+    """Up to ``steps`` Newton steps from x0 (B, 3J) (``newton_iterate``), the last iterate
+    checked (``_checked``), and the LM from the iterate of the samples it refuses within what
+    is left of ``options.max_iter`` (NaN when nothing is): the rows that one recorded step
+    did not finish (``newton_polish``, ``_cold_newton``)."""
     n_joints = pressures.shape[1]
-    x, iterations, r0 = newton_iterate(problem, pressures, x0, options)
+    x, iterations, _ = newton_iterate(problem, pressures, x0.reshape(-1, n_joints, 3), options, steps)
 
     def fallback(bad):   # the LM's answer within the rest of max_iter, or NaN
         budget = options.max_iter - int(iterations[bad].max())
@@ -807,16 +847,17 @@ def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Te
         more.iterations += iterations[bad]
         return more
 
-    return _checked(problem, pressures, x, iterations, options, t0, fallback), r0
+    return _checked(problem, pressures, x, iterations, options, t0, fallback)
 
 
 def newton_iterate(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor,
-                   options: SolverOptions = SolverOptions()) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                   options: SolverOptions = SolverOptions(),
+                   steps: int | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Full Newton steps from x0, x_k+1 = x_k - (dR/dx)⁻¹ R(x_k) (``_traced_newton_fn``),
     each sample until R(x_k) is within the one-step gate sqrt(tol × QUADRATIC), at most
-    min(NEWTON_STEPS, options.max_iter) steps; nothing is checked here: the caller checks
-    the last iterate (``newton_polish``; with an object, predictor.nn's branch check, since
-    undamped steps can land on another equilibrium).
+    min(steps (default NEWTON_STEPS), options.max_iter) steps; nothing is checked here: the
+    caller checks the last iterate (``_newton_then_lm``; with an object, predictor.nn's
+    branch check, since undamped steps can land on another equilibrium).
 
     pressures (B, J) MPa; x0 (B, J, 3) [N, N, N·mm]. Returns (x (B, 3J), Newton steps taken
     (B,) long, the residual at x0 (B, J, 3) from the first step's pass)."""
@@ -826,7 +867,7 @@ def newton_iterate(problem: GripperProblem, pressures: torch.Tensor, x0: torch.T
     iterations = torch.zeros(B, dtype=torch.long)
     active, r0 = torch.arange(B), None
     with torch.inference_mode():
-        for _ in range(min(NEWTON_STEPS, max(options.max_iter, 0))):
+        for _ in range(max(min(NEWTON_STEPS if steps is None else steps, options.max_iter), 0)):
             every = len(active) == B
             x_next, r, stepped, last = step(x if every else x[active], pressures if every else pressures[active])
             r0 = r if r0 is None else r0
@@ -911,25 +952,20 @@ def _solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solve
 
 def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Tensor, ok: torch.Tensor,
                    iterations: torch.Tensor, t0: float, method: str,
-                   first_contact: torch.Tensor | None, statics: Statics | None = None,
-                   free: FingerPose | None = None) -> GestureResult:
+                   first_contact: torch.Tensor | None, statics: Statics | None = None) -> GestureResult:
     """The GestureResult of solved unknowns x (B, 3J) at pressures (B, J) MPa: residual,
     contact and pose at x (``statics``, when the caller has them already), NaN where ok
-    (B,) is False; time_ms from perf_counter t0 up to the answer (the free pose, a drawing
-    aid, is outside it; ``free`` when the caller has it)."""
+    (B,) is False; time_ms from perf_counter t0 up to the answer."""
     B, n_joints = pressures.shape
     with torch.no_grad():
         tau = x.reshape(B, n_joints, 3)
         st = statics_at(problem, pressures, tau) if statics is None else statics
-        elapsed = 1e3 * (time.perf_counter() - t0)
-        free = problem.pose(pressures, torch.zeros_like(tau)) if free is None else free
     force, moment = residual_norms(st.residual)
     every = bool(ok.all())   # nothing to mask (the usual case: saves ~0.1 ms a query)
+    tau, pose = (tau, st.pose) if every else (nan_unless(ok, tau), st.pose.masked(ok))
     return GestureResult(
-        pressures=pressures, tau=tau if every else nan_unless(ok, tau), converged=ok,
-        residual_force_mN=force, residual_moment_Nmm=moment,
+        pressures=pressures, tau=tau, converged=ok, residual_force_mN=force, residual_moment_Nmm=moment,
         normal_force_N=st.contact.normal, friction_N=st.contact.friction, friction_ratio=st.contact.ratio,
-        slip=st.contact.slip, iterations=iterations, time_ms=elapsed, pose=st.pose if every else st.pose.masked(ok),
-        free_pose=free,
+        slip=st.contact.slip, iterations=iterations, time_ms=1e3 * (time.perf_counter() - t0), pose=pose,
         method=method, first_contact=first_contact,
     )
