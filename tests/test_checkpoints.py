@@ -10,10 +10,15 @@ Exact claims checked here:
   header's sha256 and length, so no position can escape; the sample shows it does.)
 - a checkpoint of one kind is refused by the loader of another kind, and a plain
   ``torch.save`` file (the pre-integrity format) is refused.
+- in a fresh clone make takes the committed checkpoints and figures as up to date (the
+  Makefile gives every tracked file one time per clone): ``make -n`` of the predictor's
+  targets trains nothing, and an edit of predictor/nn.py makes the NNs stale again.
 """
 
 from __future__ import annotations
 
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -98,3 +103,23 @@ def test_a_checkpoint_of_another_kind_is_refused(tmp_path):
     foreign = tmp_path / "hostname.pt"
     foreign.write_bytes(b"not a checkpoint\n")
     _refused(load_surrogate, foreign)
+
+
+@pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(), reason="not a git checkout")
+def test_fresh_clone_takes_the_committed_artefacts_as_up_to_date(tmp_path):
+    """A clone of HEAD: ``make -n`` of bench-predictor, gestures and train lists no
+    surrogate.train and no predictor.nn training (git writes the files in path order, so
+    without the Makefile's one time per clone results/ would be older than the code);
+    after predictor/nn.py is edited it lists the three NN trainings."""
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+
+    def planned() -> str:
+        return subprocess.run(["make", "-n", "bench-predictor", "gestures", "train"], cwd=clone, check=True,
+                              capture_output=True, text=True).stdout
+
+    first = planned()
+    assert "surrogate.train" not in first and "predictor.nn" not in first, first
+    assert "predictor.nn" not in planned()
+    (clone / "predictor/nn.py").write_text((clone / "predictor/nn.py").read_text() + "\n")
+    assert planned().count("-m predictor.nn --variant") == 3
