@@ -552,7 +552,7 @@ def test_finger_pose_mirrored_and_masked():
 def test_gesture_result_summary_and_rows():
     """summary(i) is plain JSON with the figures of sample i (tau 2x3 and the tip only when
     converged, degrees for the tip angle); with_rows takes every solved field of the
-    replaced rows from the other result and keeps the pressures, the free pose, the time
+    replaced rows from the other result and keeps the pressures, the time
     and the method."""
     p = t([[-0.1, 0.1], [0.3, -0.3]])
     good = solve(GRAVITY, p)
