@@ -760,7 +760,7 @@ def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=N
     """The GestureResult at x (B, n) checked at the solver's tolerances (tau in the box,
     every joint's residual within tol_force and tol_moment), the check inside ``time_ms``;
     the rows it refuses (B,) bool are replaced by ``fallback(rows)``, a GestureResult of
-    those rows."""
+    those rows whose iterations are added to the ``iterations`` (B,) they took here."""
     res = gesture_result(problem, pressures, x, torch.ones(len(x), dtype=torch.bool), iterations, t0, "newton",
                          None, statics)
     t_check = time.perf_counter()   # the check is part of the answer's time
@@ -768,7 +768,9 @@ def _checked(problem, pressures, x, iterations, options, t0, fallback, statics=N
     bad = ~res.converged
     res.time_ms += 1e3 * (time.perf_counter() - t_check)
     if bool(bad.any()):
-        res = res.with_rows(bad, fallback(bad))
+        more = fallback(bad)
+        more.iterations += iterations[bad]
+        res = res.with_rows(bad, more)
         res.time_ms = 1e3 * (time.perf_counter() - t0)
     return res
 
@@ -784,13 +786,9 @@ def _cold_newton(problem: GripperProblem, pressures: torch.Tensor, options: Solv
         st = _as_statics(problem, out)
     x, iterations = x.clone(), iterations.clone()
 
-    def fallback(bad):
-        more = _newton_then_lm(problem, pressures[bad], x[bad],
-                               dataclasses.replace(options, max_iter=options.max_iter - COLD_STEPS), t0, NEWTON_STEPS)
-        more.iterations += iterations[bad]
-        return more
-
-    return _checked(problem, pressures, x, iterations, options, t0, fallback, st)
+    rest = dataclasses.replace(options, max_iter=options.max_iter - COLD_STEPS)
+    return _checked(problem, pressures, x, iterations, options, t0,
+                    lambda bad: _newton_then_lm(problem, pressures[bad], x[bad], rest, t0, NEWTON_STEPS), st)
 
 
 def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor,
@@ -819,13 +817,9 @@ def newton_polish(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Te
         st = _as_statics(problem, out)
     x, iterations, r0 = x.clone(), stepped.long(), r0.clone()
 
-    def fallback(bad):
-        more = _newton_then_lm(problem, pressures[bad], x[bad], dataclasses.replace(options, max_iter=options.max_iter - 1),
-                               t0, NEWTON_STEPS - 1)
-        more.iterations += iterations[bad]
-        return more
-
-    return _checked(problem, pressures, x, iterations, options, t0, fallback, st), r0
+    rest = dataclasses.replace(options, max_iter=options.max_iter - 1)
+    return _checked(problem, pressures, x, iterations, options, t0,
+                    lambda bad: _newton_then_lm(problem, pressures[bad], x[bad], rest, t0, NEWTON_STEPS - 1), st), r0
 
 
 def _newton_then_lm(problem: GripperProblem, pressures: torch.Tensor, x0: torch.Tensor, options: SolverOptions,
@@ -841,11 +835,9 @@ def _newton_then_lm(problem: GripperProblem, pressures: torch.Tensor, x0: torch.
         budget = options.max_iter - int(iterations[bad].max())
         if budget <= 0:
             return gesture_result(problem, pressures[bad], x[bad], torch.zeros(int(bad.sum()), dtype=torch.bool),
-                                  iterations[bad], t0, "newton", None)
-        more = solve(problem, pressures[bad], dataclasses.replace(options, method="lm", max_iter=budget),
+                                  torch.zeros_like(iterations[bad]), t0, "newton", None)
+        return solve(problem, pressures[bad], dataclasses.replace(options, method="lm", max_iter=budget),
                      x0=x[bad].reshape(-1, n_joints, 3))
-        more.iterations += iterations[bad]
-        return more
 
     return _checked(problem, pressures, x, iterations, options, t0, fallback)
 
