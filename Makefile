@@ -25,17 +25,21 @@ APT_PACKAGES := python3-dolfinx python3-gmsh python3-meshio python3-scipy python
 # surrogate and the NNs (hours) before measuring them. The committed tree is one
 # consistent state, so once per clone, while its tree is clean, every tracked file gets
 # the time of the last commit; from then on an edit makes its dependants stale as usual.
+# It is the first prerequisite of every artefact (never done at parse time, so `make help`
+# changes nothing); the marker carries the commit's time, so it never makes a target stale,
+# and its `+` runs it under `make -n` too (a dry run then plans what a real run would do).
 GIT_DIR := $(shell git rev-parse --absolute-git-dir 2>/dev/null)
-ifneq ($(GIT_DIR),)
-ifeq ($(wildcard $(GIT_DIR)/softjoint-times),)
-$(shell test -z "$$(git status --porcelain --untracked-files=no)" \
-  && git ls-files -z | xargs -0 touch -c -d @$$(git log -1 --format=%ct) \
-  && touch $(GIT_DIR)/softjoint-times)
-endif
+TIMES   := $(if $(GIT_DIR),$(GIT_DIR)/softjoint-times)
+
+ifneq ($(TIMES),)
+$(TIMES):
+	+@t=$$(git log -1 --format=%ct); \
+	  if test -z "$$(git status --porcelain --untracked-files=no)"; then git ls-files -z | xargs -0 touch -c -d @$$t; fi; \
+	  touch -d @$$t $@
 endif
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo test bench-fem mesh-study joint-render self-contact validation \
+.PHONY: help setup demo test bench-fem bench-finger mesh-study joint-render self-contact validation \
         dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse finger-fem validate-finger report clean
 
 help: ## show this help
@@ -73,27 +77,27 @@ test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~12 min with se
 
 # ---------------------------------------------------------------- fem (issue 2)
 bench-fem: results/bench/fem.json ## FEM timings at the production mesh -> results/bench/fem.json
-results/bench/fem.json: fem/*.py | $(SETUP)
+results/bench/fem.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_joint --out $@
 
 bench-finger: results/bench/finger.json ## whole-finger FEM timings, 4 gestures on one core (idle machine, ~18 min) -> results/bench/finger.json
-results/bench/finger.json: fem/*.py | $(SETUP)
+results/bench/finger.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_finger --out $@
 
 mesh-study: results/fem/mesh_study.json ## 4 corners x (production + sqrt-2 family with wall refinement) + Richardson (hours; resumes) -> results/fem/mesh_study.json
-results/fem/mesh_study.json: fem/*.py | $(SETUP)
+results/fem/mesh_study.json: $(TIMES) fem/*.py | $(SETUP)
 	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --out $@ --work build/mesh_study
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
-results/fem/self_contact.json: fem/*.py | $(SETUP)
+results/fem/self_contact.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.self_contact --out $@
 
 validation: results/fem/validation.json ## FEM vs exact elastica: cantilever alpha<=10, roll-up to 2 pi
-results/fem/validation.json: fem/*.py | $(SETUP)
+results/fem/validation.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.validation table --out $@
 
 joint-render: results/fem/joint.png ## pyvista render of the joint, undeformed + deformed
-results/fem/joint.png: fem/*.py | $(SETUP)
+results/fem/joint.png: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.render --out $@
 
 # ---------------------------------------------------------------- campaign (issue 3)
@@ -135,7 +139,7 @@ dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse mesh into build/
 	$(PY) -m workflow.dataset info $(SMOKE_DIR)
 
 bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh -> results/bench/campaign.json
-results/bench/campaign.json: workflow/campaign.py workflow/bench_campaign.py fem/solver.py | $(SETUP)
+results/bench/campaign.json: $(TIMES) workflow/campaign.py workflow/bench_campaign.py fem/solver.py | $(SETUP)
 	nice $(PY) -m workflow.bench_campaign --mpirun "$(MPIRUN)" --out $@
 
 # ---------------------------------------------------------------- surrogate (issue 4)
@@ -148,16 +152,16 @@ SURROGATE_CODE    := surrogate/data.py surrogate/model.py surrogate/train.py sur
 train: results/surrogate/metrics.json ## surrogates (paper, improved) + KNN -> results/surrogate/
 
 results/surrogate/paper.pt results/surrogate/improved.pt: results/surrogate/%.pt: \
-    $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
+    $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
 	nice $(PY) -m surrogate.train --config $* --data $(SURROGATE_TRAIN) --out $@
 
-results/surrogate/metrics.json: results/surrogate/paper.pt results/surrogate/improved.pt \
+results/surrogate/metrics.json: $(TIMES) results/surrogate/paper.pt results/surrogate/improved.pt \
     surrogate/knn.py $(wildcard $(SURROGATE_HELDOUT)/manifest.json) | $(SETUP)
 	$(PY) -m surrogate.evaluate --report --train-data $(SURROGATE_TRAIN) \
 	  --heldout $(SURROGATE_HELDOUT) --dir results/surrogate
 
 sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the improved surrogate (its 800 epochs each, 2 jobs, ~20 min)
-results/surrogate/sweep/README.md: $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
+results/surrogate/sweep/README.md: $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
 	nice $(PY) -m surrogate.sweep --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) \
 	  --jobs 2 --dir results/surrogate/sweep
 
@@ -169,20 +173,20 @@ PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predi
               $(filter-out analytic,$(PRED_JOINT))
 
 gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
-results/predictor/gestures.json: $(PRED_CORE) predictor/plot.py predictor/figures.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
+results/predictor/gestures.json: $(TIMES) $(PRED_CORE) predictor/plot.py predictor/figures.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
 	nice $(PY) -m predictor.figures --out results/predictor --model $(PRED_JOINT)
 
-results/predictor/gravity_nn_paper.pt: $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN (75 epochs, ~2 min)
+results/predictor/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN (75 epochs, ~2 min)
 	nice $(PY) -m predictor.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
 
-results/predictor/gravity_nn.pt: $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels (SiLU + L-BFGS, ~2 min)
+results/predictor/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels (SiLU + L-BFGS, ~2 min)
 	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
 
-results/predictor/contact_nn.pt: $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
+results/predictor/contact_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
 	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
 
 bench-predictor: results/bench/predictor.json ## predictor timings and residuals, torch.compile graphs (~10 min) -> results/bench/predictor.json
-results/bench/predictor.json: $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
+results/bench/predictor.json: $(TIMES) $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
 	$(PY) -m predictor.bench --model $(PRED_JOINT) --graphs compile --out $@
 
 # ---------------------------------------------------------------- grasp planning (issue 16)
@@ -192,23 +196,23 @@ ATLAS_JSON    := $(foreach o,$(ATLAS_OBJECTS),results/predictor/atlas_$(o).json)
 PLAN_CODE     := $(PRED_CORE) predictor/atlas.py predictor/plot.py
 
 atlas: $(ATLAS_JSON) ## grasp atlas 61x61 of the three objects -> results/predictor/atlas_{circle,ellipse,rectangle}.{png,json}
-results/predictor/atlas_%.json: $(PLAN_CODE) | $(SETUP)
+results/predictor/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --model $(PRED_JOINT) \
 	  --plot results/predictor/atlas_$*.png --out $@ --json
 
 ATLAS_RAMP    := $(foreach o,$(ATLAS_OBJECTS),results/predictor/ramp/atlas_$(o).json)
 atlas-reference: $(ATLAS_RAMP) ## the atlases with every point ramped on its own (the sweep's reference, ~10 min) -> results/predictor/ramp/
-results/predictor/ramp/atlas_%.json: $(PLAN_CODE) | $(SETUP)
+results/predictor/ramp/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --model $(PRED_JOINT) --out $@ --json
 
 atlas-reference-fine: results/predictor/ramp_fine/atlas_rectangle.json ## the rectangle's reference ramp with 48 sub-steps instead of 12: its path resolution (~9 min) -> results/predictor/ramp_fine/
-results/predictor/ramp_fine/atlas_%.json: $(PLAN_CODE) | $(SETUP)
+results/predictor/ramp_fine/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
 
 inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, two tip targets -> results/predictor/inverse.{json,png}
-results/predictor/inverse.json: $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)
+results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)
 	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
 	  --out $@ --plot results/predictor/inverse.png --json
 
@@ -220,7 +224,7 @@ finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases at the productio
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
 
 validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
-results/validation/finger.json: $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)
+results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)
 	$(MAKE) --no-print-directory finger-fem
 	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(PRED_JOINT) --out $@ --figures results/validation
 
