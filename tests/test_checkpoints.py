@@ -110,9 +110,13 @@ def test_fresh_clone_takes_the_committed_artefacts_as_up_to_date(tmp_path):
     """A clone of HEAD: ``make -n`` of bench-predictor, gestures and train lists no
     surrogate.train and no predictor.nn training (git writes the files in path order, so
     without the Makefile's one time per clone results/ would be older than the code);
-    after predictor/nn.py is edited it lists the three NN trainings."""
+    after predictor/nn.py is edited it lists the three NN trainings. ``make help`` alone
+    changes no file time (the stamping is a prerequisite of the artefacts, not parse-time)."""
     clone = tmp_path / "clone"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+    before = (clone / "Makefile").stat().st_mtime_ns
+    subprocess.run(["make", "help"], cwd=clone, check=True, capture_output=True)
+    assert (clone / "Makefile").stat().st_mtime_ns == before
 
     def planned() -> str:
         return subprocess.run(["make", "-n", "bench-predictor", "gestures", "train"], cwd=clone, check=True,
