@@ -30,7 +30,7 @@ from predictor.joint import load_joint  # noqa: E402
 from predictor.nn import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
 from predictor.plot import draw_gesture, save_figure  # noqa: E402
 from predictor.solve import APPROACH, solve  # noqa: E402
-from predictor.statics import GripperProblem, parse_object  # noqa: E402
+from predictor.statics import STATES, GripperProblem, parse_object  # noqa: E402
 
 GRAVITY_CASES = [(-0.1, 0.1), (0.1, -0.1)]
 FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
@@ -123,8 +123,9 @@ def main(argv: list[str] | None = None) -> int:
         for i, p in enumerate(cases):
             panels.append((res, i))
             problems.append(grasp)
-            state = ("slip" if bool(res.slip[i]) else "holds") if bool(res.converged[i]) else "NOT CONVERGED"
-            titles.append(f"{kind}, P = {p} MPa: N = {float(res.normal_force_N[i]):.2f} N, {state}")
+            state = STATES[int(res.states()[i])]
+            titles.append(f"{kind}, P = {p} MPa: N = {float(res.normal_force_N[i]):.2f} N, {state}"
+                          if bool(res.converged[i]) else f"{kind}, P = {p} MPa: NOT CONVERGED")
     _panel_row(out / "grasps.png", panels, problems, titles, 2)
     nn_curves(curves, out / "nn_training.png")
     write_text(out / "gestures.json", dumps(summary))  # no trailing newline, as committed
