@@ -55,12 +55,13 @@ import torch
 
 from fem import cli
 from fem.files import write_json
-from predictor.solve import (APPROACH, GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
-                             gesture_result, solve)
-from predictor.progress import Heartbeat, set_quiet
 from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
                                placement_error)
-from predictor.statics import HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state
+from predictor.progress import Heartbeat, set_quiet
+from predictor.solve import (GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
+                             gesture_result, solve)
+from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
+                               out_of_reach)
 
 __all__ = ["FULL_BOX", "Atlas", "box_arg", "classify", "grasp_atlas", "load_problem", "object_arg",
            "placement_error", "sweep_solve"]
@@ -171,8 +172,8 @@ def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
     p2 = np.linspace(box[2], box[3], grid)
     pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
     t0 = time.perf_counter()
-    if problem.obstacle is None:
-        path = "ramp"                                      # no history: one batched solve
+    if problem.obstacle is None or out_of_reach(problem):
+        path = "ramp"            # no history (or nothing to touch): one batched solve
     if path == "sweep":
         res, how = sweep_solve(problem, pressures, np.array([p1[1] - p1[0], p2[1] - p2[0]]), options)
     else:

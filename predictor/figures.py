@@ -29,6 +29,7 @@ from fem.files import dumps, write_text  # noqa: E402
 from predictor.joint import load_joint  # noqa: E402
 from predictor.nn import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
 from predictor.plot import draw_gesture, save_figure  # noqa: E402
+from predictor.progress import set_quiet  # noqa: E402
 from predictor.solve import APPROACH, solve  # noqa: E402
 from predictor.statics import STATES, GripperProblem, parse_object  # noqa: E402
 
@@ -93,7 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
     ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR,
                     help=f"folder of the NN checkpoints for nn_training.png (default {DEFAULT_DIR})")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
+    set_quiet(args.quiet)
     torch.set_num_threads(1)
     out = Path(args.out)
     with ap.errors():  # every input is read before the solves

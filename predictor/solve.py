@@ -59,6 +59,7 @@ import torch
 
 from fem.spec import INPUT_BOX
 from predictor.gripper import FingerPose, check_pressures, nan_unless, rot, with_rows
+from predictor.progress import Heartbeat
 from predictor.statics import (MOMENT_SCALE, NOT_CONVERGED, PENALTY_WEIGHT, STATES, ContactState, GripperProblem,
                                Statics, contact_loads, grasp_state, out_of_reach, range_penalty, residual_norms,
                                scaled)
@@ -967,7 +968,9 @@ def _solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solve
             x, ok, iterations, _ = run_free(x, p0)
         record_contact(x, p0)
         jac = None
+        beat = Heartbeat("solve")   # a hard ramp (cut-backs on every step) can take tens of seconds
         for k in range(1, options.ramp_steps + 1):
+            beat(lambda: f"ramp step {k} of {options.ramp_steps}, {int(ok.sum())} of {B} on track")
             pa = p0 + (pressures - p0) * ((k - 1) / options.ramp_steps)
             pb = p0 + (pressures - p0) * (k / options.ramp_steps)
             step_run = run if k == options.ramp_steps else run_loose

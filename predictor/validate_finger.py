@@ -41,6 +41,7 @@ from fem.finger_spec import load_finger
 from fem.geometry import JointGeometry
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
+from predictor.progress import set_quiet
 from predictor.solve import SolverOptions, solve
 from predictor.statics import GripperProblem
 
@@ -192,7 +193,9 @@ def main(argv=None) -> int:
     ap.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"), default=JointGeometry().mesh_size,
                     help="validate the cases solved at this joint mesh size, mm (default: the production "
                          "mesh, %(default)g)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
+    set_quiet(args.quiet)
     torch.set_num_threads(1)
     with ap.errors():
         finger = load_finger(args.finger)

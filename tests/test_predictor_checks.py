@@ -10,9 +10,7 @@ cannot check: numbers, timings, the environment and figures.
 """
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
 import os
 import subprocess
 import sys
@@ -28,9 +26,9 @@ from predictor import progress
 from predictor.defaults import RESULTS_ENV
 from predictor.inverse import atlas_from_json, parse_goal
 from predictor.joint import AnalyticJoint, load_joint
-from predictor.problem import FULL_BOX, load_problem
+from predictor.problem import load_problem
 from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import ContactParams, GripperProblem, Obstacle, finger_reach, out_of_reach, parse_object
+from predictor.statics import GripperProblem, Obstacle, finger_reach, out_of_reach
 
 ROOT = Path(__file__).resolve().parents[1]
 SURROGATE = ROOT / "results/surrogate/improved.pt"
