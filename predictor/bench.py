@@ -183,7 +183,8 @@ def _contact_throughput(pred, problem, pressures, threads: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.bench", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".json", default="results/bench/predictor.json")
-    ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR, help=f"NN checkpoints (default {DEFAULT_DIR})")
     ap.add_argument("--quick", action="store_true",
                     help="every figure on a few samples (seconds; for tests, not for quoting)")

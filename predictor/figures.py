@@ -10,7 +10,7 @@
   read from the histories of the checkpoints in ``--nn-dir``;
 - gestures.json: the figures' numbers (GestureResult.summary of every case).
 
-Data flow: joint model (--model, default analytic) -> GripperProblem -> predictor.solve ->
+Data flow: joint model (--model, default the committed surrogate) -> GripperProblem -> predictor.solve ->
 predictor.plot. Every file is written atomically; ``--json`` prints gestures.json.
 """
 from __future__ import annotations
@@ -91,7 +91,8 @@ def nn_curves(curves: list, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.figures", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/predictor", help="output folder")
-    ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR,
                     help=f"folder of the NN checkpoints for nn_training.png (default {DEFAULT_DIR})")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

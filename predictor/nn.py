@@ -787,7 +787,8 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.nn", description="train an NN gesture predictor")
     ap.add_argument("--variant", choices=sorted(VARIANTS), required=True)
-    ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_output("--out", suffix=".pt", required=True, help="checkpoint path (.pt)")
     ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
                     help="override the variant's epochs (smoke runs)")
