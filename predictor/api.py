@@ -8,7 +8,11 @@
 
 Units: pressures MPa, lengths mm (global frame of DESIGN.md §4, right finger), forces N.
 Every call goes through the same solver and history as ``predictor.gesture --object``
-(approach gesture APPROACH, then the pressure ramp); the objects are frozen dataclasses.
+(approach gesture APPROACH, then the pressure ramp) and the same checks as the command
+lines (predictor.problem: one validation per input, ValueError with the CLI's reason);
+the default joint model is found from the package (predictor.defaults), never the
+working directory. Every result names its joint model, mu and object weight; the objects
+are frozen dataclasses.
 """
 from __future__ import annotations
 
@@ -20,9 +24,11 @@ import torch
 
 from fem.finger_spec import FingerSpec, load_finger
 from predictor import atlas as _atlas
-from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
 from predictor import inverse as _inverse
+from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
+from predictor.problem import FULL_BOX, load_problem
 from predictor.solve import GestureResult, SolverOptions, solve
+from predictor.statics import STATES
 
 
 @dataclass(frozen=True)
@@ -36,40 +42,46 @@ class Gripper:
 @dataclass(frozen=True)
 class Gesture:
     """One solved gesture: ``result`` (a one-row GestureResult); summary() as in
-    ``predictor.gesture --json`` (tip mm, tip_angle_deg, contact_force_N, slip, ...)
-    plus ``state`` (predictor.atlas.STATES) and ``first_contact_MPa`` (None without an object)."""
+    ``predictor.gesture --json`` (GestureResult.summary: state, tip mm, tip_angle_deg,
+    contact_force_N, friction_use, slip, joint, mu, object_weight_N; null figures unless
+    converged) plus ``first_contact_MPa`` (None without an object or contact)."""
 
     result: GestureResult
     state: str
 
     def summary(self) -> dict:
-        return {**self.result.summary(0), "state": self.state,
-                "first_contact_MPa": None if self.result.first_contact is None else self.result.first_contact[0].tolist()}
+        first = self.result.first_contact
+        first = None if first is None or bool(first[0].isnan().any()) else first[0].tolist()
+        return {**self.result.summary(0), "first_contact_MPa": first}
 
 
 def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True,
                  finger: str | Path | FingerSpec | None = None, kinematics: str = DEFAULT_KINEMATICS,
-                 joint_weight: str = DEFAULT_JOINT_WEIGHT) -> Gripper:
-    """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate
-    when present); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None:
-    no object); finger: a finger description file or FingerSpec (None: the paper's,
-    fem/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split"
-    (predictor.gesture's --finger, --kinematics, --joint-weight). ValueError (one line) for
-    a bad spec, finger file, model, option or a badly placed object."""
+                 joint_weight: str = DEFAULT_JOINT_WEIGHT, mu: float | None = None,
+                 object_weight: float | None = None) -> Gripper:
+    """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate,
+    results/surrogate/improved.pt of this package or $SOFTJOINT_RESULTS; ValueError when
+    missing); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None: no
+    object); finger: a finger description file or FingerSpec (None: the paper's,
+    fem/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
+    mu: friction coefficient, object_weight: N (None: the defaults 0.3 and 0.2 N)
+    (predictor.gesture's --finger, --kinematics, --joint-weight, --mu, --object-weight).
+    ValueError (one line) for a bad spec, finger file, model, option, an object the model
+    cannot represent or one cutting through the fingers at the approach gesture."""
     if finger is not None and not isinstance(finger, FingerSpec):
         finger = load_finger(finger)
     params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight)
-    return Gripper(_atlas.load_problem(model, object, gravity, params), object)
+    return Gripper(load_problem(model, object, gravity, params, mu=mu, object_weight=object_weight), object)
 
 
 def solve_gesture(gripper: Gripper, *pressures: float) -> Gesture:
     """The equilibrium gesture at pressures (P1, .., PJ) MPa, one per joint of the finger
     (p1, p2 for the paper's)."""
     res = solve(gripper.problem, torch.tensor([pressures], dtype=torch.float64))
-    return Gesture(res, _atlas.STATES[int(_atlas.classify(res, gripper.problem.contact.mu)[0][0])])
+    return Gesture(res, STATES[int(res.states()[0])])
 
 
-def grasp_atlas(gripper: Gripper, grid: int = 61, box=_atlas.FULL_BOX,
+def grasp_atlas(gripper: Gripper, grid: int = 61, box=FULL_BOX,
                 options: SolverOptions = SolverOptions(), path: str = "sweep") -> _atlas.Atlas:
     """The grid x grid atlas over box (P1lo, P1hi, P2lo, P2hi) MPa (predictor.atlas;
     path: sweep or ramp)."""
@@ -77,8 +89,9 @@ def grasp_atlas(gripper: Gripper, grid: int = 61, box=_atlas.FULL_BOX,
 
 
 def inverse_pressures(gripper: Gripper, goal: str = "hold", min_normal: float = 0.0, least_pressure: bool = False,
-                      atlas: _atlas.Atlas | None = None, box=_atlas.FULL_BOX) -> _inverse.InverseResult:
+                      atlas: _atlas.Atlas | None = None, box=FULL_BOX) -> _inverse.InverseResult:
     """Pressures for goal "hold" or "tip:X,Y[,DEG]" (mm, degrees), predictor.inverse;
-    atlas: this gripper's atlas for the starts (else a coarse one is solved)."""
+    min_normal: N, as --min-normal; atlas: this gripper's atlas for the starts (else a
+    coarse one is solved; refused when solved with other settings)."""
     g = dataclasses.replace(_inverse.parse_goal(goal), min_normal=min_normal, least_pressure=least_pressure)
     return _inverse.inverse_pressures(_inverse.InverseProblem(gripper.problem, g, box), atlas)

@@ -1,7 +1,8 @@
 """Grasp atlas: where the gripper holds, slips or misses an object over its pressure plane.
 
     python -m predictor.atlas --object SPEC --grid N [--box P1LO,P1HI,P2LO,P2HI]
-        [--path sweep|ramp] [--model PATH] [--json] [--plot FILE.png] [--out FILE.json]
+        [--path sweep|ramp] [--model PATH|analytic] [--mu MU] [--object-weight N]
+        [--quiet] [--json] [--plot FILE.png] [--out FILE.json]
 
 Every (P1, P2) of an N x N grid over the pressure box (MPa, default the full |P| <= 0.3
 box) is solved along the same history as ``predictor.gesture --object``: the gripper
@@ -28,19 +29,22 @@ object there is no history and the grid is one batched solve. Each point is clas
 
 and records N (N), u, the fingertip (X, Y) mm of the right finger and the first-contact
 pressures along the ramp (GestureResult.first_contact, MPa, NaN when never). The friction
-margin is 1 - u (> 0 where the grasp holds).
+margin is 1 - u (> 0 where the grasp holds). The summary and JSON name what was solved:
+joint, mu, object_weight_N, gravity, approach_MPa (predictor.inverse refuses an atlas of
+other settings). A run longer than ~10 s prints progress lines on stderr (``--quiet``:
+none).
 
 Data flow: GripperProblem (joint, object, approach) + grid -> ``grasp_atlas`` -> Atlas
 (arrays (N, N[, 2]) indexed [i, j] = (P1 = p1[i], P2 = p2[j]), plus the GestureResult of
 the flattened grid) -> ``Atlas.to_json()`` / ``save_atlas_figure``.
 
-Exit codes: 0 atlas written; 2 bad input (a bad number, box, object spec, unwritable
-output, an object that intersects the fingers at zero pressure or at the approach
-gesture), one line on stderr, before the grid solve.
+Exit codes: 0 atlas written; 2 bad input (a bad number, grid, box, object spec, an
+object the model cannot represent, unwritable output, a missing default model, an object
+that intersects the fingers at the approach gesture), one line on stderr, before the
+grid solve. The API (``grasp_atlas``) applies the same checks (predictor.problem).
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -51,12 +55,16 @@ import torch
 
 from fem import cli
 from fem.files import write_json
-from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import GripperParams, check_pressures
-from predictor.solve import (APPROACH, GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
+from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
+                               placement_error)
+from predictor.progress import Heartbeat, set_quiet
+from predictor.solve import (GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
                              gesture_result, solve)
-from predictor.statics import HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state
-FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
+from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
+                               out_of_reach)
+
+__all__ = ["FULL_BOX", "Atlas", "box_arg", "classify", "grasp_atlas", "load_problem", "object_arg",
+           "placement_error", "sweep_solve"]
 #: How an atlas point was solved (Atlas.how): continued from its ray's previous grid
 #: point, ramped from the approach (no predecessor, or the ``ramp`` path), or ramped after
 #: its continuation failed.
@@ -69,33 +77,11 @@ TARGET_S_PER_OBJECT = 10.0
 
 def classify(res: GestureResult, mu: float) -> tuple[np.ndarray, np.ndarray]:
     """(state codes (B,) int into STATES, friction use u = |λ|/mu (B,), NaN without
-    contact or convergence) of a solve result."""
+    contact or convergence) of a solve result (GestureResult.states, friction_use)."""
     conv = res.converged.numpy()
     use = np.abs(res.friction_ratio.numpy()) / mu
     state = np.where(~conv, NOT_CONVERGED, grasp_state(res.normal_force_N, res.slip).numpy())
     return state, np.where(conv & (res.normal_force_N.numpy() > 0), use, np.nan)
-
-
-def placement_error(problem: GripperProblem) -> str | None:
-    """Why the object is badly placed, or None: it intersects the fingers where it is
-    brought in, i.e. at the approach gesture (or at zero pressure without one), a
-    gravity-loaded equilibrium without the object. (The default objects do intersect the
-    zero-pressure gesture, by design: statics.Obstacle.)"""
-    if problem.obstacle is None:
-        return None
-    free = GripperProblem(problem.joint, problem.params, None, problem.contact, problem.gravity)
-    p = (0.0,) * problem.n_joints if problem.approach is None else tuple(problem.approach)
-    res = solve(free, torch.tensor([p], dtype=torch.float64))
-    if not bool(res.converged[0]):  # no gesture to check against: never guess one
-        return f"the gesture without the object at ({', '.join(f'{v:g}' for v in p)}) MPa did not converge"
-    with torch.no_grad():
-        pen = float(problem.residual(res.pressures, res.tau).contact.penetration[0])
-    if pen > 0:
-        where = ("zero pressure" if problem.approach is None else
-                 f"the approach gesture ({', '.join(f'{v:g}' for v in p)}) MPa")
-        return (f"the object intersects the fingers at {where} by {pen:.2f} mm: place it lower or "
-                "farther from the fingers")
-    return None
 
 
 @dataclass(frozen=True)
@@ -104,9 +90,9 @@ class Atlas:
     (N, N) int (STATES); normal_N (N, N); friction_use (N, N) |f|/(mu N), NaN without
     contact; tip (N, N, 2) mm (right finger, NaN unless converged); first_contact (N, N, 2)
     MPa; result: the GestureResult of the flattened grid (row i*N + j); time_s: wall time
-    of the grid's solve; obstacle, joint, mu, approach (MPa): what was solved; path: sweep
-    or ramp (grasp_atlas); how (N, N) int: SWEPT, RAMPED or RETRIED per point (None: all
-    ramped)."""
+    of the grid's solve; obstacle, joint, mu, approach (MPa), gravity, object_weight_N
+    (N, 0 without gravity): what was solved; path: sweep or ramp (grasp_atlas); how
+    (N, N) int: SWEPT, RAMPED or RETRIED per point (None: all ramped)."""
 
     p1: np.ndarray
     p2: np.ndarray
@@ -123,6 +109,8 @@ class Atlas:
     approach: tuple[float, float] | None = None
     path: str = "ramp"
     how: np.ndarray | None = None
+    gravity: bool = True
+    object_weight_N: float | None = None
 
     def index(self, p1: float, p2: float) -> int:
         """Flat row of the grid point nearest to (p1, p2) MPa in ``result``."""
@@ -147,13 +135,14 @@ class Atlas:
         how = np.full(self.state.shape, RAMPED) if self.how is None else self.how
         how = {name: int((how == k).sum()) for k, name in enumerate(HOW)}
         return {"grid": len(self.p1), "counts": self.counts(), "best_hold": point, "time_s": self.time_s,
-                "path": self.path, "solved_by": how}
+                "path": self.path, "solved_by": how, "joint": self.joint, "mu": self.mu,
+                "object_weight_N": self.object_weight_N, "gravity": self.gravity}
 
     def to_json(self) -> dict:
         """Everything (grid arrays as nested lists, NaN -> null by the JSON writer)."""
         ob = self.obstacle
         tau = self.result.tau.reshape(len(self.p1), len(self.p2), 2, 3)
-        return {**self.summary(), "joint": self.joint, "mu": self.mu,
+        return {**self.summary(),
                 "object": None if ob is None else {"kind": ob.kind, "a_mm": ob.a, "b_mm": ob.b, "x_mm": ob.x,
                                                    "y_mm": ob.y, "angle_rad": ob.angle},
                 "approach_MPa": self.approach,
@@ -178,12 +167,13 @@ def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
                          f"{problem.n_joints} joints")
     if path not in PATHS:
         raise ValueError(f"unknown atlas path {path!r}: use {' or '.join(PATHS)}")
+    grid, box = GRID.value("grid", grid), check_box(box)
     p1 = np.linspace(box[0], box[1], grid)
     p2 = np.linspace(box[2], box[3], grid)
     pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
     t0 = time.perf_counter()
-    if problem.obstacle is None:
-        path = "ramp"                                      # no history: one batched solve
+    if problem.obstacle is None or out_of_reach(problem):
+        path = "ramp"            # no history (or nothing to touch): one batched solve
     if path == "sweep":
         res, how = sweep_solve(problem, pressures, np.array([p1[1] - p1[0], p2[1] - p2[0]]), options)
     else:
@@ -196,7 +186,8 @@ def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
                  friction_use=use.reshape(shape), tip=res.pose.tip_end.numpy().reshape(*shape, 2),
                  first_contact=first.numpy().reshape(*shape, 2), result=res, time_s=elapsed,
                  obstacle=problem.obstacle, joint=problem.joint.name, mu=problem.contact.mu,
-                 approach=problem.approach, path=path, how=how.reshape(shape))
+                 approach=problem.approach, path=path, how=how.reshape(shape), gravity=problem.gravity,
+                 object_weight_N=res.object_weight_N)
 
 
 def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.ndarray,
@@ -246,7 +237,9 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
             J_, _, Jp_ = jac_fn(x[good], pressures[good])
             jx[good], jp[good] = J_[:, :n], Jp_
 
+    beat = Heartbeat("atlas")
     for s in np.unique(ring):
+        beat(lambda: f"ring {s} of {ring.max()}: {int(ok.sum())} of {M} points converged")
         rows = np.nonzero(ring == s)[0]
         # a predecessor within one step of the ray's point on ring s - 1 lies on ring s - 2 or s - 1
         done = np.nonzero(ok.numpy() & (ring >= s - 2))[0]
@@ -320,7 +313,7 @@ def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
               cmap=mcolors.ListedColormap(colours), vmin=-0.5, vmax=3.5, interpolation="nearest")
     ax.legend(handles=[plt.Rectangle((0, 0), 1, 1, color=c) for c in colours], labels=list(STATES),
               fontsize=7, loc="lower left")
-    ax.set_title(f"{atlas.obstacle.kind if atlas.obstacle else 'no object'}: state", fontsize=9)
+    ax.set_title(f"{atlas.obstacle.kind if atlas.obstacle else 'no object'}: state\n{atlas.joint}", fontsize=9)
     ax = axes[1]
     im = ax.imshow(atlas.friction_use, origin="lower", extent=ext, aspect="auto", cmap="RdYlGn_r",
                    vmin=0.0, vmax=2.0, interpolation="nearest")
@@ -338,55 +331,17 @@ def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
         ax.set_xlabel("P2 (MPa)")
         ax.set_ylabel("P1 (MPa)")
     for k, (row, label) in enumerate(marks):
-        draw_gesture(axes[2 + k], atlas.result, row, problem)
         p1, p2 = atlas.result.pressures[row].tolist()
-        axes[2 + k].set_title(f"{k + 1}: {label}, P = ({p1:+.2f}, {p2:+.2f}) MPa", fontsize=9)
+        draw_gesture(axes[2 + k], atlas.result, row, problem, f"{k + 1}: {label}, P = ({p1:+.2f}, {p2:+.2f}) MPa")
     fig.tight_layout()
     save_figure(fig, path, 110)
-
-
-def object_arg(text: str) -> str:
-    """--object: a spec checked while parsing (predictor.gesture's rule)."""
-    from predictor.gesture import _object
-
-    return _object(text)
-
-
-def box_arg(text: str) -> tuple[float, float, float, float]:
-    """--box P1LO,P1HI,P2LO,P2HI MPa, within |P| <= 0.3, each lo < hi."""
-    box = cli.numbers(4, -PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")(text)
-    if not (box[0] < box[1] and box[2] < box[3]):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected P1LO < P1HI and P2LO < P2HI")
-    return box
-
-
-def load_problem(model: str | None, spec: str | None, gravity: bool = True,
-                 params: GripperParams | None = None) -> GripperProblem:
-    """GripperProblem of ``predictor.gesture``'s defaults for a model path (None: the
-    committed surrogate when present, else analytic), an object spec (None: no object)
-    and the finger and chain options ``params`` (None: the paper's finger, tangent,
-    lumped); ValueError (one line) for a badly placed object."""
-    from predictor.gesture import DEFAULT_SURROGATE
-    from predictor.joint import load_joint
-    from predictor.solve import approach_for
-    from predictor.statics import parse_object
-
-    model = model or (str(DEFAULT_SURROGATE) if DEFAULT_SURROGATE.is_file() else "analytic")
-    params = params or GripperParams()
-    approach = (APPROACH if params.n_joints == 2 else approach_for(params.n_joints)) if spec else None
-    problem = GripperProblem(load_joint(model), params, obstacle=parse_object(spec) if spec else None,
-                             gravity=gravity, approach=approach)
-    why = placement_error(problem)
-    if why:
-        raise ValueError(why)
-    return problem
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.atlas", description=__doc__.split("\n\n")[0])
     ap.add_argument("--object", type=object_arg, required=True,
                     help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
-    ap.add_argument("--grid", type=cli.number(2, 201, integer=True), default=61, help="N: N x N grid (default 61)")
+    ap.add_argument("--grid", type=GRID.arg, default=61, help="N: N x N grid (default 61)")
     ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (default the full box)")
     ap.add_argument("--path", choices=PATHS, default="sweep",
                     help="sweep: continuation outward from the approach (default); ramp: every point "
@@ -394,21 +349,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ramp-steps", type=cli.number(1, 1000, integer=True), default=SolverOptions.ramp_steps,
                     help=f"pressure sub-steps of a ramped point (default {SolverOptions.ramp_steps}; --path ramp "
                     "with more steps checks the reference's own path resolution)")
-    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate)")
+    add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
     ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
+    set_quiet(args.quiet)
     with ap.errors():
-        problem = load_problem(args.model, args.object)
-        check_pressures(torch.tensor(args.box).reshape(2, 2).T)
+        problem = load_problem(args.model, args.object, mu=args.mu, object_weight=args.object_weight)
         atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
         doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps}
         if args.out:
             write_json(args.out, doc)
         if args.plot:
             save_atlas_figure(args.plot, atlas, problem)
-    print_figures({**atlas.summary(), "spec": args.object, "joint": atlas.joint}, args.json)
+    print_figures({**atlas.summary(), "spec": args.object}, args.json)
     return 0
 
 

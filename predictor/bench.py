@@ -63,6 +63,7 @@ from fem.spec import PRESSURE_LIMIT
 from predictor.joint import load_joint
 from predictor.nn import (DEFAULT_DIR, contact_fraction, evaluate, evaluate_contact, evaluate_polished, load_predictor,
                           nn_folder, predict_gesture, sample_pressures)
+from predictor.progress import set_quiet
 from predictor.solve import APPROACH, GRAPHS, SolverOptions, solve, use_graphs
 from predictor.statics import GripperProblem, Obstacle
 
@@ -182,14 +183,17 @@ def _contact_throughput(pred, problem, pressures, threads: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.bench", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".json", default="results/bench/predictor.json")
-    ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR, help=f"NN checkpoints (default {DEFAULT_DIR})")
     ap.add_argument("--quick", action="store_true",
                     help="every figure on a few samples (seconds; for tests, not for quoting)")
     ap.add_argument("--graphs", choices=GRAPHS, default="trace",
                     help="record the solver's graphs by torch.jit.trace (default) or torch.compile (inductor's C++: "
                     "faster, but every graph compiles on first use, minutes in all; predictor.solve.use_graphs)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
+    set_quiet(args.quiet)
     n = QUICK if args.quick else FULL
     torch.set_num_threads(1)
     use_graphs(args.graphs)

@@ -10,7 +10,7 @@
   read from the histories of the checkpoints in ``--nn-dir``;
 - gestures.json: the figures' numbers (GestureResult.summary of every case).
 
-Data flow: joint model (--model, default analytic) -> GripperProblem -> predictor.solve ->
+Data flow: joint model (--model, default the committed surrogate) -> GripperProblem -> predictor.solve ->
 predictor.plot. Every file is written atomically; ``--json`` prints gestures.json.
 """
 from __future__ import annotations
@@ -29,8 +29,9 @@ from fem.files import dumps, write_text  # noqa: E402
 from predictor.joint import load_joint  # noqa: E402
 from predictor.nn import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
 from predictor.plot import draw_gesture, save_figure  # noqa: E402
+from predictor.progress import set_quiet  # noqa: E402
 from predictor.solve import APPROACH, solve  # noqa: E402
-from predictor.statics import GripperProblem, parse_object  # noqa: E402
+from predictor.statics import STATES, GripperProblem, parse_object  # noqa: E402
 
 GRAVITY_CASES = [(-0.1, 0.1), (0.1, -0.1)]
 FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
@@ -90,10 +91,13 @@ def nn_curves(curves: list, path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.figures", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/predictor", help="output folder")
-    ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR,
                     help=f"folder of the NN checkpoints for nn_training.png (default {DEFAULT_DIR})")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
+    set_quiet(args.quiet)
     torch.set_num_threads(1)
     out = Path(args.out)
     with ap.errors():  # every input is read before the solves
@@ -123,8 +127,9 @@ def main(argv: list[str] | None = None) -> int:
         for i, p in enumerate(cases):
             panels.append((res, i))
             problems.append(grasp)
-            state = ("slip" if bool(res.slip[i]) else "holds") if bool(res.converged[i]) else "NOT CONVERGED"
-            titles.append(f"{kind}, P = {p} MPa: N = {float(res.normal_force_N[i]):.2f} N, {state}")
+            state = STATES[int(res.states()[i])]
+            titles.append(f"{kind}, P = {p} MPa: N = {float(res.normal_force_N[i]):.2f} N, {state}"
+                          if bool(res.converged[i]) else f"{kind}, P = {p} MPa: NOT CONVERGED")
     _panel_row(out / "grasps.png", panels, problems, titles, 2)
     nn_curves(curves, out / "nn_training.png")
     write_text(out / "gestures.json", dumps(summary))  # no trailing newline, as committed

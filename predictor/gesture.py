@@ -1,47 +1,58 @@
 """Command line: the gripper's static gesture for pressures (P1, P2).
 
     python -m predictor.gesture --p1 -0.1 --p2 0.1 [--object circle:r=30,y=-195]
-        [--approach -0.15,0|zero] [--method newton|lbfgs|nn [--polish]] [--model PATH] [--nn PATH]
-        [--finger FILE] [--kinematics tangent|cap] [--joint-weight lumped|split]
-        [--no-gravity] [--plot out.png] [--json]
+        [--mu MU] [--object-weight N] [--approach -0.15,0|zero] [--method newton|lbfgs|nn
+        [--polish]] [--model PATH|analytic] [--nn PATH] [--finger FILE]
+        [--kinematics cap|tangent] [--joint-weight split|lumped] [--no-gravity]
+        [--plot out.png] [--json]
     python -m predictor.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
 
 The finger is read from a finger description file (``--finger``, default
 fem/fingers/paper.toml, fem.finger_spec): any chain of J joints and rigid parts. A
 2-joint finger takes ``--p1 --p2`` (or ``--pressures P1,P2``); another takes ``--pressures
 P1,..,PJ`` (MPa, base to tip), and ``--approach`` takes J values too (default: joint 1 at
--0.15 MPa, the others at 0). ``--kinematics``: how a part leaves a joint, along the chord
-of its last two anchors (tangent, the paper's, default) or along its cap face (cap; needs
-a joint model with a cap-rotation head). ``--joint-weight``: a joint's weight at the mean
-of its anchors (lumped, default) or half at each end (split) (predictor.statics).
+-0.15 MPa, the others at 0). ``--kinematics``: how a part leaves a joint, along its cap
+face (cap, the default; needs a joint model with a cap-rotation head) or along the chord
+of its last two anchors (tangent, the paper's). ``--joint-weight``: a joint's weight half
+at each end (split, the default) or at the mean of its anchors (lumped, the paper's)
+(predictor.statics).
 
-Data flow: pressures (MPa) + finger + object spec -> GripperProblem (joint model from
-``--model``: surrogate checkpoint; default results/surrogate/improved.pt when present, else
-the analytic stand-in) -> predictor.solve (or the NN predictor) -> right-finger figures
-(GestureResult.summary plus friction_N, time_ms and the run's settings) as text or as
-strict JSON: converged, tau [[F1 N, F2 N, M N·mm] x J], residual_force_mN,
-residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last part), tip_angle_deg
-(global direction of the last part, -90 at rest), joint_end_angle_deg (per joint, its
-global exit angle), contact_force_N, slip, iterations, time_ms, finger {name, sha256},
-kinematics, joint_weight. With ``--method nn`` also the network's own figures before any
+Data flow: pressures (MPa) + finger + object spec -> GripperProblem (predictor.problem:
+joint model from ``--model``, a surrogate checkpoint or ``analytic``; default the
+committed surrogate found from the package, predictor.defaults, an error when missing)
+-> predictor.solve (or the NN predictor) -> right-finger figures (GestureResult.summary
+plus time_ms and the run's settings) as text or as strict JSON: converged, state
+(no_contact, holds, slips or not_converged), tau [[F1 N, F2 N, M N·mm] x J],
+residual_force_mN, residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last
+part), tip_angle_deg (global direction of the last part, -90 at rest),
+joint_end_angle_deg (per joint, its global exit angle), contact_force_N, friction_N,
+friction_use = |f|/(mu N) and slip (null where nothing touches), iterations, time_ms,
+joint (the joint model's name), mu and object_weight_N (null without an object), finger
+{name, sha256}, kinematics, joint_weight. Every figure of the gesture is null when the
+solve did not converge. With ``--method nn`` also the network's own figures before any
 solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
-answer is the solver's polish of them (polished: contact, or gravity with ``--polish``, one
-Newton step from the network's tau) or the full ramp's (fallback; gravity: the LM's);
-with an object raw_state, the network's own grasp state (no_contact, holds or slips).
+answer is the solver's polish of them (polished: contact, or gravity with ``--polish``,
+one Newton step from the network's tau) or the full ramp's (fallback; gravity: the
+LM's); with an object raw_state, the network's own grasp state.
 
-Exit codes: 0 converged; 1 not converged (the JSON says so, tau is null); 2 bad input
-(a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures for the
-finger, a bad finger file or object spec, an unwritable --plot, a missing, damaged or
-other-kind model, cap kinematics on a joint model without a cap head, an NN checkpoint
-trained for another finger or options) with a one-line reason on stderr, checked before
-the solve.
+Objects: the model mirrors the right finger, so an object is centred (x = 0) and
+mirror-symmetric; its sizes and height are bounded (statics.object_error); one cutting
+through the fingers at the approach gesture is refused; one beyond the fingers' reach
+answers no_contact at once (statics.out_of_reach).
+
+Exit codes: 0 converged; 1 not converged (the JSON says so, its figures are null); 2 bad
+input (a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures
+for the finger, a bad finger file or object spec, an object the model cannot represent
+or that intersects the fingers at the approach gesture, a bad --mu or --object-weight,
+an unwritable --plot, a missing, damaged or other-kind model, cap kinematics on a joint
+model without a cap head, an NN checkpoint trained for another finger or options) with a
+one-line reason on stderr, checked before the solve.
 """
 from __future__ import annotations
 
 import argparse
 import math
 import sys
-from pathlib import Path
 
 import torch
 
@@ -51,10 +62,10 @@ from fem.spec import PRESSURE_LIMIT
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
                                finger_arg)
 from predictor.joint import load_joint
-from predictor.solve import APPROACH, SolverOptions, approach_for, solve
-from predictor.statics import STATES, GripperProblem, parse_object
+from predictor.problem import DEFAULT, add_arguments, load_problem, object_arg
+from predictor.solve import APPROACH, SolverOptions, solve
+from predictor.statics import STATES
 
-DEFAULT_SURROGATE = Path("results/surrogate/improved.pt")
 PRESSURE = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
 
 
@@ -85,38 +96,27 @@ def pressures_of(args: argparse.Namespace, n_joints: int) -> tuple[float, ...]:
     return (args.p1, args.p2)
 
 
-def _object(text: str) -> str:
-    """--object: the spec, checked while parsing (so a bad one is refused before any load)."""
-    try:
-        parse_object(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
-
-
 def prepare(args: argparse.Namespace):
     """Everything a gesture needs, checked before any solve: (problem, pressures (1, J),
-    joint, NN predictor or None). ValueError (one line) for any bad input."""
+    joint, NN predictor or None). ValueError (one line) for any bad input, a missing
+    default model, an object the model cannot represent or that cuts through the fingers
+    at the approach gesture (predictor.problem.load_problem)."""
     params = GripperParams(args.finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
     n_joints = params.n_joints
     pressures = torch.tensor([pressures_of(args, n_joints)], dtype=torch.float64)
     if args.approach not in (None, "zero") and len(args.approach) != n_joints:
         raise ValueError(f"--approach: {len(args.approach)} values for finger {args.finger.name!r} of "
                          f"{n_joints} joints")
-    model = args.model or (str(DEFAULT_SURROGATE) if DEFAULT_SURROGATE.is_file() else "analytic")
-    joint = load_joint(model)
-    obstacle = parse_object(args.object) if args.object else None
+    joint = load_joint(args.model)
+    options = dict(params=params, mu=args.mu, object_weight=args.object_weight, joint=joint)
     if args.method == "nn":
         from predictor.nn import load_predictor
 
         predictor = load_predictor(args.nn, joint, contact=args.object is not None, params=params)
-        problem = GripperProblem(joint, params, obstacle=obstacle, approach=predictor.config.approach)
+        problem = load_problem(None, args.object, approach=predictor.config.approach, **options)
         return problem, pressures, joint, predictor
-    if args.approach == "zero":
-        start = None
-    else:
-        start = args.approach or (APPROACH if n_joints == 2 else approach_for(n_joints))
-    problem = GripperProblem(joint, params, obstacle=obstacle, gravity=not args.no_gravity, approach=start)
+    approach = None if args.approach == "zero" else args.approach or DEFAULT
+    problem = load_problem(None, args.object, gravity=not args.no_gravity, approach=approach, **options)
     return problem, pressures, joint, None
 
 
@@ -131,8 +131,8 @@ def run(args: argparse.Namespace, prepared=None):
     else:
         res = solve(problem, pressures, SolverOptions(method=args.method))
     ok = bool(res.converged[0])
-    out = {**res.summary(0), "friction_N": float(res.friction_N[0]), "time_ms": res.time_ms,
-           "method": args.method, "joint": joint.name, "object": args.object, "gravity": problem.gravity,
+    out = {**res.summary(0), "time_ms": res.time_ms,
+           "method": args.method, "object": args.object, "gravity": problem.gravity,
            "finger": {"name": problem.params.finger.name, "sha256": problem.params.finger.digest},
            "kinematics": problem.params.kinematics, "joint_weight": problem.params.joint_weight,
            "joint_end_angle_deg": [math.degrees(a) for a in res.pose.phi[0].tolist()] if ok else None}
@@ -158,20 +158,19 @@ def main(argv: list[str] | None = None) -> int:
                     "or its cap face (cap)")
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT,
                     help="a joint's weight at its anchors' mean (lumped) or half at each end (split)")
-    ap.add_argument("--object", type=_object,
+    ap.add_argument("--object", type=object_arg,
                     help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
     ap.add_argument("--approach", type=_approach, help="P1,P2[,..] (MPa, one per joint) at which the object is "
                     f"brought in (grasp history; default {APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with "
                     "the object present")
     ap.add_argument("--method", choices=("newton", "lbfgs", "nn"), default="newton")
-    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: "
-                    f"{DEFAULT_SURROGATE} if present, else analytic)")
     ap.add_argument("--nn", help="NN predictor checkpoint for --method nn (default: results/predictor/"
                     "gravity_nn.pt, or contact_nn.pt with --object)")
     ap.add_argument("--polish", action="store_true", help="--method nn under gravity: finish the network's tau "
                     "with a Newton step to the iterative solver's tolerances (the contact NN's answer is always "
                     "polished)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
+    add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the gesture PNG here")
     args = ap.parse_args(argv)
     if args.polish and args.method != "nn":

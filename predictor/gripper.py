@@ -17,7 +17,8 @@ proximal orientation is theta_i = a:
 and then O <- r_10,i (its distal end) and a <- phi_i, the joint's exit angle:
 
     tangent kinematics (the paper's):  phi_i = theta_i + phi_end(R_i)  (chord of anchors 9-10)
-    cap kinematics (bonded cap face):  phi_i = theta_i + cap_rotation_i (JointModel.anchors_and_cap)
+    cap kinematics (bonded cap face, the default):  phi_i = theta_i + cap_rotation_i
+                                       (JointModel.anchors_and_cap)
 
 A rigid part of length l goes from O to O + l·(cos a, sin a) and leaves a unchanged, so
 theta_{i+1} = phi_i when a rigid part (or nothing) lies between two joints. For the right
@@ -25,7 +26,7 @@ finger, a joint's local +y is global +X at rest, so P > 0 (bending to -y) closes
 and P < 0 opens it.
 
 Weights (N): a rigid part's at its midpoint; a joint's, with ``joint_weight``
-``lumped`` (the paper's, the default), at the mean of its 10 anchors, or ``split``: half at
+``lumped`` (the paper's), at the mean of its 10 anchors, or ``split`` (the default): half at
 its proximal centre O_i, half at its distal end r_10,i (predictor.statics says which joint
 balances each enters). Contact sample points, in chain order: each rigid part's
 ``contact_points`` segment midpoints (each carrying l/n of length) and the 10 anchors of each
@@ -49,8 +50,6 @@ from fem.finger_spec import DEFAULT_FINGER, FingerFileError, FingerSpec, JointPa
 from fem.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
-#: The paper gripper's inputs: one pressure per joint, each within the joint's |P| <= 0.3 MPa.
-PRESSURE_NAMES = ("P1", "P2")
 KINEMATICS = ("tangent", "cap")
 JOINT_WEIGHTS = ("lumped", "split")
 #: The defaults: the chain that matches the whole-finger FEM (results/validation/finger.json:

@@ -1,7 +1,8 @@
 """Inverse pressures: which (P1, P2) hold an object, or put the fingertip where asked.
 
     python -m predictor.inverse --goal hold --object SPEC [--min-normal N] [--least-pressure]
-        [--atlas ATLAS.json] [--model PATH] [--json] [--plot FILE.png]
+        [--atlas ATLAS.json] [--model PATH|analytic] [--mu MU] [--object-weight N]
+        [--no-gravity] [--quiet] [--json] [--plot FILE.png]
     python -m predictor.inverse --goal tip:X,Y[,DEG] [--object SPEC] ...
 
 Goals (right finger; lengths mm in the global frame of DESIGN.md §4, pressures MPa):
@@ -15,7 +16,7 @@ Every goal is a least-squares one, f = |e|² with a goal residual e:
   least pressure that holds with a friction margin of HOLD_MARGIN.
 - ``tip:X,Y[,DEG]``: the fingertip at (X, Y) mm, and its tip angle at DEG degrees (the
   ``tip_angle_deg`` of ``predictor.gesture --json``, the direction of the rigid tip):
-  e = (x_tip - X, y_tip - Y[, l_tip·(phi_2 - DEG)]) mm. With DEG the goal has three
+  e = (x_tip - X, y_tip - Y[, l_tip·(phi_2 - DEG)]) mm, DEG wrapped to (-180, 180]. With DEG the goal has three
   conditions for two pressures: it is met only where the target lies on the reachable
   surface (within TIP_TOL_MM), else it is answered ``infeasible`` with its least-squares
   closest gesture.
@@ -46,10 +47,14 @@ from the verified gesture (the pressure error of a regulator acts on the settled
 and the answer is robust when all 9 points keep the goal's state; robust candidates are
 preferred.
 
-Answers: ``feasible`` (exit 0), or ``infeasible`` (exit 1) with the closest achievable
-value (the nearest tip and its error; the best friction use found); exit 2 is bad input
-only (bad numbers, goal, object spec, an object intersecting the fingers where it is
-brought in, unwritable outputs), one line on stderr, before any solve.
+Answers: ``feasible`` (exit 0, goal_met true), or ``infeasible`` (exit 1, goal_met
+false) with the closest achievable value and a reason naming the limit (the nearest tip
+and its error; the most normal force a hold reaches under --min-normal; the best
+friction use found); grasp_state is the state of the gesture at the answer's pressures,
+not the verdict. Exit 2 is bad input (bad numbers, goal, box, object spec, an object the
+model cannot represent or intersecting the fingers where it is brought in, an object
+nothing touches anywhere in the box, an --atlas of another object, joint or settings,
+unwritable outputs), one line on stderr. The API applies the same checks.
 
 Data flow: InverseProblem (GripperProblem + Goal + box) -> ``inverse_pressures`` ->
 InverseResult (status, pressures, achieved values, verification, robustness, timings).
@@ -71,9 +76,12 @@ import torch
 from fem import cli
 from fem.files import write_json
 from fem.spec import INPUT_BOX
-from predictor.atlas import FULL_BOX, HOLDS, STATES, Atlas, classify, grasp_atlas
+from predictor.atlas import HOLDS, NOT_CONVERGED, STATES, Atlas, classify, grasp_atlas
+from predictor.problem import (FULL_BOX, MIN_NORMAL, add_arguments, box_arg, check_box, load_problem,
+                               object_arg)
+from predictor.progress import Heartbeat, set_quiet
 from predictor.solve import (GestureResult, SolverOptions, _advance, _box_scale, _jacobian_fn, _levenberg_marquardt,
-                             graph_cache, solve, touch, traced)
+                             graph_cache, result_labels, solve, touch, traced)
 from predictor.statics import GripperProblem
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
@@ -107,8 +115,14 @@ class Goal:
         return (3 if self.least_pressure else 1) + (self.min_normal > 0)
 
 
+def wrap_deg(angle: float) -> float:
+    """An angle (deg) wrapped to (-180, 180]: 631.63 -> -88.37."""
+    return 180.0 - (180.0 - angle) % 360.0
+
+
 def parse_goal(text: str) -> Goal:
-    """``hold`` or ``tip:X,Y[,DEG]`` (mm, degrees); ValueError with a one-line reason."""
+    """``hold`` or ``tip:X,Y[,DEG]`` (mm, degrees; DEG wrapped to (-180, 180], the range
+    of ``tip_angle_deg``); ValueError with a one-line reason."""
     kind, _, rest = text.strip().partition(":")
     if kind == "hold" and not rest:
         return Goal("hold")
@@ -116,7 +130,7 @@ def parse_goal(text: str) -> Goal:
         parts = rest.split(",")
         if len(parts) in (2, 3):
             vals = [cli.number(unit="mm or deg")(p.strip()) for p in parts]
-            return Goal("tip", (vals[0], vals[1]), vals[2] if len(parts) == 3 else None)
+            return Goal("tip", (vals[0], vals[1]), wrap_deg(vals[2]) if len(parts) == 3 else None)
     raise ValueError(f"goal {text!r}: use hold or tip:X,Y[,DEG] (mm, degrees)")
 
 
@@ -131,8 +145,13 @@ class InverseProblem:
     options: SolverOptions = SolverOptions()
 
     def __post_init__(self):
+        object.__setattr__(self, "box", check_box(self.box))
+        MIN_NORMAL.value("min_normal", self.goal.min_normal)
         if self.goal.kind == "hold" and self.problem.obstacle is None:
             raise ValueError("--goal hold needs an --object")
+        if self.goal.kind == "tip" and (self.goal.min_normal or self.goal.least_pressure):
+            raise ValueError("min_normal and least_pressure (--min-normal, --least-pressure) apply to the hold "
+                             "goal only")
         if self.problem.n_joints != 2:
             raise ValueError(f"the inverse search spans (P1, P2): finger {self.problem.params.finger.name!r} has "
                              f"{self.problem.n_joints} joints")
@@ -140,16 +159,19 @@ class InverseProblem:
 
 @dataclass(frozen=True)
 class InverseResult:
-    """status: feasible | infeasible; pressures (P1, P2) MPa of the answer (or of the
-    closest achievable value when infeasible); state (atlas STATES); tip (X, Y) mm and
+    """status: feasible | infeasible (goal_met: the same as a bool); pressures (P1, P2) MPa
+    of the answer (or of the closest achievable value when infeasible); grasp_state (atlas
+    STATES) of the gesture there, which is not the goal's verdict; tip (X, Y) mm and
     tip_angle_deg; tip_error_mm (tip goals); normal_N, friction_use (|f|/(mu N)); objective
     f; verified: the ramp solve agreed; robust: the goal's state holds on the ±REGULATOR
     stencil; stencil_states (9, centre first); candidates: starts tried; time_ms: whole
-    query; reason: one line; gesture: the verifying GestureResult."""
+    query; reason: one line; joint, mu, object_weight_N: what was solved (statics);
+    gesture: the verifying GestureResult."""
 
     status: str
+    goal_met: bool
     pressures: tuple[float, float]
-    state: str
+    grasp_state: str
     tip: tuple[float, float]
     tip_angle_deg: float
     tip_error_mm: float | None
@@ -162,7 +184,15 @@ class InverseResult:
     candidates: int
     time_ms: float
     reason: str
+    joint: str = ""
+    mu: float | None = None
+    object_weight_N: float | None = None
     gesture: GestureResult | None = None
+
+    @property
+    def state(self) -> str:
+        """The grasp state at the answer's pressures (``grasp_state``)."""
+        return self.grasp_state
 
     def summary(self) -> dict:
         """Plain JSON types (the gesture omitted)."""
@@ -378,11 +408,9 @@ def _meets(ip: InverseProblem, v: dict) -> bool:
     return ok and (not ip.goal.least_pressure or v["friction_use"] <= 1.0 - HOLD_MARGIN + LEAST_PRESSURE_SLACK)
 
 
-def _starts(ip: InverseProblem, atlas: Atlas | None) -> list[tuple[torch.Tensor, torch.Tensor]]:
-    """The N_STARTS best converged grid points, START_SEPARATION apart, of the atlas (or of a coarse one)
-    for the goal: (pressures (2,), tau (6,)) each."""
-    if atlas is None:
-        atlas = grasp_atlas(ip.problem, COARSE, ip.box, ip.options)
+def _starts(ip: InverseProblem, atlas: Atlas) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """The N_STARTS best converged grid points, START_SEPARATION apart, of the atlas for
+    the goal: (pressures (2,), tau (6,)) each."""
     res = atlas.result
     ok = res.converged
     if ip.goal.kind == "hold":
@@ -453,9 +481,16 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
     """Answer ``ip`` (module docstring); ``atlas``: the object's atlas for the starts (its
     problem must be ip.problem), else a coarse one is solved. Returns an InverseResult."""
     t0 = time.perf_counter()
+    if atlas is not None:
+        _atlas_matches(atlas, ip.problem)
+    atlas = atlas if atlas is not None else grasp_atlas(ip.problem, COARSE, ip.box, ip.options)
+    if ip.goal.kind == "hold":
+        _check_touch(atlas)
     starts = _starts(ip, atlas)
     cands = []
-    for p, x in starts:
+    beat = Heartbeat("inverse")
+    for k, (p, x) in enumerate(starts):
+        beat(f"start {k + 1} of {len(starts)}")
         branch = _Branch(ip, p, x)
         _gauss_newton(ip, branch)
         branch.refine()
@@ -463,7 +498,7 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
         if gradient(ip, branch)[0] <= _exact(ip):
             break  # the goal is met exactly (up to verification): more starts cannot beat it
     if not cands:
-        raise ValueError("no converged start point in the atlas: nothing to search from")
+        raise ValueError("no converged gesture in the atlas of the box: nothing to search from")
     # Verify the candidates best first, each by a forward solve along the ramp, and stop at
     # the first that meets the goal robustly (±REGULATOR stencil): robust answers are
     # preferred, then goal-meeting ones, then the least objective.
@@ -489,14 +524,49 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
         reason = (f"unreachable: the closest achievable tip is {cand['tip_error_mm']:.2f} mm away "
                   f"(tolerance {TIP_TOL_MM} mm)")
     else:
-        reason = ("no pressure in the box holds the object: best friction use "
-                  f"{cand['friction_use'] if cand['friction_use'] is not None else float('nan'):.3f} (holds <= 1)")
+        reason = _hold_reason(ip, cand, checked, atlas)
     return InverseResult(
-        status="feasible" if cand["meets"] else "infeasible", pressures=cand["pressures"], state=cand["state"],
+        status="feasible" if cand["meets"] else "infeasible", goal_met=bool(cand["meets"]),
+        pressures=cand["pressures"], grasp_state=cand["state"],
         tip=cand["tip"], tip_angle_deg=cand["tip_angle_deg"], tip_error_mm=cand["tip_error_mm"],
         normal_N=cand["normal_N"], friction_use=cand["friction_use"], objective=cand["objective"],
         verified=cand["verified"], robust=robust, stencil_states=stencil, candidates=len(cands),
-        time_ms=1e3 * (time.perf_counter() - t0), reason=reason, gesture=cand["gesture"])
+        time_ms=1e3 * (time.perf_counter() - t0), reason=reason, joint=ip.problem.joint.name,
+        mu=cand["gesture"].mu, object_weight_N=cand["gesture"].object_weight_N, gesture=cand["gesture"])
+
+
+def _atlas_matches(atlas: Atlas, problem: GripperProblem) -> None:
+    """ValueError (one line) when ``atlas`` was solved for another question than
+    ``problem`` (object, joint, gravity, mu, object weight)."""
+    weight = None if problem.obstacle is None else problem.params.object_weight if problem.gravity else 0.0
+    ours = (problem.obstacle, problem.joint.name, problem.gravity, problem.contact.mu, weight)
+    theirs = (atlas.obstacle, atlas.joint, atlas.gravity, atlas.mu, atlas.object_weight_N)
+    names = ("object", "joint", "gravity", "mu", "object_weight_N")
+    for name, a, b in zip(names, theirs, ours):
+        if a != b:
+            raise ValueError(f"the atlas was solved with {name} = {a}, this question has {b}: use its own atlas")
+
+
+def _check_touch(atlas: Atlas) -> None:
+    """ValueError (one line) when the object is touched nowhere in the atlas (every
+    converged point no_contact): a hold cannot be searched for."""
+    conv = atlas.state != NOT_CONVERGED
+    if conv.any() and not (atlas.normal_N[conv] > 0).any():
+        raise ValueError(f"nothing touches the object at any pressure of the box ({len(atlas.p1)} x "
+                         f"{len(atlas.p2)} grid): the fingers never reach it; place it between them or make it larger")
+
+
+def _hold_reason(ip: InverseProblem, cand: dict, checked: list, atlas: Atlas) -> str:
+    """Why no hold met the goal (one line): the normal force's limit when the friction
+    held but --min-normal was not reached, else the best friction use."""
+    holds = [c for c in checked if c["state"] == "holds"]
+    if ip.goal.min_normal > 0 and (holds or (atlas.state == HOLDS).any()):
+        best = max([c["normal_N"] for c in holds] + atlas.normal_N[atlas.state == HOLDS].tolist())
+        return (f"the normal force of a hold reaches at most {best:.3f} N, less than the asked "
+                f"{ip.goal.min_normal:g} N (--min-normal)")
+    use = cand["friction_use"]
+    return ("no pressure in the box holds the object: best friction use "
+            f"{use if use is not None else float('nan'):.3f} (holds <= 1)")
 
 
 def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
@@ -514,6 +584,7 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
                                                  ("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad")]
     if want != got or doc.get("joint") != problem.joint.name:
         raise ValueError(f"{path}: an atlas of another object or joint ({doc.get('object')}, {doc.get('joint')})")
+    _same_settings(path, doc, problem)
     pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
     ok = ~tau.reshape(-1, 6).isnan().any(-1)
     # Re-evaluate the stored equilibria (no solve): the same figures as the atlas run.
@@ -523,13 +594,32 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
     res = GestureResult(pressures=pressures, tau=tau, converged=ok, residual_force_mN=nan, residual_moment_Nmm=nan,
                         normal_force_N=st.contact.normal, friction_N=st.contact.friction,
                         friction_ratio=st.contact.ratio, slip=st.contact.slip, iterations=torch.zeros_like(ok).long(),
-                        time_ms=0.0, pose=st.pose.masked(ok), method="atlas-json")
+                        time_ms=0.0, pose=st.pose.masked(ok), method="atlas-json", **result_labels(problem))
     state, use = classify(res, problem.contact.mu)
     n = len(p1), len(p2)
     return Atlas(p1, p2, state.reshape(n), res.normal_force_N.numpy().reshape(n), use.reshape(n),
                  res.pose.tip_end.numpy().reshape(*n, 2), np.array(doc["first_contact_MPa"], float), res,
                  float(doc.get("time_s", 0.0)), ob, problem.joint.name, problem.contact.mu, problem.approach,
-                 doc.get("path", "ramp"), None if doc.get("how") is None else np.array(doc["how"], int))
+                 doc.get("path", "ramp"), None if doc.get("how") is None else np.array(doc["how"], int),
+                 problem.gravity, res.object_weight_N)
+
+
+def _same_settings(path, doc: dict, problem: GripperProblem) -> None:
+    """ValueError (one line) when the atlas JSON was computed with other settings than
+    ``problem``: gravity, mu, the object's weight, the approach. Atlases written before
+    these were recorded were computed with the defaults (gravity on, mu 0.3, 0.2 N)."""
+    weight = problem.params.object_weight if problem.gravity else 0.0
+    recorded = {"gravity": doc.get("gravity", True), "mu": doc.get("mu", 0.3),
+                "object_weight_N": doc.get("object_weight_N", 0.2 if doc.get("gravity", True) else 0.0),
+                "approach_MPa": None if doc.get("approach_MPa") is None else tuple(doc["approach_MPa"])}
+    asked = {"gravity": problem.gravity, "mu": problem.contact.mu, "object_weight_N": weight,
+             "approach_MPa": None if problem.approach is None else tuple(problem.approach)}
+    for key, value in asked.items():
+        if recorded[key] != value:
+            flag = {"gravity": "--no-gravity", "mu": "--mu", "object_weight_N": "--object-weight",
+                    "approach_MPa": "the approach"}[key]
+            raise ValueError(f"{path}: an atlas computed with {key} = {recorded[key]}, this question has "
+                             f"{value} ({flag}): compute the atlas with the same settings")
 
 
 def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, GripperProblem]]) -> None:
@@ -543,10 +633,9 @@ def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, Gripper
     for ax, (label, r, prob) in zip(axes[0], items):
         i = int(torch.isclose(r.gesture.pressures, torch.tensor(r.pressures, dtype=torch.float64)).all(-1)
                 .nonzero()[0])
-        draw_gesture(ax, r.gesture, i, prob)
         p1, p2 = r.pressures
-        ax.set_title(f"{label}: {r.status}\nP = ({p1:+.3f}, {p2:+.3f}) MPa"
-                     + (f", u = {r.friction_use:.2f}" if r.friction_use is not None else ""), fontsize=8)
+        draw_gesture(ax, r.gesture, i, prob, f"{label}: {r.status}\nP = ({p1:+.3f}, {p2:+.3f}) MPa"
+                     + (f", u = {r.friction_use:.2f}" if r.friction_use is not None else ""))
         if label.startswith("tip"):  # the target
             ax.plot(*parse_goal(label).tip, "kx", ms=9, mew=2)
     fig.tight_layout()
@@ -575,10 +664,10 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
     """``make inverse``: every case REPEATS times (median time); hold goals start from the
     object's committed atlas ``atlas_dir/atlas_KIND.json`` when present (the planned use),
     and are also timed cold (a COARSE x COARSE atlas solved per query)."""
-    from predictor.atlas import load_problem
-
     cases, figs = [], []
+    beat = Heartbeat("inverse --cases")
     for kind in CASE_OBJECTS:
+        beat(f"hold {kind}")
         problem = load_problem(model, kind)
         ip = InverseProblem(problem, Goal("hold"))
         path = atlas_dir / f"atlas_{kind}.json"
@@ -594,6 +683,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
         figs.append((f"hold {kind}", res, problem))
     free = load_problem(model, None)
     for text in CASE_TIPS:
+        beat(text)
         ip = InverseProblem(free, parse_goal(text))
         runs = [inverse_pressures(ip) for _ in range(REPEATS)]
         res = runs[0]
@@ -613,7 +703,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from predictor.atlas import box_arg, load_problem, object_arg, print_figures
+    from predictor.atlas import print_figures
 
     def goal_arg(text):
         try:
@@ -629,16 +719,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--atlas-dir", default="results/predictor", help="--cases: folder of the atlases")
     ap.add_output("--out", suffix=".json", help="--cases: write the JSON here")
     ap.add_argument("--object", type=object_arg, help="object spec (required for --goal hold)")
-    ap.add_argument("--min-normal", type=cli.number(0, 10, "N"), default=0.0, help="hold: least normal force, N")
+    ap.add_argument("--min-normal", type=MIN_NORMAL.arg, default=0.0, help="hold: least normal force, N")
     ap.add_argument("--least-pressure", action="store_true",
                     help=f"hold: the least pressure holding with margin {HOLD_MARGIN}")
     ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (bounds)")
     ap.add_argument("--atlas", help="the object's predictor.atlas --out JSON for the starts (default: "
                     f"a {COARSE}x{COARSE} grid solved now)")
-    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
+    add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the answer's gesture here")
     args = ap.parse_args(argv)
+    set_quiet(args.quiet)
     if args.cases:
         torch.set_num_threads(1)
         with ap.errors():
@@ -658,13 +749,14 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--min-normal and --least-pressure apply to --goal hold only")
     torch.set_num_threads(1)
     with ap.errors():
-        problem = load_problem(args.model, args.object, gravity=not args.no_gravity)
+        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, mu=args.mu,
+                               object_weight=args.object_weight)
         ip = InverseProblem(problem, goal, args.box)
         atlas = atlas_from_json(args.atlas, problem) if args.atlas else None
         res = inverse_pressures(ip, atlas)
         if args.plot:
             save_inverse_figure(args.plot, [(args.goal, res, problem)])
-    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "joint": problem.joint.name}, args.json)
+    print_figures({**res.summary(), "goal": args.goal, "object": args.object}, args.json)
     if res.status != "feasible":
         print(f"{ap.prog}: infeasible: {res.reason}", file=sys.stderr)
         return 1

@@ -52,6 +52,7 @@ import torch
 
 from fem.files import sha256_file
 from fem.spec import JOINT_LENGTH, N_ANCHORS
+from predictor.defaults import ANALYTIC, joint_spec
 
 
 class JointModel:
@@ -164,10 +165,14 @@ class SurrogateJoint(JointModel):
 
 
 def load_joint(spec: str | None) -> JointModel:
-    """``None`` or ``"analytic"`` -> AnalyticJoint(); otherwise a checkpoint path.
+    """``"analytic"`` -> AnalyticJoint(); a checkpoint path -> SurrogateJoint; None -> the
+    default surrogate (predictor.defaults: found from the package, never the working
+    directory).
 
-    Raises ValueError (surrogate.ModelError is one) with a one-line reason.
+    Raises ValueError (surrogate.ModelError is one) with a one-line reason, also when the
+    default surrogate is missing (the analytic joint is only used when named).
     """
-    if spec is None or spec == "analytic":
+    spec = joint_spec(spec)
+    if spec == ANALYTIC:
         return AnalyticJoint()
     return SurrogateJoint(spec)

@@ -96,12 +96,14 @@ from torch import nn
 
 from fem import cli
 from fem.spec import PRESSURE_LIMIT
+from predictor import progress
+from predictor.defaults import default_nn_dir
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
                                check_pressures, default_finger, finger_arg, finger_from_dict, finger_to_dict,
                                nan_unless)
 from predictor.joint import JointModel, load_joint
 from predictor.solve import (APPROACH, GestureResult, SolverOptions, gesture_result, meets_tolerances,
-                             newton_iterate, newton_polish, newton_step, solve, statics_at)
+                             newton_iterate, newton_polish, newton_step, result_labels, solve, statics_at)
 from predictor.statics import (HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, Statics, grasp_state, loss,
                                residual_norms)
 from surrogate import checkpoint
@@ -111,7 +113,9 @@ P_SCALE = PRESSURE_LIMIT  # MPa: the network sees P / 0.3, in [-1, 1] over the b
 #: Checkpoint kinds, by whether the predictor was trained with an object.
 GRAVITY_FORMAT = "softjoint-gravity-nn/1"
 CONTACT_FORMAT = "softjoint-contact-nn/1"
-DEFAULT_DIR = Path("results/predictor")
+#: The committed NN predictors' folder (predictor.defaults: from the package or
+#: $SOFTJOINT_RESULTS, never the working directory).
+DEFAULT_DIR = default_nn_dir()
 # LM step cap (scaled units) when polishing a contact NN prediction: small enough that the
 # iterates stay on the NN's branch (0.3, the ramp's cap, let 8 of 55 jump to another one).
 POLISH_STEP = 0.02
@@ -483,7 +487,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             pressures=pressures, tau=nan_unless(ok, tau), converged=ok, residual_force_mN=f, residual_moment_Nmm=m,
             normal_force_N=c.normal, friction_N=c.friction, friction_ratio=c.ratio, slip=c.slip,
             iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
-            pose=st.pose.masked(ok), method="nn",
+            pose=st.pose.masked(ok), method="nn", **result_labels(problem),
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
     raw["raw_state"] = raw_state
     res, stepped = _newton_on_branch(problem, pressures, tau, st, raw_state, t0, options)
@@ -672,9 +676,10 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
         for k, v in (("epoch", epoch), ("train_loss", train_loss), ("val_loss", val),
                      ("val_force_mN", ev["force_mN_mean"]), ("val_moment_Nmm", ev["moment_Nmm_mean"])):
             history[k].append(v)
-        print(f"[nn {cfg.variant}] epoch {epoch:4d} train {train_loss:.3e} val {val:.3e} "
-              f"force {ev['force_mN_mean']:.3f} mN moment {ev['moment_Nmm_mean']:.3f} N·mm", file=sys.stderr,
-              flush=True)
+        if not progress.quiet():   # the training's progress lines (--quiet: none)
+            print(f"[nn {cfg.variant}] epoch {epoch:4d} train {train_loss:.3e} val {val:.3e} "
+                  f"force {ev['force_mN_mean']:.3f} mN moment {ev['moment_Nmm_mean']:.3f} N·mm", file=sys.stderr,
+                  flush=True)
 
     if not cfg.state_heads:
         _fit(net, lambda idx: (label_loss(net, pick(p_train, idx), pick(tau_train, idx)) if cfg.supervised
@@ -758,7 +763,7 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
     Raises ValueError (one line): a missing, damaged, foreign or other-kind file
     (surrogate.checkpoint.CheckpointError), a joint mismatch or a finger/options mismatch.
     """
-    path = Path(path) if path else DEFAULT_DIR / ("contact_nn.pt" if contact else "gravity_nn.pt")
+    path = Path(path) if path else default_nn_dir() / ("contact_nn.pt" if contact else "gravity_nn.pt")
     ck = checkpoint.load(path, _format(contact), "NN predictor checkpoint")
     try:
         # Checkpoints written before the chain options record them were trained with the
@@ -782,7 +787,8 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.nn", description="train an NN gesture predictor")
     ap.add_argument("--variant", choices=sorted(VARIANTS), required=True)
-    ap.add_argument("--model", default="analytic", help="joint surrogate checkpoint or 'analytic'")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_output("--out", suffix=".pt", required=True, help="checkpoint path (.pt)")
     ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
                     help="override the variant's epochs (smoke runs)")
@@ -790,7 +796,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="finger description file (default: the paper's, fem/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
+    progress.set_quiet(args.quiet)
     torch.set_num_threads(1)
     cfg = VARIANTS[args.variant]
     with ap.errors():

@@ -1,9 +1,11 @@
 """Matplotlib drawing of gestures in the paper's colours (Figure 5).
 
-Rigid parts red, joints blue, object green, the gravity-free (tau = 0) shape dashed.
-Both fingers are drawn: the right one solved, the left one its mirror. Any finger chain
-(FingerPose.part_polylines: every joint's centre line through its anchors, every rigid
-part's segment, in chain order). Units mm.
+Rigid parts red, joints blue, object green, the unloaded (tau = 0) shape dashed, each
+named in the panel's legend; the title names the pressures, the grasp state and the joint
+model. Both fingers are drawn: the right one solved, the left one its mirror. Any finger
+chain (FingerPose.part_polylines: every joint's centre line through its anchors, every
+rigid part's segment, in chain order). A gesture that did not converge is not drawn
+(only its unloaded shape), and its title says NOT CONVERGED without figures. Units mm.
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ import torch  # noqa: E402
 
 from fem.files import atomic_path  # noqa: E402
 from predictor.gripper import FingerPose  # noqa: E402
-from predictor.statics import GripperProblem, Obstacle  # noqa: E402
+from predictor.statics import STATES, GripperProblem, Obstacle  # noqa: E402
 
 
 def object_outline(obstacle: Obstacle, n: int = 200) -> np.ndarray:
@@ -45,9 +47,33 @@ def draw_finger(ax, pose: FingerPose, index: int, dashed: bool = False) -> None:
                     solid_capstyle="round")
 
 
+def legend_handles(obstacle: bool) -> list:
+    """Legend entries: joints, rigid parts, the unloaded shape (and the object)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    out = [Line2D([], [], color="tab:blue", lw=3, label="joints"),
+           Line2D([], [], color="tab:red", lw=3, label="rigid parts"),
+           Line2D([], [], color="0.4", ls="--", lw=1.2, label="unloaded (tau = 0)")]
+    return out + ([Patch(color="tab:green", alpha=0.35, label="object")] if obstacle else [])
+
+
+def gesture_title(result, index: int, problem: GripperProblem) -> str:
+    """Pressures, the grasp state (and normal force) and the joint model of gesture ``index``."""
+    pressures = ", ".join(f"P{i + 1}={v:+.2f}" for i, v in enumerate(result.pressures[index].tolist()))
+    if not bool(result.converged[index]):
+        state = "  NOT CONVERGED"
+    elif problem.obstacle is not None:
+        state = f"  N={result.normal_force_N[index]:.2f} N  {STATES[int(result.states()[index])]}"
+    else:
+        state = ""
+    return f"{pressures} MPa{state}\n{problem.joint.name}"
+
+
 def draw_gesture(ax, result, index: int, problem: GripperProblem, title: str | None = None) -> None:
     """Draw solve result ``index`` of ``problem``: gesture, the gravity- and load-free
-    shape (tau = 0, dashed) and the object."""
+    shape (tau = 0, dashed), the object and the legend; ``title`` replaces the first line
+    of the default title (the joint model stays named)."""
     p = result.pressures[index:index + 1]
     with torch.no_grad():
         draw_finger(ax, problem.pose(p, torch.zeros(*p.shape, 3, dtype=p.dtype)), 0, dashed=True)
@@ -62,11 +88,9 @@ def draw_gesture(ax, result, index: int, problem: GripperProblem, title: str | N
     ax.set_aspect("equal")
     ax.set_xlabel("X (mm)")
     ax.set_ylabel("Y (mm)")
-    pressures = ", ".join(f"P{i + 1}={v:+.2f}" for i, v in enumerate(result.pressures[index].tolist()))
-    state = "" if bool(result.converged[index]) else "  NOT CONVERGED"
-    if obstacle is not None and bool(result.converged[index]):
-        state += f"  N={result.normal_force_N[index]:.2f} N" + ("  SLIP" if bool(result.slip[index]) else "  holds")
-    ax.set_title(title or f"{pressures} MPa{state}", fontsize=9)
+    ax.legend(handles=legend_handles(obstacle is not None), fontsize=6, loc="upper right")
+    default = gesture_title(result, index, problem)
+    ax.set_title(default if title is None else f"{title}\n{problem.joint.name}", fontsize=9)
 
 
 def save_figure(fig, path, dpi: int) -> None:

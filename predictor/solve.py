@@ -59,8 +59,10 @@ import torch
 
 from fem.spec import INPUT_BOX
 from predictor.gripper import FingerPose, check_pressures, nan_unless, rot, with_rows
-from predictor.statics import (MOMENT_SCALE, PENALTY_WEIGHT, ContactState, GripperProblem, Statics, contact_loads,
-                               range_penalty, residual_norms, scaled)
+from predictor.progress import Heartbeat
+from predictor.statics import (MOMENT_SCALE, NOT_CONVERGED, PENALTY_WEIGHT, STATES, ContactState, GripperProblem,
+                               Statics, contact_loads, grasp_state, out_of_reach, range_penalty, residual_norms,
+                               scaled)
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,13 @@ class GestureResult:
     first_contact (B, J) MPa: the pressures of the first ramp step (or the approach, when
     the object is brought in) after which the finger touches the object, NaN when it never
     does (without the ramp, x0 given: the target pressures if the final gesture touches);
-    None without an object.
+    None without an object. joint: the joint model's name; mu: the contact law's friction
+    coefficient and object_weight_N: the object's weight (N, 0 without gravity), both None
+    without an object.
+
+    friction_ratio is the signed lambda of the contact law (statics.contact_loads; ±1e3
+    where nothing touches): internal. The figure reported everywhere is the friction use
+    u = |f|/(mu N) = |lambda|/mu (``friction_use``), null where nothing touches.
     """
 
     pressures: torch.Tensor = field(metadata=GIVEN)
@@ -129,22 +137,47 @@ class GestureResult:
     pose: FingerPose
     method: str
     first_contact: torch.Tensor | None = None
+    joint: str = ""
+    mu: float | None = None
+    object_weight_N: float | None = None
+
+    def friction_use(self) -> torch.Tensor:
+        """u = |f|/(mu N) = |lambda|/mu (B,), NaN where nothing touches, without an object
+        or where not converged."""
+        touching = self.converged & (self.normal_force_N > 0)
+        if self.mu is None:
+            return torch.full_like(self.normal_force_N, float("nan"))
+        return torch.where(touching, self.friction_ratio.abs() / self.mu, float("nan"))
+
+    def states(self) -> torch.Tensor:
+        """Grasp state codes (B,) into statics.STATES: not_converged, else no_contact
+        (nothing touches, or no object), holds or slips."""
+        state = grasp_state(self.normal_force_N, self.slip)
+        return torch.where(self.converged, state, NOT_CONVERGED)
 
     def summary(self, i: int = 0) -> dict:
-        """Sample i as plain JSON types: pressures_MPa, converged, tau (Jx3, None unless
-        converged), per-joint residual_force_mN and residual_moment_Nmm, tip [x, y] mm (the
-        end of the last part) and tip_angle_deg (the last part's direction; None unless
-        converged), contact_force_N, friction_ratio, slip and iterations (time excluded: a
-        summary of the same solve is the same)."""
+        """Sample i as plain JSON types: pressures_MPa, converged, state (statics.STATES),
+        tau (Jx3), per-joint residual_force_mN and residual_moment_Nmm (at the last
+        iterate), tip [x, y] mm (the end of the last part), tip_angle_deg (the last part's
+        direction), contact_force_N and friction_N (N), friction_use |f|/(mu N) and slip
+        (null where nothing touches), iterations, joint, mu and object_weight_N (null
+        without an object). Every figure of the gesture is null unless converged. Time
+        excluded: a summary of the same solve is the same."""
         ok = bool(self.converged[i])
-        return {"pressures_MPa": self.pressures[i].tolist(), "converged": ok,
+        state = STATES[int(self.states()[i])]
+        touching = state in ("holds", "slips")
+        use = float(self.friction_use()[i])
+        return {"pressures_MPa": self.pressures[i].tolist(), "converged": ok, "state": state,
                 "tau": self.tau[i].tolist() if ok else None,
                 "residual_force_mN": self.residual_force_mN[i].tolist(),
                 "residual_moment_Nmm": self.residual_moment_Nmm[i].tolist(),
                 "tip": self.pose.tip_end[i].tolist() if ok else None,
                 "tip_angle_deg": math.degrees(float(self.pose.tip_angle[i])) if ok else None,
-                "contact_force_N": float(self.normal_force_N[i]), "friction_ratio": float(self.friction_ratio[i]),
-                "slip": bool(self.slip[i]), "iterations": int(self.iterations[i])}
+                "contact_force_N": float(self.normal_force_N[i]) if ok else None,
+                "friction_N": float(self.friction_N[i]) if ok else None,
+                "friction_use": use if touching else None,
+                "slip": bool(self.slip[i]) if touching else None, "iterations": int(self.iterations[i]),
+                "joint": self.joint, "mu": self.mu, "object_weight_N": self.object_weight_N}
 
     def with_rows(self, rows: torch.Tensor, other: "GestureResult") -> "GestureResult":
         """A copy whose solved rows ``rows`` (B,) bool come from ``other`` (a result for the
@@ -604,6 +637,10 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
     check_pressures(pressures)
     if options.method not in ("newton", "lm", "lbfgs"):
         raise ValueError(f"unknown method {options.method!r}: use newton, lm or lbfgs")
+    if out_of_reach(problem):   # nothing can touch it: the object-free gesture, at once
+        res = solve(dataclasses.replace(problem, obstacle=None), pressures, options, x0)
+        return dataclasses.replace(res, first_contact=torch.full_like(pressures, float("nan")),
+                                   **result_labels(problem))
     t0 = time.perf_counter()
     if options.method == "newton" and problem.obstacle is None and options.jacobian != "exact":
         if x0 is None and options.max_iter >= COLD_STEPS:
@@ -931,7 +968,9 @@ def _solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solve
             x, ok, iterations, _ = run_free(x, p0)
         record_contact(x, p0)
         jac = None
+        beat = Heartbeat("solve")   # a hard ramp (cut-backs on every step) can take tens of seconds
         for k in range(1, options.ramp_steps + 1):
+            beat(lambda: f"ramp step {k} of {options.ramp_steps}, {int(ok.sum())} of {B} on track")
             pa = p0 + (pressures - p0) * ((k - 1) / options.ramp_steps)
             pb = p0 + (pressures - p0) * (k / options.ramp_steps)
             step_run = run if k == options.ramp_steps else run_loose
@@ -959,5 +998,13 @@ def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Te
         pressures=pressures, tau=tau, converged=ok, residual_force_mN=force, residual_moment_Nmm=moment,
         normal_force_N=st.contact.normal, friction_N=st.contact.friction, friction_ratio=st.contact.ratio,
         slip=st.contact.slip, iterations=iterations, time_ms=1e3 * (time.perf_counter() - t0), pose=pose,
-        method=method, first_contact=first_contact,
+        method=method, first_contact=first_contact, **result_labels(problem),
     )
+
+
+def result_labels(problem: GripperProblem) -> dict:
+    """The GestureResult fields that name what was solved: joint, mu, object_weight_N."""
+    has = problem.obstacle is not None
+    weight = problem.params.object_weight if problem.gravity else 0.0
+    return {"joint": problem.joint.name, "mu": problem.contact.mu if has else None,
+            "object_weight_N": weight if has else None}

@@ -20,11 +20,12 @@ A load on part k enters joint i's balance when part k is distal to joint i (k af
 the finger's chain, predictor.gripper.ChainLayout): the paper's finger gives joint 1 the
 link, joint 2 and the tip, and joint 2 the tip. Weights act at the rigid parts' midpoints;
 a joint's own weight (GripperParams.joint_weight):
-- ``lumped`` (the paper's, default): at the mean of its anchors; it enters only the
-  balances of the joints proximal to it, as loads on a joint's body do, since the
-  surrogate takes end loads only (as in the paper);
-- ``split``: half at its proximal centre O_i (the joints proximal to it) and half at its
-  distal end r_10,i, which also enters its own balance, with zero moment arm there.
+- ``lumped`` (the paper's): at the mean of its anchors; it enters only the balances of
+  the joints proximal to it, as loads on a joint's body do, since the surrogate takes
+  end loads only (as in the paper);
+- ``split`` (the default, predictor.gripper.DEFAULT_JOINT_WEIGHT): half at its proximal
+  centre O_i (the joints proximal to it) and half at its distal end r_10,i, which also
+  enters its own balance, with zero moment arm there.
 A load distal to no joint (joint 1's own weight when lumped) is carried by the base mount.
 The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with alpha = beta =
 1 N⁻², gamma = 1e-4 (N·mm)⁻² (moments scaled by a 100 mm lever, the finger's size).
@@ -39,7 +40,7 @@ Contact (object fixed in the plane, signed distance d < 0 inside, outward normal
   the object's vertical balance gives λ = (W/2 + Σ N_k n_ky) / Σ N_k t_ky. The finger
   feels N_k n_k - λ_c N_k t_k with λ_c = clip(λ, -mu, mu) (the cone |f| <= mu·N always
   holds); ``slip`` is set when |λ| > mu or nothing touches the object. The split W/2
-  assumes the object is symmetric about X = 0 (off-axis objects: an approximation).
+  assumes the object is symmetric about X = 0 (other objects are refused: ``object_error``).
 
 Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
 max(0, |M|-100)/100 per joint, the surrogate's training box (fem.spec.INPUT_BOX).
@@ -86,6 +87,16 @@ class Obstacle:
     y: float = -195.0
     angle: float = 0.0
 
+    def __post_init__(self):
+        why = object_error(self)
+        if why:
+            raise ValueError(why)
+
+    @property
+    def radius(self) -> float:
+        """Radius (mm) of the smallest circle about the centre that holds the object."""
+        return math.hypot(self.a, self.b) if self.kind == "rectangle" else max(self.a, self.b)
+
     def signed_distance(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """points (..., 2) mm -> (d (...) mm, negative inside; n (..., 2) outward unit normal).
 
@@ -123,6 +134,39 @@ class Obstacle:
         return d, (rot(torch.tensor(self.angle, dtype=points.dtype), n) if self.angle else n)
 
 
+#: Object bounds (mm): half sizes (radius, semi-axes, half width/height) and the centre's
+#: height; the model mirrors the right finger, so the object must be mirror-symmetric
+#: about X = 0 (centred, and an ellipse or rectangle turned by a multiple of 90 degrees).
+SIZE_RANGE = (0.1, 500.0)
+Y_RANGE = (-1000.0, 1000.0)
+
+
+def object_error(ob: "Obstacle") -> str | None:
+    """Why the model cannot represent object ``ob`` (one line), or None: an unknown kind,
+    a value that is not finite, a size outside SIZE_RANGE, a centre off the axis X = 0
+    or beyond Y_RANGE, a rotation that breaks the mirror symmetry."""
+    if ob.kind not in _KEYS:
+        return f"unknown object kind {ob.kind!r} (use circle, ellipse or rectangle)"
+    values = dict(size=ob.a, size_b=ob.b, x=ob.x, y=ob.y, angle=ob.angle)
+    for name, v in values.items():
+        if not math.isfinite(v):
+            return f"object {name} = {v}: not a finite number"
+    lo, hi = SIZE_RANGE
+    for v in (ob.a, ob.b):
+        if not lo <= v <= hi:
+            return (f"object size {2 * v:g} mm ({ob.kind} half size {v:g} mm) is outside the model's "
+                    f"[{lo:g}, {hi:g}] mm half-size range")
+    if ob.x != 0.0:
+        return (f"object centre x = {ob.x:g} mm: the model mirrors the right finger, so it represents objects "
+                "on the gripper's axis only (x = 0)")
+    if not Y_RANGE[0] <= ob.y <= Y_RANGE[1]:
+        return f"object centre y = {ob.y:g} mm is outside [{Y_RANGE[0]:g}, {Y_RANGE[1]:g}] mm"
+    if ob.kind != "circle" and abs(math.sin(2.0 * ob.angle)) > 1e-12:
+        return (f"object turned by {math.degrees(ob.angle):g} deg: the model mirrors the right finger, so an "
+                f"{ob.kind} must stay symmetric about X = 0 (deg a multiple of 90)")
+    return None
+
+
 _DEFAULTS = {
     "circle": dict(a=30.0, b=30.0, y=-195.0),
     "ellipse": dict(a=35.0, b=25.0, y=-195.0),
@@ -140,7 +184,8 @@ def parse_object(spec: str) -> Obstacle:
     deg=20``, ``rectangle:w=60,h=50,x=0,y=-245``. Lengths mm, ``deg`` in degrees.
 
     Raises ValueError with a one-line reason naming the offending item for an unknown kind
-    or key, a key given twice, a value that is not a finite number, or a size <= 0.
+    or key, a key given twice, a value that is not a finite number, a size <= 0, or an
+    object the model cannot represent (``object_error``: bounds, off the axis).
     """
     kind, _, rest = spec.strip().partition(":")
     kind = kind.strip().lower()
@@ -170,7 +215,10 @@ def parse_object(spec: str) -> Obstacle:
             value *= 0.5  # full width/height -> half
         for name in _KEYS[kind][key]:
             fields[name] = value
-    return Obstacle(**fields)
+    try:
+        return Obstacle(**fields)
+    except ValueError as exc:
+        raise ValueError(f"object {spec!r}: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -349,6 +397,28 @@ class GripperProblem:
         g_force = rot(pose.theta, tau[..., :2])
         res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
         return Statics(res, pose, contact)
+
+
+#: A joint's reach (its chord, mm) is bounded by this multiple of its length: an
+#: upper bound well above the stretch the joint models give in the training box (~1%).
+JOINT_REACH = 1.5
+
+
+def finger_reach(params: GripperParams) -> float:
+    """An upper bound (mm) on the distance from the base mount of any finger point: the
+    rigid parts' lengths plus JOINT_REACH times each joint's length."""
+    return sum(p.length * (JOINT_REACH if p.kind == "joint" else 1.0) for p in params.finger.parts)
+
+
+def out_of_reach(problem: "GripperProblem") -> bool:
+    """True when nothing of either finger can touch the object at any pressure: its
+    bounding circle (Obstacle.radius) lies farther than ``finger_reach`` from both
+    base mounts (the object is symmetric, so one mount suffices)."""
+    ob = problem.obstacle
+    if ob is None:
+        return False
+    mount = 0.5 * problem.params.finger.base_gap
+    return math.hypot(ob.x - mount, ob.y) - ob.radius > finger_reach(problem.params)
 
 
 def scaled(res: torch.Tensor) -> torch.Tensor:

@@ -41,6 +41,7 @@ from fem.finger_spec import load_finger
 from fem.geometry import JointGeometry
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
+from predictor.progress import set_quiet
 from predictor.solve import SolverOptions, solve
 from predictor.statics import GripperProblem
 
@@ -100,7 +101,7 @@ def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_w
     return entry, pose
 
 
-def overlay(path: Path, case: dict, fem_png: Path, poses: dict) -> None:
+def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "") -> None:
     """The FEM render (|u|) with the predictors' centre lines over it (matplotlib, atomic)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -128,7 +129,8 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict) -> None:
     ax.set_ylabel("Y (mm)")
     p1, p2 = case["pressures_MPa"]
     ax.set_title(f"finger FEM vs predictor: P = ({p1:g}, {p2:g}) MPa, "
-                 f"{'gravity' if case['gravity'] else 'no gravity'}", fontsize=10)
+                 f"{'gravity' if case['gravity'] else 'no gravity'}" + (f"\njoint model {joint}" if joint else ""),
+                 fontsize=10)
     ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
     fig.tight_layout()
     with atomic_path(path) as tmp:
@@ -181,7 +183,8 @@ def summarise(entries: list[dict]) -> dict:
 def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m predictor.validate_finger", description=__doc__.split("\n\n")[0])
     ap.add_argument("--fem", default="results/validation/finger_fem", help="folder of fem.finger_cases results")
-    ap.add_argument("--model", default="results/surrogate/improved.pt", help="joint surrogate checkpoint")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
     ap.add_argument("--finger", default=None, help="finger file the FEM cases used (default: the paper's)")
     ap.add_output("--out", suffix=".json", default="results/validation/finger.json", help="output JSON")
     ap.add_output("--figures", folder=True, default="results/validation", help="folder for the overlay PNGs")
@@ -190,7 +193,9 @@ def main(argv=None) -> int:
     ap.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"), default=JointGeometry().mesh_size,
                     help="validate the cases solved at this joint mesh size, mm (default: the production "
                          "mesh, %(default)g)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
+    set_quiet(args.quiet)
     torch.set_num_threads(1)
     with ap.errors():
         finger = load_finger(args.finger)
@@ -227,7 +232,7 @@ def main(argv=None) -> int:
             png = Path(args.fem) / f"{Path(case['case']).name}.png"
             if png.is_file():
                 fig = Path(args.figures) / f"finger_{case['case']}.png"
-                overlay(fig, case, png, poses)
+                overlay(fig, case, png, poses, joint.name)
                 figures.append(str(fig))
             print(f"{case['case']}: " + ", ".join(
                 f"{e['kinematics']}/{e['joint_weight']}: {e['tip_error_mm']:.2f} mm"

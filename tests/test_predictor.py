@@ -397,19 +397,29 @@ def test_signed_distances():
 
 
 def test_object_spec_errors():
-    """Unknown kinds and keys, a key given twice, a value that is not a finite number and a
-    size <= 0 are one-line ValueErrors naming the offending item; w/h are full sizes."""
+    """Unknown kinds and keys, a key given twice, a value that is not a finite number, a
+    size <= 0 and an object the mirrored model cannot represent (off the axis X = 0, an
+    asymmetric rotation, sizes or height beyond the bounds) are one-line ValueErrors naming
+    the offending item; w/h are full sizes, a circle may turn (it stays symmetric)."""
     for bad, needle in (("blob", "'blob'"), ("circle:q=3", "'q=3'"), ("circle:r=abc", "r=abc"),
                         ("ellipse:a=-1", "a=-1"), ("circle:r=30,r=40", "'r' given twice"),
                         ("ellipse:a=35,b=25,a=30", "'a' given twice"), ("circle:r=nan", "r=nan"),
-                        ("circle:y=inf", "y=inf"), ("rectangle:w=0", "w=0"), ("circle:r", "'r'")):
+                        ("circle:y=inf", "y=inf"), ("rectangle:w=0", "w=0"), ("circle:r", "'r'"),
+                        ("circle:x=15,r=20", "object centre x = 15 mm"), ("circle:x=-0.5", "x = -0.5 mm"),
+                        ("ellipse:deg=20", "turned by 20 deg"), ("rectangle:deg=-45", "turned by -45 deg"),
+                        ("circle:r=1e9", "half size 1e+09 mm"), ("rectangle:w=0.1", "half size 0.05 mm"),
+                        ("ellipse:b=501", "half size 501 mm"), ("circle:y=-1001", "y = -1001 mm")):
         with pytest.raises(ValueError) as info:
             parse_object(bad)
         assert needle in str(info.value) and "\n" not in str(info.value), (bad, str(info.value))
     r = parse_object("rectangle:w=60,h=50,y=-200")
     assert (r.a, r.b, r.y) == (30.0, 25.0, -200.0)
-    c = parse_object("circle:r=40, x=5,deg=90")
-    assert (c.a, c.b, c.x, c.angle) == (40.0, 40.0, 5.0, math.pi / 2)
+    c = parse_object("circle:r=40, x=0,deg=33")
+    assert (c.a, c.b, c.x, c.angle) == (40.0, 40.0, 0.0, math.radians(33))
+    assert parse_object("ellipse:deg=-270").angle == math.radians(-270)   # symmetric about X = 0
+    assert parse_object("rectangle:w=1000,h=1000,y=1000").radius == math.hypot(500, 500)
+    with pytest.raises(ValueError, match="object centre x = 3 mm"):
+        Obstacle(x=3.0)
 
 
 def test_zero_contact_force_without_penetration():
@@ -560,13 +570,16 @@ def test_gesture_result_summary_and_rows():
     assert bool(good.converged.all()) and not bool(bad.converged[1])
     s0 = good.summary(0)
     assert json.loads(json.dumps(s0)) == s0
-    assert list(s0) == ["pressures_MPa", "converged", "tau", "residual_force_mN", "residual_moment_Nmm", "tip",
-                        "tip_angle_deg", "contact_force_N", "friction_ratio", "slip", "iterations"]
-    assert s0["pressures_MPa"] == [-0.1, 0.1] and s0["converged"] is True and s0["slip"] is False
+    assert list(s0) == ["pressures_MPa", "converged", "state", "tau", "residual_force_mN", "residual_moment_Nmm",
+                        "tip", "tip_angle_deg", "contact_force_N", "friction_N", "friction_use", "slip", "iterations",
+                        "joint", "mu", "object_weight_N"]
+    assert s0["pressures_MPa"] == [-0.1, 0.1] and s0["converged"] is True and s0["state"] == "no_contact"
+    assert s0["slip"] is None and s0["friction_use"] is None and s0["joint"] == J.name and s0["mu"] is None
     assert s0["tau"] == good.tau[0].tolist() and s0["tip"] == good.pose.tip_end[0].tolist()
     assert s0["tip_angle_deg"] == math.degrees(float(good.pose.phi[0, 1])) and s0["iterations"] == good.iterations[0]
     s1 = bad.summary(1)
     assert s1["converged"] is False and s1["tau"] is None and s1["tip"] is None and s1["tip_angle_deg"] is None
+    assert s1["state"] == "not_converged" and s1["contact_force_N"] is None and s1["friction_N"] is None
     rows = torch.tensor([False, True])
     sub = solve(GRAVITY, p[rows])
     mixed = bad.with_rows(rows, sub)
@@ -919,12 +932,25 @@ def test_committed_gestures_unchanged():
     for problem, rows in groups:
         res = solve(problem, t([r["pressures_MPa"] for r in rows]))
         for i, row in enumerate(rows):
-            now = res.summary(i)
-            for key in ("converged", "iterations", "slip"):
+            now, row = res.summary(i), _current_keys(row)
+            for key in ("converged", "iterations", "slip", "state"):
                 assert now[key] == row[key], (row["pressures_MPa"], key)
-            for key in ("tau", "tip", "tip_angle_deg", "contact_force_N", "friction_ratio"):
-                np.testing.assert_allclose(np.array(now[key]), np.array(row[key]), rtol=0, atol=1e-9,
-                                           err_msg=f"{row['pressures_MPa']} {key}")
+            for key in ("tau", "tip", "tip_angle_deg", "contact_force_N", "friction_use"):
+                np.testing.assert_allclose(np.array(now[key], dtype=float), np.array(row[key], dtype=float),
+                                           rtol=0, atol=1e-9, err_msg=f"{row['pressures_MPa']} {key}")
+
+
+def _current_keys(row: dict, mu: float = 0.3) -> dict:
+    """A gestures.json case in today's keys: files written before issue 33 carry the
+    signed friction_ratio lambda and slip even where nothing touches (state, friction_use
+    = |lambda|/mu and slip are then derived; mu was always 0.3); newer ones pass through."""
+    if "state" in row:
+        return row
+    touching = row["converged"] and row["contact_force_N"] > 0
+    state = ("not_converged" if not row["converged"] else "no_contact" if not touching
+             else "slips" if row["slip"] else "holds")
+    return {**row, "state": state, "slip": row["slip"] if touching else None,
+            "friction_use": abs(row["friction_ratio"]) / mu if touching else None}
 
 
 def _closed_form_tip(finger, pressures, cap: bool):

@@ -1,0 +1,165 @@
+"""One validation of a gripper question, shared by every tool and the Python API.
+
+Each input has one check (a ``Check``: bounds and units), used as the argparse type of
+its flag (``Check.arg``: "--mu: 'nan' is not a finite number (allowed (0, 5])") and by
+the API (``Check.value``: "mu: ..."), so a value refused by one is refused by the other
+with the same reason. ``load_problem`` builds the GripperProblem of predictor.gesture's
+defaults (joint from predictor.defaults, object from a spec, approach gesture APPROACH)
+and refuses an object the model cannot represent (statics.object_error) or that cuts
+through the fingers where it is brought in (``placement_error``): the gripper settles
+at the approach gesture without the object, so an object overlapping that gesture
+would start the grasp inside the fingers.
+
+Data flow: model, object spec, options -> load_problem -> GripperProblem (checked).
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+import torch
+
+from fem import cli
+from fem.spec import PRESSURE_LIMIT
+from predictor.gripper import GripperParams, check_pressures
+from predictor.joint import load_joint
+from predictor.solve import APPROACH, approach_for, solve
+from predictor.statics import ContactParams, GripperProblem, parse_object
+
+FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
+
+
+@dataclass(frozen=True)
+class Check:
+    """A number's bounds: [lo, hi] (open at lo with open_lo), unit, integer."""
+
+    lo: float | None
+    hi: float | None
+    unit: str = ""
+    integer: bool = False
+    open_lo: bool = False
+
+    @property
+    def arg(self):
+        """The argparse type of the flag."""
+        return cli.number(self.lo, self.hi, self.unit, self.integer, self.open_lo)
+
+    def value(self, name: str, v) -> float:
+        """The API's check of value v of parameter ``name``: ValueError (one line) with the
+        flag's reason, prefixed by the name."""
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (self.integer and float(v) != int(v)):
+            raise ValueError(f"{name}: {v!r} is not {'an integer' if self.integer else 'a finite number'}")
+        try:
+            return self.arg(repr(int(v)) if self.integer else repr(float(v)))
+        except argparse.ArgumentTypeError as exc:
+            why = str(exc)
+        try:   # the reason as the CLI words it for the same value typed short (0, not 0.0)
+            self.arg(f"{v:g}")
+        except argparse.ArgumentTypeError as exc:
+            why = str(exc)
+        raise ValueError(f"{name}: {why}")
+
+
+MU = Check(0.0, 5.0, open_lo=True)                 # friction coefficient of the contact law
+OBJECT_WEIGHT = Check(0.0, 10.0, "N")              # the object's weight
+GRID = Check(2, 201, integer=True)                 # atlas grid points per axis
+MIN_NORMAL = Check(0.0, 10.0, "N")                 # inverse --min-normal
+
+
+def check_box(box) -> tuple[float, float, float, float]:
+    """A pressure box (P1LO, P1HI, P2LO, P2HI) MPa: four finite numbers within |P| <= 0.3,
+    P1LO < P1HI and P2LO < P2HI; ValueError (one line) otherwise."""
+    try:
+        box = tuple(float(v) for v in box)
+    except (TypeError, ValueError):
+        raise ValueError(f"box {box!r}: expected 4 numbers P1LO,P1HI,P2LO,P2HI (MPa)") from None
+    if len(box) != 4:
+        raise ValueError(f"box {box!r}: expected 4 numbers P1LO,P1HI,P2LO,P2HI (MPa)")
+    one = Check(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
+    box = tuple(one.value("box", v) for v in box)
+    if not (box[0] < box[1] and box[2] < box[3]):
+        raise ValueError(f"box {box}: expected P1LO < P1HI and P2LO < P2HI")
+    return box
+
+
+def box_arg(text: str) -> tuple[float, float, float, float]:
+    """--box P1LO,P1HI,P2LO,P2HI MPa (``check_box``)."""
+    box = cli.numbers(4, -PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")(text)
+    if not (box[0] < box[1] and box[2] < box[3]):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected P1LO < P1HI and P2LO < P2HI")
+    return box
+
+
+def object_arg(text: str) -> str:
+    """--object: the spec, checked while parsing (statics.parse_object), so a bad one is
+    refused before any model is loaded."""
+    try:
+        parse_object(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def placement_error(problem: GripperProblem) -> str | None:
+    """Why the object is badly placed, or None: it intersects the fingers where it is
+    brought in, i.e. at the approach gesture (or at zero pressure without one), a
+    gravity-loaded equilibrium without the object. (The default objects do intersect the
+    zero-pressure gesture, by design: statics.Obstacle.)"""
+    if problem.obstacle is None:
+        return None
+    free = GripperProblem(problem.joint, problem.params, None, problem.contact, problem.gravity)
+    p = (0.0,) * problem.n_joints if problem.approach is None else tuple(problem.approach)
+    res = solve(free, torch.tensor([p], dtype=torch.float64))
+    if not bool(res.converged[0]):  # no gesture to check against: never guess one
+        return f"the gesture without the object at ({', '.join(f'{v:g}' for v in p)}) MPa did not converge"
+    with torch.no_grad():
+        pen = float(problem.residual(res.pressures, res.tau).contact.penetration[0])
+    if pen > 0:
+        where = ("zero pressure" if problem.approach is None else
+                 f"the approach gesture ({', '.join(f'{v:g}' for v in p)}) MPa")
+        return (f"the object intersects the fingers at {where} by {pen:.2f} mm: place it lower or "
+                "farther from the fingers")
+    return None
+
+
+def add_arguments(ap, model_help: str = "") -> None:
+    """The flags of every planning tool: --model, --mu, --object-weight, --quiet."""
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "results/surrogate/improved.pt of this package or of $SOFTJOINT_RESULTS)" + model_help)
+    ap.add_argument("--mu", type=MU.arg, help=f"friction coefficient of the contact law (default {ContactParams.mu})")
+    ap.add_argument("--object-weight", type=OBJECT_WEIGHT.arg,
+                    help=f"the object's weight, N (default {GripperParams.object_weight})")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+
+DEFAULT = "default"
+
+
+def load_problem(model: str | None, spec: str | None, gravity: bool = True, params: GripperParams | None = None,
+                 mu: float | None = None, object_weight: float | None = None,
+                 approach=DEFAULT, joint=None) -> GripperProblem:
+    """The GripperProblem of ``predictor.gesture``'s defaults. model: a checkpoint path,
+    "analytic", or None (the committed surrogate, predictor.defaults); joint: an already
+    loaded JointModel instead; spec: an object spec (None: no object); params: finger and
+    chain options (None: the paper's finger, default options); mu, object_weight (N):
+    the contact law's friction coefficient and the object's weight (None: the defaults,
+    0.3 and GripperParams.object_weight); approach: DEFAULT (APPROACH, or approach_for(J),
+    with an object; none without), None (ramp from zero) or J pressures MPa. ValueError
+    (one line) for any bad value and for an object badly placed (``placement_error``)."""
+    params = params or GripperParams()
+    if object_weight is not None:
+        params = GripperParams(params.finger, OBJECT_WEIGHT.value("object_weight", object_weight),
+                               params.kinematics, params.joint_weight)
+    contact = ContactParams() if mu is None else ContactParams(mu=MU.value("mu", mu))
+    obstacle = parse_object(spec) if spec else None
+    if approach == DEFAULT:
+        approach = (APPROACH if params.n_joints == 2 else approach_for(params.n_joints)) if spec else None
+    elif approach is not None:
+        check_pressures(torch.as_tensor(approach, dtype=torch.float64).reshape(1, -1))
+    joint = joint if joint is not None else load_joint(model)
+    problem = GripperProblem(joint, params, obstacle=obstacle, contact=contact, gravity=gravity,
+                             approach=None if approach is None else tuple(approach))
+    why = placement_error(problem)
+    if why:
+        raise ValueError(why)
+    return problem
