@@ -170,6 +170,7 @@ results/surrogate/sweep/README.md: $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manife
 # Joint model for the predictor: the committed surrogate when present, else the analytic stand-in.
 PRED_JOINT := $(if $(wildcard results/surrogate/improved.pt),results/surrogate/improved.pt,analytic)
 PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
+              predictor/defaults.py predictor/problem.py predictor/progress.py \
               $(filter-out analytic,$(PRED_JOINT))
 
 gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/

@@ -160,7 +160,7 @@ def test_inverse_hold_beats_the_atlas(circle, atlas):
 
 def test_bad_placement_and_cli_exit_codes(tmp_path):
     with pytest.raises(ValueError, match="intersects the fingers"):
-        load_gripper(MODEL, "circle:x=40,y=-80")
+        load_gripper(MODEL, "rectangle:w=1000,h=2,y=-195")
     r = subprocess.run([sys.executable, "-m", "predictor.inverse", "--goal", "tip:0,-400", "--json"], cwd=ROOT,
                        env=ENV, capture_output=True, text=True, timeout=300)
     assert r.returncode == 1, r.stderr

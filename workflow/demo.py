@@ -178,22 +178,21 @@ def gravity_row(fem: dict, gesture: dict, fem_file: str) -> dict:
 
 
 def grasp_state(g: dict) -> str:
-    if g["contact_force_N"] <= 0:
-        return "no contact"
-    return "slips" if g["slip"] else "holds"
+    """The gesture's own state (predictor.gesture --json ``state``) in words."""
+    return g["state"].replace("_", " ")
 
 
 def grasp_row(g: dict) -> dict:
     """A grasp (predictor.gesture --object JSON): no FEM, so the contact figures."""
     p1, p2 = g["pressures_MPa"]
-    figures = {"normal_force_N": g["contact_force_N"], "friction_ratio": g["friction_ratio"],
+    figures = {"normal_force_N": g["contact_force_N"], "friction_use": g["friction_use"],
                "state": grasp_state(g)}
     return {"case": f"grasp {g['object']} ({_g(p1)}, {_g(p2)}) MPa", "fem": "n/a", "model": _predictor_label(g),
             "errors": None, "grasp": figures,
-            "error": f"n/a; normal {figures['normal_force_N']:.3f} N, |f|/N {figures['friction_ratio']:.3f}, "
+            "error": f"n/a; normal {figures['normal_force_N']:.3f} N, |f|/(mu N) {figures['friction_use']:.3f}, "
                      f"{figures['state']}",
             "fem_s": None, "model_s": g["time_ms"] / 1000.0,
-            "produced_by": {"grasp": "grasp: contact_force_N, friction_ratio, slip", "model_s": "grasp: time_ms"},
+            "produced_by": {"grasp": "grasp: contact_force_N, friction_use, state", "model_s": "grasp: time_ms"},
             "figures": ["grasp.png"]}
 
 

@@ -641,6 +641,18 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
     return out + [""]
 
 
+def _grasp_figures(c: dict, mu: float) -> tuple[str, str]:
+    """(state in words, friction use |f|/(mu N) as text) of one gesture of gestures.json;
+    files written before the gesture said its state carry a signed friction_ratio f/N."""
+    if "state" in c:
+        state, use = c["state"], c["friction_use"]
+    else:
+        touching = c["contact_force_N"] > 0
+        state = "slips" if touching and c["slip"] else "holds" if touching else "no_contact"
+        use = abs(c["friction_ratio"]) / mu if touching else None
+    return state.replace("_", " "), "n/a" if use is None else f"{use:.3f}"
+
+
 def _gestures(root: Path) -> list[str]:
     """The paper's gesture cases (make gestures): their figures from gestures.json and the
     pictures predictor.figures draws."""
@@ -652,9 +664,9 @@ def _gestures(root: Path) -> list[str]:
         out += [f"results/predictor/gestures.json (`python -m predictor.figures --out results/predictor`), joint "
                 f"model {_joint(root, g.get('joint'), 'make gestures')}; grasps from the approach gesture "
                 f"({', '.join(f'{v:g}' for v in g.get('approach_MPa', []))} MPa). Fingertip: the end of the "
-                "last part; |f|/N: friction over normal force at the contact.", "",
+                "last part; friction use: |f|/(mu N), the share of the friction cone the grasp needs.", "",
                 "| case | (P1, P2) MPa | converged | fingertip (X, Y) mm | tip angle | normal force "
-                "| \\|f\\|/N | state |",
+                "| friction use | state |",
                 "|---|---|---|---|---|---|---|---|"]
         cases = [("gravity", c) for c in g.get("gravity", [])] + [("no gravity", c) for c in g.get("free", [])]
         cases += [(f"grasp, {kind}", c) for kind, cs in g.get("grasps", {}).items() for c in cs]
@@ -663,9 +675,9 @@ def _gestures(root: Path) -> list[str]:
             if not c["converged"]:
                 out.append(f"| {label} | {p} | no | | | | | not converged |")
                 continue
-            state = ("no contact" if c["contact_force_N"] == 0 else "slips" if c["slip"] else "holds")
+            state, use = _grasp_figures(c, g.get("mu", 0.3))
             out.append(f"| {label} | {p} | yes | ({c['tip'][0]:.2f}, {c['tip'][1]:.2f}) | {c['tip_angle_deg']:.2f}° | "
-                       f"{c['contact_force_N']:.3f} N | {c['friction_ratio']:.3f} | {state} |")
+                       f"{c['contact_force_N']:.3f} N | {use} | {state} |")
         out.append("")
     made = f"`make gestures` (`python -m predictor.figures`, joint model {_joint(root, (g or {}).get('joint'))})"
     count = lambda key: f" {len(g[key])}" if g and key in g else ""

@@ -24,6 +24,11 @@ import runpy
 import sys
 import tempfile
 import traceback
+from pathlib import Path
+
+# The checkout this script belongs to comes first: an installed copy elsewhere must not
+# answer for it.
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
 def _read(f) -> str:
