@@ -132,7 +132,7 @@ def test_refused_run_leaves_the_dataset_untouched(tmp_path):
     partial = tmp_path / "heldout"
     shutil.copytree(held, partial)
     (partial / "shards" / "unit-00003.npz").unlink()      # an unfinished campaign to resume
-    args = ["--samples", "256", "--unit-size", "16", "--quiet", "--out"]
+    args = ["--unit-size", "16", "--quiet", "--out"]
     for out, extra, needle in ((held, ["--seed", "3"], "--seed 2, not --seed 3"),
                                (partial, ["--seed", "3"], "--seed 2, not --seed 3"),
                                (partial, ["--seed", "2", "--mesh-size", "4"],
@@ -141,13 +141,14 @@ def test_refused_run_leaves_the_dataset_untouched(tmp_path):
                                 "made with --wall-mesh-size unset (this run: 0.9 mm)"),
                                (partial, ["--seed", "2", "--samples", "128"],
                                 "holds a campaign of --samples 256; --samples 128 would drop")):
+        extra = extra if "--samples" in extra else [*extra, "--samples", "256"]
         before = _snapshot(out)
         r = subprocess.run([PY, "-m", "workflow.campaign", *args, str(out), *extra], cwd=ROOT,
                            env=ENV, capture_output=True, text=True, timeout=300)
         assert r.returncode == 2 and r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr
         assert _snapshot(out) == before and not (out / ".campaign.lock").exists()
     r = subprocess.run([PY, "-m", "workflow.campaign", *args, str(tmp_path / "new"), "--seed", "1",
-                        "--units", "16:17"], cwd=ROOT, env=ENV, capture_output=True, text=True)
+                        "--samples", "256", "--units", "16:17"], cwd=ROOT, env=ENV, capture_output=True, text=True)
     assert r.returncode == 2 and "outside 0:16" in r.stderr and not (tmp_path / "new").exists()
 
 
