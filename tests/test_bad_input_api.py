@@ -199,3 +199,27 @@ def test_heartbeat_and_filtered_progress(capsys):
     logging.getLogger("softjoint.fem").info("load step 2")
     assert capsys.readouterr().err == ""
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr, force=True)
+
+
+@pytest.mark.fem
+def test_fem_solve_progress_on_stderr_json_alone_on_stdout():
+    """fem.solve --json (coarse mesh): stdout is the result alone (strict JSON), stderr the
+    progress (mesh, every load step); --quiet silences the progress, not the result."""
+    import os
+    import subprocess
+
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    base = [sys.executable, "-m", "fem.solve", "--p", "0.1", "--m", "50", "--mesh-size", "4", "--json"]
+    loud, quiet = (subprocess.run(base + extra, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+                   for extra in ([], ["--quiet"]))
+    for r in (loud, quiet):
+        assert r.returncode == 0, r.stderr[-2000:]
+        out = json.loads(r.stdout)
+        assert out["converged"] and out["phi_end_deg"] > 0        # P and M both bend it the + way
+    lines = loud.stderr.splitlines()
+    assert lines[0].startswith("joint: meshing") and any(ln.startswith("mesh ready") for ln in lines)
+    steps = [ln for ln in lines if ln.startswith("load step")]
+    assert len(steps) == json.loads(loud.stdout)["load_steps"]
+    assert quiet.stderr == ""
+    assert json.loads(quiet.stdout)["phi_end_deg"] == json.loads(loud.stdout)["phi_end_deg"]
