@@ -151,7 +151,7 @@ def main(argv=None) -> int:
     if not todo:
         print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
         return 0
-    with ap.errors():
+    with ap.errors(), cli.heartbeat("finger cases"):
         t0 = time.perf_counter()
         solver = FingerSolver(geometry, comm)
         setup_s = time.perf_counter() - t0

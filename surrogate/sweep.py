@@ -152,7 +152,9 @@ def main(argv=None) -> int:
                          "default: keep them, marked stale")
     ap.add_output("--dir", folder=True, default="results/surrogate/sweep",
                   help="one NAME.json per variant and README.md")
+    cli.add_quiet(ap)
     args = ap.parse_args(argv)
+    cli.setup_logging(args.quiet)
     out = Path(args.dir)
     names = args.only or list(VARIANTS)
     say = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else \
@@ -170,7 +172,8 @@ def main(argv=None) -> int:
         + (f"; {len(kept)} stale result(s) kept ({', '.join(f'{n}: {stale[n]}' for n in kept)}); "
            "--replace-stale retrains them" if kept else ""))
     cli.make_output_folder(out)
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool, \
+            cli.heartbeat(f"surrogate.sweep: training {len(todo)} variant(s)", every=30.0, enabled=bool(todo)):
         futures = [pool.submit(run_variant, n, args.data, data_sha256, args.heldout, args.epochs,
                                str(out / f"{n}.json")) for n in todo]
         for f in futures:
