@@ -223,3 +223,33 @@ def test_fem_solve_progress_on_stderr_json_alone_on_stdout():
     assert len(steps) == json.loads(loud.stdout)["load_steps"]
     assert quiet.stderr == ""
     assert json.loads(quiet.stdout)["phi_end_deg"] == json.loads(loud.stdout)["phi_end_deg"]
+
+
+def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys):
+    """fem.finger's command line around a solve that does not converge (a stand-in solver
+    returns it, so no FEM runs): JSON with null figures on stdout, the same in the text
+    output, exit 1 and one reason line on stderr (with --quiet, the only line)."""
+    import fem.finger as finger_cli
+
+    class Unconverged:
+        def __init__(self, geometry, comm):
+            pass
+
+        def solve(self, load):
+            assert load.pressures == (-0.1, 0.1) and load.gravity
+            return _finger_result(False)
+
+        def mesh_info(self):
+            return {"nodes": 1, "vertices": 1, "cells": 1, "dofs": 3}
+
+    monkeypatch.setattr(finger_cli, "FingerSolver", Unconverged)
+    assert finger_cli.main(["--pressures", "-0.1,0.1", "--json", "--quiet"]) == 1
+    got = capsys.readouterr()
+    out = json.loads(got.out)
+    assert out["converged"] is False and out["tip"] is None and out["joints"] is None
+    assert got.err.splitlines() == ["python -m fem.finger: did not converge: no convergence after 10 cut-backs "
+                                    "at path 0.4000; no figures reported"]
+    assert finger_cli.main(["--p1", "-0.1", "--p2", "0.1", "--quiet"]) == 1
+    text = capsys.readouterr().out
+    assert "tip = none (did not converge)" in text and "end angle" not in text
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr, force=True)
