@@ -253,3 +253,38 @@ def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys
     text = capsys.readouterr().out
     assert "tip = none (did not converge)" in text and "end angle" not in text
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr, force=True)
+
+
+def _shard_arrays(n: int) -> dict:
+    from workflow.shards import empty_arrays
+
+    arrays = empty_arrays()
+    for key, a in list(arrays.items()):
+        if not key.startswith("failed_"):
+            arrays[key] = np.ones((n, *a.shape[1:]), a.dtype)
+    arrays["sample_id"] = np.arange(n)
+    return arrays
+
+
+def test_full_disk_gives_one_line_and_keeps_the_shard(tmp_path):
+    """A 64 KiB tmpfs: a 2-sample shard fits, a 300-sample one (~260 KB) does not. The
+    failed write is one line naming the shard and ENOSPC, the old shard stays byte for
+    byte, and no temp file is left. Needs root's mount (skipped elsewhere)."""
+    import subprocess
+
+    from workflow.campaign import save_shard
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a small tmpfs here")
+    try:
+        shard = disk / "unit-00000.npz"
+        assert save_shard(shard, _shard_arrays(2), {"unit": 0}) is None
+        before = shard.read_bytes()
+        why = save_shard(shard, _shard_arrays(300), {"unit": 0})
+        assert why.startswith(f"cannot write {shard}: No space left on device") and "\n" not in why
+        assert shard.read_bytes() == before and [p.name for p in disk.iterdir()] == [shard.name]
+    finally:
+        subprocess.run(["umount", str(disk)], check=True)
