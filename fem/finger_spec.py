@@ -16,7 +16,7 @@ along that direction.
 The file is TOML (format tag ``softjoint-finger/1``); ``fem/fingers/paper.toml`` is the
 paper's gripper and the default. Every error is a FingerFileError (a ValueError) with one
 line naming the file and the offending key; every number has a working range (RANGES) and a
-finger has at most MAX_PARTS parts. dolfinx-free and torch-free: the predictor
+finger has at most MAX_PARTS parts and MAX_LENGTH mm. dolfinx-free and torch-free: the predictor
 imports it without FEniCSx.
 """
 from __future__ import annotations
@@ -32,6 +32,9 @@ from fem.spec import JOINT_LENGTH
 FORMAT = "softjoint-finger/1"
 DEFAULT_FINGER = Path(__file__).with_name("fingers") / "paper.toml"
 MAX_PARTS = 16
+#: Whole-finger straight length (mm): with RANGES' cross-sections it bounds the rigid
+#: mesh (a 500 x 100 x 100 mm part is 61k tetrahedra at the default 6 mm).
+MAX_LENGTH = 1000.0
 
 
 class FingerFileError(ValueError):
@@ -179,6 +182,9 @@ def parse_finger(text: str, source: str = "<finger>") -> FingerSpec:
     parts = tuple(_part(source, k, t) for k, t in enumerate(tables))
     if not any(p.kind == "joint" for p in parts):
         raise FingerFileError(f"{source}: a finger needs at least one joint part")
+    length = sum(p.length for p in parts)
+    if length > MAX_LENGTH:
+        raise FingerFileError(f"{source}: the parts add up to {length:g} mm, at most {MAX_LENGTH:g} mm")
     name = doc.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise FingerFileError(f"{source}: name = {name!r} must be a non-empty string")

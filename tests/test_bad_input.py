@@ -101,6 +101,8 @@ CASES_FEM = [
     ("fem.finger", ["--finger", "tests/data/fingers/many_contact_points.toml"],
      "part 2 (rigid): contact_points = 100000000 is outside [0, 1000]"),
     ("fem.finger", ["--finger", "tests/data/fingers/heavy.toml"], "part 2 (rigid): weight = 1000000000.0 is outside [0, 2] N"),
+    ("fem.finger", ["--finger", "tests/data/fingers/too_long.toml"],
+     "too_long.toml: the parts add up to 1245.45 mm, at most 1000 mm"),
     ("fem.finger_cases", ["--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/f"],
      "--finger: finger 'three' has 3 joint(s); the validation cases are pressure pairs for a two-joint finger"),
     ("fem.finger_cases", ["--finger", "tests/data/fingers/heavy.toml", "--out", "{tmp}/f"], "weight = 1000000000.0 is outside"),

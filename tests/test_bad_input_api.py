@@ -89,6 +89,7 @@ def test_check_output_probes_for_real():
     ("many_contact_points", "part 2 (rigid): contact_points = 100000000 is outside [0, 1000]"),
     ("heavy", "part 2 (rigid): weight = 1000000000.0 is outside [0, 2] N"),
     ("negative_length", "part 2 (rigid): length = -60.0 must be > 0.0"),
+    ("too_long", "the parts add up to 1245.45 mm, at most 1000 mm"),
 ])
 def test_finger_bounds_through_the_api(name, needle):
     """load_finger (the API every tool parses with) refuses with the CLI's line."""
