@@ -4,7 +4,14 @@
 - Bad input exits 2 with ONE line on stderr that names the value and what is allowed:
   a non-number, NaN or inf, a value out of range, an unknown or repeated option, an
   output that cannot be written. It is checked before any long work starts, and nothing
-  is written for it (output folders are made by the atomic writers, when they write).
+  is written for it.
+- Outputs: a file's folder must exist, and a folder output's parent must exist (the tool
+  makes that one folder, nothing above it). Writability is probed by creating and
+  removing a temporary file there (as root, os.access says yes even on /proc).
+- Negative numbers are values, also in comma lists: ``--pressures -0.1,0.1``.
+- Progress: tools that run longer than ~10 s log on the "softjoint" loggers at INFO to
+  stderr (``add_quiet`` and ``setup_logging``); ``--quiet`` keeps only warnings. stdout
+  stays the result alone (strict JSON with ``--json``).
 - Under mpirun, srun or Slurm only the launcher's rank 0 prints the error line.
 
 Usage::
@@ -23,9 +30,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import math
 import os
+import re
 import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
 
 from fem.files import dumps
@@ -82,21 +94,116 @@ def numbers(count: int, lo: float | None = None, hi: float | None = None, unit: 
     return parse
 
 
+def number_list(lo: float | None = None, hi: float | None = None, unit: str = ""):
+    """argparse type: one or more comma-separated finite numbers in [lo, hi] -> tuple
+    (the count is the tool's to check: it may depend on another option)."""
+    one = number(lo, hi, unit)
+
+    def parse(text: str):
+        return tuple(one(p.strip()) for p in text.split(","))
+
+    parse.__name__ = "numbers"
+    return parse
+
+
+def _missing_folder(folder: Path) -> str | None:
+    """Why files cannot be created in ``folder`` (it must exist), or None."""
+    if folder.is_dir():
+        return None
+    above = folder
+    while not above.exists() and above != above.parent:
+        above = above.parent
+    if above.exists() and not above.is_dir():
+        return f"{above} is not a folder"
+    return f"folder {folder} does not exist"
+
+
+def probe_write(folder: str | Path) -> str | None:
+    """Why a file cannot be created in the existing ``folder``, or None: really creates
+    and removes an empty temporary file (os.access answers yes to root even on /proc)."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".softjoint-probe-", dir=folder)
+    except OSError as exc:
+        return exc.strerror or type(exc).__name__
+    os.close(fd)
+    os.unlink(name)
+    return None
+
+
 def check_output(path: str | Path, folder: bool = False) -> str | None:
     """Why ``path`` cannot be written as a file (or, with ``folder``, be a folder that
-    files are written into), or None. Nothing is created."""
+    files are written into), or None. A file's folder must exist; a folder may be new
+    if its parent exists (no folder is made above what the user named). Nothing is
+    left behind."""
     path = Path(path)
-    if path.is_dir() != folder and path.exists():
+    if path.exists() and path.is_dir() != folder:
         return f"{path} is {'a file, not a folder' if folder else 'a folder, not a file'}"
-    parent = path if folder else path.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"cannot create {path}: {parent} is not a folder"
-    target = path if path.exists() else parent
-    if not os.access(target, os.W_OK | (os.X_OK if target.is_dir() else 0)):
-        return f"cannot write {path}: permission denied"
+    where = path if folder and path.is_dir() else path.parent
+    why = _missing_folder(where)
+    if why:
+        return f"cannot create {path}: {why}"
+    why = probe_write(where)
+    if why:
+        return f"cannot write {path}: {where}: {why}"
     return None
+
+
+def make_output_folder(path: str | Path) -> Path:
+    """Create the output folder ``path`` (its parent must exist: check_output) and return
+    it; an existing folder is fine."""
+    path = Path(path)
+    path.mkdir(exist_ok=True)
+    return path
+
+
+#: argparse takes "-0.1" for a value only when it looks like one number; these also
+#: count as values: comma lists ("-0.1,0.1"), exponents ("-1e-3") and "-inf"/"-nan"
+#: (refused later with the usual message).
+NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d|inf\b|nan\b)", re.IGNORECASE)
+
+
+def add_quiet(ap: argparse.ArgumentParser) -> None:
+    """``--quiet``: no progress lines on stderr (warnings and errors only)."""
+    ap.add_argument("--quiet", action="store_true",
+                    help="no progress lines on stderr (they never go to stdout)")
+
+
+def _progress_or_warning(record: logging.LogRecord) -> bool:
+    """Pass warnings and errors, and the project's own progress; drop other libraries'
+    chatter (the form compiler's build lines: setuptools lowers the root level to INFO)."""
+    return record.levelno >= logging.WARNING or record.name.split(".")[0] == "softjoint"
+
+
+def setup_logging(quiet: bool = False, verbose: bool = False) -> None:
+    """Progress (INFO) of the "softjoint" loggers to stderr, one line each; ``quiet``:
+    warnings only; ``verbose``: DEBUG too. stdout is never used."""
+    level = logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO
+    logging.basicConfig(level=logging.WARNING, format="%(message)s", stream=sys.stderr, force=True)
+    for handler in logging.getLogger().handlers:
+        handler.addFilter(_progress_or_warning)
+    logging.getLogger("softjoint").setLevel(level)
+
+
+@contextlib.contextmanager
+def heartbeat(what: str, every: float = 10.0, enabled: bool = True):
+    """While the block runs, log "<what>: still working, N s" on the "softjoint" logger
+    every ``every`` s (a daemon thread; a C call that holds the GIL delays a line, it
+    does not lose the next one). ``enabled=False`` (other MPI ranks) does nothing."""
+    stop = threading.Event()
+    t0 = time.perf_counter()
+    log = logging.getLogger("softjoint.progress")
+
+    def beat():
+        while not stop.wait(every):
+            log.info("%s: still working, %.0f s", what, time.perf_counter() - t0)
+
+    thread = threading.Thread(target=beat, daemon=True) if enabled else None
+    if thread:
+        thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
 
 
 class Parser(argparse.ArgumentParser):
@@ -105,15 +212,16 @@ class Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, json: bool = True, **kwargs):
         super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
         self._outputs: list[tuple[str, str | None, bool]] = []
         if json:
             self.add_argument("--json", action="store_true", help="print the figures as JSON")
 
     def add_output(self, *flags, suffix: str | None = None, folder: bool = False, **kwargs):
         """An output file (or, with folder=True, a folder) option, checked writable right
-        after parsing, before the tool's work starts. Nothing is created for it here: the
-        atomic writers of fem.files create the folders when they write, so a run refused
-        later (a corrupt input, a failed solve) leaves no trace."""
+        after parsing (check_output), before the tool's work starts. Nothing is created
+        for it here, so a run refused later (a corrupt input, a failed solve) leaves no
+        trace."""
         action = self.add_argument(*flags, **kwargs)
         self._outputs.append((action.dest, suffix, folder))
         return action

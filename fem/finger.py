@@ -1,6 +1,7 @@
 """The whole finger in DOLFINx: the ground truth for the gesture predictor (issue 14).
 
     python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE] --json
+    python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
 Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one half-model
@@ -29,7 +30,8 @@ for the centre line points (z = 0, y = 0). Per joint: its 10 anchors, proximal c
 proximal orientation theta (the rotation of the part it is bonded to), its distal cap's
 orientation (``end_angle``, the direction the next part leaves along) and its chord angle
 from the last two anchors (the paper's tangent connection), plus the joint-frame anchors,
-phi_end and cap rotation comparable with the single-joint FEM. The fingertip is the centre
+phi_end and cap rotation comparable with the single-joint FEM. A solve that does not
+converge reports no figures (null in the JSON) and exits 1 with its reason on stderr. The fingertip is the centre
 of the last part's distal face, ``tip_angle`` the orientation of the last part. Rotations
 of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
 """
@@ -106,25 +108,31 @@ class FingerResult:
 
     def summary(self) -> dict:
         """JSON-ready figures (degrees for angles); ``tip`` and ``tip_angle_deg`` mean
-        what they mean in ``predictor.gesture --json``."""
-        deg = lambda a: np.degrees(a).tolist()
-        joints = [{"anchors_mm": np.round(self.anchors[j], 6).tolist(),
-                   "proximal_mm": self.proximal[j].tolist(),
-                   "theta_deg": math.degrees(self.theta[j]),
-                   "end_angle_deg": math.degrees(self.end_angle[j]),
-                   "chord_angle_deg": math.degrees(self.chord_angle[j]),
-                   "cap_rotation_deg": math.degrees(self.end_angle[j] - self.theta[j]),
-                   "phi_end_deg": math.degrees(self.chord_angle[j] - self.theta[j]),
-                   "local_anchors_mm": np.round(self.local_anchors[j], 6).tolist()}
-                  for j in range(len(self.theta))]
-        return {"pressures_MPa": list(self.load.pressures), "gravity": self.load.gravity,
-                "converged": self.converged, "tip": self.tip.tolist(),
-                "tip_angle_deg": math.degrees(self.tip_angle),
-                "joint_end_angle_deg": deg(self.end_angle), "joints": joints,
-                "newton_iterations": self.newton_iterations,
+        what they mean in ``predictor.gesture --json``. A solve that did not converge has
+        no figures: tip, angles and joints are null (the state it stopped in is not an
+        answer), ``reason`` says why."""
+        out = {"pressures_MPa": list(self.load.pressures), "gravity": self.load.gravity,
+               "converged": self.converged, "tip": None, "tip_angle_deg": None,
+               "joint_end_angle_deg": None, "joints": None}
+        if self.converged:
+            out.update(tip=self.tip.tolist(), tip_angle_deg=math.degrees(self.tip_angle),
+                       joint_end_angle_deg=np.degrees(self.end_angle).tolist(), joints=self._joints())
+        return {**out, "newton_iterations": self.newton_iterations,
                 "iterations": int(sum(self.newton_iterations)), "load_steps": self.load_steps,
                 "cutbacks": self.cutbacks, "factorisations": self.factorisations,
                 "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
+
+    def _joints(self) -> list[dict]:
+        """Per joint: anchors, proximal centre and the angles of the module docstring."""
+        return [{"anchors_mm": np.round(self.anchors[j], 6).tolist(),
+                 "proximal_mm": self.proximal[j].tolist(),
+                 "theta_deg": math.degrees(self.theta[j]),
+                 "end_angle_deg": math.degrees(self.end_angle[j]),
+                 "chord_angle_deg": math.degrees(self.chord_angle[j]),
+                 "cap_rotation_deg": math.degrees(self.end_angle[j] - self.theta[j]),
+                 "phi_end_deg": math.degrees(self.chord_angle[j] - self.theta[j]),
+                 "local_anchors_mm": np.round(self.local_anchors[j], 6).tolist()}
+                for j in range(len(self.theta))]
 
 
 def rotation_matrix(angle: float) -> np.ndarray:
@@ -284,6 +292,8 @@ def build_parser() -> cli.Parser:
     for j in range(1, MAX_JOINTS + 1):
         ap.add_argument(f"--p{j}", type=pressure, default=None,
                         help=f"joint-{j} pressure, MPa (|P| <= {PRESSURE_LIMIT:g}; default 0)")
+    ap.add_argument("--pressures", type=cli.number_list(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa"), metavar="P1,P2,...",
+                    help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
     ap.add_argument("--finger", type=finger_file, default=None,
                     help="finger description file (default: fem/fingers/paper.toml)")
@@ -292,8 +302,41 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="log load steps")
+    cli.add_quiet(ap)
+    ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
     return ap
+
+
+def parsed_pressures(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpec) -> tuple[float, ...]:
+    """One pressure per joint of ``finger`` (MPa) from --pressures or --p1..--p4 (missing
+    ones 0); a count that does not fit the finger is a usage error."""
+    n = finger.n_joints
+    given = [j for j in range(1, MAX_JOINTS + 1) if getattr(args, f"p{j}") is not None]
+    if args.pressures is not None:
+        if given:
+            ap.error(f"give either --p1..--p{MAX_JOINTS} or --pressures, not both")
+        if len(args.pressures) != n:
+            ap.error(f"--pressures: {len(args.pressures)} values for finger {finger.name!r} of {n} joint(s)")
+        return tuple(args.pressures)
+    if given and max(given) > n:
+        ap.error(f"--p{max(given)} given, but finger {finger.name!r} has {n} joint(s)")
+    return tuple(getattr(args, f"p{j}", None) or 0.0 for j in range(1, n + 1))
+
+
+def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int) -> None:
+    load = result.load
+    print(f"finger {finger.name!r}, P = {list(load.pressures)} MPa, gravity {load.gravity}: "
+          f"converged={result.converged} {result.reason}")
+    if result.converged:
+        print(f"  tip = ({result.tip[0]:.4f}, {result.tip[1]:.4f}) mm, "
+              f"tip angle {math.degrees(result.tip_angle):.3f} deg")
+        for j, s in enumerate(out["joints"]):
+            print(f"  joint {j + 1}: end angle {s['end_angle_deg']:.3f} deg, chord {s['chord_angle_deg']:.3f} deg, "
+                  f"cap rotation {s['cap_rotation_deg']:.3f} deg")
+    else:
+        print("  tip = none (did not converge)")
+    print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
+          f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes, {ranks} rank(s)")
 
 
 def main(argv=None) -> int:
@@ -302,18 +345,19 @@ def main(argv=None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
     finger = args.finger or load_finger()
-    n = finger.n_joints
-    given = [j for j in range(1, MAX_JOINTS + 1) if getattr(args, f"p{j}") is not None]
-    if given and max(given) > n:
-        ap.error(f"--p{max(given)} given, but finger {finger.name!r} has {n} joint(s)")
-    load = FingerLoad(tuple(getattr(args, f"p{j}") or 0.0 for j in range(1, n + 1)), not args.no_gravity)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(message)s", force=True)
+    load = FingerLoad(parsed_pressures(ap, args, finger), not args.no_gravity)
+    cli.setup_logging(args.quiet, args.verbose)
     joint = replace(JointGeometry(), mesh_size=args.mesh_size, wall_mesh_size=args.wall_mesh_size)
     geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
     comm = MPI.COMM_WORLD
-    with ap.errors():
+    with ap.errors(), cli.heartbeat(f"finger {finger.name!r}", enabled=comm.rank == 0):
+        if comm.rank == 0:
+            log.info("finger %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
+                     finger.name)
         solver = FingerSolver(geometry, comm)
+        if comm.rank == 0:
+            log.info("mesh ready (%d nodes); solving P = %s MPa, gravity %s", solver.mesh_info()["nodes"],
+                     list(load.pressures), load.gravity)
         result = solver.solve(load)
         if args.xdmf and result.converged:
             write_xdmf(args.xdmf, solver)
@@ -323,15 +367,10 @@ def main(argv=None) -> int:
         if args.json:
             cli.print_json(out)
         else:
-            print(f"finger {finger.name!r}, P = {list(load.pressures)} MPa, gravity {load.gravity}: "
-                  f"converged={result.converged} {result.reason}")
-            print(f"  tip = ({result.tip[0]:.4f}, {result.tip[1]:.4f}) mm, "
-                  f"tip angle {math.degrees(result.tip_angle):.3f} deg")
-            for j, s in enumerate(out["joints"]):
-                print(f"  joint {j + 1}: end angle {s['end_angle_deg']:.3f} deg, chord {s['chord_angle_deg']:.3f} deg, "
-                      f"cap rotation {s['cap_rotation_deg']:.3f} deg")
-            print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
-                  f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes, {comm.size} rank(s)")
+            _print_text(out, result, finger, comm.size)
+        if not result.converged:
+            print(f"{ap.prog}: did not converge: {' '.join(result.reason.split()) or 'no reason given'}; no figures reported",
+                  file=sys.stderr, flush=True)
     return 0 if result.converged else 1
 
 

@@ -109,6 +109,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default="", help="appended to each file name (e.g. _h1.2 for a finer mesh)")
+    cli.add_quiet(ap)
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
     args = ap.parse_args(argv)
@@ -124,6 +125,10 @@ def main(argv=None) -> int:
         ap.error(f"--part {args.part!r}: use K/N with 1 <= K <= N")
     cases = [c for c in CASES if c[0] in chosen][k - 1::n]
     finger = args.finger or load_finger()
+    if finger.n_joints != 2:
+        ap.error(f"--finger: finger {finger.name!r} has {finger.n_joints} joint(s); the validation cases "
+                 "are pressure pairs for a two-joint finger (use python -m fem.finger --pressures for others)")
+    cli.setup_logging(args.quiet)
     geometry = FingerGeometry(finger, replace(JointGeometry(), mesh_size=args.mesh_size,
                                               wall_mesh_size=args.wall_mesh_size), args.rigid_mesh_size)
     settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
@@ -146,7 +151,7 @@ def main(argv=None) -> int:
     if not todo:
         print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
         return 0
-    with ap.errors():
+    with ap.errors(), cli.heartbeat("finger cases"):
         t0 = time.perf_counter()
         solver = FingerSolver(geometry, comm)
         setup_s = time.perf_counter() - t0
@@ -158,10 +163,11 @@ def main(argv=None) -> int:
                       "ranks": comm.size}
             if res.converged:
                 record["render"] = render(solver, path.with_suffix(".png"))
-            out.mkdir(parents=True, exist_ok=True)
+            cli.make_output_folder(out)
             write_json(path, record)
-            print(f"{name}: converged={res.converged}, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
-                  f"{math.degrees(res.tip_angle):.2f} deg, {res.wall_time:.0f} s", flush=True)
+            print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
+                                 f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
+                                 f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)
     return 0
 
 

@@ -15,7 +15,8 @@ along that direction.
 
 The file is TOML (format tag ``softjoint-finger/1``); ``fem/fingers/paper.toml`` is the
 paper's gripper and the default. Every error is a FingerFileError (a ValueError) with one
-line naming the file and the offending key. dolfinx-free and torch-free: the predictor
+line naming the file and the offending key; every number has a working range (RANGES) and a
+finger has at most MAX_PARTS parts and MAX_LENGTH mm. dolfinx-free and torch-free: the predictor
 imports it without FEniCSx.
 """
 from __future__ import annotations
@@ -31,6 +32,9 @@ from fem.spec import JOINT_LENGTH
 FORMAT = "softjoint-finger/1"
 DEFAULT_FINGER = Path(__file__).with_name("fingers") / "paper.toml"
 MAX_PARTS = 16
+#: Whole-finger straight length (mm): with RANGES' cross-sections it bounds the rigid
+#: mesh (a 500 x 100 x 100 mm part is 61k tetrahedra at the default 6 mm).
+MAX_LENGTH = 1000.0
 
 
 class FingerFileError(ValueError):
@@ -102,6 +106,16 @@ class FingerSpec:
                 "base_angle_deg": math.degrees(self.base_angle), "parts": parts}
 
 
+#: Working ranges (inclusive) of every value that sizes the mesh or the predictor's
+#: arrays, or loads the soft joints: outside them meshing breaks (a 1e-9 mm part), memory
+#: runs out (1e8 contact points) or no gesture exists (a 1e9 N weight on a joint that
+#: carries |M| <= 100 N·mm). key -> (low, high, unit).
+RANGES = {
+    "length": (1.0, 500.0, "mm"), "height": (1.0, 100.0, "mm"), "width": (1.0, 100.0, "mm"),
+    "weight": (0.0, 2.0, "N"), "contact_points": (0, 1000, ""),
+    "base_gap": (0.0, 1000.0, "mm"), "base_angle_deg": (-360.0, 360.0, "deg"),
+}
+
 # key -> (type, lower bound, strictly above?) ; bool keys have no bound
 _PART_KEYS = {
     "joint": {"weight": (float, 0.0, False), "contact": (bool, None, False)},
@@ -113,7 +127,7 @@ _TOP_KEYS = {"format", "name", "base_gap", "base_angle_deg", "part"}
 
 
 def _value(where: str, key: str, value, kind: type, low, strict: bool):
-    """Check one value's type and bound; return it as ``kind``."""
+    """Check one value's type, sign and working range (RANGES); return it as ``kind``."""
     if kind is bool:
         if not isinstance(value, bool):
             raise FingerFileError(f"{where}: {key} = {value!r} must be true or false")
@@ -124,6 +138,9 @@ def _value(where: str, key: str, value, kind: type, low, strict: bool):
         raise FingerFileError(f"{where}: {key} = {value!r} is not a finite number")
     if low is not None and (value <= low if strict else value < low):
         raise FingerFileError(f"{where}: {key} = {value!r} must be {'>' if strict else '>='} {low}")
+    lo, hi, unit = RANGES.get(key, (None, None, ""))
+    if lo is not None and not lo <= value <= hi:
+        raise FingerFileError(f"{where}: {key} = {value!r} is outside [{lo:g}, {hi:g}]{' ' + unit if unit else ''}")
     return kind(value)
 
 
@@ -165,6 +182,9 @@ def parse_finger(text: str, source: str = "<finger>") -> FingerSpec:
     parts = tuple(_part(source, k, t) for k, t in enumerate(tables))
     if not any(p.kind == "joint" for p in parts):
         raise FingerFileError(f"{source}: a finger needs at least one joint part")
+    length = sum(p.length for p in parts)
+    if length > MAX_LENGTH:
+        raise FingerFileError(f"{source}: the parts add up to {length:g} mm, at most {MAX_LENGTH:g} mm")
     name = doc.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise FingerFileError(f"{source}: name = {name!r} must be a non-empty string")

@@ -10,7 +10,8 @@ is refused before meshing unless --allow-extrapolation (then recorded as
 shape (20, 4), rows (x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm); with
 --xdmf the displacement field (NAME.xdmf + NAME.h5, written by all ranks into a hidden
 folder beside them, then renamed into place). Exit status 0 on convergence, 1 if the
-solve failed, 2 on bad input.
+solve failed, 2 on bad input. Progress (mesh, load steps) goes to stderr unless --quiet;
+stdout holds the result alone.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from fem.geometry import JointGeometry
 from fem.options import add_load, add_mesh_size, on_root, parsed_load
 from fem.solver import JointSolver, Load
 
+log = logging.getLogger("softjoint.fem")
+
 
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.solve",
@@ -40,7 +43,8 @@ def build_parser() -> cli.Parser:
                     help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
     ap.add_output("--xdmf", suffix=".xdmf",
                   help="also write the displacement field to this XDMF file (+ its .h5)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="log load steps")
+    cli.add_quiet(ap)
+    ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
     return ap
 
 
@@ -94,11 +98,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     load = Load.from_array(parsed_load(ap, args))
     comm = MPI.COMM_WORLD
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(message)s", force=True)
+    cli.setup_logging(args.quiet, args.verbose)
     geo = replace(JointGeometry(), mesh_size=args.mesh_size)
-    with ap.errors():
+    with ap.errors(), cli.heartbeat("joint", enabled=comm.rank == 0):
+        if comm.rank == 0:
+            log.info("joint: meshing and compiling the forms (the first run compiles for tens of seconds)")
         solver = JointSolver(geo, comm)
+        if comm.rank == 0:
+            log.info("mesh ready (%d nodes); solving %s", solver.mesh_info()["nodes"], load)
         result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
         jac = solver.sensitivities() if args.jacobian and result.converged else None
         if args.xdmf and result.converged:

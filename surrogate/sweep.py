@@ -8,10 +8,14 @@ Data flow: for each variant in VARIANTS, the improved config with that variant's
 ``--set`` overrides (surrogate.train), trained ``--epochs`` epochs on the train split ->
 metrics on the validation split (which chooses the configuration), on the held-out set
 (reported, never used to choose) and inference speed (surrogate.evaluate.timing) ->
-DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes (a
-file made with another config, epoch count or dataset is redone) and ``--jobs`` workers
-never share a file -> DIR/README.md (also atomic), the table of every finished
-variant. Units: mm, degrees, seconds, samples per second.
+DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes and
+``--jobs`` workers never share a file -> DIR/README.md (also atomic), the table of every
+variant that has a result. Units: mm, degrees, seconds, samples per second.
+
+A result made with another config (an older format of the code, another epoch count) or
+on another dataset is *stale*: it is kept, listed as such in the table and on the
+console, and retrained only with ``--replace-stale``; a rerun never drops a variant's row
+nor replaces a committed result silently.
 """
 
 from __future__ import annotations
@@ -87,20 +91,51 @@ def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: in
     return name
 
 
-def table(results: list[dict]) -> str:
-    """Markdown table, one row per finished variant, in VARIANTS order."""
+def table(results: list[dict], stale: dict[str, str]) -> str:
+    """Markdown table, one row per variant with a result, in VARIANTS order; ``stale``:
+    name -> why its result is not of this config and dataset (shown in the last column)."""
     head = ["run", "overrides"] + [f"{part} {key.replace('_error', '').replace('_', ' ')}"
                                    for part, key, _ in COLUMNS]
-    head += ["train s", "batched f32 /s (1 thread)"]
+    head += ["epochs", "train s", "batched f32 /s (1 thread)", "result"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         cells = [r["name"], " ".join(r["overrides"]) or "(none)"]
         for part, key, digits in COLUMNS:
-            v = r[part][key]
+            v = r[part].get(key)
             cells.append("n/a" if v is None else f"{v:.{digits}f}")
-        cells += [f"{r['train_time_s']:.0f}", f"{r['timing']['batched_samples_per_s_float32']:.2g}"]
+        cells += [str(r["epochs"]), f"{r['train_time_s']:.0f}",
+                  f"{r['timing']['batched_samples_per_s_float32']:.2g}",
+                  f"stale: {stale[r['name']]}" if r["name"] in stale else "current"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def stored(path: Path) -> dict | None:
+    """A variant's result file, or None if there is none (a damaged one is an error:
+    it is not replaced behind the user's back)."""
+    if not path.exists():
+        return None
+    try:
+        r = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError):
+        raise ValueError(f"{path}: not a surrogate.sweep result (remove it to retrain)") from None
+    if not isinstance(r, dict) or not {"name", "model_config", "train_config", "data_sha256"} <= set(r):
+        raise ValueError(f"{path}: not a surrogate.sweep result (remove it to retrain)")
+    return r
+
+
+def staleness(r: dict, name: str, epochs: int | None, data_sha256: str) -> str | None:
+    """Why result ``r`` is not this run's variant ``name`` (None: it is): which config
+    fields differ (an older format of the code lacks the new ones), or the dataset."""
+    model_cfg, cfg = variant_configs(name, epochs)
+    want = json.loads(json.dumps({"model_config": asdict(model_cfg), "train_config": asdict(cfg)}))
+    fields = sorted(k for part in want for k in set(want[part]) | set(r[part])
+                    if want[part].get(k, "missing") != r[part].get(k, "missing"))
+    if fields:
+        return f"made with other {', '.join(fields[:4])}{' ...' if len(fields) > 4 else ''}"
+    if r["data_sha256"] != data_sha256:
+        return "made on another dataset"
+    return None
 
 
 def main(argv=None) -> int:
@@ -112,9 +147,14 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=cli.number(1, os.cpu_count() or 1, integer=True), default=1,
                     help="variants trained at once, 1 thread each")
     ap.add_argument("--only", nargs="*", choices=sorted(VARIANTS), help="these variants only")
+    ap.add_argument("--replace-stale", action="store_true",
+                    help="retrain (and replace) results made with another config or dataset; "
+                         "default: keep them, marked stale")
     ap.add_output("--dir", folder=True, default="results/surrogate/sweep",
                   help="one NAME.json per variant and README.md")
+    cli.add_quiet(ap)
     args = ap.parse_args(argv)
+    cli.setup_logging(args.quiet)
     out = Path(args.dir)
     names = args.only or list(VARIANTS)
     say = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else \
@@ -122,33 +162,34 @@ def main(argv=None) -> int:
     with ap.errors():
         data_sha256 = dataset_digest(args.data)
         load_samples(args.heldout)  # a bad held-out set fails now, not after the training
-
-    def done(name):
-        path = out / f"{name}.json"
-        if not path.exists():
-            return None
-        r = json.loads(path.read_text())
-        model_cfg, cfg = variant_configs(name, args.epochs)
-        same = [r["model_config"], r["train_config"]] == json.loads(json.dumps([asdict(model_cfg), asdict(cfg)]))
-        return r if same and r["data_sha256"] == data_sha256 else None
-
-    todo = [n for n in names if done(n) is None]
-    say(f"surrogate.sweep: {len(names) - len(todo)} of {len(names)} variants done, "
-        f"{len(todo)} to train ({args.epochs or 'configured'} epochs, {args.jobs} job(s))")
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        have = {n: stored(out / f"{n}.json") for n in VARIANTS}
+    stale = {n: why for n, r in have.items() if r is not None
+             and (why := staleness(r, n, args.epochs, data_sha256)) is not None}
+    todo = [n for n in names if have[n] is None or (n in stale and args.replace_stale)]
+    kept = [n for n in names if n in stale and not args.replace_stale]
+    say(f"surrogate.sweep: {len(names) - len(todo) - len(kept)} of {len(names)} variants current, "
+        f"{len(todo)} to train ({args.epochs or 'configured'} epochs, {args.jobs} job(s))"
+        + (f"; {len(kept)} stale result(s) kept ({', '.join(f'{n}: {stale[n]}' for n in kept)}); "
+           "--replace-stale retrains them" if kept else ""))
+    cli.make_output_folder(out)
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool, \
+            cli.heartbeat(f"surrogate.sweep: training {len(todo)} variant(s)", every=30.0, enabled=bool(todo)):
         futures = [pool.submit(run_variant, n, args.data, data_sha256, args.heldout, args.epochs,
                                str(out / f"{n}.json")) for n in todo]
         for f in futures:
-            say(f"  {f.result()} done")
-    results = [r for r in map(done, VARIANTS) if r is not None]
-    text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep` "
-            f"({results[0]['epochs']} epochs) on `{args.data}` (split {results[0]['n']}); held-out: "
+            name = f.result()
+            have[name] = stored(out / f"{name}.json")
+            stale.pop(name, None)
+            say(f"  {name} done")
+    results = [r for r in have.values() if r is not None]
+    text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep` on `{args.data}`; held-out: "
             f"`{args.heldout}`. Each run is the improved config with the overrides listed. "
-            f"Validation chooses; held-out is for reference only.\n\n"
-            + table(results))
+            f"Validation chooses; held-out is for reference only. A stale result was made with "
+            f"another config or dataset than the current code's (`--replace-stale` retrains it).\n\n"
+            + table(results, stale))
     write_text(out / "README.md", text)
     if args.json:
-        cli.print_json({"dir": str(out), "trained": todo, "results": results})
+        cli.print_json({"dir": str(out), "trained": todo, "stale": stale, "results": results})
     else:
         print(text, end="")
     return 0

@@ -54,8 +54,8 @@ CASES_FEM = [
     ("fem.self_contact", ["--loads", "0,0,0,0", "0,0,0,120", "--out", "{tmp}/x.json"],
      "M = 120 is outside the training box"),
     ("fem.mesh_study", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("fem.mesh_study", ["--meshes", "2:1", "2:1", "--out", "{tmp}/sub/x.json"], "give each mesh once"),
-    ("fem.mesh_study", ["--meshes", "2:x", "--out", "{tmp}/sub/x.json"], "--meshes"),
+    ("fem.mesh_study", ["--meshes", "2:1", "2:1", "--out", "{tmp}/x.json"], "give each mesh once"),
+    ("fem.mesh_study", ["--meshes", "2:x", "--out", "{tmp}/x.json"], "--meshes"),
     ("fem.bench_finger", ["--cases", "free_0.1_0.1,nope", "--out", "{tmp}/x.json"], "--cases: 'nope'"),
     ("fem.bench_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("fem.bench_joint", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
@@ -76,6 +76,36 @@ CASES_FEM = [
     ("fem.finger_cases", ["--cases", "nope", "--out", "{tmp}/f"], "unknown case 'nope'"),
     ("fem.finger_cases", ["--part", "3/2", "--out", "{tmp}/f"], "--part '3/2': use K/N with 1 <= K <= N"),
     ("fem.finger_cases", ["--out", "/etc/passwd/f"], "cannot create /etc/passwd/f"),
+    # issue 33: negative values in comma lists parse (the form --help shows), so the real
+    # check answers; outputs are probed for real (root passes os.access on /proc) and no
+    # folder is made above what the user named
+    ("fem.self_contact", ["--loads", "-0.1,0,0", "--out", "{tmp}/x.json"], "--loads: '-0.1,0,0': expected 4"),
+    ("fem.self_contact", ["--loads", "-0.1,0,0,-120", "--out", "{tmp}/x.json"], "M = -120 is outside the training box"),
+    ("fem.finger", ["--pressures", "-0.1,0.5"], "--pressures: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("fem.finger", ["--pressures", "-0.1,0.1,0"], "--pressures: 3 values for finger 'paper' of 2 joint(s)"),
+    ("fem.finger", ["--p1", "-0.1", "--pressures", "-0.1,0.1"], "give either --p1..--p4 or --pressures"),
+    ("fem.finger", ["--finger", "tests/data/fingers/five_joints.toml", "--pressures", "0,0,0,-0.1"],
+     "--pressures: 4 values for finger 'five' of 5 joint(s)"),
+    ("fem.finger", ["--xdmf", "/proc/u.xdmf"], "cannot write /proc/u.xdmf: /proc:"),
+    ("fem.finger", ["--xdmf", "{tmp}/none/u.xdmf"], "cannot create {tmp}/none/u.xdmf: folder {tmp}/none does not exist"),
+    ("fem.solve", ["--xdmf", "{tmp}/a/b/u.xdmf"], "cannot create {tmp}/a/b/u.xdmf: folder {tmp}/a/b does not exist"),
+    ("fem.solve", ["--xdmf", "/proc/u.xdmf", "--json"], "cannot write /proc/u.xdmf"),
+    ("fem.finger_cases", ["--out", "{tmp}/a/b"], "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
+    ("fem.finger_cases", ["--out", "/proc/f"], "cannot write /proc/f: /proc:"),
+    # issue 33: finger-file values that break meshing, exhaust memory or leave no gesture
+    # are refused while parsing; fingers of any joint count solve or are refused up front
+    ("fem.finger", ["--finger", "tests/data/fingers/huge_length.toml"],
+     "part 2 (rigid): length = 1000000000.0 is outside [1, 500] mm"),
+    ("fem.finger", ["--finger", "tests/data/fingers/tiny_length.toml"], "part 2 (rigid): length = 1e-09 is outside [1, 500] mm"),
+    ("fem.finger", ["--finger", "tests/data/fingers/flat.toml"], "part 2 (rigid): height = 1e-09 is outside [1, 100] mm"),
+    ("fem.finger", ["--finger", "tests/data/fingers/many_contact_points.toml"],
+     "part 2 (rigid): contact_points = 100000000 is outside [0, 1000]"),
+    ("fem.finger", ["--finger", "tests/data/fingers/heavy.toml"], "part 2 (rigid): weight = 1000000000.0 is outside [0, 2] N"),
+    ("fem.finger", ["--finger", "tests/data/fingers/too_long.toml"],
+     "too_long.toml: the parts add up to 1245.45 mm, at most 1000 mm"),
+    ("fem.finger_cases", ["--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/f"],
+     "--finger: finger 'three' has 3 joint(s); the validation cases are pressure pairs for a two-joint finger"),
+    ("fem.finger_cases", ["--finger", "tests/data/fingers/heavy.toml", "--out", "{tmp}/f"], "weight = 1000000000.0 is outside"),
     # --- fem cases (end)
 ]
 CASES_WORKFLOW = [
@@ -97,7 +127,19 @@ CASES_WORKFLOW = [
     ("workflow.campaign", ["--samples", "4", "--seed", "1", "--bogus", "--out", "{tmp}/d"],
      "unrecognized arguments: --bogus"),
     ("workflow.campaign", ["--samples", "4", "--seed", "1", "--out", "/etc/passwd/x"],
-     "cannot create /etc/passwd/x/manifest.json: /etc/passwd is not a folder"),
+     "cannot create /etc/passwd/x: /etc/passwd is not a folder"),
+    # issue 33: no folder above the named one; a real write probe (root passes os.access)
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--out", "{tmp}/a/b"],
+     "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
+    ("workflow.campaign", ["--samples", "4", "--seed", "1", "--out", "/proc/d"], "cannot write /proc/d: /proc:"),
+    # issue 33: a refusal names the option and both values; a campaign never shrinks
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--mesh-size", "3",
+                           "--out", "results/data/heldout"],
+     "results/data/heldout holds a campaign made with --mesh-size 1.8 mm (this run: 3 mm)"),
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "8", "--seed", "2", "--out", "results/data/heldout"],
+     "made with --unit-size 16 (this run: 8)"),
+    ("workflow.campaign", ["--samples", "128", "--unit-size", "16", "--seed", "2", "--out", "results/data/heldout"],
+     "results/data/heldout holds a campaign of --samples 256; --samples 128 would drop its other shards"),
     # another seed than the committed held-out set's: refused before the lock is taken
     ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "3", "--out", "results/data/heldout"],
      "results/data/heldout holds a campaign of --seed 2, not --seed 3"),
@@ -107,7 +149,8 @@ CASES_WORKFLOW = [
     ("workflow.dataset", ["verify", "--mirror", "-1", "results/data/heldout"], "--mirror: -1 is outside [0, inf]"),
     ("workflow.dataset", ["verify", "--mirror", "nan", "results/data/heldout"], "--mirror: 'nan' is not an integer"),
     ("workflow.dataset", ["merge", "{tmp}/m", "/etc"], "/etc: no manifest.json"),
-    ("workflow.dataset", ["merge", "/etc/passwd/m", "results/data/heldout"], "cannot create /etc/passwd/m/manifest.json"),
+    ("workflow.dataset", ["merge", "/etc/passwd/m", "results/data/heldout"], "cannot create /etc/passwd/m: /etc/passwd is not a folder"),
+    ("workflow.dataset", ["merge", "{tmp}/a/m", "results/data/heldout"], "cannot create {tmp}/a/m: folder {tmp}/a does not exist"),
     ("workflow.dataset", ["info", "results/data/heldout", "--json", "--json"], "--json given twice"),
     # workflow.report / bench_campaign / profile_walk: outputs and numbers checked up front
     ("workflow.report", ["--out", "/etc/passwd/x.md"], "cannot create /etc/passwd/x.md"),
@@ -157,6 +200,8 @@ CASES_SURROGATE = [
     ("surrogate.sweep", ["--dir", "{tmp}", "--data", "/etc"], "/etc: no manifest.json"),
     ("surrogate.synthetic", ["--out", "{tmp}/ds", "--n", "0"], "--n: 0 is outside [1, 1e+07]"),
     ("surrogate.synthetic", ["--out", "/etc/passwd/ds"], "cannot create /etc/passwd/ds"),
+    ("surrogate.sweep", ["--dir", "{tmp}/a/sweep"], "cannot create {tmp}/a/sweep: folder {tmp}/a does not exist"),
+    ("surrogate.sweep", ["--dir", "/proc/sweep"], "cannot write /proc/sweep: /proc:"),
     # --- surrogate cases (end)
 ]
 CASES_PREDICTOR = [

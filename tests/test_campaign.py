@@ -123,8 +123,8 @@ def _snapshot(root: Path) -> dict[str, bytes]:
 
 
 def test_refused_run_leaves_the_dataset_untouched(tmp_path):
-    """A campaign refused by the compatibility check (another --seed, or another config:
-    here the mesh) exits 2 with one line and leaves an existing dataset folder byte for
+    """A campaign refused by the compatibility check (another --seed, another config: here
+    the mesh, named with both values; or fewer --samples: a campaign never shrinks) exits 2 with one line and leaves an existing dataset folder byte for
     byte as it was (the mesh, or the wall mesh alone): no .campaign.lock, no shards/ folder, no manifest rewrite; pointed at a
     folder that does not exist yet, a refused run (--units beyond the unit count) creates
     nothing either."""
@@ -132,18 +132,23 @@ def test_refused_run_leaves_the_dataset_untouched(tmp_path):
     partial = tmp_path / "heldout"
     shutil.copytree(held, partial)
     (partial / "shards" / "unit-00003.npz").unlink()      # an unfinished campaign to resume
-    args = ["--samples", "256", "--unit-size", "16", "--quiet", "--out"]
+    args = ["--unit-size", "16", "--quiet", "--out"]
     for out, extra, needle in ((held, ["--seed", "3"], "--seed 2, not --seed 3"),
                                (partial, ["--seed", "3"], "--seed 2, not --seed 3"),
-                               (partial, ["--seed", "2", "--mesh-size", "4"], "another geometry"),
-                               (partial, ["--seed", "2", "--wall-mesh-size", "0.9"], "another geometry")):
+                               (partial, ["--seed", "2", "--mesh-size", "4"],
+                                "made with --mesh-size 1.8 mm (this run: 4 mm)"),
+                               (partial, ["--seed", "2", "--wall-mesh-size", "0.9"],
+                                "made with --wall-mesh-size unset (this run: 0.9 mm)"),
+                               (partial, ["--seed", "2", "--samples", "128"],
+                                "holds a campaign of --samples 256; --samples 128 would drop")):
+        extra = extra if "--samples" in extra else [*extra, "--samples", "256"]
         before = _snapshot(out)
         r = subprocess.run([PY, "-m", "workflow.campaign", *args, str(out), *extra], cwd=ROOT,
                            env=ENV, capture_output=True, text=True, timeout=300)
         assert r.returncode == 2 and r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr
         assert _snapshot(out) == before and not (out / ".campaign.lock").exists()
     r = subprocess.run([PY, "-m", "workflow.campaign", *args, str(tmp_path / "new"), "--seed", "1",
-                        "--units", "16:17"], cwd=ROOT, env=ENV, capture_output=True, text=True)
+                        "--samples", "256", "--units", "16:17"], cwd=ROOT, env=ENV, capture_output=True, text=True)
     assert r.returncode == 2 and "outside 0:16" in r.stderr and not (tmp_path / "new").exists()
 
 

@@ -554,7 +554,7 @@ def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys)
     """Each variant's record carries the improved config with exactly its overrides (w64x3:
     hidden 64,64,64; nojac: w_jac 0, the rest as improved); a re-run trains nothing, and a
     record of another config (the improved config changed since), epoch count or dataset
-    is redone."""
+    is kept and marked stale, and redone only with --replace-stale (issue 33)."""
     args = ["--data", str(data[0]), "--heldout", str(data[1]), "--epochs", "2",
             "--only", "w64x3", "nojac", "--dir", str(tmp_path)]
     assert sweep.main(args) == 0
@@ -568,15 +568,25 @@ def test_sweep_trains_each_variant_as_listed_and_resumes(data, tmp_path, capsys)
     assert (tmp_path / "README.md").read_text().count("\n| ") == 3   # header + 2 rows
     capsys.readouterr()
     assert sweep.main(args) == 0
-    assert "2 of 2 variants done, 0 to train" in capsys.readouterr().out
+    assert "2 of 2 variants current, 0 to train" in capsys.readouterr().out
+    # another config (as after a code change): kept and marked stale, retrained on request
     w64["model_config"]["hidden"] = [32, 32]
     (tmp_path / "w64x3.json").write_text(json.dumps(w64))
     assert sweep.main(args) == 0
-    assert "1 of 2 variants done, 1 to train" in capsys.readouterr().out
-    assert sweep.main(args[:5] + ["3"] + args[6:]) == 0
-    assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "1 of 2 variants current, 0 to train" in said and "w64x3: made with other hidden" in said
+    assert json.loads((tmp_path / "w64x3.json").read_text())["model_config"]["hidden"] == [32, 32]
+    assert (tmp_path / "README.md").read_text().count("| stale: made with other hidden |") == 1
+    assert sweep.main(args + ["--replace-stale"]) == 0
+    assert "1 of 2 variants current, 1 to train" in capsys.readouterr().out
+    assert json.loads((tmp_path / "w64x3.json").read_text())["model_config"]["hidden"] == [64, 64, 64]
+    assert sweep.main(args[:5] + ["3"] + args[6:]) == 0      # another epoch count: both stale
+    assert "0 of 2 variants current, 0 to train (3 epochs, 1 job(s)); 2 stale" in capsys.readouterr().out
+    assert sweep.main(args[:5] + ["3"] + args[6:] + ["--replace-stale"]) == 0
+    assert "0 of 2 variants current, 2 to train" in capsys.readouterr().out
     assert sweep.main(["--data", str(data[1])] + args[2:5] + ["3"] + args[6:]) == 0
-    assert "0 of 2 variants done, 2 to train" in capsys.readouterr().out
+    assert "w64x3: made on another dataset" in capsys.readouterr().out
+    assert (tmp_path / "README.md").read_text().count("\n| ") == 3   # still header + 2 rows
 
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"

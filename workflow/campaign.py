@@ -44,8 +44,9 @@ solution is stored instead: it is the one a user's single solve returns.
 Ranks. ``comm.Split`` forms groups of ``--ranks-per-group`` ranks; the units still to do
 are dealt round-robin to the groups. Only world rank 0 prints and writes the manifest;
 each group's rank 0 writes its shards. Start and resume: world rank 0 first checks that
-DIR holds no dataset of another seed or config (check_compatible; a refused run creates
-nothing in DIR, not even the lock), then takes DIR/.campaign.lock, removes left-over temp
+DIR holds no dataset of another seed or config, nor of more samples (check_compatible: the
+refusal names the option and both values; a refused run creates nothing in DIR, not even
+the lock; DIR's parent must exist), then takes DIR/.campaign.lock, removes left-over temp
 files, scans DIR/shards (checksum + unit layout + config) and rebuilds the manifest; units
 with a missing or invalid shard are (re)done. A ``kill -9`` at any moment loses at most
 the units in progress: shards and manifest only ever appear complete (temp file + rename).
@@ -246,7 +247,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="seconds between progress lines (default 60)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines")
     args = ap.parse_args(argv)
-    why = cli.check_output(Path(args.out) / "manifest.json")   # checked now, created in run()
+    why = cli.check_output(args.out, folder=True)   # checked now, created in run()
     if why:
         ap.error(why)
     n_units = unit_count(args.samples, args.unit_size)
@@ -276,20 +277,57 @@ class Progress:
               f"{rate:.0f} samples/h, ETA {eta:.2f} h, failures {failures}", flush=True)
 
 
-def check_compatible(out: Path, config: dict, seed: int) -> Manifest | None:
+#: The manifest's config entries that a command-line option sets: key -> (flag, unit).
+CONFIG_FLAGS = {("geometry", "mesh_size"): ("--mesh-size", " mm"),
+                ("geometry", "wall_mesh_size"): ("--wall-mesh-size", " mm"),
+                ("unit_size",): ("--unit-size", ""), ("walk_step",): ("--step", ""),
+                ("fresh_check_every",): ("--fresh-check-every", "")}
+
+
+def _differences(old: dict, new: dict, prefix: tuple = ()) -> list[tuple[tuple, object, object]]:
+    """(key path, old value, new value) of every leaf where two configs differ."""
+    out = []
+    for key in sorted(set(old) | set(new)):
+        a, b = old.get(key), new.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += _differences(a, b, prefix + (key,))
+        elif a != b:
+            out.append((prefix + (key,), a, b))
+    return out
+
+
+def describe_difference(path: tuple, old, new) -> str:
+    """One config difference in the user's words: the option and both values, or the
+    code setting (the FEM code or its defaults changed) and both values."""
+    if path in CONFIG_FLAGS:
+        flag, unit = CONFIG_FLAGS[path]
+        show = lambda v: "unset" if v is None else f"{v:g}{unit}" if isinstance(v, (int, float)) else repr(v)
+        return f"{flag} {show(old)} (this run: {show(new)})"
+    return f"{'.'.join(path)} = {old!r} (this run, from the code: {new!r})"
+
+
+def check_compatible(out: Path, config: dict, seed: int, samples: int | None = None) -> Manifest | None:
     """The manifest already in ``out`` (None if there is none). Raises ShardError (one
-    line) if ``out`` holds a dataset this run must not touch: an unreadable manifest, or a
-    campaign with another seed or config (e.g. the FEM code changed)."""
+    line naming the option or setting and both values) if ``out`` holds a dataset this
+    run must not touch: an unreadable manifest, a campaign with another seed or config,
+    or more samples than ``samples`` (a smaller run would drop its shards from the
+    manifest)."""
     if not Manifest.exists(out):
         return None
     old = Manifest.load(out)
-    differ = [k for k in sorted(set(config) | set(old.config)) if old.config.get(k) != config.get(k)]
+    differ = _differences(old.config, config)
     if differ:
-        raise ShardError(f"{out} holds a campaign with another {', '.join(differ)} (e.g. the FEM "
-                         "code changed); use another --out")
+        shown = "; ".join(describe_difference(*d) for d in differ[:3])
+        more = f" and {len(differ) - 3} more" if len(differ) > 3 else ""
+        raise ShardError(f"{out} holds a campaign made with {shown}{more}; rerun with its settings "
+                         "or use another --out")
     if old.seed != seed:
         raise ShardError(f"{out} holds a campaign of --seed {old.seed}, not --seed {seed}; "
                          "use another --out or its seed")
+    if samples is not None and old.samples_requested is not None and samples < old.samples_requested:
+        raise ShardError(f"{out} holds a campaign of --samples {old.samples_requested}; --samples {samples} "
+                         "would drop its other shards: rerun with --samples "
+                         f"{old.samples_requested} (or more) or use another --out")
     return old
 
 
@@ -329,11 +367,11 @@ def run(args) -> int:
     status, lock, scanner, manifest, todo = None, None, None, None, None
     if rank == 0:
         try:
-            check_compatible(out, config, args.seed)
-            (out / "shards").mkdir(parents=True, exist_ok=True)
+            check_compatible(out, config, args.seed, args.samples)
+            (cli.make_output_folder(out) / "shards").mkdir(exist_ok=True)
             lock = open(out / ".campaign.lock", "w")
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            old = check_compatible(out, config, args.seed)     # again: a writer may have raced us
+            old = check_compatible(out, config, args.seed, args.samples)   # again: a writer may have raced us
             clean_temporaries(out)
             scanner = ShardScanner(out, args.samples, config, args.seed)
             done = scanner.scan()
@@ -373,7 +411,7 @@ def run(args) -> int:
             progress.line(manifest.samples + manifest.failures + state["in_unit"],
                           manifest.failures + state["fail_in_unit"])
 
-    units_run, stopped, solver, unit_times = 0, False, None, []
+    units_run, stopped, failed, solver, unit_times = 0, False, False, None, []
     budget = args.max_hours * 3600 if args.max_hours else math.inf
     for unit in mine:
         # All ranks of a group must agree to start a unit (its solves are collective).
@@ -395,7 +433,13 @@ def run(args) -> int:
             meta = {"config": config, "seed": args.seed, "unit": unit, "git_commit": commit,
                     "mesh": solver.mesh_info(), "ranks": G, "cpu_s": figures["wall_s"] * G,
                     **figures}
-            shards.write_shard(out / shard_file(unit), arrays, meta)
+            write_error = save_shard(out / shard_file(unit), arrays, meta)
+        write_error = group.bcast(write_error if group.rank == 0 else None, root=0)
+        if write_error:
+            if group.rank == 0:
+                _error_line(write_error)
+            failed = True
+            break
         units_run += 1
         if rank == 0:
             manifest = build_manifest(out, args.samples, config, args.seed, scanner.scan(), manifest)
@@ -412,6 +456,7 @@ def run(args) -> int:
                 manifest = build_manifest(out, args.samples, config, args.seed, fresh, manifest)
                 progress.line(manifest.samples + manifest.failures, manifest.failures)
     stopped = world.allreduce(stopped, op=MPI.LOR)
+    failed = world.allreduce(failed, op=MPI.LOR)
     units_run = world.allreduce(units_run, op=MPI.SUM)
     code = 0
     if rank == 0:
@@ -440,13 +485,37 @@ def run(args) -> int:
                   f"({100 * summary['failure_rate']:.2f}%), {units_run} units this run in "
                   f"{wall / 3600:.2f} h ({summary['samples_per_hour']:.0f} samples/h)"
                   + ("; time budget reached, re-run to resume" if stopped else ""), flush=True)
-        code = 0 if summary["range_complete"] else EXIT_INCOMPLETE
+        code = 1 if failed else 0 if summary["range_complete"] else EXIT_INCOMPLETE
         lock.close()
     return world.bcast(code, root=0)
 
 
+def _error_line(text: str) -> None:
+    print(f"python -m workflow.campaign: error: {' '.join(text.split())}", file=sys.stderr, flush=True)
+
+
+def save_shard(path: Path, arrays: dict, meta: dict) -> str | None:
+    """Write one shard (atomically: what was there stays on failure); why it could not
+    be written (full disk, a folder in its place), or None."""
+    try:
+        shards.write_shard(path, arrays, meta)
+    except OSError as exc:
+        return (f"cannot write {path}: {exc.strerror or exc}; the dataset keeps its other shards "
+                "(free the space or the path, then rerun to resume)")
+    return None
+
+
 def main(argv=None) -> int:
-    return run(parse_args(argv))
+    args = parse_args(argv)
+    try:
+        return run(args)
+    except OSError as exc:      # the manifest or the lock on a full disk: one line, data kept
+        _error_line(f"{args.out}: {exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
+                    + "; what was written stays (rerun to resume)")
+        from mpi4py import MPI
+        if MPI.COMM_WORLD.size > 1:
+            MPI.COMM_WORLD.Abort(1)
+        return 1
 
 
 if __name__ == "__main__":

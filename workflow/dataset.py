@@ -126,7 +126,7 @@ def main(argv=None) -> int:
                 write_json(args.out, d)
         cli.print_json(d) if args.json else _print_compare(d)
         return 0
-    why = cli.check_output(f"{args.out}/{MANIFEST}")   # not created: the sources are checked first
+    why = cli.check_output(args.out, folder=True)   # not created: the sources are checked first
     if why:
         ap.error(why)
     with ap.errors():
