@@ -86,6 +86,7 @@ results/bench/finger.json: $(TIMES) fem/*.py | $(SETUP)
 
 mesh-study: results/fem/mesh_study.json ## 4 corners x (production + sqrt-2 family with wall refinement) + Richardson (hours; resumes) -> results/fem/mesh_study.json
 results/fem/mesh_study.json: $(TIMES) fem/*.py | $(SETUP)
+	@mkdir -p build
 	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --out $@ --work build/mesh_study
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
@@ -132,7 +133,7 @@ fine-compare: | $(SETUP) ## compare what the finer-mesh held-out walk holds so f
 	$(PY) -m surrogate.evaluate --model results/surrogate/improved.pt --data $(FINE_HELDOUT) --out results/surrogate/heldout_fine.json
 
 dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse mesh into build/dataset-smoke, verified
-	rm -rf $(SMOKE_DIR)
+	rm -rf $(SMOKE_DIR) && mkdir -p build
 	$(MPIRUN) -n 2 $(PY) -m workflow.campaign --samples 8 --seed 3 --unit-size 4 --mesh-size 4 \
 	  --out $(SMOKE_DIR) --progress-every 10
 	$(PY) -m workflow.dataset verify $(SMOKE_DIR) --require-complete --mirror 1
@@ -163,7 +164,7 @@ results/surrogate/metrics.json: $(TIMES) results/surrogate/paper.pt results/surr
 sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the improved surrogate (its 800 epochs each, 2 jobs, ~20 min)
 results/surrogate/sweep/README.md: $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
 	nice $(PY) -m surrogate.sweep --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) \
-	  --jobs 2 --dir results/surrogate/sweep
+	  --jobs 2 --dir results/surrogate/sweep --replace-stale
 
 # ---------------------------------------------------------------- predictor (issue 5)
 # (section owned by predictor/)
