@@ -139,7 +139,7 @@ def test_more_samples_fit_the_exact_function_better(data):
     for s in (6, 200):
         model_cfg, cfg = lc.point_configs("improved", ["hidden=32,32", "epochs=10"], s, True, 0, 600)
         err[s] = lc.run_point(splits, heldout, subsets[s], model_cfg, cfg)["heldout_mean_anchor_error_mm"]
-    assert err[200] < 0.5 * err[6]
+    assert err[200] < 0.25 * err[6]   # measured: 0.077 against 0.474 mm
 
 
 def test_report_section_shows_every_point(data, tmp_path):
