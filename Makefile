@@ -40,7 +40,7 @@ endif
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study joint-render self-contact validation \
-        dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse finger-fem validate-finger report clean
+        dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse finger-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -165,6 +165,9 @@ sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the im
 results/surrogate/sweep/README.md: $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
 	nice $(PY) -m surrogate.sweep --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) \
 	  --jobs 2 --dir results/surrogate/sweep --replace-stale
+
+learning-curve: | $(SETUP) ## held-out errors vs 100..1,600 and all train samples, with/without the Jacobian loss, 2nd seed at 400 (1 core, ~1.5 h; resumes) -> results/surrogate/learning_curve.{json,png}
+	nice $(PY) -m surrogate.learning_curve --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) --repeat 400:1
 
 # ---------------------------------------------------------------- predictor (issue 5)
 # (section owned by predictor/)

@@ -452,6 +452,57 @@ def surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
     return out + [""], checks
 
 
+def _curve_spread(points: list[dict], key: str) -> list[str]:
+    """'s samples (with|without): a vs b' for every size and mode measured with more than
+    one seed: the learning curve's noise."""
+    groups = {}
+    for p in points:
+        groups.setdefault((p["samples"], p["jacobian_loss"]), []).append(p)
+    out = []
+    for (samples, jac), ps in sorted(groups.items()):
+        if len(ps) > 1:
+            vals = [q[key] for q in sorted(ps, key=lambda q: q["seed"])]
+            spread = (max(vals) - min(vals)) / (sum(vals) / len(vals))
+            out.append(f"{samples} samples {'with' if jac else 'without'} the Jacobian loss, seeds "
+                       f"{', '.join(str(q['seed']) for q in sorted(ps, key=lambda q: q['seed']))}: "
+                       + " vs ".join(f"{v:.4f}" for v in vals) + f" mm ({100 * spread:.0f} % of their mean)")
+    return out
+
+
+def learning_curve_section(root: Path) -> tuple[list[str], list[Check]]:
+    title = "Surrogate learning curve (issue 35)"
+    out = [f"## {title}", ""]
+    c = _load(root / "surrogate/learning_curve.json")
+    if not c or not c.get("points"):
+        return out + _missing("trains the improved config on nested subsets of the train split", "make learning-curve"), []
+    n = c["data"]["n"]
+    out += [f"`make learning-curve` (results/surrogate/learning_curve.json, `python -m surrogate.learning_curve`): "
+            f"the `{c['config']}` config trained on nested random subsets of the train split ({n['train']} samples), "
+            f"with its Jacobian loss and without it (w_jac = 0), the whole validation split ({n['val']}) choosing the "
+            f"kept epoch, measured on the held-out set ({c['data']['heldout_n']}). Every point gets at least "
+            f"{c['min_steps']:,} Adam steps with the same learning-rate path ({c['epoch_budget']}), so a small set is "
+            f"not also under-trained." + ("" if c.get("complete") else " **The curve is not finished**: "
+                                          "`make learning-curve` resumes it."), "",
+            "| samples | Jacobian loss | seed | mean anchor (mm) | tip (mm) | cap rotation (deg) | phi_end (deg) "
+            "| Jacobian rel. | train anchor (mm) | Adam steps | train time (s) |", "|---" * 11 + "|"]
+    for p in c["points"]:
+        out.append(f"| {p['samples']} | {'with' if p['jacobian_loss'] else 'without'} | {p['seed']} "
+                   f"| {_num(p['heldout_mean_anchor_error_mm'])} | {_num(p['heldout_tip_error_mm'])} "
+                   f"| {_num(p['heldout_cap_rotation_error_deg'])} | {_num(p['heldout_phi_end_error_deg'])} "
+                   f"| {_num(p['heldout_jacobian_rel_error'])} | {_num(p['train_anchor_error_mm'])} "
+                   f"| {p['steps']} | {_num(p['train_time_s'], '.0f')} |")
+    out.append("")
+    spread = _curve_spread(c["points"], "heldout_mean_anchor_error_mm")
+    if spread:
+        out += ["The curve's noise, held-out mean anchor error of the same size with another seed (another subset "
+                "draw and initialisation): " + "; ".join(spread) + ".", ""]
+    out += _figure(root, "surrogate/learning_curve.png", "the surrogate's learning curve",
+                   "`make learning-curve` (`python -m surrogate.learning_curve`): held-out mean anchor, tip and "
+                   "cap-rotation errors against the training samples, with and without the Jacobian loss; other "
+                   "seeds as open markers.", "make learning-curve")
+    return out, []
+
+
 def predictor_section(root: Path) -> tuple[list[str], list[Check]]:
     title = "Gripper gesture predictor (issue 5)"
     out, checks = [f"## {title}", ""], []
@@ -1046,7 +1097,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
     return out, checks
 
 
-SECTIONS = (fem_section, campaign_section, surrogate_section, predictor_section, finger_section, planning_section)
+SECTIONS = (fem_section, campaign_section, surrogate_section, learning_curve_section, predictor_section, finger_section, planning_section)
 
 
 def build(root: Path) -> tuple[str, list[str], list[Check]]:
