@@ -7,7 +7,7 @@ Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one ha
 (z >= 0, u_z = 0 on z = 0) of the finger described by a finger file
 (fem.finger_spec; default the paper's, fem/fingers/paper.toml), built by
 fem.geometry.build_finger in the finger frame (x along the straight rest finger from the
-base mount, y in the bending plane). Every joint is the bellow joint of fem.solver (the
+base mount, y in the bending plane). Every joint is the bellow joint of fem.problem (the
 same neo-Hookean NinjaFlex, stiff distal cap, P2 elements, valley self-contact of
 fem.contact); every rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35),
 bonded to its neighbours (one conforming mesh). The base face x = 0 is clamped.
@@ -22,7 +22,7 @@ Loads, all ramped together along one load path (load vector a = (P_1 .. P_n, g))
 
 The physics is declared once as a problem (:func:`finger_problem`, from the pieces of
 fem.problem that the joint uses) and handed to the joint's load-path solver
-(fem.solver.LoadPathSolver: stepping, cut-back, Newton/MUMPS, sensitivities).
+(fem.load_path.LoadPathSolver: stepping, cut-back, Newton/MUMPS, sensitivities).
 
 Outputs, in the predictor's global frame (DESIGN.md §4; the right finger, base mount at
 (base_gap/2, 0), finger frame rotated by base_angle): x_global = B + Rot(base_angle)·(x + u)
@@ -52,12 +52,12 @@ from petsc4py import PETSc
 from fem import cli
 from fem.finger_spec import FingerFileError, FingerSpec, load_finger
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
+from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
 from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size
 from fem.problem import (Average, LoadTerm, Material, Problem, bellow_work, chamber_pressures,
                          clamp_and_symmetry, deformation_gradient, displacement_space, elastic_work,
                          facet_tags_present, region_volume, rotation_about_z, valley_contact)
-from fem.solver import LoadPathSolver, SolverConfig
 from fem.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
 
 log = logging.getLogger("softjoint.fem")
@@ -206,7 +206,7 @@ def finger_probes(geometry: FingerGeometry) -> np.ndarray:
 
 class FingerSolver:
     """Static large-deflection solve of one whole finger (module docstring):
-    :func:`finger_problem` handed to a :class:`fem.solver.LoadPathSolver`."""
+    :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: Material = Material(), rigid: RigidMaterial = RigidMaterial(),

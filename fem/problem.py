@@ -23,7 +23,7 @@ A :class:`Problem` holds one static boundary-value problem in the unknown displa
 * probe points (material points whose displacement is reported) and named volume
   averages (:class:`Average`, e.g. the rotation of a rigid part).
 
-The problem is declared here, solved by :class:`fem.solver.LoadPathSolver` (load path,
+The problem is declared here, solved by :class:`fem.load_path.LoadPathSolver` (load path,
 Newton, MUMPS, sensitivities), which knows nothing of the physics.
 
 The physics pieces, written once and shared by the joint, the beam and the finger:
@@ -46,7 +46,7 @@ The physics pieces, written once and shared by the joint, the beam and the finge
 * :func:`valley_contact`: penalty self-contact of the valley walls (:mod:`fem.contact`).
 
 Data flow: MeshData (fem.mesh) -> joint_problem / fem.finger.finger_problem -> Problem
--> fem.solver.LoadPathSolver.
+-> fem.load_path.LoadPathSolver.
 """
 
 from __future__ import annotations
