@@ -8,7 +8,7 @@ Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one ha
 (z >= 0, u_z = 0 on z = 0) of the finger described by a finger file
 (fem.finger_spec; default the paper's, fem/fingers/paper.toml), built by
 fem.geometry.build_finger in the finger frame (x along the straight rest finger from the
-base mount, y in the bending plane). Every joint is the bellow joint of fem.solver (the
+base mount, y in the bending plane). Every joint is the bellow joint of fem.problem (the
 same neo-Hookean NinjaFlex, stiff distal cap, P2 elements, valley self-contact of
 fem.contact); every rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35),
 bonded to its neighbours (one conforming mesh). The base face x = 0 is clamped.
@@ -21,8 +21,9 @@ Loads, all ramped together along one load path (load vector a = (P_1 .. P_n, g))
   finger file, V_k its half-model volume: the half-model carries half the weight), with
   e_g = Rot(-base_angle)·(0, -1) the global -Y in the finger frame, g in [0, 1].
 
-The load stepping, cut-back and Newton/MUMPS machinery is fem.solver.NewtonSolver, shared
-with the joint.
+The physics is declared once as a problem (:func:`finger_problem`, from the pieces of
+fem.problem that the joint uses) and handed to the joint's load-path solver
+(fem.load_path.LoadPathSolver: stepping, cut-back, Newton/MUMPS, sensitivities).
 
 Outputs, in the predictor's global frame (DESIGN.md §4; the right finger, base mount at
 (base_gap/2, 0), finger frame rotated by base_angle): x_global = B + Rot(base_angle)·(x + u)
@@ -51,13 +52,14 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem import cli
-from fem.contact import ValleyContact
 from fem.finger_spec import FingerFileError, FingerSpec, load_finger
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
-from fem.mesh import create_mesh
+from fem.load_path import LoadPathSolver, SolverConfig
+from fem.mesh import MeshData, create_mesh
 from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size
-from fem.solver import (Material, NewtonSolver, SolverConfig, _lame, displacement_problem,
-                        facet_tags_present, follower_pressure, neo_hookean_psi, rotation_about_z)
+from fem.problem import (Average, LoadTerm, Material, Problem, bellow_work, chamber_pressures,
+                         clamp_and_symmetry, deformation_gradient, displacement_space, elastic_work,
+                         facet_tags_present, region_volume, rotation_about_z, valley_contact)
 from fem.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
 
 log = logging.getLogger("softjoint.fem")
@@ -149,86 +151,101 @@ def rotation_matrix(angle: float) -> np.ndarray:
 FINGER_CONFIG = SolverConfig(max_it=25, min_step=1.0 / 1024)
 
 
-class FingerSolver(NewtonSolver):
-    """Static large-deflection solve of one whole finger (module docstring)."""
+def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Material = Material(),
+                   rigid: RigidMaterial = RigidMaterial(), *, degree: int = 2,
+                   quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
+    """The whole finger as a :class:`fem.problem.Problem` (module docstring): every joint
+    the bellow joint's body, stiff cap, chamber pressures and valley contact, every rigid
+    part a PLA-like solid, gravity a dead body force. Load vector a = (P_1 .. P_n, g) in
+    MPa and [0, 1]; probes: each joint's proximal centre and anchors, then the fingertip;
+    averages ``rotation{k}`` (rad): part k's rigid body (a rigid part, or a joint's cap).
+    Collective."""
+    finger, comm = geometry.finger, mesh_data.mesh.comm
+    u, v, dx, ds = displacement_space(mesh_data, degree, quadrature_degree)
+    V, ft, mesh = u.function_space, mesh_data.facet_tags, mesh_data.mesh
+    F = deformation_gradient(u)
+    tags = finger_tags(finger)
+    present = facet_tags_present(ft)
+    internal, weights, pressures, averages = 0, [], (), {}
+    for k, part in enumerate(finger.parts):
+        own = dx(tags[f"part{k}"])
+        if part.kind == "joint":
+            rigid_body = dx(tags[f"cap{k}"])
+            internal = internal + bellow_work(F, v, material, own, rigid_body)
+            whole = own + rigid_body
+            pressures += chamber_pressures(F, v, ds, tags[f"top{k}"], tags[f"bottom{k}"], present,
+                                           finger.joints.index(k))
+        else:
+            internal = internal + elastic_work(F, v, rigid.E, rigid.nu, own)
+            whole = rigid_body = own
+        if part.weight > 0:
+            weights.append(gravity_work(v, finger, part.weight, whole, region_volume(mesh, whole, comm)))
+        averages[f"rotation{k}"] = Average(fem.form(rotation_about_z(F) * rigid_body),
+                                           region_volume(mesh, rigid_body, comm))
+    n = len(finger.joints)
+    loads = pressures
+    if weights:
+        loads += (LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), sum(weights[1:], weights[0]), n),)
+    contact = valley_contact(V, ft, present, geometry.joint, contact_penalty,
+                             offsets=tuple(finger.rest_start(k) for k in finger.joints))
+    return Problem(mesh_data, u, internal, loads, np.array([PRESSURE_LIMIT] * n + [1.0]),
+                   tuple(clamp_and_symmetry(V, ft)), finger_probes(geometry), contact,
+                   averages=averages)
+
+
+def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
+    """Virtual work per unit g of a part's weight (N) as a dead body force over ``region``
+    of half-model volume ``volume`` (mm³): b = W / (2 V) e_g, e_g = Rot(-base_angle)·(0, -1)
+    the global -Y in the finger frame. Returned as the residual term -∫ b·v dX."""
+    e_g = rotation_matrix(-finger.base_angle) @ np.array([0.0, -1.0])
+    gravity = ufl.as_vector([float(e_g[0]), float(e_g[1]), 0.0])
+    rho = fem.Constant(v.ufl_function_space().mesh, PETSc.ScalarType(weight / (2 * volume)))
+    return -rho * ufl.inner(gravity, v) * region
+
+
+def finger_probes(geometry: FingerGeometry) -> np.ndarray:
+    """Every joint's proximal centre and 10 anchors, then the fingertip: (n, 3) mm."""
+    finger, L = geometry.finger, geometry.joint.length
+    points = [[finger.rest_start(k) + i * L / N_ANCHORS, 0.0, 0.0]
+              for k in finger.joints for i in range(N_ANCHORS + 1)]
+    points.append([finger.length, 0.0, 0.0])
+    return np.array(points)
+
+
+class FingerSolver:
+    """Static large-deflection solve of one whole finger (module docstring):
+    :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: Material = Material(), rigid: RigidMaterial = RigidMaterial(),
                  config: SolverConfig = FINGER_CONFIG):
-        self.finger = finger = geometry.finger
-        self.mesh_data = mesh_data = create_mesh(geometry, comm)
-        mesh, ft = mesh_data.mesh, mesh_data.facet_tags
-        self.comm = mesh.comm
-        tags = finger_tags(finger)
-        joints = finger.joints
-        self.load_scale = np.array([PRESSURE_LIMIT] * len(joints) + [1.0])
-        V, u, v, bcs, dx, ds = displacement_problem(mesh_data, config)
+        self.finger, self.config = geometry.finger, config
+        self.mesh_data = create_mesh(geometry, comm)
+        self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
+                                      **config.discretisation())
+        self.solver = LoadPathSolver(self.problem, config)
+        self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
+        self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
 
-        # --- internal energy: NinjaFlex joints, stiff caps, PLA rigid parts
-        F = ufl.variable(ufl.Identity(3) + ufl.grad(u))
-        stress = {name: ufl.diff(neo_hookean_psi(F, *_lame(E, nu)), F) for name, (E, nu) in {
-            "body": (material.E, material.nu),
-            "cap": (material.cap_stiffness * material.E, material.cap_nu),
-            "rigid": (rigid.E, rigid.nu)}.items()}
-        one = fem.Constant(mesh, PETSc.ScalarType(1))
-        volume = lambda m: self._allsum(fem.assemble_scalar(fem.form(one * m)))
-        R = 0
-        self.g = fem.Constant(mesh, PETSc.ScalarType(0))
-        e_g = rotation_matrix(-finger.base_angle) @ np.array([0.0, -1.0])
-        gravity = ufl.as_vector([float(e_g[0]), float(e_g[1]), 0.0])
-        self._rotation_forms = {}       # part k (rigid) or cap of joint k -> (form, volume)
-        for k, part in enumerate(finger.parts):
-            own = dx(tags[f"part{k}"])
-            if part.kind == "joint":
-                cap = dx(tags[f"cap{k}"])
-                R = R + ufl.inner(stress["body"], ufl.grad(v)) * own + ufl.inner(stress["cap"], ufl.grad(v)) * cap
-                whole = own + cap
-                rigid_body = cap
-            else:
-                R = R + ufl.inner(stress["rigid"], ufl.grad(v)) * own
-                whole = own
-                rigid_body = own
-            if part.weight > 0:
-                rho = fem.Constant(mesh, PETSc.ScalarType(part.weight / (2 * volume(whole))))
-                R = R - self.g * rho * ufl.inner(gravity, v) * whole
-            self._rotation_forms[k] = (fem.form(rotation_about_z(F) * rigid_body), volume(rigid_body))
+    # The solver's running totals and state, read through (diagnostics).
+    factorisations = property(lambda self: self.solver.factorisations)
+    krylov_iterations = property(lambda self: self.solver.krylov_iterations)
 
-        # --- chamber pressures, per joint
-        present = facet_tags_present(ft)
-        self.p = []
-        for k in joints:
-            pair = {}
-            for side in ("top", "bottom"):
-                if tags[f"{side}{k}"] in present:
-                    pair[side] = fem.Constant(mesh, PETSc.ScalarType(0))
-                    R = R + pair[side] * follower_pressure(F, v, ds(tags[f"{side}{k}"]))
-            self.p.append(pair)
-        contact = None
-        if config.contact_penalty > 0 and tags["valley_faces"] in present:
-            contact = ValleyContact(V, ft, geometry.joint, config.contact_penalty,
-                                    offsets=tuple(finger.rest_start(k) for k in joints))
-        super().__init__(V, u, R, bcs, config, contact)
+    def reset(self) -> None:
+        """Return to the undeformed, unloaded state."""
+        self.solver.reset()
 
-        # --- probes: every joint's proximal centre and anchors, and the fingertip
-        L = geometry.joint.length
-        points = [[finger.rest_start(k) + i * L / N_ANCHORS, 0.0, 0.0]
-                  for k in joints for i in range(N_ANCHORS + 1)]
-        points.append([finger.length, 0.0, 0.0])
-        self.probe_points = np.array(points)
-        self._probe_cells = self._locate(self.probe_points)
-
-    def _set_load(self, a: np.ndarray) -> None:
-        for pair, P in zip(self.p, a[:-1]):
-            if "top" in pair:
-                pair["top"].value = max(P, 0.0)
-            if "bottom" in pair:
-                pair["bottom"].value = max(-P, 0.0)
-        self.g.value = a[-1]
+    def mesh_info(self) -> dict:
+        return self.solver.mesh_info()
 
     def rotation(self, k: int) -> float:
         """Rotation (rad) about +z of part k's rigid body: a rigid part, or a joint's cap."""
-        form, vol = self._rotation_forms[k]
-        return self._allsum(fem.assemble_scalar(form)) / vol
+        return self.solver.average(f"rotation{k}")
+
+    def sensitivities(self) -> np.ndarray:
+        """d(probe x, y)/d(P_1 .. P_n, g) in the finger frame at the converged state,
+        shape (n_probe, 2, n + 1): mm/MPa and mm per unit g (probes: finger_probes)."""
+        return self.solver.sensitivities()[:, :2, :]
 
     def solve(self, load: FingerLoad) -> FingerResult:
         """Solve one finger gesture from the unloaded state; raises OutOfBoxError
@@ -238,27 +255,27 @@ class FingerSolver(NewtonSolver):
             raise ValueError(f"{len(load.pressures)} pressures for a finger with {len(joints)} joints")
         check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(joints))],
                   box=[PRESSURE_LIMIT] * len(joints), units=["MPa"] * len(joints))
-        t0, c0, lu0 = time.perf_counter(), time.process_time(), self.factorisations
-        self.reset()
-        path = self._follow(self.state.copy(), load.as_array())
-        result = self._result(load, path)
-        result.factorisations = self.factorisations - lu0
-        result.wall_time = time.perf_counter() - t0
-        result.cpu_time = time.process_time() - c0
+        solver = self.solver
+        t0, c0, lu0 = time.perf_counter(), time.process_time(), solver.factorisations
+        solver.reset()
+        path = solver.follow(solver.state.copy(), load.as_array())
+        result = self._result(load, path, solver.factorisations - lu0, time.perf_counter() - t0,
+                              time.process_time() - c0)
         if self.comm.rank == 0:
             log.info("finger %s: converged=%s, %d steps, %.1f s", load.pressures, path.converged,
                      path.load_steps, result.wall_time)
         return result
 
-    def _result(self, load: FingerLoad, path) -> FingerResult:
+    def _result(self, load: FingerLoad, path, factorisations: int, wall: float,
+                cpu: float) -> FingerResult:
         """Global-frame figures of the current state (module docstring)."""
         finger = self.finger
         base, turn = np.array([0.5 * finger.base_gap, 0.0]), rotation_matrix(finger.base_angle)
-        x = (self.probe_points + self.evaluate(self.u))[:, :2]
+        x = (self.probe_points + self.solver.probe_displacements())[:, :2]
         x = base + x @ turn.T
         n = N_ANCHORS + 1
         polylines = x[:-1].reshape(-1, n, 2)
-        rot = {k: self.rotation(k) for k in self._rotation_forms}
+        rot = {k: self.rotation(k) for k in range(len(finger.parts))}
         theta, end = [], []
         for k in finger.joints:
             theta.append(finger.base_angle + (rot[k - 1] if k > 0 else 0.0))
@@ -274,7 +291,8 @@ class FingerSolver(NewtonSolver):
             anchors=polylines[:, 1:], proximal=polylines[:, 0], theta=theta, end_angle=end,
             chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi, local_anchors=local,
             newton_iterations=path.newton_iterations, load_steps=path.load_steps,
-            cutbacks=path.cutbacks, reason=path.reason)
+            cutbacks=path.cutbacks, factorisations=factorisations, wall_time=wall, cpu_time=cpu,
+            reason=path.reason)
 
 
 # ---------------------------------------------------------------------- command line

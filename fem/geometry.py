@@ -20,7 +20,7 @@ Joint cross-section along x::
   and one channel of height H_valley - wall - s/2 that connects them;
 * the distal cap (x in [L - cap, L]) is its own volume so the solver can make it rigid.
 
-Physical groups (the names are the contract with :mod:`fem.solver`):
+Physical groups (the names are the contract with :mod:`fem.problem`):
 
 =================  ====  =====================================================
 name               dim   what
@@ -45,7 +45,7 @@ import numpy as np
 from fem.finger_spec import FingerSpec
 from fem.spec import JOINT_LENGTH, N_ANCHORS
 
-#: Physical-group tags, shared with fem.solver.
+#: Physical-group tags, shared with fem.problem.
 TAGS = {
     "solid": 1, "distal_cap": 2,
     "proximal": 11, "distal": 12, "symmetry": 13,

@@ -1,8 +1,9 @@
 """Large-deflection validation of the joint's loading code on a slender 3D cantilever.
 
 The beam (fem.geometry.BeamGeometry, nu = 0 so EI = E b h³/12 is unambiguous) is solved
-with the SAME Solver as the joint: its end block is the rigid cap, F2 is the dead load at
-the beam end (L, 0, 0) and M the pure couple of fem.solver. Results are compared with the
+as the SAME problem as the joint (fem.problem.joint_problem) by the same load-path solver
+(fem.load_path): its end block is the rigid cap, F2 is the dead load at the beam end
+(L, 0, 0) and M the pure couple of fem.problem.end_loads. Results are compared with the
 exact elastica of fem.elastica:
 
 * ``cantilever --alpha A``: dead transverse tip load P = A·EI/L² (Bisshopp-Drucker),

@@ -95,3 +95,26 @@ def test_mirror_pressure_gives_the_mirror_finger(bent):
     np.testing.assert_allclose(plus.tip[0] - 25.0, -(minus.tip[0] - 25.0), atol=1e-6)
     np.testing.assert_allclose(plus.tip[1], minus.tip[1], atol=1e-6)
     np.testing.assert_allclose(plus.tip_angle + math.pi / 2, -(minus.tip_angle + math.pi / 2), atol=1e-8)
+
+
+def test_finger_sensitivities_match_finite_differences(finger):
+    """The load-path solver's sensitivities of the finger problem (pressure: one-sided
+    follower load; gravity: the weight body force summed over the parts) against central
+    differences of continuation solves, h = 1e-3 MPa and 1e-3 g, at (0.15 MPa, gravity):
+    the finger-frame probe displacements (anchors, fingertip) agree to 1e-3 of the largest
+    derivative (the difference quotient's error is O(h^2))."""
+    assert finger.solve(FingerLoad((0.15,), True)).converged
+    S = finger.sensitivities()                         # (n_probe, 2, 2): mm/MPa, mm/g
+    assert S.shape == (len(finger.probe_points), 2, 2)
+    state, h = finger.solver.state.copy(), 1e-3
+    for j in range(2):
+        x = []
+        for sign in (1, -1):
+            step = np.zeros(2)
+            step[j] = sign * h
+            assert finger.solver.follow(finger.solver.state.copy(), state + step).converged
+            x.append(finger.solver.probe_displacements()[:, :2])
+        fd = (x[0] - x[1]) / (2 * h)
+        scale = np.abs(S[:, :, j]).max()
+        assert scale > 1.0                             # the tip moves by mm per MPa or per g
+        np.testing.assert_allclose(S[:, :, j], fd, atol=1e-3 * scale)

@@ -1,0 +1,307 @@
+"""Physics of the FEM models as problem objects: what is solved, apart from how.
+
+Units: mm, N, MPa (= N/mm²), N·mm; angles in rad.
+
+A :class:`Problem` holds one static boundary-value problem in the unknown displacement u
+(P``degree`` vector field, mm) of a half-model (z >= 0):
+
+    R(u; v; a) = R_int(u; v) + sum_i c_i(a) G_i(u; v) = 0      for all v,  u = 0 on Dirichlet faces
+
+* R_int, the internal virtual work of a hyperelastic energy psi, P = d psi / d F::
+
+      F = I + grad u,   J = det F,   I1 = tr(F^T F)
+      psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2
+      mu = E / (2 (1 + nu)),   lambda = E nu / ((1 + nu)(1 - 2 nu))
+
+* the loads: each :class:`LoadTerm` is a constant c_i (a ``fem.Constant``) times its form
+  G_i = dR/dc_i, and c_i follows one entry of the load vector a, either linearly
+  (c = a_j) or one-sided (c = max(±a_j, 0): a signed pressure P inflates the top chamber
+  when P > 0 and the bottom one when P < 0);
+* an optional contact term (:class:`fem.contact.ValleyContact`) assembled apart;
+* lagged constants (:class:`Lagged`): values recomputed from each converged state (the
+  cap's rotation that the end loads are written relative to);
+* probe points (material points whose displacement is reported) and named volume
+  averages (:class:`Average`, e.g. the rotation of a rigid part).
+
+The problem is declared here, solved by :class:`fem.load_path.LoadPathSolver` (load path,
+Newton, MUMPS, sensitivities), which knows nothing of the physics.
+
+The physics pieces, written once and shared by the joint, the beam and the finger:
+
+* :func:`elastic_work`: neo-Hookean internal virtual work of one region;
+* :func:`bellow_work`: the joint's NinjaFlex body and its stiff distal cap (modulus
+  ``cap_stiffness`` x E, so it moves rigidly to solver precision);
+* :func:`chamber_pressures`: follower pressure on the deformed chamber walls (Nanson)::
+
+      t0 = -p J F^-T N = -p cofac(F) N,   p_top = max(P, 0),  p_bottom = max(-P, 0)
+
+* :func:`end_loads`: F1, F2 (dead, joint frame) at the reference point X_ref and the pure
+  couple M about +z, through the rigid cap's rotation theta (:func:`rotation_about_z`)::
+
+      Pi_ext = -1/(2 V_cap) ∫_cap [ f·(u + (R(theta) - I)(X_ref - X)) + M theta ] dX
+
+  whose variation is f·δu_ref + M δtheta: the couple is M at any end rotation. theta is
+  measured relative to the last converged rotation (a lagged constant), so it has no
+  branch cut; the half-model carries half of each resultant;
+* :func:`valley_contact`: penalty self-contact of the valley walls (:mod:`fem.contact`).
+
+Data flow: MeshData (fem.mesh) -> joint_problem / fem.finger.finger_problem -> Problem
+-> fem.load_path.LoadPathSolver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem.contact import ValleyContact
+from fem.geometry import TAGS, JointGeometry
+from fem.mesh import MeshData
+
+
+@dataclass(frozen=True)
+class Material:
+    """Neo-Hookean material (MPa). Defaults: NinjaFlex (DESIGN.md §3)."""
+
+    E: float = 12.2
+    nu: float = 0.49
+    # Distal cap modulus = cap_stiffness * E: the 3 mm solid cap then bends by < 3e-5 rad
+    # under M = 100 N·mm, rigid for every reported figure. Much stiffer caps slow Newton:
+    # a linearised rotation step strains a stiff block by ~theta^2/2.
+    cap_stiffness: float = 100.0
+    # The connector need not be nearly incompressible; nu = 0.3 keeps lambda_cap small,
+    # since lambda * theta^2/2 is the spurious stress a linearised rotation step creates.
+    cap_nu: float = 0.3
+
+
+# ---------------------------------------------------------------------- problem types
+@dataclass(frozen=True, eq=False)
+class LoadTerm:
+    """One load of the residual: ``constant`` c times ``form`` G = dR/dc.
+
+    c follows entry ``index`` of the load vector a: c = a_j (``side`` 0), max(a_j, 0)
+    (side +1) or max(-a_j, 0) (side -1)."""
+
+    constant: fem.Constant
+    form: ufl.Form
+    index: int
+    side: int = 0
+
+    def value(self, a: np.ndarray) -> float:
+        x = a[self.index]
+        return x if self.side == 0 else max(self.side * x, 0.0)
+
+    def slope(self, a: np.ndarray) -> float:
+        """dc/da_j; at a_j = 0 the one-sided derivative of the + side (side +1 active)."""
+        x = a[self.index]
+        if self.side == 0:
+            return 1.0
+        active = x >= 0 if self.side > 0 else x < 0
+        return float(self.side) if active else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Average:
+    """Volume average of a scalar field f over a region: ∫ f dX / volume."""
+
+    form: object                    # compiled dolfinx form of ∫ f dX
+    volume: float                   # mm³ (of the half-model)
+
+    def value(self, comm: MPI.Comm) -> float:
+        """The average over all ranks (collective)."""
+        return comm.allreduce(fem.assemble_scalar(self.form), op=MPI.SUM) / self.volume
+
+
+@dataclass(frozen=True, eq=False)
+class Lagged:
+    """A constant of the forms set to ``average`` at every converged state (0 at rest)."""
+
+    constant: fem.Constant
+    average: Average
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A static problem R(u; v; a) = 0 (module docstring), ready for a solver.
+
+    ``load_scale`` (len(a),): the full-range magnitude of each load entry, which sizes the
+    solver's first step. ``probe_points`` (n, 3) mm: material points whose displacement
+    the solver reports. ``averages``: named outputs (e.g. part rotations, rad)."""
+
+    mesh_data: MeshData
+    u: fem.Function
+    internal: ufl.Form
+    loads: tuple[LoadTerm, ...]
+    load_scale: np.ndarray
+    bcs: tuple
+    probe_points: np.ndarray
+    contact: ValleyContact | None = None
+    lagged: tuple[Lagged, ...] = ()
+    averages: dict = field(default_factory=dict)
+
+    @property
+    def V(self):
+        return self.u.function_space
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.mesh_data.mesh.comm
+
+    def residual(self) -> ufl.Form:
+        """R(u; v) with the loads as constants."""
+        R = self.internal
+        for term in self.loads:
+            R = R + term.constant * term.form
+        return R
+
+    def set_load(self, a: np.ndarray) -> None:
+        """Set every load constant for the load vector ``a``."""
+        for term in self.loads:
+            term.constant.value = term.value(a)
+
+
+# ---------------------------------------------------------------------- physics pieces
+def lame(E: float, nu: float) -> tuple[float, float]:
+    """(mu, lambda) in MPa of Young's modulus E (MPa) and Poisson's ratio nu."""
+    return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
+
+
+def neo_hookean_psi(F, mu, lmbda):
+    """Strain energy density psi(F) (MPa = N·mm/mm³), compressible neo-Hookean."""
+    J = ufl.det(F)
+    I1 = ufl.tr(F.T * F)
+    return mu / 2 * (I1 - 3) - mu * ufl.ln(J) + lmbda / 2 * ufl.ln(J) ** 2
+
+
+def deformation_gradient(u):
+    """F = I + grad u as a UFL variable (so that P = ufl.diff(psi, F))."""
+    return ufl.variable(ufl.Identity(len(u)) + ufl.grad(u))
+
+
+def elastic_work(F, v, E: float, nu: float, dx):
+    """Internal virtual work ∫ P : grad v dX (N·mm per mm of v) of a neo-Hookean region."""
+    P = ufl.diff(neo_hookean_psi(F, *lame(E, nu)), F)
+    return ufl.inner(P, ufl.grad(v)) * dx
+
+
+def bellow_work(F, v, material: Material, body, cap):
+    """The joint's internal virtual work: NinjaFlex ``body`` and its stiff distal ``cap``."""
+    return (elastic_work(F, v, material.E, material.nu, body)
+            + elastic_work(F, v, material.cap_stiffness * material.E, material.cap_nu, cap))
+
+
+def rotation_about_z(F, theta_ref=0.0):
+    """Rotation (rad) about +z of the material at a point, theta = atan2(F_yx - F_xy,
+    F_xx + F_yy): exact for any rigid motion, and the polar rotation's angle for a planar
+    F. Taken relative to ``theta_ref`` (UFL scalar), so it has no branch cut near it."""
+    c, s = ufl.cos(theta_ref), ufl.sin(theta_ref)
+    a, b = F[0, 0] + F[1, 1], F[1, 0] - F[0, 1]
+    return theta_ref + ufl.atan_2(b * c - a * s, a * c + b * s)
+
+
+def follower_pressure(F, v, ds):
+    """Virtual work per unit pressure of a follower load on the deformed surface ``ds``
+    (Nanson: t0 = -p cofac(F) N; this is the residual term divided by p)."""
+    N = ufl.FacetNormal(v.ufl_function_space().mesh)
+    return ufl.inner(ufl.cofac(F) * N, v) * ds
+
+
+def chamber_pressures(F, v, ds, top: int, bottom: int, present: set, index: int) -> tuple:
+    """Load terms of one joint's signed pressure a[index] (MPa): P > 0 on the ``top``
+    chamber's walls, -P on the ``bottom`` one's (facet tags; absent ones are skipped)."""
+    mesh = v.ufl_function_space().mesh
+    return tuple(LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)),
+                          follower_pressure(F, v, ds(tag)), index, side)
+                 for tag, side in ((top, 1), (bottom, -1)) if tag in present)
+
+
+def region_volume(mesh, dx, comm: MPI.Comm) -> float:
+    """Volume (mm³) of the region of measure ``dx`` (collective)."""
+    one = fem.Constant(mesh, PETSc.ScalarType(1))
+    return comm.allreduce(fem.assemble_scalar(fem.form(one * dx)), op=MPI.SUM)
+
+
+def end_loads(F, u, v, dx_cap, ref_point, first: int) -> tuple[tuple, Lagged]:
+    """F1, F2 (N) at ``ref_point`` carried by the rigid cap and the couple M (N·mm) about
+    +z (module docstring), on load entries first .. first + 2; and the cap rotation they
+    are measured from (lagged, rad)."""
+    mesh = u.function_space.mesh
+    theta_ref = fem.Constant(mesh, PETSc.ScalarType(0))
+    theta = rotation_about_z(F, theta_ref)
+    volume = region_volume(mesh, dx_cap, mesh.comm)
+    # Mesh-dependent numbers are Constants, so one compiled form serves every mesh.
+    X = ufl.SpatialCoordinate(mesh)
+    Xref = fem.Constant(mesh, np.asarray(ref_point[:2], dtype=PETSc.ScalarType))
+    Rth = ufl.as_matrix([[ufl.cos(theta), -ufl.sin(theta)], [ufl.sin(theta), ufl.cos(theta)]])
+    arm = Xref - ufl.as_vector([X[0], X[1]])
+    u_ref = ufl.as_vector([u[0], u[1]]) + (Rth - ufl.Identity(2)) * arm
+    w = fem.Constant(mesh, PETSc.ScalarType(-0.5 / volume))   # the half-model carries half
+    potentials = [w * u_ref[0] * dx_cap, w * u_ref[1] * dx_cap, w * theta * dx_cap]
+    terms = tuple(LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), ufl.derivative(pi, u, v),
+                           first + i) for i, pi in enumerate(potentials))
+    return terms, Lagged(theta_ref, Average(fem.form(theta * dx_cap), volume))
+
+
+def facet_tags_present(facet_tags) -> set:
+    """The facet tag values present on any rank (collective)."""
+    comm = facet_tags.mesh.comm
+    tags = set(np.unique(facet_tags.values)) if facet_tags.values.size else set()
+    return comm.allreduce(tags, op=MPI.BOR) if comm.size > 1 else tags
+
+
+def valley_contact(V, facet_tags, present: set, joint: JointGeometry, penalty: float,
+                   offsets: tuple[float, ...] = (0.0,)) -> ValleyContact | None:
+    """The valley self-contact of the joints at x = ``offsets`` (mm), or None when the
+    mesh has no valley faces or the penalty (MPa/mm) is 0."""
+    if TAGS["valley_faces"] not in present or penalty <= 0:
+        return None
+    return ValleyContact(V, facet_tags, joint, penalty, offsets=offsets)
+
+
+def clamp_and_symmetry(V, facet_tags) -> list:
+    """u = 0 on the ``proximal`` facets and u_z = 0 on the ``symmetry`` plane z = 0."""
+    tdim = V.mesh.topology.dim
+    zero = np.zeros(3, dtype=PETSc.ScalarType)
+    clamp = fem.locate_dofs_topological(V, tdim - 1, facet_tags.find(TAGS["proximal"]))
+    Vz = V.sub(2)
+    sym = fem.locate_dofs_topological(Vz, tdim - 1, facet_tags.find(TAGS["symmetry"]))
+    return [fem.dirichletbc(zero, clamp, V), fem.dirichletbc(PETSc.ScalarType(0), sym, Vz)]
+
+
+def displacement_space(mesh_data: MeshData, degree: int, quadrature_degree: int):
+    """(u, v, dx, ds) of a half-model: the unknown displacement u (mm) in a P``degree``
+    vector space, its test function and the tagged measures at ``quadrature_degree``."""
+    mesh, ct, ft = mesh_data.mesh, mesh_data.cell_tags, mesh_data.facet_tags
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    V = fem.VectorFunctionSpace(mesh, ("CG", degree))
+    md = {"quadrature_degree": quadrature_degree}
+    dx = ufl.Measure("dx", domain=mesh, subdomain_data=ct, metadata=md)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=ft, metadata=md)
+    return fem.Function(V, name="u"), ufl.TestFunction(V), dx, ds
+
+
+# ---------------------------------------------------------------------- the joint
+def joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
+                  material: Material = Material(), *, degree: int = 2,
+                  quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
+    """One joint-like body clamped at x = 0 (the bellow joint, or the benchmark beam):
+    body and stiff cap, chamber pressure, valley contact where the mesh has them, and the
+    end loads at ``ref_point`` (3,) mm. Load vector a = (P, F1, F2, M) in MPa, N, N, N·mm,
+    with full-range magnitudes ``load_scale`` (4,). Collective."""
+    u, v, dx, ds = displacement_space(mesh_data, degree, quadrature_degree)
+    V, ft = u.function_space, mesh_data.facet_tags
+    F = deformation_gradient(u)
+    internal = bellow_work(F, v, material, dx(TAGS["solid"]), dx(TAGS["distal_cap"]))
+    present = facet_tags_present(ft)
+    pressure = chamber_pressures(F, v, ds, TAGS["top_chamber"], TAGS["bottom_chamber"], present, 0)
+    forces, cap = end_loads(F, u, v, dx(TAGS["distal_cap"]), ref_point, first=1)
+    return Problem(mesh_data, u, internal, pressure + forces, np.asarray(load_scale, dtype=float),
+                   tuple(clamp_and_symmetry(V, ft)), np.asarray(probe_points, dtype=float).reshape(-1, 3),
+                   valley_contact(V, ft, present, mesh_data.geometry, contact_penalty),
+                   lagged=(cap,), averages={"cap_rotation": cap.average})
