@@ -61,6 +61,7 @@ from fem.problem import (Average, LoadTerm, Material, Problem, bellow_work, cham
                          clamp_and_symmetry, deformation_gradient, displacement_space, elastic_work,
                          facet_tags_present, region_volume, rotation_about_z, valley_contact)
 from fem.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
+from fem.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
 MAX_JOINTS = 4        # --p1 .. --p4
@@ -358,7 +359,6 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
 
 
 def main(argv=None) -> int:
-    from fem.solve import write_xdmf
 
     ap = build_parser()
     args = ap.parse_args(argv)

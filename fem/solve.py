@@ -17,19 +17,16 @@ stdout holds the result alone.
 from __future__ import annotations
 
 import logging
-import os
-import shutil
 import sys
-import tempfile
 from dataclasses import asdict, replace
-from pathlib import Path
 
 from mpi4py import MPI
 
 from fem import cli
 from fem.geometry import JointGeometry
-from fem.options import add_load, add_mesh_size, on_root, parsed_load
+from fem.options import add_load, add_mesh_size, parsed_load
 from fem.solver import JointSolver, Load
+from fem.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
 
@@ -46,35 +43,6 @@ def build_parser() -> cli.Parser:
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
     return ap
-
-
-def write_xdmf(path: str | Path, solver: JointSolver) -> None:
-    """u to ``path`` (.xdmf) and its .h5 (collective). Both are written into a hidden
-    folder beside ``path`` under their final names (the .xdmf names its .h5), then
-    renamed into place, .h5 first: a reader never sees a half-written pair."""
-    from dolfinx.io import XDMFFile
-
-    comm, path = solver.comm, Path(path)
-    tmp = None
-    if comm.rank == 0:
-        tmp = tempfile.mkdtemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
-    tmp = Path(comm.bcast(tmp, root=0))
-    try:
-        with XDMFFile(comm, str(tmp / path.name), "w") as f:
-            f.write_mesh(solver.mesh_data.mesh)
-            f.write_function(solver.u)
-        comm.barrier()
-
-        def publish():
-            for name in (path.with_suffix(".h5").name, path.name):
-                with open(tmp / name, "rb+") as fh:
-                    os.fsync(fh.fileno())
-                os.replace(tmp / name, path.parent / name)
-
-        on_root(comm, publish)
-    finally:
-        if comm.rank == 0:
-            shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _print_text(out: dict, result, jac) -> None:
