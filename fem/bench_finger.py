@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from fem import cli
-from fem.files import write_json
+from contract import cli
+from contract.files import write_json
 from fem.finger import FingerLoad, FingerSolver
 from fem.finger_cases import CASES
-from fem.finger_spec import load_finger
+from contract.finger import load_finger
 from fem.geometry import FingerGeometry
 from fem.options import one_rank
 

@@ -28,12 +28,12 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from fem import cli
-from fem.files import write_json
+from contract import cli
+from contract.files import write_json
 from fem.geometry import JointGeometry
 from fem.options import one_rank
 from fem.solver import JointSolver, Load
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 
 FROM_ZERO = [Load(0.2, 1.0, -1.0, 20.0), Load(-0.15, -1.0, 1.5, -40.0), Load(0.1, 2.0, 2.0, 60.0)]
 PAPER_SECONDS_PER_SAMPLE = 7 * 60

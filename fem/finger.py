@@ -6,7 +6,7 @@
 
 Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one half-model
 (z >= 0, u_z = 0 on z = 0) of the finger described by a finger file
-(fem.finger_spec; default the paper's, fem/fingers/paper.toml), built by
+(contract.finger; default the paper's, contract/fingers/paper.toml), built by
 fem.geometry.build_finger in the finger frame (x along the straight rest finger from the
 base mount, y in the bending plane). Every joint is the bellow joint of fem.problem (the
 same neo-Hookean NinjaFlex, stiff distal cap, P2 elements, valley self-contact of
@@ -51,8 +51,8 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem import cli
-from fem.finger_spec import FingerFileError, FingerSpec, load_finger
+from contract import cli
+from contract.finger import FingerSpec, finger_arg, load_finger
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
@@ -60,7 +60,7 @@ from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size
 from fem.problem import (Average, LoadTerm, Material, Problem, bellow_work, chamber_pressures,
                          clamp_and_symmetry, deformation_gradient, displacement_space, elastic_work,
                          facet_tags_present, region_volume, rotation_about_z, valley_contact)
-from fem.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
+from contract.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
 from fem.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
@@ -297,14 +297,6 @@ class FingerSolver:
 
 
 # ---------------------------------------------------------------------- command line
-def finger_file(text: str) -> FingerSpec:
-    """argparse type: a finger description file (fem.finger_spec), one-line errors."""
-    try:
-        return load_finger(text)
-    except FingerFileError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
     pressure = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
@@ -314,8 +306,8 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--pressures", type=cli.number_list(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa"), metavar="P1,P2,...",
                     help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
-    ap.add_argument("--finger", type=finger_file, default=None,
-                    help="finger description file (default: fem/fingers/paper.toml)")
+    ap.add_argument("--finger", type=finger_arg, default=None,
+                    help="finger description file (default: contract/fingers/paper.toml)")
     add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,

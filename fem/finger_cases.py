@@ -37,10 +37,10 @@ import numpy as np
 import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
 from mpi4py import MPI
 
-from fem import cli
-from fem.files import atomic_path, json_safe, write_json
-from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, finger_file, rotation_matrix
-from fem.finger_spec import load_finger
+from contract import cli
+from contract.files import atomic_path, json_safe, write_json
+from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, rotation_matrix
+from contract.finger import finger_arg, load_finger
 from fem.geometry import FingerGeometry, JointGeometry
 from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size, one_rank
 
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.finger_cases", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/validation/finger_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
-    ap.add_argument("--finger", type=finger_file, default=None, help="finger file (default: the paper's)")
+    ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
     add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,

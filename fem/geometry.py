@@ -42,8 +42,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from fem.finger_spec import FingerSpec
-from fem.spec import JOINT_LENGTH, N_ANCHORS
+from contract.finger import FingerSpec
+from contract.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.problem.
 TAGS = {
@@ -118,7 +118,7 @@ class BeamGeometry:
 
 @dataclass(frozen=True)
 class FingerGeometry:
-    """A whole finger (fem.finger_spec.FingerSpec) as one half-model in its own frame.
+    """A whole finger (contract.finger.FingerSpec) as one half-model in its own frame.
 
     The finger frame is the joint frame of the first joint, extended: x runs along the
     straight rest finger from the base mount (x = 0) to the fingertip (x = finger.length),

@@ -44,8 +44,8 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from fem import cli
-from fem.files import json_safe, write_json
+from contract import cli
+from contract.files import json_safe, write_json
 from fem.geometry import JointGeometry, anchor_points
 from fem.options import MESH_SIZE, MESH_SIZE_TEXT, on_root
 from fem.solver import JointSolver, Load

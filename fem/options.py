@@ -1,10 +1,10 @@
-"""Command-line pieces shared by the fem tools, on top of :mod:`fem.cli` (no dolfinx).
+"""Command-line pieces shared by the fem tools, on top of :mod:`contract.cli` (no dolfinx).
 
 * ``--mesh-size`` h (mm) in MESH_SIZE_RANGE = [0.3, 10]: finer meshes than 0.3 mm do not
   fit in memory (the production 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser
   ones than 10 mm no longer resolve the 2.5 mm valleys of the joint or the 2 mm beam.
 * the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the box
-  |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100 is checked by :func:`fem.spec.check_box` right
+  |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100 is checked by :func:`contract.spec.check_box` right
   after parsing (before any mesh), unless ``--allow-extrapolation``.
 * :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
   under mpirun ``with ap.errors():`` exits every rank with 2 and nothing hangs.
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fem import cli
-from fem.spec import INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
+from contract import cli
+from contract.spec import INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
 
 MESH_SIZE_RANGE = (0.3, 10.0)  # mm
 MESH_SIZE = cli.number(*MESH_SIZE_RANGE, "mm")   # argparse type

@@ -20,8 +20,8 @@ import numpy as np
 import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
 from mpi4py import MPI
 
-from fem import cli
-from fem.files import atomic_path
+from contract import cli
+from contract.files import atomic_path
 from fem.geometry import JointGeometry
 from fem.options import add_load, add_mesh_size, one_rank, parsed_load
 from fem.solver import JointSolver, Load

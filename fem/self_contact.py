@@ -25,14 +25,14 @@ from dataclasses import replace
 import numpy as np
 from mpi4py import MPI
 
-from fem import cli
+from contract import cli
 from fem.contact import ValleyContact
-from fem.files import write_json
+from contract.files import write_json
 from fem.geometry import JointGeometry
 from fem.mesh_study import CORNERS
 from fem.options import add_extrapolation, add_mesh_size, checked_loads, one_rank
 from fem.solver import JointSolver, Load, SolverConfig
-from fem.spec import INPUT_MIRROR
+from contract.spec import INPUT_MIRROR
 
 PENALTY_MAX = 1e5  # MPa/mm: 1000 x the production penalty
 

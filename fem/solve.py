@@ -22,7 +22,7 @@ from dataclasses import asdict, replace
 
 from mpi4py import MPI
 
-from fem import cli
+from contract import cli
 from fem.geometry import JointGeometry
 from fem.options import add_load, add_mesh_size, parsed_load
 from fem.solver import JointSolver, Load

@@ -34,7 +34,7 @@ from fem.geometry import BeamGeometry, JointGeometry, anchor_points
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
 from fem.problem import Material, joint_problem
-from fem.spec import INPUT_BOX, check_box, outside_box, phi_end
+from contract.spec import INPUT_BOX, check_box, outside_box, phi_end
 
 # Material and SolverConfig are re-exported: the joint's public configuration.
 __all__ = ["Load", "Material", "SolverConfig", "SolveResult", "JointSolver", "EndLoadedSolver",
@@ -188,7 +188,7 @@ class JointSolver(EndLoadedSolver):
 
     def solve(self, load: Load, continuation: bool = False,
               allow_extrapolation: bool = False) -> SolveResult:
-        """Solve one load case. Raises fem.spec.OutOfBoxError, before any work, for a
+        """Solve one load case. Raises contract.spec.OutOfBoxError, before any work, for a
         load that is not finite, or outside the box unless ``allow_extrapolation``."""
         check_box(load.as_array(), allow_extrapolation)
         result = super().solve(load, continuation)

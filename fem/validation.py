@@ -28,9 +28,9 @@ from dataclasses import asdict, replace
 
 from mpi4py import MPI
 
-from fem import cli
+from contract import cli
 from fem.elastica import cantilever_tip, rollup_tip
-from fem.files import write_json
+from contract.files import write_json
 from fem.geometry import BeamGeometry
 from fem.options import add_mesh_size, on_root
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from fem.finger_spec import FingerSpec, load_finger
+from contract.finger import FingerSpec, load_finger
 from predictor import atlas as _atlas
 from predictor import inverse as _inverse
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
@@ -63,7 +63,7 @@ def load_gripper(model: str | None = None, object: str | None = None, gravity: b
     results/surrogate/improved.pt of this package or $SOFTJOINT_RESULTS; ValueError when
     missing); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None: no
     object); finger: a finger description file or FingerSpec (None: the paper's,
-    fem/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
+    contract/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
     mu: friction coefficient, object_weight: N (None: the defaults 0.3 and 0.2 N)
     (predictor.gesture's --finger, --kinematics, --joint-weight, --mu, --object-weight).
     ValueError (one line) for a bad spec, finger file, model, option, an object the model

@@ -57,9 +57,9 @@ import time
 
 import torch
 
-from fem import cli
-from fem.files import write_json
-from fem.spec import PRESSURE_LIMIT
+from contract import cli
+from contract.files import write_json
+from contract.spec import PRESSURE_LIMIT
 from predictor.joint import load_joint
 from predictor.nn import (DEFAULT_DIR, contact_fraction, evaluate, evaluate_contact, evaluate_polished, load_predictor,
                           nn_folder, predict_gesture, sample_pressures)

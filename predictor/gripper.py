@@ -3,8 +3,8 @@
 Global plane: X horizontal, Y vertical up, gravity along -Y, gripper base on Y = 0.
 The right-hand finger is modelled; the left one is its mirror image X -> -X.
 
-The finger is read from a finger description file (fem.finger_spec, default
-fem/fingers/paper.toml): an ordered chain of J bellow joints and rigid parts in any
+The finger is read from a finger description file (contract.finger, default
+contract/fingers/paper.toml): an ordered chain of J bellow joints and rigid parts in any
 order, from the base mount B = (base_gap/2, 0), leaving it at base_angle (-pi/2: down).
 The paper's layout is joint 1 -> rigid link (60 mm) -> joint 2 -> rigid tip (65 mm).
 
@@ -39,15 +39,14 @@ the finger only (ChainLayout) are cached: the residual runs thousands of times p
 """
 from __future__ import annotations
 
-import argparse
 import functools
 import math
 from dataclasses import dataclass, field, fields
 
 import torch
 
-from fem.finger_spec import DEFAULT_FINGER, FingerFileError, FingerSpec, JointPart, RigidPart, load_finger
-from fem.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
+from contract.finger import DEFAULT_FINGER, FingerSpec, load_finger
+from contract.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
 KINEMATICS = ("tangent", "cap")
@@ -64,7 +63,7 @@ def pressure_names(n: int) -> tuple[str, ...]:
 
 def check_pressures(pressures) -> None:
     """Refuse pressures (..., J) MPa that are not finite or beyond |P| <= PRESSURE_LIMIT
-    (fem.spec.OutOfBoxError, a ValueError, one line naming the value)."""
+    (contract.spec.OutOfBoxError, a ValueError, one line naming the value)."""
     n = int(pressures.shape[-1])
     check_box(pressures, names=pressure_names(n), box=(PRESSURE_LIMIT,) * n, units=("MPa",) * n)
 
@@ -84,31 +83,8 @@ def with_rows(v: torch.Tensor, rows: torch.Tensor, new: torch.Tensor) -> torch.T
 
 @functools.lru_cache(maxsize=4)
 def default_finger() -> FingerSpec:
-    """The paper's finger (fem/fingers/paper.toml), read once."""
+    """The paper's finger (contract/fingers/paper.toml), read once."""
     return load_finger(DEFAULT_FINGER)
-
-
-def finger_arg(text: str) -> FingerSpec:
-    """argparse type of --finger: a finger description file, read and checked while
-    parsing (one line)."""
-    try:
-        return load_finger(text)
-    except FingerFileError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def finger_to_dict(finger: FingerSpec) -> dict:
-    """Plain-JSON description of a finger that ``finger_from_dict`` rebuilds exactly
-    (angles in rad, so the round trip is bit for bit; for checkpoints' configs)."""
-    return {"name": finger.name, "base_gap": finger.base_gap, "base_angle": finger.base_angle,
-            "parts": [{"kind": p.kind, **{k: getattr(p, k) for k in p.__dataclass_fields__}} for p in finger.parts]}
-
-
-def finger_from_dict(d: dict) -> FingerSpec:
-    """The FingerSpec of ``finger_to_dict`` (ValueError/TypeError/KeyError if malformed)."""
-    parts = tuple(JointPart(**{k: v for k, v in p.items() if k != "kind"}) if p["kind"] == "joint" else
-                  RigidPart(**{k: v for k, v in p.items() if k != "kind"}) for p in d["parts"])
-    return FingerSpec(parts, float(d["base_gap"]), float(d["base_angle"]), str(d["name"]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,7 +170,7 @@ class GripperParams:
     two anchors) or ``cap`` (along the distal cap face, the joint model's cap rotation);
     joint_weight: ``lumped`` (at the mean of the anchors) or ``split`` (half at each end).
 
-    Paper defaults (DESIGN.md §4, fem/fingers/paper.toml; Figure S4 is unavailable): link
+    Paper defaults (DESIGN.md §4, contract/fingers/paper.toml; Figure S4 is unavailable): link
     60 mm, tip 65 mm, base mounts 50 mm apart, which give the paper's 50 mm free tip
     opening and ≈3 mm of tip travel per degree of phi_1. Weights: joint 0.09 N, link 0.04 N,
     tip 0.06 N, object 0.2 N.

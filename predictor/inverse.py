@@ -73,9 +73,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem import cli
-from fem.files import write_json
-from fem.spec import INPUT_BOX
+from contract import cli
+from contract.files import write_json
+from contract.spec import INPUT_BOX
 from predictor.atlas import HOLDS, NOT_CONVERGED, STATES, Atlas, classify, grasp_atlas
 from predictor.problem import (FULL_BOX, MIN_NORMAL, add_arguments, box_arg, check_box, load_problem,
                                object_arg)

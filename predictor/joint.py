@@ -38,7 +38,7 @@ angle of the last segment plus its turn). SurrogateJoint: the surrogate's cap-ro
 head (``module.with_cap``) when the checkpoint has one (``module.has_cap_rotation``),
 otherwise a one-line ValueError (use tangent kinematics).
 
-The joint's contract (length, anchors, input box, phi_end) is fem.spec's; this module
+The joint's contract (length, anchors, input box, phi_end) is contract.spec's; this module
 only implements it.
 """
 from __future__ import annotations
@@ -50,8 +50,8 @@ from pathlib import Path
 
 import torch
 
-from fem.files import sha256_file
-from fem.spec import JOINT_LENGTH, N_ANCHORS
+from contract.files import sha256_file
+from contract.spec import JOINT_LENGTH, N_ANCHORS
 from predictor.defaults import ANALYTIC, joint_spec
 
 

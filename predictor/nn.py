@@ -69,7 +69,7 @@ Variants (``python -m predictor.nn --variant ...``):
   object: tau jumps) are left out of the NN's domain.
 
 Fingers (issue 14): the network is (P1..PJ) -> tau (J, 3) for the finger of its config
-(``finger``: predictor.gripper.finger_to_dict, None = the paper's finger, which is what
+(``finger``: contract.finger.finger_to_dict, None = the paper's finger, which is what
 checkpoints written before the option record), with its ``kinematics`` and
 ``joint_weight`` options (default: predictor.gripper's, cap and split); ``--finger``, ``--kinematics`` and
 ``--joint-weight`` train for others. A predictor answers only for the finger and options
@@ -94,13 +94,13 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from fem import cli
-from fem.spec import PRESSURE_LIMIT
+from contract import cli
+from contract.finger import finger_arg, finger_from_dict, finger_to_dict
+from contract.spec import PRESSURE_LIMIT
 from predictor import progress
 from predictor.defaults import default_nn_dir
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
-                               check_pressures, default_finger, finger_arg, finger_from_dict, finger_to_dict,
-                               nan_unless)
+                               check_pressures, default_finger, nan_unless)
 from predictor.joint import JointModel, load_joint
 from predictor.solve import (APPROACH, GestureResult, SolverOptions, gesture_result, meets_tolerances,
                              newton_iterate, newton_polish, newton_step, result_labels, solve, statics_at)
@@ -164,7 +164,7 @@ class NNConfig:
     obstacle: dict | None = None
     approach: tuple | None = None
     seed: int = 0
-    finger: dict | None = None  # predictor.gripper.finger_to_dict; None: the paper's finger
+    finger: dict | None = None  # contract.finger.finger_to_dict; None: the paper's finger
     kinematics: str = DEFAULT_KINEMATICS
     joint_weight: str = DEFAULT_JOINT_WEIGHT
 
@@ -793,7 +793,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
                     help="override the variant's epochs (smoke runs)")
     ap.add_argument("--finger", type=finger_arg, default=None,
-                    help="finger description file (default: the paper's, fem/fingers/paper.toml)")
+                    help="finger description file (default: the paper's, contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

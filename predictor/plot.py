@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from fem.files import atomic_path  # noqa: E402
+from contract.files import atomic_path  # noqa: E402
 from predictor.gripper import FingerPose  # noqa: E402
 from predictor.statics import STATES, GripperProblem, Obstacle  # noqa: E402
 
@@ -94,7 +94,7 @@ def draw_gesture(ax, result, index: int, problem: GripperProblem, title: str | N
 
 
 def save_figure(fig, path, dpi: int) -> None:
-    """Write ``fig`` to ``path`` atomically (fem.files.atomic_path) and close it."""
+    """Write ``fig`` to ``path`` atomically (contract.files.atomic_path) and close it."""
     try:
         with atomic_path(path) as tmp:
             fig.savefig(tmp, dpi=dpi)

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import torch
 
-from fem import cli
-from fem.spec import PRESSURE_LIMIT
+from contract import cli
+from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import GripperParams, check_pressures
 from predictor.joint import load_joint
 from predictor.solve import APPROACH, approach_for, solve

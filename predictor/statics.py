@@ -43,7 +43,7 @@ Contact (object fixed in the plane, signed distance d < 0 inside, outward normal
   assumes the object is symmetric about X = 0 (other objects are refused: ``object_error``).
 
 Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
-max(0, |M|-100)/100 per joint, the surrogate's training box (fem.spec.INPUT_BOX).
+max(0, |M|-100)/100 per joint, the surrogate's training box (contract.spec.INPUT_BOX).
 
 Data flow: a GripperProblem (joint model, GripperParams = finger + kinematics + joint
 weights, object, contact law, gravity, approach pressures) -> ``problem.residual(pressures,
@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import torch
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from predictor.gripper import FingerPose, GripperParams, check_pressures, finger_pose, rot
 from predictor.joint import JointModel, no_cap_message
 

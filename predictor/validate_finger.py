@@ -35,9 +35,9 @@ from pathlib import Path
 
 import torch
 
-from fem import cli
-from fem.files import atomic_path, write_json
-from fem.finger_spec import load_finger
+from contract import cli
+from contract.files import atomic_path, write_json
+from contract.finger import load_finger
 from fem.geometry import JointGeometry
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint

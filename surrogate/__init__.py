@@ -7,9 +7,9 @@ Public API (the gripper predictor uses load_surrogate and ModelError):
     ModelError             (ValueError) missing, damaged, foreign or inconsistent
                            checkpoint, one-line message
     check_box(x)           refuses inputs outside the training box or not finite
-                           (OutOfBoxError, a ValueError); fem.spec owns the box
+                           (OutOfBoxError, a ValueError); contract.spec owns the box
     phi_end(anchors)       end orientation atan2(y10 - y9, x10 - x9), rad (numpy or torch,
-                           autograd kept); from fem.spec
+                           autograd kept); from contract.spec
     ModelConfig, JointSurrogate, KNN
 
 Modules: data (load/split/augment/normalise), model (network + integrity-checked
@@ -19,7 +19,7 @@ not FEM data; also a CLI), checkpoint (the checkpoint container, shared with the
 Importing this package never imports dolfinx or the predictor.
 """
 
-from fem.spec import OutOfBoxError, check_box, phi_end
+from contract.spec import OutOfBoxError, check_box, phi_end
 from surrogate.knn import KNN
 from surrogate.model import JointSurrogate, ModelConfig, ModelError, load_surrogate
 

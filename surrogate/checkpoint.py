@@ -11,7 +11,7 @@ A checkpoint file is one header line followed by a standard ``torch.save`` archi
   nothing damaged loads, not even a byte the archive reader would ignore;
 - the payload is a dict of tensors and plain types, loaded with ``weights_only=True``
   (no pickled code runs);
-- files are written atomically (fem.files.atomic_path).
+- files are written atomically (contract.files.atomic_path).
 
 Outside this project: ``torch.load(io.BytesIO(data.split(b"\\n", 1)[1]), weights_only=True)``.
 """
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from fem.files import atomic_write
+from contract.files import atomic_write
 
 MAX_HEADER = 512  # bytes; a header is ~120
 

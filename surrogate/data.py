@@ -20,7 +20,7 @@ rotation, measured on the cap by the FEM; DESIGN.md §3).
 Mirror (DESIGN.md §3, y -> -y): (x, R, J, cap) -> (B x, R S, S J B, -cap); the cap
 rotation is odd, like phi_end.
 
-Normalisation (stored inside the model): z = x / INPUT_BOX (fem.spec), so the training box is
+Normalisation (stored inside the model): z = x / INPUT_BOX (contract.spec), so the training box is
 [-1, 1]^4; anchors = output_mean + output_scale * network(z), with the per-coordinate
 mean and standard deviation of the (mirror-augmented) training anchors. A model with a
 cap-rotation head also stores cap_scale (rad): the root mean square of its target, the
@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem.spec import INPUT_BOX, N_ANCHORS, mirror, phi_end
+from contract.spec import INPUT_BOX, N_ANCHORS, mirror, phi_end
 from surrogate.model import wrap
 from workflow.shards import Manifest, ShardError, load_dataset, split_of
 

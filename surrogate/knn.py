@@ -14,7 +14,7 @@ import time
 import torch
 from torch import nn
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from surrogate.data import Samples, augment_mirror
 
 

@@ -55,8 +55,8 @@ from pathlib import Path
 
 import torch
 
-from fem import cli
-from fem.files import atomic_path, json_safe, write_json
+from contract import cli
+from contract.files import atomic_path, json_safe, write_json
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate
 from surrogate.train import CONFIGS, apply_overrides, check_configs, train

@@ -60,7 +60,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from fem.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS, phi_end
+from contract.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS, phi_end
 from surrogate import checkpoint
 from surrogate.checkpoint import CheckpointError
 

@@ -7,7 +7,7 @@ prints the anchors r_1..r_10 (mm, joint frame, relative to the proximal centre),
 phi_end = atan2(y10 - y9, x10 - x9) (rad and deg) and, for a model with the cap-rotation
 head, the distal cap's rotation (rad and deg; null otherwise). A value that is not a finite number is
 always refused; inputs outside the training box |P| <= 0.3 MPa, |F1|, |F2| <= 3 N,
-|M| <= 100 N·mm (fem.spec) are refused unless --allow-extrapolation is given, which the
+|M| <= 100 N·mm (contract.spec) are refused unless --allow-extrapolation is given, which the
 output records ("extrapolation": true). Either refusal is one line, exit 2, before the
 model is loaded.
 JSON keys: model, inputs {P_MPa, F1_N, F2_N, M_Nmm}, extrapolation, anchors_mm (10 x 2),
@@ -25,8 +25,8 @@ import sys
 
 import torch
 
-from fem import cli
-from fem.spec import INPUT_NAMES, INPUT_UNITS, check_box, phi_end
+from contract import cli
+from contract.spec import INPUT_NAMES, INPUT_UNITS, check_box, phi_end
 from surrogate.model import load_surrogate
 
 HELP = {"p": "pressure P (MPa, signed)", "f1": "axial end force F1 (N)",

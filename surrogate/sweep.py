@@ -29,8 +29,8 @@ from pathlib import Path
 
 import torch
 
-from fem import cli
-from fem.files import write_json, write_text
+from contract import cli
+from contract.files import write_json, write_text
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate, timing
 from surrogate.train import CONFIGS, apply_overrides, train

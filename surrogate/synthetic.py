@@ -38,8 +38,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem import cli
-from fem.spec import INPUT_BOX, JOINT_LENGTH, N_ANCHORS, N_INPUTS, phi_end
+from contract import cli
+from contract.spec import INPUT_BOX, JOINT_LENGTH, N_ANCHORS, N_INPUTS, phi_end
 from workflow import shards
 
 

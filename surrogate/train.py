@@ -69,9 +69,9 @@ from pathlib import Path
 
 import torch
 
-from fem import cli
-from fem.files import atomic_path
-from fem.spec import INPUT_BOX, phi_end
+from contract import cli
+from contract.files import atomic_path
+from contract.spec import INPUT_BOX, phi_end
 from surrogate.data import Samples, augment_mirror, load_splits, normalisation
 from surrogate.evaluate import evaluate
 from surrogate.model import (ACTIVATIONS, CAP_TARGETS, JointSurrogate, ModelConfig, save_checkpoint,

@@ -2,7 +2,7 @@
 (tests/test_bad_input.py runs the command lines) and the cases whose right answer is not
 an error.
 
-- the shared ``fem.cli.Parser`` takes negative values in comma lists, and still refuses
+- the shared ``contract.cli.Parser`` takes negative values in comma lists, and still refuses
   an option where a value belongs;
 - ``cli.check_output`` probes for real and creates no folder above the one named;
 - the finger-file bounds refuse through ``load_finger`` with the CLI's very line;
@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem import cli
-from fem.finger_spec import FingerFileError, load_finger
+from contract import cli
+from contract.finger import FingerFileError, load_finger
 
 ROOT = Path(__file__).resolve().parents[1]
 FINGERS = ROOT / "tests" / "data" / "fingers"

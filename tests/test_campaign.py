@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from workflow import campaign, dataset, shards, store
 from workflow.shards import Manifest
 

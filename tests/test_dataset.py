@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem.spec import BOX_TOL, INPUT_BOX
+from contract.spec import BOX_TOL, INPUT_BOX
 from workflow import shards, store
 from workflow.shards import Manifest, ShardError
 
@@ -117,8 +117,8 @@ def set_input(root, value, column=3):
 def test_verify_flags_incomplete_and_out_of_box(tmp_path):
     """A campaign with one of 3 units missing verifies with an 'incomplete' warning (exit 0),
     and fails (exit 1) with --require-complete; --require-units A:B (a job-array slice)
-    passes for 0:1 and 2:3 and fails naming unit 1 for 0:3. An input outside the box of fem.spec
-    (|M| = 150 > 100 N·mm, or NaN) is an error; one on the box edge up to fem.spec's
+    passes for 0:1 and 2:3 and fails naming unit 1 for 0:3. An input outside the box of contract.spec
+    (|M| = 150 > 100 N·mm, or NaN) is an error; one on the box edge up to contract.spec's
     relative BOX_TOL (float32 round-off) is not."""
     fabricate(tmp_path, units=[0, 2])
     r = store.verify(tmp_path)
@@ -167,7 +167,7 @@ def test_scanner_rejects_foreign_and_misplaced_shards(tmp_path):
 
 
 def test_temporaries_are_cleaned_and_never_count_as_shards(tmp_path):
-    """A killed writer's temp files (the old ``.NAME.*.tmp`` and fem.files'
+    """A killed writer's temp files (the old ``.NAME.*.tmp`` and contract.files'
     ``.NAME.*.tmp.npz``) are not reported as unlisted shards, and clean_temporaries removes
     exactly them."""
     fabricate(tmp_path)

@@ -24,7 +24,7 @@ from fem.elastica import cantilever_tip, rollup_tip  # noqa: E402
 from fem.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
 from fem.mesh import create_mesh  # noqa: E402
 from fem.solver import JointSolver, Load, SolverConfig  # noqa: E402
-from fem.spec import INPUT_BOX, OutOfBoxError, mirror  # noqa: E402
+from contract.spec import INPUT_BOX, OutOfBoxError, mirror  # noqa: E402
 
 pytestmark = pytest.mark.fem
 COARSE = JointGeometry(mesh_size=4.0)

@@ -19,10 +19,10 @@ pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
 from fem.finger import FingerLoad, FingerSolver  # noqa: E402
-from fem.finger_spec import parse_finger  # noqa: E402
+from contract.finger import parse_finger  # noqa: E402
 from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
 from fem.solver import JointSolver, Load  # noqa: E402
-from fem.spec import JOINT_LENGTH  # noqa: E402
+from contract.spec import JOINT_LENGTH  # noqa: E402
 
 pytestmark = pytest.mark.fem
 COARSE = JointGeometry(mesh_size=4.0)

@@ -22,8 +22,8 @@ import pytest
 import torch
 from scipy.optimize import fsolve
 
-from fem.spec import INPUT_BOX, OutOfBoxError, phi_end
-from fem.finger_spec import parse_finger
+from contract.spec import INPUT_BOX, OutOfBoxError, phi_end
+from contract.finger import parse_finger
 from predictor.gripper import FingerPose, GripperParams, default_finger, finger_pose
 from predictor.joint import AnalyticJoint, JointModel, load_joint
 from predictor.solve import APPROACH, GestureResult, SolverOptions, _jacobian_fn, _residual_fn, solve
@@ -502,7 +502,7 @@ def test_nonconverged_is_not_an_answer():
 
 def test_pressure_out_of_range_refused():
     """|P| > 0.3 MPa is outside the surrogate's box, and NaN or inf is not a number:
-    fem.spec.OutOfBoxError (a ValueError) naming the value and the allowed 0.3 MPa, for the
+    contract.spec.OutOfBoxError (a ValueError) naming the value and the allowed 0.3 MPa, for the
     target pressures and for the approach pressures alike."""
     for p, needle in (([0.31, 0.0], "P1 = 0.31 is outside"), ([0.0, float("nan")], "P2 = nan is not a finite"),
                       ([float("-inf"), 0.0], "P1 = -inf is not a finite")):
@@ -876,7 +876,7 @@ def _reference_problem(joint, case: str) -> GripperProblem:
 
 @pytest.mark.parametrize("model", ["analytic", "results/surrogate/paper.pt"])
 def test_paper_finger_reproduces_the_frozen_predictor(model):
-    """The paper's finger (fem/fingers/paper.toml) through the generic chain, with tangent
+    """The paper's finger (contract/fingers/paper.toml) through the generic chain, with tangent
     kinematics and lumped weights, reproduces the predictor as it was before issue 14 (its
     hard-wired joint-link-joint-tip chain, frozen at commit bbc0df4 into
     tests/data/predictor_reference.json by tests/data/freeze_predictor_reference.py), on

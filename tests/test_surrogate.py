@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import torch
 
-from fem.spec import INPUT_BOX, mirror
+from contract.spec import INPUT_BOX, mirror
 from surrogate import (KNN, ModelConfig, ModelError, JointSurrogate, OutOfBoxError, check_box,
                        load_surrogate, phi_end)
 from surrogate import checkpoint, model as model_mod, sweep, synthetic, train as train_mod
@@ -61,10 +61,10 @@ def run(*args):
 
 def test_import_does_not_pull_dolfinx_or_predictor():
     """`import surrogate` loads neither dolfinx, predictor nor matplotlib, and of fem only
-    its plain-Python contract modules (fem.spec, fem.files)."""
+    its plain-Python contract modules (contract.spec, contract.files)."""
     code = ("import sys, surrogate; bad = [m for m in sys.modules if m.split('.')[0] in "
             "('dolfinx', 'predictor', 'matplotlib') or (m.split('.')[0] == 'fem' and m not in "
-            "('fem', 'fem.spec', 'fem.files'))]; print(bad)")
+            "('fem', 'contract.spec', 'contract.files'))]; print(bad)")
     assert run("-c", code).stdout.strip() == "[]"
 
 

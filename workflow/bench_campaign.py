@@ -16,7 +16,7 @@ ranks per group), against the paper's 7 min x 2,560 samples.
 Units: seconds, samples per hour, CPU hours. The machine is shared: the 1-minute load
 average before each run is recorded next to the figures. The targets are
 workflow.report.CAMPAIGN_TARGETS (met or not is recorded under "targets"). The JSON is
-written atomically (fem.files); ``--json`` prints all of it.
+written atomically (contract.files); ``--json`` prints all of it.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem import cli
-from fem.files import write_json
+from contract import cli
+from contract.files import write_json
 from fem.options import add_mesh_size
 from workflow import campaign, report, shards
 from workflow.shards import Manifest, ShardError

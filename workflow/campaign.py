@@ -70,9 +70,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fem import cli
+from contract import cli
 from fem.options import add_mesh_size, add_wall_mesh_size
-from fem.spec import INPUT_BOX, N_INPUTS
+from contract.spec import INPUT_BOX, N_INPUTS
 from workflow import shards
 from workflow.shards import Manifest, ShardError
 from workflow.store import (ShardScanner, build_manifest, clean_temporaries, shard_file,

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import sys
 
-from fem import cli
-from fem.files import write_json
+from contract import cli
+from contract.files import write_json
 from workflow import store
 from workflow.campaign import unit_range
 from workflow.shards import MANIFEST, Manifest

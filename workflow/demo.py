@@ -24,7 +24,7 @@ table, PNGs linked) and the table on stdout. Each step prints ``[demo k/N] what 
 (elapsed s)`` before it starts, a heartbeat while it runs and its result after.
 
 Layering: workflow sits below surrogate and predictor, so it runs their command lines
-and reads their JSON; of fem it imports only the plain-Python fem.cli, fem.files and
+and reads their JSON; of fem it imports only the plain-Python contract.cli, contract.files and
 fem.geometry. Exit 0 when every step succeeded; otherwise one line names the failed
 step and the exit is 1. The summary is written (atomically) only at the end, and the
 previous summary is removed at the start, so no summary ever describes another run.
@@ -43,8 +43,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fem import cli
-from fem.files import write_json, write_text
+from contract import cli
+from contract.files import write_json, write_text
 from fem.geometry import JointGeometry
 
 ROOT = Path(__file__).resolve().parents[1]

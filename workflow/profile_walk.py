@@ -16,7 +16,7 @@ import cProfile
 import pstats
 import time
 
-from fem import cli
+from contract import cli
 from fem.options import add_mesh_size
 
 

@@ -21,7 +21,7 @@ figures come from the bench JSON where the benchmarks record them, else from PAP
 
 Reads JSON only (and hashes the surrogate checkpoints to compare them with the artefacts'
 joint names), so it imports nothing from the packages above workflow. REPORT.md is
-written atomically (fem.files).
+written atomically (contract.files).
 """
 
 from __future__ import annotations
@@ -35,8 +35,8 @@ import sys
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from fem import cli
-from fem.files import sha256_file, write_text
+from contract import cli
+from contract.files import sha256_file, write_text
 
 
 def _load(path: Path):

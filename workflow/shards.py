@@ -2,7 +2,7 @@
 
 Everything here is plain numpy + json, so a dataset is readable without this project
 and importing this module never imports dolfinx or torch (the surrogate depends on it).
-The joint's contract (input names, units, box, mirror) is ``fem.spec``'s.
+The joint's contract (input names, units, box, mirror) is ``contract.spec``'s.
 
 Layout of a dataset directory ``DIR``::
 
@@ -27,7 +27,7 @@ Arrays of one shard (n stored samples, m failures)::
     meta               ()          str      JSON: config, mesh parameters, git commit, seed, unit
     checksum           ()          str      sha256 over the arrays above (see array_digest)
 
-Shards and the manifest are written atomically (``fem.files``: temporary name in the same
+Shards and the manifest are written atomically (``contract.files``: temporary name in the same
 directory, fsync, rename), so a killed writer never leaves half a file under its name.
 The manifest is validated once, when ``Manifest.load`` reads it; past that point every
 field has its type (see Manifest).
@@ -44,8 +44,8 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from fem.files import atomic_write, sha256_file, write_text
-from fem.spec import N_ANCHORS, N_INPUTS
+from contract.files import atomic_write, sha256_file, write_text
+from contract.spec import N_ANCHORS, N_INPUTS
 
 FORMAT = "softjoint-dataset/1"
 MANIFEST = "manifest.json"

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.files import atomic_path, sha256_file
-from fem.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, mirror, outside_box
+from contract.files import atomic_path, sha256_file
+from contract.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, mirror, outside_box
 from workflow.shards import (DATA_KEYS, FAILURE_KEYS, Manifest, ShardEntry, ShardError,
                              array_digest, load_dataset, read_shard, split_of)
 
@@ -147,7 +147,7 @@ def build_manifest(root: str | Path, samples: int, config: dict, seed: int,
 
 def clean_temporaries(root: str | Path) -> int:
     """Remove temp files a killed writer left beside shards/manifest (``.NAME.*.tmp`` and
-    fem.files' ``.NAME.*.tmp.SUFFIX``); return how many."""
+    contract.files' ``.NAME.*.tmp.SUFFIX``); return how many."""
     n = 0
     for d in (Path(root), Path(root) / SHARD_DIR):
         if d.is_dir():
@@ -234,7 +234,7 @@ def verify(root: str | Path, mirror: int = 0, tol_mm: float = 1e-5, jac_tol: flo
 
     Errors: unreadable or invalid manifest or shard, sha256/checksum mismatch, config or
     seed mismatch, duplicated or misplaced sample ids, non-finite or out-of-box data
-    (fem.spec.outside_box), a sample both stored and failed, and (with ``mirror`` > 0) a
+    (contract.spec.outside_box), a sample both stored and failed, and (with ``mirror`` > 0) a
     mirror relation off by more than ``tol_mm`` (anchors) or ``jac_tol`` (relative,
     Jacobian). Warnings: an incomplete campaign, shard files the manifest does not list.
     """

@@ -2,7 +2,7 @@
 
 A finger is an ordered chain of parts from the base mount to the fingertip (DESIGN.md §4):
 
-* ``joint``: one bellow joint of DESIGN.md §3 (length fem.spec.JOINT_LENGTH, the
+* ``joint``: one bellow joint of DESIGN.md §3 (length contract.spec.JOINT_LENGTH, the
   surrogate's geometry), with its weight (N) and whether its anchors take contact;
 * ``rigid``: a straight segment of ``length`` (mm) and cross-section ``height`` x
   ``width`` (mm, in and normal to the bending plane), with its weight (N) and the number
@@ -13,7 +13,7 @@ A gripper is two such fingers, mirror images about X = 0, with base mounts ``bas
 down). At rest the finger is straight: part k starts at arc length ``rest_start(k)`` (mm)
 along that direction.
 
-The file is TOML (format tag ``softjoint-finger/1``); ``fem/fingers/paper.toml`` is the
+The file is TOML (format tag ``softjoint-finger/1``); ``contract/fingers/paper.toml`` is the
 paper's gripper and the default. Every error is a FingerFileError (a ValueError) with one
 line naming the file and the offending key; every number has a working range (RANGES) and a
 finger has at most MAX_PARTS parts and MAX_LENGTH mm. dolfinx-free and torch-free: the predictor
@@ -21,13 +21,14 @@ imports it without FEniCSx.
 """
 from __future__ import annotations
 
+import argparse
 import hashlib
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fem.spec import JOINT_LENGTH
+from contract.spec import JOINT_LENGTH
 
 FORMAT = "softjoint-finger/1"
 DEFAULT_FINGER = Path(__file__).with_name("fingers") / "paper.toml"
@@ -201,3 +202,26 @@ def load_finger(path: str | Path | None = None) -> FingerSpec:
     except (OSError, UnicodeDecodeError) as exc:
         raise FingerFileError(f"cannot read finger file {path}: {exc.strerror if isinstance(exc, OSError) else exc}") from None
     return parse_finger(text, str(path))
+
+
+def finger_arg(text: str) -> FingerSpec:
+    """argparse type of --finger: a finger description file, read and checked while
+    parsing (one line)."""
+    try:
+        return load_finger(text)
+    except FingerFileError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def finger_to_dict(finger: FingerSpec) -> dict:
+    """Plain-JSON description of a finger that ``finger_from_dict`` rebuilds exactly
+    (angles in rad, so the round trip is bit for bit; for checkpoints' configs)."""
+    return {"name": finger.name, "base_gap": finger.base_gap, "base_angle": finger.base_angle,
+            "parts": [{"kind": p.kind, **{k: getattr(p, k) for k in p.__dataclass_fields__}} for p in finger.parts]}
+
+
+def finger_from_dict(d: dict) -> FingerSpec:
+    """The FingerSpec of ``finger_to_dict`` (ValueError/TypeError/KeyError if malformed)."""
+    parts = tuple(JointPart(**{k: v for k, v in p.items() if k != "kind"}) if p["kind"] == "joint" else
+                  RigidPart(**{k: v for k, v in p.items() if k != "kind"}) for p in d["parts"])
+    return FingerSpec(parts, float(d["base_gap"]), float(d["base_angle"]), str(d["name"]))

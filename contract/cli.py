@@ -40,7 +40,7 @@ import threading
 import time
 from pathlib import Path
 
-from fem.files import dumps
+from contract.files import dumps
 
 EXIT_USAGE = 2
 #: Set to 1 to see the traceback behind a one-line error (development).
