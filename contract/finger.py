@@ -1,8 +1,8 @@
 """The finger description: one file that both the finger FEM and the predictor build from.
 
-A finger is an ordered chain of parts from the base mount to the fingertip (DESIGN.md §4):
+A finger is an ordered chain of parts from the base mount to the fingertip (docs/gripper.md):
 
-* ``joint``: one bellow joint of DESIGN.md §3 (length contract.spec.JOINT_LENGTH, the
+* ``joint``: one bellow joint of docs/physics.md (length contract.spec.JOINT_LENGTH, the
   surrogate's geometry), with its weight (N) and whether its anchors take contact;
 * ``rigid``: a straight segment of ``length`` (mm) and cross-section ``height`` x
   ``width`` (mm, in and normal to the bending plane), with its weight (N) and the number

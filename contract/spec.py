@@ -1,4 +1,4 @@
-"""The joint contract (DESIGN.md §3): the one owner of what every package agrees on.
+"""The joint contract (docs/physics.md): the one owner of what every package agrees on.
 
 The FEM produces it, the dataset stores it, the surrogate learns it and the predictor
 feeds it, so it lives here once, in plain numpy (importing it never imports dolfinx or

@@ -14,7 +14,7 @@ Measures on one rank (the machine is noisy: medians of several solves in one run
   random walk, as the campaign harvests samples), with the sensitivities included;
 * mesh figures: ``nodes`` (P2, incl. mid-side nodes), ``dofs``, vertices, element size.
 
-The paper's ANSYS figure is ~7 min per sample at 16,000 nodes (DESIGN.md §6). ``--json``
+The paper's ANSYS figure is ~7 min per sample at 16,000 nodes (docs/decisions.md §0). ``--json``
 prints the headline figures (SUMMARY_KEYS) that the text line shows.
 """
 

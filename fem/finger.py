@@ -25,7 +25,7 @@ The physics is declared once as a problem (:func:`finger_problem`, from the piec
 fem.problem that the joint uses) and handed to the joint's load-path solver
 (fem.load_path.LoadPathSolver: stepping, cut-back, Newton/MUMPS, sensitivities).
 
-Outputs, in the predictor's global frame (DESIGN.md §4; the right finger, base mount at
+Outputs, in the predictor's global frame (docs/gripper.md; the right finger, base mount at
 (base_gap/2, 0), finger frame rotated by base_angle): x_global = B + Rot(base_angle)·(x + u)
 for the centre line points (z = 0, y = 0). Per joint: its 10 anchors, proximal centre,
 proximal orientation theta (the rotation of the part it is bonded to), its distal cap's

@@ -4,7 +4,7 @@ Both builders return the *global* ``gmsh.model`` holding one meshed half-model (
 with named physical groups, so the same solver code loads either of them. They only
 build and mesh; conversion to DOLFINx lives in :mod:`fem.mesh`.
 
-Frame and units (DESIGN.md §2-3): mm; x along the joint axis from the proximal face
+Frame and units (docs/physics.md): mm; x along the joint axis from the proximal face
 (x = 0) to the distal face (x = L); y in the bending plane, top chamber at +y;
 z normal to the bending plane, z = 0 the symmetry plane.
 
@@ -57,7 +57,7 @@ _GMSH_READY = False
 
 @dataclass(frozen=True)
 class JointGeometry:
-    """Dimensions of the bellow joint half-model (mm). Defaults: DESIGN.md §3.
+    """Dimensions of the bellow joint half-model (mm). Defaults: docs/physics.md.
 
     ``mesh_size`` is the target tetrahedron edge length; ``wall_mesh_size`` (default:
     ``mesh_size``) is used on the chamber walls.
@@ -194,7 +194,7 @@ def build_joint(geo: JointGeometry = JointGeometry()):
 
     Only the quarter y >= 0 is meshed; its mesh is then mirrored to y < 0 node by node
     (:func:`_mirror_mesh_y`), so the discrete problem has the exact y-mirror symmetry of
-    DESIGN.md §3 and the solver reproduces it to solver tolerance, not mesh error.
+    docs/physics.md and the solver reproduces it to solver tolerance, not mesh error.
     Call on rank 0 only, then convert with :func:`fem.mesh.create_mesh`.
     """
     gmsh = _init_gmsh("bellow_joint")
@@ -465,6 +465,6 @@ def _mesh_regions(gmsh, size, wall_size, wall_surfaces, wall_thickness, regions,
 
 
 def anchor_points(length: float, n: int = N_ANCHORS) -> np.ndarray:
-    """Material anchor points X_i = (i·L/n, 0, 0), i = 1..n (DESIGN.md §3). Shape (n, 3), mm."""
+    """Material anchor points X_i = (i·L/n, 0, 0), i = 1..n (docs/physics.md). Shape (n, 3), mm."""
     x = np.arange(1, n + 1) * length / n
     return np.column_stack([x, np.zeros(n), np.zeros(n)])

@@ -66,7 +66,7 @@ from fem.mesh import MeshData
 
 @dataclass(frozen=True)
 class Material:
-    """Neo-Hookean material (MPa). Defaults: NinjaFlex (DESIGN.md §3)."""
+    """Neo-Hookean material (MPa). Defaults: NinjaFlex (docs/physics.md)."""
 
     E: float = 12.2
     nu: float = 0.49

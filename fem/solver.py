@@ -6,7 +6,7 @@ The joint's physics is :func:`fem.problem.joint_problem` (neo-Hookean body, stif
 cap, follower chamber pressure, valley self-contact, end loads F1, F2, M on the rigid cap;
 equations there); it is solved by :class:`fem.load_path.LoadPathSolver` (load path with
 cut-back, Newton/MUMPS, sensitivities). This module adds the joint's load vector
-(P, F1, F2, M) in MPa, N, N, N·mm (DESIGN.md §3), its input box, and its result: the
+(P, F1, F2, M) in MPa, N, N, N·mm (docs/physics.md), its input box, and its result: the
 anchors r_1..r_10, phi_end and the cap rotation.
 
 The material is neo-Hookean, whose small-strain limit is exactly (E, nu) = (12.2 MPa,
@@ -177,7 +177,7 @@ class EndLoadedSolver:
 
 
 class JointSolver(EndLoadedSolver):
-    """The bellow joint: anchors r_1..r_10 (DESIGN.md §3), loads at r_10; loads outside
+    """The bellow joint: anchors r_1..r_10 (docs/physics.md), loads at r_10; loads outside
     the input box are refused unless allowed."""
 
     def __init__(self, geometry: JointGeometry = JointGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,

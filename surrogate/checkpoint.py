@@ -1,4 +1,4 @@
-"""Integrity-checked checkpoint files (DESIGN.md §5), for the surrogate and the NN predictors.
+"""Integrity-checked checkpoint files (docs/formats.md), for the surrogate and the NN predictors.
 
 A checkpoint file is one header line followed by a standard ``torch.save`` archive::
 

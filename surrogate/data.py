@@ -15,9 +15,9 @@ shards.
 
 Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian d anchors.reshape(20) /
 d inputs (NaN rows where the campaign stored none), cap_rotation rad (the distal cap's own
-rotation, measured on the cap by the FEM; DESIGN.md §3).
+rotation, measured on the cap by the FEM; docs/physics.md).
 
-Mirror (DESIGN.md §3, y -> -y): (x, R, J, cap) -> (B x, R S, S J B, -cap); the cap
+Mirror (docs/physics.md, y -> -y): (x, R, J, cap) -> (B x, R S, S J B, -cap); the cap
 rotation is odd, like phi_end.
 
 Normalisation (stored inside the model): z = x / INPUT_BOX (contract.spec), so the training box is
@@ -101,7 +101,7 @@ def load_splits(root: str | Path) -> tuple[dict[str, Samples], Manifest]:
 
 
 def augment_mirror(samples: Samples) -> Samples:
-    """samples ∪ their y-mirror images (DESIGN.md §3, cap_rotation -> -cap_rotation); the
+    """samples ∪ their y-mirror images (docs/physics.md, cap_rotation -> -cap_rotation); the
     mirror copies keep their ids."""
     x, r, j = mirror(samples.inputs, samples.anchors, samples.jacobian)
     return Samples(torch.cat([samples.inputs, x]), torch.cat([samples.anchors, r]),

@@ -1,4 +1,4 @@
-"""The paper's k-nearest-neighbour baseline (DESIGN.md §6: k = 4 gave 1.04 mm).
+"""The paper's k-nearest-neighbour baseline (docs/decisions.md §0: k = 4 gave 1.04 mm).
 
 Distances are Euclidean in the normalised inputs z = x / INPUT_BOX (the box is [-1, 1]^4).
 The reference set is the training split plus its y-mirror images (the same augmentation

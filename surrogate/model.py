@@ -22,7 +22,7 @@ Cap-rotation head (optional, ModelConfig.cap_rotation): the distal cap's own rot
     symmetric:    c = (c(x) - c(Bx)) / 2              (odd by construction)
     theta = c                          cap_target "absolute" (the improved config's)
     theta = phi_end(R) + c             cap_target "offset": c learns wrap(theta - phi_end),
-                                       the tangent connection's error (~2 deg, DESIGN.md §3),
+                                       the tangent connection's error (~2 deg, docs/physics.md),
                                        but theta inherits the error of phi_end(R)
 
 so theta(Bx) = -theta(x) bit for bit for the equivariant and symmetric forms (phi_end is odd
@@ -30,7 +30,7 @@ in y exactly: atan2(-a, b) = -atan2(a, b) and (-a) - (-b) = -(a - b) in floating
 cap_scale (rad) is the RMS of the target over the mirror-augmented training set
 (surrogate.data.normalisation).
 
-with the y-mirror of DESIGN.md §3: B = diag(-1, 1, -1, -1) on the inputs and S = diag(1, -1)
+with the y-mirror of docs/physics.md: B = diag(-1, 1, -1, -1) on the inputs and S = diag(1, -1)
 on each anchor. The symmetric form satisfies R(Bx) = S R(x) by construction, for any
 weights: g(BBx) = g(x), and a sign flip, a sum and a halving are exact in floating point,
 so the identity holds to the last bit when x and Bx are evaluated in the same layout.

@@ -18,7 +18,7 @@ the couple M:
 with EI(P) = EI0 (1 + s1 |P|) (a pressurised chamber stiffens) and the pressure's free
 curvature kappa_P(P) = -k1 P (1 + k2 |P|) (P > 0 inflates the +y chamber, which lengthens
 and bends the joint towards -y). The pressure terms use |P|, so the response has a kink
-at P = 0 like the two-chamber FEM. The model is exactly mirror-symmetric (DESIGN.md §3).
+at P = 0 like the two-chamber FEM. The model is exactly mirror-symmetric (docs/physics.md).
 
 The N equations G(theta; u) = 0 are solved by Newton with load stepping, batched over
 samples. The anchors are r_{iN/10}, i = 1..10, and their exact sensitivities follow from

@@ -240,7 +240,7 @@ def test_jacobian_matches_central_differences(reference, solver):
 @pytest.mark.fem
 def test_mirror_relation_via_verify(reference):
     """verify --mirror 1 solves the y-mirror of one stored sample: exit 0, anchors within
-    1e-6 mm of R·diag(1,-1) and the Jacobian within 1e-4 of S·J·B (DESIGN.md §3; the
+    1e-6 mm of R·diag(1,-1) and the Jacobian within 1e-4 of S·J·B (docs/physics.md; the
     mesh itself is mirror symmetric, so this holds to solver tolerance)."""
     r = subprocess.run([PY, "-m", "workflow.dataset", "verify", str(reference), "--mirror", "1",
                         "--json"], cwd=ROOT, env=ENV, capture_output=True, text=True)

@@ -1,4 +1,4 @@
-"""Integrity of the checkpoint files (issue 13, DESIGN.md §5).
+"""Integrity of the checkpoint files (issue 13, docs/formats.md).
 
 Exact claims checked here:
 - a save/load round trip returns the payload unchanged (tensors bit-equal);

@@ -1,7 +1,7 @@
 """Physics tests of the FEM joint solver (coarse meshes; DOLFINx on one rank, and mpirun).
 
 Exact references: the Bisshopp-Drucker elastica and the roll-up circle for the beam, the
-y-mirror symmetry of DESIGN.md §3, u = 0 at zero load, and the linearised response
+y-mirror symmetry of docs/physics.md, u = 0 at zero load, and the linearised response
 (tangent solves) for small loads.
 """
 

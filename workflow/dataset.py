@@ -1,4 +1,4 @@
-"""Dataset tools (DESIGN.md §5): inspect, verify and merge FEM campaign datasets.
+"""Dataset tools (docs/formats.md): inspect, verify and merge FEM campaign datasets.
 
     python -m workflow.dataset info ROOT [--json]
     python -m workflow.dataset verify ROOT [--mirror N] [--require-complete | --require-units A:B] [--json]
@@ -68,7 +68,7 @@ def parser() -> cli.Parser:
     p_ver.add_argument("root", help="dataset directory")
     p_ver.add_argument("--mirror", type=cli.number(0, None, "samples", integer=True), default=0,
                        metavar="N", help="also solve the y-mirror of N stored samples with the FEM "
-                                         "and check the mirror relation (DESIGN.md §3); default 0")
+                                         "and check the mirror relation (docs/physics.md); default 0")
     need = p_ver.add_mutually_exclusive_group()
     need.add_argument("--require-complete", action="store_true",
                       help="treat an unfinished campaign as an error")

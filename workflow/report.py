@@ -8,7 +8,7 @@ states a target has a "target" and a "met" column: "yes", or "no, over by X" (an
 bound missed) / "no, short by X" (a lower bound missed), X in the figure's unit. The
 targets are read from the artefacts where their producers record them (fem validation,
 mesh study, predictor bench), else from this module (SURROGATE_TARGETS, CAMPAIGN_TARGETS);
-the paper's figures count as targets to beat (DESIGN.md §6). ``--json`` prints what was
+the paper's figures count as targets to beat (docs/decisions.md §0). ``--json`` prints what was
 written: the sections and every target row with its verdict.
 
 Each section embeds the pictures it discusses (relative links from REPORT.md in the
@@ -16,7 +16,7 @@ results folder, e.g. ``fem/joint.png``), each with a caption naming the command 
 model that drew it; a picture not on disk is named with the make target that draws it.
 A row shown without a target says "shown, not judged" in its met column. The paper's
 figures come from the bench JSON where the benchmarks record them, else from PAPER
-(DESIGN.md §6; no artefact records those). An artefact whose joint model is a
+(docs/decisions.md §0; no artefact records those). An artefact whose joint model is a
 ``surrogate:NAME.pt@HASH`` other than the results/surrogate/NAME.pt on disk is flagged.
 
 Reads JSON only (and hashes the surrogate checkpoints to compare them with the artefacts'
@@ -47,7 +47,7 @@ def _missing(what: str, target: str) -> list[str]:
     return [f"_Not produced yet: run `{target}` ({what})._", ""]
 
 
-#: The paper's figures that no artefact records (DESIGN.md §6); the others are read from
+#: The paper's figures that no artefact records (docs/decisions.md §0); the others are read from
 #: the bench JSON (fem.json paper_*, campaign.json paper_cpu_hours, predictor.json "paper").
 PAPER = {"fem_mesh_mm": 1.2, "mesh_change_percent": 3, "surrogate_nn_mm": 0.19, "surrogate_knn_mm": 1.04,
          "finger_fem": "20-30 min (ANSYS)", "predictor_speedup": "~100x"}
@@ -402,7 +402,7 @@ def surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
             f"results/surrogate/paper.pt and improved.pt trained on the train split "
             f"{n.get('train', '?')} samples, chosen on validation ({n.get('val', '?')}), and a KNN; test split "
             f"and the separate held-out set. Paper's mean anchor error: NN {PAPER['surrogate_nn_mm']} mm, "
-            f"KNN {PAPER['surrogate_knn_mm']} mm (DESIGN.md §6).", "",
+            f"KNN {PAPER['surrogate_knn_mm']} mm (docs/decisions.md §0).", "",
             "| model | set | n | " + " | ".join(keys) + " | train time (s) |",
             "|---" * (len(keys) + 4) + "|"]
     for name in names:
@@ -1107,7 +1107,7 @@ def build(root: Path) -> tuple[str, list[str], list[Check]]:
              "each section names the make target that produced its numbers, and shows the pictures it discusses "
              "(linked relative to results/, each captioned with the command and joint model that drew it). "
              f"A row shown beside judged ones without a target says \"{NOT_JUDGED}\"; the paper's figures are "
-             "DESIGN.md §6's.", ""]
+             "in docs/decisions.md §0.", ""]
     checks = []
     for section in SECTIONS:
         part, found = section(root)

@@ -1,4 +1,4 @@
-"""Joint dataset format (DESIGN.md §5): sharded NPZ plus a JSON manifest.
+"""Joint dataset format (docs/formats.md): sharded NPZ plus a JSON manifest.
 
 Everything here is plain numpy + json, so a dataset is readable without this project
 and importing this module never imports dolfinx or torch (the surrogate depends on it).

@@ -1,4 +1,4 @@
-"""Dataset store (DESIGN.md §5): the campaign's unit layout, the shard scan, the manifest
+"""Dataset store (docs/formats.md): the campaign's unit layout, the shard scan, the manifest
 rebuild, and the info / verify / merge operations behind ``python -m workflow.dataset``.
 
 Shared by ``workflow.campaign`` (scan + manifest on resume and after every unit) and the
@@ -199,7 +199,7 @@ def info(root: str | Path) -> dict:
 # ---------------------------------------------------------------------------- verify
 def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
     """Solve the y-mirror of ``n`` stored samples with the FEM (fresh from zero) and compare
-    with the mirrored stored anchors and Jacobian (DESIGN.md §3). The mesh is mirror
+    with the mirrored stored anchors and Jacobian (docs/physics.md). The mesh is mirror
     symmetric, so the relation holds to solver tolerance. Needs dolfinx; runs on one rank."""
     from mpi4py import MPI
 
