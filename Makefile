@@ -66,7 +66,7 @@ $(SETUP): pyproject.toml constraints.txt
 # ---------------------------------------------------------------- main commands
 # One joint FEM against the surrogate, the paper's gravity and grasp gestures, one coarse
 # whole-finger FEM against the predictor: PNGs + summary.{json,md} + a table (workflow/demo.py).
-demo: $(SETUP) ## the main job (~5 min): joint FEM vs surrogate, gestures, finger FEM vs predictor -> results/demo/
+demo: $(SETUP) ## the main job (~2 min): joint FEM vs surrogate, gestures, finger FEM vs predictor -> results/demo/
 	$(PY) -m workflow.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
