@@ -65,9 +65,9 @@ $(SETUP): pyproject.toml constraints.txt
 
 # ---------------------------------------------------------------- main commands
 # One joint FEM against the surrogate, the paper's gravity and grasp gestures, one coarse
-# whole-finger FEM against the predictor: PNGs + summary.{json,md} + a table (workflow/demo.py).
+# whole-finger FEM against the predictor: PNGs + summary.{json,md} + a table (apps/demo.py).
 demo: $(SETUP) ## the main job (~2 min): joint FEM vs surrogate, gestures, finger FEM vs predictor -> results/demo/
-	$(PY) -m workflow.demo --out results/demo
+	$(PY) -m apps.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
 # fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 10.3 min of
@@ -235,7 +235,7 @@ results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predic
 
 
 report: ## results/REPORT.md from the committed JSON artefacts
-	$(PY) -m workflow.report --out results/REPORT.md
+	$(PY) -m apps.report --out results/REPORT.md
 
 clean: ## remove the venv and caches (keeps results/)
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -24,7 +24,7 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.files import write_json
+from fem.artefacts import BENCH_FINGER
 from fem.finger import FingerLoad, FingerSolver
 from fem.finger_cases import CASES
 from contract.finger import load_finger
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     with ap.errors():
         out = run(names, Path(args.committed))
-        write_json(args.out, out)
+        BENCH_FINGER.write(args.out, out)
     line = {"finger_fem_median_s": out["finger_fem_median_s"], "finger_fem_max_s": out["finger_fem_max_s"],
             "met": out["met"], "nodes": out["nodes"]}
     if args.json:

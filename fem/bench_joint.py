@@ -29,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.files import write_json
+from fem.artefacts import BENCH_JOINT
 from fem.geometry import JointGeometry
 from fem.options import one_rank
 from fem.solver import JointSolver, Load
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     out = run(args.walk, args.step)
     with ap.errors():
-        write_json(args.out, out)
+        BENCH_JOINT.write(args.out, out)
     summary = {k: out[k] for k in SUMMARY_KEYS}
     if args.json:
         cli.print_json({**summary, "out": args.out})

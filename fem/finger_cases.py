@@ -38,7 +38,8 @@ import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after i
 from mpi4py import MPI
 
 from contract import cli
-from contract.files import atomic_path, json_safe, write_json
+from contract.files import atomic_path, json_safe
+from fem.artefacts import FINGER_CASE
 from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, rotation_matrix
 from contract.finger import finger_arg, load_finger
 from fem.geometry import FingerGeometry, JointGeometry
@@ -164,7 +165,7 @@ def main(argv=None) -> int:
             if res.converged:
                 record["render"] = render(solver, path.with_suffix(".png"))
             cli.make_output_folder(out)
-            write_json(path, record)
+            FINGER_CASE.write(path, record)
             print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
                                  f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
                                  f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)

@@ -27,7 +27,7 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.contact import ValleyContact
-from contract.files import write_json
+from fem.artefacts import SELF_CONTACT
 from fem.geometry import JointGeometry
 from fem.mesh_study import CORNERS
 from fem.options import add_extrapolation, add_mesh_size, checked_loads, one_rank
@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     out = run(args.mesh_size, loads, args.penalty, args.allow_extrapolation)
     with ap.errors():
-        write_json(args.out, out)
+        SELF_CONTACT.write(args.out, out)
     if args.json:
         cli.print_json({**out, "out": args.out})
         return 0

@@ -30,7 +30,7 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.elastica import cantilever_tip, rollup_tip
-from contract.files import write_json
+from fem.artefacts import VALIDATION
 from fem.geometry import BeamGeometry
 from fem.options import add_mesh_size, on_root
 
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
         with ap.errors():
             if args.case == "table":
                 out = table()
-                on_root(comm, lambda: write_json(args.out, out))
+                on_root(comm, lambda: VALIDATION.write(args.out, out))
             else:
                 geo = replace(DEFAULT_BEAM, mesh_size=args.mesh_size)
                 out = (cantilever(args.alpha, geo, comm) if args.case == "cantilever"

@@ -38,7 +38,8 @@ import numpy as np
 import torch
 
 from contract import cli
-from contract.files import atomic_path, write_json, write_text
+from contract.files import atomic_path, write_text
+from surrogate.artefacts import EVALUATION, METRICS
 from contract.spec import INPUT_BOX, N_INPUTS, check_box, phi_end
 from surrogate.data import Samples, load_samples, load_splits
 from surrogate.knn import choose_knn
@@ -243,7 +244,7 @@ def report(train_root: Path, heldout_root: Path, out_dir: Path) -> dict:
                                     "n": {k: len(v) for k, v in splits.items()}},
                           "heldout": {"root": str(heldout_root), "seed": heldout_manifest.seed,
                                       "config": heldout_manifest.config, "n": len(heldout)}}
-    write_json(out_dir / "metrics.json", result)
+    METRICS.write(out_dir / "metrics.json", result)
     write_text(out_dir / "metrics.md", markdown_table(result))
     source = heldout_manifest.config.get("source", "FEM campaign")
     comparison_figure(out_dir / "comparison.png", heldout, models, source)
@@ -291,7 +292,7 @@ def main(argv=None) -> int:
         outside = check_box(samples.inputs, args.allow_extrapolation)
         result = evaluate(model, samples) | {"split": args.split, "extrapolated_samples": outside}
         if args.out:
-            write_json(args.out, result | {"model": args.model, "data": args.data})
+            EVALUATION.write(args.out, result | {"model": args.model, "data": args.data})
     if args.json:
         cli.print_json(result)
     else:

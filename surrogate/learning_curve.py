@@ -56,7 +56,8 @@ from pathlib import Path
 import torch
 
 from contract import cli
-from contract.files import atomic_path, json_safe, write_json
+from contract.files import atomic_path, json_safe
+from surrogate.artefacts import LEARNING_CURVE
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate
 from surrogate.train import CONFIGS, apply_overrides, check_configs, train
@@ -329,7 +330,7 @@ def load_points(path: Path) -> list[dict]:
 def write(out: Path, plot: Path, header: dict, points: list[dict], jobs) -> None:
     """OUT and its figure, atomically; ``complete`` when every planned point is in."""
     have = {(p["samples"], p["jacobian_loss"], p["seed"]) for p in points}
-    write_json(out, header | {"complete": all(job in have for job in jobs), "points": points})
+    LEARNING_CURVE.write(out, header | {"complete": all(job in have for job in jobs), "points": points})
     figure(plot, points, f"Surrogate learning curve ({header['config']}; held-out n = "
                          f"{header['data']['heldout_n']}, >= {header['min_steps']} Adam steps per point)")
 

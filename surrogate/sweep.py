@@ -30,7 +30,8 @@ from pathlib import Path
 import torch
 
 from contract import cli
-from contract.files import write_json, write_text
+from contract.files import write_text
+from surrogate.artefacts import SWEEP
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate, timing
 from surrogate.train import CONFIGS, apply_overrides, train
@@ -87,7 +88,7 @@ def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: in
               "val": evaluate(model, splits["val"]),
               "heldout": evaluate(model, load_samples(heldout)[0]),
               "timing": timing(model, repeats=500, seconds=0.5, threads=(1,))}
-    write_json(out, result)
+    SWEEP.write(out, result)
     return name
 
 

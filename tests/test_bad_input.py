@@ -152,10 +152,10 @@ CASES_WORKFLOW = [
     ("workflow.dataset", ["merge", "/etc/passwd/m", "results/data/heldout"], "cannot create /etc/passwd/m: /etc/passwd is not a folder"),
     ("workflow.dataset", ["merge", "{tmp}/a/m", "results/data/heldout"], "cannot create {tmp}/a/m: folder {tmp}/a does not exist"),
     ("workflow.dataset", ["info", "results/data/heldout", "--json", "--json"], "--json given twice"),
-    # workflow.report / bench_campaign / profile_walk: outputs and numbers checked up front
-    ("workflow.report", ["--out", "/etc/passwd/x.md"], "cannot create /etc/passwd/x.md"),
-    ("workflow.report", ["--out", "{tmp}/x.txt"], "expected a .md file"),
-    ("workflow.report", ["--results", "/nonexistent", "--out", "{tmp}/x.md"], "--results /nonexistent: not a folder"),
+    # apps.report, workflow.bench_campaign / profile_walk: outputs and numbers checked up front
+    ("apps.report", ["--out", "/etc/passwd/x.md"], "cannot create /etc/passwd/x.md"),
+    ("apps.report", ["--out", "{tmp}/x.txt"], "expected a .md file"),
+    ("apps.report", ["--results", "/nonexistent", "--out", "{tmp}/x.md"], "--results /nonexistent: not a folder"),
     ("workflow.bench_campaign", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("workflow.bench_campaign", ["--fresh", "nan", "--out", "{tmp}/x.json"], "--fresh: 'nan' is not an integer"),
     ("workflow.bench_campaign", ["--unit-size", "1", "--out", "{tmp}/x.json"], "--unit-size: 1 is outside [2, inf]"),

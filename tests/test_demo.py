@@ -1,16 +1,18 @@
-"""make demo (workflow.demo): the pure part that turns the steps' JSON into table rows.
+"""make demo (apps.demo): the pure part that turns the steps' JSON into table rows.
 
 Hand-made step JSONs with known answers (anchors offset by a 3-4-5 vector, fingertips
 offset by 6-8-10, ...); no FEM, no model, no subprocess.
 """
 from __future__ import annotations
 
+import re
 import subprocess
+from pathlib import Path
 import sys
 
 import pytest
 
-from workflow import demo
+from apps import demo
 
 ANCHORS = [[4.5 * i, -0.5 * i] for i in range(1, 11)]
 
@@ -114,14 +116,21 @@ def test_tables_show_every_row_and_figure():
     assert len(text.splitlines()) == 2 + len(rows)
     assert "n/a" in text and "5.000 mm" in text
     md = demo.markdown(rows, [{"title": "t", "command": "python -m x", "wall_s": 1.0}], 60.0)
-    assert "[joint.png](joint.png)" in md and "![" in md
-    assert md.count("\n| ") >= len(rows) + 2
+    table = [ln for ln in md.split("## Steps")[0].splitlines() if ln.startswith("| ")]
+    assert len(table) == 1 + len(rows)              # the header and one line per row
+    for r, line in zip(rows, table[1:]):            # each row links its own figures, in order
+        assert line.startswith(f"| {r['case']} | ")
+        assert line.endswith(" | " + (", ".join(f"[{Path(p).name}]({p})" for p in r["figures"]) or "-") + " |")
+    pictures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md.split("## Figures")[1])
+    assert pictures == [p for r in rows for p in r["figures"]]
+    assert "| t | `python -m x` | 1.0 |" in md
 
 
-def test_workflow_does_not_import_upper_layers():
-    """workflow sits below surrogate and predictor: the demo runs their command lines
-    (a fresh interpreter, since other test files import those packages)."""
-    code = ("import sys, workflow.demo; print([m for m in sys.modules if m.split('.')[0] in "
+def test_demo_runs_the_packages_command_lines_without_importing_them():
+    """The demo runs the packages' command lines, one subprocess each, so importing it
+    loads neither surrogate, predictor, torch nor dolfinx (a fresh interpreter, since other
+    test files import those packages)."""
+    code = ("import sys, apps.demo; print([m for m in sys.modules if m.split('.')[0] in "
             "('surrogate', 'predictor', 'torch', 'dolfinx')])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "[]", out.stderr

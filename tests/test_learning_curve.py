@@ -143,9 +143,9 @@ def test_more_samples_fit_the_exact_function_better(data):
 
 
 def test_report_section_shows_every_point(data, tmp_path):
-    """workflow.report's learning-curve section: one table row per point, with the JSON's
+    """apps.report's learning-curve section: one table row per point, with the JSON's
     figures, and the seed-to-seed spread where a size was run with two seeds."""
-    from workflow import report as workflow_report
+    from apps import report as workflow_report
 
     out = tmp_path / "surrogate/learning_curve.json"
     assert lc.main(_args(data, out, "20", ["--repeat", "20:1"])) == 0

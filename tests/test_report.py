@@ -1,4 +1,4 @@
-"""workflow.report (results/REPORT.md): pictures, tables and sources, on JSON only (no solve,
+"""apps.report (results/REPORT.md): pictures, tables and sources, on JSON only (no solve,
 no training; a second or two).
 
 - On the committed results/: every linked picture or file exists, every table row has its
@@ -8,6 +8,9 @@ no training; a second or two).
   of every missing picture instead of linking it.
 - The finger section takes the judged variant from finger.json, and the surrogate's cap
   rotation (mean, p95, held-out) and the tangent assumption's error from metrics.json.
+- An artefact that fails its format is named in one line (file, key, make target) in
+  place of its section; the other sections are unchanged.
+- ``python -m apps.report`` reproduces the committed REPORT.md byte for byte.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from pathlib import Path
 
 import pytest
 
-from workflow import report as workflow_report
+from apps import report as report_app
+from apps.report.__main__ import main as report_main
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 LINK = re.compile(r"\]\(([^)\s]+)\)")
@@ -50,8 +54,8 @@ def _tables(text: str):
 
 @committed
 def test_committed_report_links_tables_and_sources():
-    text, sections, checks = workflow_report.build(RESULTS)
-    assert len(sections) == len(set(sections)) == len(workflow_report.SECTIONS)
+    text, sections, checks = report_app.build(RESULTS)
+    assert len(sections) == len(set(sections)) == len(report_app.SECTIONS)
     for part in text.split("\n## ")[1:]:
         subs = [ln for ln in part.splitlines() if ln.startswith("### ")]
         assert len(subs) == len(set(subs)), subs
@@ -81,7 +85,7 @@ def test_finger_judged_variant_and_cap_figures_come_from_the_json(tmp_path):
     other = next(k for k in v["summary"] if k != v["judged_variant"] and k.startswith("predictor_"))
     v["judged_variant"] = other
     (tmp_path / "validation/finger.json").write_text(json.dumps(v))
-    text = workflow_report.report(tmp_path)
+    text = report_app.report(tmp_path)
     s = v["summary"][other]
     assert f"| fingertip error, {other} (max over {s['cases']} cases) | {s['tip_error_mm_max']:.2f} mm |" in text
     assert f"(`{other}`)**" in text
@@ -96,15 +100,40 @@ def test_finger_judged_variant_and_cap_figures_come_from_the_json(tmp_path):
 
 
 def test_report_builds_without_artefacts(tmp_path):
-    text, sections, checks = workflow_report.build(tmp_path)
-    assert len(sections) == len(workflow_report.SECTIONS) and not checks
+    text, sections, checks = report_app.build(tmp_path)
+    assert len(sections) == len(report_app.SECTIONS) and not checks
     assert not LINK.findall(text)
     for target in ("make joint-render", "make gestures", "make atlas", "make inverse"):
         assert f"(not generated yet: `{target}`)" in text, target
 
 
-def test_not_judged_rows_say_so():
-    assert workflow_report._cells(None).strip() == f"| {workflow_report.NOT_JUDGED} |"
+@committed
+def test_the_committed_report_regenerates_identically(tmp_path, capsys):
+    """make report on the committed artefacts writes the committed REPORT.md, byte for byte."""
+    assert report_main(["--results", str(RESULTS), "--out", str(tmp_path / "R.md")]) == 0
+    assert (tmp_path / "R.md").read_bytes() == (RESULTS / "REPORT.md").read_bytes()
+
+
+@committed
+def test_a_malformed_artefact_is_named_in_one_line(tmp_path):
+    """bench/fem.json with a renamed key (solve_from_zero_s -> solve_s): the FEM section is
+    one line naming the file, the key path and the make target; the campaign section, which
+    reads bench/fem.json only for the paper's seconds per sample, is named the same way;
+    every other section renders as from the committed file."""
+    shutil.copytree(RESULTS, tmp_path / "results", ignore=shutil.ignore_patterns("*.npz"))
+    root = tmp_path / "results"
+    bench = json.loads((root / "bench/fem.json").read_text())
+    bench["solve_s"] = bench.pop("solve_from_zero_s")
+    (root / "bench/fem.json").write_text(json.dumps(bench))
+    text, sections, _ = report_app.build(root)
+    good, _, _ = report_app.build(RESULTS)
+    lines = [ln for ln in text.splitlines() if ln.startswith("_Malformed artefact:")]
+    assert len(lines) == 2, lines
+    for line in lines:
+        assert f"{root}/bench/fem.json: solve_from_zero_s: missing" in line and "`make bench-fem`" in line
+    by_section = lambda t: dict(zip(sections, t.split("\n## ")[1:]))
+    same = [s for s in sections if by_section(text)[s] == by_section(good)[s]]
+    assert same == sections[2:], same
 
 
 def test_mesh_study_judges_the_production_mesh_only(tmp_path):
@@ -127,13 +156,13 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
     study["production_error"] = study["meshes"][0]["max_error"]
     (tmp_path / "fem").mkdir()
     (tmp_path / "fem/mesh_study.json").write_text(json.dumps(study))
-    text, _, checks = workflow_report.build(tmp_path)
+    text, _, checks = report_app.build(tmp_path)
     (check,) = [c for c in checks if "production mesh" in c.figure]
     assert check.figure == "production mesh 1.8 mm against the Richardson extrapolation"
     assert check.verdict == "no, over by 1.5 %"
     rows = {r[0]: r for h, rows in _tables(text) if h[0] == "mesh H:W (mm)" for r in rows}
     assert rows["1.8"][-1] == check.verdict and rows["1.8"][3] == "3.50"
-    assert all(rows[m][-1] == workflow_report.NOT_JUDGED for m in ("2.4:1.2", "1.697:0.849", "1.2:0.6"))
+    assert all(rows[m][-1] == report_app.NOT_JUDGED for m in ("2.4:1.2", "1.697:0.849", "1.2:0.6"))
     assert "family 2.4:1.2, 1.697:0.849, 1.2:0.6, in the asymptotic range" in text
     assert "orders of convergence of the anchors per corner: 2.00, 2.00, 2.00, 2.00" in text
     study.update(asymptotic=False, reference="finest mesh", extrapolation=[{"anchors": {"order": None}}] * 4)
@@ -141,7 +170,7 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
                              (1.5, "not established: 1.50 % is a lower bound (no extrapolation in the asymptotic range)")):
         study["meshes"][0] = mesh(1.8, None, 17351, percent)
         (tmp_path / "fem/mesh_study.json").write_text(json.dumps(study))
-        text, _, checks = workflow_report.build(tmp_path)
+        text, _, checks = report_app.build(tmp_path)
         (check,) = [c for c in checks if "production mesh" in c.figure]
         assert check.figure == "production mesh 1.8 mm against the finest mesh" and not check.met
         assert check.verdict == verdict
@@ -159,11 +188,11 @@ def test_finger_fem_time_is_judged_on_the_bench(tmp_path):
              {"case": "gravity_0.2_0.2", "wall_time_s": 700.0, "load_average_before": 1.0}]
     (tmp_path / "bench/finger.json").write_text(json.dumps(
         {"cases": cases, "finger_fem_median_s": 450.0, "finger_fem_max_s": 700.0, "target_s": 600.0}))
-    text, _, checks = workflow_report.build(tmp_path)
+    text, _, checks = report_app.build(tmp_path)
     (check,) = [c for c in checks if "finger FEM per gesture" in c.figure]
     assert "`make bench-finger`, max over free_0.1_0.1, gravity_0.2_0.2" in check.figure
     assert check.verdict == "no, over by 100 s"
     validation_max = max(c["fem_s"] for c in json.loads((RESULTS / "validation/finger.json").read_text())["fem"]
                          if c["converged"])
     row = next(r for h, rows in _tables(text) for r in rows if r[0].startswith("finger FEM per gesture in the validation"))
-    assert row[1] == f"{validation_max:.0f} s" and row[-1] == workflow_report.NOT_JUDGED
+    assert row[1] == f"{validation_max:.0f} s" and row[-1] == report_app.NOT_JUDGED

@@ -27,7 +27,7 @@ from surrogate.evaluate import evaluate, jacobian, metrics
 from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, save_checkpoint
 from workflow.shards import ShardError, split_of
-from workflow import report as workflow_report
+from apps import report as workflow_report
 
 torch.set_num_threads(1)
 PY = sys.executable

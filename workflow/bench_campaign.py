@@ -15,8 +15,9 @@ ranks per group), against the paper's 7 min x 2,560 samples.
 
 Units: seconds, samples per hour, CPU hours. The machine is shared: the 1-minute load
 average before each run is recorded next to the figures. The targets are
-workflow.report.CAMPAIGN_TARGETS (met or not is recorded under "targets"). The JSON is
-written atomically (contract.files); ``--json`` prints all of it.
+workflow.artefacts.CAMPAIGN_TARGETS (met or not is recorded under "targets"). The JSON is
+checked against its format (workflow.artefacts.BENCH_CAMPAIGN) and written atomically;
+``--json`` prints all of it.
 """
 
 from __future__ import annotations
@@ -33,9 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from contract import cli
-from contract.files import write_json
 from fem.options import add_mesh_size
-from workflow import campaign, report, shards
+from workflow import campaign, shards
+from workflow.artefacts import BENCH_CAMPAIGN, CAMPAIGN_TARGETS
 from workflow.shards import Manifest, ShardError
 
 PAPER_CPU_HOURS = 7 / 60 * 2560
@@ -90,7 +91,7 @@ def main(argv=None) -> int:
     except RuntimeError as exc:
         print(f"python -m workflow.bench_campaign: error: {exc}", file=sys.stderr)
         return 1
-    write_json(args.out, result)
+    BENCH_CAMPAIGN.write(args.out, result)
     if args.json:
         cli.print_json(result)
     else:
@@ -149,7 +150,7 @@ def bench(args) -> dict:
         "harvested_newton_iterations_median": float(np.median(data["newton_iterations"][~first])),
         "fresh_newton_iterations_median": float(np.median(fresh_its)),
         "hours_for_2560_samples_2ranks": 2560 / sph2,
-        "targets": {f"{t.key}{t.op}{t.bound:g}": t.met(figures[t.key]) for t in report.CAMPAIGN_TARGETS},
+        "targets": {f"{t.key}{t.op}{t.bound:g}": t.met(figures[t.key]) for t in CAMPAIGN_TARGETS},
         "setup": {"mesh": solver.mesh_info(), "unit_size": args.unit_size, "walk_step": args.step,
                   "samples_1rank": one["samples"], "samples_2ranks": two["samples"],
                   "wall_s_1rank": one["wall_s"], "wall_s_2ranks": two["wall_s"],

@@ -23,8 +23,8 @@ from __future__ import annotations
 import sys
 
 from contract import cli
-from contract.files import write_json
 from workflow import store
+from workflow.artefacts import MESH_COMPARISON
 from workflow.campaign import unit_range
 from workflow.shards import MANIFEST, Manifest
 
@@ -123,7 +123,7 @@ def main(argv=None) -> int:
         with ap.errors():
             d = store.compare(args.ref, args.other)
             if args.out:
-                write_json(args.out, d)
+                MESH_COMPARISON.write(args.out, d)
         cli.print_json(d) if args.json else _print_compare(d)
         return 0
     why = cli.check_output(args.out, folder=True)   # not created: the sources are checked first

@@ -1,6 +1,6 @@
 """make demo: the project end to end in a few minutes, FEM against every model.
 
-    python -m workflow.demo --out results/demo [--finger-mesh-size 4] [--json]
+    python -m apps.demo --out results/demo [--finger-mesh-size 4] [--json]
 
 What runs, one subprocess at a time (``sys.executable -m ...``, so at most one FEM runs):
 
@@ -23,9 +23,11 @@ the errors, times and labels of every row) -> ``summary.json``, ``summary.md`` (
 table, PNGs linked) and the table on stdout. Each step prints ``[demo k/N] what ...
 (elapsed s)`` before it starts, a heartbeat while it runs and its result after.
 
-Layering: workflow sits below surrogate and predictor, so it runs their command lines
-and reads their JSON; of fem it imports only the plain-Python contract.cli, contract.files and
-fem.geometry. Exit 0 when every step succeeded; otherwise one line names the failed
+Layering: an app (apps -> predictor -> surrogate -> workflow -> fem); it runs the
+packages' command lines, one subprocess each, and reads their JSON, the committed finger
+FEM cases through their format (fem.artefacts); of fem it imports only
+fem.geometry and fem.artefacts (no dolfinx). Its own summary.json is checked against
+SUMMARY before it is written. Exit 0 when every step succeeded; otherwise one line names the failed
 step and the exit is 1. The summary is written (atomically) only at the end, and the
 previous summary is removed at the start, so no summary ever describes another run.
 Units: mm, deg, N, MPa, s.
@@ -44,7 +46,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from contract import cli
-from contract.files import write_json, write_text
+from contract.files import write_text
+from contract.records import Format, each
+from fem import artefacts as fem_artefacts
 from fem.geometry import JointGeometry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,6 +59,13 @@ GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the pap
 GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
 FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.finger_cases name
 HEARTBEAT_S = 30.0
+
+#: results/demo/summary.json: the run's steps and its table rows (docs/formats.md §6.12).
+SUMMARY = Format("demo-summary", 1, "apps.demo", {
+    "out": str, **each("", float, "total_s", "finger_mesh_size_mm", "load_average_1min"), "units": str,
+    **each("steps[]", str, "key", "title", "command"), "steps[].wall_s": float | None,
+    **each("rows[]", str, "case", "fem", "model", "error"), "rows[].errors": dict | None,
+    **each("rows[]", float | None, "fem_s", "model_s"), "rows[].figures": list})
 
 
 class StepFailed(RuntimeError):
@@ -264,7 +275,7 @@ LEGEND = ("errors: model minus FEM (mm, deg); FEM s: the FEM's solve time from i
 def markdown(rows: list[dict], steps: list[dict], total_s: float) -> str:
     head = [h for _, h in COLUMNS] + ["figures"]
     out = ["# softjoint demo", "",
-           f"`make demo` (python -m workflow.demo), {total_s:.0f} s in all. {LEGEND}.", "",
+           f"`make demo` (python -m apps.demo), {total_s:.0f} s in all. {LEGEND}.", "",
            "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         links = ", ".join(f"[{Path(p).name}]({p})" for p in r["figures"]) or "-"
@@ -345,11 +356,13 @@ def load_committed(name: str) -> tuple[dict, str]:
     """A committed whole-finger FEM case at the production mesh: (JSON, its path)."""
     rel = f"{COMMITTED_FINGER_FEM}/{name}.json"
     try:
-        case = json.loads(Path(ROOT, rel).read_text())
-    except (OSError, ValueError):
+        case = fem_artefacts.FINGER_CASE.load(Path(ROOT, rel))
+    except OSError:
         raise StepFailed(f"committed finger FEM {rel} missing or unreadable: run `make finger-fem`") from None
+    except ValueError as exc:
+        raise StepFailed(f"{exc}: run `make finger-fem`") from None
     production = JointGeometry().mesh_size
-    if not case.get("converged") or case.get("mesh", {}).get("mesh_size") != production:
+    if not case["converged"] or case["mesh"]["mesh_size"] != production:
         raise StepFailed(f"committed finger FEM {rel} is not a converged case on the production mesh "
                          f"h={_g(production)}: run `make finger-fem`")
     return case, rel
@@ -407,7 +420,7 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
     summary = {"out": rel, "total_s": total, "finger_mesh_size_mm": finger_mesh_size,
                "load_average_1min": os.getloadavg()[0], "units": "mm, deg, N, MPa, s",
                "rows": rows, "steps": step_log}
-    write_json(out / "summary.json", summary)
+    SUMMARY.write(out / "summary.json", summary)
     write_text(out / "summary.md", markdown(rows, step_log, total))
     if as_json:
         cli.print_json(summary)
@@ -419,7 +432,7 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
 
 
 def main(argv=None) -> int:
-    ap = cli.Parser(prog="python -m workflow.demo", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m apps.demo", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/demo", help="output folder (default results/demo)")
     ap.add_argument("--finger-mesh-size", type=cli.number(0.3, 10, "mm"), default=4.0,
                     help="joint mesh size of the live finger FEM, mm (default 4: coarse, for time)")

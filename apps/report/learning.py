@@ -1,0 +1,141 @@
+"""The report's surrogate sections: the models on the test and held-out sets against
+issue 4's targets (SURROGATE_TARGETS), end angles, inference times, and the learning curve
+(issue 35)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from apps.report.common import PAPER, Check, Target, cells, figure, figure_grid, judge, load, missing, num
+
+SURROGATE_TITLE = "Joint surrogate (issue 4)"
+CURVE_TITLE = "Surrogate learning curve (issue 35)"
+
+
+# Issue 4's accuracy targets for the improved surrogate on the held-out set.
+SURROGATE_TARGETS = (("mean anchor error", "mean_anchor_error_mm", 0.10, "mm"),
+                     ("95th-percentile anchor error", "p95_anchor_error_mm", 0.30, "mm"),
+                     ("phi_end error", "phi_end_error_deg", 0.3, "deg"),
+                     ("Jacobian relative error", "jacobian_rel_error", 0.05, ""))
+
+def _angles(r: dict, key: str) -> str:
+    """'mean / p95' of the held-out angle error ``key`` (deg), or why there is none."""
+    if r.get(key) is None:
+        return "no cap head" if key.startswith("cap") else "n/a"
+    p95 = r.get("p95_" + key)
+    return f"{r[key]:.3f}° / " + ("n/a" if p95 is None else f"{p95:.3f}°")
+
+
+def surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
+    title = SURROGATE_TITLE
+    out = [f"## {title}", ""]
+    m = load(root, "surrogate/metrics.json")
+    if not m:
+        return out + missing("needs the FEM dataset of `make dataset`", "make train"), []
+    keys = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm", "phi_end_error_deg",
+            "jacobian_rel_error")
+    names = [name for name in ("paper", "improved", "knn") if name in m]
+    n = m.get("datasets", {}).get("train", {}).get("n", {})
+    out += [f"`make train` (results/surrogate/metrics.json, written by `python -m surrogate.evaluate --report`): "
+            f"results/surrogate/paper.pt and improved.pt trained on the train split "
+            f"{n.get('train', '?')} samples, chosen on validation ({n.get('val', '?')}), and a KNN; test split "
+            f"and the separate held-out set. Paper's mean anchor error: NN {PAPER['surrogate_nn_mm']} mm, "
+            f"KNN {PAPER['surrogate_knn_mm']} mm (docs/decisions.md §0).", "",
+            "| model | set | n | " + " | ".join(keys) + " | train time (s) |",
+            "|---" * (len(keys) + 4) + "|"]
+    for name in names:
+        for split in ("test", "heldout"):
+            r = m[name][split]
+            out.append(f"| {name} | {split} | {r['n']} | " + " | ".join(num(r.get(k)) for k in keys)
+                       + f" | {num(m[name].get('train_time_s'), '.0f')} |")
+    out.append("")
+    out += figure(root, "surrogate/comparison.png", "surrogates against the held-out FEM data",
+                   "`make train` (`python -m surrogate.evaluate --report`, results/surrogate/paper.pt, improved.pt "
+                   "and the KNN): left, random held-out cases' centre lines, FEM data (dots) against each model; "
+                   "right, each model's mean error per anchor over the held-out set.", "make train")
+    curves = [(f"surrogate/{name}_curve.png", f"{name}.pt") for name in ("paper", "improved")]
+    out += figure_grid(root, curves,
+                        "`python -m surrogate.train --config paper` / `--config improved` (`make train`; the curve is "
+                        "written beside the checkpoint): train and validation mean anchor error per epoch, the kept "
+                        "epoch dotted; right panel, the validation angle errors.", "make train")
+    out += ["End angles on the held-out set (deg, mean / p95): phi_end is the chord angle of the last anchors; "
+            "the cap rotation is the distal cap's own rotation, predicted by the improved model's cap head (the cap "
+            "kinematics of the predictor use it); the tangent assumption's error is that of taking the model's "
+            "phi_end for the cap rotation, as the paper's tangent connection does.", "",
+            "| model | n | phi_end error | cap rotation error | tangent assumption's error |", "|---|---|---|---|---|"]
+    for name in names:
+        r = m[name]["heldout"]
+        out.append(f"| {name} | {r['n']} | {_angles(r, 'phi_end_error_deg')} | {_angles(r, 'cap_rotation_error_deg')} "
+                   f"| {_angles(r, 'tangent_error_deg')} |")
+    improved = m["improved"]
+    held, t = improved["heldout"], improved.get("timing", {})
+    cores = max(t.get("threads", [1]))
+    batched = t.get("batched_samples_per_s_float32_all_cores")
+    rows = [(label, f"{num(held[key])} {unit}".strip(), Target("<=", target, unit), held[key])
+            for label, key, target, unit in SURROGATE_TARGETS]
+    rows += [("single-sample inference (1 thread, f64)",
+              f"{num(t.get('single_ms_float64'), '.3f')} ms", Target("<=", 0.2, "ms"), t.get("single_ms_float64")),
+             (f"batched inference (f32, {cores} thread(s))", f"{num(batched, '.3g')} /s",
+              Target(">=", 1e6, "/s", shown="1e6"), batched),
+             ("training time", f"{num(improved.get('train_time_s'), '.0f')} s",
+              Target("<", 900, "s"), improved.get("train_time_s"))]
+    checks = [judge(title, f"surrogate {label}", [(target, value)]) for label, _, target, value in rows]
+    out += ["", "Improved model against issue 4's targets (held-out set; the inference times are metrics.json's "
+            "`timing`, measured by surrogate.evaluate when it wrote the file):", "",
+            "| figure | measured | target | met |", "|---|---|---|---|"]
+    out += [f"| {label} | {shown} |" + cells(c) for (label, shown, _, _), c in zip(rows, checks)]
+    cap = ("no cap head" if held.get("cap_rotation_error_deg") is None else
+           f"{held['cap_rotation_error_deg']:.3f} deg; {num(held.get('p95_cap_rotation_error_deg'), '.3f')} deg")
+    out += [f"| cap rotation error (mean; p95) | {cap} |" + cells(None)]
+    return out + [""], checks
+
+
+def _curve_spread(points: list[dict], key: str) -> list[str]:
+    """'s samples (with|without): a vs b' for every size and mode measured with more than
+    one seed: the learning curve's noise."""
+    groups = {}
+    for p in points:
+        groups.setdefault((p["samples"], p["jacobian_loss"]), []).append(p)
+    out = []
+    for (samples, jac), ps in sorted(groups.items()):
+        if len(ps) > 1:
+            vals = [q[key] for q in sorted(ps, key=lambda q: q["seed"])]
+            spread = (max(vals) - min(vals)) / (sum(vals) / len(vals))
+            out.append(f"{samples} samples {'with' if jac else 'without'} the Jacobian loss, seeds "
+                       f"{', '.join(str(q['seed']) for q in sorted(ps, key=lambda q: q['seed']))}: "
+                       + " vs ".join(f"{v:.4f}" for v in vals) + f" mm ({100 * spread:.0f} % of their mean)")
+    return out
+
+
+def learning_curve_section(root: Path) -> tuple[list[str], list[Check]]:
+    title = CURVE_TITLE
+    out = [f"## {title}", ""]
+    c = load(root, "surrogate/learning_curve.json")
+    if not c or not c.get("points"):
+        return out + missing("trains the improved config on nested subsets of the train split", "make learning-curve"), []
+    n = c["data"]["n"]
+    out += [f"`make learning-curve` (results/surrogate/learning_curve.json, `python -m surrogate.learning_curve`): "
+            f"the `{c['config']}` config trained on nested random subsets of the train split ({n['train']} samples), "
+            f"with its Jacobian loss and without it (w_jac = 0), the whole validation split ({n['val']}) choosing the "
+            f"kept epoch, measured on the held-out set ({c['data']['heldout_n']}). Every point gets at least "
+            f"{c['min_steps']:,} Adam steps with the same learning-rate path ({c['epoch_budget']}), so a small set is "
+            f"not also under-trained." + ("" if c.get("complete") else " **The curve is not finished**: "
+                                          "`make learning-curve` resumes it."), "",
+            "| samples | Jacobian loss | seed | mean anchor (mm) | tip (mm) | cap rotation (deg) | phi_end (deg) "
+            "| Jacobian rel. | train anchor (mm) | Adam steps | train time (s) |", "|---" * 11 + "|"]
+    for p in c["points"]:
+        out.append(f"| {p['samples']} | {'with' if p['jacobian_loss'] else 'without'} | {p['seed']} "
+                   f"| {num(p['heldout_mean_anchor_error_mm'])} | {num(p['heldout_tip_error_mm'])} "
+                   f"| {num(p['heldout_cap_rotation_error_deg'])} | {num(p['heldout_phi_end_error_deg'])} "
+                   f"| {num(p['heldout_jacobian_rel_error'])} | {num(p['train_anchor_error_mm'])} "
+                   f"| {p['steps']} | {num(p['train_time_s'], '.0f')} |")
+    out.append("")
+    spread = _curve_spread(c["points"], "heldout_mean_anchor_error_mm")
+    if spread:
+        out += ["The curve's noise, held-out mean anchor error of the same size with another seed (another subset "
+                "draw and initialisation): " + "; ".join(spread) + ".", ""]
+    out += figure(root, "surrogate/learning_curve.png", "the surrogate's learning curve",
+                   "`make learning-curve` (`python -m surrogate.learning_curve`): held-out mean anchor, tip and "
+                   "cap-rotation errors against the training samples, with and without the Jacobian loss; other "
+                   "seeds as open markers.", "make learning-curve")
+    return out, []

@@ -1,0 +1,127 @@
+"""The report's planning section (issue 16): the grasp atlases against their ramp
+references and a finer ramp, and the inverse pressures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from apps.report.common import Check, Target, cells, figure, joint_model, judge, load, missing, num
+
+PLANNING_TITLE = "Grasp planning (issue 16)"
+
+
+def _range_mid(text) -> float | None:
+    """The middle of a paper figure recorded as a range ('10-15' -> 12.5), or None."""
+    try:
+        parts = [float(v) for v in str(text).split("-")]
+    except ValueError:
+        return None
+    return sum(parts) / len(parts)
+
+def planning_section(root: Path) -> tuple[list[str], list[Check]]:
+    title = PLANNING_TITLE
+    out, checks = [f"## {title}", ""], []
+    kinds = ("circle", "ellipse", "rectangle")
+    atlases = [(kind, a) for kind in kinds if (a := load(root, f"predictor/atlas_{kind}.json"))]
+    # the paper's contact gesture time, as the predictor benchmark records it
+    paper = (load(root, "bench/predictor.json") or {}).get("paper", {})
+    per_gesture = _range_mid(paper.get("contact_lbfgs_s"))
+    out += ["### Grasp atlas (`make atlas`)", ""]
+    if atlases:
+        first = atlases[0][1]
+        out += [f"Every (P1, P2) of a {first['grid']} x {first['grid']} grid over the "
+                "pressure box, each solved along the straight pressure path from the approach gesture "
+                f"({', '.join(f'{v:g}' for v in first['approach_MPa'])} MPa): by continuation outward from "
+                "it (`--path sweep`, each point from its ray's previous grid point; a point without one, or "
+                "whose continuation fails, is ramped on its own), checked against the reference that ramps "
+                "every point on its own (`--path ramp`, `make atlas-reference`): the 'same state' column. "
+                f"Friction use = |f|/(mu N), mu = {first['mu']}. Joint model: "
+                f"{joint_model(root, first.get('joint'), 'make atlas')}. The time is predictor.atlas's own wall time "
+                "for the whole grid (atlas_<object>.json, not a benchmark); the paper's column is its contact "
+                f"gesture time ({paper.get('contact_lbfgs_s', 'n/a')} s, bench/predictor.json) times the grid.", "",
+                "| object | no contact | holds | slips | not converged | best hold (P1, P2) MPa "
+                "| its friction use | swept / ramped / retried | same state as the ramp reference "
+                "| time (atlas_<object>.json) | paper | target | met |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for kind, a in atlases:
+            c, best = a["counts"], a.get("best_hold") or {}
+            checks.append(judge(title, f"atlas {kind}", [(Target("<=", a["targets"]["atlas_s_per_object"], "s"),
+                                                          a["measured"]["atlas_s_per_object"])]))
+            hold_p = ", ".join(f"{v:.3f}" for v in best.get("pressures_MPa", [])) or "none"
+            paper_h = f"~{per_gesture * a['measured']['grid_points'] / 3600:.0f} h" if per_gesture else "n/a"
+            by = a.get("solved_by") or {}
+            how = " / ".join(str(by.get(k, "?")) for k in ("swept", "ramped", "retried")) if by else "all ramped"
+            ref = load(root, f"predictor/ramp/atlas_{kind}.json")
+            same = "n/a (make atlas-reference)"
+            if ref and ref.get("grid") == a["grid"]:
+                pairs = [(u, v) for ru, rv in zip(ref["state"], a["state"]) for u, v in zip(ru, rv)]
+                differ = sum(u != v for u, v in pairs)
+                same = f"{1 - differ / len(pairs):.2%} ({differ} differ)"
+            out.append(f"| {kind} | {c['no_contact']} | {c['holds']} | {c['slips']} | {c['not_converged']} | "
+                       f"{hold_p} | {num(best.get('friction_use'))} | {how} | {same} | "
+                       f"{a['measured']['atlas_s_per_object']:.1f} s "
+                       f"| {paper_h} |" + cells(checks[-1]))
+        out.append("")
+        for kind, a in atlases:
+            out += _finer_ramp(root, kind, a)
+    else:
+        out += missing("grasp atlas", "make atlas")
+    for kind in kinds:
+        a = next((a for k, a in atlases if k == kind), {})
+        out += figure(root, f"predictor/atlas_{kind}.png", f"grasp atlas, {kind}",
+                       f"`make atlas` (`python -m predictor.atlas --object {kind} --grid {a.get('grid', '?')}`, joint "
+                       f"model {joint_model(root, a.get('joint'))}): the state and the friction use over "
+                       "(P1, P2), normal-force contours; right, the best hold, a slip and a no-contact gesture.",
+                       "make atlas")
+    inv = load(root, "predictor/inverse.json")
+    out += ["### Inverse pressures (`make inverse`)", ""]
+    if inv:
+        t, m = inv["targets"], inv["measured"]
+        out += ["Gradients by the implicit function theorem on the converged equilibrium; every answer "
+                "verified by a forward solve along the ramp, and its robustness checked at the "
+                f"regulators' +/-{inv['tolerances']['regulator_MPa']} MPa. Joint model: "
+                f"{joint_model(root, inv.get('joint'), 'make inverse')}. Times are predictor.inverse's own wall times "
+                "(inverse.json, not a benchmark).", "",
+                "| goal | object | status | pressures (MPa) | friction use / tip error | verified | robust "
+                "| time (inverse.json) |",
+                "|---|---|---|---|---|---|---|---|"]
+        for c in inv["cases"]:
+            shown = (f"{num(c['friction_use'])}" if c["friction_use"] is not None
+                      else f"{num(c['tip_error_mm'])} mm")
+            out.append(f"| {c['goal']} | {c['object'] or '-'} | {c['status']} | "
+                       f"{', '.join(f'{v:.4f}' for v in c['pressures'])} | {shown} | {c['verified']} | "
+                       f"{c['robust']} | {c['time_ms_median']:.0f} ms |")
+        rows = [("fingertip target (median)", "inverse_tip_ms"), ("hold goal, from the atlas (median)",
+                                                                  "inverse_hold_ms")]
+        out += ["", "| figure (inverse.json) | measured | target | met |", "|---|---|---|---|"]
+        for label, key in rows:
+            checks.append(judge(title, f"inverse {label}", [(Target("<=", t[key], "ms"), m[key])]))
+            out.append(f"| {label} | {m[key]:.0f} ms |" + cells(checks[-1]))
+        out += [f"| hold goal, without an atlas (median) | {m['inverse_hold_cold_ms']:.0f} ms |" + cells(None), ""]
+    else:
+        out += missing("inverse pressures", "make inverse")
+    out += figure(root, "predictor/inverse.png", "inverse answers",
+                   f"`make inverse` (`python -m predictor.inverse --cases`, joint model "
+                   f"{joint_model(root, (inv or {}).get('joint'))}): each case's answer drawn, its goal "
+                   "and status in the title (x: a fingertip target).", "make inverse")
+    return out, checks
+
+def _finer_ramp(root: Path, kind: str, a: dict) -> list[str]:
+    """The reference's own path resolution: the sweep ``a`` and the ramp reference against
+    a ramp with more sub-steps (results/predictor/ramp_fine/, make atlas-reference-fine),
+    on the points that converge on all three."""
+    fine, ref = (load(root, f"predictor/{d}/atlas_{kind}.json") for d in ("ramp_fine", "ramp"))
+    if not (fine and ref and fine.get("grid") == ref.get("grid") == a["grid"]):
+        return []
+    fine_s, ref_s, sweep_s = (sum(x["state"], []) for x in (fine, ref, a))
+    failed = fine["states"].index("not_converged")
+    common = [i for i in range(len(fine_s)) if failed not in (fine_s[i], ref_s[i], sweep_s[i])]
+    sweep = sum(sweep_s[i] != fine_s[i] for i in common)
+    coarse = sum(ref_s[i] != fine_s[i] for i in common)
+    steps, ref_steps = fine.get("ramp_steps"), ref.get("ramp_steps", 12)  # older files: the solver's default, 12
+    return [f"Path resolution, {kind}: the ramp with {steps} sub-steps instead of {ref_steps} "
+            f"(`make atlas-reference-fine`) converges at {len(fine_s) - fine['counts']['not_converged']} of "
+            f"{len(fine_s)} points. On the {len(common)} points that converge on all three paths, the sweep's "
+            f"state differs from the {steps}-step ramp's at {sweep} and the {ref_steps}-step reference's at "
+            f"{coarse}" + (": the sweep is closer to the finer ramp than the reference is, so most of their "
+                           "disagreement is the reference's coarse path." if sweep < coarse else "."), ""]

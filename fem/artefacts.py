@@ -1,0 +1,57 @@
+"""The formats of the JSON artefacts the fem package writes (contract.records).
+
+Each names the key paths the report and the demo read, with their JSON types; the writer
+named in ``owner`` checks its document against the format before writing it, and every
+reader loads the file through it (docs/formats.md §6). Units as in the key names: mm, s,
+MPa, deg; ``*_over_L`` are fractions of the beam length.
+"""
+
+from __future__ import annotations
+
+from contract.records import Format, each
+
+NUM, MAYBE = float, float | None
+
+#: results/fem/validation.json (make validation): the elastica sweeps against exact solutions.
+VALIDATION = Format("fem-validation", 1, "fem.validation", {
+    **each("required", float, "cantilever", "rollup"),
+    **each("cantilever[]", NUM, "alpha", "error_over_L", "u_over_L", "w_over_L", "theta"),
+    **each("cantilever[].exact", NUM, "u_over_L", "w_over_L", "theta"),
+    **each("rollup[]", NUM, "theta_load", "error_over_L", "x_over_L", "y_over_L", "theta"),
+    **each("rollup[].exact", NUM, "x_over_L", "y_over_L", "theta"),
+    **each("", NUM, "max_cantilever_error_over_L", "max_rollup_error_over_L")})
+
+_ERRORS = ("anchor_mm", "anchor_percent", "tip_mm", "phi_end_deg", "cap_rotation_deg")
+
+#: results/fem/mesh_study.json (make mesh-study): every mesh's worst error over the corners.
+MESH_STUDY = Format("fem-mesh-study", 1, "fem.mesh_study", {
+    "tolerance_percent": NUM, "min_nodes": int, "production_mesh": list, "reference": str,
+    "family": list, "wall_mm": NUM, "meshes[].mesh_size": NUM, "meshes[].wall_mesh_size": MAYBE,
+    "meshes[].nodes": int, **each("meshes[].max_error", NUM, *_ERRORS),
+    "extrapolation?[].anchors.order": MAYBE,
+    **each("production_error?", NUM, "anchor_mm", "tip_mm", "phi_end_deg", "cap_rotation_deg")})
+
+#: results/fem/self_contact.json (make self-contact): valley gaps over the load cases.
+SELF_CONTACT = Format("fem-self-contact", 1, "fem.self_contact", {
+    **each("", NUM, "contact_penalty_MPa_per_mm", "min_gap_mm", "undeformed_gap_mm"),
+    "unsolved_cases": int, "cases[].load": list, "cases[].phi_end_deg": NUM,
+    "cases[].min_gap_mm": MAYBE, "cases[].converged?": bool})
+
+#: results/bench/fem.json (make bench-fem): joint FEM timings on one core.
+BENCH_JOINT = Format("fem-bench-joint", 1, "fem.bench_joint", {
+    **each("", int, "paper_nodes", "nodes", "dofs"),
+    **each("", NUM, "mesh_size", "solve_from_zero_s", "continuation_sample_s", "newton_iterations",
+           "continuation_step_fraction_of_box", "paper_seconds_per_sample",
+           "speedup_vs_paper_from_zero", "speedup_vs_paper_continuation"),
+    "solve_from_zero_cases": list})
+
+#: results/bench/finger.json (make bench-finger): the finger FEM's time per gesture.
+BENCH_FINGER = Format("fem-bench-finger", 1, "fem.bench_finger", {
+    "cases[].case": str, "cases[].load_average_before": NUM,
+    **each("", NUM, "finger_fem_max_s", "finger_fem_median_s", "target_s")})
+
+#: results/validation/finger_fem/<case>.json (make finger-fem): one finger FEM case
+#: (FingerResult.summary); tip and angles are null unless converged.
+FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
+    "case": str, "pressures_MPa": list, "gravity": bool, "converged": bool, "tip": list | None,
+    "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh_size": NUM, "mesh.nodes": int})

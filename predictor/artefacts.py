@@ -1,0 +1,104 @@
+"""The formats of the JSON artefacts the predictor package writes (contract.records).
+
+Each names the key paths the report and the demo read with their JSON types; the writer
+in ``owner`` checks its document before writing it and readers load the file through it
+(docs/formats.md §6). Units as in the key names: MPa, mm, N, mN, N·mm, deg, ms, s.
+Optional paths (``?``) are figures a writer records only in some runs (a path it did not
+bench, a file from before a figure was added).
+"""
+
+from __future__ import annotations
+
+from contract.records import Format, each
+
+NUM, MAYBE = float, float | None
+
+_RESIDUALS = ("force_mN_mean", "moment_Nmm_mean", "force_mN_p95", "moment_Nmm_p95",
+              "force_mN_max", "moment_Nmm_max")
+_THROUGHPUT = {"per_s": NUM, "newton_from_nn": int, "ramp_fallback": int}
+
+#: results/bench/predictor.json (make bench-predictor): timings, residuals and throughputs.
+BENCH = Format("predictor-bench", 1, "predictor.bench", {
+    **each("", NUM, "gravity_newton_median_ms", "gravity_lbfgs_median_ms", "contact_median_ms",
+           "gravity_nn_residual_force_mN", "gravity_nn_residual_moment_Nmm",
+           "contact_nn_raw_residual_force_mN", "contact_nn_raw_residual_moment_Nmm",
+           "contact_nn_raw_p95_force_mN", "contact_nn_raw_p95_moment_Nmm", "contact_nn_state_agreement",
+           "contact_nn_raw_tip_error_mm", "contact_nn_residual_force_mN", "contact_nn_residual_moment_Nmm",
+           "contact_nn_polished_fallback_rate", "nn_single_query_ms", "nn_batched_per_s"),
+    **each("", NUM, "gravity_lm_median_ms?", "gravity_fast_median_ms?", "contact_fast_median_ms?",
+           "contact_batched_per_s?", "contact_ramp_batched_per_s?", "contact_nn_newton_rate?",
+           "gravity_batched_per_s?"),
+    "batched_threads?": int, "batched_dtype?": str, "threads?": int, "graphs?": str, "joint?": str,
+    "targets?{}": NUM, "paper?": dict,
+    "details.nn_domain_MPa?{}.p1": list, "details.nn_domain_MPa?{}.p2": list,
+    **each("details.gravity_nn_improved?", NUM, *_RESIDUALS),
+    **each("details.gravity_nn_paper_mlp?", NUM, *_RESIDUALS),
+    **each("details.gravity_nn_throughput?.one_thread?", NUM, "nn_and_kinematics_per_s?", "delivered_per_s?"),
+    "details.gravity_fast?.method": str, **each("details.gravity_fast?", int, "misses", "n", "fallbacks"),
+    "details.contact_fast?.method": str, **each("details.contact_fast?", int, "misses", "n"),
+    **each("details.contact_fast?", int, "newton_from_nn?", "fallbacks?"),
+    **each("details.contact_throughput?", int, "n", "threads"), "details.contact_throughput?.dtype": str,
+    **{f"details.contact_throughput?.{k}.{f}": t for k in ("issue_bound", "solver_tolerance")
+       for f, t in _THROUGHPUT.items()},
+    "details.contact_nn_vs_solver.raw_contact_free": dict | None,
+    "details.contact_nn_vs_solver.raw_contact_free?.force_mN_mean": MAYBE,
+    "details.contact_nn_vs_solver.reference_converged": int,
+    "details.contact_nn_vs_solver.state_by?": str,
+    "details.contact_nn_vs_solver.state_agreement_of_tau?": NUM,
+    **each("details.contact_nn_vs_solver.reference_penetration_mm?", NUM, "mean", "p95"),
+    **each("details.contact_nn_vs_solver.newton_step_from_raw?", NUM, "force_mN_mean", "moment_Nmm_mean",
+           "force_mN_p95", "moment_Nmm_p95", "tip_error_mm_mean"),
+    **each("details.contact_nn_vs_solver.newton_from_raw?", int, "converged", "converged_to_ramp_equilibrium",
+           "converged_elsewhere", "kept", "kept_elsewhere"),
+    **each("details.contact_nn_vs_solver.newton_from_raw?", MAYBE, "tip_shift_mm_max_at_ramp_equilibrium",
+           "tip_shift_mm_min_elsewhere"),
+    "details.contact_nn_vs_solver.newton_from_raw?.branch_tip_mm": NUM})
+
+#: One gesture summary (predictor.gesture --json, and each case of gestures.json): the
+#: fingertip and angles are null unless converged; files from before the gesture said its
+#: state carry ``slip`` and a signed ``friction_ratio`` instead of ``state``, ``friction_use``.
+_GESTURE = {"pressures_MPa": list, "converged": bool, "tip": list | None, "tip_angle_deg": MAYBE,
+            "contact_force_N": NUM, "state?": str, "friction_use?": MAYBE, "slip?": bool,
+            "friction_ratio?": MAYBE}
+
+#: results/predictor/gestures.json (make gestures): the paper's gesture cases and grasps.
+GESTURES = Format("predictor-gestures", 1, "predictor.figures", {
+    "joint": str, "approach_MPa": list, "mu?": NUM,
+    **{f"{group}.{k}": kind for group in ("gravity[]", "free[]", "grasps{}[]") for k, kind in _GESTURE.items()}})
+
+#: results/predictor/atlas_<object>.json and its ramp/, ramp_fine/ references (make atlas):
+#: the grasp state over a (P1, P2) grid; ``state`` holds codes into ``states``.
+ATLAS = Format("predictor-atlas", 1, "predictor.atlas", {
+    "grid": int, "approach_MPa": list, "mu": NUM, "joint?": str, "states": list, "state[]": list,
+    **each("counts", int, "no_contact", "holds", "slips", "not_converged"),
+    "best_hold?.pressures_MPa": list, "best_hold?.friction_use": MAYBE,
+    "targets.atlas_s_per_object": NUM, "measured.atlas_s_per_object": NUM, "measured.grid_points": int,
+    "solved_by?{}": int, "ramp_steps?": int})
+
+#: results/predictor/inverse.json (make inverse): each goal's pressures, verified forward.
+INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
+    "joint?": str, **each("targets", NUM, "inverse_tip_ms", "inverse_hold_ms"),
+    **each("measured", NUM, "inverse_tip_ms", "inverse_hold_ms", "inverse_hold_cold_ms"),
+    "tolerances.regulator_MPa": NUM,
+    **each("cases[]", str, "goal", "status"), "cases[].object": str | None, "cases[].pressures": list,
+    "cases[].friction_use": MAYBE, "cases[].tip_error_mm?": MAYBE, "cases[].verified": bool | None,
+    "cases[].robust": bool | None, "cases[].time_ms_median": NUM})
+
+_SUMMARY = ("tip_error_mm_max", "tip_error_mm_mean", "tip_angle_error_deg_max",
+            "joint_end_angle_error_deg_max", "speedup_min")
+
+#: results/validation/finger.json, results/demo/finger.json (make validate-finger): the
+#: predictor's variants against the finger FEM, per case and summarised per variant.
+VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger", {
+    **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "speedup", "fem_s", "fem_cases"),
+    "summary{}.cases": int, **each("summary{}", NUM, *_SUMMARY), "judged_variant": str,
+    "joint": str, "repeats": int, "finger.name": str, "finger.base_angle_deg?": NUM, "figures?": list,
+    "fem[].case": str, "fem[].converged": bool, "fem[].gravity": bool, "fem[].pressures_MPa": list,
+    "fem[].fem_s": NUM, "fem[].tip": list | None, "fem[].tip_angle_deg": MAYBE,
+    "fem[].load_average?": NUM, "fem[].reason?": str, "fem[].mesh.nodes": int, "fem[].mesh.mesh_size": NUM,
+    **each("cases[]", str, "case", "variant", "method", "kinematics"), "cases[].joint_weight": str | None,
+    **each("cases[]", MAYBE, "tip_error_mm", "tip_angle_error_deg", "predictor_s", "tip_angle_deg"),
+    "cases[].tip_mm": list | None,
+    "mesh_check?[].case": str, **each("mesh_check?[]", NUM, "production_mesh_size", "mesh_size",
+                                       "tip_change_mm", "tip_angle_change_deg"),
+    **each("mesh_check?[]", int, "production_nodes", "nodes"), "mesh_check?[].wall_mesh_size?": NUM})

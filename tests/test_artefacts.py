@@ -1,0 +1,113 @@
+"""Each artefact owns its format (contract.records, */artefacts.py, apps.artefacts).
+
+- Every committed JSON under results/ is an artefact the catalogue knows, and loads
+  through its format.
+- A writer refuses a document with a renamed key: one line naming the file, the key path
+  and the format, and nothing is written (for every committed artefact, the deepest key
+  its format requires through objects renamed, e.g. details.contact_nn_vs_solver.
+  reference_converged of bench/predictor.json).
+- The key paths mean what contract.records says: nested lists and objects, optional keys,
+  nullable numbers, a bool is not a number, an int is a number but a float not an int.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from apps.artefacts import ARTEFACTS, find
+from contract.records import Format
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results"
+
+
+def _committed() -> list[str]:
+    out = subprocess.run(["git", "ls-files", "results/*.json", "results/**/*.json"], cwd=ROOT,
+                         capture_output=True, text=True, check=True).stdout.split()
+    return sorted({str(Path(p).relative_to("results")) for p in out if (ROOT / p).is_file()})
+
+
+COMMITTED = _committed()
+
+
+def test_every_committed_json_is_a_known_artefact():
+    assert len(COMMITTED) >= 60, COMMITTED           # 67 at the time of writing
+    # every catalogue entry has a committed file, so every format is checked below
+    assert {find(rel).pattern for rel in COMMITTED} == {a.pattern for a in ARTEFACTS}
+    with pytest.raises(ValueError, match="not an artefact the project writes"):
+        find("fem/unknown.json")
+
+
+@pytest.mark.parametrize("rel", COMMITTED)
+def test_committed_artefact_loads_through_its_format(rel):
+    doc = find(rel).load(RESULTS / rel)
+    assert isinstance(doc, dict) and doc
+
+
+def _required_path(fmt: Format) -> list[str]:
+    """The keys of the first path the format requires through objects only (no '?', '[]'
+    or '{}'), deepest first listed: e.g. ["required", "cantilever"]."""
+    plain = [p.split(".") for p in fmt.keys if all(s.isidentifier() for s in p.split("."))]
+    return max(plain, key=len)
+
+
+@pytest.mark.parametrize("rel", [r for r in COMMITTED if find(r).format is not None])
+def test_writer_refuses_a_renamed_key(rel, tmp_path):
+    fmt = find(rel).format
+    doc = json.loads((RESULTS / rel).read_text())
+    *parents, key = _required_path(fmt)
+    bad = copy.deepcopy(doc)
+    node = bad
+    for k in parents:
+        node = node[k]
+    node[key + "_renamed"] = node.pop(key)
+    out = tmp_path / "x.json"
+    with pytest.raises(ValueError) as err:
+        fmt.write(out, bad)
+    message = str(err.value)
+    assert "\n" not in message
+    assert message == f"{out}: {'.'.join([*parents, key])}: missing (format {fmt.tag}, {fmt.owner})", message
+    assert not list(tmp_path.iterdir())              # nothing written, no temporary file left
+    fmt.write(out, doc)                              # the committed document itself is accepted
+    assert json.loads(out.read_text()) == doc
+
+
+FMT = Format("t", 2, "tests", {"a.b": float, "c[].d": int | None, "e?{}.f": str, "g": float | None,
+                              "h?[].i?": bool})
+
+
+@pytest.mark.parametrize("doc,error", [
+    ({"a": {"b": 1}, "c": [{"d": None}, {"d": 2}], "g": None}, None),
+    ({"a": {"b": 1.5}, "c": [], "g": 3, "e": {"x": {"f": "s"}}, "h": [{}, {"i": True}]}, None),
+    ({"a": {"b": True}, "c": [], "g": 1}, "a.b: expected a number, found a boolean True"),
+    ({"a": {}, "c": [], "g": 1}, "a.b: missing"),
+    ({"a": {"b": 1}, "c": [{"d": 1}, {"d": 1.5}], "g": 1}, "c[1].d: expected an integer or null, found a number 1.5"),
+    ({"a": {"b": 1}, "c": [], "g": 1, "e": {"k": {"f": 3}}}, "e.k.f: expected a string, found a number 3"),
+    ({"a": {"b": 1}, "c": {}, "g": 1}, "c: expected a list, found an object"),
+    ({"a": [], "c": [], "g": 1}, "a: expected an object, found a list"),
+    ({"a": {"b": 1}, "c": None, "g": 1}, "c: expected a value, found null"),
+    ({"a": {"b": 1}, "c": [], "g": "1"}, "g: expected a number or null, found a string '1'"),
+])
+def test_key_paths(doc, error):
+    if error is None:
+        assert FMT.check(doc) is doc
+    else:
+        with pytest.raises(ValueError, match=re.escape(f"f.json: {error} (format t/2, tests)") + "$"):
+            FMT.check(doc, "f.json")
+
+
+def test_a_bad_key_path_is_refused_when_the_format_is_defined():
+    with pytest.raises(ValueError, match="bad key path 'a..b'"):
+        Format("t", 1, "tests", {"a..b": float})
+
+
+def test_load_names_a_file_that_is_not_json(tmp_path):
+    (tmp_path / "x.json").write_text("{not json")
+    with pytest.raises(ValueError, match=r"x\.json: not JSON"):
+        FMT.load(tmp_path / "x.json")

@@ -1,0 +1,35 @@
+"""The formats of the JSON artefacts the workflow package writes (contract.records), and
+issue 3's campaign throughput targets.
+
+Dataset manifests have their own strict format (``workflow.shards.Manifest``,
+docs/formats.md §2). Each format names the key paths the report reads with their JSON
+types; the writer in ``owner`` checks its document before writing it and readers load the
+file through it. Units as in the key names: s, h, mm, deg.
+"""
+
+from __future__ import annotations
+
+from contract.records import Format, Target, each
+
+NUM, MAYBE = float, float | None
+
+#: Issue 3's throughput targets (bench_campaign records whether they are met).
+CAMPAIGN_TARGETS = (Target(">=", 400, key="samples_per_hour_2ranks"),
+                    Target(">=", 0.85, "%", 100, key="parallel_efficiency"))
+
+#: results/bench/campaign.json (make bench-campaign): campaign throughput on 1 and 2 ranks.
+BENCH_CAMPAIGN = Format("workflow-bench-campaign", 1, "workflow.bench_campaign", {
+    **each("", NUM, "samples_per_hour_1rank", "samples_per_hour_2ranks", "parallel_efficiency",
+           "per_unit_efficiency", "harvested_sample_s", "fresh_sample_s", "paper_cpu_hours"),
+    "dataset_cpu_hours": MAYBE, "targets{}": bool})
+
+_MESH = ("mesh_size", "wall_mesh_size")
+
+#: results/fem/heldout_mesh.json (make fine-compare; workflow.dataset compare --out): one
+#: walk solved on two meshes, the differences' mean, p95 and max.
+MESH_COMPARISON = Format("workflow-mesh-comparison", 1, "workflow.dataset", {
+    "ref_mesh.mesh_size": NUM, "ref_mesh.wall_mesh_size": MAYBE,
+    "other_mesh.mesh_size": NUM, "other_mesh.wall_mesh_size": MAYBE,
+    "samples": int, "ref_samples": int,
+    **each("tip_mm", NUM, "mean", "p95", "max"), "phi_end_deg.mean": NUM,
+    **each("cap_rotation_deg", NUM, "mean", "p95"), "cpu_s_per_sample.other": NUM})
