@@ -112,6 +112,8 @@ def bench(args) -> dict:
     first = data["sample_id"] % args.unit_size == 0
     harvested = data["wall_time_s"][~first]
 
+    # Imported only now, after the mpirun runs above: MPI started in this process would hand
+    # its singleton environment to those child launchers.
     from mpi4py import MPI
 
     from fem.geometry import JointGeometry

@@ -62,6 +62,7 @@ from __future__ import annotations
 import argparse
 import fcntl
 import math
+import os
 import subprocess
 import sys
 import time
@@ -69,14 +70,17 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
 
 from contract import cli
-from fem.options import add_mesh_size, add_wall_mesh_size
 from contract.spec import INPUT_BOX, N_INPUTS
+from fem.geometry import JointGeometry
+from fem.options import add_mesh_size, add_wall_mesh_size
+from fem.solver import JointSolver, Load, Material, SolverConfig
 from workflow import shards
 from workflow.shards import Manifest, ShardError
 from workflow.store import (ShardScanner, build_manifest, clean_temporaries, shard_file,
-                            unit_count, unit_ids)
+                            unit_count, unit_ids, unit_range)
 
 EXIT_INCOMPLETE = 3
 #: A harvested sample farther than this (mm) from the from-zero solve is another branch.
@@ -137,8 +141,6 @@ def git_commit() -> str:
 def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int) -> dict:
     """The manifest's ``config``: everything that determines the samples (not N, not ranks);
     ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included)."""
-    from fem.solver import Material, SolverConfig
-
     return {"source": "fem-campaign", "geometry": geometry.as_dict(),
             "material": asdict(Material()), "solver": asdict(SolverConfig()),
             "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
@@ -151,8 +153,6 @@ def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
                on_sample=None) -> tuple[dict, dict]:
     """Solve the walk ``inputs`` (n, 4) of one unit by continuation (collective over the
     solver's communicator). Returns (arrays for write_shard, meta figures)."""
-    from fem.solver import Load
-
     data = {k: [] for k in ("sample_id", "inputs", "anchors", "jacobian", "phi_end",
                             "cap_rotation", "newton_iterations", "wall_time_s")}
     fail = {"failed_sample_id": [], "failed_inputs": [], "failed_reason": []}
@@ -205,18 +205,6 @@ def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
 
 
 # ---------------------------------------------------------------------------- CLI
-def unit_range(text: str) -> tuple[int, int]:
-    """argparse type of ``--units A:B``: two integers 0 <= A < B (B is checked against the
-    campaign's unit count after parsing)."""
-    try:
-        a, b = (int(v) for v in text.split(":"))    # not two integers: ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not A:B (two integers, 0 <= A < B)") from None
-    if not 0 <= a < b:
-        raise argparse.ArgumentTypeError(f"{text} is not a unit range A:B with 0 <= A < B")
-    return a, b
-
-
 def parse_args(argv=None) -> argparse.Namespace:
     ap = cli.Parser(prog="python -m workflow.campaign",
                     description="Resumable MPI FEM data campaign of the bellow joint "
@@ -332,10 +320,6 @@ def check_compatible(out: Path, config: dict, seed: int, samples: int | None = N
 
 
 def run(args) -> int:
-    import os
-
-    from mpi4py import MPI
-
     world = MPI.COMM_WORLD
     rank, size = world.rank, world.size
     # srun without an MPI plugin that this MPI understands (a stock MpiDefault=none, no
@@ -354,9 +338,6 @@ def run(args) -> int:
             print(f"python -m workflow.campaign: error: --ranks-per-group {G} does not divide "
                   f"{size} ranks", file=sys.stderr)
         return 2
-    from fem.geometry import JointGeometry
-    from fem.solver import JointSolver
-
     mesh_size = args.mesh_size or JointGeometry().mesh_size
     geometry = JointGeometry(mesh_size=mesh_size, wall_mesh_size=args.wall_mesh_size)
     config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every)
@@ -512,7 +493,6 @@ def main(argv=None) -> int:
     except OSError as exc:      # the manifest or the lock on a full disk: one line, data kept
         _error_line(f"{args.out}: {exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
                     + "; what was written stays (rerun to resume)")
-        from mpi4py import MPI
         if MPI.COMM_WORLD.size > 1:
             MPI.COMM_WORLD.Abort(1)
         return 1

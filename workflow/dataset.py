@@ -25,7 +25,8 @@ import sys
 from contract import cli
 from workflow import store
 from workflow.artefacts import MESH_COMPARISON
-from workflow.campaign import unit_range
+from workflow.store import unit_range
+from workflow.mirror import mirror_check
 from workflow.shards import MANIFEST, Manifest
 
 EXIT_PROBLEMS = 1
@@ -107,7 +108,8 @@ def main(argv=None) -> int:
         if not Manifest.exists(args.root):
             ap.error(f"{args.root}: no {MANIFEST} (not a softjoint dataset)")
         with ap.errors():
-            d = store.verify(args.root, mirror=args.mirror)
+            check = (lambda arrays, manifest: mirror_check(arrays, manifest, args.mirror)) if args.mirror else None
+            d = store.verify(args.root, mirror_check=check)
         if args.require_complete and any(w.startswith("incomplete") for w in d["warnings"]):
             d["ok"], d["errors"] = False, d["errors"] + ["incomplete campaign"]
         if args.require_units and d["ok"]:

@@ -2,8 +2,8 @@
 rebuild, and the info / verify / merge operations behind ``python -m workflow.dataset``.
 
 Shared by ``workflow.campaign`` (scan + manifest on resume and after every unit) and the
-``workflow.dataset`` command line. Imports neither dolfinx nor torch; only
-``verify(..., mirror=N)`` builds a FEM solver.
+``workflow.dataset`` command line. Imports neither dolfinx nor torch; the FEM's mirror check
+of a dataset is ``workflow.mirror``, handed to ``verify`` by its caller.
 
 Data flow::
 
@@ -20,6 +20,7 @@ Units: inputs P MPa, F1 F2 N, M N·mm; anchors mm.
 
 from __future__ import annotations
 
+import argparse
 import re
 import shutil
 from dataclasses import dataclass
@@ -28,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from contract.files import atomic_path, sha256_file
-from contract.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, mirror, outside_box
+from contract.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, outside_box
 from workflow.shards import (DATA_KEYS, FAILURE_KEYS, Manifest, ShardEntry, ShardError,
                              array_digest, load_dataset, read_shard, split_of)
 
@@ -196,47 +197,27 @@ def info(root: str | Path) -> dict:
     }
 
 
+def unit_range(text: str) -> tuple[int, int]:
+    """argparse type of ``--units A:B``: two integers 0 <= A < B (B is checked against the
+    campaign's unit count after parsing)."""
+    try:
+        a, b = (int(v) for v in text.split(":"))    # not two integers: ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not A:B (two integers, 0 <= A < B)") from None
+    if not 0 <= a < b:
+        raise argparse.ArgumentTypeError(f"{text} is not a unit range A:B with 0 <= A < B")
+    return a, b
+
+
 # ---------------------------------------------------------------------------- verify
-def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
-    """Solve the y-mirror of ``n`` stored samples with the FEM (fresh from zero) and compare
-    with the mirrored stored anchors and Jacobian (docs/physics.md). The mesh is mirror
-    symmetric, so the relation holds to solver tolerance. Needs dolfinx; runs on one rank."""
-    from mpi4py import MPI
-
-    from fem.geometry import JointGeometry
-    from fem.solver import JointSolver, Load, Material, SolverConfig
-
-    cfg = manifest.config
-    solver = JointSolver(JointGeometry(**cfg["geometry"]), MPI.COMM_SELF,
-                         Material(**cfg["material"]), SolverConfig(**cfg["solver"]))
-    rng = np.random.default_rng([manifest.seed, 7])
-    pick = np.sort(rng.choice(len(arrays["sample_id"]), size=min(n, len(arrays["sample_id"])),
-                              replace=False))
-    cases = []
-    for i in pick:
-        x_m, r_m, j_m = mirror(arrays["inputs"][i:i + 1], arrays["anchors"][i:i + 1],
-                                    arrays["jacobian"][i:i + 1])
-        res = solver.solve(Load.from_array(x_m[0]))
-        case = {"sample_id": int(arrays["sample_id"][i]), "converged": res.converged}
-        if res.converged:
-            jac = solver.sensitivities()
-            case["anchor_error_mm"] = float(np.abs(res.anchors - r_m[0]).max())
-            case["jacobian_rel_error"] = float(np.abs(jac - j_m[0]).max() / np.abs(j_m[0]).max())
-        cases.append(case)
-    return {"cases": cases,
-            "max_anchor_error_mm": max((c.get("anchor_error_mm", np.inf) for c in cases), default=0.0),
-            "max_jacobian_rel_error": max((c.get("jacobian_rel_error", np.inf) for c in cases),
-                                          default=0.0)}
-
-
-def verify(root: str | Path, mirror: int = 0, tol_mm: float = 1e-5, jac_tol: float = 1e-3) -> dict:
+def verify(root: str | Path, mirror_check=None, tol_mm: float = 1e-5, jac_tol: float = 1e-3) -> dict:
     """Check dataset ``root``; returns {"ok", "errors", "warnings", ...}.
 
     Errors: unreadable or invalid manifest or shard, sha256/checksum mismatch, config or
     seed mismatch, duplicated or misplaced sample ids, non-finite or out-of-box data
-    (contract.spec.outside_box), a sample both stored and failed, and (with ``mirror`` > 0) a
-    mirror relation off by more than ``tol_mm`` (anchors) or ``jac_tol`` (relative,
-    Jacobian). Warnings: an incomplete campaign, shard files the manifest does not list.
+    (contract.spec.outside_box), a sample both stored and failed, and (with ``mirror_check``,
+    a callable (arrays, manifest) -> figures such as workflow.mirror.mirror_check) a mirror
+    relation off by more than ``tol_mm`` (anchors) or ``jac_tol`` (relative, Jacobian). Warnings: an incomplete campaign, shard files the manifest does not list.
     """
     root = Path(root)
     errors, warnings = [], []
@@ -276,11 +257,11 @@ def verify(root: str | Path, mirror: int = 0, tol_mm: float = 1e-5, jac_tol: flo
     if both.size:
         errors.append(f"{both.size} sample id(s) both stored and failed")
     out = {"n": len(arrays["sample_id"]), "failures": len(arrays["failed_sample_id"])}
-    if mirror > 0 and len(arrays["sample_id"]):
+    if mirror_check is not None and len(arrays["sample_id"]):
         if cfg.get("source") != "fem-campaign":
             warnings.append(f"mirror check skipped: source {cfg.get('source')!r} is not the FEM")
         else:
-            out["mirror"] = mc = mirror_check(arrays, manifest, mirror)
+            out["mirror"] = mc = mirror_check(arrays, manifest)
             if not all(c["converged"] for c in mc["cases"]):
                 errors.append("mirror check: a mirrored case did not converge")
             elif mc["max_anchor_error_mm"] > tol_mm or mc["max_jacobian_rel_error"] > jac_tol:
