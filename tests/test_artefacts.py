@@ -111,3 +111,24 @@ def test_load_names_a_file_that_is_not_json(tmp_path):
     (tmp_path / "x.json").write_text("{not json")
     with pytest.raises(ValueError, match=r"x\.json: not JSON"):
         FMT.load(tmp_path / "x.json")
+
+
+def test_a_writer_command_refuses_a_renamed_key_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    """workflow.dataset compare --out, its comparison renamed (tip_mm -> tip) as a writer
+    with a stale key would produce it: exit 2, one line naming the output file, the key and
+    the format, and no file; the same comparison unrenamed is written and loads back."""
+    from workflow import dataset, store
+
+    doc = json.loads((RESULTS / "fem/heldout_mesh.json").read_text())
+    renamed = {("tip" if k == "tip_mm" else k): v for k, v in doc.items()}
+    out = tmp_path / "cmp.json"
+    monkeypatch.setattr(store, "compare", lambda ref, other: renamed)
+    with pytest.raises(SystemExit) as exit_:
+        dataset.main(["compare", "a", "b", "--out", str(out)])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert exit_.value.code == 2 and len(err) == 1, err
+    assert f"{out}: tip_mm: missing (format workflow-mesh-comparison/1, workflow.dataset)" in err[0]
+    assert not list(tmp_path.iterdir())
+    monkeypatch.setattr(store, "compare", lambda ref, other: doc)
+    assert dataset.main(["compare", "a", "b", "--out", str(out), "--json"]) == 0
+    assert find("fem/heldout_mesh.json").load(out) == doc
