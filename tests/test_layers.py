@@ -60,7 +60,7 @@ def test_imports_run_downward_and_name_no_private_names(package, path):
 
 
 def test_the_dolfinx_free_layers_import_no_dolfinx_and_contract_no_torch():
-    """Every module of contract, surrogate and predictor imported (command lines too):
+    """Every module of contract, surrogate, predictor and apps imported (command lines too):
     dolfinx is never loaded, and the contract loads neither torch nor gmsh."""
     code = """
 import importlib, pkgutil, sys
@@ -68,7 +68,7 @@ for pkg in ("contract",):
     for m in pkgutil.iter_modules([pkg]):
         importlib.import_module(f"{pkg}.{m.name}")
 light = sorted(m for m in ("torch", "dolfinx", "gmsh") if m in sys.modules)
-for pkg in ("surrogate", "predictor"):
+for pkg in ("surrogate", "predictor", "apps"):
     for m in pkgutil.iter_modules([pkg]):
         importlib.import_module(f"{pkg}.{m.name}")
 print(light, "dolfinx" in sys.modules)
