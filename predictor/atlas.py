@@ -58,8 +58,11 @@ from fem.files import write_json
 from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
                                placement_error)
 from predictor.progress import Heartbeat, set_quiet
-from predictor.solve import (GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
-                             gesture_result, solve)
+from predictor.jacobians import jacobian_fn
+from predictor.options import SolverOptions
+from predictor.ramp import advance, attempts, ramp_method, runner
+from predictor.result import GestureResult
+from predictor.solve import gesture_result, solve
 from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
                                out_of_reach)
 
@@ -198,7 +201,7 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     Ring s holds the points s grid steps from p0 (Chebyshev distance, rounded up); rings
     are solved in order, each as one batch. A point q of ring s continues (one ramp step
     of predictor.solve: tangent predictor from its predecessor's Jacobians, LM with the
-    solve's Jacobians in turn (solve.attempts), depth check, cut-backs) from the converged
+    solve's Jacobians in turn (predictor.ramp.attempts), depth check, cut-backs) from the converged
     point nearest to p0 + (q - p0)(s - 1)/s, the ray's point one ring back, if that lies
     within one grid step of it. So each point's
     path follows its own straight ray from p0 within half a grid step (exactly on it
@@ -224,8 +227,8 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     pred = np.full(M, -1)
     first = np.full((M, J), np.nan)          # the ramped points' own first contact
     how = np.full(M, SWEPT)
-    runs = [_runner(problem, dataclasses.replace(options, jacobian=k)) for k in attempts(problem, options)]
-    jac_fn = _jacobian_fn(problem, True, options.jacobian)
+    runs = [runner(problem, dataclasses.replace(options, jacobian=k)) for k in attempts(problem, options)]
+    jac_fn = jacobian_fn(problem, True, options.jacobian)
 
     def ramp(rows):
         # the reference path; its Jacobians at the solution start the points beyond it
@@ -249,11 +252,11 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
             k = dist.argmin(1)
             pred[rows] = np.where(dist[np.arange(len(rows)), k] <= 1.0, done[k], -1)
         cont = rows[pred[rows] >= 0]
-        for run in runs:                            # the solve's Jacobians in turn (solve.attempts)
+        for run in runs:                            # the solve's Jacobians in turn (predictor.ramp.attempts)
             if len(cont) == 0:
                 break
             pc = pred[cont]
-            xs, conv, its, (J_, Jp_) = _advance(run, x[pc], pressures[pc], pressures[cont], options.cutbacks,
+            xs, conv, its, (J_, Jp_) = advance(run, x[pc], pressures[pc], pressures[cont], options.cutbacks,
                                                 (jx[pc], jp[pc]))
             x[cont], ok[cont], jx[cont], jp[cont] = xs, conv, J_, Jp_
             iterations[cont] += its
@@ -266,7 +269,7 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     if len(retry):
         how[retry], pred[retry] = RETRIED, -1
         ramp(retry)
-    res = gesture_result(problem, pressures, x, ok, iterations, t0, options.method, None)
+    res = gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options), None)
     touch = res.normal_force_N.numpy() > 0
     for s in np.unique(ring):                   # along each path, ring by ring
         rows = np.nonzero((ring == s) & (pred >= 0))[0]

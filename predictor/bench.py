@@ -18,13 +18,13 @@ Newton steps on its branch, converged to the issue's 0.1 mN and 0.01 N·mm per s
 one batch of 2,000 pressures on every core in float64; ``details.contact_throughput`` has
 it at the solver's own tolerance too, and ``contact_ramp_batched_per_s`` the ramp solve's
 batch), ``gravity_batched_per_s`` and ``nn_single_query_ms`` (the
-delivered NN path, predictor.nn.predict_gesture: network, kinematics and its residual
+delivered NN path, predictor.nn_answer.predict_gesture: network, kinematics and its residual
 check). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
 in float32 on every core (``batched_dtype``, ``batched_threads``; the network and the
 joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
 float64 on one thread and on every core beside them in the details; every other figure
 on one thread in float64. ``gravity_newton_median_ms`` is the default solve from tau = 0
-(a Picard step and Newton steps in one recorded graph, predictor.solve._cold_newton);
+(a Picard step and Newton steps in one recorded graph, predictor.solve's cold path, predictor.newton.traced_cold_fn);
 ``gravity_lm_median_ms`` the LM it replaced,
 over the same pressures in the same run.
 
@@ -61,8 +61,10 @@ from fem import cli
 from fem.files import write_json
 from fem.spec import PRESSURE_LIMIT
 from predictor.joint import load_joint
-from predictor.nn import (DEFAULT_DIR, contact_fraction, evaluate, evaluate_contact, evaluate_polished, load_predictor,
-                          nn_folder, predict_gesture, sample_pressures)
+from predictor.networks import sample_pressures
+from predictor.nn_answer import predict_gesture
+from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder
+from predictor.nn_eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished
 from predictor.progress import set_quiet
 from predictor.solve import APPROACH, GRAPHS, SolverOptions, solve, use_graphs
 from predictor.statics import GripperProblem, Obstacle
@@ -103,7 +105,7 @@ def _median_solve_ms(problem, pressures, options=SolverOptions()):
 
 def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_moment_Nmm: float,
                polish: bool = False) -> dict:
-    """Median single-query time (ms) of predictor.nn.predict_gesture over ``pressures``
+    """Median single-query time (ms) of predictor.nn_answer.predict_gesture over ``pressures``
     (n, J), a network's tau finished by a solver (contact: Newton steps kept on the
     network's branch, else the capped LM polish, the ramp where it fails; gravity with
     ``polish``: one Newton step, the LM where its check fails), and its worst residuals. A
@@ -237,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # NN throughput: pressures -> tau -> full gesture (forward kinematics), no autograd, on
     # one thread and on every core (best of 3 each: the machine is shared, and the best
-    # run is the one least disturbed). The delivered path (predictor.nn.predict_gesture)
+    # run is the one least disturbed). The delivered path (predictor.nn_answer.predict_gesture)
     # adds the residual check that refuses an answer outside the NN bound.
     p_big = torch.rand(n["throughput"], 2, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
     cores = os.cpu_count() or 1

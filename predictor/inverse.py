@@ -28,7 +28,7 @@ so by the implicit function theorem
     d tau/dP = -(dr/dtau)⁻¹ dr/dP                                    (6 x 2)
     de/dP    = ∂e/∂P + ∂e/∂tau · d tau/dP                              (k x 2)
     df/dP    = 2 eᵀ de/dP                                            (2)
-with dr/dtau and dr/dP from the solver's Jacobian (solve._jacobian_fn: exact with an
+with dr/dtau and dr/dP from the solver's Jacobian (predictor.jacobians.jacobian_fn: exact with an
 object, central differences to ~1e-10 relative without) at the converged point, and
 ∂e/∂(tau, P) the same way (``_goal_derivatives``): no unrolled iterations.
 Moving P moves the equilibrium by continuation (solve's tangent predictor + LM, cut back
@@ -80,9 +80,14 @@ from predictor.atlas import HOLDS, NOT_CONVERGED, STATES, Atlas, classify, grasp
 from predictor.problem import (FULL_BOX, MIN_NORMAL, add_arguments, box_arg, check_box, load_problem,
                                object_arg)
 from predictor.progress import Heartbeat, set_quiet
-from predictor.solve import (GestureResult, SolverOptions, _advance, _box_scale, _jacobian_fn, _levenberg_marquardt,
-                             graph_cache, result_labels, solve, touch, traced)
-from predictor.statics import GripperProblem
+from predictor.graphs import graph_cache, touch, traced
+from predictor.jacobians import jacobian_fn
+from predictor.lm import levenberg_marquardt
+from predictor.options import SolverOptions
+from predictor.ramp import advance
+from predictor.result import GestureResult, result_labels
+from predictor.solve import solve
+from predictor.statics import GripperProblem, box_scale
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
 HOLD_MARGIN = 0.2  # friction margin 1 - u required by --least-pressure
@@ -205,7 +210,7 @@ class _Branch:
     def __init__(self, ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
         prob, opts = ip.problem, ip.options
         self.problem, self.opts = prob, opts
-        self.jac_fn = _jacobian_fn(prob)
+        self.jac_fn = jacobian_fn(prob)
         cap = None if prob.obstacle is None else opts.contact_max_step
         # The search iterates need only stay on the branch (solve's intermediate ramp steps
         # use the same 100x looser tolerance); refine() converges the answer fully.
@@ -213,7 +218,7 @@ class _Branch:
         self.tol = self.loose
 
         def run(x, p, p_prev=None, jac=None):
-            x, ok, its, jac = _levenberg_marquardt(self.jac_fn, x, p, self.tol, cap, p_prev, jac)
+            x, ok, its, jac = levenberg_marquardt(self.jac_fn, x, p, self.tol, cap, p_prev, jac)
             if prob.obstacle is not None:  # the solver's tunnelling guard
                 ok = ok & (touch(prob, x, p)[1] <= opts.max_penetration)
             return x, ok, its, jac
@@ -228,7 +233,7 @@ class _Branch:
         p = p.reshape(1, 2).double()
         if torch.equal(p, self.p):
             return True
-        x, ok, _, jac = _advance(self.run, self.x, self.p, p, self.opts.cutbacks, self.jac)
+        x, ok, _, jac = advance(self.run, self.x, self.p, p, self.opts.cutbacks, self.jac)
         if not bool(ok.all()):
             return False
         self.p, self.x, self.jac = p, x, jac
@@ -251,7 +256,7 @@ class _Branch:
     def neighbours(self, ps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Continue to each of ps (n, 2) from this point, batched: (x (n, 6), converged (n,))."""
         n = ps.shape[0]
-        x, ok, _, _ = _advance(self.run, self.x.expand(n, 6), self.p.expand(n, 2), ps.double(),
+        x, ok, _, _ = advance(self.run, self.x.expand(n, 6), self.p.expand(n, 2), ps.double(),
                                self.opts.cutbacks, tuple(a.expand(n, *a.shape[1:]) for a in self.jac))
         return x, ok
 
@@ -291,13 +296,13 @@ def gradient(ip: InverseProblem, branch: _Branch):
 
 def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
     """(e (k,), ∂e/∂x (k, 6), ∂e/∂P (k, 2)) at x (1, 6), p (1, 2). As the solver's
-    Jacobian (solve._jacobian_fn): without an object, central differences of the traced
+    Jacobian (predictor.jacobians.jacobian_fn): without an object, central differences of the traced
     goal residual in one pass (the pose is smooth; steps 1e-6 of (1 N, 1 N, 100 N·mm) and
     of 0.3 MPa); with one, exact, by one reverse pass over k copies of the point (copy i
     feeds row i only: the contact law has kinks)."""
     k = ip.goal.terms
     if ip.problem.obstacle is None:
-        h = 1e-6 * torch.cat((_box_scale(6)[1], torch.full((2,), INPUT_BOX[0], dtype=torch.float64)))
+        h = 1e-6 * torch.cat((box_scale(6)[1], torch.full((2,), INPUT_BOX[0], dtype=torch.float64)))
         steps = torch.diag(h)                                                        # (8, 8)
         y = torch.cat((x, p), 1)
         Y = torch.cat((y, y + steps, y - steps))                                     # (17, 8)
@@ -317,7 +322,7 @@ def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
 
 @graph_cache
 def _traced_goal_fn(ip: InverseProblem):
-    """e(x (B, 6), p (B, 2)) -> (B, k), recorded by solve.traced."""
+    """e(x (B, 6), p (B, 2)) -> (B, k), recorded by predictor.graphs.traced."""
     return traced(lambda x, p: _goal_terms(ip, p, x)[1], 6, 2)
 
 

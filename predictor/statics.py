@@ -52,6 +52,7 @@ tau)`` with pressures (B, J), tau (B, J, 3) -> Statics (residual (B, J, 3), pose
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -430,6 +431,14 @@ def scaled(res: torch.Tensor) -> torch.Tensor:
 #: (F1, F2, M) half-widths of the box as floats (torch.compile guards a numpy array
 #: read inside a graph by its dispatch keys, and fails under inference mode).
 _TAU_BOX = tuple(float(v) for v in INPUT_BOX[1:])
+
+
+@functools.lru_cache(maxsize=8)
+def box_scale(n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(box, scale) (n,) of n = 3J unknowns: (3 N, 3 N, 100 N·mm) and (1, 1, MOMENT_SCALE)
+    per joint (cached, read only: the solvers' Jacobians and steps ask for them)."""
+    return (torch.tensor(list(_TAU_BOX) * (n // 3), dtype=torch.float64),
+            torch.tensor([1.0, 1.0, MOMENT_SCALE] * (n // 3), dtype=torch.float64))
 
 
 def range_penalty(tau: torch.Tensor) -> torch.Tensor:
