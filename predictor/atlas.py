@@ -244,13 +244,7 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     for s in np.unique(ring):
         beat(lambda: f"ring {s} of {ring.max()}: {int(ok.sum())} of {M} points converged")
         rows = np.nonzero(ring == s)[0]
-        # a predecessor within one step of the ray's point on ring s - 1 lies on ring s - 2 or s - 1
-        done = np.nonzero(ok.numpy() & (ring >= s - 2))[0]
-        if s > 0 and len(done):
-            ideal = p0 + (Q[rows] - p0) * ((s - 1) / s)
-            dist = np.abs((ideal[:, None] - Q[done][None]) / spacing).max(-1)   # (rows, done) grid steps
-            k = dist.argmin(1)
-            pred[rows] = np.where(dist[np.arange(len(rows)), k] <= 1.0, done[k], -1)
+        pred[rows] = _predecessors(Q, rows, s, p0, spacing, ring, ok.numpy())
         cont = rows[pred[rows] >= 0]
         for run in runs:                            # the solve's Jacobians in turn (predictor.ramp.attempts)
             if len(cont) == 0:
@@ -270,13 +264,36 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
         how[retry], pred[retry] = RETRIED, -1
         ramp(retry)
     res = gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options), None)
-    touch = res.normal_force_N.numpy() > 0
+    first = _first_contacts(first, Q, ring, pred, res.normal_force_N.numpy() > 0)
+    return dataclasses.replace(res, first_contact=torch.from_numpy(first)), how
+
+
+def _predecessors(Q: np.ndarray, rows: np.ndarray, s: int, p0: np.ndarray, spacing: np.ndarray, ring: np.ndarray,
+                  ok: np.ndarray) -> np.ndarray:
+    """The predecessor (index into Q (M, 2) MPa, or -1) of each point ``rows`` of ring s: the
+    converged point (ok (M,) bool) nearest to the ray's point p0 + (q - p0)(s - 1)/s one ring
+    back, if within one grid step (spacing (2,) MPa) of it; none on ring 0."""
+    # a predecessor within one step of the ray's point on ring s - 1 lies on ring s - 2 or s - 1
+    done = np.nonzero(ok & (ring >= s - 2))[0]
+    if s == 0 or not len(done):
+        return np.full(len(rows), -1)
+    ideal = p0 + (Q[rows] - p0) * ((s - 1) / s)
+    dist = np.abs((ideal[:, None] - Q[done][None]) / spacing).max(-1)   # (rows, done) grid steps
+    k = dist.argmin(1)
+    return np.where(dist[np.arange(len(rows)), k] <= 1.0, done[k], -1)
+
+
+def _first_contacts(first: np.ndarray, Q: np.ndarray, ring: np.ndarray, pred: np.ndarray,
+                    touch: np.ndarray) -> np.ndarray:
+    """First contact (M, 2) MPa of every point along its path: a swept point (pred >= 0)
+    inherits its predecessor's, or is its own first contact where it touches (touch (M,)
+    bool) and the path before it did not; ramped points keep ``first``, their ramp's."""
+    first = first.copy()
     for s in np.unique(ring):                   # along each path, ring by ring
         rows = np.nonzero((ring == s) & (pred >= 0))[0]
         before = first[pred[rows]]
         first[rows] = np.where(np.isnan(before[:, :1]), np.where(touch[rows, None], Q[rows], np.nan), before)
-    res.first_contact = torch.from_numpy(first)
-    return res, how
+    return first
 
 
 def marked_points(atlas: Atlas) -> list[tuple[int, str]]:

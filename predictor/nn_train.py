@@ -35,7 +35,7 @@ from predictor.joint import JointModel
 from predictor.networks import TAU_SCALE, ContactNet, NNConfig, Predictor, network, sample_pressures
 from predictor.nn_eval import contact_fraction, evaluate, evaluate_polished
 from predictor.solve import solve
-from predictor.statics import NO_CONTACT, grasp_state, loss
+from predictor.statics import NO_CONTACT, GripperProblem, grasp_state, loss
 
 
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, ...]:
@@ -174,37 +174,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     else:
         if not cfg.supervised:
             raise ValueError("state_heads needs the solver's labels (supervised)")
-        final = fit(net.classifier, lambda idx: nn.functional.cross_entropy(
-            net.logits(pick(p_train, idx)), pick(s_train, idx)), p_train.shape[0], cfg, gen,
-            lbfgs=False)
-        epochs = cfg.epochs
-        log(epochs, final)
-        for k, head in enumerate(net.heads):
-            pk, tk = p_train[s_train == k], tau_train[s_train == k]
-            # The contact states' heads also fit the label's contact points (pose_weight, mm²):
-            # while slipping a small tau error moves the fingertip far, and the penalty answers
-            # the pose. Not the contact-free head: there it cost tau accuracy (the raw
-            # contact-free residual rose from 0.12 to 0.95 mN in bench-predictor).
-            with torch.no_grad():
-                points = problem.pose(pk, tk).points if cfg.pose_weight and len(pk) and k != NO_CONTACT else None
-
-            def head_loss(idx, head=head, pk=pk, tk=tk, points=points):
-                p = pick(pk, idx)
-                tau = head(p)
-                value = tau_error(tau, pick(tk, idx), scale)
-                if points is not None:
-                    miss = (problem.pose(p, tau).points - pick(points, idx)).pow(2).sum(-1).mean(-1).mean()
-                    value = value + cfg.pose_weight * miss
-                return value
-
-            if len(pk):   # a state the domain never reaches keeps an untrained head it never picks
-                final = fit(head, head_loss, len(pk), cfg, gen)
-                epochs += cfg.epochs
-                log(epochs, final)
-                for s in range(len(net.refine[k])):
-                    final = fit_stage(net, k, s, pk, tk, cfg, gen)
-                    epochs += cfg.refine_epochs
-                    log(epochs, final)
+        _fit_state_heads(net, problem, p_train, tau_train, s_train, scale, cfg, gen, log)
     train_time = time.perf_counter() - t_start
     metrics = {"val": evaluate(net, problem, p_val), "train_time_s": train_time,
                "label_time_s": label_time, "n_train": int(p_train.shape[0]), "n_val": int(p_val.shape[0])}
@@ -212,3 +182,46 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
         metrics["val_polished"] = evaluate_polished(Predictor(net, cfg, joint.name), joint, p_val)
         metrics["val_contact_fraction"] = contact_fraction(net, problem, p_val)
     return Predictor(net, cfg, joint.name, metrics, history)
+
+
+def _fit_state_heads(net: ContactNet, problem: GripperProblem, p_train: torch.Tensor, tau_train: torch.Tensor,
+                     s_train: torch.Tensor, scale: torch.Tensor, cfg: NNConfig, gen: torch.Generator, log) -> None:
+    """A ContactNet's training on labels p_train (n, J) MPa, tau_train (n, J, 3), states
+    s_train (n,): the classifier (cross-entropy, Adam only), then each state's head on its
+    own labels (scaled tau error, ``scale`` (3,), plus the pose term for the contact
+    states), then the head's correction stages in turn (``fit_stage``); log(epoch, loss)
+    after each, at its cumulative epoch."""
+
+    def pick(t, idx):
+        return t if idx is None else t[idx]
+
+    final = fit(net.classifier, lambda idx: nn.functional.cross_entropy(
+        net.logits(pick(p_train, idx)), pick(s_train, idx)), p_train.shape[0], cfg, gen,
+        lbfgs=False)
+    epochs = cfg.epochs
+    log(epochs, final)
+    for k, head in enumerate(net.heads):
+        pk, tk = p_train[s_train == k], tau_train[s_train == k]
+        # The contact states' heads also fit the label's contact points (pose_weight, mm²):
+        # while slipping a small tau error moves the fingertip far, and the penalty answers
+        # the pose. Not the contact-free head: there it costs tau accuracy (docs/decisions.md).
+        with torch.no_grad():
+            points = problem.pose(pk, tk).points if cfg.pose_weight and len(pk) and k != NO_CONTACT else None
+
+        def head_loss(idx, head=head, pk=pk, tk=tk, points=points):
+            p = pick(pk, idx)
+            tau = head(p)
+            value = tau_error(tau, pick(tk, idx), scale)
+            if points is not None:
+                miss = (problem.pose(p, tau).points - pick(points, idx)).pow(2).sum(-1).mean(-1).mean()
+                value = value + cfg.pose_weight * miss
+            return value
+
+        if len(pk):   # a state the domain never reaches keeps an untrained head it never picks
+            final = fit(head, head_loss, len(pk), cfg, gen)
+            epochs += cfg.epochs
+            log(epochs, final)
+            for s in range(len(net.refine[k])):
+                final = fit_stage(net, k, s, pk, tk, cfg, gen)
+                epochs += cfg.refine_epochs
+                log(epochs, final)
