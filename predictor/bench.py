@@ -77,7 +77,7 @@ QUICK = {"gravity": 3, "lbfgs": 1, "contact": 2, "batch": 6, "nn_validation": 16
          "contact_batch": 2, "throughput": 1000, "contact_throughput": 8, "single": 3, "lbfgs_contact": 0}
 #: the issue's bound on a converged gesture (0.1 mN, 0.01 N·mm), 1000x the solver's default
 ISSUE_TOLERANCE = SolverOptions(tol_force=1e-4, tol_moment=1e-2)
-#: top-level figures required by issues 5 and 15 (tests/test_predictor.py checks them)
+#: top-level figures required by issues 5 and 15 (tests/test_predictor_nn.py checks them)
 REQUIRED_KEYS = (
     "gravity_newton_median_ms", "gravity_lbfgs_median_ms", "contact_median_ms", "gravity_nn_residual_force_mN",
     "gravity_nn_residual_moment_Nmm", "contact_nn_residual_force_mN", "contact_nn_residual_moment_Nmm",
