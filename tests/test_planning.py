@@ -19,7 +19,7 @@ import torch
 from fem.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify
-from predictor.inverse import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
+from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
 from predictor.solve import solve
 
 ROOT = Path(__file__).resolve().parents[1]
