@@ -53,7 +53,7 @@ def raw_answer(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor)
     return tau, st, grasp_state(st.contact.normal, st.contact.slip) if state is None else state
 
 
-@dataclass
+@dataclass(frozen=True)
 class NNGestureResult(GestureResult):
     """GestureResult of the NN predictor. raw_residual_force_mN, raw_residual_moment_Nmm
     (B, J): Equation 1 at the network's own tau, before any solver; polished (B,): the

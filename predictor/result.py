@@ -17,9 +17,10 @@ from predictor.statics import NOT_CONVERGED, STATES, GripperProblem, grasp_state
 GIVEN = {"given": True}
 
 
-@dataclass
+@dataclass(frozen=True)
 class GestureResult:
-    """Batched solve result for the right finger (mirror with ``pose.mirrored()``).
+    """Batched solve result for the right finger (mirror with ``pose.mirrored()``), frozen:
+    a result derived from another is a ``dataclasses.replace`` (``with_rows``).
 
     pressures (B, J) MPa; tau (B, J, 3) [F1 N, F2 N, M N·mm], NaN where not converged;
     converged (B,) bool; residual_force_mN, residual_moment_Nmm (B, J) at the last
@@ -33,7 +34,9 @@ class GestureResult:
     does (without the ramp, x0 given: the target pressures if the final gesture touches);
     None without an object. joint: the joint model's name; mu: the contact law's friction
     coefficient and object_weight_N: the object's weight (N, 0 without gravity), both None
-    without an object.
+    without an object. method: what produced the answers (predictor.solve: "newton", "lm",
+    "lbfgs", "newton+lm" where the LM finished rows; predictor.nn_answer: "nn",
+    "nn+newton", "nn+lm", "nn+newton+lm").
 
     friction_ratio is the signed lambda of the contact law (statics.contact_loads; ±1e3
     where nothing touches): internal. The figure reported everywhere is the friction use

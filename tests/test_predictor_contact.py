@@ -103,13 +103,15 @@ def test_default_jacobian_gives_the_exact_jacobians_grasps(kind):
     """A contact solve's default Jacobian (central differences, the exact one only for
     samples that fail with them: solve.attempts) ends at the same equilibria as the exact
     Jacobian alone, on the committed surrogate: three pressure pairs that hold, slip and
-    miss, the same grasp state and tau to 1e-6 N / N·mm (the solver's 1e-7 N tolerance)."""
+    miss, the same grasp state and tau to 1e-6 N / N·mm (the solver's 1e-7 N tolerance).
+    Both are the LM's answers along the ramp, and say so (method "lm", asked for "newton")."""
     from predictor.atlas import classify, load_problem
 
     problem = load_problem(str(ROOT / "results/surrogate/improved.pt"), kind)
     p = t([[0.25, 0.14], [0.12, -0.04], [-0.1, 0.0]])
     auto, exact = solve(problem, p), solve(problem, p, SolverOptions(jacobian="exact"))
     assert bool(auto.converged.all()) and bool(exact.converged.all())
+    assert auto.method == exact.method == "lm"
     assert classify(auto, 0.3)[0].tolist() == classify(exact, 0.3)[0].tolist() == [1, 2, 0]
     assert torch.allclose(auto.tau, exact.tau, rtol=0, atol=1e-6)
 
