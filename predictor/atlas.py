@@ -31,8 +31,8 @@ and records N (N), u, the fingertip (X, Y) mm of the right finger and the first-
 pressures along the ramp (GestureResult.first_contact, MPa, NaN when never). The friction
 margin is 1 - u (> 0 where the grasp holds). The summary and JSON name what was solved:
 joint, mu, object_weight_N, gravity, approach_MPa; ``atlas_from_json`` reads an atlas
-back for the same problem and refuses (one line) one of another object, joint or settings. A run longer than ~10 s prints progress lines on stderr (``--quiet``:
-none).
+back for the same problem and refuses (one line) one of another object, joint or settings.
+A run longer than ~10 s prints progress lines on stderr (``--quiet``: none).
 
 Data flow: GripperProblem (joint, object, approach) + grid -> ``grasp_atlas`` -> Atlas
 (arrays (N, N[, 2]) indexed [i, j] = (P1 = p1[i], P2 = p2[j]), plus the GestureResult of

@@ -43,8 +43,8 @@ import torch
 from torch import nn
 
 from fem.spec import PRESSURE_LIMIT
-from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger, finger_from_dict,
-                               finger_to_dict)
+from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger,
+                               finger_from_dict, finger_to_dict)
 from predictor.joint import JointModel
 from predictor.ramp import APPROACH
 from predictor.statics import HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle

@@ -109,7 +109,8 @@ def test_atlas_json_keys(atlas):
     codes = np.array(doc["state"]).ravel()
     assert doc["counts"] == {name: int((codes == k).sum()) for k, name in enumerate(STATES)}
     assert sum(doc["counts"].values()) == 16 == doc["measured"]["grid_points"]
-    use, normal = np.array(doc["friction_use"], dtype=float).ravel(), np.array(doc["normal_force_N"], dtype=float).ravel()
+    use = np.array(doc["friction_use"], dtype=float).ravel()
+    normal = np.array(doc["normal_force_N"], dtype=float).ravel()
     touching = (codes != NO_CONTACT) & np.isfinite(normal) & (normal > 0)
     assert np.array_equal(np.isfinite(use), touching)
 

@@ -109,8 +109,8 @@ def test_cli_finger_kinematics_and_joint_weight(tmp_path):
     path = tmp_path / "three.toml"
     path.write_text(THREE)
     png = tmp_path / "three.png"
-    out = run_gesture_cli("--finger", str(path), "--pressures", "0.1,-0.05,0.2", "--model", "analytic", "--kinematics", "cap",
-               "--joint-weight", "split", "--json", "--plot", str(png))
+    out = run_gesture_cli("--finger", str(path), "--pressures", "0.1,-0.05,0.2", "--model", "analytic",
+                          "--kinematics", "cap", "--joint-weight", "split", "--json", "--plot", str(png))
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)
     assert got["finger"] == {"name": "three", "sha256": hashlib.sha256(THREE.encode()).hexdigest()}

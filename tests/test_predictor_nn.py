@@ -148,7 +148,8 @@ def test_nn_predictor_cli_matches_solver():
     np.testing.assert_allclose(np.array(pol["tau"]), ref, atol=1e-6)
     assert pol["raw_residual_force_mN"] == pytest.approx(got["raw_residual_force_mN"], rel=1e-9, abs=1e-12)
     # contact: the raw network's residual is reported beside the polished answer's
-    out = run_gesture_cli("--p1", "0.1", "--p2", "0.2", "--object", "circle", "--model", model, "--method", "nn", "--json")
+    out = run_gesture_cli("--p1", "0.1", "--p2", "0.2", "--object", "circle", "--model", model, "--method", "nn",
+                          "--json")
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)
     assert got["polished"] != got["fallback"] and max(got["residual_force_mN"]) <= 1e-4
