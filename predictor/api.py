@@ -6,7 +6,7 @@
     atlas = grasp_atlas(g, grid=21)                   # predictor.atlas.Atlas: .summary(), .to_json()
     answer = inverse_pressures(g, goal="hold", atlas=atlas)   # InverseResult: .summary()
 
-Units: pressures MPa, lengths mm (global frame of DESIGN.md §4, right finger), forces N.
+Units: pressures MPa, lengths mm (global frame of docs/gripper.md, right finger), forces N.
 Every call goes through the same solver and history as ``predictor.gesture --object``
 (approach gesture APPROACH, then the pressure ramp) and the same checks as the command
 lines (predictor.problem: one validation per input, ValueError with the CLI's reason);
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from fem.finger_spec import FingerSpec, load_finger
+from contract.finger import FingerSpec, load_finger
 from predictor import atlas as _atlas
 from predictor import inversion as _inverse
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
@@ -63,7 +63,7 @@ def load_gripper(model: str | None = None, object: str | None = None, gravity: b
     results/surrogate/improved.pt of this package or $SOFTJOINT_RESULTS; ValueError when
     missing); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None: no
     object); finger: a finger description file or FingerSpec (None: the paper's,
-    fem/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
+    contract/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
     mu: friction coefficient, object_weight: N (None: the defaults 0.3 and 0.2 N)
     (predictor.gesture's --finger, --kinematics, --joint-weight, --mu, --object-weight).
     ValueError (one line) for a bad spec, finger file, model, option, an object the model

@@ -56,8 +56,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem import cli
-from fem.files import write_json
+from contract import cli
+from contract.files import write_json
 from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
                                placement_error)
 from predictor.progress import Heartbeat, set_quiet

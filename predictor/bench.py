@@ -58,9 +58,9 @@ from types import SimpleNamespace
 
 import torch
 
-from fem import cli
-from fem.files import write_json
-from fem.spec import PRESSURE_LIMIT
+from contract import cli
+from contract.files import write_json
+from contract.spec import PRESSURE_LIMIT
 from predictor.joint import load_joint
 from predictor.networks import sample_pressures
 from predictor.nn_answer import predict_gesture

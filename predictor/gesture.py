@@ -8,7 +8,7 @@
     python -m predictor.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
 
 The finger is read from a finger description file (``--finger``, default
-fem/fingers/paper.toml, fem.finger_spec): any chain of J joints and rigid parts. A
+contract/fingers/paper.toml, contract.finger): any chain of J joints and rigid parts. A
 2-joint finger takes ``--p1 --p2`` (or ``--pressures P1,P2``); another takes ``--pressures
 P1,..,PJ`` (MPa, base to tip), and ``--approach`` takes J values too (default: joint 1 at
 -0.15 MPa, the others at 0). ``--kinematics``: how a part leaves a joint, along its cap
@@ -56,9 +56,9 @@ import sys
 
 import torch
 
-from fem import cli
-from fem.finger_spec import DEFAULT_FINGER
-from fem.spec import PRESSURE_LIMIT
+from contract import cli
+from contract.finger import DEFAULT_FINGER
+from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
                                finger_arg)
 from predictor.joint import load_joint
@@ -152,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pressures", type=_pressure_list, help="P1,..,PJ MPa, one per joint of the finger, base "
                     "to tip (instead of --p1 --p2)")
     ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
-                    help="finger description file (TOML, fem.finger_spec; default fem/fingers/paper.toml)")
+                    help="finger description file (TOML, contract.finger; default contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
                     help="a part leaves a joint along its last anchors' chord (tangent, the paper's) "
                     "or its cap face (cap)")

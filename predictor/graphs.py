@@ -19,7 +19,7 @@ import warnings
 
 import torch
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from predictor.gripper import FingerPose
 from predictor.statics import ContactState, GripperProblem, Statics, box_scale, contact_loads, range_penalty, scaled
 

@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem import cli
-from fem.files import write_json
+from contract import cli
+from contract.files import write_json
 from predictor.atlas import STATES, Atlas, atlas_from_json
 from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
                                  VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, inverse_pressures, parse_goal)

@@ -1,7 +1,7 @@
 """Inverse pressures: which (P1, P2) hold an object, or put the fingertip where asked (the
 library; the command line is predictor.inverse).
 
-Goals (right finger; lengths mm in the global frame of DESIGN.md §4, pressures MPa):
+Goals (right finger; lengths mm in the global frame of docs/gripper.md, pressures MPa):
 
 Every goal is a least-squares one, f = |e|² with a goal residual e:
 
@@ -65,8 +65,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from fem import cli
-from fem.spec import INPUT_BOX
+from contract import cli
+from contract.spec import INPUT_BOX
 from predictor.atlas import HOLDS, NOT_CONVERGED, STATES, Atlas, classify, grasp_atlas
 from predictor.problem import FULL_BOX, MIN_NORMAL, check_box
 from predictor.progress import Heartbeat

@@ -8,7 +8,7 @@ import functools
 
 import torch
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from predictor.graphs import residual_fn, traced_residual_fn
 from predictor.statics import PENALTY_WEIGHT, GripperProblem, box_scale
 

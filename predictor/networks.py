@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass, field, replace
 import torch
 from torch import nn
 
-from fem.spec import PRESSURE_LIMIT
+from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger,
                                finger_from_dict, finger_to_dict)
 from predictor.joint import JointModel

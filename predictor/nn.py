@@ -17,7 +17,7 @@ from dataclasses import asdict, replace
 
 import torch
 
-from fem import cli
+from contract import cli
 from predictor import progress
 from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
                                default_finger, finger_arg)
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--epochs", type=cli.number(1, None, integer=True),
                     help="override the variant's epochs (smoke runs)")
     ap.add_argument("--finger", type=finger_arg, default=None,
-                    help="finger description file (default: the paper's, fem/fingers/paper.toml)")
+                    help="finger description file (default: the paper's, contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -80,7 +80,7 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
           x0: torch.Tensor | None = None) -> GestureResult:
     """Equilibrium gesture of ``problem`` for a batch of pressure pairs.
 
-    pressures: (B, J) or (J,) MPa [P1 .. PJ], |P| <= 0.3 (fem.spec.OutOfBoxError otherwise;
+    pressures: (B, J) or (J,) MPa [P1 .. PJ], |P| <= 0.3 (contract.spec.OutOfBoxError otherwise;
     ValueError for another count than the finger's J joints).
     x0: optional warm start (B, J, 3) (e.g. the NN's prediction); it disables the ramp.
     With an object the gripper first settles at ``problem.approach`` without it (when

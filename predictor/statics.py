@@ -1,6 +1,6 @@
 """Equilibrium residual of the right finger (paper's Equation 1), with gravity and contact.
 
-Load convention (must match how the FEM defines the surrogate's inputs, DESIGN.md §3-4):
+Load convention (must match how the FEM defines the surrogate's inputs, docs/physics.md and docs/gripper.md):
 tau_i = (F1, F2, M)_i is the load that the part of the finger distal to joint i exerts ON
 joint i's distal end. F1, F2 (N) are dead loads at the end point r_10 expressed in joint
 i's UNDEFORMED frame, so their global value is Rot(theta_i)·(F1, F2) with theta_i the
@@ -43,7 +43,7 @@ Contact (object fixed in the plane, signed distance d < 0 inside, outward normal
   assumes the object is symmetric about X = 0 (other objects are refused: ``object_error``).
 
 Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
-max(0, |M|-100)/100 per joint, the surrogate's training box (fem.spec.INPUT_BOX).
+max(0, |M|-100)/100 per joint, the surrogate's training box (contract.spec.INPUT_BOX).
 
 Data flow: a GripperProblem (joint model, GripperParams = finger + kinematics + joint
 weights, object, contact law, gravity, approach pressures) -> ``problem.residual(pressures,
@@ -58,7 +58,7 @@ from dataclasses import dataclass
 
 import torch
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from predictor.gripper import FingerPose, GripperParams, check_pressures, finger_pose, rot
 from predictor.joint import JointModel, no_cap_message
 

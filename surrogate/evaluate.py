@@ -37,9 +37,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fem import cli
-from fem.files import atomic_path, write_json, write_text
-from fem.spec import INPUT_BOX, N_INPUTS, check_box, phi_end
+from contract import cli
+from contract.files import atomic_path, write_json, write_text
+from contract.spec import INPUT_BOX, N_INPUTS, check_box, phi_end
 from surrogate.data import Samples, load_samples, load_splits
 from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, load_surrogate, wrap

@@ -20,7 +20,7 @@ theta the distal cap's rotation (n,) rad):
       + w_jac · mean_i ||(Ĵ_i - J_i) D||_F              Sobolev; D = diag(INPUT_BOX), so each
                                                         column is mm per input half-range
 
-The paper config (DESIGN.md §6): MLP 4-96-192-96-20, Adam lr 0.0016 decayed ×0.99 per
+The paper config (docs/decisions.md (the paper's figures)): MLP 4-96-192-96-20, Adam lr 0.0016 decayed ×0.99 per
 epoch, 500 epochs, mirror augmentation, anchor term only. The paper states neither the
 activation nor the batch size; we take ReLU and 32.
 
@@ -55,9 +55,9 @@ from pathlib import Path
 
 import torch
 
-from fem import cli
-from fem.files import atomic_path
-from fem.spec import INPUT_BOX, phi_end
+from contract import cli
+from contract.files import atomic_path
+from contract.spec import INPUT_BOX, phi_end
 from surrogate.data import Samples, augment_mirror, load_splits, normalisation
 from surrogate.evaluate import evaluate
 from surrogate.model import (ACTIVATIONS, CAP_TARGETS, JointSurrogate, ModelConfig, save_checkpoint,

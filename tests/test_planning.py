@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import torch
 
-from fem.files import dumps
+from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify
 from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient

@@ -297,9 +297,9 @@ def test_gesture_figure_has_legend_and_joint_title():
     plt.close(fig)
 
 
-# ------------------------------------------------------------ rows pending fem.cli (another agent)
-#: Refused by fem.cli.Parser's write probe and negative comma lists once that change
-#: merges (fem/cli.py is not this branch's): these fail until then.
+# ------------------------------------------------------------ rows pending contract.cli (another agent)
+#: Refused by contract.cli.Parser's write probe and negative comma lists once that change
+#: merges (contract/cli.py is not this branch's): these fail until then.
 PENDING_ROWS = [
     (["predictor.gesture", "--p1", "0", "--p2", "0", "--plot", "/proc/x.png"], "/proc/x.png"),
     (["predictor.gesture", "--p1", "0", "--p2", "0", "--plot", "{tmp}/missing/dir/x.png"], "{tmp}/missing/dir/x.png"),
@@ -324,7 +324,7 @@ def test_unwritable_outputs_refused_before_work(argv, needle, tmp_path):
 @needs_surrogate
 def test_negative_values_in_comma_lists():
     """--pressures -0.1,0.1 and --approach -0.15,0, as --help shows them: the committed
-    surrogate's gesture (pending fem.cli's negative comma lists)."""
+    surrogate's gesture (pending contract.cli's negative comma lists)."""
     r = subprocess.run([sys.executable, "-m", "predictor.gesture", "--pressures", "-0.1,0.1", "--approach",
                         "-0.15,0", "--json"], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from fem.spec import INPUT_BOX
+from contract.spec import INPUT_BOX
 from predictor.gripper import GripperParams
 from predictor.joint import load_joint
 from predictor.solve import solve

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import torch
 
-from fem.finger_spec import parse_finger
+from contract.finger import parse_finger
 from predictor.gripper import GripperParams
 from predictor.joint import AnalyticJoint, JointModel
 from predictor.solve import APPROACH

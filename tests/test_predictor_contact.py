@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from fem.spec import OutOfBoxError
+from contract.spec import OutOfBoxError
 from predictor.gripper import FingerPose, GripperParams, finger_pose
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
 from predictor.statics import ContactParams, GripperProblem, Obstacle, parse_object
@@ -148,7 +148,7 @@ def test_nonconverged_is_not_an_answer():
 
 def test_pressure_out_of_range_refused():
     """|P| > 0.3 MPa is outside the surrogate's box, and NaN or inf is not a number:
-    fem.spec.OutOfBoxError (a ValueError) naming the value and the allowed 0.3 MPa, for the
+    contract.spec.OutOfBoxError (a ValueError) naming the value and the allowed 0.3 MPa, for the
     target pressures and for the approach pressures alike."""
     for p, needle in (([0.31, 0.0], "P1 = 0.31 is outside"), ([0.0, float("nan")], "P2 = nan is not a finite"),
                       ([float("-inf"), 0.0], "P1 = -inf is not a finite")):

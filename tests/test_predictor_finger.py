@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from fem.spec import INPUT_BOX, phi_end
+from contract.spec import INPUT_BOX, phi_end
 from predictor.gripper import GripperParams, default_finger, finger_pose
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, SolverOptions, solve
@@ -33,7 +33,7 @@ def _reference_problem(joint, case: str) -> GripperProblem:
 
 @pytest.mark.parametrize("model", ["analytic", "results/surrogate/paper.pt"])
 def test_paper_finger_reproduces_the_frozen_predictor(model):
-    """The paper's finger (fem/fingers/paper.toml) through the generic chain, with tangent
+    """The paper's finger (contract/fingers/paper.toml) through the generic chain, with tangent
     kinematics and lumped weights, reproduces the predictor as it was before issue 14 (its
     hard-wired joint-link-joint-tip chain, frozen at commit bbc0df4 into
     tests/data/predictor_reference.json by tests/data/freeze_predictor_reference.py), on

@@ -17,7 +17,7 @@ import pytest
 import torch
 from scipy.optimize import fsolve
 
-from fem.spec import phi_end
+from contract.spec import phi_end
 from predictor.gripper import GripperParams, default_finger
 from predictor.joint import AnalyticJoint, load_joint
 from predictor.graphs import residual_fn
@@ -44,14 +44,14 @@ def test_analytic_joint_pure_moment_is_circular_arc():
 
 def test_analytic_joint_axial_stretch_and_pressure_sign():
     """F1 = 3 N alone stretches the straight joint to L(1 + 3/300) = 45.9045 mm; P > 0
-    (top chamber) bends towards -y, so y_10 < 0 (DESIGN.md §3 sign of the stand-in)."""
+    (top chamber) bends towards -y, so y_10 < 0 (docs/physics.md sign of the stand-in)."""
     r = J(t([0.0, 3.0, 0.0, 0.0]))
     assert abs(float(r[-1, 0]) - 45.9045) < 1e-12 and float(r[-1, 1].abs()) == 0.0
     assert float(J(t([0.2, 0.0, 0.0, 0.0]))[-1, 1]) < -10.0
 
 
 def test_analytic_joint_mirror_symmetry():
-    """DESIGN.md §3: (R·diag(1,-1), -P, F1, -F2, -M) is a solution; equal to 1e-12 mm."""
+    """docs/physics.md: (R·diag(1,-1), -P, F1, -F2, -M) is a solution; equal to 1e-12 mm."""
     x = t([[0.13, 1.1, -0.7, 35.0], [-0.25, -2.0, 2.5, -80.0]])
     mirrored = J(x * t([-1.0, 1.0, -1.0, -1.0]))
     np.testing.assert_allclose(mirrored.numpy(), (J(x) * t([1.0, -1.0])).numpy(), atol=1e-12)
