@@ -174,7 +174,10 @@ learning-curve: | $(SETUP) ## held-out errors vs 100..1,600 and all train sample
 # Joint model for the predictor: the committed surrogate when present, else the analytic stand-in.
 PRED_JOINT := $(if $(wildcard results/surrogate/improved.pt),results/surrogate/improved.pt,analytic)
 PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
-              predictor/defaults.py predictor/problem.py predictor/progress.py \
+              predictor/defaults.py predictor/problem.py predictor/progress.py predictor/result.py \
+              predictor/options.py predictor/graphs.py predictor/jacobians.py predictor/lm.py predictor/newton.py \
+              predictor/ramp.py predictor/networks.py predictor/nn_train.py predictor/nn_answer.py \
+              predictor/nn_eval.py predictor/nn_checkpoint.py \
               $(filter-out analytic,$(PRED_JOINT))
 
 gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
@@ -217,7 +220,7 @@ results/predictor/ramp_fine/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
 
 inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, two tip targets -> results/predictor/inverse.{json,png}
-results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py | $(SETUP)
+results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py | $(SETUP)
 	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
 	  --out $@ --plot results/predictor/inverse.png --json
 

@@ -1,4 +1,4 @@
-"""Gripper gesture predictor (DESIGN.md §4). The grasp-planning API (predictor.api) is
+"""Gripper gesture predictor (docs/gripper.md). The grasp-planning API (predictor.api) is
 re-exported here: load_gripper, solve_gesture, grasp_atlas, inverse_pressures, Gripper,
 Gesture. They are loaded on first use, so that ``python -m predictor.<tool>`` does not
 import its own module twice (and importing predictor stays light: no torch, no dolfinx)."""

@@ -6,7 +6,7 @@
     atlas = grasp_atlas(g, grid=21)                   # predictor.atlas.Atlas: .summary(), .to_json()
     answer = inverse_pressures(g, goal="hold", atlas=atlas)   # InverseResult: .summary()
 
-Units: pressures MPa, lengths mm (global frame of DESIGN.md §4, right finger), forces N.
+Units: pressures MPa, lengths mm (global frame of docs/gripper.md, right finger), forces N.
 Every call goes through the same solver and history as ``predictor.gesture --object``
 (approach gesture APPROACH, then the pressure ramp) and the same checks as the command
 lines (predictor.problem: one validation per input, ValueError with the CLI's reason);
@@ -24,7 +24,7 @@ import torch
 
 from contract.finger import FingerSpec, load_finger
 from predictor import atlas as _atlas
-from predictor import inverse as _inverse
+from predictor import inversion as _inverse
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
 from predictor.problem import FULL_BOX, load_problem
 from predictor.solve import GestureResult, SolverOptions, solve
@@ -90,7 +90,7 @@ def grasp_atlas(gripper: Gripper, grid: int = 61, box=FULL_BOX,
 
 def inverse_pressures(gripper: Gripper, goal: str = "hold", min_normal: float = 0.0, least_pressure: bool = False,
                       atlas: _atlas.Atlas | None = None, box=FULL_BOX) -> _inverse.InverseResult:
-    """Pressures for goal "hold" or "tip:X,Y[,DEG]" (mm, degrees), predictor.inverse;
+    """Pressures for goal "hold" or "tip:X,Y[,DEG]" (mm, degrees), predictor.inversion;
     min_normal: N, as --min-normal; atlas: this gripper's atlas for the starts (else a
     coarse one is solved; refused when solved with other settings)."""
     g = dataclasses.replace(_inverse.parse_goal(goal), min_normal=min_normal, least_pressure=least_pressure)

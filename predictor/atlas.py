@@ -30,13 +30,14 @@ object there is no history and the grid is one batched solve. Each point is clas
 and records N (N), u, the fingertip (X, Y) mm of the right finger and the first-contact
 pressures along the ramp (GestureResult.first_contact, MPa, NaN when never). The friction
 margin is 1 - u (> 0 where the grasp holds). The summary and JSON name what was solved:
-joint, mu, object_weight_N, gravity, approach_MPa (predictor.inverse refuses an atlas of
-other settings). A run longer than ~10 s prints progress lines on stderr (``--quiet``:
-none).
+joint, mu, object_weight_N, gravity, approach_MPa; ``atlas_from_json`` reads an atlas
+back for the same problem and refuses (one line) one of another object, joint or settings.
+A run longer than ~10 s prints progress lines on stderr (``--quiet``: none).
 
 Data flow: GripperProblem (joint, object, approach) + grid -> ``grasp_atlas`` -> Atlas
 (arrays (N, N[, 2]) indexed [i, j] = (P1 = p1[i], P2 = p2[j]), plus the GestureResult of
-the flattened grid) -> ``Atlas.to_json()`` / ``save_atlas_figure``.
+the flattened grid) -> ``Atlas.to_json()`` / ``save_atlas_figure``; JSON + GripperProblem ->
+``atlas_from_json`` -> Atlas (the stored equilibria re-evaluated, no solve).
 
 Exit codes: 0 atlas written; 2 bad input (a bad number, grid, box, object spec, an
 object the model cannot represent, unwritable output, a missing default model, an object
@@ -46,9 +47,11 @@ grid solve. The API (``grasp_atlas``) applies the same checks (predictor.problem
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -58,8 +61,11 @@ from contract.files import write_json
 from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
                                placement_error)
 from predictor.progress import Heartbeat, set_quiet
-from predictor.solve import (GestureResult, SolverOptions, _advance, _jacobian_fn, _runner, attempts,
-                             gesture_result, solve)
+from predictor.jacobians import jacobian_fn
+from predictor.options import SolverOptions
+from predictor.ramp import advance, attempts, ramp_method, runner
+from predictor.result import GestureResult, result_labels
+from predictor.solve import gesture_result, solve
 from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
                                out_of_reach)
 
@@ -198,7 +204,7 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     Ring s holds the points s grid steps from p0 (Chebyshev distance, rounded up); rings
     are solved in order, each as one batch. A point q of ring s continues (one ramp step
     of predictor.solve: tangent predictor from its predecessor's Jacobians, LM with the
-    solve's Jacobians in turn (solve.attempts), depth check, cut-backs) from the converged
+    solve's Jacobians in turn (predictor.ramp.attempts), depth check, cut-backs) from the converged
     point nearest to p0 + (q - p0)(s - 1)/s, the ray's point one ring back, if that lies
     within one grid step of it. So each point's
     path follows its own straight ray from p0 within half a grid step (exactly on it
@@ -224,8 +230,8 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     pred = np.full(M, -1)
     first = np.full((M, J), np.nan)          # the ramped points' own first contact
     how = np.full(M, SWEPT)
-    runs = [_runner(problem, dataclasses.replace(options, jacobian=k)) for k in attempts(problem, options)]
-    jac_fn = _jacobian_fn(problem, True, options.jacobian)
+    runs = [runner(problem, dataclasses.replace(options, jacobian=k)) for k in attempts(problem, options)]
+    jac_fn = jacobian_fn(problem, True, options.jacobian)
 
     def ramp(rows):
         # the reference path; its Jacobians at the solution start the points beyond it
@@ -241,19 +247,13 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     for s in np.unique(ring):
         beat(lambda: f"ring {s} of {ring.max()}: {int(ok.sum())} of {M} points converged")
         rows = np.nonzero(ring == s)[0]
-        # a predecessor within one step of the ray's point on ring s - 1 lies on ring s - 2 or s - 1
-        done = np.nonzero(ok.numpy() & (ring >= s - 2))[0]
-        if s > 0 and len(done):
-            ideal = p0 + (Q[rows] - p0) * ((s - 1) / s)
-            dist = np.abs((ideal[:, None] - Q[done][None]) / spacing).max(-1)   # (rows, done) grid steps
-            k = dist.argmin(1)
-            pred[rows] = np.where(dist[np.arange(len(rows)), k] <= 1.0, done[k], -1)
+        pred[rows] = _predecessors(Q, rows, s, p0, spacing, ring, ok.numpy())
         cont = rows[pred[rows] >= 0]
-        for run in runs:                            # the solve's Jacobians in turn (solve.attempts)
+        for run in runs:                            # the solve's Jacobians in turn (predictor.ramp.attempts)
             if len(cont) == 0:
                 break
             pc = pred[cont]
-            xs, conv, its, (J_, Jp_) = _advance(run, x[pc], pressures[pc], pressures[cont], options.cutbacks,
+            xs, conv, its, (J_, Jp_) = advance(run, x[pc], pressures[pc], pressures[cont], options.cutbacks,
                                                 (jx[pc], jp[pc]))
             x[cont], ok[cont], jx[cont], jp[cont] = xs, conv, J_, Jp_
             iterations[cont] += its
@@ -266,14 +266,90 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     if len(retry):
         how[retry], pred[retry] = RETRIED, -1
         ramp(retry)
-    res = gesture_result(problem, pressures, x, ok, iterations, t0, options.method, None)
-    touch = res.normal_force_N.numpy() > 0
+    res = gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options), None)
+    first = _first_contacts(first, Q, ring, pred, res.normal_force_N.numpy() > 0)
+    return dataclasses.replace(res, first_contact=torch.from_numpy(first)), how
+
+
+def _predecessors(Q: np.ndarray, rows: np.ndarray, s: int, p0: np.ndarray, spacing: np.ndarray, ring: np.ndarray,
+                  ok: np.ndarray) -> np.ndarray:
+    """The predecessor (index into Q (M, 2) MPa, or -1) of each point ``rows`` of ring s: the
+    converged point (ok (M,) bool) nearest to the ray's point p0 + (q - p0)(s - 1)/s one ring
+    back, if within one grid step (spacing (2,) MPa) of it; none on ring 0."""
+    # a predecessor within one step of the ray's point on ring s - 1 lies on ring s - 2 or s - 1
+    done = np.nonzero(ok & (ring >= s - 2))[0]
+    if s == 0 or not len(done):
+        return np.full(len(rows), -1)
+    ideal = p0 + (Q[rows] - p0) * ((s - 1) / s)
+    dist = np.abs((ideal[:, None] - Q[done][None]) / spacing).max(-1)   # (rows, done) grid steps
+    k = dist.argmin(1)
+    return np.where(dist[np.arange(len(rows)), k] <= 1.0, done[k], -1)
+
+
+def _first_contacts(first: np.ndarray, Q: np.ndarray, ring: np.ndarray, pred: np.ndarray,
+                    touch: np.ndarray) -> np.ndarray:
+    """First contact (M, 2) MPa of every point along its path: a swept point (pred >= 0)
+    inherits its predecessor's, or is its own first contact where it touches (touch (M,)
+    bool) and the path before it did not; ramped points keep ``first``, their ramp's."""
+    first = first.copy()
     for s in np.unique(ring):                   # along each path, ring by ring
         rows = np.nonzero((ring == s) & (pred >= 0))[0]
         before = first[pred[rows]]
         first[rows] = np.where(np.isnan(before[:, :1]), np.where(touch[rows, None], Q[rows], np.nan), before)
-    res.first_contact = torch.from_numpy(first)
-    return res, how
+    return first
+
+
+def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
+    """An Atlas (with a GestureResult of its converged tau) from predictor.atlas --out
+    JSON; ValueError (one line) for a file that is not an atlas of this object."""
+    try:
+        doc = json.loads(Path(path).read_text())
+        p1, p2 = np.array(doc["p1_MPa"], float), np.array(doc["p2_MPa"], float)
+        tau = torch.tensor(np.array(doc["tau"], dtype=float), dtype=torch.float64).reshape(-1, 2, 3)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a predictor.atlas JSON ({type(exc).__name__})") from None
+    ob = problem.obstacle
+    want = None if ob is None else [ob.kind, ob.a, ob.b, ob.x, ob.y, ob.angle]
+    got = None if doc.get("object") is None else [doc["object"][k] for k in
+                                                 ("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad")]
+    if want != got or doc.get("joint") != problem.joint.name:
+        raise ValueError(f"{path}: an atlas of another object or joint ({doc.get('object')}, {doc.get('joint')})")
+    _same_settings(path, doc, problem)
+    pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
+    ok = ~tau.reshape(-1, 6).isnan().any(-1)
+    # Re-evaluate the stored equilibria (no solve): the same figures as the atlas run.
+    with torch.no_grad():
+        st = problem.residual(pressures, torch.nan_to_num(tau))
+    nan = torch.full_like(st.contact.normal, float("nan"))
+    res = GestureResult(pressures=pressures, tau=tau, converged=ok, residual_force_mN=nan, residual_moment_Nmm=nan,
+                        normal_force_N=st.contact.normal, friction_N=st.contact.friction,
+                        friction_ratio=st.contact.ratio, slip=st.contact.slip, iterations=torch.zeros_like(ok).long(),
+                        time_ms=0.0, pose=st.pose.masked(ok), method="atlas-json", **result_labels(problem))
+    state, use = classify(res, problem.contact.mu)
+    n = len(p1), len(p2)
+    return Atlas(p1, p2, state.reshape(n), res.normal_force_N.numpy().reshape(n), use.reshape(n),
+                 res.pose.tip_end.numpy().reshape(*n, 2), np.array(doc["first_contact_MPa"], float), res,
+                 float(doc.get("time_s", 0.0)), ob, problem.joint.name, problem.contact.mu, problem.approach,
+                 doc.get("path", "ramp"), None if doc.get("how") is None else np.array(doc["how"], int),
+                 problem.gravity, res.object_weight_N)
+
+
+def _same_settings(path, doc: dict, problem: GripperProblem) -> None:
+    """ValueError (one line) when the atlas JSON was computed with other settings than
+    ``problem``: gravity, mu, the object's weight, the approach. Atlases written before
+    these were recorded were computed with the defaults (gravity on, mu 0.3, 0.2 N)."""
+    weight = problem.params.object_weight if problem.gravity else 0.0
+    recorded = {"gravity": doc.get("gravity", True), "mu": doc.get("mu", 0.3),
+                "object_weight_N": doc.get("object_weight_N", 0.2 if doc.get("gravity", True) else 0.0),
+                "approach_MPa": None if doc.get("approach_MPa") is None else tuple(doc["approach_MPa"])}
+    asked = {"gravity": problem.gravity, "mu": problem.contact.mu, "object_weight_N": weight,
+             "approach_MPa": None if problem.approach is None else tuple(problem.approach)}
+    for key, value in asked.items():
+        if recorded[key] != value:
+            flag = {"gravity": "--no-gravity", "mu": "--mu", "object_weight_N": "--object-weight",
+                    "approach_MPa": "the approach"}[key]
+            raise ValueError(f"{path}: an atlas computed with {key} = {recorded[key]}, this question has "
+                             f"{value} ({flag}): compute the atlas with the same settings")
 
 
 def marked_points(atlas: Atlas) -> list[tuple[int, str]]:

@@ -18,13 +18,13 @@ Newton steps on its branch, converged to the issue's 0.1 mN and 0.01 N·mm per s
 one batch of 2,000 pressures on every core in float64; ``details.contact_throughput`` has
 it at the solver's own tolerance too, and ``contact_ramp_batched_per_s`` the ramp solve's
 batch), ``gravity_batched_per_s`` and ``nn_single_query_ms`` (the
-delivered NN path, predictor.nn.predict_gesture: network, kinematics and its residual
+delivered NN path, predictor.nn_answer.predict_gesture: network, kinematics and its residual
 check). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
 in float32 on every core (``batched_dtype``, ``batched_threads``; the network and the
 joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
 float64 on one thread and on every core beside them in the details; every other figure
 on one thread in float64. ``gravity_newton_median_ms`` is the default solve from tau = 0
-(a Picard step and Newton steps in one recorded graph, predictor.solve._cold_newton);
+(a Picard step and Newton steps in one recorded graph, predictor.solve's cold path, predictor.newton.traced_cold_fn);
 ``gravity_lm_median_ms`` the LM it replaced,
 over the same pressures in the same run.
 
@@ -54,6 +54,7 @@ import os
 import platform
 import statistics
 import time
+from types import SimpleNamespace
 
 import torch
 
@@ -61,8 +62,10 @@ from contract import cli
 from contract.files import write_json
 from contract.spec import PRESSURE_LIMIT
 from predictor.joint import load_joint
-from predictor.nn import (DEFAULT_DIR, contact_fraction, evaluate, evaluate_contact, evaluate_polished, load_predictor,
-                          nn_folder, predict_gesture, sample_pressures)
+from predictor.networks import sample_pressures
+from predictor.nn_answer import predict_gesture
+from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder
+from predictor.nn_eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished
 from predictor.progress import set_quiet
 from predictor.solve import APPROACH, GRAPHS, SolverOptions, solve, use_graphs
 from predictor.statics import GripperProblem, Obstacle
@@ -75,7 +78,7 @@ QUICK = {"gravity": 3, "lbfgs": 1, "contact": 2, "batch": 6, "nn_validation": 16
          "contact_batch": 2, "throughput": 1000, "contact_throughput": 8, "single": 3, "lbfgs_contact": 0}
 #: the issue's bound on a converged gesture (0.1 mN, 0.01 N·mm), 1000x the solver's default
 ISSUE_TOLERANCE = SolverOptions(tol_force=1e-4, tol_moment=1e-2)
-#: top-level figures required by issues 5 and 15 (tests/test_predictor.py checks them)
+#: top-level figures required by issues 5 and 15 (tests/test_predictor_nn.py checks them)
 REQUIRED_KEYS = (
     "gravity_newton_median_ms", "gravity_lbfgs_median_ms", "contact_median_ms", "gravity_nn_residual_force_mN",
     "gravity_nn_residual_moment_Nmm", "contact_nn_residual_force_mN", "contact_nn_residual_moment_Nmm",
@@ -103,7 +106,7 @@ def _median_solve_ms(problem, pressures, options=SolverOptions()):
 
 def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_moment_Nmm: float,
                polish: bool = False) -> dict:
-    """Median single-query time (ms) of predictor.nn.predict_gesture over ``pressures``
+    """Median single-query time (ms) of predictor.nn_answer.predict_gesture over ``pressures``
     (n, J), a network's tau finished by a solver (contact: Newton steps kept on the
     network's branch, else the capped LM polish, the ramp where it fails; gravity with
     ``polish``: one Newton step, the LM where its check fails), and its worst residuals. A
@@ -169,40 +172,20 @@ def _contact_throughput(pred, problem, pressures, threads: int) -> dict:
             runs = [predict_gesture(pred, problem, pressures, options=options) for _ in range(5)]
             res = sorted(runs, key=lambda r: r.time_ms)[2]
             out[name] = {"per_s": int(res.converged.sum()) / (res.time_ms / 1e3), "ms": res.time_ms,
-                         "converged": int(res.converged.sum()), "newton_from_nn": int(res.stepped.sum()),
-                         "ramp_fallback": int(res.fallback.sum()),
-                         "median_newton_steps": float(res.iterations.double().median()),
-                         "tolerance_mN_Nmm": [1e3 * options.tol_force, options.tol_moment],
-                         "max_residual_force_mN": float(res.residual_force_mN[res.converged].max()),
-                         "max_residual_moment_Nmm": float(res.residual_moment_Nmm[res.converged].max())}
+                            "converged": int(res.converged.sum()), "newton_from_nn": int(res.stepped.sum()),
+                            "ramp_fallback": int(res.fallback.sum()),
+                            "median_newton_steps": float(res.iterations.double().median()),
+                            "tolerance_mN_Nmm": [1e3 * options.tol_force, options.tol_moment],
+                            "max_residual_force_mN": float(res.residual_force_mN[res.converged].max()),
+                            "max_residual_moment_Nmm": float(res.residual_moment_Nmm[res.converged].max())}
     finally:
         torch.set_num_threads(1)
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = cli.Parser(prog="python -m predictor.bench", description=__doc__.split("\n\n")[0])
-    ap.add_output("--out", suffix=".json", default="results/bench/predictor.json")
-    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
-                    "predictor.defaults)")
-    ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR, help=f"NN checkpoints (default {DEFAULT_DIR})")
-    ap.add_argument("--quick", action="store_true",
-                    help="every figure on a few samples (seconds; for tests, not for quoting)")
-    ap.add_argument("--graphs", choices=GRAPHS, default="trace",
-                    help="record the solver's graphs by torch.jit.trace (default) or torch.compile (inductor's C++: "
-                    "faster, but every graph compiles on first use, minutes in all; predictor.solve.use_graphs)")
-    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    args = ap.parse_args(argv)
-    set_quiet(args.quiet)
-    n = QUICK if args.quick else FULL
-    torch.set_num_threads(1)
-    use_graphs(args.graphs)
-    load = os.getloadavg()
-    with ap.errors():  # every input is read before the timings
-        joint = load_joint(args.model)
-        grav_pred = load_predictor(args.nn_dir / "gravity_nn.pt", joint)
-        paper_pred = load_predictor(args.nn_dir / "gravity_nn_paper.pt", joint)
-        cont_pred = load_predictor(args.nn_dir / "contact_nn.pt", joint, contact=True)
+def _solver_figures(joint, n: dict) -> SimpleNamespace:
+    """The iterative solvers' timings and batches on the bench's pressures (sizes n):
+    gravity Newton, LM and L-BFGS, the grasp ramp, one L-BFGS grasp, a Newton batch."""
     gravity, grasp = GripperProblem(joint), GripperProblem(joint, obstacle=Obstacle(), approach=APPROACH)
     gen = torch.Generator().manual_seed(2026)
     p_grav = torch.rand(n["gravity"], 2, generator=gen, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
@@ -217,7 +200,14 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     batch = solve(gravity, p_grav.repeat(n["batch"] // len(p_grav) + 1, 1)[:n["batch"]])
     batched_ms = 1e3 * (time.perf_counter() - t0)
+    return SimpleNamespace(gravity=gravity, grasp=grasp, p_grav=p_grav, newton=newton, lm=lm, lbfgs=lbfgs,
+                           p_contact=p_contact, contact=contact, lbfgs_contact=lbfgs_contact, batch=batch,
+                           batched_ms=batched_ms)
 
+
+def _nn_figures(joint, grav_pred, paper_pred, cont_pred, s: SimpleNamespace, n: dict) -> SimpleNamespace:
+    """The NN predictors' residuals against the solver (raw, delivered, contact state),
+    their fast paths' timings and the grasp ramp's batch, on the bench's pressures."""
     grav_nn_problem, cont_problem = grav_pred.config.problem(joint), cont_pred.config.problem(joint)
     p_val = sample_pressures(n["nn_validation"], grav_pred.config, torch.Generator().manual_seed(77))
     grav_nn = evaluate(grav_pred.net, grav_nn_problem, p_val)
@@ -226,82 +216,95 @@ def main(argv: list[str] | None = None) -> int:
     cont_vs_solver = evaluate_contact(cont_pred, joint, pc_val)
     cont_pol = evaluate_polished(cont_pred, joint, pc_val)
     in_contact = contact_fraction(cont_pred.net, cont_problem, pc_val)
-    fast = _fast_path(cont_pred, cont_problem, p_contact, "contact NN warm start + Newton steps on its branch "
+    fast = _fast_path(cont_pred, cont_problem, s.p_contact, "contact NN warm start + Newton steps on its branch "
                       "(else the capped LM polish, then the ramp)", 0.1, 0.01)
     t0 = time.perf_counter()
-    cbatch = solve(grasp, p_contact.repeat(n["contact_batch"] // len(p_contact), 1))
+    cbatch = solve(s.grasp, s.p_contact.repeat(n["contact_batch"] // len(s.p_contact), 1))
     contact_batched_s = time.perf_counter() - t0
 
-    gravity_fast = _fast_path(grav_pred, grav_nn_problem, p_grav, "gravity NN warm start + one Newton step "
-                              "(LM where its check fails)", 1e-4, 1e-5, polish=True)
+    gravity_fast = _fast_path(grav_pred, grav_nn_problem, s.p_grav, "gravity NN warm start + one Newton step "
+                                 "(LM where its check fails)", 1e-4, 1e-5, polish=True)
+    return SimpleNamespace(grav_nn_problem=grav_nn_problem, cont_problem=cont_problem, grav_nn=grav_nn,
+                           paper_nn=paper_nn, cont_vs_solver=cont_vs_solver, cont_pol=cont_pol, in_contact=in_contact,
+                           fast=fast, cbatch=cbatch, contact_batched_s=contact_batched_s, gravity_fast=gravity_fast)
 
+
+def _throughput_figures(grav_pred, cont_pred, m: SimpleNamespace, n: dict) -> SimpleNamespace:
+    """Batched throughputs of the NN paths (one thread and every core) and single queries."""
     # NN throughput: pressures -> tau -> full gesture (forward kinematics), no autograd, on
     # one thread and on every core (best of 3 each: the machine is shared, and the best
-    # run is the one least disturbed). The delivered path (predictor.nn.predict_gesture)
+    # run is the one least disturbed). The delivered path (predictor.nn_answer.predict_gesture)
     # adds the residual check that refuses an answer outside the NN bound.
     p_big = torch.rand(n["throughput"], 2, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
     cores = os.cpu_count() or 1
-    one = _gravity_throughput(grav_pred, grav_nn_problem, p_big, 1)
-    every64 = _gravity_throughput(grav_pred, grav_nn_problem, p_big, cores)
-    every = _gravity_throughput(grav_pred, grav_nn_problem, p_big, cores, torch.float32)
-    single = [predict_gesture(grav_pred, grav_nn_problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
+    one = _gravity_throughput(grav_pred, m.grav_nn_problem, p_big, 1)
+    every64 = _gravity_throughput(grav_pred, m.grav_nn_problem, p_big, cores)
+    every = _gravity_throughput(grav_pred, m.grav_nn_problem, p_big, cores, torch.float32)
+    single = [predict_gesture(grav_pred, m.grav_nn_problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
     p_cbig = sample_pressures(n["contact_throughput"], cont_pred.config, torch.Generator().manual_seed(79))
-    cthrough = _contact_throughput(cont_pred, cont_problem, p_cbig, cores)
+    cthrough = _contact_throughput(cont_pred, m.cont_problem, p_cbig, cores)
+    return SimpleNamespace(one=one, every64=every64, every=every, single=single, cthrough=cthrough)
 
-    out = {
-        "gravity_newton_median_ms": newton["median_ms"],
-        "gravity_lbfgs_median_ms": lbfgs["median_ms"],
-        "gravity_lm_median_ms": lm["median_ms"],
-        "contact_median_ms": contact["median_ms"],
-        "gravity_nn_residual_force_mN": grav_nn["force_mN_mean"],
-        "gravity_nn_residual_moment_Nmm": grav_nn["moment_Nmm_mean"],
-        "contact_nn_residual_force_mN": cont_pol["force_mN_mean"],
-        "contact_nn_residual_moment_Nmm": cont_pol["moment_Nmm_mean"],
-        "gravity_fast_median_ms": gravity_fast["median_ms"],
+
+def _record(args, n: dict, joint, load, preds: tuple, s: SimpleNamespace, m: SimpleNamespace,
+            h: SimpleNamespace) -> dict:
+    """The bench JSON: the required top-level figures, details, the paper's figures and
+    the targets, in the order the report reads them."""
+    grav_pred, paper_pred, cont_pred = preds
+    return {
+        "gravity_newton_median_ms": s.newton["median_ms"],
+        "gravity_lbfgs_median_ms": s.lbfgs["median_ms"],
+        "gravity_lm_median_ms": s.lm["median_ms"],
+        "contact_median_ms": s.contact["median_ms"],
+        "gravity_nn_residual_force_mN": m.grav_nn["force_mN_mean"],
+        "gravity_nn_residual_moment_Nmm": m.grav_nn["moment_Nmm_mean"],
+        "contact_nn_residual_force_mN": m.cont_pol["force_mN_mean"],
+        "contact_nn_residual_moment_Nmm": m.cont_pol["moment_Nmm_mean"],
+        "gravity_fast_median_ms": m.gravity_fast["median_ms"],
         # batched figures in float32 on every core (``batched_threads``, ``batched_dtype``);
         # float64 on one thread and on every core in details.gravity_nn_throughput
-        "nn_batched_per_s": every["nn_and_kinematics_per_s"],
-        "nn_single_query_ms": statistics.median(single),
-        "gravity_batched_per_s": every["delivered_per_s"],
-        "batched_threads": every["threads"], "batched_dtype": every["dtype"],
-        "contact_fast_median_ms": fast["median_ms"],
+        "nn_batched_per_s": h.every["nn_and_kinematics_per_s"],
+        "nn_single_query_ms": statistics.median(h.single),
+        "gravity_batched_per_s": h.every["delivered_per_s"],
+        "batched_threads": h.every["threads"], "batched_dtype": h.every["dtype"],
+        "contact_fast_median_ms": m.fast["median_ms"],
         # the delivered contact path (network + Newton steps on its branch, a solver) to the
         # issue's bound, one batch on every core; the ramp solve's batch beside it
-        "contact_batched_per_s": cthrough["issue_bound"]["per_s"],
-        "contact_ramp_batched_per_s": int(cbatch.converged.sum()) / contact_batched_s,
+        "contact_batched_per_s": h.cthrough["issue_bound"]["per_s"],
+        "contact_ramp_batched_per_s": int(m.cbatch.converged.sum()) / m.contact_batched_s,
         "graphs": args.graphs,
-        "nn_tau_only_batched_per_s": every["nn_only_per_s"],
+        "nn_tau_only_batched_per_s": h.every["nn_only_per_s"],
         # the raw contact network against the ramp solver (issue 15): no solver at inference
-        "contact_nn_raw_residual_force_mN": cont_vs_solver["raw"]["force_mN_mean"],
-        "contact_nn_raw_residual_moment_Nmm": cont_vs_solver["raw"]["moment_Nmm_mean"],
-        "contact_nn_raw_p95_force_mN": cont_vs_solver["raw"]["force_mN_p95"],
-        "contact_nn_raw_p95_moment_Nmm": cont_vs_solver["raw"]["moment_Nmm_p95"],
-        "contact_nn_state_agreement": cont_vs_solver["state_agreement"],
-        "contact_nn_raw_tip_error_mm": cont_vs_solver["raw_tip_error_mm"]["mean"],
-        "contact_nn_polished_fallback_rate": cont_pol["fallback"] / cont_pol["n"],
-        "contact_nn_newton_rate": cont_pol["newton_from_nn"] / cont_pol["n"],
+        "contact_nn_raw_residual_force_mN": m.cont_vs_solver["raw"]["force_mN_mean"],
+        "contact_nn_raw_residual_moment_Nmm": m.cont_vs_solver["raw"]["moment_Nmm_mean"],
+        "contact_nn_raw_p95_force_mN": m.cont_vs_solver["raw"]["force_mN_p95"],
+        "contact_nn_raw_p95_moment_Nmm": m.cont_vs_solver["raw"]["moment_Nmm_p95"],
+        "contact_nn_state_agreement": m.cont_vs_solver["state_agreement"],
+        "contact_nn_raw_tip_error_mm": m.cont_vs_solver["raw_tip_error_mm"]["mean"],
+        "contact_nn_polished_fallback_rate": m.cont_pol["fallback"] / m.cont_pol["n"],
+        "contact_nn_newton_rate": m.cont_pol["newton_from_nn"] / m.cont_pol["n"],
         "details": {
-            "gravity_newton": newton, "gravity_lm": lm, "gravity_lbfgs": lbfgs, "contact_newton": contact,
-            "contact_cases": p_contact.tolist(), "contact_approach_MPa": APPROACH,
-            "contact_lbfgs_one_case": None if lbfgs_contact is None else {
-                "pressures_MPa": p_contact[4].tolist(), "ms": lbfgs_contact.time_ms,
-                "converged": bool(lbfgs_contact.converged[0]),
-                "residual_force_mN": lbfgs_contact.residual_force_mN[0].tolist(),
-                "residual_moment_Nmm": lbfgs_contact.residual_moment_Nmm[0].tolist()},
-            "contact_fast": fast, "gravity_fast": gravity_fast,
-            "gravity_nn_throughput": {"one_thread": one, "every_core_float64": every64, "every_core": every},
-            "contact_throughput": cthrough,
-            "contact_batched": {"n": len(cbatch.converged), "converged": int(cbatch.converged.sum()),
-                                "s": contact_batched_s, "method": "newton ramp from the approach, one batch"},
-            "gravity_newton_batched_1000_ms": batched_ms,
-            "gravity_newton_batched_converged": int(batch.converged.sum()),
-            "gravity_nn_improved": grav_nn, "gravity_nn_paper_mlp": paper_nn,
-            "contact_nn_polished": cont_pol, "contact_nn_vs_solver": cont_vs_solver,
-            "contact_nn_validation_contact_fraction": in_contact,
+            "gravity_newton": s.newton, "gravity_lm": s.lm, "gravity_lbfgs": s.lbfgs, "contact_newton": s.contact,
+            "contact_cases": s.p_contact.tolist(), "contact_approach_MPa": APPROACH,
+            "contact_lbfgs_one_case": None if s.lbfgs_contact is None else {
+                "pressures_MPa": s.p_contact[4].tolist(), "ms": s.lbfgs_contact.time_ms,
+                "converged": bool(s.lbfgs_contact.converged[0]),
+                "residual_force_mN": s.lbfgs_contact.residual_force_mN[0].tolist(),
+                "residual_moment_Nmm": s.lbfgs_contact.residual_moment_Nmm[0].tolist()},
+            "contact_fast": m.fast, "gravity_fast": m.gravity_fast,
+            "gravity_nn_throughput": {"one_thread": h.one, "every_core_float64": h.every64, "every_core": h.every},
+            "contact_throughput": h.cthrough,
+            "contact_batched": {"n": len(m.cbatch.converged), "converged": int(m.cbatch.converged.sum()),
+                                   "s": m.contact_batched_s, "method": "newton ramp from the approach, one batch"},
+            "gravity_newton_batched_1000_ms": s.batched_ms,
+            "gravity_newton_batched_converged": int(s.batch.converged.sum()),
+            "gravity_nn_improved": m.grav_nn, "gravity_nn_paper_mlp": m.paper_nn,
+            "contact_nn_polished": m.cont_pol, "contact_nn_vs_solver": m.cont_vs_solver,
+            "contact_nn_validation_contact_fraction": m.in_contact,
             # the pressures each network was trained on and is validated over here
             "nn_domain_MPa": {name: {"p1": list(pred.config.p1_range), "p2": list(pred.config.p2_range)}
-                              for name, pred in (("gravity_nn", grav_pred), ("gravity_nn_paper", paper_pred),
-                                                 ("contact_nn", cont_pred))},
+                                 for name, pred in (("gravity_nn", grav_pred), ("gravity_nn_paper", paper_pred),
+                                                    ("contact_nn", cont_pred))},
         },
         "paper": {"gravity_lbfgs_s": "2-3", "contact_lbfgs_s": "10-15", "gravity_nn_residual_mN": 2.0,
                   "gravity_nn_residual_Nmm": 1.2, "contact_nn_residual_mN": ">10",
@@ -315,6 +318,41 @@ def main(argv: list[str] | None = None) -> int:
         "joint": joint.name, "threads": 1, "cpu": platform.processor() or platform.machine(),
         "load_average_at_start": load, "sizes": n,
     }
+
+
+def _parser() -> cli.Parser:
+    """The command line of ``python -m predictor.bench``."""
+    ap = cli.Parser(prog="python -m predictor.bench", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", suffix=".json", default="results/bench/predictor.json")
+    ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
+                    "predictor.defaults)")
+    ap.add_argument("--nn-dir", type=nn_folder, default=DEFAULT_DIR, help=f"NN checkpoints (default {DEFAULT_DIR})")
+    ap.add_argument("--quick", action="store_true",
+                    help="every figure on a few samples (seconds; for tests, not for quoting)")
+    ap.add_argument("--graphs", choices=GRAPHS, default="trace",
+                    help="record the solver's graphs by torch.jit.trace (default) or torch.compile (inductor's C++: "
+                    "faster, but every graph compiles on first use, minutes in all; predictor.solve.use_graphs)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _parser()
+    args = ap.parse_args(argv)
+    set_quiet(args.quiet)
+    n = QUICK if args.quick else FULL
+    torch.set_num_threads(1)
+    use_graphs(args.graphs)
+    load = os.getloadavg()
+    with ap.errors():  # every input is read before the timings
+        joint = load_joint(args.model)
+        grav_pred = load_predictor(args.nn_dir / "gravity_nn.pt", joint)
+        paper_pred = load_predictor(args.nn_dir / "gravity_nn_paper.pt", joint)
+        cont_pred = load_predictor(args.nn_dir / "contact_nn.pt", joint, contact=True)
+    s = _solver_figures(joint, n)
+    m = _nn_figures(joint, grav_pred, paper_pred, cont_pred, s, n)
+    h = _throughput_figures(grav_pred, cont_pred, m, n)
+    out = _record(args, n, joint, load, (grav_pred, paper_pred, cont_pred), s, m, h)
     write_json(args.out, out)
     top = {k: v for k, v in out.items() if not isinstance(v, dict)}
     if args.json:

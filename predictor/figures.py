@@ -27,7 +27,7 @@ import torch  # noqa: E402
 from contract import cli  # noqa: E402
 from contract.files import dumps, write_text  # noqa: E402
 from predictor.joint import load_joint  # noqa: E402
-from predictor.nn import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
+from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
 from predictor.plot import draw_gesture, save_figure  # noqa: E402
 from predictor.progress import set_quiet  # noqa: E402
 from predictor.solve import APPROACH, solve  # noqa: E402

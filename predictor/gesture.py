@@ -109,7 +109,7 @@ def prepare(args: argparse.Namespace):
     joint = load_joint(args.model)
     options = dict(params=params, mu=args.mu, object_weight=args.object_weight, joint=joint)
     if args.method == "nn":
-        from predictor.nn import load_predictor
+        from predictor.nn_checkpoint import load_predictor
 
         predictor = load_predictor(args.nn, joint, contact=args.object is not None, params=params)
         problem = load_problem(None, args.object, approach=predictor.config.approach, **options)
@@ -124,7 +124,7 @@ def run(args: argparse.Namespace, prepared=None):
     Returns (json dict, result, problem)."""
     problem, pressures, joint, predictor = prepared or prepare(args)
     if predictor is not None:
-        from predictor.nn import predict_gesture
+        from predictor.nn_answer import predict_gesture
 
         res = predict_gesture(predictor, problem, pressures, polish=args.polish)
     else:

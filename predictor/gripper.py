@@ -1,4 +1,4 @@
-"""Two-finger gripper geometry: the finger chain, its weights and forward kinematics (DESIGN.md §4).
+"""Two-finger gripper geometry: the finger chain, its weights and forward kinematics (docs/gripper.md).
 
 Global plane: X horizontal, Y vertical up, gravity along -Y, gripper base on Y = 0.
 The right-hand finger is modelled; the left one is its mirror image X -> -X.
@@ -170,7 +170,7 @@ class GripperParams:
     two anchors) or ``cap`` (along the distal cap face, the joint model's cap rotation);
     joint_weight: ``lumped`` (at the mean of the anchors) or ``split`` (half at each end).
 
-    Paper defaults (DESIGN.md §4, contract/fingers/paper.toml; Figure S4 is unavailable): link
+    Paper defaults (docs/gripper.md, contract/fingers/paper.toml; Figure S4 is unavailable): link
     60 mm, tip 65 mm, base mounts 50 mm apart, which give the paper's 50 mm free tip
     opening and ≈3 mm of tip travel per degree of phi_1. Weights: joint 0.09 N, link 0.04 N,
     tip 0.06 N, object 0.2 N.

@@ -1,7 +1,7 @@
 """Joint models: (P, F1, F2, M) -> 10 anchor points of one bellow joint.
 
 Data flow: ``inputs (..., 4) = [P MPa, F1 N, F2 N, M N·mm]`` -> ``anchors (..., 10, 2) mm``
-in the joint frame of DESIGN.md §3 (x along the undeformed axis from the proximal face,
+in the joint frame of docs/physics.md (x along the undeformed axis from the proximal face,
 y in the bending plane, proximal centre at the origin). Both implementations are torch,
 float64, batched over any leading shape and differentiable in every input, so the
 equilibrium solver can take exact autograd Jacobians through them.
@@ -21,7 +21,7 @@ start angle a_k = sum_{j<k} kappa_j·h, chord
 
 and r_i = sum_{k<=i} Δr_k. Sign of the pressure moment: P > 0 pressurises the top (+y)
 chamber, the top bellow lengthens, so the joint bends towards -y (clockwise); hence the
-``-c_p·P``. The model keeps the DESIGN.md §3 mirror symmetry
+``-c_p·P``. The model keeps the docs/physics.md mirror symmetry
 (R·diag(1,-1), -P, F1, -F2, -M) exactly.
 
 Stand-in stiffnesses (chosen, not measured; documented here so reports can quote them):

@@ -1,6 +1,6 @@
 """Equilibrium residual of the right finger (paper's Equation 1), with gravity and contact.
 
-Load convention (must match how the FEM defines the surrogate's inputs, DESIGN.md §3-4):
+Load convention (must match how the FEM defines the surrogate's inputs, docs/physics.md and docs/gripper.md):
 tau_i = (F1, F2, M)_i is the load that the part of the finger distal to joint i exerts ON
 joint i's distal end. F1, F2 (N) are dead loads at the end point r_10 expressed in joint
 i's UNDEFORMED frame, so their global value is Rot(theta_i)·(F1, F2) with theta_i the
@@ -52,6 +52,7 @@ tau)`` with pressures (B, J), tau (B, J, 3) -> Statics (residual (B, J, 3), pose
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -430,6 +431,14 @@ def scaled(res: torch.Tensor) -> torch.Tensor:
 #: (F1, F2, M) half-widths of the box as floats (torch.compile guards a numpy array
 #: read inside a graph by its dispatch keys, and fails under inference mode).
 _TAU_BOX = tuple(float(v) for v in INPUT_BOX[1:])
+
+
+@functools.lru_cache(maxsize=8)
+def box_scale(n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(box, scale) (n,) of n = 3J unknowns: (3 N, 3 N, 100 N·mm) and (1, 1, MOMENT_SCALE)
+    per joint (cached, read only: the solvers' Jacobians and steps ask for them)."""
+    return (torch.tensor(list(_TAU_BOX) * (n // 3), dtype=torch.float64),
+            torch.tensor([1.0, 1.0, MOMENT_SCALE] * (n // 3), dtype=torch.float64))
 
 
 def range_penalty(tau: torch.Tensor) -> torch.Tensor:

@@ -45,11 +45,6 @@ from surrogate.data import Samples, load_samples, load_splits
 from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, load_surrogate, wrap
 
-METRIC_KEYS = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm",
-               "phi_end_error_deg", "jacobian_rel_error", "cap_rotation_error_deg",
-               "tangent_error_deg", "n")
-
-
 def jacobian(model, x: torch.Tensor) -> torch.Tensor:
     """d model(x).reshape(20) / dx for independent rows: x (n, 4) -> (n, 20, 4)."""
     x = x.detach().clone()

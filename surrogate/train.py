@@ -27,30 +27,16 @@ activation nor the batch size; we take ReLU and 32.
 The improved config is exactly mirror-symmetric (model.py), so mirror augmentation would
 only duplicate every loss term and is off. Its form: the one-pass equivariant network
 (invariants in, odd outputs as odd inputs times invariant coefficients), 3 x 96 SiLU,
-residual, |P| feature, chosen as the most accurate form that reaches the 1e6 samples/s
-inference target. Figures below are validation mean anchor errors from ``make sweep``
-(results/surrogate/sweep/README.md, 800 epochs each, FEM train set; made before the cap head,
-whose variants nocap and capoffset the sweep now has too):
-- the improved config 0.0136 mm; without the Sobolev term 0.0294 mm (Jacobian 5.7 % vs
-  3.0 %); w_jac = 0.05 gave 0.0151 mm (and ``--set w_jac=0.4`` 0.0157 mm);
-- the exactly symmetric two-pass forms fit better but are slower: 4 x 64 0.0102 mm at
-  ~0.6e6 samples/s on one thread (0.9e6 on both cores), 4 x 128 0.0078 mm at ~0.4e6;
-- a plain MLP with mirror augmentation (0.0108 mm) is not exactly symmetric;
-- tanh instead of SiLU gave 0.0116 mm at the same speed, found after the choice
-  (SiLU led the 150-epoch screening): the next candidate;
-- 800 epochs with a x0.995 decay beat 400 with x0.99 (``--set epochs=400 --set
-  lr_decay=0.99``: 0.0170 mm), and still train in ~2 min.
+residual, |P| feature (P > 0 and P < 0 inflate different chambers: the response has a
+kink at P = 0), 800 epochs with lr decayed x0.995: the most accurate form that reaches the
+1e6 samples/s inference target (the variants compared, and their errors:
+docs/decisions.md; ``make sweep`` records them in results/surrogate/sweep/).
 w_phi = 10 mm/rad counts the end slope like an extra anchor on a 100 mm lever (one
 finger link). The improved config also has the cap-rotation head (surrogate.model), weighted
 alike, w_cap = 10 mm/rad: the rigid part is bonded to the cap, so the cap's rotation swings
 the same lever as phi_end does under the tangent connection. Its target is the cap rotation
-itself ("absolute"), not its ~2 deg offset from phi_end: over seeds 0 and 1 (800 epochs, FEM
-train set) the validation cap error was 0.064 and 0.063 deg against 0.067 and 0.068 with the
-offset target (held-out 0.072 and 0.076 against 0.093 and 0.091), whose theta = phi_end(R̂) + c
-carries the anchors' chord error. The head leaves the anchors as they were: validation mean
-0.0143 and 0.0132 mm (held-out 0.0178, 0.0183) against 0.0136 and 0.0140 (0.0181, 0.0181) for
-two trainings without it (the committed improved.pt, and its config retrained with today's
-code, which round-off alone makes another sample).
+itself, not its offset from phi_end, whose theta = phi_end(R̂) + c would carry the anchors'
+chord error.
 
 Seeded: the same seed, data and thread count reproduce the same weights.
 """

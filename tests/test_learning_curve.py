@@ -148,7 +148,7 @@ def test_report_section_shows_every_point(data, tmp_path):
     from apps import report as workflow_report
 
     out = tmp_path / "surrogate/learning_curve.json"
-    out.parent.mkdir()                     # the tool writes into an existing folder only
+    out.parent.mkdir()
     assert lc.main(_args(data, out, "20", ["--repeat", "20:1"])) == 0
     points = json.loads(out.read_text())["points"]
     text = workflow_report.report(tmp_path)

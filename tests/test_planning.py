@@ -19,7 +19,7 @@ import torch
 from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify
-from predictor.inverse import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
+from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
 from predictor.solve import solve
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,6 +95,10 @@ def test_first_contact_lies_on_the_path(atlas):
 
 
 def test_atlas_json_keys(atlas):
+    """The atlas JSON has every key the report and inverse read, and its figures agree
+    with its grids: the counts are the state codes' tallies over the 4 x 4 grid, the
+    friction use is null exactly where nothing touches, and the measured point count is
+    the grid's."""
     doc = json.loads(dumps(atlas.to_json()))
     for key in ("grid", "counts", "best_hold", "time_s", "joint", "mu", "object", "approach_MPa", "states",
                 "p1_MPa", "p2_MPa", "state", "path", "solved_by", "how", "normal_force_N", "friction_use", "tip_mm", "first_contact_MPa",
@@ -102,8 +106,13 @@ def test_atlas_json_keys(atlas):
         assert key in doc, key
     assert doc["states"] == list(STATES)
     assert np.array(doc["tip_mm"], dtype=float).shape == (4, 4, 2)
-    assert doc["targets"]["atlas_s_per_object"] == 10.0
-    assert sum(doc["counts"].values()) == 16
+    codes = np.array(doc["state"]).ravel()
+    assert doc["counts"] == {name: int((codes == k).sum()) for k, name in enumerate(STATES)}
+    assert sum(doc["counts"].values()) == 16 == doc["measured"]["grid_points"]
+    use = np.array(doc["friction_use"], dtype=float).ravel()
+    normal = np.array(doc["normal_force_N"], dtype=float).ravel()
+    touching = (codes != NO_CONTACT) & np.isfinite(normal) & (normal > 0)
+    assert np.array_equal(np.isfinite(use), touching)
 
 
 def test_ift_gradient_matches_finite_differences(circle, free):

@@ -24,7 +24,8 @@ import torch
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor import progress
 from predictor.defaults import RESULTS_ENV
-from predictor.inverse import atlas_from_json, parse_goal
+from predictor.atlas import atlas_from_json
+from predictor.inversion import parse_goal
 from predictor.joint import AnalyticJoint, load_joint
 from predictor.problem import load_problem
 from predictor.solve import APPROACH, SolverOptions, solve

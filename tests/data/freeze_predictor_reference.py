@@ -10,7 +10,7 @@ It adds (or replaces) the entry of ``--model`` ("analytic" or a surrogate checkp
 unchanged since that commit). The cases and their off-equilibrium tau offsets are those of
 the analytic entry: gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1),
 and the circle grasp at (0.1, 0.2) from the approach gesture.
-tests/test_predictor.py::test_paper_finger_reproduces_the_frozen_predictor checks today's
+tests/test_predictor_finger.py::test_paper_finger_reproduces_the_frozen_predictor checks today's
 generic chain against every entry.
 """
 from __future__ import annotations

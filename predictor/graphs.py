@@ -1,0 +1,201 @@
+"""Recorded graphs of the gesture residual: one evaluation of Equation 1 is ~150 small
+tensor operations whose Python dispatch costs more than their arithmetic, so the solvers
+call them through a graph recorded once per problem (``traced``): the residual r(x; P)
+(``traced_residual_fn``), the contact figures (``touch``) and the answer's statics
+(``statics_at``).
+
+How graphs are recorded is a process-wide choice, visible as ``graph_mode()`` and set by
+``use_graphs`` (which empties every ``graph_cache``, so that the next call records anew):
+"trace" (torch.jit.trace, the default) or "compile" (torch.compile). Either is checked
+against the eager function before it is used; results are bit for bit the eager ones
+(trace) or within 1e-6 relative (compile).
+
+Unknowns x (B, 3J) = (F1 N, F2 N, M N·mm) per joint; pressures p (B, J) MPa.
+"""
+from __future__ import annotations
+
+import functools
+import warnings
+
+import torch
+
+from contract.spec import INPUT_BOX
+from predictor.gripper import FingerPose
+from predictor.statics import ContactState, GripperProblem, Statics, box_scale, contact_loads, range_penalty, scaled
+
+
+#: How ``traced`` records a graph (``use_graphs``): "trace", torch.jit.trace (the default:
+#: 0.3 s to record); "compile", torch.compile to inductor's C++ with a C++ wrapper, which
+#: fuses the ~150 small operations of a residual into a few loops: ~3x faster for one
+#: query and ~2x for a batch on this machine (environment.md), but the first use of each
+#: graph compiles for 15-40 s (cached on disk: ~14 s in a later process). For batch jobs
+#: and benchmarks, not for one-off queries.
+GRAPHS = ("trace", "compile")
+_graphs = "trace"
+_GRAPH_CACHES: list = []
+
+
+def graph_cache(builder):
+    """functools.lru_cache for a builder of recorded graphs (one per problem): emptied by
+    ``use_graphs``, so that its next call records with the new backend."""
+    cached = functools.lru_cache(maxsize=16)(builder)
+    _GRAPH_CACHES.append(cached)
+    return cached
+
+
+def use_graphs(mode: str) -> None:
+    """Record graphs from now on by ``mode`` (one of GRAPHS), process-wide; ValueError
+    (one line) for another."""
+    global _graphs
+    if mode not in GRAPHS:
+        raise ValueError(f"graphs {mode!r}: use one of {', '.join(GRAPHS)}")
+    _graphs = mode
+    for cached in _GRAPH_CACHES:
+        cached.cache_clear()
+
+
+def graph_mode() -> str:
+    """How graphs are recorded now: one of GRAPHS (``use_graphs``)."""
+    return _graphs
+
+
+def residual_fn(problem: GripperProblem):
+    """Batched r(x; P): x (B, 3J), P (B, J) -> (B, 6J) [scaled equilibrium, penalties]."""
+    n_joints = problem.n_joints
+
+    def r(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+        tau = x.reshape(-1, n_joints, 3)
+        return torch.cat((scaled(problem.residual(p, tau).residual), range_penalty(tau)), -1)
+
+    return r
+
+
+@graph_cache
+def traced_residual_fn(problem: GripperProblem):
+    """``residual_fn(problem)`` recorded by ``traced``: one per problem (0.3 s), valid
+    for any batch size."""
+    return traced(residual_fn(problem), 3 * problem.n_joints, problem.n_joints)
+
+
+@graph_cache
+def _traced_contact_fn(problem: GripperProblem):
+    """c(x (B, 3J), p (B, J)) -> (B, 2) [total normal force N, penetration mm] of the
+    object on the finger, recorded by ``traced``: the ramp asks for it after every step
+    (the depth check, the first contact), where the whole eager residual (pose, weights,
+    Equation 1) costs several times more."""
+    n_joints, weight = problem.n_joints, problem.params.object_weight if problem.gravity else 0.0
+
+    def c(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+        st = contact_loads(problem.pose(p, x.reshape(-1, n_joints, 3)), problem.params, problem.obstacle,
+                           problem.contact, weight)
+        return torch.stack((st.normal, st.penetration), -1)
+
+    return traced(c, 3 * n_joints, n_joints)
+
+
+def touch(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(normal force N (B,), penetration mm (B,)) of the object on the finger at unknowns
+    x (B, 3J) and pressures p (B, J) (``_traced_contact_fn``)."""
+    with torch.inference_mode():
+        c = _traced_contact_fn(problem)(x, p)
+    return c[:, 0].clone(), c[:, 1].clone()
+
+
+def traced(fn, n: int, J: int):
+    """fn(x (B, n), p (B, J)) recorded for inference only (no autograd): one evaluation of
+    the gesture residual is ~150 small tensor operations, whose Python dispatch costs more
+    than their arithmetic. By torch.jit.trace (the default), the recorded graph runs them
+    2-3x faster with identical results (no data-dependent Python branches; the joint
+    model's weights become constants of the graph); fn itself if the record does not
+    reproduce it bit for bit on random x in the box and P in [-0.3, 0.3] MPa. With
+    ``use_graphs("compile")``, torch.compile (dynamic batch size), kept where it agrees
+    with fn (``_agree``), else the trace."""
+    gen = torch.Generator().manual_seed(0)
+    x = (2 * torch.rand(4, n, generator=gen, dtype=torch.float64) - 1) * box_scale(n)[0]
+    p = (2 * torch.rand(4, J, generator=gen, dtype=torch.float64) - 1) * INPUT_BOX[0]
+    failed = None
+    with torch.inference_mode(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # the tracer's notes on constants; checked below
+        if _graphs == "compile":
+            record = _compiled(fn)
+            try:
+                if all(_agree(a, b) for a, b in zip(_tensors(record(x[:1], p[:1])), _tensors(fn(x[:1], p[:1])))):
+                    return record
+                failed = "its graph disagrees with the eager one"
+            except Exception as exc:   # e.g. no C++ compiler: the trace below still works
+                failed = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        theirs = _tensors(fn(x[:3], p[:3]))
+        record = torch.jit.trace(fn, (x, p), check_trace=False)
+        chosen = record if all(map(torch.equal, _tensors(record(x[:3], p[:3])), theirs)) else fn
+    if failed:
+        warnings.warn(f"torch.compile not used ({failed}): the graph is recorded by torch.jit.trace")
+    return chosen
+
+
+def _compiled(fn):
+    """torch.compile of fn(x, p) with a dynamic batch size, its inputs passed as inference
+    tensors: a compiled graph is specialised to its inputs' dispatch keys, and callers
+    pass both kinds (a clone of a few rows is cheaper than a second compile)."""
+    record = torch.compile(fn, dynamic=True, options={"cpp_wrapper": True, "cpp.dynamic_threads": True})
+
+    def run(x: torch.Tensor, p: torch.Tensor):
+        with torch.inference_mode():
+            return record(x if x.is_inference() else x.clone(), p if p.is_inference() else p.clone())
+
+    run.__wrapped__ = record
+    return run
+
+
+def _agree(a: torch.Tensor, b: torch.Tensor) -> bool:
+    """A compiled graph's output a against fn's b: within 1e-6 relative for floats (inductor
+    reorders sums, ~1e-15, which a difference quotient's 1/h turns into ~1e-8), equal
+    otherwise."""
+    return torch.allclose(a, b, rtol=1e-6, atol=1e-9) if a.is_floating_point() else torch.equal(a, b)
+
+
+def _tensors(out) -> tuple:
+    """A graph's output, a tensor or a tuple of them, as a tuple."""
+    return out if isinstance(out, tuple) else (out,)
+
+
+def statics_fn(problem: GripperProblem):
+    """s(x (B, 3J), p (B, J)) -> (residual (B, J, 3), then the FingerPose's tensor fields
+    joints, segments, theta, phi, points, then with an object the ContactState's forces,
+    normal, friction, ratio, slip, penetration)."""
+    n_joints, contact = problem.n_joints, problem.obstacle is not None
+
+    def s(x: torch.Tensor, p: torch.Tensor):
+        st = problem.residual(p, x.reshape(-1, n_joints, 3))
+        q, c = st.pose, st.contact
+        out = (st.residual, q.joints, q.segments, q.theta, q.phi, q.points)
+        return out + (c.forces, c.normal, c.friction, c.ratio, c.slip, c.penetration) if contact else out
+
+    return s
+
+
+@graph_cache
+def _traced_statics_fn(problem: GripperProblem):
+    """``statics_fn`` recorded by ``traced``: the answer's statics (``gesture_result``) in a
+    third of the eager time (0.43 against 1.21 ms for one query on this machine), bit for
+    bit the same."""
+    return traced(statics_fn(problem), 3 * problem.n_joints, problem.n_joints)
+
+
+def as_statics(problem: GripperProblem, out) -> Statics:
+    """The Statics of ``statics_fn``'s tuple (cloned: out of inference mode)."""
+    res, joints, segments, theta, phi, points, *contact = (v.clone() for v in out)
+    pose = FingerPose(joints=joints, segments=segments, theta=theta, phi=phi, points=points,
+                      finger=problem.params.finger)
+    if not contact:
+        return Statics(res, pose, ContactState.none(len(res), res.dtype))
+    return Statics(res, pose, ContactState(points, contact[0], problem.params.layout.contact_part, *contact[1:]))
+
+
+def statics_at(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
+    """problem.residual(pressures (B, J), tau (B, J, 3)) by its recorded graph in float64
+    (``_traced_statics_fn``, recorded in float64; float32 is the throughput mode's,
+    eager)."""
+    if tau.dtype != torch.float64:
+        return problem.residual(pressures, tau)
+    with torch.inference_mode():
+        return as_statics(problem, _traced_statics_fn(problem)(tau.reshape(len(tau), -1), pressures))

@@ -1,0 +1,108 @@
+"""Levenberg-Marquardt and L-BFGS on the gesture residual r(x; P) (2n rows: the scaled
+equilibrium of n = 3J unknowns and the out-of-box penalties, predictor.graphs.residual_fn),
+batched over samples, and the convergence rule they share (``within``).
+
+LM step (JᵀJ + mu·I) δ = -Jᵀr; mu shrinks ×0.1 on success and grows ×10 on failure, per
+sample; near the root mu -> 1e-12 and the step is Newton's (quadratic convergence).
+"""
+from __future__ import annotations
+
+import torch
+
+from predictor.options import SolverOptions
+from predictor.statics import MOMENT_SCALE, box_scale
+
+
+def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
+    """Converged mask (B,) from residual vectors r (B, 2n)."""
+    n = r.shape[1] // 2
+    eq = r[:, :n].reshape(-1, n // 3, 3)
+    return within(eq[..., :2].norm(dim=-1), eq[..., 2].abs() * MOMENT_SCALE, r[:, n:].abs().amax(-1) == 0, opts)
+
+
+def within(force: torch.Tensor, moment: torch.Tensor, in_box: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
+    """Converged mask (B,): every joint's |R_F| (B, J) N and |R_M| (B, J) N·mm within the
+    tolerances, and tau in the surrogate's box (in_box (B,) bool: no out-of-box penalty)."""
+    return (force.amax(-1) <= opts.tol_force) & (moment.amax(-1) <= opts.tol_moment) & in_box
+
+
+def lm_step(J: torch.Tensor, r: torch.Tensor, mu) -> torch.Tensor:
+    """The damped Gauss-Newton step -(JᵀJ + mu·I)⁻¹ Jᵀ r (B, n) of J (B, m, n), r (B, m),
+    mu (B,) or a number."""
+    JT = J.transpose(1, 2)
+    mu = torch.as_tensor(mu, dtype=J.dtype).reshape(-1, 1, 1)
+    return -torch.linalg.solve(JT @ J + mu * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])[..., 0]
+
+
+def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):
+    """Batched LM from x (B, n = 3J) at pressures p (B, J).
+
+    Returns (x, converged, iterations, (dr/dx (B, n, n), dr/dP (B, n, J)) at the final x);
+    the last item is the next ramp step's ``prev_jac``, which saves one Jacobian per step.
+
+    p_prev: the pressures at which x is an equilibrium (a ramp step). The start is then
+    the tangent predictor x + dx/dP·(p - p_prev), dx/dP = -(dr/dx)⁻¹ dr/dP: it keeps the
+    finger's geometry instead of its loads, so a pressure step does not
+    push the finger deep into the object.
+
+    max_step caps each step's largest scaled component (N, N·mm/100): with contact it
+    keeps the iterates on the branch of the previous ramp step, since a long step can jump
+    the finger through the object to a contact-free root."""
+    n = x.shape[1]
+    eye = torch.eye(n, dtype=x.dtype)
+    step_scale = box_scale(n)[1]
+    x = x.clone()
+    if p_prev is not None:
+        J0, Jp0 = prev_jac if prev_jac is not None else (lambda a: (a[0][:, :n], a[2]))(jac_fn(x, p_prev))
+        dx = -torch.linalg.solve(J0 + 1e-12 * eye, Jp0 @ (p - p_prev)[..., None])[..., 0]
+        x = x + dx
+    J, r, Jp = jac_fn(x, p, dp=False)    # dr/dP: at the last iterate only (below)
+    mu = torch.full((x.shape[0],), 1e-6, dtype=x.dtype)
+    iters = torch.zeros(x.shape[0], dtype=torch.long)
+    done = _done(r, opts)
+    stuck = torch.zeros_like(done)
+    for _ in range(opts.max_iter):
+        act = torch.nonzero(~(done | stuck)).flatten()  # work on unfinished samples only
+        if act.numel() == 0:
+            break
+        Ja, ra, ma = J[act], r[act], mu[act]
+        step = lm_step(Ja, ra, ma)
+        if max_step is not None:
+            big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
+            step = step / big.clamp_min(1.0)
+        x_try = x[act] + step
+        J_try, r_try, Jp_try = jac_fn(x_try, p[act], dp=False)
+        better = r_try.pow(2).sum(-1) < ra.pow(2).sum(-1)
+        x[act] = torch.where(better[:, None], x_try, x[act])
+        r[act] = torch.where(better[:, None], r_try, ra)
+        J[act] = torch.where(better[:, None, None], J_try, Ja)
+        if Jp is not None:
+            Jp[act] = torch.where(better[:, None, None], Jp_try, Jp[act])
+        mu[act] = torch.where(better, (ma * 0.1).clamp_min(1e-12), ma * 10.0)
+        iters[act] += 1
+        done[act] = _done(r[act], opts)
+        stuck = mu > 1e8
+    if Jp is None and getattr(jac_fn, "dp", None) is not None:
+        Jp = jac_fn.dp(x, p)
+    return x, done, iters, (J[:, :n], Jp)
+
+
+def lbfgs(loss_fn, x, p, opts):
+    """Paper's L-BFGS on sum_b |r_b|² from x (B, 3J). Returns (x, converged, iterations)."""
+    x = x.clone().requires_grad_(True)
+    opt = torch.optim.LBFGS([x], lr=1.0, max_iter=opts.lbfgs_max_iter, tolerance_grad=1e-15,
+                            tolerance_change=1e-20, history_size=20, line_search_fn="strong_wolfe")
+
+    def closure():
+        opt.zero_grad()
+        r = loss_fn(x, p)
+        total = r.pow(2).sum()
+        total.backward()
+        return total
+
+    opt.step(closure)
+    x = x.detach()
+    with torch.no_grad():
+        r = loss_fn(x, p)
+    n_iter = opt.state[opt._params[0]]["n_iter"]
+    return x, _done(r, opts), torch.full((x.shape[0],), n_iter, dtype=torch.long), None

@@ -1,0 +1,183 @@
+"""Answers of a trained NN predictor in the solver's result format (NNGestureResult),
+pressures (B, J) MPa:
+
+- gravity, raw: the network's tau, an answer only within the NN bound (NN_FORCE_TOL_MN,
+  NN_MOMENT_TOL_NMM: 2 mN, 1.2 N·mm), NaN elsewhere; method "nn";
+- gravity with ``polish``: the network's tau finished by one Newton step
+  (predictor.solve.newton_polish; the LM where its check fails); method "nn+newton"
+  (joined with "lm" where the LM answered rows);
+- contact: full Newton steps from the network's tau (``newton_on_branch``), kept where they
+  converge on the network's branch (fingertip within BRANCH_TIP_MM, the classifier's grasp
+  state, penetration within max_penetration), since undamped steps can land on another
+  equilibrium of the contact law; the other samples by the LM from the network's tau with
+  a small step cap (POLISH_STEP) that keeps the iterates on the network's branch, and where
+  that does not converge by the full pressure ramp (``fallback``). Method "nn+newton"
+  where Newton steps answered rows, joined with "lm" where the LM answered rows
+  (predictor.solve.joined): "nn+newton", "nn+newton+lm" or "nn+lm".
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, fields, replace
+
+import torch
+from torch import nn
+
+from predictor.gripper import check_pressures, nan_unless
+from predictor.networks import ContactNet, Predictor
+from predictor.options import SolverOptions
+from predictor.result import GestureResult, result_labels
+from predictor.solve import gesture_result, joined, meets_tolerances, newton_iterate, newton_polish, solve, statics_at
+from predictor.statics import GripperProblem, Statics, grasp_state, residual_norms
+
+
+# LM step cap (scaled units) when polishing a contact NN prediction: small enough that the
+# iterates stay on the NN's branch (0.3, the ramp's cap, let 8 of 55 jump to another one).
+POLISH_STEP = 0.02
+# The issue's NN bound: a prediction counts as an answer only within it.
+NN_FORCE_TOL_MN = 2.0
+NN_MOMENT_TOL_NMM = 1.2
+# mm: a Newton answer from the contact NN's tau counts only if its fingertip is this close to
+# the network's (``newton_on_branch``; bench-predictor's details.contact_nn_vs_solver.
+# newton_from_raw gives the largest shift to the ramp's equilibrium and the smallest to another).
+BRANCH_TIP_MM = 1.0
+BRANCH_ROUNDS = 3    # newton_iterate calls from the contact network's tau (``newton_on_branch``)
+
+
+def raw_answer(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor):
+    """The network's own answer, no solver: (tau (B, J, 3), Statics at it, grasp state
+    (B,) codes: its classifier's for a ContactNet, else its tau's contact)."""
+    with torch.no_grad():
+        tau, state = net.tau_and_state(pressures) if isinstance(net, ContactNet) else (net(pressures), None)
+        st = statics_at(problem, pressures, tau)
+    return tau, st, grasp_state(st.contact.normal, st.contact.slip) if state is None else state
+
+
+@dataclass(frozen=True)
+class NNGestureResult(GestureResult):
+    """GestureResult of the NN predictor. raw_residual_force_mN, raw_residual_moment_Nmm
+    (B, J): Equation 1 at the network's own tau, before any solver; polished (B,): the
+    answer is a solver's polish of the network's tau (contact; gravity with ``polish``),
+    not the network's; fallback (B,): the polish did not converge and the full pressure
+    ramp solved the sample instead (gravity: the Newton step's check failed and the LM went
+    on from it);
+    raw_state (B,) codes of statics.STATES: the grasp state by the network itself (its
+    classifier; the contact of its tau for a network without one), None without an object;
+    stepped (B,): contact, the answer is full Newton steps' from the network's tau (kept on
+    its branch, ``newton_on_branch``), not the capped LM's; None without an object."""
+
+    fallback: torch.Tensor = None
+    raw_residual_force_mN: torch.Tensor = None
+    raw_residual_moment_Nmm: torch.Tensor = None
+    polished: torch.Tensor = None
+    raw_state: torch.Tensor = None
+    stepped: torch.Tensor = None
+
+
+def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor,
+                    polish: bool = False, options: SolverOptions = SolverOptions()) -> NNGestureResult:
+    """NN gesture in the solver's result format, pressures (B, J) MPa.
+
+    ``problem`` must be the one the NN was trained for (``pred.config.problem(joint)``),
+    ValueError otherwise. Gravity: the raw NN tau; ``converged`` means its residual is
+    within the NN bound (2 mN, 1.2 N·mm), other samples get NaN. Gravity with ``polish``:
+    the NN tau finished by one Newton step (solve.newton_polish; the LM where its check
+    fails, ``fallback``) to the iterative solver's tolerances. Contact: full Newton steps
+    from the NN tau (predictor.newton.newton_iterate), kept where they converge on the network's
+    branch (``stepped``, ``newton_on_branch``); the other samples start again from the NN
+    tau with the LM under a small step cap (POLISH_STEP) so the iterates stay on the NN's
+    branch, with the Jacobian by differences and then, for the samples that did not
+    converge, the exact one; samples neither converges in ``max_iter`` steps are
+    re-solved by the full ramp (``fallback``). ``options``: the solvers' tolerances and
+    limits (default: the solver's 1e-4 mN, 1e-5 N·mm); a batch job content with the issue's
+    0.1 mN, 0.01 N·mm (``SolverOptions(tol_force=1e-4, tol_moment=1e-2)``) mostly takes one
+    Newton step instead of two or three.
+    """
+    trained = pred.config.problem(problem.joint)
+    if problem != trained:
+        diff = "; ".join(f"{f.name} {getattr(trained, f.name)} (given {getattr(problem, f.name)})"
+                         for f in fields(trained) if getattr(problem, f.name) != getattr(trained, f.name))
+        raise ValueError(f"this NN predictor was trained for {diff}")
+    check_pressures(pressures)
+    t0 = time.perf_counter()
+    if polish and problem.obstacle is None:
+        with torch.no_grad():
+            tau = pred.net(pressures)
+        res, start = newton_polish(problem, pressures, tau, options, t0=t0)
+        f, m = residual_norms(start)   # the network's own residual, from the step's pass
+        return NNGestureResult(**{**res.__dict__, "method": joined("nn", res.method)},
+                               fallback=res.iterations > 1, polished=res.converged, raw_residual_force_mN=f,
+                               raw_residual_moment_Nmm=m)
+    tau, st, raw_state = raw_answer(pred.net, problem, pressures)
+    f, m = residual_norms(st.residual)
+    raw = {"raw_residual_force_mN": f, "raw_residual_moment_Nmm": m}
+    if problem.obstacle is None:
+        ok = (f.amax(-1) <= NN_FORCE_TOL_MN) & (m.amax(-1) <= NN_MOMENT_TOL_NMM)
+        c = st.contact
+        return NNGestureResult(
+            pressures=pressures, tau=nan_unless(ok, tau), converged=ok, residual_force_mN=f, residual_moment_Nmm=m,
+            normal_force_N=c.normal, friction_N=c.friction, friction_ratio=c.ratio, slip=c.slip,
+            iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
+            pose=st.pose.masked(ok), method="nn", **result_labels(problem),
+            fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
+    raw["raw_state"] = raw_state
+    res, stepped = newton_on_branch(problem, pressures, tau, st, raw_state, t0, options)
+    rest = ~stepped
+    fallback, method = torch.zeros_like(stepped), "nn+newton" if bool(stepped.any()) else "nn"
+    if bool(rest.any()):
+        # The capped LM from the NN's tau (Jacobian by differences, and the exact one where
+        # that stalls at a kink of the contact law: predictor.ramp.attempts), then the full ramp.
+        lm = solve(problem, pressures[rest], replace(options, contact_max_step=POLISH_STEP), x0=tau[rest])
+        fallback[rest] = ~lm.converged
+        if bool((~lm.converged).any()):
+            lm = lm.with_rows(~lm.converged, solve(problem, pressures[rest][~lm.converged], options))
+        # the Newton steps tried first count too
+        res = res.with_rows(rest, replace(lm, iterations=lm.iterations + res.iterations[rest]))
+        method = joined(method, lm.method)
+    return NNGestureResult(**{**res.__dict__, "time_ms": 1e3 * (time.perf_counter() - t0), "method": method},
+                           fallback=fallback, polished=~fallback, stepped=stepped, **raw)
+
+
+def newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, raw: Statics,
+                     raw_state: torch.Tensor, t0: float,
+                     options: SolverOptions = SolverOptions()) -> tuple[GestureResult, torch.Tensor]:
+    """Full Newton steps from the contact network's tau (predictor.newton.newton_iterate) and which of
+    their answers to keep: (GestureResult, stepped (B,) bool).
+
+    From the network's tau undamped steps converge for most pressures, but some land on
+    another equilibrium, the finger tens of mm away in another grasp state, while the
+    ramp's equilibria lie within a fraction of a mm of the network's fingertip
+    (``branch_figures``, in bench-predictor). An answer is kept (``stepped``) when it
+    meets the solver's tolerances and stays on the network's branch: fingertip within
+    BRANCH_TIP_MM of the network's, the grasp state of its classifier raw_state (B,),
+    penetration within max_penetration. The network's own tau is the answer (0 steps)
+    where it meets them already; an answer on the branch but short of the tolerances (a
+    step that straddled a kink of the contact law contracts less) goes on from where it
+    is, up to BRANCH_ROUNDS calls of newton_iterate in all. pressures (B, J) MPa; tau (B,
+    J, 3) the network's and raw its Statics; t0: perf_counter time the query began."""
+    B, n_joints = pressures.shape
+    rows, x, steps, st, res = torch.arange(B), tau.reshape(B, -1), torch.zeros(B, dtype=torch.long), raw, None
+    for k in range(BRANCH_ROUNDS + 1):
+        p = pressures[rows]
+        if k:   # Newton steps from where these rows are
+            x, more, _ = newton_iterate(problem, p, x.reshape(-1, n_joints, 3), options)
+            steps = steps + more
+            st = statics_at(problem, p, x.reshape(-1, n_joints, 3))
+        c = st.contact
+        first = torch.where((c.normal > 0)[:, None], p, torch.full_like(p, float("nan")))
+        part = gesture_result(problem, p, x, torch.ones_like(c.slip), steps, t0, "nn+newton", first, st)
+        on_branch = ((grasp_state(c.normal, c.slip) == raw_state[rows])
+                     & ((st.pose.tip_end - raw.pose.tip_end[rows]).norm(dim=-1) <= BRANCH_TIP_MM)
+                     & (c.penetration <= options.max_penetration))
+        part = replace(part, converged=meets_tolerances(part, x, options) & on_branch)
+        if res is None:
+            res = part
+        else:
+            mask = torch.zeros(B, dtype=torch.bool)
+            mask[rows] = True
+            res = res.with_rows(mask, part)
+        again = ~part.converged if k == 0 else on_branch & ~part.converged
+        if not bool(again.any()):
+            break
+        rows, x, steps = rows[again], x[again], steps[again]
+    return res, res.converged.clone()

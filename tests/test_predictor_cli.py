@@ -1,0 +1,163 @@
+"""The predictor's command lines (predictor.gesture) and joint loading: JSON keys, one-line
+errors with exit 2, the real surrogate, the surrogate wrapper, finger options on the
+command line, and that importing the predictor imports no dolfinx.
+
+Every test states the exact or expected answer it checks.
+"""
+from __future__ import annotations
+
+import json
+import ast
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from contract.spec import INPUT_BOX
+from predictor.gripper import GripperParams
+from predictor.joint import load_joint
+from predictor.solve import solve
+from predictor.statics import GripperProblem
+
+from test_predictor_common import DT, PAPER_CHAIN, ROOT, SURROGATE, THREE, THREE_FINGER, THREE_P, J, run_gesture_cli, t
+
+torch.set_num_threads(1)
+
+
+def test_cli_json_and_errors():
+    """--json prints the issue's keys (converged true, tau 2x3, per-joint residuals, tip)
+    and exits 0; |P| > 0.3, an unknown object and a missing model exit 2 with one
+    'error:' line on stderr."""
+    ok = run_gesture_cli("--p1", "-0.1", "--p2", "0.1", "--model", "analytic", "--json")
+    assert ok.returncode == 0, ok.stderr
+    out = json.loads(ok.stdout)
+    for key in ("converged", "tau", "residual_force_mN", "residual_moment_Nmm", "tip", "tip_angle_deg",
+                "contact_force_N", "slip", "iterations", "time_ms"):
+        assert key in out
+    assert out["converged"] and np.array(out["tau"]).shape == (2, 3) and len(out["residual_force_mN"]) == 2
+    for args in (("--p1", "0.5", "--p2", "0"), ("--p1", "0", "--p2", "0", "--object", "blob"),
+                 ("--p1", "0", "--p2", "0", "--model", "/nonexistent.pt")):
+        bad = run_gesture_cli(*args)
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
+        assert bad.stderr.startswith("python -m predictor.gesture: error:"), bad.stderr
+
+
+@pytest.mark.skipif(not SURROGATE.is_file(), reason="no committed surrogate checkpoint yet")
+def test_real_surrogate_gravity_gesture():
+    """With the trained surrogate the gravity gesture at (-0.1, 0.1) converges to the same
+    tolerance (|R_F| <= 1e-4 mN, |R_M| <= 1e-5 N·mm) and tau is inside the box."""
+    joint = load_joint(str(SURROGATE))
+    res = solve(GripperProblem(joint), t([[-0.1, 0.1], [0.1, -0.1]]))
+    assert bool(res.converged.all())
+    assert float(res.residual_force_mN.max()) <= 1e-4 and float(res.residual_moment_Nmm.max()) <= 1e-5
+    assert float(res.tau[..., :2].abs().max()) <= 3 and float(res.tau[..., 2].abs().max()) <= 100
+
+
+def test_surrogate_joint_wrapper_with_a_fitted_surrogate(tmp_path):
+    """A small surrogate (issue 4's JointSurrogate) fitted for a few seconds to the analytic
+    joint, saved and loaded through SurrogateJoint: the gravity gesture at (-0.1, 0.1)
+    converges to the solver tolerance and its tip lies within 3 mm of the analytic one;
+    a corrupt file is a one-line ValueError."""
+    model_mod = pytest.importorskip("surrogate.model")
+    from predictor.joint import SurrogateJoint
+
+    torch.manual_seed(0)
+    box = t(INPUT_BOX)
+    x = (torch.rand(1000, 4, dtype=DT) * 2 - 1) * box * t([1.0, 0.3, 0.3, 0.3])
+    y = J(x).reshape(-1, 20)
+    norm = {"input_scale": box.tolist(), "output_mean": y.mean(0).tolist(), "output_scale": y.std(0).tolist()}
+    net = model_mod.JointSurrogate(model_mod.ModelConfig(hidden=(32, 32), activation="tanh"), norm).double()
+    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    for _ in range(400):
+        opt.zero_grad()
+        lossv = (net(x).reshape(-1, 20) - y).pow(2).mean()
+        lossv.backward()
+        opt.step()
+    path = tmp_path / "fit.pt"
+    model_mod.save_checkpoint(path, net, {}, {}, {})
+    res = solve(GripperProblem(SurrogateJoint(path), PAPER_CHAIN), t([-0.1, 0.1]))   # no cap head: tangent
+    ref = solve(GripperProblem(J, PAPER_CHAIN), t([-0.1, 0.1]))
+    assert bool(res.converged[0]) and float(res.residual_force_mN.max()) <= 1e-4
+    assert float((res.pose.tip_end - ref.pose.tip_end).norm()) < 3.0
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError):
+        SurrogateJoint(bad)
+
+
+def test_import_predictor_does_not_import_dolfinx():
+    """Dependencies run downward and the predictor is FEM-free: importing every predictor
+    module (each file of predictor/) leaves 'dolfinx' out of sys.modules."""
+    modules = sorted(f"predictor.{f.stem}" for f in (ROOT / "predictor").glob("*.py") if f.stem != "__init__")
+    assert {"predictor.solve", "predictor.newton", "predictor.nn", "predictor.nn_answer"} <= set(modules)
+    code = f"import sys, {', '.join(modules)}; print('dolfinx' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr
+
+
+def test_cli_finger_kinematics_and_joint_weight(tmp_path):
+    """predictor.gesture --finger FILE --pressures P1,P2,P3 on the three-joint finger (and
+    --kinematics cap --joint-weight split) exits 0; its JSON names the finger (name, sha256
+    of the file), the kinematics and the joint weight, has tau 3x3, three
+    joint_end_angle_deg whose last is tip_angle_deg, and the tip equals the Python solve's;
+    --p1/--p2 with that finger exits 2 with one line asking for --pressures; --plot draws
+    the three-joint gripper."""
+    import hashlib
+
+    path = tmp_path / "three.toml"
+    path.write_text(THREE)
+    png = tmp_path / "three.png"
+    out = run_gesture_cli("--finger", str(path), "--pressures", "0.1,-0.05,0.2", "--model", "analytic",
+                          "--kinematics", "cap", "--joint-weight", "split", "--json", "--plot", str(png))
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["finger"] == {"name": "three", "sha256": hashlib.sha256(THREE.encode()).hexdigest()}
+    assert (got["kinematics"], got["joint_weight"]) == ("cap", "split")
+    assert np.array(got["tau"]).shape == (3, 3) and len(got["joint_end_angle_deg"]) == 3
+    assert got["joint_end_angle_deg"][-1] == got["tip_angle_deg"]
+    ref = solve(GripperProblem(J, GripperParams(THREE_FINGER, kinematics="cap", joint_weight="split")),
+                THREE_P[:1])
+    np.testing.assert_allclose(got["tip"], ref.pose.tip_end[0].numpy(), rtol=0, atol=1e-9)
+    assert png.stat().st_size > 10_000
+    paper = json.loads(run_gesture_cli("--p1", "-0.1", "--p2", "0.1", "--model", "analytic", "--json").stdout)
+    assert paper["finger"]["name"] == "paper" and (paper["kinematics"], paper["joint_weight"]) == ("cap", "split")
+    assert paper["tip_angle_deg"] == paper["joint_end_angle_deg"][1]
+    bad = run_gesture_cli("--finger", str(path), "--p1", "0", "--p2", "0", "--model", "analytic")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1
+    assert "finger 'three' has 3 joints: give --pressures with 3 values" in bad.stderr
+
+
+def _predictor_imports():
+    """(importer, imported module, name) of every ``from predictor.x import name`` in
+    predictor/ (top level and inside functions), and the set of command-line modules (a
+    ``main`` function)."""
+    found, clis = [], set()
+    for path in sorted((ROOT / "predictor").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        if any(isinstance(n, ast.FunctionDef) and n.name == "main" for n in tree.body):
+            clis.add(f"predictor.{path.stem}")
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("predictor"):
+                for alias in node.names:
+                    module = node.module if node.module != "predictor" else f"predictor.{alias.name}"
+                    found.append((f"predictor.{path.stem}", module, alias.name))
+    return found, clis
+
+
+def test_no_private_imports_and_no_library_imports_a_command_line():
+    """Issue 34: no predictor module imports another's private (``_name``) names, and no
+    library module (one without ``main``) imports a command-line-only module (one with
+    ``main`` other than predictor.atlas and predictor.inverse, libraries that carry their
+    command line, whose library names predictor.api imports). The check finds what it
+    looks for: gesture and nn are command-line-only modules, and the solver's parts are
+    imported by name (predictor.ramp's advance by atlas)."""
+    found, clis = _predictor_imports()
+    assert {"predictor.gesture", "predictor.nn", "predictor.atlas", "predictor.inverse"} <= clis
+    assert ("predictor.atlas", "predictor.ramp", "advance") in found
+    private = [f for f in found if f[2].startswith("_")]
+    assert private == []
+    cli_only = clis - {"predictor.atlas", "predictor.inverse"}
+    upward = [f for f in found if f[0] not in clis and f[1] in cli_only]
+    assert upward == []

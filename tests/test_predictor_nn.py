@@ -1,0 +1,365 @@
+"""NN gesture predictors (predictor.networks, nn_train, nn_answer, nn_eval, nn_checkpoint
+and the predictor.nn command line): training, correction stages, checkpoints, the
+delivered gravity and contact paths against the solver, and the benchmark's record.
+
+Every test states the exact or expected answer it checks.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from predictor.gripper import GripperParams
+from predictor.joint import AnalyticJoint, load_joint
+from predictor.solve import solve
+from predictor.statics import GripperProblem
+
+from test_predictor_common import (CONTACT_NN, DT, GRASP, GRAVITY, GRAVITY_NN, PAPER_CHAIN, ROOT, SURROGATE,
+                                   THREE_FINGER, THREE_P, J, LeftJoint, run_gesture_cli, t)
+
+torch.set_num_threads(1)
+
+
+# ---------------------------------------------------------------- NN and CLI
+def test_nn_training_reduces_equilibrium_residual():
+    """Two epochs of the paper's gravity NN on 400 pairs (equilibrium loss, no labels) cut
+    the mean validation force residual below 1/3 of the untrained network's."""
+    from predictor.networks import GestureNet, NNConfig
+    from predictor.nn_eval import evaluate
+    from predictor.nn_train import train
+
+    cfg = NNConfig(n_train=400, n_val=100, epochs=2, lr=3e-3)
+    torch.manual_seed(cfg.seed)
+    before = evaluate(GestureNet(cfg.widths, cfg.activation), GRAVITY, torch.rand(100, 2, dtype=DT) * 0.6 - 0.3)
+    pred = train(cfg, J)
+    assert pred.metrics["val"]["force_mN_mean"] < before["force_mN_mean"] / 3
+
+
+def test_correction_stage_cuts_a_fitted_heads_error_fourfold():
+    """Multi-stage training (predictor.nn_train.fit_stage) on labels with an exact solution,
+    tau(P) = (sin 3P1 cos 2P2, P1 P2, 20 tanh(P1 - P2)) per joint (the second joint's
+    halved): a small head fitted by Adam and L-BFGS leaves an error e; the correction
+    stage's tau_scale is e's RMS per output, and head + stage leave less than a quarter
+    of e's RMS in every output, on the training pressures and on 300 others (0.11-0.17
+    on the others when written)."""
+    from predictor.networks import VARIANTS, network
+    from predictor.nn_train import fit, fit_stage
+
+    def exact(p):
+        one = torch.stack((torch.sin(3 * p[:, 0] / 0.3) * torch.cos(2 * p[:, 1] / 0.3), p[:, 0] * p[:, 1] / 0.09,
+                           20 * torch.tanh((p[:, 0] - p[:, 1]) / 0.3)), -1)
+        return torch.stack((one, 0.5 * one), 1)
+
+    cfg = dataclasses.replace(VARIANTS["contact"], widths=(2, 24, 24, 6), refine_hidden=(24, 24), refine_stages=1,
+                              abs_pressure=False,
+                              epochs=40, batch=50, lbfgs_iters=400, refine_epochs=40, refine_lbfgs_iters=400)
+    torch.manual_seed(0)
+    gen = torch.Generator().manual_seed(0)
+    net = network(cfg)
+    p, q = ((2 * torch.rand(n, 2, generator=gen, dtype=DT) - 1) * 0.3 for n in (600, 300))
+    scale = torch.tensor([1.0, 1.0, 30.0], dtype=DT)
+    fit(net.heads[1], lambda i: ((net.heads[1](p if i is None else p[i]) - exact(p if i is None else p[i]))
+                                  / scale).pow(2).sum((-1, -2)).mean(), len(p), cfg, gen)
+    rms = lambda x, stages: (net.head_tau(1, x, stages) - exact(x)).pow(2).mean(0).sqrt()  # noqa: E731
+    with torch.no_grad():
+        before_p, before_q = rms(p, 0), rms(q, 0)
+    fit_stage(net, 1, 0, p, exact(p), cfg, gen)
+    with torch.no_grad():
+        assert torch.allclose(net.refine[1][0].tau_scale, before_p.flatten(), rtol=1e-12, atol=0)
+        assert bool((rms(p, None) < before_p / 4).all()) and bool((rms(q, None) < before_q / 4).all())
+
+
+def test_nn_checkpoint_round_trip_and_refusals(tmp_path):
+    """save_predictor/load_predictor return the same network bit for bit (outputs on 500
+    pressures torch.equal); the file is the gravity kind (no object), so loading it as a
+    contact predictor is refused by name, as are a flipped byte, a plain torch.save file,
+    a joint other than the one it was trained on, and a query with an object: each a
+    one-line ValueError."""
+    from predictor.networks import NNConfig
+    from predictor.nn_answer import predict_gesture
+    from predictor.nn_checkpoint import GRAVITY_FORMAT, load_predictor, save_predictor
+    from predictor.nn_train import train
+
+    pred = train(NNConfig(n_train=100, n_val=20, epochs=1), J)
+    path = tmp_path / "g.pt"
+    save_predictor(pred, path)
+    assert path.read_bytes().startswith(b'{"bytes":') and GRAVITY_FORMAT.encode() in path.read_bytes()[:200]
+    back = load_predictor(path, J)
+    p = torch.rand(500, 2, dtype=DT) * 0.6 - 0.3
+    with torch.no_grad():
+        assert torch.equal(back.net(p), pred.net(p))
+    assert back.config == pred.config and back.joint_name == "analytic" and back.history == pred.history
+    data = path.read_bytes()
+    bad = tmp_path / "bad.pt"
+    for damaged, needle in ((data[:100] + bytes([data[100] ^ 1]) + data[101:], "damaged"),
+                            (data[:-1], "damaged")):
+        bad.write_bytes(damaged)
+        with pytest.raises(ValueError, match=needle):
+            load_predictor(bad, J)
+    torch.save({"config": {}}, bad)
+    for call, needle in ((lambda: load_predictor(path, J, contact=True), "softjoint-gravity-nn/1"),
+                         (lambda: load_predictor(bad, J), "no valid checkpoint header"),
+                         (lambda: load_predictor(path, LeftJoint()), "trained with joint"),
+                         (lambda: predict_gesture(back, GRASP, p), "trained for obstacle None")):
+        with pytest.raises(ValueError, match=needle) as info:
+            call()
+        assert "\n" not in str(info.value)
+
+
+@pytest.mark.skipif(not GRAVITY_NN.is_file(), reason="no trained NN predictor (make gestures)")
+def test_nn_predictor_cli_matches_solver():
+    """--method nn with the committed gravity NN at (-0.1, 0.1), on the joint model it was
+    trained on (analytic or the committed surrogate): converged (residual within 2 mN /
+    1.2 N·mm), tau within 0.01 N / 1 N·mm of the Newton solution and its raw residual is
+    its residual (no solver); with the contact NN at (0.1, 0.2) on the circle the answer is
+    the solver's polish (or the ramp's) within 1e-4 mN, and the raw network's larger
+    residual is reported beside it."""
+    from predictor.nn_checkpoint import load_predictor
+
+    trained_on = load_predictor(GRAVITY_NN).joint_name
+    model = "analytic" if trained_on == "analytic" else str(SURROGATE)
+    if model != "analytic" and not (SURROGATE.is_file() and load_joint(model).name == trained_on):
+        pytest.skip(f"NN trained on joint model {trained_on!r}, not the committed one")
+    out = run_gesture_cli("--p1", "-0.1", "--p2", "0.1", "--model", model, "--method", "nn", "--json")
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    ref = solve(GripperProblem(load_joint(model)), t([-0.1, 0.1])).tau[0].numpy()
+    assert got["converged"] and max(got["residual_force_mN"]) <= 2.0
+    np.testing.assert_allclose(np.array(got["tau"])[:, :2], ref[:, :2], atol=0.01)
+    np.testing.assert_allclose(np.array(got["tau"])[:, 2], ref[:, 2], atol=1.0)
+    # gravity: the answer is the network's own, so its raw residual is the residual
+    assert (got["raw_residual_force_mN"], got["raw_residual_moment_Nmm"]) == \
+        (got["residual_force_mN"], got["residual_moment_Nmm"])
+    assert not got["polished"] and not got["fallback"]
+    # gravity, --polish: one Newton step from the same tau reaches the solver's tolerance
+    # and the cold solve's tau; the raw figures are the network's, as above
+    out = run_gesture_cli("--p1", "-0.1", "--p2", "0.1", "--model", model, "--method", "nn", "--polish", "--json")
+    assert out.returncode == 0, out.stderr
+    pol = json.loads(out.stdout)
+    assert pol["converged"] and pol["polished"] and max(pol["residual_force_mN"]) <= 1e-4
+    np.testing.assert_allclose(np.array(pol["tau"]), ref, atol=1e-6)
+    assert pol["raw_residual_force_mN"] == pytest.approx(got["raw_residual_force_mN"], rel=1e-9, abs=1e-12)
+    # contact: the raw network's residual is reported beside the polished answer's
+    out = run_gesture_cli("--p1", "0.1", "--p2", "0.2", "--object", "circle", "--model", model, "--method", "nn",
+                          "--json")
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["polished"] != got["fallback"] and max(got["residual_force_mN"]) <= 1e-4
+    assert len(got["raw_residual_force_mN"]) == 2 and max(got["raw_residual_force_mN"]) > max(got["residual_force_mN"])
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and GRAVITY_NN.is_file()), reason="no committed surrogate and NN")
+def test_float32_batched_gravity_nn_agrees_with_float64():
+    """The float32 throughput mode (Predictor.astype, GripperProblem.astype) on 2,000
+    pressures of the committed gravity NN's domain: computed in float32 throughout, and
+    against float64 the same samples pass the NN bound, tau agrees to 1e-4 N / N·mm, the
+    fingertip to 1e-3 mm and the residuals to 1e-3 mN / N·mm (float32's 6e-8 relative
+    rounding on ~200 mm and ~1 N is 1e-5 of those)."""
+    from predictor.networks import sample_pressures
+    from predictor.nn_answer import predict_gesture
+    from predictor.nn_checkpoint import load_predictor
+
+    pred = load_predictor(GRAVITY_NN, load_joint(SURROGATE))
+    if pred.joint_name != load_joint(SURROGATE).name:
+        pytest.skip("the gravity NN was trained on another joint model")
+    problem = pred.config.problem(load_joint(SURROGATE))
+    p = sample_pressures(2000, pred.config, torch.Generator().manual_seed(11))
+    a = predict_gesture(pred, problem, p)
+    b = predict_gesture(pred.astype(torch.float32), problem.astype(torch.float32), p.float())
+    assert b.tau.dtype == b.pose.tip_end.dtype == b.residual_force_mN.dtype == torch.float32
+    assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 1990
+    ok = a.converged
+    assert float((a.tau[ok] - b.tau[ok].double()).abs().max()) <= 1e-4
+    assert float((a.pose.tip_end[ok] - b.pose.tip_end[ok].double()).abs().max()) <= 1e-3
+    assert float((a.residual_force_mN - b.residual_force_mN.double()).abs().max()) <= 1e-3
+    assert float((a.residual_moment_Nmm - b.residual_moment_Nmm.double()).abs().max()) <= 1e-3
+    # the analytic joint follows its inputs' dtype: its float32 anchors are float64's to 1e-4 mm
+    inputs = t([[0.2, 1.0, -2.0, 50.0], [-0.3, -3.0, 3.0, -100.0]])
+    a32 = AnalyticJoint().astype(torch.float32)(inputs.float())
+    assert a32.dtype == torch.float32 and float((a32.double() - J(inputs)).abs().max()) <= 1e-4
+
+
+def test_nn_for_another_finger(tmp_path):
+    """An NN config moved to the three-joint finger (NNConfig.for_params) trains a 3 -> 9
+    network; its checkpoint records the finger and options and loads back with them, and
+    loading it for the paper finger (or other options) is refused with one line; an old
+    checkpoint without the fields means the paper finger and chain (tangent, lumped)."""
+    from predictor.networks import NNConfig
+    from predictor.nn_checkpoint import load_predictor, save_predictor
+    from predictor.nn_train import train
+
+    params = GripperParams(THREE_FINGER, kinematics="tangent", joint_weight="split")
+    cfg = NNConfig(n_train=60, n_val=20, epochs=1).for_params(params)
+    assert cfg.widths[0] == 3 and cfg.widths[-1] == 9 and cfg.params() == params
+    pred = train(cfg, J)
+    assert pred.net(THREE_P).shape == (3, 3, 3)
+    path = tmp_path / "three.pt"
+    save_predictor(pred, path)
+    back = load_predictor(path, J, params=params)
+    assert back.config.params() == params
+    with pytest.raises(ValueError, match="was trained for finger 'three', tangent kinematics, split joint weights, "
+                                         "not finger 'paper', cap kinematics, split joint weights"):
+        load_predictor(path, J, params=GripperParams())
+    assert NNConfig().params() == GripperParams()
+    # a checkpoint written before the chain options were recorded: the paper's chain
+    from dataclasses import asdict
+
+    from predictor.nn_checkpoint import checkpoint_kind
+    from surrogate import checkpoint
+
+    old = train(NNConfig(n_train=60, n_val=20, epochs=1), J)
+    old_path = tmp_path / "old.pt"
+    payload = {"config": {k: v for k, v in asdict(old.config).items() if k not in ("kinematics", "joint_weight")},
+               "state_dict": old.net.state_dict(), "joint": old.joint_name, "metrics": old.metrics,
+               "history": old.history}
+    checkpoint.save(old_path, checkpoint_kind(False), payload)
+    with pytest.raises(ValueError, match="not finger 'paper', cap kinematics"):
+        load_predictor(old_path, J, params=GripperParams())
+    assert load_predictor(old_path, J, params=PAPER_CHAIN).config.params() == PAPER_CHAIN
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and (ROOT / "results/predictor/contact_nn.pt").is_file()),
+                    reason="no committed surrogate or NN checkpoints")
+def test_bench_writes_every_required_key(tmp_path):
+    """``python -m predictor.bench --quick`` (a few samples per figure, the committed models)
+    writes every top-level figure issues 5 and 15 require as a finite number, and figures
+    that agree with their details: the batched rates are converged gestures over measured seconds, and
+    the fast contact path's misses and times add up to its cases. Physics: every gravity
+    Newton solve converged to the solver's 1e-4 mN / 1e-5 N·mm, the polished contact NN (a
+    solver result) to the issue's 0.1 mN / 0.01 N·mm, and no answer of the Newton steps
+    from the contact NN that the branch check kept is another equilibrium than the ramp's."""
+    from predictor import bench
+
+    out = tmp_path / "bench.json"
+    run = subprocess.run([sys.executable, "-m", "predictor.bench", "--quick", "--model", str(SURROGATE),
+                          "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    b = json.loads(out.read_text())
+    for key in bench.REQUIRED_KEYS:
+        assert isinstance(b[key], (int, float)) and math.isfinite(b[key]), key
+    cb = b["details"]["contact_batched"]
+    assert cb["converged"] <= cb["n"] and abs(b["contact_ramp_batched_per_s"] - cb["converged"] / cb["s"]) < 1e-9
+    through = b["details"]["contact_throughput"]   # the delivered path's batch, to two tolerances
+    assert through["n"] == bench.QUICK["contact_throughput"] and through["threads"] == os.cpu_count()
+    assert b["contact_batched_per_s"] == through["issue_bound"]["per_s"] and b["graphs"] == "trace"
+    for key, (force, moment) in (("issue_bound", (0.1, 0.01)), ("solver_tolerance", (1e-4, 1e-5))):
+        r = through[key]
+        assert r["converged"] == through["n"] and abs(r["per_s"] - r["converged"] / (r["ms"] / 1e3)) < 1e-6
+        assert r["max_residual_force_mN"] <= force and r["max_residual_moment_Nmm"] <= moment
+    fast = b["details"]["contact_fast"]
+    assert fast["n"] == bench.QUICK["contact"] and 0 <= fast["misses"] < fast["n"]
+    assert 0.0 <= b["contact_nn_state_agreement"] <= 1.0
+    assert b["contact_nn_raw_p95_force_mN"] >= 0.0 and b["gravity_batched_per_s"] > 0.0
+    assert (b["batched_dtype"], b["batched_threads"]) == ("float32", os.cpu_count())
+    thr = b["details"]["gravity_nn_throughput"]
+    assert thr["one_thread"]["dtype"] == "float64" and thr["one_thread"]["threads"] == 1
+    assert b["gravity_batched_per_s"] == thr["every_core"]["delivered_per_s"]
+    gf = b["details"]["gravity_fast"]
+    assert gf["n"] == bench.QUICK["gravity"] and gf["misses"] == 0 and gf["max_residual_force_mN"] <= 1e-4
+    g = b["details"]["gravity_newton"]
+    assert g["converged"] == g["n"] == bench.QUICK["gravity"]
+    assert g["max_residual_force_mN"] <= 1e-4 and g["max_residual_moment_Nmm"] <= 1e-5
+    assert b["contact_nn_residual_force_mN"] <= 0.1 and b["contact_nn_residual_moment_Nmm"] <= 0.01
+    steps = b["details"]["contact_nn_vs_solver"]["newton_from_raw"]   # no kept answer off the ramp's branch
+    assert steps["kept_elsewhere"] == 0 and steps["kept"] <= steps["converged_to_ramp_equilibrium"]
+    assert 0.0 <= b["contact_nn_newton_rate"] <= 1.0 and fast["newton_from_nn"] + fast["fallbacks"] <= fast["n"]
+
+
+def test_contact_net_answers_from_the_head_of_its_state(tmp_path):
+    """ContactNet's tau for each pressure is exactly the output of the head its classifier
+    picks plus that head's correction stages (random weights, so every state occurs on 200
+    pressures and every stage adds something), and its checkpoint round-trips bit for bit."""
+    from predictor.networks import VARIANTS, ContactNet, features, network, Predictor
+    from predictor.nn_checkpoint import load_predictor, save_predictor
+
+    cfg = VARIANTS["contact"]
+    torch.manual_seed(5)   # a seed whose random classifier picks all three states
+    net = network(cfg)
+    assert isinstance(net, ContactNet)
+    p = (2 * torch.rand(200, 2, dtype=torch.float64) - 1) * 0.3
+    # every network sees P / 0.3 and |P| / 0.3 (the joint model's kink at P = 0)
+    assert cfg.abs_pressure and torch.equal(features(p, True), torch.cat((p / 0.3, (p / 0.3).abs()), 1))
+    assert {m.mlp[0].in_features for m in [*net.heads, *(s for r in net.refine for s in r)]} == {4}
+    assert net.classifier[0].in_features == 4
+    with torch.no_grad():
+        net.classifier[-1].weight.mul_(100.0)  # an untrained classifier's logits barely vary
+        state, tau = net.state(p), net(p)
+        assert set(state.tolist()) == {0, 1, 2}
+        for k, head in enumerate(net.heads):
+            rows = p[state == k]
+            assert torch.equal(tau[state == k], net.head_tau(k, rows))
+            stages = [stage(rows) for stage in net.refine[k]]
+            assert len(stages) == cfg.refine_stages and all(bool(c.abs().min() > 0) for c in stages)
+            assert torch.allclose(tau[state == k], head(rows) + sum(stages), rtol=0, atol=1e-12)
+    save_predictor(Predictor(net, cfg, J.name), tmp_path / "c.pt")
+    back = load_predictor(tmp_path / "c.pt", J, contact=True)
+    with torch.no_grad():
+        assert isinstance(back.net, ContactNet) and torch.equal(back.net(p), tau)
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and CONTACT_NN.is_file()), reason="no committed contact NN")
+def test_contact_nn_raw_residual_and_state_on_a_fixed_set():
+    """The committed contact NN on 60 fixed pressures of its domain (seed 5; 50 end in
+    contact), against the ramp solver (the reference): its classifier's grasp state is the
+    solver's on at least 57 (the bench's 400 give the >= 99 % figure); with no solver its
+    raw tau meets the issue's bounds over every equilibrium, contact or not (mean <= 2 mN,
+    1.2 N·mm; p95 <= 10 mN, 5 N·mm; 0.96 mN, 0.13 N·mm mean when written), is within
+    1e-3 mN at every contact-free one, and its fingertip is within 2 µm of the solver's on
+    average. One closed-form Gauss-Newton step (exact Jacobian, no iteration or check)
+    from it cuts the mean force residual at least tenfold."""
+    from predictor.networks import sample_pressures
+    from predictor.nn_checkpoint import load_predictor
+    from predictor.nn_eval import evaluate_contact
+
+    joint = load_joint(SURROGATE)
+    pred = load_predictor(CONTACT_NN, joint, contact=True)
+    p = sample_pressures(60, pred.config, torch.Generator().manual_seed(5))
+    ev = evaluate_contact(pred, joint, p)
+    assert ev["reference_converged"] == 60 and ev["state_by"] == "classifier"
+    assert ev["state_agreement"] >= 57 / 60
+    raw, free, step = ev["raw"], ev["raw_contact_free"], ev["newton_step_from_raw"]
+    assert raw["force_mN_mean"] <= 2.0 and raw["moment_Nmm_mean"] <= 1.2
+    assert raw["force_mN_p95"] <= 10.0 and raw["moment_Nmm_p95"] <= 5.0
+    assert free is not None and free["force_mN_max"] <= 1e-3
+    assert ev["raw_tip_error_mm"]["mean"] <= 0.002
+    assert step["force_mN_mean"] <= raw["force_mN_mean"] / 10
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and CONTACT_NN.is_file()), reason="no committed contact NN")
+def test_contact_nn_newton_answers_are_the_ramps_equilibria(monkeypatch):
+    """The delivered contact NN path on 24 fixed pressures of its domain (seed 11): every
+    answer converges to the solver's tolerances; the answers of the Newton steps from the
+    network's tau (``stepped``: most of them; 95 % on the 400 validation pressures) are
+    the ramp solver's equilibria (tau within 1e-4 N, 1e-4 N·mm), not another branch's.
+    With the branch check made impossible (BRANCH_TIP_MM = -1) nothing is stepped and
+    the capped LM answers the same equilibria."""
+    import predictor.nn_answer as answer
+    from predictor.nn_checkpoint import load_predictor
+    from predictor.networks import sample_pressures
+
+    joint = load_joint(SURROGATE)
+    pred = load_predictor(CONTACT_NN, joint, contact=True)
+    problem = pred.config.problem(joint)
+    p = sample_pressures(24, pred.config, torch.Generator().manual_seed(11))
+    ref = solve(problem, p)
+    res = answer.predict_gesture(pred, problem, p)
+    assert bool(ref.converged.all()) and bool(res.converged.all())
+    # method: "nn+newton", joined with "lm" where the capped LM answered rows
+    assert int(res.stepped.sum()) >= 12 and res.method == ("nn+newton" if bool(res.stepped.all()) else "nn+newton+lm")
+    assert torch.allclose(res.tau, ref.tau, rtol=0, atol=1e-4)
+    # a stepped answer took Newton steps, or the network's own tau met the tolerances already
+    # (contact-free raw residuals reach 1e-4 mN)
+    raw_done = (res.raw_residual_force_mN.amax(-1) <= 1e-4) & (res.raw_residual_moment_Nmm.amax(-1) <= 1e-5)
+    assert bool(((res.iterations >= 1) | raw_done)[res.stepped].all())
+    monkeypatch.setattr(answer, "BRANCH_TIP_MM", -1.0)
+    lm = answer.predict_gesture(pred, problem, p[:6])
+    assert not bool(lm.stepped.any()) and bool(lm.converged.all()) and lm.method == "nn+lm"
+    assert torch.allclose(lm.tau, ref.tau[:6], rtol=0, atol=1e-4)
