@@ -1,8 +1,9 @@
 """The formats of the JSON artefacts the predictor package writes (contract.records).
 
 Each names the key paths the report and the demo read with their JSON types; the writer
-in ``owner`` checks its document before writing it and readers load the file through it
-(docs/formats.md §6). Units as in the key names: MPa, mm, N, mN, N·mm, deg, ms, s.
+in ``owner`` checks its document before writing it (predictor.bench, atlas, inverse,
+validate_finger; predictor.figures checks gestures.json, which it writes without a final
+newline) and readers load the file through it (docs/formats.md §6). Units as in the key names: MPa, mm, N, mN, N·mm, deg, ms, s.
 Optional paths (``?``) are figures a writer records only in some runs (a path it did not
 bench, a file from before a figure was added).
 """

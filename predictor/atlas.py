@@ -57,7 +57,7 @@ import numpy as np
 import torch
 
 from contract import cli
-from contract.files import write_json
+from predictor.artefacts import ATLAS
 from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
                                placement_error)
 from predictor.progress import Heartbeat, set_quiet
@@ -436,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
         atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
         doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps}
         if args.out:
-            write_json(args.out, doc)
+            ATLAS.write(args.out, doc)
         if args.plot:
             save_atlas_figure(args.plot, atlas, problem)
     print_figures({**atlas.summary(), "spec": args.object}, args.json)

@@ -59,8 +59,8 @@ from types import SimpleNamespace
 import torch
 
 from contract import cli
-from contract.files import write_json
 from contract.spec import PRESSURE_LIMIT
+from predictor.artefacts import BENCH
 from predictor.joint import load_joint
 from predictor.networks import sample_pressures
 from predictor.nn_answer import predict_gesture
@@ -353,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
     m = _nn_figures(joint, grav_pred, paper_pred, cont_pred, s, n)
     h = _throughput_figures(grav_pred, cont_pred, m, n)
     out = _record(args, n, joint, load, (grav_pred, paper_pred, cont_pred), s, m, h)
-    write_json(args.out, out)
+    BENCH.write(args.out, out)
     top = {k: v for k, v in out.items() if not isinstance(v, dict)}
     if args.json:
         cli.print_json(top)

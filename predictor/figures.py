@@ -25,7 +25,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 
 from contract import cli  # noqa: E402
-from contract.files import dumps, write_text  # noqa: E402
+from contract.files import dumps, json_safe, write_text  # noqa: E402
+from predictor.artefacts import GESTURES  # noqa: E402
 from predictor.joint import load_joint  # noqa: E402
 from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
 from predictor.plot import draw_gesture, save_figure  # noqa: E402
@@ -132,6 +133,7 @@ def main(argv: list[str] | None = None) -> int:
                           if bool(res.converged[i]) else f"{kind}, P = {p} MPa: NOT CONVERGED")
     _panel_row(out / "grasps.png", panels, problems, titles, 2)
     nn_curves(curves, out / "nn_training.png")
+    GESTURES.check(json_safe(summary), str(out / "gestures.json"))
     write_text(out / "gestures.json", dumps(summary))  # no trailing newline, as committed
     if args.json:
         cli.print_json(summary)

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from contract import cli
-from contract.files import write_json
+from predictor.artefacts import INVERSE
 from predictor.atlas import STATES, Atlas, atlas_from_json
 from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
                                  VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, inverse_pressures, parse_goal)
@@ -148,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         with ap.errors():
             doc, figs = run_cases(args.model, Path(args.atlas_dir))
             if args.out:
-                write_json(args.out, doc)
+                INVERSE.write(args.out, doc)
             if args.plot:
                 save_inverse_figure(args.plot, figs)
         print_figures(doc["measured"], args.json)

@@ -36,9 +36,10 @@ from pathlib import Path
 import torch
 
 from contract import cli
-from contract.files import atomic_path, write_json
+from contract.files import atomic_path
 from contract.finger import load_finger
 from fem.geometry import JointGeometry
+from predictor.artefacts import VALIDATION
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
 from predictor.progress import set_quiet
@@ -246,7 +247,7 @@ def main(argv=None) -> int:
             "mesh_check": mesh_check(cases, meshes),
             "targets": TARGETS, "judged_variant": JUDGED, "repeats": REPEATS, "figures": figures,
         }
-        write_json(args.out, report)
+        VALIDATION.write(args.out, report)
     if args.json:
         cli.print_json(report["summary"])
     else:
