@@ -8,7 +8,7 @@ write), and a reader calls ``Format.load`` (read, then check). A renamed or rety
 fails the writer's tests instead of a reader's run. Keys beyond those listed are allowed:
 a format states what readers rely on, not everything a writer records.
 
-Key paths (docs/formats.md §0):
+Key paths (docs/formats.md §6):
 
 * ``a.b.c``: key c of the object at key b of the object at key a;
 * ``a[]``: every element of the list at a (``a[].b``: key b of each);

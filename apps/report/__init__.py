@@ -7,7 +7,8 @@ whose artefact does not exist yet say so instead of showing a number. Every tabl
 states a target has a "target" and a "met" column: "yes", or "no, over by X" (an upper
 bound missed) / "no, short by X" (a lower bound missed), X in the figure's unit. The
 targets are read from the artefacts where their producers record them (fem validation,
-mesh study, predictor bench), else from this module (SURROGATE_TARGETS, CAMPAIGN_TARGETS);
+mesh study, predictor bench), else from the section modules (FEM_TARGETS, SURROGATE_TARGETS)
+and workflow.artefacts (CAMPAIGN_TARGETS);
 the paper's figures count as targets to beat (docs/decisions.md §0). ``--json`` prints what was
 written: the sections and every target row with its verdict.
 
