@@ -28,7 +28,8 @@ part), tip_angle_deg (global direction of the last part, -90 at rest),
 joint_end_angle_deg (per joint, its global exit angle), contact_force_N, friction_N,
 friction_use = |f|/(mu N) and slip (null where nothing touches), iterations, time_ms,
 joint (the joint model's name), mu and object_weight_N (null without an object), finger
-{name, sha256}, kinematics, joint_weight. Every figure of the gesture is null when the
+{name, sha256}, kinematics, joint_weight, method (what produced the answer: newton, lm,
+newton+lm, nn, nn+newton, ...) beside requested_method (--method). Every figure of the gesture is null when the
 solve did not converge. With ``--method nn`` also the network's own figures before any
 solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
 answer is the solver's polish of them (polished: contact, or gravity with ``--polish``,
@@ -131,7 +132,7 @@ def run(args: argparse.Namespace, prepared=None):
         res = solve(problem, pressures, SolverOptions(method=args.method))
     ok = bool(res.converged[0])
     out = {**res.summary(0), "time_ms": res.time_ms,
-           "method": args.method, "object": args.object, "gravity": problem.gravity,
+           "method": res.method, "requested_method": args.method, "object": args.object, "gravity": problem.gravity,
            "finger": {"name": problem.params.finger.name, "sha256": problem.params.finger.digest},
            "kinematics": problem.params.kinematics, "joint_weight": problem.params.joint_weight,
            "joint_end_angle_deg": [math.degrees(a) for a in res.pose.phi[0].tolist()] if ok else None}
