@@ -25,8 +25,9 @@ table, PNGs linked) and the table on stdout. Each step prints ``[demo k/N] what 
 
 Layering: an app (apps -> predictor -> surrogate -> workflow -> fem); it runs the
 packages' command lines, one subprocess each, and reads their JSON, the committed finger
-FEM cases through their format (fem.artefacts); of fem it imports only
-fem.geometry and fem.artefacts (no dolfinx). Its own summary.json is checked against
+FEM cases and the files the steps write through their formats (fem.artefacts,
+predictor.artefacts); of the packages it imports only those, fem.geometry and the
+contract (no torch, no dolfinx). Its own summary.json is checked against
 SUMMARY before it is written. Exit 0 when every step succeeded; otherwise one line names the failed
 step and the exit is 1. The summary is written (atomically) only at the end, and the
 previous summary is removed at the start, so no summary ever describes another run.
@@ -50,6 +51,7 @@ from contract.files import write_text
 from contract.records import Format, each
 from fem import artefacts as fem_artefacts
 from fem.geometry import JointGeometry
+from predictor import artefacts as predictor_artefacts
 
 ROOT = Path(__file__).resolve().parents[1]
 SURROGATE = "results/surrogate/improved.pt"
@@ -75,13 +77,15 @@ class StepFailed(RuntimeError):
 @dataclass
 class Step:
     """One command line: ``python -m module *args``. Its figures are its stdout JSON, or
-    the JSON file ``reads`` (relative to the repository) when the tool writes one."""
+    the JSON file ``reads`` (relative to the repository) when the tool writes one, loaded
+    through that artefact's ``format``."""
 
     key: str
     title: str
     module: str
     args: list[str]
     reads: str | None = None
+    format: Format | None = None
     wall_s: float | None = None
     data: dict = field(default_factory=dict)
 
@@ -121,11 +125,11 @@ def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
     h = _g(finger_mesh_size)
     steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.finger_cases)",
                       "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h],
-                      reads=f"{out}/finger_fem/{FINGER_CASE}.json"))
+                      reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
     steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
                       "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h,
                                                     "--out", f"{out}/finger.json", "--figures", out, "--json"],
-                      reads=f"{out}/finger.json"))
+                      reads=f"{out}/finger.json", format=predictor_artefacts.VALIDATION))
     return steps
 
 
@@ -340,7 +344,8 @@ def run_step(step: Step, k: int, n: int, t0: float, env: dict, log=sys.stdout) -
     if proc.returncode != 0:
         raise StepFailed(f"{name} failed with exit {proc.returncode}: {_last_line(stderr)}")
     try:
-        step.data = json.loads(Path(ROOT, step.reads).read_text() if step.reads else stdout)
+        step.data = step.format.load(Path(ROOT, step.reads)) if step.format else json.loads(
+            Path(ROOT, step.reads).read_text() if step.reads else stdout)
     except (OSError, ValueError) as exc:
         raise StepFailed(f"{name} gave no JSON figures: {' '.join(str(exc).split())}") from None
     if step.data.get("converged") is False:

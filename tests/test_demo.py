@@ -1,14 +1,18 @@
 """make demo (apps.demo): the pure part that turns the steps' JSON into table rows.
 
 Hand-made step JSONs with known answers (anchors offset by a 3-4-5 vector, fingertips
-offset by 6-8-10, ...); no FEM, no model, no subprocess.
+offset by 6-8-10, ...); no FEM, no model. A step's file is read through its artefact's
+format (one ``python -m json.tool`` subprocess stands in for the tool).
 """
 from __future__ import annotations
 
+import io
+import json
+import os
 import re
 import subprocess
-from pathlib import Path
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -128,9 +132,35 @@ def test_tables_show_every_row_and_figure():
 
 def test_demo_runs_the_packages_command_lines_without_importing_them():
     """The demo runs the packages' command lines, one subprocess each, so importing it
-    loads neither surrogate, predictor, torch nor dolfinx (a fresh interpreter, since other
-    test files import those packages)."""
-    code = ("import sys, apps.demo; print([m for m in sys.modules if m.split('.')[0] in "
-            "('surrogate', 'predictor', 'torch', 'dolfinx')])")
+    loads neither torch nor dolfinx, and of surrogate and predictor only the predictor's
+    artefact formats (a fresh interpreter, since other test files import those packages)."""
+    code = ("import sys, apps.demo; print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('surrogate', 'predictor', 'torch', 'dolfinx')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert out.stdout.strip() == "[]", out.stderr
+    assert out.stdout.strip() == "['predictor', 'predictor.artefacts']", out.stderr
+
+
+def test_a_step_file_is_read_through_its_format(tmp_path):
+    """A step whose tool writes a finger FEM case (here ``python -m json.tool`` copying the
+    committed one) is loaded through fem.artefacts.FINGER_CASE: the case as committed is
+    read; with ``tip_angle_deg`` renamed the step fails in one line naming the file and key."""
+    from fem.artefacts import FINGER_CASE
+
+    committed = Path(demo.ROOT, demo.COMMITTED_FINGER_FEM, f"{demo.FINGER_CASE}.json")
+    case = json.loads(committed.read_text())
+    src, out = tmp_path / "src.json", tmp_path / "out.json"
+
+    def step():
+        return demo.Step("finger_fem", "copy", "json.tool", [str(src), str(out)], reads=str(out),
+                         format=FINGER_CASE)
+
+    src.write_text(json.dumps(case))
+    good = step()
+    demo.run_step(good, 1, 1, 0.0, dict(os.environ), log=io.StringIO())
+    assert good.data == case
+    case["tip_angle"] = case.pop("tip_angle_deg")
+    src.write_text(json.dumps(case))
+    with pytest.raises(demo.StepFailed) as err:
+        demo.run_step(step(), 1, 1, 0.0, dict(os.environ), log=io.StringIO())
+    assert "\n" not in str(err.value)
+    assert f"{out}: tip_angle_deg: missing (format fem-finger-case/1, fem.finger_cases)" in str(err.value)
