@@ -39,8 +39,10 @@ from pathlib import Path
 from apps.report.common import NOT_JUDGED, Check, Malformed, Target, cells, judge
 from apps.report.finger import FINGER_TITLE, finger_section
 from apps.report.gestures import PREDICTOR_TITLE, predictor_section
-from apps.report.joint_fem import CAMPAIGN_TARGETS, CAMPAIGN_TITLE, FEM_TARGETS, FEM_TITLE, campaign_section, fem_section
-from apps.report.learning import CURVE_TITLE, SURROGATE_TARGETS, SURROGATE_TITLE, learning_curve_section, surrogate_section
+from apps.report.joint_fem import (CAMPAIGN_TARGETS, CAMPAIGN_TITLE, FEM_TARGETS, FEM_TITLE, campaign_section,
+                                   fem_section)
+from apps.report.learning import (CURVE_TITLE, SURROGATE_TARGETS, SURROGATE_TITLE, learning_curve_section,
+                                  surrogate_section)
 from apps.report.planning import PLANNING_TITLE, planning_section
 
 __all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGATE_TARGETS", "Check", "Target",
