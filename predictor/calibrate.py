@@ -71,7 +71,7 @@ def _model(args):
 def main_fit(argv) -> int:
     from predictor.calibration import DEFAULT_FIT, resolve_fit
     from predictor.calibration_file import write_calibrated
-    from predictor.calibration_fit import Prior, calibrate
+    from predictor.calibration_fit import FitFailed, Prior, calibrate
     from predictor.observations import load_observations
 
     ap = cli.Parser(prog="python -m predictor.calibrate", description=__doc__.split("\n\n")[0],
@@ -94,9 +94,10 @@ def main_fit(argv) -> int:
             if name in priors:
                 raise ValueError(f"--prior {name}: given twice")
             priors[name] = Prior(mean, std)
-        res = calibrate(model, obs, names, priors, starts=args.starts, loo=not args.no_loo)
-        if not res.converged:
-            print("python -m predictor.calibrate: the fit did not converge (no gesture at some start)", file=sys.stderr)
+        try:
+            res = calibrate(model, obs, names, priors, starts=args.starts, loo=not args.no_loo)
+        except FitFailed as exc:
+            print(f"python -m predictor.calibrate: {exc}", file=sys.stderr)
             return 1
         write_calibrated(args.out, model, res, obs.sha256, str(args.observations))
     out = {**res.summary(), "out": str(args.out), "joint": model.joint.name, "observations": len(obs),

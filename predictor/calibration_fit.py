@@ -29,6 +29,10 @@ from predictor.calibration import (CalibrationModel, DEFAULT_FIT, Design, design
                                    sensitivities)
 from predictor.observations import Observations
 
+class FitFailed(RuntimeError):
+    """No start of the fit reached a point where every observed gesture converges."""
+
+
 CORRELATED = 0.95  # |correlation| above which a pair is reported as hard to separate
 MAX_VIF = 1e4      # variance inflation (std x100 by the others) beyond which a parameter is unidentifiable
 
@@ -212,7 +216,9 @@ def fit(prob: Problem, starts: int = 3, seed: int = 0) -> tuple[np.ndarray, floa
 
 def calibrate(model: CalibrationModel, obs: Observations, fit_names=DEFAULT_FIT, priors: dict | None = None,
               starts: int = 3, loo: bool = True, seed: int = 0) -> CalibrationResult:
-    """Fit the parameters ``fit_names`` (names or groups) to ``obs`` (module docstring)."""
+    """Fit the parameters ``fit_names`` (names or groups) to ``obs`` (module docstring).
+    ValueError (one line) for a bad name or prior, or observations the nominal model cannot
+    solve; FitFailed when no start converges."""
     t0 = time.perf_counter()
     idx = resolve_fit(fit_names, model.table)
     for k, p in (priors or {}).items():
@@ -228,7 +234,9 @@ def calibrate(model: CalibrationModel, obs: Observations, fit_names=DEFAULT_FIT,
         raise ValueError("the nominal gripper has no converged gesture at some observed pressures")
     v, cost, ok = fit(prob, starts, seed)
     prob.x = None
-    r, jac = prob.residual(v, jacobian=True)
+    r, jac = prob.residual(v, jacobian=True) if ok else (None, None)
+    if r is None:
+        raise FitFailed(f"no start of the fit of {', '.join(model.table[i].name for i in idx)} converged")
     cov = covariance(jac)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     corr = cov / np.outer(np.maximum(std, 1e-300), np.maximum(std, 1e-300))

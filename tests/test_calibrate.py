@@ -195,6 +195,25 @@ def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "elasticity" in bad.stderr
 
 
+def test_api_calibrate_with_a_prior(tmp_path, model):
+    """predictor.api.calibrate: a measurement file of a heavier tip and a turned camera,
+    fitted with a prior on the tip's weight at its true value: both recovered to 1e-6
+    (noise-free), the prior's std bounds the weight's (<= 0.002 N); an unknown prior name
+    is a one-line ValueError."""
+    from predictor.api import calibrate as api_calibrate
+
+    truth = {"weight_4": 0.075, "frame_deg": -1.0}
+    path = tmp_path / "obs.json"
+    path.write_text(json.dumps(observations_to_json(synthetic_observations(model, truth, P))))
+    res = api_calibrate(path, fit=("weight_4", "frame_deg"), model="analytic", priors={"weight_4": (0.075, 0.002)},
+                        starts=1, loo=False)
+    s = res.summary()["parameters"]
+    assert abs(s["weight_4"]["value"] - 0.075) <= 1e-6 and abs(s["frame_deg"]["value"] + 1.0) <= 1e-6
+    assert 0 < s["weight_4"]["std"] <= 0.002
+    with pytest.raises(ValueError, match="--prior mount_x: not a fitted parameter"):
+        api_calibrate(path, fit=("frame",), model="analytic", priors={"mount_x": (0.0, 1.0)}, loo=False)
+
+
 @pytest.mark.xfail(strict=True, reason="predictor.gripper.finger_pose does not apply the joint calibration keys "
                    "(pressure_gain, pressure_offset, stiffness_scale) yet: docs/calibration.md")
 def test_tools_apply_the_joint_calibration_keys(model):
