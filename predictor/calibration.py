@@ -324,11 +324,22 @@ def sensitivities(model: CalibrationModel, d: Design, x: torch.Tensor, theta: to
     rx, rt = torch.stack(rx, 1), torch.stack(rt, 1)                     # (B, 3J, 3J), (B, 3J, n)
     dxdt = -torch.linalg.solve(rx, rt)                                   # (B, 3J, n)
     m = predict(model, d, xr, th)
-    jac = []
-    for j in range(m.shape[0]):
-        gx, gt = torch.autograd.grad(m[j], (xr, th), retain_graph=True, allow_unused=True)
-        b = int(d.obs[j])
+    jac = torch.zeros(m.shape[0], th.shape[1], dtype=m.dtype)
+    for rows in _independent_groups(d):
+        # rows of distinct observations: one reverse pass gives each its own gradient
+        gx, gt = torch.autograd.grad(m[rows].sum(), (xr, th), retain_graph=True, allow_unused=True)
         gx = torch.zeros_like(xr) if gx is None else gx
         gt = torch.zeros_like(th) if gt is None else gt
-        jac.append(gt[b] + gx[b] @ dxdt[b])
-    return m.detach(), torch.stack(jac)
+        b = torch.as_tensor(d.obs[rows])
+        jac[rows] = gt[b] + (gx[b, None, :] @ dxdt[b])[:, 0]
+    return m.detach(), jac
+
+
+def _independent_groups(d: Design) -> list[list[int]]:
+    """Measurement rows grouped so that no two rows of a group belong to one observation
+    (the k-th row of each observation that measures the same quantity)."""
+    groups, seen = {}, {}
+    for j, (b, w) in enumerate(zip(d.obs.tolist(), d.what)):
+        k = seen[(b, w)] = seen.get((b, w), -1) + 1
+        groups.setdefault((w, k), []).append(j)
+    return list(groups.values())
