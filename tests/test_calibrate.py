@@ -231,8 +231,6 @@ def test_api_calibrate_with_a_prior(tmp_path, model):
         api_calibrate(path, fit=("frame",), model="analytic", priors={"mount_x": (0.0, 1.0)}, loo=False)
 
 
-@pytest.mark.xfail(strict=True, reason="predictor.gripper.finger_pose does not apply the joint calibration keys "
-                   "(pressure_gain, pressure_offset, stiffness_scale) yet: docs/calibration.md")
 def test_tools_apply_the_joint_calibration_keys(model):
     """A finger file with a joint's pressure_gain = 1.2 gives GripperProblem the gesture of
     the calibration's model at gain 1.2 (tau within 1e-6 N, N·mm: the solver's tolerances)."""
