@@ -40,7 +40,7 @@ endif
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study joint-render self-contact validation \
-        dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse finger-fem validate-finger report clean
+        dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery finger-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -223,6 +223,13 @@ inverse: results/predictor/inverse.json ## inverse pressures: hold the three obj
 results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py | $(SETUP)
 	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
 	  --out $@ --plot results/predictor/inverse.png --json
+
+# ---------------------------------------------------------------- calibration (issue 38)
+calibrate-recovery: results/calibration/recovery.json ## calibration on known truth: the fit recovers parameters from predictor observations, noise-free and 20 noisy seeds (~1 min) -> results/calibration/recovery.json
+results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.py predictor/calibration.py \
+    predictor/calibration_fit.py predictor/calibration_recovery.py predictor/calibrate.py | $(SETUP)
+	@mkdir -p $(@D)
+	$(PY) -m predictor.calibrate recovery --out $@
 
 # ---------------------------------------------------------------- finger validation (issue 14)
 FINGER_FEM := results/validation/finger_fem

@@ -14,7 +14,14 @@ down). At rest the finger is straight: part k starts at arc length ``rest_start(
 along that direction.
 
 The file is TOML (format tag ``softjoint-finger/1``); ``contract/fingers/paper.toml`` is the
-paper's gripper and the default. Every error is a FingerFileError (a ValueError) with one
+paper's gripper and the default.
+
+A calibrated finger (predictor.calibrate, docs/calibration.md) adds optional keys, absent
+from uncalibrated files (which load exactly as before): per joint ``pressure_gain`` g,
+``pressure_offset`` o (MPa) and ``stiffness_scale`` s, under which joint i sees
+P_eff = (g·P + o)/s and loads tau/s (a joint of modulus s·E), and a top-level
+``[calibration]`` table that records the fit (measurements' digest, figures): kept as read,
+never interpreted by the loader beyond being a table. Every error is a FingerFileError (a ValueError) with one
 line naming the file and the offending key; every number has a working range (RANGES) and a
 finger has at most MAX_PARTS parts and MAX_LENGTH mm. dolfinx-free and torch-free: the predictor
 imports it without FEniCSx.
@@ -44,11 +51,21 @@ class FingerFileError(ValueError):
 
 @dataclass(frozen=True)
 class JointPart:
-    """A bellow joint: weight (N); contact: its 10 anchors are contact sample points."""
+    """A bellow joint: weight (N); contact: its 10 anchors are contact sample points;
+    pressure_gain, pressure_offset (MPa), stiffness_scale: its calibration (module
+    docstring; 1, 0, 1 = the joint model as it is)."""
 
     weight: float = 0.09
     contact: bool = True
+    pressure_gain: float = 1.0
+    pressure_offset: float = 0.0
+    stiffness_scale: float = 1.0
     kind = "joint"
+
+    @property
+    def calibrated(self) -> bool:
+        """Whether any calibration key differs from the identity (1, 0, 1)."""
+        return (self.pressure_gain, self.pressure_offset, self.stiffness_scale) != (1.0, 0.0, 1.0)
 
     @property
     def length(self) -> float:
@@ -76,6 +93,8 @@ class FingerSpec:
     base_angle: float = -0.5 * math.pi
     name: str = "finger"
     digest: str = field(default="", compare=False)   # sha256 of the file it came from
+    # The [calibration] table of a calibrated file, as read (a record, not physics).
+    calibration: dict | None = field(default=None, compare=False, repr=False)
 
     @property
     def joints(self) -> tuple[int, ...]:
@@ -100,11 +119,26 @@ class FingerSpec:
         """Weight of one finger (N)."""
         return sum(p.weight for p in self.parts)
 
+    @property
+    def calibrated(self) -> bool:
+        """Whether any joint carries a calibration (JointPart.calibrated)."""
+        return any(p.kind == "joint" and p.calibrated for p in self.parts)
+
     def summary(self) -> dict:
         """JSON-ready description (angles in degrees)."""
-        parts = [{"kind": p.kind, **{k: getattr(p, k) for k in p.__dataclass_fields__}} for p in self.parts]
         return {"name": self.name, "sha256": self.digest, "base_gap": self.base_gap,
-                "base_angle_deg": math.degrees(self.base_angle), "parts": parts}
+                "base_angle_deg": math.degrees(self.base_angle), "parts": [part_dict(p) for p in self.parts]}
+
+
+#: A joint's calibration keys and their identity values: part_dict leaves them out when
+#: they are the identity, so an uncalibrated finger describes itself as before.
+JOINT_CALIBRATION = {"pressure_gain": 1.0, "pressure_offset": 0.0, "stiffness_scale": 1.0}
+
+
+def part_dict(part) -> dict:
+    """A part's keys and values (kind first), calibration keys only when not the identity."""
+    return {"kind": part.kind, **{k: getattr(part, k) for k in part.__dataclass_fields__
+                                  if JOINT_CALIBRATION.get(k, object()) != getattr(part, k)}}
 
 
 #: Working ranges (inclusive) of every value that sizes the mesh or the predictor's
@@ -115,16 +149,19 @@ RANGES = {
     "length": (1.0, 500.0, "mm"), "height": (1.0, 100.0, "mm"), "width": (1.0, 100.0, "mm"),
     "weight": (0.0, 2.0, "N"), "contact_points": (0, 1000, ""),
     "base_gap": (0.0, 1000.0, "mm"), "base_angle_deg": (-360.0, 360.0, "deg"),
+    "pressure_gain": (0.2, 5.0, ""), "pressure_offset": (-0.1, 0.1, "MPa"), "stiffness_scale": (0.2, 5.0, ""),
 }
 
 # key -> (type, lower bound, strictly above?) ; bool keys have no bound
 _PART_KEYS = {
-    "joint": {"weight": (float, 0.0, False), "contact": (bool, None, False)},
+    "joint": {"weight": (float, 0.0, False), "contact": (bool, None, False),
+              "pressure_gain": (float, 0.0, True), "pressure_offset": (float, None, False),
+              "stiffness_scale": (float, 0.0, True)},
     "rigid": {"length": (float, 0.0, True), "weight": (float, 0.0, False), "height": (float, 0.0, True),
               "width": (float, 0.0, True), "contact_points": (int, 0, False)},
 }
 _REQUIRED = {"joint": (), "rigid": ("length", "weight")}
-_TOP_KEYS = {"format", "name", "base_gap", "base_angle_deg", "part"}
+_TOP_KEYS = {"format", "name", "base_gap", "base_angle_deg", "part", "calibration"}
 
 
 def _value(where: str, key: str, value, kind: type, low, strict: bool):
@@ -191,7 +228,11 @@ def parse_finger(text: str, source: str = "<finger>") -> FingerSpec:
         raise FingerFileError(f"{source}: name = {name!r} must be a non-empty string")
     gap = _value(source, "base_gap", doc.get("base_gap", 50.0), float, None, False)
     angle = _value(source, "base_angle_deg", doc.get("base_angle_deg", -90.0), float, None, False)
-    return FingerSpec(parts, gap, math.radians(angle), name, hashlib.sha256(text.encode()).hexdigest())
+    calibration = doc.get("calibration")
+    if calibration is not None and not isinstance(calibration, dict):
+        raise FingerFileError(f"{source}: calibration must be a [calibration] table")
+    return FingerSpec(parts, gap, math.radians(angle), name, hashlib.sha256(text.encode()).hexdigest(),
+                      calibration)
 
 
 def load_finger(path: str | Path | None = None) -> FingerSpec:
@@ -217,7 +258,7 @@ def finger_to_dict(finger: FingerSpec) -> dict:
     """Plain-JSON description of a finger that ``finger_from_dict`` rebuilds exactly
     (angles in rad, so the round trip is bit for bit; for checkpoints' configs)."""
     return {"name": finger.name, "base_gap": finger.base_gap, "base_angle": finger.base_angle,
-            "parts": [{"kind": p.kind, **{k: getattr(p, k) for k in p.__dataclass_fields__}} for p in finger.parts]}
+            "parts": [part_dict(p) for p in finger.parts]}
 
 
 def finger_from_dict(d: dict) -> FingerSpec:

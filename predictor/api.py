@@ -5,6 +5,7 @@
     gesture = solve_gesture(g, 0.2, 0.3)              # Gesture: .summary() -> dict
     atlas = grasp_atlas(g, grid=21)                   # predictor.atlas.Atlas: .summary(), .to_json()
     answer = inverse_pressures(g, goal="hold", atlas=atlas)   # InverseResult: .summary()
+    fit = calibrate("observations.json", fit=("gain", "offset"), out="calibrated.toml")
 
 Units: pressures MPa, lengths mm (global frame of docs/gripper.md, right finger), forces N.
 Every call goes through the same solver and history as ``predictor.gesture --object``
@@ -86,6 +87,32 @@ def grasp_atlas(gripper: Gripper, grid: int = 61, box=FULL_BOX,
     """The grid x grid atlas over box (P1lo, P1hi, P2lo, P2hi) MPa (predictor.atlas;
     path: sweep or ramp)."""
     return _atlas.grasp_atlas(gripper.problem, grid, box, options, path)
+
+
+def calibrate(observations: str | Path, fit=("gain", "offset", "stiffness"), finger: str | Path | FingerSpec | None = None,
+              model: str | None = None, priors: dict | None = None, out: str | Path | None = None, starts: int = 3,
+              loo: bool = True, kinematics: str = DEFAULT_KINEMATICS, joint_weight: str = DEFAULT_JOINT_WEIGHT):
+    """Fit the gripper to a measurement file, as ``python -m predictor.calibrate``
+    (docs/calibration.md): fit names or groups, priors {name: (mean, std)} in the
+    parameters' units; out: the calibrated finger file to write (None: none). Returns
+    predictor.calibration_fit.CalibrationResult (summary() is the CLI's JSON). ValueError
+    (one line) for a bad file, name, prior or finger."""
+    from predictor.calibration import CalibrationModel
+    from predictor.calibration_file import write_calibrated
+    from predictor.calibration_fit import Prior, calibrate as fit_calibration
+    from predictor.joint import load_joint
+    from predictor.observations import load_observations
+
+    if finger is not None and not isinstance(finger, FingerSpec):
+        finger = load_finger(finger)
+    finger = finger or default_finger()
+    obs = load_observations(observations, finger)
+    cal = CalibrationModel(load_joint(model), finger, kinematics, joint_weight)
+    res = fit_calibration(cal, obs, tuple(fit), {k: Prior(*v) for k, v in (priors or {}).items()}, starts=starts,
+                          loo=loo)
+    if out is not None:
+        write_calibrated(out, cal, res, obs.sha256, str(observations))
+    return res
 
 
 def inverse_pressures(gripper: Gripper, goal: str = "hold", min_normal: float = 0.0, least_pressure: bool = False,

@@ -23,7 +23,9 @@ and then O <- r_10,i (its distal end) and a <- phi_i, the joint's exit angle:
 A rigid part of length l goes from O to O + l·(cos a, sin a) and leaves a unchanged, so
 theta_{i+1} = phi_i when a rigid part (or nothing) lies between two joints. For the right
 finger, a joint's local +y is global +X at rest, so P > 0 (bending to -y) closes the finger
-and P < 0 opens it.
+and P < 0 opens it. A calibrated finger file (predictor.calibrate) gives joint i a pressure
+gain g_i, offset o_i (MPa) and stiffness scale s_i: the joint model is evaluated at
+((g_i P_i + o_i)/s_i, tau_i/s_i), the exact similarity of a joint of modulus s_i E.
 
 Weights (N): a rigid part's at its midpoint; a joint's, with ``joint_weight``
 ``lumped`` (the paper's), at the mean of its 10 anchors, or ``split`` (the default): half at
@@ -350,6 +352,17 @@ class FingerPose:
         return self._points_of(3)
 
 
+@functools.lru_cache(maxsize=16)
+def joint_calibration(finger: FingerSpec) -> tuple[tuple[float, ...], ...] | None:
+    """(gains, offsets MPa, stiffness scales), one per joint, of a calibrated finger file
+    (contract.finger; predictor.calibrate writes them), or None when every joint is the
+    joint model as it is."""
+    joints = [p for p in finger.parts if p.kind == "joint"]
+    if not any(p.calibrated for p in joints):
+        return None
+    return tuple(tuple(getattr(p, k) for p in joints) for k in ("pressure_gain", "pressure_offset", "stiffness_scale"))
+
+
 def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
     """Forward kinematics of the right finger (module docstring).
 
@@ -359,6 +372,10 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
     finger = params.finger
     B = pressures.shape[0]
     inputs = torch.cat((pressures[..., None], tau), -1)  # (B, J, 4): one joint-model pass
+    calibration = joint_calibration(finger)
+    if calibration is not None:   # joint i of modulus s E sees ((g P + o)/s, tau/s)
+        g, o, s = (torch.tensor(v, dtype=tau.dtype) for v in calibration)
+        inputs = torch.cat((((g * pressures + o) / s)[..., None], tau / s[:, None]), -1)
     if params.kinematics == "cap":
         anchors, turn = joint.anchors_and_cap(inputs)  # (B, J, 10, 2) local, (B, J) rad
     else:

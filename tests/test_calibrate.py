@@ -1,0 +1,277 @@
+"""The calibration (predictor.calibration, calibration_fit, calibration_file, observations,
+the predictor.calibrate CLI) on the analytic joint: its residual against the statics', the
+stiffness similarity against a stiffer analytic beam, its equilibrium against the solver,
+the fit's Jacobian against finite differences, exact recovery of a known truth, the
+detection of an exact degeneracy, bad measurement files (exit 2, one line, nothing
+written) and the calibrated finger file read back by predictor.gesture.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from contract.finger import FingerFileError, load_finger, parse_finger
+from predictor.calibrate import main as calibrate_main
+from predictor.calibration import CalibrationModel, ScaledJoint, design, equilibrium, predict
+from predictor.calibration_fit import Prior, Problem, calibrate
+from predictor.calibration_recovery import synthetic_observations
+from predictor.gripper import GripperParams, default_finger, rot
+from predictor.joint import AnalyticJoint
+from predictor.observations import ObservationError, observations_to_json, parse_observations
+from predictor.solve import solve
+from predictor.statics import GripperProblem, scaled
+
+from test_predictor_common import ROOT
+
+torch.set_num_threads(1)
+JOINT = AnalyticJoint()
+PAPER = default_finger()
+P = ((0.0, 0.0), (0.1, 0.0), (0.0, 0.1), (-0.1, 0.05), (0.05, -0.1), (0.12, 0.12))
+TRUTH = {"gain_J1": 1.08, "gain_J2": 0.93, "offset_J1": 0.008, "offset_J2": -0.006, "stiffness_J1": 1.12,
+         "stiffness_J2": 0.9, "frame_x": 3.0, "frame_y": -2.0, "frame_deg": 1.5}
+
+
+@pytest.fixture(scope="module")
+def model():
+    return CalibrationModel(JOINT, PAPER)
+
+
+def _theta(model, B, **values):
+    th = model.nominal.clone()
+    for k, v in values.items():
+        th[model.index[k]] = v
+    return th[None].repeat(B, 1)
+
+
+def test_residual_is_the_statics_and_a_turned_mount_turns_gravity(model):
+    """At the nominal parameters the calibration's residual equals GripperProblem's scaled
+    residual at random tau (<= 1e-15); with the mount turned by 3 deg it equals the
+    residual of a finger file with base_angle + 3 deg turned back by 3 deg (moments
+    unchanged), to 1e-12."""
+    g = torch.Generator().manual_seed(0)
+    p = torch.tensor(P, dtype=torch.float64)
+    x = 0.3 * torch.randn(len(P), 6, generator=g, dtype=torch.float64)
+    ones = torch.ones(len(P), dtype=torch.float64)
+    ref = scaled(GripperProblem(JOINT, GripperParams(PAPER)).residual(p, x.reshape(-1, 2, 3)).residual)
+    assert float((model.residual(x, _theta(model, len(P)), p, ones) - ref).abs().max()) <= 1e-15
+    turned = dataclasses.replace(PAPER, base_angle=PAPER.base_angle + math.radians(3.0))
+    ref = scaled(GripperProblem(JOINT, GripperParams(turned)).residual(p, x.reshape(-1, 2, 3)).residual)
+    ours = model.residual(x, _theta(model, len(P), mount_deg=3.0), p, ones).reshape(-1, 2, 3)
+    back = torch.cat((rot(torch.tensor(math.radians(3.0), dtype=torch.float64), ours[..., :2]), ours[..., 2:]), -1)
+    assert float((back.reshape(len(P), -1) - ref).abs().max()) <= 1e-12
+
+
+def test_scaled_joint_is_a_stiffer_beam():
+    """The similarity R(P, tau; sE) = R(P/s, tau/s; E) with a gain and offset, against
+    an independent analytic beam: modulus s·E scales EI and EA by s, the gain scales the
+    pressure couple c_p by g, the offset adds -c_p·o to the end couple."""
+    g, o, s = 1.1, 0.02, 1.3
+    inputs = torch.tensor([[0.15, 0.4, -0.3, 12.0], [-0.2, -0.5, 0.6, -30.0]], dtype=torch.float64)
+    gos = (torch.tensor(v, dtype=torch.float64) for v in (g, o, s))
+    ours = ScaledJoint(JOINT, *gos).anchors_and_cap(inputs)
+    beam = AnalyticJoint(EI=s * JOINT.EI, c_p=g * JOINT.c_p, EA=s * JOINT.EA)
+    shifted = inputs + torch.tensor([0.0, 0.0, 0.0, -JOINT.c_p * o], dtype=torch.float64)
+    ref = beam.anchors_and_cap(shifted)
+    assert float((ours[0] - ref[0]).abs().max()) <= 1e-12 and float((ours[1] - ref[1]).abs().max()) <= 1e-14
+
+
+def test_equilibrium_is_the_solvers(model):
+    """Newton on the calibration's residual lands on predictor.solve's gravity gesture
+    (tau within 1e-6 N, N·mm: the solver stops at 1e-7 N, 1e-5 N·mm), with and without gravity."""
+    obs = synthetic_observations(model, {}, P)
+    d = design(obs, PAPER)
+    x, ok = equilibrium(model, d, _theta(model, len(P)))
+    assert bool(ok.all())
+    ref = solve(GripperProblem(JOINT, GripperParams(PAPER)), d.pressures)
+    assert float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6
+    d.gravity = torch.zeros(len(P), dtype=torch.float64)
+    x, ok = equilibrium(model, d, _theta(model, len(P)))
+    ref = solve(GripperProblem(JOINT, GripperParams(PAPER), gravity=False), d.pressures)
+    assert bool(ok.all()) and float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6
+
+
+def test_fit_jacobian_matches_finite_differences(model):
+    """The implicit-function Jacobian of the weighted residual (every group: gains,
+    offsets, stiffness, a weight, the mount, the frame; one observation without gravity)
+    against central differences (h = 1e-5 of the scale): relative error <= 1e-6."""
+    obs = synthetic_observations(model, TRUTH, P[:4], noise_mm=0.3, noise_deg=0.3, seed=3)
+    obs = dataclasses.replace(obs, items=obs.items[:3] + (dataclasses.replace(obs.items[3], gravity=False),))
+    names = list(TRUTH) + ["weight_4", "mount_x", "mount_deg"]
+    prob = Problem(model, design(obs, PAPER), tuple(model.index[n] for n in names), {"weight_4": Prior(0.07, 0.01)})
+    v = np.array([model.nominal[model.index[n]].item() for n in names]) + 0.01 * prob.scale
+    r, jac = prob.residual(v, jacobian=True)
+    fd = np.empty_like(jac)
+    for k in range(len(v)):
+        h = np.zeros_like(v)
+        h[k] = 1e-5 * prob.scale[k]   # the equilibria are exact to 1e-10: smaller h is noise
+        fd[:, k] = (prob.residual(v + h) - prob.residual(v - h)) / (2 * h[k])
+    assert np.abs(jac - fd).max() <= 1e-6 * np.abs(jac).max()
+    assert np.abs(fd[:, names.index("stiffness_J2")]).max() > 1.0   # not a vacuous check
+
+
+def test_noise_free_recovery_and_exact_degeneracy(model):
+    """Noise-free observations of a known truth (6 pressure pairs): every parameter
+    recovered to 1e-6 relative, rms from > 1 mm to < 1e-6 mm. Fitting the mount's shift
+    beside the frame's (an exact degeneracy: both translate the finger along X) flags
+    both unidentifiable."""
+    obs = synthetic_observations(model, TRUTH, P)
+    res = calibrate(model, obs, list(TRUTH), starts=1, loo=False)
+    for n, v in zip(res.names, res.values):
+        assert abs(v - TRUTH[n]) <= 1e-6 * abs(TRUTH[n]), n
+    assert res.rms_before_mm > 1.0 and res.rms_after_mm < 1e-6
+    res = calibrate(model, obs, ["offset", "mount_x", "frame_x"], starts=1, loo=False)
+    assert {"mount_x", "frame_x"} <= set(res.unidentifiable)
+    assert any({p[0], p[1]} == {"mount_x", "frame_x"} and p[2] < -0.999 for p in res.correlated)
+
+
+def _points(obs) -> np.ndarray:
+    """(B, 2 + 2·markers) measured tip and marker coordinates (mm)."""
+    return np.array([[*o.tip[:2]] + [v for m in o.markers for v in (m.x, m.y)] for o in obs.items])
+
+
+def test_covariance_of_a_translation_is_exact(model):
+    """The measurements are linear in the frame's translation with unit slope: fitting
+    frame_x and frame_y to 6 noisy observations of 2 points each (sigma 0.3 mm) gives the
+    exact least-squares answers (the mean offsets) and std 0.3/sqrt(12) mm, uncorrelated."""
+    obs = synthetic_observations(model, {"frame_x": 1.0, "frame_y": -2.0}, P, noise_mm=0.3, noise_deg=0.3, seed=5)
+    clean = synthetic_observations(model, {}, P)
+    res = calibrate(model, obs, ["frame_x", "frame_y"], starts=1, loo=False)
+    diff = (_points(obs) - _points(clean)).reshape(-1, 2)
+    assert np.allclose(res.values, diff.mean(0), atol=1e-9, rtol=0)
+    assert np.allclose(res.std, 0.3 / math.sqrt(12), rtol=1e-9) and abs(res.correlation[0, 1]) < 1e-9
+
+
+BAD = [
+    ({"format": "x", "observations": []}, "format"),
+    ({"format": "softjoint-observations/1", "observations": [{"pressures": [0.1]}]}, "list of 2 numbers"),
+    ({"format": "softjoint-observations/1", "observations": [{"pressures": [0.5, 0], "tip": {}}]},
+     "pressures[0] = 0.5: outside [-0.3, 0.3] MPa"),
+    ({"format": "softjoint-observations/1", "observations": [{"pressures": [0, 0]}]}, "measures nothing"),
+    ({"format": "softjoint-observations/1", "observations": [
+        {"pressures": [0, 0], "tip": {"x": 1, "y": 2, "sigma_mm": 0}}]}, "sigma_mm = 0: outside [0.0001, 100] mm"),
+    ({"format": "softjoint-observations/1", "observations": [
+        {"pressures": [0, 0], "markers": [{"part": 5, "s": 1, "x": 0, "y": 0, "sigma_mm": 1}]}]}, "part = 5"),
+    ({"format": "softjoint-observations/1", "observations": [
+        {"pressures": [0, 0], "markers": [{"part": 2, "s": 61, "x": 0, "y": 0, "sigma_mm": 1}]}]},
+     "s = 61: outside [0, 60] mm"),
+    ({"format": "softjoint-observations/1", "observations": [
+        {"pressures": [0, 0], "tip_angle": {"deg": -90, "sigma_deg": 0.3}, "colour": 1}]}, "unknown key 'colour'"),
+]
+
+
+@pytest.mark.parametrize("doc,why", BAD)
+def test_bad_measurement_file_exits_2_with_one_line(tmp_path, capsys, doc, why):
+    """Each schema violation: exit 2, one stderr line naming the key and the allowed range,
+    no output written (checked before any model is loaded)."""
+    path, out = tmp_path / "obs.json", tmp_path / "cal.toml"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(SystemExit) as exc:
+        calibrate_main(["--observations", str(path), "--model", "analytic", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and why in err, err
+    assert not out.exists()
+    with pytest.raises(ObservationError):
+        parse_observations(json.dumps(doc), PAPER)
+
+
+def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
+    """The CLI (a subprocess, --json) fits a heavier tip and a turned, shifted mount to
+    observations of that truth (frame untouched), exits 0 with the issue's keys, and
+    writes a finger file: predictor.gesture --finger reads it and its tip at a new
+    pressure pair equals the truth's prediction (1e-6 mm); the file records the
+    measurements' sha256. A bad --fit name exits 2 with one line."""
+    truth = {"weight_4": 0.075, "mount_deg": 2.0, "mount_x": 1.5}
+    obs = synthetic_observations(model, truth, P)
+    path, out = tmp_path / "obs.json", tmp_path / "cal.toml"
+    path.write_text(json.dumps(observations_to_json(obs)))
+    run = [sys.executable, "-m", "predictor.calibrate", "--observations", str(path), "--model", "analytic"]
+    r = subprocess.run(run + ["--fit", "weight_4,mount", "--out", str(out), "--json"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert {"parameters", "rms_before_mm", "rms_after_mm", "loo_tip_error_mm", "time_s"} <= set(s)
+    assert abs(s["parameters"]["mount_deg"]["value"] - 2.0) <= 1e-6 and s["loo_tip_error_mm"] < 1e-5
+    finger = load_finger(out)
+    assert finger.calibration["observations_sha256"] == parse_observations(path.read_text(), PAPER).sha256
+    g = subprocess.run([sys.executable, "-m", "predictor.gesture", "--finger", str(out), "--model", "analytic",
+                        "--p1", "0.07", "--p2", "-0.03", "--json"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)
+    assert g.returncode == 0, g.stderr
+    one = synthetic_observations(model, truth, ((0.07, -0.03),))
+    assert np.allclose(json.loads(g.stdout)["tip"], one.items[0].tip[:2], atol=1e-6, rtol=0)
+    bad = subprocess.run(run + ["--fit", "gain,elasticity", "--out", str(tmp_path / "b.toml")], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "elasticity" in bad.stderr
+
+
+def test_api_calibrate_with_a_prior(tmp_path, model):
+    """predictor.api.calibrate: a measurement file of a heavier tip and a turned camera,
+    fitted with a prior on the tip's weight at its true value: both recovered to 1e-6
+    (noise-free), the prior's std bounds the weight's (<= 0.002 N); an unknown prior name
+    is a one-line ValueError."""
+    from predictor.api import calibrate as api_calibrate
+
+    truth = {"weight_4": 0.075, "frame_deg": -1.0}
+    path = tmp_path / "obs.json"
+    path.write_text(json.dumps(observations_to_json(synthetic_observations(model, truth, P))))
+    res = api_calibrate(path, fit=("weight_4", "frame_deg"), model="analytic", priors={"weight_4": (0.075, 0.002)},
+                        starts=1, loo=False)
+    s = res.summary()["parameters"]
+    assert abs(s["weight_4"]["value"] - 0.075) <= 1e-6 and abs(s["frame_deg"]["value"] + 1.0) <= 1e-6
+    assert 0 < s["weight_4"]["std"] <= 0.002
+    with pytest.raises(ValueError, match="--prior mount_x: not a fitted parameter"):
+        api_calibrate(path, fit=("frame",), model="analytic", priors={"mount_x": (0.0, 1.0)}, loo=False)
+
+
+def test_tools_apply_the_joint_calibration_keys(model):
+    """A finger file with a joint's pressure_gain = 1.2 gives GripperProblem the gesture of
+    the calibration's model at gain 1.2 (tau within 1e-6 N, N·mm: the solver's tolerances)."""
+    text = (ROOT / "contract/fingers/paper.toml").read_text().replace(
+        'weight = 0.09\ncontact = false', 'weight = 0.09\ncontact = false\npressure_gain = 1.2', 1)
+    finger = parse_finger(text, "gain.toml")
+    p = torch.tensor([[0.1, 0.05]], dtype=torch.float64)
+    ref = solve(GripperProblem(JOINT, GripperParams(finger)), p)
+    obs = synthetic_observations(model, {}, ((0.1, 0.05),))
+    x, _ = equilibrium(model, design(obs, PAPER), _theta(model, 1, gain_J1=1.2))
+    assert float((x - ref.tau.reshape(1, -1)).abs().max()) <= 1e-6
+
+
+def test_finger_files_without_calibration_load_as_before():
+    """The paper's file: no calibration, summary without the joint keys (as before), the
+    same FingerSpec as one with the identity keys written out; out-of-range or non-table
+    calibration keys are one-line FingerFileErrors."""
+    text = (ROOT / "contract/fingers/paper.toml").read_text()
+    paper = parse_finger(text, "paper.toml")
+    assert not paper.calibrated and paper.calibration is None
+    assert all(set(p) <= {"kind", "weight", "contact", "length", "height", "width", "contact_points"}
+               for p in paper.summary()["parts"])
+    same = parse_finger(text.replace("contact = false", "contact = false\npressure_gain = 1.0\nstiffness_scale = 1.0"))
+    assert same == paper
+    for bad, why in (("pressure_gain = 9.0", "outside [0.2, 5]"), ("stiffness_scale = 0.0", "must be > 0"),
+                     ("pressure_offset = 0.5", "outside [-0.1, 0.1] MPa")):
+        with pytest.raises(FingerFileError, match=re.escape(why)):
+            parse_finger(text.replace("contact = false", f"contact = false\n{bad}"), "f.toml")
+    with pytest.raises(FingerFileError, match="calibration must be a"):
+        parse_finger(text.replace('name = "paper"', 'name = "paper"\ncalibration = 3'), "f.toml")
+
+
+def test_predicted_tip_is_the_pose_tip(model):
+    """predict's tip (identity frame and mount) is FingerPose.tip_end of the solved gesture,
+    and its angle tip_angle in degrees (to 1e-12)."""
+    obs = synthetic_observations(model, {}, P[:2])
+    d = design(obs, PAPER)
+    th = _theta(model, 2)
+    x, _ = equilibrium(model, d, th)
+    m = predict(model, d, x, th)
+    pose = model.pose(x, th, d.pressures)
+    rows = list(d.tip_rows[1])
+    assert float((m[rows] - pose.tip_end[1]).abs().max()) <= 1e-12
+    assert abs(float(m[rows[1] + 3]) - math.degrees(float(pose.tip_angle[1]))) <= 1e-12
