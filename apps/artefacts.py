@@ -61,6 +61,7 @@ ARTEFACTS = (
     Artefact("predictor/ramp/atlas_*.json", "make atlas-reference", predictor.ATLAS),
     Artefact("predictor/ramp_fine/atlas_*.json", "make atlas-reference-fine", predictor.ATLAS),
     Artefact("predictor/inverse.json", "make inverse", predictor.INVERSE),
+    Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),
     Artefact("validation/finger.json", "make validate-finger", predictor.VALIDATION),
     Artefact("validation/finger_fem/*.json", "make finger-fem", fem.FINGER_CASE),
     Artefact("demo/finger.json", "make demo", predictor.VALIDATION),

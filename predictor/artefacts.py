@@ -103,3 +103,14 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
     "mesh_check?[].case": str, **each("mesh_check?[]", NUM, "production_mesh_size", "mesh_size",
                                        "tip_change_mm", "tip_angle_change_deg"),
     **each("mesh_check?[]", int, "production_nodes", "nodes"), "mesh_check?[].wall_mesh_size?": NUM})
+
+#: results/calibration/recovery.json (make calibrate-recovery; predictor.calibrate recovery):
+#: the calibration fit on observations made from a known truth, noise-free and noisy seeds.
+RECOVERY = Format("predictor-calibration-recovery", 1, "predictor.calibrate", {
+    "truth{}": NUM, "pressures_MPa": list, "joint_model": str, **each("noise", NUM, "mm", "deg"),
+    "seeds": int, "starts": int, "targets": dict, "time_s": NUM,
+    **each("noise_free", list, "parameters", "identifiable", "unidentifiable"),
+    "noise_free.all_identifiable_within_2pct": bool, "noise_free.observations": int,
+    **each("noise_free", NUM, "rms_before_mm", "rms_after_mm", "time_s"),
+    "noisy.coverage_95": NUM, "noisy.coverage_95_per_parameter{}": MAYBE,
+    "noisy.runs[].seed": int, "noisy.runs[].rms_after_mm": NUM, "noisy.runs[].parameters": dict})

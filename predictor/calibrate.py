@@ -32,8 +32,8 @@ import sys
 import torch
 
 from contract import cli
-from contract.files import write_json
 from contract.finger import DEFAULT_FINGER, finger_arg
+from predictor.artefacts import RECOVERY
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS
 from predictor.joint import load_joint
 
@@ -125,7 +125,7 @@ def main_recovery(argv) -> int:
     with ap.errors():
         model = _model(args)
         study = recovery_study(model, seeds=args.seeds, starts=args.starts, progress=LOG.info)
-        write_json(args.out, study)
+        RECOVERY.write(args.out, study)
     nf = study["noise_free"]
     if args.json:
         cli.print_json({"coverage_95": study["noisy"]["coverage_95"],
