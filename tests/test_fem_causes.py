@@ -30,7 +30,7 @@ def record(disc, load, shift, phi=10.0, cap=12.0, t=10.0):
 
 def records(shifts: dict, loads=mc.LOADS[:2]) -> dict:
     out = {}
-    for (_, disc, _) in mc.PLAN:
+    for disc in mc.PLAN:
         if disc.key in shifts:
             out[disc.key] = {mc.load_key(ld.as_array()): record(disc, ld, shifts[disc.key], t=20.0 if
                                                                   disc.formulation == "mixed" else 10.0)
