@@ -206,10 +206,32 @@ def markdown(table: dict) -> str:
                      f"{_fmt(w.get('anchor_percent'), '.2f')} ({_fmt(m.get('anchor_percent'), '.2f')}) | "
                      f"{_fmt(w.get('phi_end_deg'), '.3f')} | {_fmt(w.get('cap_rotation_deg'), '.3f')} | "
                      f"{_fmt(ref, '.2f')} | {r['mean_solve_s']:.0f}{ratio} |")
+    lines += per_load_markdown(table)
     d = table["dominant"]
     lines += ["", f"Largest single effect: **{d['factor']}** ({d['key']}), {d['worst_anchor_percent']:.2f} % "
               "of the largest anchor displacement at the worst load." if d else "No effect measured yet."]
     return "\n".join(lines) + "\n"
+
+
+def per_load_markdown(table: dict) -> list[str]:
+    """Lines of a second table: each row's effect (anchor %) at each load, with the base's
+    contact state there (closed valley pairs)."""
+    rows = [r for r in table["rows"] if r.get("effect", {}).get("per_load")]
+    if not rows:
+        return []
+    head = "| load (P, F1, F2, M) | closed pairs | " + " | ".join(
+        f"{r['factor']}: {r['key']}" for r in rows) + " |"
+    lines = ["", "Effect per load, anchors % (phi_end deg):", "", head,
+             "|---|---|" + "---|" * len(rows)]
+    for load in table["loads"]:
+        k = load_key(load)
+        cells = []
+        for r in rows:
+            e = r["effect"]["per_load"].get(k)
+            cells.append("–" if e is None else f"{e['anchor_percent']:.2f} ({e['phi_end_deg']:.2f})")
+        closed = (table["base_contact"].get(k) or {}).get("closed_pairs", "–")
+        lines.append(f"| {', '.join(f'{v:g}' for v in load)} | {closed} | " + " | ".join(cells) + " |")
+    return lines
 
 
 # ---------------------------------------------------------------- solves
