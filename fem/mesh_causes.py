@@ -174,11 +174,15 @@ def analyse(records: dict, study: dict | None) -> dict:
         rows.append(row)
     effects = [r for r in rows if r.get("effect", {}).get("worst")]
     dominant = max(effects, key=lambda r: r["effect"]["worst"]["anchor_percent"]) if effects else None
+    ranking = {}
+    for r in effects:           # each factor's largest worst-load effect, over its rows
+        ranking[r["factor"]] = max(ranking.get(r["factor"], 0.0), r["effect"]["worst"]["anchor_percent"])
     contact = {load_key(c["load"]): c["contact"] for c in records.get(BASE.key, {}).values()}
     return {"loads": [load.as_array().tolist() for load in LOADS],
             "interior_loads": [load.as_array().tolist() for load in INTERIOR],
             "base": asdict(BASE), "reference": "mesh study, finest mesh (displacement P2 1.2:0.6), corners only"
             if refs else None, "base_contact": contact, "rows": rows,
+            "ranking": sorted(([f, v] for f, v in ranking.items()), key=lambda fv: -fv[1]),
             "dominant": {"factor": dominant["factor"], "key": dominant["key"],
                          "worst_anchor_percent": dominant["effect"]["worst"]["anchor_percent"]}
             if dominant else None}
@@ -211,6 +215,9 @@ def markdown(table: dict) -> str:
     d = table["dominant"]
     lines += ["", f"Largest single effect: **{d['factor']}** ({d['key']}), {d['worst_anchor_percent']:.2f} % "
               "of the largest anchor displacement at the worst load." if d else "No effect measured yet."]
+    if len(table["ranking"]) > 1:
+        lines += ["", "Factors by their largest effect (anchors %, worst load): " + ", ".join(
+            f"{f} {v:.2f}" for f, v in table["ranking"]) + "."]
     return "\n".join(lines) + "\n"
 
 
