@@ -60,6 +60,8 @@ def test_analyse_names_the_factor_that_moves_the_answer_most():
     assert rows[mixed.key]["time_ratio"] == pytest.approx(2.0)
     assert rows[mixed.key]["effect"]["loads"] == 2
     assert table["dominant"]["factor"] == "formulation"
+    assert [f for f, _ in table["ranking"]] == ["formulation", "quadrature"]
+    assert table["ranking"][1][1] == pytest.approx(100 * 0.05 / np.hypot(2.0, 10.0))
     assert "**formulation**" in mc.markdown(table)
 
 
