@@ -41,17 +41,28 @@ class ValleyContact:
     """Node-to-node penalty contact between the periodic valley faces of the joint."""
 
     def __init__(self, V, facet_tags, geometry: JointGeometry, penalty: float,
-                 offsets: tuple[float, ...] = (0.0,)):
-        """``offsets``: x (mm) of the proximal face of every joint in the mesh (a finger
-        holds several); valleys are numbered along x across all joints."""
+                 offsets: tuple[float, ...] = (0.0,), parent=None):
+        """``V``: the blocked (3-component) displacement space. ``offsets``: x (mm) of the
+        proximal face of every joint in the mesh (a finger holds several); valleys are
+        numbered along x across all joints. ``parent`` = (W, to_parent) when V is the
+        displacement block collapsed out of the unknown's mixed space W: ``to_parent[i]``
+        is the local dof of W of V's unrolled local dof i."""
         self.comm = V.mesh.comm
         self.penalty = penalty
         imap = V.dofmap.index_map
         nodes = fem.locate_dofs_topological(V, 2, facet_tags.find(TAGS["valley_faces"]))
-        self._owned = nodes[nodes < imap.size_local]
-        gidx = np.concatenate(self.comm.allgather(imap.local_to_global(self._owned)))
-        X = np.vstack(self.comm.allgather(V.tabulate_dof_coordinates()[self._owned]))
-        self._global = gidx.astype(PETSc.IntType)
+        owned = nodes[nodes < imap.size_local]
+        unrolled = 3 * owned[:, None] + np.arange(3)
+        if parent is None:
+            self._local = unrolled
+            gdofs = 3 * imap.local_to_global(owned)[:, None] + np.arange(3)
+        else:
+            W, to_parent = parent
+            self._local = np.asarray(to_parent, dtype=np.int32)[unrolled]
+            gdofs = W.dofmap.index_map.local_to_global(self._local.reshape(-1)).reshape(-1, 3)
+        # Global dofs (x, y, z) of every contact node, gathered: (n, 3).
+        self._dofs = np.vstack(self.comm.allgather(gdofs)).astype(PETSc.IntType)
+        X = np.vstack(self.comm.allgather(V.tabulate_dof_coordinates()[owned]))
         self.X = X
         # Pairs per valley and side, as indices into the gathered arrays.
         self.groups = {}
@@ -70,7 +81,7 @@ class ValleyContact:
 
     def positions(self, u: fem.Function) -> np.ndarray:
         """Deformed positions of all contact nodes, gathered on every rank. (n, 3) mm."""
-        mine = u.x.array.reshape(-1, 3)[self._owned]
+        mine = u.x.array[self._local]
         return self.X + np.vstack(self.comm.allgather(mine))
 
     @staticmethod
@@ -94,13 +105,13 @@ class ValleyContact:
         return out
 
     def _terms(self, u: fem.Function):
-        """Per pair: global node indices of a and b, normal, k w <-g>, k w H(-g)."""
+        """Per pair: global (x, y, z) dofs of a and b (n, 3), normal, k w <-g>, k w H(-g)."""
         x = self.positions(u)
         for a, b, w in self.groups.values():
             n = self.normal(x[a], x[b])
             g = (x[b] - x[a]) @ n
             closed = g < 0
-            yield (self._global[a], self._global[b], n,
+            yield (self._dofs[a], self._dofs[b], n,
                    self.penalty * w * np.where(closed, -g, 0.0),
                    self.penalty * w * closed)
 
@@ -110,8 +121,8 @@ class ValleyContact:
         if self.comm.rank == 0:
             for ga, gb, n, f, _ in terms:
                 for c in (0, 1):
-                    b.setValues(3 * ga + c, f * n[c], addv=PETSc.InsertMode.ADD)
-                    b.setValues(3 * gb + c, -f * n[c], addv=PETSc.InsertMode.ADD)
+                    b.setValues(ga[:, c], f * n[c], addv=PETSc.InsertMode.ADD)
+                    b.setValues(gb[:, c], -f * n[c], addv=PETSc.InsertMode.ADD)
         b.assemblyBegin()
         b.assemblyEnd()
 
@@ -126,7 +137,7 @@ class ValleyContact:
             for ga, gb, n, _, k in terms:
                 # One 4 x 4 block per pair on dofs (a_x, a_y, b_x, b_y), all pairs of the
                 # group in one CSR insertion: rows = the dofs, each row's columns = its pair's.
-                dofs = np.column_stack([3 * ga, 3 * ga + 1, 3 * gb, 3 * gb + 1]).astype(PETSc.IntType)
+                dofs = np.column_stack([ga[:, 0], ga[:, 1], gb[:, 0], gb[:, 1]]).astype(PETSc.IntType)
                 blocks = k[:, None, None] * np.kron(sign, np.outer(n[:2], n[:2]))
                 A.setValuesIJV(np.arange(0, blocks.size + 1, 4, dtype=PETSc.IntType),
                                np.repeat(dofs, 4, axis=0).reshape(-1), blocks.reshape(-1),

@@ -97,7 +97,10 @@ class Probes:
         return len(self.points)
 
     def values(self, func) -> np.ndarray:
-        """Values of ``func`` at the points, shape (n, 3); raises if one is outside."""
+        """Values of ``func`` at the points, shape (n, 3), of its displacement block for a
+        mixed (u, p) unknown; raises if one is outside."""
+        if type(func.function_space.ufl_element()) is ufl.MixedElement:
+            func = func.sub(0).collapse()   # dolfinx evaluates no mixed element
         points, cells = self.points, self.cells
         vals = np.full((len(points), 3), np.nan)
         mine = cells >= 0
@@ -217,10 +220,18 @@ class LoadPathSolver:
         mesh = mesh_data.mesh
         imap = mesh.topology.index_map(0)
         cmap = mesh.topology.index_map(mesh.topology.dim)
-        nodes = self.V.dofmap.index_map.size_global
+        if self.problem.displacement_space is None:
+            nodes = self.V.dofmap.index_map.size_global
+            return {"vertices": imap.size_global, "cells": cmap.size_global,
+                    "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
+                    "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size}
+        # mixed: nodes of u; dofs of the whole unknown (u and p)
+        imap_w = self.V.dofmap.index_map
         return {"vertices": imap.size_global, "cells": cmap.size_global,
-                "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
-                "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size}
+                "nodes": self.problem.displacement_space.dofmap.index_map.size_global,
+                "dofs": imap_w.size_global * self.V.dofmap.index_map_bs,
+                "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size,
+                "formulation": self.problem.formulation}
 
     # ------------------------------------------------------------------ algebra
     def _residual(self) -> float:

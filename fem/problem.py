@@ -13,6 +13,19 @@ A :class:`Problem` holds one static boundary-value problem in the unknown displa
       psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2
       mu = E / (2 (1 + nu)),   lambda = E nu / ((1 + nu)(1 - 2 nu))
 
+  or, with ``formulation="mixed"``, the same energy split by a pressure p (MPa, positive
+  in compression; Taylor-Hood: P``degree`` u, continuous P``degree - 1`` p) as the
+  stationary point of the perturbed Lagrangian
+
+      Pi(u, p) = ∫ mu/2 (I1 - 3) - mu ln J - p ln J - p² / (2 lambda) dX
+
+  whose p-equation ∫ q (ln J + p / lambda) dX = 0 makes p the projection of
+  -lambda ln J, i.e. J = exp(-p / lambda) ≈ 1 - p / lambda: at the solution Pi is the
+  displacement energy above, so both formulations converge to one answer, but the
+  near-incompressible lambda ~ 50 mu no longer enters the displacement stiffness
+  directly (no volumetric locking). The unknown is then w = (u, p); its first three
+  components are u;
+
 * the loads: each :class:`LoadTerm` is a constant c_i (a ``fem.Constant``) times its form
   G_i = dR/dc_i, and c_i follows one entry of the load vector a, either linearly
   (c = a_j) or one-sided (c = max(±a_j, 0): a signed pressure P inflates the top chamber
@@ -131,7 +144,11 @@ class Problem:
 
     ``load_scale`` (len(a),): the full-range magnitude of each load entry, which sizes the
     solver's first step. ``probe_points`` (n, 3) mm: material points whose displacement
-    the solver reports. ``averages``: named outputs (e.g. part rotations, rad)."""
+    the solver reports. ``averages``: named outputs (e.g. part rotations, rad).
+
+    ``u`` is the unknown: the displacement (mm), or for ``formulation`` "mixed" the pair
+    w = (u, p) whose first three components are u; ``displacement_space`` is then u's
+    own (collapsed) space, for counting nodes."""
 
     mesh_data: MeshData
     u: fem.Function
@@ -143,6 +160,8 @@ class Problem:
     contact: ValleyContact | None = None
     lagged: tuple[Lagged, ...] = ()
     averages: dict = field(default_factory=dict)
+    formulation: str = "displacement"
+    displacement_space: object = None
 
     @property
     def V(self):
@@ -207,14 +226,14 @@ def rotation_about_z(F, theta_ref=0.0):
 def follower_pressure(F, v, ds):
     """Virtual work per unit pressure of a follower load on the deformed surface ``ds``
     (Nanson: t0 = -p cofac(F) N; this is the residual term divided by p)."""
-    N = ufl.FacetNormal(v.ufl_function_space().mesh)
+    N = ufl.FacetNormal(ufl.domain.extract_unique_domain(v))
     return ufl.inner(ufl.cofac(F) * N, v) * ds
 
 
 def chamber_pressures(F, v, ds, top: int, bottom: int, present: set, index: int) -> tuple:
     """Load terms of one joint's signed pressure a[index] (MPa): P > 0 on the ``top``
     chamber's walls, -P on the ``bottom`` one's (facet tags; absent ones are skipped)."""
-    mesh = v.ufl_function_space().mesh
+    mesh = ufl.domain.extract_unique_domain(v)
     return tuple(LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)),
                           follower_pressure(F, v, ds(tag)), index, side)
                  for tag, side in ((top, 1), (bottom, -1)) if tag in present)
@@ -226,11 +245,14 @@ def region_volume(mesh, dx, comm: MPI.Comm) -> float:
     return comm.allreduce(fem.assemble_scalar(fem.form(one * dx)), op=MPI.SUM)
 
 
-def end_loads(F, u, v, dx_cap, ref_point, first: int) -> tuple[tuple, Lagged]:
+def end_loads(F, u, v, dx_cap, ref_point, first: int, unknown=None,
+              test=None) -> tuple[tuple, Lagged]:
     """F1, F2 (N) at ``ref_point`` carried by the rigid cap and the couple M (N·mm) about
     +z (module docstring), on load entries first .. first + 2; and the cap rotation they
-    are measured from (lagged, rad)."""
-    mesh = u.function_space.mesh
+    are measured from (lagged, rad). The potentials are varied in ``unknown`` along
+    ``test`` (default u and v; the mixed pair w and its test function)."""
+    unknown, test = (u, v) if unknown is None else (unknown, test)
+    mesh = unknown.function_space.mesh
     theta_ref = fem.Constant(mesh, PETSc.ScalarType(0))
     theta = rotation_about_z(F, theta_ref)
     volume = region_volume(mesh, dx_cap, mesh.comm)
@@ -242,7 +264,7 @@ def end_loads(F, u, v, dx_cap, ref_point, first: int) -> tuple[tuple, Lagged]:
     u_ref = ufl.as_vector([u[0], u[1]]) + (Rth - ufl.Identity(2)) * arm
     w = fem.Constant(mesh, PETSc.ScalarType(-0.5 / volume))   # the half-model carries half
     potentials = [w * u_ref[0] * dx_cap, w * u_ref[1] * dx_cap, w * theta * dx_cap]
-    terms = tuple(LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), ufl.derivative(pi, u, v),
+    terms = tuple(LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), ufl.derivative(pi, unknown, test),
                            first + i) for i, pi in enumerate(potentials))
     return terms, Lagged(theta_ref, Average(fem.form(theta * dx_cap), volume))
 
@@ -255,12 +277,13 @@ def facet_tags_present(facet_tags) -> set:
 
 
 def valley_contact(V, facet_tags, present: set, joint: JointGeometry, penalty: float,
-                   offsets: tuple[float, ...] = (0.0,)) -> ValleyContact | None:
+                   offsets: tuple[float, ...] = (0.0,), parent=None) -> ValleyContact | None:
     """The valley self-contact of the joints at x = ``offsets`` (mm), or None when the
-    mesh has no valley faces or the penalty (MPa/mm) is 0."""
+    mesh has no valley faces or the penalty (MPa/mm) is 0. ``parent``: see ValleyContact
+    (V a displacement space collapsed out of the mixed space)."""
     if TAGS["valley_faces"] not in present or penalty <= 0:
         return None
-    return ValleyContact(V, facet_tags, joint, penalty, offsets=offsets)
+    return ValleyContact(V, facet_tags, joint, penalty, offsets=offsets, parent=parent)
 
 
 def clamp_and_symmetry(V, facet_tags) -> list:
@@ -286,14 +309,96 @@ def displacement_space(mesh_data: MeshData, degree: int, quadrature_degree: int)
     return fem.Function(V, name="u"), ufl.TestFunction(V), dx, ds
 
 
+# ---------------------------------------------------------------------- mixed u-p
+FORMULATIONS = ("displacement", "mixed")
+
+
+@dataclass(frozen=True, eq=False)
+class MixedFields:
+    """The mixed unknown w = (u, p) of a Taylor-Hood space W and its pieces: UFL u (mm) and
+    p (MPa) with their test functions; ``U`` the collapsed displacement space and
+    ``to_parent[i]`` the local dof of W of U's unrolled local dof i."""
+
+    w: fem.Function
+    u: object
+    p: object
+    test: object
+    v: object
+    q: object
+    U: object
+    to_parent: np.ndarray
+
+
+def mixed_space(mesh_data: MeshData, degree: int, quadrature_degree: int):
+    """(MixedFields, dx, ds) of a half-model: P``degree`` u with a continuous
+    P``degree - 1`` pressure (Taylor-Hood, inf-sup stable for degree >= 2)."""
+    if degree < 2:
+        raise ValueError(f"the mixed formulation needs degree >= 2 (Taylor-Hood), not {degree}")
+    mesh, ct, ft = mesh_data.mesh, mesh_data.cell_tags, mesh_data.facet_tags
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    cell = mesh.ufl_cell()
+    W = fem.FunctionSpace(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, degree),
+                                                   ufl.FiniteElement("Lagrange", cell, degree - 1)]))
+    w = fem.Function(W, name="u_p")
+    test = ufl.TestFunction(W)
+    (u, p), (v, q) = ufl.split(w), ufl.split(test)
+    U, to_parent = W.sub(0).collapse()
+    md = {"quadrature_degree": quadrature_degree}
+    dx = ufl.Measure("dx", domain=mesh, subdomain_data=ct, metadata=md)
+    ds = ufl.Measure("ds", domain=mesh, subdomain_data=ft, metadata=md)
+    return MixedFields(w, u, p, test, v, q, U, np.asarray(to_parent)), dx, ds
+
+
+def mixed_energy_density(F, p, E: float, nu: float):
+    """The perturbed-Lagrangian density (MPa) of the module docstring,
+    mu/2 (I1 - 3) - mu ln J - p ln J - p²/(2 lambda); stationary in p at p = -lambda ln J,
+    where it equals neo_hookean_psi. Needs lambda > 0 (nu > 0)."""
+    mu, lmbda = lame(E, nu)
+    if lmbda <= 0:
+        raise ValueError(f"the mixed formulation needs nu > 0 (lambda > 0), not nu = {nu}")
+    J = ufl.det(F)
+    return mu / 2 * (ufl.tr(F.T * F) - 3) - mu * ufl.ln(J) - p * ufl.ln(J) - p ** 2 / (2 * lmbda)
+
+
+def mixed_bellow_work(fields: MixedFields, F, material: Material, body, cap):
+    """The joint's internal virtual work in w = (u, p): the variation of Pi(u, p) over the
+    NinjaFlex ``body`` and the stiff ``cap`` (one continuous pressure across both)."""
+    Pi = (mixed_energy_density(F, fields.p, material.E, material.nu) * body
+          + mixed_energy_density(F, fields.p, material.cap_stiffness * material.E,
+                                 material.cap_nu) * cap)
+    return ufl.derivative(Pi, fields.w, fields.test)
+
+
+def mixed_clamp_and_symmetry(W, facet_tags) -> list:
+    """u = 0 on the ``proximal`` facets and u_z = 0 on ``symmetry``, on the displacement
+    block of the mixed space W (one scalar condition per component)."""
+    fdim = W.mesh.topology.dim - 1
+    U = W.sub(0)
+    clamp, sym = facet_tags.find(TAGS["proximal"]), facet_tags.find(TAGS["symmetry"])
+    bcs = [fem.dirichletbc(PETSc.ScalarType(0), fem.locate_dofs_topological(U.sub(c), fdim, clamp),
+                           U.sub(c)) for c in range(3)]
+    bcs.append(fem.dirichletbc(PETSc.ScalarType(0), fem.locate_dofs_topological(U.sub(2), fdim, sym),
+                               U.sub(2)))
+    return bcs
+
+
 # ---------------------------------------------------------------------- the joint
 def joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
                   material: Material = Material(), *, degree: int = 2,
-                  quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
+                  quadrature_degree: int = 2, contact_penalty: float = 100.0,
+                  formulation: str = "displacement") -> Problem:
     """One joint-like body clamped at x = 0 (the bellow joint, or the benchmark beam):
     body and stiff cap, chamber pressure, valley contact where the mesh has them, and the
     end loads at ``ref_point`` (3,) mm. Load vector a = (P, F1, F2, M) in MPa, N, N, N·mm,
-    with full-range magnitudes ``load_scale`` (4,). Collective."""
+    with full-range magnitudes ``load_scale`` (4,). ``formulation``: "displacement"
+    (P``degree`` u) or "mixed" (Taylor-Hood u-p, module docstring). Collective."""
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
+    if formulation == "mixed":
+        return mixed_joint_problem(mesh_data, ref_point, probe_points, load_scale, material,
+                                   degree=degree, quadrature_degree=quadrature_degree,
+                                   contact_penalty=contact_penalty)
     u, v, dx, ds = displacement_space(mesh_data, degree, quadrature_degree)
     V, ft = u.function_space, mesh_data.facet_tags
     F = deformation_gradient(u)
@@ -305,3 +410,26 @@ def joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
                    tuple(clamp_and_symmetry(V, ft)), np.asarray(probe_points, dtype=float).reshape(-1, 3),
                    valley_contact(V, ft, present, mesh_data.geometry, contact_penalty),
                    lagged=(cap,), averages={"cap_rotation": cap.average})
+
+
+def mixed_joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
+                        material: Material = Material(), *, degree: int = 2,
+                        quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
+    """:func:`joint_problem` in the mixed u-p formulation: the same loads, contact, cap
+    rotation and probes, with the internal work of Pi(u, p). Collective."""
+    fields, dx, ds = mixed_space(mesh_data, degree, quadrature_degree)
+    W, ft = fields.w.function_space, mesh_data.facet_tags
+    F = deformation_gradient(fields.u)
+    internal = mixed_bellow_work(fields, F, material, dx(TAGS["solid"]), dx(TAGS["distal_cap"]))
+    present = facet_tags_present(ft)
+    pressure = chamber_pressures(F, fields.v, ds, TAGS["top_chamber"], TAGS["bottom_chamber"],
+                                 present, 0)
+    forces, cap = end_loads(F, fields.u, fields.v, dx(TAGS["distal_cap"]), ref_point, first=1,
+                            unknown=fields.w, test=fields.test)
+    contact = valley_contact(fields.U, ft, present, mesh_data.geometry, contact_penalty,
+                             parent=(W, fields.to_parent))
+    return Problem(mesh_data, fields.w, internal, pressure + forces,
+                   np.asarray(load_scale, dtype=float), tuple(mixed_clamp_and_symmetry(W, ft)),
+                   np.asarray(probe_points, dtype=float).reshape(-1, 3), contact,
+                   lagged=(cap,), averages={"cap_rotation": cap.average},
+                   formulation="mixed", displacement_space=fields.U)

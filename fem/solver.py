@@ -11,7 +11,8 @@ anchors r_1..r_10, phi_end and the cap rotation.
 
 The material is neo-Hookean, whose small-strain limit is exactly (E, nu) = (12.2 MPa,
 0.49); P2 displacements avoid the volumetric locking of P1 at nu = 0.49 (mesh convergence:
-``make mesh-study``). The paper used ANSYS linear elasticity with large deflection (St
+``make mesh-study``); ``formulation="mixed"`` solves the same energy in Taylor-Hood u-p
+form (fem.problem), which does not lock. The paper used ANSYS linear elasticity with large deflection (St
 Venant-Kirchhoff-like); neo-Hookean agrees with it at small strain and stays stable in
 compression.
 
@@ -103,13 +104,19 @@ class EndLoadedSolver:
     """A joint-like body (the bellow joint, the benchmark beam) clamped at x = 0, with a
     rigid cap loaded at ``ref_point`` (3,) mm: :func:`fem.problem.joint_problem` handed
     to a :class:`LoadPathSolver`. Load vector (P, F1, F2, M); ``probe_points`` (n, 3) are
-    material points whose deformed (x, y) are reported (the joint's anchors)."""
+    material points whose deformed (x, y) are reported (the joint's anchors).
+
+    ``formulation``: "displacement" (the datasets' P2 displacement form) or "mixed"
+    (Taylor-Hood u-p, fem.problem). It is an argument rather than a SolverConfig field so
+    that every recorded SolverConfig (campaign manifests) stays what it is."""
 
     def __init__(self, mesh_data: MeshData, ref_point, probe_points,
-                 material: Material = Material(), config: SolverConfig = SolverConfig()):
+                 material: Material = Material(), config: SolverConfig = SolverConfig(),
+                 formulation: str = "displacement"):
         self.mesh_data, self.material, self.config = mesh_data, material, config
+        self.formulation = formulation
         self.problem = joint_problem(mesh_data, ref_point, probe_points, INPUT_BOX, material,
-                                     **config.discretisation())
+                                     formulation=formulation, **config.discretisation())
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
         self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
@@ -181,10 +188,11 @@ class JointSolver(EndLoadedSolver):
     the input box are refused unless allowed."""
 
     def __init__(self, geometry: JointGeometry = JointGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
-                 material: Material = Material(), config: SolverConfig = SolverConfig()):
+                 material: Material = Material(), config: SolverConfig = SolverConfig(),
+                 formulation: str = "displacement"):
         X = anchor_points(geometry.length)
         super().__init__(create_mesh(geometry, comm), ref_point=X[-1], probe_points=X,
-                         material=material, config=config)
+                         material=material, config=config, formulation=formulation)
 
     def solve(self, load: Load, continuation: bool = False,
               allow_extrapolation: bool = False) -> SolveResult:
