@@ -39,7 +39,7 @@ $(TIMES):
 endif
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo test bench-fem bench-finger mesh-study joint-render self-contact validation \
+.PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-causes joint-render self-contact validation \
         dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery finger-fem validate-finger report clean
 
 help: ## show this help
@@ -88,6 +88,10 @@ mesh-study: results/fem/mesh_study.json ## 4 corners x (production + sqrt-2 fami
 results/fem/mesh_study.json: $(TIMES) fem/*.py | $(SETUP)
 	@mkdir -p build
 	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --out $@ --work build/mesh_study
+
+MESH_CAUSES_HOURS ?= 3
+mesh-causes: | $(SETUP) ## what limits the joint's mesh convergence: formulation, quadrature, penalty, wall elements at 8 loads, one factor at a time (one core, hours; resumes) -> results/fem/mesh_causes.{json,md}
+	nice $(PY) -m fem.mesh_causes --work results/fem/mesh_causes --out results/fem/mesh_causes.json --max-hours $(MESH_CAUSES_HOURS)
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
 results/fem/self_contact.json: $(TIMES) fem/*.py | $(SETUP)
