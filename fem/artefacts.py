@@ -55,3 +55,12 @@ BENCH_FINGER = Format("fem-bench-finger", 1, "fem.bench_finger", {
 FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
     "case": str, "pressures_MPa": list, "gravity": bool, "converged": bool, "tip": list | None,
     "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh_size": NUM, "mesh.nodes": int})
+
+#: results/fem/mesh_causes/<discretisation>_<load>.json (make mesh-causes; fem.mesh_causes):
+#: one joint solve of one load under one discretisation (mesh H:W, formulation, quadrature
+#: degree, penalty factor), kept so that the study resumes.
+MESH_CAUSE_CASE = Format("fem-mesh-cause-case", 1, "fem.mesh_causes", {
+    "load": list, "discretisation.H": NUM, "discretisation.W": MAYBE, "discretisation.formulation": str,
+    "discretisation.quadrature": int, "discretisation.penalty": NUM, "anchors": list,
+    **each("", NUM, "phi_end_deg", "cap_rotation_deg", "wall_time_s"), "newton_iterations": int,
+    "contact.closed_pairs": int, "contact.min_gap_mm": MAYBE, "mesh.nodes": int, "ranks": int})

@@ -46,6 +46,7 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import json_safe, write_json, write_text
+from fem.artefacts import MESH_CAUSE_CASE
 from fem.geometry import JointGeometry, anchor_points
 from fem.load_path import SolverConfig
 from fem.mesh_study import CORNERS
@@ -295,7 +296,7 @@ def run(work: Path, max_hours: float, comm=MPI.COMM_WORLD) -> bool:
             solver = solver or JointSolver(disc.geometry(), comm, config=disc.config(),
                                            formulation=disc.formulation)
             record = solve_record(solver, disc, load, comm)
-            on_root(comm, lambda: write_json(case_file(work, disc, load), record))
+            on_root(comm, lambda: MESH_CAUSE_CASE.write(case_file(work, disc, load), record))
             if comm.rank == 0:
                 log.info("%s %s: phi_end %.3f deg, %.0f s", disc.key, load, record["phi_end_deg"],
                          record["wall_time_s"])

@@ -46,6 +46,7 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import json_safe, write_json
+from fem.artefacts import MESH_STUDY
 from fem.geometry import JointGeometry, anchor_points
 from fem.options import MESH_SIZE, MESH_SIZE_TEXT, on_root
 from fem.solver import JointSolver, Load
@@ -227,7 +228,7 @@ def main(argv=None) -> int:
             Path(args.work).mkdir(parents=True, exist_ok=True)
         comm.barrier()
         study = run(args.meshes, Path(args.work), comm)
-        on_root(comm, lambda: write_json(args.out, study))
+        on_root(comm, lambda: MESH_STUDY.write(args.out, study))
     if comm.rank == 0:
         if args.json:
             cli.print_json({**summary(study), "out": args.out})
