@@ -11,4 +11,6 @@ layer may import it: apps -> predictor -> surrogate -> workflow -> fem, all on t
 * ``contract.cli``: the command-line contract every ``python -m`` tool follows (``--json``,
   one-line errors with exit 2, outputs checked before work).
 * ``contract.files``: atomic result files and strict JSON.
+* ``contract.records``: artefact formats (the key paths and types an artefact's readers rely
+  on), checked by its writer before writing and by its readers on load; figure targets.
 """

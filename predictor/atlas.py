@@ -302,8 +302,8 @@ def _first_contacts(first: np.ndarray, Q: np.ndarray, ring: np.ndarray, pred: np
 def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
     """An Atlas (with a GestureResult of its converged tau) from predictor.atlas --out
     JSON; ValueError (one line) for a file that is not an atlas of this object."""
+    doc = ATLAS.load(path)      # its format (predictor.artefacts): one line when it is not an atlas
     try:
-        doc = json.loads(Path(path).read_text())
         p1, p2 = np.array(doc["p1_MPa"], float), np.array(doc["p2_MPa"], float)
         tau = torch.tensor(np.array(doc["tau"], dtype=float), dtype=torch.float64).reshape(-1, 2, 3)
     except (OSError, ValueError, KeyError, TypeError) as exc:

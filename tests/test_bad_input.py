@@ -336,7 +336,7 @@ CASES_PREDICTOR = [
                            "--no-gravity", "--plot", "{tmp}/x.png"],
      "an atlas computed with gravity = True, this question has False (--no-gravity)"),
     ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--atlas", "/etc/hostname"],
-     "/etc/hostname: not a predictor.atlas JSON"),
+     "/etc/hostname: not JSON"),
     ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--plot", "/etc/passwd/x.png"],
      "cannot create /etc/passwd/x.png"),
     ("predictor.inverse", ["--goal", "hold", "--goal", "hold", "--object", "circle"], "--goal given twice"),
@@ -419,11 +419,11 @@ def _help(argv: list[str]):
 
 
 def test_every_cli_has_help_and_json():
-    """Every ``python -m`` tool of the four packages answers --help (exit 0) and offers
+    """Every ``python -m`` tool of the packages (and the apps) answers --help (exit 0) and offers
     --json (on the tool itself or on each of its subcommands)."""
     tools = sorted({f"{p.parent.name}.{p.stem}" for p in ROOT.glob("*/*.py")
-                    if p.parent.name in ("fem", "workflow", "surrogate", "predictor")
-                    and "def main(" in p.read_text()})
+                    if p.parent.name in ("fem", "workflow", "surrogate", "predictor", "apps")
+                    and "def main(" in p.read_text()} | {"apps.report"})
     assert len(tools) >= 15, tools
     with ThreadPoolExecutor(max_workers=2) as pool:
         helps = dict(zip(tools, pool.map(lambda t: _help([t]), tools)))
