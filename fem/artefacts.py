@@ -64,3 +64,14 @@ MESH_CAUSE_CASE = Format("fem-mesh-cause-case", 1, "fem.mesh_causes", {
     "discretisation.quadrature": int, "discretisation.penalty": NUM, "anchors": list,
     **each("", NUM, "phi_end_deg", "cap_rotation_deg", "wall_time_s"), "newton_iterations": int,
     "contact.closed_pairs": int, "contact.min_gap_mm": MAYBE, "mesh.nodes": int, "ranks": int})
+
+#: results/fem/mesh_causes.json (make mesh-causes; fem.mesh_causes): each factor's effect on
+#: the answer against the production discretisation, its time, and the error against the
+#: mesh study's finest mesh where that exists.
+MESH_CAUSES = Format("fem-mesh-causes", 1, "fem.mesh_causes", {
+    "loads": list, "base.H": NUM, "base.formulation": str, "reference": str, "complete": bool,
+    "rows[].factor": str, "rows[].key": str, "rows[].loads_solved": int, "rows[].nodes": int,
+    "rows[].mean_solve_s": MAYBE, "rows[].effect?.worst?.anchor_percent": MAYBE,
+    "rows[].effect?.worst?.phi_end_deg": MAYBE, "rows[].effect?.worst?.cap_rotation_deg": MAYBE,
+    "rows[].against_reference?.worst?.anchor_percent": MAYBE, "ranking": list,
+    "dominant?.factor": str, "dominant?.worst_anchor_percent": NUM})

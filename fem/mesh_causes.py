@@ -45,8 +45,8 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.files import json_safe, write_json, write_text
-from fem.artefacts import MESH_CAUSE_CASE
+from contract.files import json_safe, write_text
+from fem.artefacts import MESH_CAUSE_CASE, MESH_CAUSES
 from fem.geometry import JointGeometry, anchor_points
 from fem.load_path import SolverConfig
 from fem.mesh_study import CORNERS
@@ -331,7 +331,7 @@ def main(argv=None) -> int:
         table = {**analyse(read_records(Path(args.work)), study), "complete": complete}
 
         def write():
-            write_json(args.out, table)
+            MESH_CAUSES.write(args.out, table)
             write_text(Path(args.out).with_suffix(".md"), markdown(table))
         on_root(comm, write)
     if comm.rank == 0:
