@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from apps.report.common import (MESH_REFERENCE, PAPER, Check, Target, cells, figure, judge, load, mesh_label,
-                                missing, num)
+from apps.report.common import (MESH_REFERENCE, NOT_JUDGED, PAPER, Check, Target, cells, figure, judge, load,
+                                mesh_label, missing, num)
 from workflow.artefacts import CAMPAIGN_TARGETS
 
 FEM_TITLE = "FEM bellow joint (issue 2)"
@@ -63,6 +63,7 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
         out += _mesh_study(ms, title, checks)
     else:
         out += missing("mesh convergence", "make mesh-study")
+    out += _mesh_causes(load(root, "fem/mesh_causes.json"))
 
     sc = load(root, "fem/self_contact.json")
     out += ["### Self-contact of the bellows (`make self-contact`)", ""]
@@ -104,6 +105,36 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
     else:
         out += missing("timings", "make bench-fem")
     return out, checks
+
+
+def _mesh_causes(mc: dict | None) -> list[str]:
+    """What limits the mesh convergence (fem.mesh_causes, issue 35 §1): each factor changed
+    alone from the production discretisation, its worst effect over the loads solved, the
+    error against the mesh study's finest mesh, the solve time. Shown, not judged."""
+    out = ["### What limits the mesh convergence (`make mesh-causes`)", ""]
+    if not mc:
+        return out + missing("the causes of the mesh error", "make mesh-causes")
+    base = mc["base"]
+    out += [f"results/fem/mesh_causes.json (`python -m fem.mesh_causes`{'' if mc['complete'] else ', not complete yet'}):"
+            f" each factor changed alone from the production discretisation ({base['H']:g} mm, "
+            f"{base['formulation']} P2), at the mesh study's four corners and four interior loads; effect = the "
+            "largest anchor change in % of the largest anchor displacement, worst over the loads solved; "
+            f"reference: {mc['reference']}; solve s: one core, from zero, measured beside other jobs. "
+            f"{NOT_JUDGED[0].upper()}{NOT_JUDGED[1:]}.", "",
+            "| factor | discretisation | nodes | loads | effect, anchors % | phi_end deg | cap rotation deg "
+            "| vs reference, anchors % | solve s |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in mc["rows"]:
+        worst = (r.get("effect") or {}).get("worst") or {}
+        ref = (r.get("against_reference") or {}).get("worst") or {}
+        out.append(f"| {r['factor']} | {r['key']} | {r['nodes']} | {r['loads_solved']} | "
+                   f"{num(worst.get('anchor_percent'), '.2f')} | {num(worst.get('phi_end_deg'), '.3f')} | "
+                   f"{num(worst.get('cap_rotation_deg'), '.3f')} | {num(ref.get('anchor_percent'), '.2f')} | "
+                   f"{num(r['mean_solve_s'], '.0f')} |")
+    if mc.get("dominant"):
+        d = mc["dominant"]
+        out += ["", f"Largest single effect: {d['factor']} ({d['key']}), {d['worst_anchor_percent']:.2f} % at the "
+                "worst load."]
+    return out + [""]
 
 
 def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
