@@ -175,8 +175,9 @@ learning-curve: | $(SETUP) ## held-out errors vs 100..1,600 and all train sample
 
 # ---------------------------------------------------------------- predictor (issue 5)
 # (section owned by predictor/)
-# Joint model for the predictor: the committed surrogate when present, else the analytic stand-in.
-PRED_JOINT := $(if $(wildcard results/surrogate/improved.pt),results/surrogate/improved.pt,analytic)
+# Joint model for the predictor: the committed surrogate (`make train` makes it; the analytic
+# stand-in only when asked for by name, PRED_JOINT=analytic).
+PRED_JOINT ?= results/surrogate/improved.pt
 PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
               predictor/defaults.py predictor/problem.py predictor/progress.py predictor/result.py \
               predictor/options.py predictor/graphs.py predictor/jacobians.py predictor/lm.py predictor/newton.py \
