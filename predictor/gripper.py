@@ -191,6 +191,7 @@ class GripperParams:
         # Built once per params (not a field: eq, hash and repr ignore it); the residual reads
         # it on every evaluation.
         object.__setattr__(self, "_layout", chain_layout(self.finger, self.joint_weight))
+        object.__setattr__(self, "_calibration", joint_calibration(self.finger))
 
     @property
     def n_joints(self) -> int:
@@ -199,6 +200,11 @@ class GripperParams:
     @property
     def layout(self) -> ChainLayout:
         return self._layout
+
+    @property
+    def calibration(self) -> tuple[tuple[float, ...], ...] | None:
+        """The finger file's joint calibration (joint_calibration), read once."""
+        return self._calibration
 
     @property
     def base_gap(self) -> float:
@@ -352,7 +358,6 @@ class FingerPose:
         return self._points_of(3)
 
 
-@functools.lru_cache(maxsize=16)
 def joint_calibration(finger: FingerSpec) -> tuple[tuple[float, ...], ...] | None:
     """(gains, offsets MPa, stiffness scales), one per joint, of a calibrated finger file
     (contract.finger; predictor.calibrate writes them), or None when every joint is the
@@ -372,7 +377,7 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
     finger = params.finger
     B = pressures.shape[0]
     inputs = torch.cat((pressures[..., None], tau), -1)  # (B, J, 4): one joint-model pass
-    calibration = joint_calibration(finger)
+    calibration = params.calibration
     if calibration is not None:   # joint i of modulus s E sees ((g P + o)/s, tau/s)
         g, o, s = (torch.tensor(v, dtype=tau.dtype) for v in calibration)
         inputs = torch.cat((((g * pressures + o) / s)[..., None], tau / s[:, None]), -1)

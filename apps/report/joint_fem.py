@@ -37,20 +37,14 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
         out += ["Slender 3D cantilever (L/h = 50, nu = 0), same loading code as the joint.", "",
                 "| case | load | FEM | exact | tip error (% L) | target | met |",
                 "|---|---|---|---|---|---|---|"]
-        for c in val["cantilever"]:
-            checks.append(judge(title, f"cantilever alpha = {c['alpha']:g} tip error",
-                                [(tip["cantilever"], c["error_over_L"])]))
-            out.append(f"| cantilever | alpha = {c['alpha']:g} | u/L {c['u_over_L']:.5f}, w/L "
-                       f"{c['w_over_L']:.5f}, theta {c['theta']:.4f} | {c['exact']['u_over_L']:.5f}, "
-                       f"{c['exact']['w_over_L']:.5f}, {c['exact']['theta']:.4f} | "
-                       f"{100 * c['error_over_L']:.3f} |" + cells(checks[-1]))
-        for r in val["rollup"]:
-            checks.append(judge(title, f"roll-up T = {r['theta_load']:.4f} tip error",
-                                [(tip["rollup"], r["error_over_L"])]))
-            out.append(f"| roll-up | T = {r['theta_load']:.4f} | x/L {r['x_over_L']:.5f}, y/L "
-                       f"{r['y_over_L']:.5f}, theta {r['theta']:.4f} | {r['exact']['x_over_L']:.5f}, "
-                       f"{r['exact']['y_over_L']:.5f}, {r['exact']['theta']:.4f} | "
-                       f"{100 * r['error_over_L']:.3f} |" + cells(checks[-1]))
+        rows = ([("cantilever", "cantilever", f"alpha = {c['alpha']:g}", "u", "w", c) for c in val["cantilever"]]
+                + [("rollup", "roll-up", f"T = {r['theta_load']:.4f}", "x", "y", r) for r in val["rollup"]])
+        for kind, name, load_text, a, b, c in rows:
+            checks.append(judge(title, f"{name} {load_text} tip error", [(tip[kind], c["error_over_L"])]))
+            ex = c["exact"]
+            out.append(f"| {name} | {load_text} | {a}/L {c[a + '_over_L']:.5f}, {b}/L {c[b + '_over_L']:.5f}, "
+                       f"theta {c['theta']:.4f} | {ex[a + '_over_L']:.5f}, {ex[b + '_over_L']:.5f}, "
+                       f"{ex['theta']:.4f} | {100 * c['error_over_L']:.3f} |" + cells(checks[-1]))
         out += ["", f"Worst: cantilever {100 * val['max_cantilever_error_over_L']:.3f} % L "
                 f"(required {100 * required['cantilever']:g} %), roll-up "
                 f"{100 * val['max_rollup_error_over_L']:.3f} % L (required {100 * required['rollup']:g} %).", ""]
