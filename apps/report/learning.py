@@ -119,7 +119,8 @@ def learning_curve_section(root: Path) -> tuple[list[str], list[Check]]:
             f"with its Jacobian loss and without it (w_jac = 0), the whole validation split ({n['val']}) choosing the "
             f"kept epoch, measured on the held-out set ({c['data']['heldout_n']}). Every point gets at least "
             f"{c['min_steps']:,} Adam steps with the same learning-rate path ({c['epoch_budget']}), so a small set is "
-            f"not also under-trained." + ("" if c.get("complete") else " **The curve is not finished**: "
+            f"not also under-trained. Shown, not judged: it sizes the next campaign (issue 35's accuracy targets "
+            "apply to the surrogate trained on the new data)." + ("" if c.get("complete") else " **The curve is not finished**: "
                                           "`make learning-curve` resumes it."), "",
             "| samples | Jacobian loss | seed | mean anchor (mm) | tip (mm) | cap rotation (deg) | phi_end (deg) "
             "| Jacobian rel. | train anchor (mm) | Adam steps | train time (s) |", "|---" * 11 + "|"]
