@@ -3,10 +3,8 @@
     python -m fem.mesh_causes --work build/mesh_causes --out results/fem/mesh_causes.json \\
         [--max-hours 1.5] [--reference results/fem/mesh_study.json]
 
-A discretisation is (H, W, formulation, q, kappa): tetrahedron size H mm and W mm on the
-1.2 mm chamber walls (JointGeometry.mesh_size, wall_mesh_size; W = None: H), the
-formulation ("displacement" P2, or "mixed" Taylor-Hood u-p, fem.problem), the quadrature
-degree q and the valley-contact penalty kappa (MPa/mm). Every discretisation of PLAN is
+A discretisation (:class:`fem.discretisation.Discretisation`) is (H, W, formulation, q,
+kappa): mesh sizes, formulation, quadrature degree and contact penalty. Every discretisation of PLAN is
 solved from zero at the eight LOADS (the mesh study's four box corners and four interior
 loads); each (discretisation, load) is one JSON file in ``--work`` written atomically on
 rank 0, so a killed or time-limited run (``--max-hours``: no new solve starts after it)
@@ -38,7 +36,7 @@ import logging
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +46,7 @@ from contract import cli
 from contract.files import json_safe, write_text
 from fem.artefacts import MESH_CAUSE_CASE, MESH_CAUSES
 from fem.geometry import JointGeometry, anchor_points
-from fem.load_path import SolverConfig
+from fem.discretisation import PAPER, Discretisation
 from fem.mesh_study import CORNERS
 from fem.options import on_root
 from fem.solver import JointSolver, Load
@@ -62,29 +60,7 @@ INTERIOR = [Load(0.15, 1, -1, 30), Load(0.1, -1.5, 1.5, 60), Load(-0.1, 1, -1, -
 LOADS = INTERIOR + CORNERS
 
 
-@dataclass(frozen=True)
-class Discretisation:
-    """One discretisation of the joint: sizes in mm, penalty in MPa/mm."""
-
-    H: float = 1.8
-    W: float | None = None
-    formulation: str = "displacement"
-    quadrature: int = 2
-    penalty: float = 100.0
-
-    @property
-    def key(self) -> str:
-        w = "none" if self.W is None else f"{self.W:g}"
-        return f"h{self.H:g}_w{w}_{self.formulation}_q{self.quadrature}_k{self.penalty:g}"
-
-    def geometry(self) -> JointGeometry:
-        return replace(JointGeometry(), mesh_size=self.H, wall_mesh_size=self.W)
-
-    def config(self) -> SolverConfig:
-        return replace(SolverConfig(), quadrature_degree=self.quadrature, contact_penalty=self.penalty)
-
-
-BASE = Discretisation()
+BASE = PAPER
 MIXED = replace(BASE, formulation="mixed")
 #: the discretisations solved, in this order: the base, the two suspected main causes
 #: (formulation; one element through the wall, W = 1.2 mm: 1.6x BASE's nodes), the others
