@@ -85,14 +85,13 @@ bench-finger: results/bench/finger.json ## whole-finger FEM timings, 4 gestures 
 results/bench/finger.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_finger --out $@
 
-mesh-study: results/fem/mesh_study.json ## 4 corners x (production + sqrt-2 family with wall refinement) + Richardson (hours; resumes) -> results/fem/mesh_study.json
-results/fem/mesh_study.json: $(TIMES) fem/*.py | $(SETUP)
-	@mkdir -p build
-	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --out $@ --work build/mesh_study
+MESH_STUDY_HOURS ?= 3
+mesh-study: | $(SETUP) ## 8 loads x (sqrt-2 family of the production formulation + production + paper mesh) + Richardson (2 ranks, hours; resumes) -> results/fem/mesh_study.json
+	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --out results/fem/mesh_study.json --work results/fem/joint_cases --max-hours $(MESH_STUDY_HOURS)
 
 MESH_CAUSES_HOURS ?= 3
 mesh-causes: | $(SETUP) ## what limits the joint's mesh convergence: formulation, quadrature, penalty, wall elements at 8 loads, one factor at a time (one core, hours; resumes) -> results/fem/mesh_causes.{json,md}
-	nice $(PY) -m fem.mesh_causes --work results/fem/mesh_causes --out results/fem/mesh_causes.json --max-hours $(MESH_CAUSES_HOURS)
+	nice $(PY) -m fem.mesh_causes --work results/fem/joint_cases --out results/fem/mesh_causes.json --max-hours $(MESH_CAUSES_HOURS)
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
 results/fem/self_contact.json: $(TIMES) fem/*.py | $(SETUP)

@@ -23,13 +23,17 @@ VALIDATION = Format("fem-validation", 1, "fem.validation", {
 
 _ERRORS = ("anchor_mm", "anchor_percent", "tip_mm", "phi_end_deg", "cap_rotation_deg")
 
-#: results/fem/mesh_study.json (make mesh-study): every mesh's worst error over the corners.
-MESH_STUDY = Format("fem-mesh-study", 1, "fem.mesh_study", {
-    "tolerance_percent": NUM, "min_nodes": int, "production_mesh": list, "reference": str,
-    "family": list, "wall_mm": NUM, "meshes[].mesh_size": NUM, "meshes[].wall_mesh_size": MAYBE,
-    "meshes[].nodes": int, **each("meshes[].max_error", NUM, *_ERRORS),
-    "extrapolation?[].anchors.order": MAYBE,
-    **each("production_error?", NUM, "anchor_mm", "tip_mm", "phi_end_deg", "cap_rotation_deg")})
+#: results/fem/mesh_study.json (make mesh-study): every discretisation's worst error over the
+#: eight loads against the reference (Richardson extrapolation of the family, or its finest
+#: mesh), the production discretisation's judged against the tolerances.
+MESH_STUDY = Format("fem-mesh-study", 2, "fem.mesh_study", {
+    "loads": list, "formulation": str, "complete": bool, "asymptotic": bool, "reference": str | None,
+    **each("", NUM, "tolerance_percent", "tolerance_deg", "wall_mm"), "min_nodes": int,
+    "family": list | None, "production": str, "production_mesh": list, "production_met": bool,
+    "meshes[].key": str, "meshes[].formulation": str, "meshes[].mesh_size": NUM,
+    "meshes[].wall_mesh_size": MAYBE, "meshes[].nodes": int, "meshes[].mean_solve_s": NUM,
+    **each("meshes[].max_error?", NUM, *_ERRORS), "orders": list, "extrapolation?[].anchors.order": MAYBE,
+    **each("production_error?", NUM, *_ERRORS), **each("paper_error?", NUM, *_ERRORS)})
 
 #: results/fem/self_contact.json (make self-contact): valley gaps over the load cases.
 SELF_CONTACT = Format("fem-self-contact", 1, "fem.self_contact", {
@@ -56,10 +60,10 @@ FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
     "case": str, "pressures_MPa": list, "gravity": bool, "converged": bool, "tip": list | None,
     "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh_size": NUM, "mesh.nodes": int})
 
-#: results/fem/mesh_causes/<discretisation>_<load>.json (make mesh-causes; fem.mesh_causes):
-#: one joint solve of one load under one discretisation (mesh H:W, formulation, quadrature
-#: degree, penalty factor), kept so that the study resumes.
-MESH_CAUSE_CASE = Format("fem-mesh-cause-case", 1, "fem.mesh_causes", {
+#: results/fem/joint_cases/<discretisation>_<load>.json (make mesh-study, make mesh-causes;
+#: fem.joint_cases): one joint solve of one load under one discretisation (mesh H:W,
+#: formulation, quadrature degree, penalty factor), kept so that the studies resume.
+JOINT_CASE = Format("fem-joint-case", 1, "fem.joint_cases", {
     "load": list, "discretisation.H": NUM, "discretisation.W": MAYBE, "discretisation.formulation": str,
     "discretisation.quadrature": int, "discretisation.penalty": NUM, "anchors": list,
     **each("", NUM, "phi_end_deg", "cap_rotation_deg", "wall_time_s"), "newton_iterations": int,

@@ -1,6 +1,6 @@
 """What limits the joint FEM's mesh convergence: the candidate causes, one at a time.
 
-    python -m fem.mesh_causes --work build/mesh_causes --out results/fem/mesh_causes.json \\
+    python -m fem.mesh_causes --work results/fem/joint_cases --out results/fem/mesh_causes.json \\
         [--max-hours 1.5] [--reference results/fem/mesh_study.json]
 
 A discretisation (:class:`fem.discretisation.Discretisation`) is (H, W, formulation, q,
@@ -22,8 +22,8 @@ that factor alone, e.g. the wall refinement of the mixed form)::
     phi_end, cap rotation: |difference| in deg
 
 and the table keeps its worst and mean over the loads solved in both. Errors against the
-reference: the finest mesh of the mesh study (``--reference``, displacement P2 at
-1.2:0.6) at the loads it holds (the corners), with the same measures.
+reference: the mesh study's reference (``--reference``: its Richardson extrapolation, or
+its finest mesh outside the asymptotic range), with the same measures.
 
 Data flow: PLAN x LOADS -> fem.solver.JointSolver (one per discretisation) -> work JSONs
 -> analyse -> ``--out`` JSON and a markdown table beside it (same stem, .md).
@@ -33,9 +33,7 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import sys
-import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -43,22 +41,12 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.files import json_safe, write_text
-from fem.artefacts import MESH_CAUSE_CASE, MESH_CAUSES
+from contract.files import write_text
+from fem.artefacts import MESH_CAUSES
 from fem.geometry import JointGeometry, anchor_points
-from fem.discretisation import PAPER, Discretisation
-from fem.mesh_study import CORNERS
+from fem.discretisation import PAPER
+from fem.joint_cases import INTERIOR, LOADS, difference, load_key, read_records, solve_missing
 from fem.options import on_root
-from fem.solver import JointSolver, Load
-
-log = logging.getLogger("softjoint.fem")
-
-#: Interior loads, away from the box corners (P MPa, F1 N, F2 N, M N·mm); the records say
-#: which close a valley (contact) and which do not.
-INTERIOR = [Load(0.15, 1, -1, 30), Load(0.1, -1.5, 1.5, 60), Load(-0.1, 1, -1, -20),
-            Load(0.05, 0.5, 0.5, 0)]
-LOADS = INTERIOR + CORNERS
-
 
 BASE = PAPER
 MIXED = replace(BASE, formulation="mixed")
@@ -87,21 +75,6 @@ COMPARISONS = [
 
 
 # ---------------------------------------------------------------- pure post-processing
-def load_key(load) -> str:
-    return "_".join(f"{v:g}" for v in np.asarray(load, dtype=float))
-
-
-def difference(case: dict, ref: dict, X: np.ndarray) -> dict:
-    """Change of one answer ``case`` against ``ref`` (anchors (10, 2) mm, phi_end_deg,
-    cap_rotation_deg); X (10, 2) the rest anchors. Anchor % of ref's largest displacement."""
-    a, b = np.asarray(case["anchors"]), np.asarray(ref["anchors"])
-    d = float(np.linalg.norm(a - b, axis=1).max())
-    scale = float(np.linalg.norm(b - X, axis=1).max())
-    return {"anchor_mm": d, "anchor_percent": 100.0 * d / scale,
-            "phi_end_deg": abs(case["phi_end_deg"] - ref["phi_end_deg"]),
-            "cap_rotation_deg": abs(case["cap_rotation_deg"] - ref["cap_rotation_deg"])}
-
-
 def worst_and_mean(per_load: dict) -> dict:
     """{"worst": {...}, "mean": {...}} of the per-load differences (empty: None)."""
     if not per_load:
@@ -118,18 +91,24 @@ def compare(cases: dict, refs: dict, X: np.ndarray) -> dict:
     return {"loads": len(per_load), "per_load": per_load, **worst_and_mean(per_load)}
 
 
-def reference_cases(study: dict | None) -> dict:
-    """{load key: record} of the mesh study's finest mesh (empty without a study)."""
-    if not study:
-        return {}
+def reference_cases(study: dict | None) -> tuple[dict, str | None]:
+    """({load key: answer}, what it is) of the mesh study's reference: the extrapolated
+    answers in the asymptotic range, else its finest mesh (empty without a study)."""
+    if not study or not study.get("meshes"):
+        return {}, None
+    if study["reference"] == "richardson":
+        refs = {load_key(load): {k: e[k]["extrapolated"] for k in e}
+                for load, e in zip(study["loads"], study["extrapolation"])}
+        family = ", ".join(f"{h:g}" + (f":{w:g}" if w else "") for h, w in study["family"])
+        return refs, f"mesh study, Richardson extrapolation of the {study['formulation']} family {family}"
     finest = max(study["meshes"], key=lambda m: m["nodes"])
-    return {load_key(c["load"]): c for c in finest["cases"]}
+    return {load_key(c["load"]): c for c in finest["cases"]}, f"mesh study, finest mesh ({finest['key']})"
 
 
 def analyse(records: dict, study: dict | None) -> dict:
     """The table from the solved records ({discretisation key: {load key: record}})."""
     X = anchor_points(JointGeometry().length)[:, :2]
-    refs = reference_cases(study)
+    refs, reference = reference_cases(study)
     rows = []
     for factor, variant, base in COMPARISONS:
         cases = records.get(variant.key, {})
@@ -157,8 +136,7 @@ def analyse(records: dict, study: dict | None) -> dict:
     contact = {load_key(c["load"]): c["contact"] for c in records.get(BASE.key, {}).values()}
     return {"loads": [load.as_array().tolist() for load in LOADS],
             "interior_loads": [load.as_array().tolist() for load in INTERIOR],
-            "base": asdict(BASE), "reference": "mesh study, finest mesh (displacement P2 1.2:0.6), corners only"
-            if refs else None, "base_contact": contact, "rows": rows,
+            "base": asdict(BASE), "reference": reference, "base_contact": contact, "rows": rows,
             "ranking": sorted(([f, v] for f, v in ranking.items()), key=lambda fv: -fv[1]),
             "dominant": {"factor": dominant["factor"], "key": dominant["key"],
                          "worst_anchor_percent": dominant["effect"]["worst"]["anchor_percent"]}
@@ -219,73 +197,12 @@ def per_load_markdown(table: dict) -> list[str]:
     return lines
 
 
-# ---------------------------------------------------------------- solves
-def case_file(work: Path, disc: Discretisation, load: Load) -> Path:
-    return work / f"{disc.key}_{load_key(load.as_array())}.json"
-
-
-def read_records(work: Path) -> dict:
-    """{discretisation key: {load key: record}} of the valid records in ``work``."""
-    out = {}
-    for disc in PLAN:
-        for load in LOADS:
-            try:
-                record = json.loads(case_file(work, disc, load).read_text())
-            except (OSError, ValueError):
-                continue                    # missing or damaged: solved again
-            if record.get("discretisation") == json_safe(asdict(disc)):
-                out.setdefault(disc.key, {})[load_key(load.as_array())] = record
-    return out
-
-
-def contact_state(solver: JointSolver) -> dict:
-    """Closed valley pairs and the smallest gap (mm) at the solver's state."""
-    if solver.contact is None:
-        return {"closed_pairs": 0, "min_gap_mm": None}
-    gaps = np.concatenate(list(solver.contact.gaps(solver.u).values()))
-    return {"closed_pairs": int((gaps < 0).sum()), "min_gap_mm": float(gaps.min())}
-
-
-def solve_record(solver: JointSolver, disc: Discretisation, load: Load, comm) -> dict:
-    r = solver.solve(load)
-    if not r.converged:
-        raise RuntimeError(f"{disc.key}: {load} did not converge ({r.reason})")
-    return {"load": load.as_array().tolist(), "discretisation": json_safe(asdict(disc)),
-            "anchors": r.anchors.tolist(), "phi_end_deg": math.degrees(r.phi_end),
-            "cap_rotation_deg": math.degrees(r.cap_rotation), "wall_time_s": r.wall_time,
-            "newton_iterations": r.iterations, "load_steps": r.load_steps,
-            "factorisations": r.factorisations, "contact": contact_state(solver),
-            "mesh": solver.mesh_info(), "ranks": comm.size}
-
-
-def run(work: Path, max_hours: float, comm=MPI.COMM_WORLD) -> bool:
-    """Solve the missing (discretisation, load) records of PLAN in order until done or
-    ``max_hours`` have passed (no new solve starts then). Returns True when all are done."""
-    t_end = time.monotonic() + 3600.0 * max_hours
-    done = read_records(work)
-    for disc in PLAN:
-        missing = [load for load in LOADS if load_key(load.as_array()) not in done.get(disc.key, {})]
-        solver = None
-        for load in missing:
-            if time.monotonic() > t_end:
-                return False
-            solver = solver or JointSolver(disc.geometry(), comm, config=disc.config(),
-                                           formulation=disc.formulation)
-            record = solve_record(solver, disc, load, comm)
-            on_root(comm, lambda: MESH_CAUSE_CASE.write(case_file(work, disc, load), record))
-            if comm.rank == 0:
-                log.info("%s %s: phi_end %.3f deg, %.0f s", disc.key, load, record["phi_end_deg"],
-                         record["wall_time_s"])
-        del solver
-    return True
-
-
 # ---------------------------------------------------------------- command line
 def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.mesh_causes", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".json", default="results/fem/mesh_causes.json",
                   help="table (default results/fem/mesh_causes.json; a .md summary beside it)")
-    ap.add_output("--work", folder=True, default="build/mesh_causes",
+    ap.add_output("--work", folder=True, default="results/fem/joint_cases",
                   help="folder of the per-(discretisation, load) records (resumes from it)")
     ap.add_argument("--max-hours", type=cli.number(0, 1000, "h"), default=1000.0,
                     help="start no new solve after this many hours (default 1000)")
@@ -303,8 +220,8 @@ def main(argv=None) -> int:
         if comm.rank == 0:
             Path(args.work).mkdir(parents=True, exist_ok=True)
         comm.barrier()
-        complete = run(Path(args.work), args.max_hours, comm)
-        table = {**analyse(read_records(Path(args.work)), study), "complete": complete}
+        complete = solve_missing(Path(args.work), PLAN, LOADS, args.max_hours, comm)
+        table = {**analyse(read_records(Path(args.work), PLAN), study), "complete": complete}
 
         def write():
             MESH_CAUSES.write(args.out, table)

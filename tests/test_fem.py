@@ -227,34 +227,46 @@ def test_richardson_recovers_a_known_order_and_limit():
 
 def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
     """A synthetic study whose results follow f(h) = f* + C h^2 exactly (anchors shifted by
-    C h^2 along x, phi_end and cap rotation by 0.1 h^2 deg), with the production mesh
-    1.8 mm outside the sqrt(2) family: the family is found, the extrapolation is f*, and
-    the production mesh's error is C 1.8^2 in anchors and 0.1 1.8^2 deg in both angles.
-    The finest family is chosen, and one is found with the production mesh between its
-    members in size (3.394:1.697 > 1.8 > 2.4:1.2)."""
+    C h^2 along x, phi_end and cap rotation by 0.1 h^2 deg) on a sqrt(2) chain of four mixed
+    meshes, the production mesh 2.4:1.2 in it, and the paper's 1.8 mm displacement mesh
+    (a constant 0.5 mm, 1 deg off): the chain is found without the other formulation, both
+    triples observe order 2, the extrapolation is f*, the production error is C 2.4^2 in
+    anchors and 0.1 2.4^2 deg in both angles, the paper's error its offset."""
     from fem import mesh_study
 
     X = anchor_points(JointGeometry().length)[:, :2]
     star = X + np.array([5.0, 2.0])
+    n = len(mesh_study.LOADS)
 
-    def mesh(h, w):
-        e = (w or h) ** 2          # W scales with H inside the family
-        cases = [{"anchors": (star + [0.01 * e, 0.0]).tolist(), "phi_end_deg": 60.0 + 0.1 * e,
-                  "cap_rotation_deg": 58.0 + 0.1 * e} for _ in mesh_study.CORNERS]
-        return {"mesh_size": h, "wall_mesh_size": w, "nodes": int(1e5 / (h * (w or h))), "cases": cases}
+    def mesh(h, w, formulation="mixed", offset=None):
+        e = h ** 2                 # W scales with H inside the family
+        shift, angle = ([0.01 * e, 0.0], 0.1 * e) if offset is None else ([offset, 0.0], 1.0)
+        cases = [{"anchors": (star + shift).tolist(), "phi_end_deg": 60.0 + angle,
+                  "cap_rotation_deg": 58.0 + angle} for _ in range(n)]
+        return {"key": f"{h}:{w}:{formulation}", "formulation": formulation, "mesh_size": h,
+                "wall_mesh_size": w, "nodes": int(1e5 / (h * (w or h))), "cases": cases}
 
     r = math.sqrt(2.0)
-    meshes = [mesh(1.8, None), mesh(2.4, 1.2), mesh(2.4 / r, 1.2 / r), mesh(1.2, 0.6)]
-    out = mesh_study.analyse(meshes, (1.8, None))
-    assert out["asymptotic"] and out["reference"] == "richardson" and out["family"][0] == [2.4, 1.2]
-    assert abs(out["production_error"]["anchor_mm"] - 0.01 * 1.8 ** 2) < 1e-9
-    assert abs(out["production_error"]["phi_end_deg"] - 0.1 * 1.8 ** 2) < 1e-9
-    assert abs(out["production_error"]["cap_rotation_deg"] - 0.1 * 1.8 ** 2) < 1e-9
-    coarse = mesh(2.4 * r, 1.2 * r)
-    assert mesh_study.analyse([coarse] + meshes, (1.8, None))["family"] == [[2.4, 1.2], [2.4 / r, 1.2 / r], [1.2, 0.6]]
-    out = mesh_study.analyse([coarse] + meshes[:3], (1.8, None))
-    assert out["family"] == [[2.4 * r, 1.2 * r], [2.4, 1.2], [2.4 / r, 1.2 / r]] and out["asymptotic"]
-    assert abs(out["production_error"]["phi_end_deg"] - 0.1 * 1.8 ** 2) < 1e-9
+    chain = [mesh(2.4 * r, 1.2 * r), mesh(2.4, 1.2), mesh(2.4 / r, 1.2 / r), mesh(1.2, 0.6)]
+    paper = mesh(1.8, None, "displacement", offset=0.5)
+    out = mesh_study.analyse(chain + [paper], chain[1]["key"], paper["key"])
+    assert out["asymptotic"] and out["reference"] == "richardson"
+    assert out["family"] == [[m["mesh_size"], m["wall_mesh_size"]] for m in chain]
+    assert len(out["orders"]) == 2
+    for triple in out["orders"]:
+        np.testing.assert_allclose(triple["anchors"] + triple["phi_end_deg"], 2.0, atol=1e-9)
+    e = out["production_error"]
+    assert abs(e["anchor_mm"] - 0.01 * 2.4 ** 2) < 1e-9 and abs(e["tip_mm"] - 0.01 * 2.4 ** 2) < 1e-9
+    assert abs(e["phi_end_deg"] - 0.1 * 2.4 ** 2) < 1e-9 and abs(e["cap_rotation_deg"] - 0.1 * 2.4 ** 2) < 1e-9
+    assert not out["production_met"]            # 0.576 deg > 0.3 deg
+    assert abs(out["paper_error"]["anchor_mm"] - 0.5) < 1e-9 and abs(out["paper_error"]["phi_end_deg"] - 1.0) < 1e-9
+    out = mesh_study.analyse(chain + [paper], chain[3]["key"], paper["key"])
+    # the finest: 0.0144 mm of |(5, 2)| = 5.385 mm (0.27 %), 0.144 deg: within 1 % and 0.3 deg
+    assert out["production_met"] and abs(out["production_error"]["anchor_percent"] - 1.44 / 29 ** 0.5) < 1e-9
+    # out of the asymptotic range (a wiggle on the finest mesh): the finest mesh is the reference
+    chain[3]["cases"][0]["phi_end_deg"] += 5.0
+    out = mesh_study.analyse(chain + [paper], chain[1]["key"], paper["key"])
+    assert not out["asymptotic"] and out["reference"] == "finest mesh" and not out["production_met"]
 
 
 def test_a_problem_composed_from_the_pieces_is_solved_by_the_same_solver():

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("dolfinx")
+from fem import joint_cases  # noqa: E402
 from fem import mesh_causes as mc  # noqa: E402
 from fem.geometry import JointGeometry, anchor_points  # noqa: E402
 
@@ -41,7 +42,7 @@ def records(shifts: dict, loads=mc.LOADS[:2]) -> dict:
 def test_difference_is_the_largest_anchor_distance_over_the_largest_displacement():
     ref = record(mc.BASE, mc.LOADS[0], np.zeros(2))
     case = record(mc.BASE, mc.LOADS[0], np.array([0.3, 0.4]), phi=10.5, cap=11.0)
-    d = mc.difference(case, ref, X)
+    d = joint_cases.difference(case, ref, X)
     assert d["anchor_mm"] == pytest.approx(0.5)
     assert d["anchor_percent"] == pytest.approx(100 * 0.5 / np.hypot(2.0, 10.0))
     assert d["phi_end_deg"] == pytest.approx(0.5) and d["cap_rotation_deg"] == pytest.approx(1.0)
@@ -66,23 +67,33 @@ def test_analyse_names_the_factor_that_moves_the_answer_most():
 
 
 def test_reference_is_the_study_s_finest_mesh_at_its_loads():
-    """Against a study whose finest mesh holds only the first load, one load is compared."""
+    """Against a study out of the asymptotic range whose finest mesh holds only the first
+    load, one load is compared; in the range, its extrapolated answers are the reference."""
     base = records({mc.BASE.key: np.zeros(2)})
     ref = record(mc.BASE, mc.LOADS[0], np.array([0.0, 1.0]))
-    study = {"meshes": [{"nodes": 10, "cases": []}, {"nodes": 1000, "cases": [ref]}]}
-    row = mc.analyse(base, study)["rows"][0]
+    study = {"reference": "finest mesh",
+             "meshes": [{"key": "a", "nodes": 10, "cases": []}, {"key": "b", "nodes": 1000, "cases": [ref]}]}
+    table = mc.analyse(base, study)
+    assert table["reference"] == "mesh study, finest mesh (b)"
+    row = table["rows"][0]
     assert row["against_reference"]["loads"] == 1
     assert row["against_reference"]["worst"]["anchor_mm"] == pytest.approx(1.0)
+    ext = {k: {"extrapolated": ref[k]} for k in ("anchors", "phi_end_deg", "cap_rotation_deg")}
+    study.update(reference="richardson", formulation="mixed", loads=[ref["load"]], extrapolation=[ext],
+                 family=[[2.4, 1.2], [1.697, 0.849], [1.2, 0.6]])
+    table = mc.analyse(base, study)
+    assert table["reference"] == "mesh study, Richardson extrapolation of the mixed family 2.4:1.2, 1.697:0.849, 1.2:0.6"
+    assert table["rows"][0]["against_reference"]["worst"]["anchor_mm"] == pytest.approx(1.0)
 
 
 def test_resume_reads_only_records_of_the_same_discretisation(tmp_path):
     """A record file whose discretisation differs from its name is solved again."""
     good = record(mc.BASE, mc.LOADS[0], np.zeros(2))
     foreign = record(replace(mc.BASE, penalty=1.0), mc.LOADS[1], np.zeros(2))
-    (tmp_path / mc.case_file(tmp_path, mc.BASE, mc.LOADS[0]).name).write_text(json.dumps(good))
-    (tmp_path / mc.case_file(tmp_path, mc.BASE, mc.LOADS[1]).name).write_text(json.dumps(foreign))
-    (tmp_path / mc.case_file(tmp_path, mc.BASE, mc.LOADS[2]).name).write_text("{damaged")
-    assert list(mc.read_records(tmp_path)[mc.BASE.key]) == [mc.load_key(mc.LOADS[0].as_array())]
+    (tmp_path / joint_cases.case_file(tmp_path, mc.BASE, mc.LOADS[0]).name).write_text(json.dumps(good))
+    (tmp_path / joint_cases.case_file(tmp_path, mc.BASE, mc.LOADS[1]).name).write_text(json.dumps(foreign))
+    (tmp_path / joint_cases.case_file(tmp_path, mc.BASE, mc.LOADS[2]).name).write_text("{damaged")
+    assert list(joint_cases.read_records(tmp_path, mc.PLAN)[mc.BASE.key]) == [mc.load_key(mc.LOADS[0].as_array())]
 
 
 @pytest.mark.parametrize("args, message", [(["--max-hours", "-1"], "--max-hours"),

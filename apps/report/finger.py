@@ -32,12 +32,13 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    f"`python -m fem.finger_cases --mesh-size {m['mesh_size']}"
                    + (f" --wall-mesh-size {wall}`" if wall else "`") + " |")
     study = load(root, "fem/mesh_study.json")
-    if study and study.get("production_error"):
-        e = study["production_error"]
-        out.append(f"| discretisation: one joint at the box corners, production mesh {mesh_label(*study['production_mesh'])} mm "
-                   f"against {MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, phi_end "
-                   f"{e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst corner; the corners "
-                   "load a joint far more than the finger's cases do) | `make mesh-study` |")
+    if study:
+        for name, e in ((study["production"], study["production_error"]), (study["paper"], study.get("paper_error"))):
+            if e:
+                out.append(f"| discretisation: one joint at eight loads (four box corners), {name} against "
+                           f"{MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, "
+                           f"phi_end {e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst load; the "
+                           "corners load a joint far more than the finger's cases do) | `make mesh-study` |")
     c, fine = load(root, "fem/heldout_mesh.json"), load(root, "surrogate/heldout_fine.json")
     mesh = lambda m: mesh_label(m["mesh_size"], m["wall_mesh_size"])
     if c:
