@@ -56,7 +56,7 @@ CHECK_LAWS = {
 STRETCH, BIAXIAL, SHEAR, SMALL = 1.5, 1.3, 0.5, 1e-6
 TARGET_REL = 1e-6           # homogeneous tests, relative to max |P|
 SMALL_STRAIN_TARGET = 1e-4  # small-strain E and nu, relative
-FORMULATIONS = {"displacement": 1, "mixed": 2}   # formulation -> displacement degree
+DEGREES = {"displacement": 1, "mixed": 2}   # formulation -> displacement degree
 CELLS = 2
 QUADRATURE = 2              # P is constant: any degree integrates it exactly
 
@@ -114,7 +114,7 @@ class HomogeneousCube:
         from fem.materials import energy, mixed_energy
 
         cube = mesh.create_unit_cube(MPI.COMM_SELF, cells, cells, cells, mesh.CellType.tetrahedron)
-        degree = FORMULATIONS[formulation]
+        degree = DEGREES[formulation]
         vector = ufl.VectorElement("Lagrange", cube.ufl_cell(), degree)
         if formulation == "mixed":
             scalar = ufl.FiniteElement("Lagrange", cube.ufl_cell(), degree - 1)
@@ -150,7 +150,7 @@ class HomogeneousCube:
         fixed[self.u_dofs[self.boundary].ravel()] = True
         self.free = np.flatnonzero(~fixed)
 
-    def _assemble(self) -> tuple[np.ndarray, np.ndarray]:
+    def assemble(self) -> tuple[np.ndarray, np.ndarray]:
         from dolfinx import fem
         from dolfinx.fem.petsc import assemble_matrix
 
@@ -174,14 +174,14 @@ class HomogeneousCube:
             x[self.p_dofs] = rng.uniform(-0.01, 0.01, len(self.p_dofs))
         free = self.free
         for it in range(1, max_it + 1):
-            b, A = self._assemble()
+            b, A = self.assemble()
             du = np.linalg.solve(A[np.ix_(free, free)], -b[free])
             x[free] += du
             if np.abs(du).max() < 1e-13 * max(1.0, np.abs(x).max()):
                 break
         else:
             raise RuntimeError(f"homogeneous cube: Newton did not converge in {max_it} iterations")
-        b, _ = self._assemble()
+        b, _ = self.assemble()
         reactions = np.array([[b[self.u_dofs[self.faces[K], j]].sum() for K in range(3)] for j in range(3)])
         pressure = x[self.p_dofs].copy() if self.p_dofs is not None else None
         return CubeResult(reactions, it, pressure)
@@ -215,7 +215,7 @@ def check_case(cubes: dict, material: MaterialLaw, F: np.ndarray, seed: int) -> 
     return out
 
 
-def check_law(material: MaterialLaw, formulations=tuple(FORMULATIONS), seed: int = 0) -> dict:
+def check_law(material: MaterialLaw, formulations=tuple(DEGREES), seed: int = 0) -> dict:
     """Every homogeneous test of one law (module docstring): a JSON-ready dict."""
     t0 = time.perf_counter()
     cubes = {f: HomogeneousCube(material, f) for f in formulations}
@@ -245,7 +245,7 @@ def run(laws: dict[str, MaterialLaw]) -> dict:
     return {"laws": out, "worst_rel_diff": worst, "target_rel": TARGET_REL,
             "worst_small_strain_rel_diff": small, "small_strain_target_rel": SMALL_STRAIN_TARGET,
             "target_met": worst <= TARGET_REL and small <= SMALL_STRAIN_TARGET,
-            "mesh": {"cells_per_edge": CELLS, "degrees": FORMULATIONS, "quadrature_degree": QUADRATURE}}
+            "mesh": {"cells_per_edge": CELLS, "degrees": DEGREES, "quadrature_degree": QUADRATURE}}
 
 
 def main(argv=None) -> int:
