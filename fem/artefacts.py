@@ -79,3 +79,13 @@ MESH_CAUSES = Format("fem-mesh-causes", 1, "fem.mesh_causes", {
     "rows[].effect?.worst?.phi_end_deg": MAYBE, "rows[].effect?.worst?.cap_rotation_deg": MAYBE,
     "rows[].against_reference?.worst?.anchor_percent": MAYBE, "ranking": list,
     "dominant?.factor": str, "dominant?.worst_anchor_percent": NUM})
+
+#: results/fem/materials.json (fem.materials_check): each material law against its closed
+#: form on homogeneous deformations of a cube: per law and test the largest relative
+#: difference, and the small-strain E and nu.
+MATERIALS = Format("fem-materials", 1, "fem.materials_check", {
+    **each("", NUM, "worst_rel_diff", "target_rel", "worst_small_strain_rel_diff", "small_strain_target_rel"),
+    "target_met": bool, "laws{}.law": str,
+    **each("laws{}", NUM, "E_small_strain", "nu_small_strain", "mu0", "K", "worst_rel_diff"),
+    "laws{}.tests{}.max_rel_diff": NUM, "laws{}.tests{}.P_closed_form": list,
+    **each("laws{}.tests.small_strain", NUM, "E_fem", "E_rel_diff", "nu_closed_form", "nu_rel_diff")})
