@@ -39,7 +39,7 @@ $(TIMES):
 endif
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-causes joint-render self-contact validation \
+.PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-causes materials joint-render self-contact validation \
         dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery finger-fem validate-finger report clean
 
 help: ## show this help
@@ -92,6 +92,10 @@ mesh-study: | $(SETUP) ## 8 loads x (sqrt-2 family of the production formulation
 MESH_CAUSES_HOURS ?= 3
 mesh-causes: | $(SETUP) ## what limits the joint's mesh convergence: formulation, quadrature, penalty, wall elements at 8 loads, one factor at a time (one core, hours; resumes) -> results/fem/mesh_causes.{json,md}
 	nice $(PY) -m fem.mesh_causes --work results/fem/joint_cases --out results/fem/mesh_causes.json --max-hours $(MESH_CAUSES_HOURS)
+
+materials: results/fem/materials.json ## each hyperelastic law's FEM against its closed form on homogeneous deformations (minutes) -> results/fem/materials.json
+results/fem/materials.json: $(TIMES) fem/materials.py fem/materials_check.py contract/joint.py | $(SETUP)
+	$(PY) -m fem.materials_check --out $@
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners
 results/fem/self_contact.json: $(TIMES) fem/*.py | $(SETUP)

@@ -48,6 +48,7 @@ ARTEFACTS = (
     Artefact("fem/joint_cases/*.json", "make mesh-study", fem.JOINT_CASE),
     Artefact("fem/mesh_causes.json", "make mesh-causes", fem.MESH_CAUSES),
     Artefact("fem/self_contact.json", "make self-contact", fem.SELF_CONTACT),
+    Artefact("fem/materials.json", "make materials", fem.MATERIALS),
     Artefact("fem/heldout_mesh.json", "make fine-compare", workflow.MESH_COMPARISON),
     Artefact("bench/fem.json", "make bench-fem", fem.BENCH_JOINT),
     Artefact("bench/finger.json", "make bench-finger", fem.BENCH_FINGER),

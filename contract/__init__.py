@@ -8,6 +8,9 @@ layer may import it: apps -> predictor -> surrogate -> workflow -> fem, all on t
 * ``contract.finger``: the finger description (an ordered chain of joints and rigid parts,
   TOML files, ``contract/fingers/paper.toml`` the paper's), its bounds, load, save and
   plain-dict round trip (docs/gripper.md, docs/formats.md).
+* ``contract.joint``: the joint description (geometry, material law, input box, anchors,
+  mesh defaults; TOML files, ``contract/joints/paper.toml`` the paper's), its shape rules,
+  load, plain-dict round trip and digest (docs/joints.md).
 * ``contract.cli``: the command-line contract every ``python -m`` tool follows (``--json``,
   one-line errors with exit 2, outputs checked before work).
 * ``contract.files``: atomic result files and strict JSON.
