@@ -1,6 +1,7 @@
 """The whole finger in DOLFINx: the ground truth for the gesture predictor (issue 14).
 
-    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE] --json
+    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE]
+                         [--formulation mixed] --json
     python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
@@ -12,6 +13,17 @@ base mount, y in the bending plane). Every joint is the bellow joint of fem.prob
 same neo-Hookean NinjaFlex, stiff distal cap, P2 elements, valley self-contact of
 fem.contact); every rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35),
 bonded to its neighbours (one conforming mesh). The base face x = 0 is clamped.
+
+Formulation (the joint's discretisation, fem.discretisation; default the production
+FORMULATION): "displacement", P2 displacements u; or "mixed", one Taylor-Hood space
+(P2 u, continuous P1 pressure p, MPa) over the whole finger, whose internal work is the
+variation of the perturbed Lagrangian of fem.problem with each region's own moduli,
+
+    Pi(u, p) = sum_regions ∫ mu_r/2 (I1 - 3) - mu_r ln J - p ln J - p² / (2 lambda_r) dX,
+
+(NinjaFlex body, stiff cap, PLA parts), one pressure continuous across them as in the
+joint's body and cap. It removes the volumetric locking of P2 at nu = 0.49 in the joints
+(results/fem/mesh_causes.md; the stiff parts move rigidly in either formulation).
 
 Loads, all ramped together along one load path (load vector a = (P_1 .. P_n, g)):
 
@@ -43,7 +55,9 @@ import logging
 import math
 import sys
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Callable
 
 import numpy as np
 import ufl
@@ -53,13 +67,16 @@ from petsc4py import PETSc
 
 from contract import cli
 from contract.finger import FingerSpec, finger_arg, load_finger
-from fem.geometry import FingerGeometry, JointGeometry, finger_tags
+from fem.discretisation import FORMULATION
+from fem.geometry import FingerGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
-from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size
-from fem.problem import (Average, LoadTerm, Material, Problem, bellow_work, chamber_pressures,
-                         clamp_and_symmetry, deformation_gradient, displacement_space, elastic_work,
-                         facet_tags_present, region_volume, rotation_about_z, valley_contact)
+from fem.options import MESH_SIZE, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, bellow_work,
+                         chamber_pressures, clamp_and_symmetry, deformation_gradient,
+                         displacement_space, elastic_work, facet_tags_present, mixed_bellow_work,
+                         mixed_clamp_and_symmetry, mixed_elastic_work, mixed_space, region_volume,
+                         rotation_about_z, valley_contact)
 from contract.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
 from fem.xdmf import write_xdmf
 
@@ -152,19 +169,71 @@ def rotation_matrix(angle: float) -> np.ndarray:
 FINGER_CONFIG = SolverConfig(max_it=25, min_step=1.0 / 1024)
 
 
+@dataclass(frozen=True, eq=False)
+class FingerUnknown:
+    """The finger's unknown in one formulation: ``w`` the Function solved for (u, or the
+    mixed pair (u, p)), F = I + grad u (UFL variable), ``v`` the displacement test function,
+    the measures, the internal virtual work of a joint (``joint_work(body, cap)``) and of a
+    rigid part (``rigid_work(region)``), the clamp and symmetry conditions, and the
+    displacement space ``U`` the contact acts on (with ``parent`` = (W, to_parent) when it
+    is collapsed out of the mixed space W)."""
+
+    w: fem.Function
+    F: object
+    v: object
+    dx: object
+    ds: object
+    joint_work: Callable
+    rigid_work: Callable
+    bcs: tuple
+    U: object
+    parent: tuple | None = None
+    formulation: str = "displacement"
+
+
+def displacement_unknown(mesh_data: MeshData, material: Material, rigid: RigidMaterial,
+                         degree: int, quadrature_degree: int) -> FingerUnknown:
+    """P``degree`` displacements u (mm) over the whole finger."""
+    u, v, dx, ds = displacement_space(mesh_data, degree, quadrature_degree)
+    F = deformation_gradient(u)
+    return FingerUnknown(u, F, v, dx, ds,
+                         lambda body, cap: bellow_work(F, v, material, body, cap),
+                         lambda region: elastic_work(F, v, rigid.E, rigid.nu, region),
+                         tuple(clamp_and_symmetry(u.function_space, mesh_data.facet_tags)),
+                         u.function_space)
+
+
+def mixed_unknown(mesh_data: MeshData, material: Material, rigid: RigidMaterial,
+                  degree: int, quadrature_degree: int) -> FingerUnknown:
+    """One Taylor-Hood space (P``degree`` u mm, continuous P``degree - 1`` p MPa) over the
+    whole finger; every region's work the variation of its perturbed Lagrangian."""
+    fields, dx, ds = mixed_space(mesh_data, degree, quadrature_degree)
+    W = fields.w.function_space
+    F = deformation_gradient(fields.u)
+    return FingerUnknown(fields.w, F, fields.v, dx, ds,
+                         lambda body, cap: mixed_bellow_work(fields, F, material, body, cap),
+                         lambda region: mixed_elastic_work(fields, F, rigid.E, rigid.nu, region),
+                         tuple(mixed_clamp_and_symmetry(W, mesh_data.facet_tags)), fields.U,
+                         parent=(W, fields.to_parent), formulation="mixed")
+
+
 def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Material = Material(),
                    rigid: RigidMaterial = RigidMaterial(), *, degree: int = 2,
-                   quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
+                   quadrature_degree: int = 2, contact_penalty: float = 100.0,
+                   formulation: str = "displacement") -> Problem:
     """The whole finger as a :class:`fem.problem.Problem` (module docstring): every joint
     the bellow joint's body, stiff cap, chamber pressures and valley contact, every rigid
     part a PLA-like solid, gravity a dead body force. Load vector a = (P_1 .. P_n, g) in
     MPa and [0, 1]; probes: each joint's proximal centre and anchors, then the fingertip;
     averages ``rotation{k}`` (rad): part k's rigid body (a rigid part, or a joint's cap).
-    Collective."""
+    ``formulation``: "displacement" or "mixed" (module docstring). Collective."""
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
+    build = mixed_unknown if formulation == "mixed" else displacement_unknown
+    unknown = build(mesh_data, material, rigid, degree, quadrature_degree)
     finger, comm = geometry.finger, mesh_data.mesh.comm
-    u, v, dx, ds = displacement_space(mesh_data, degree, quadrature_degree)
-    V, ft, mesh = u.function_space, mesh_data.facet_tags, mesh_data.mesh
-    F = deformation_gradient(u)
+    F, v, dx, ds = unknown.F, unknown.v, unknown.dx, unknown.ds
+    ft, mesh = mesh_data.facet_tags, mesh_data.mesh
     tags = finger_tags(finger)
     present = facet_tags_present(ft)
     internal, weights, pressures, averages = 0, [], (), {}
@@ -172,12 +241,12 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Mate
         own = dx(tags[f"part{k}"])
         if part.kind == "joint":
             rigid_body = dx(tags[f"cap{k}"])
-            internal = internal + bellow_work(F, v, material, own, rigid_body)
+            internal = internal + unknown.joint_work(own, rigid_body)
             whole = own + rigid_body
             pressures += chamber_pressures(F, v, ds, tags[f"top{k}"], tags[f"bottom{k}"], present,
                                            finger.joints.index(k))
         else:
-            internal = internal + elastic_work(F, v, rigid.E, rigid.nu, own)
+            internal = internal + unknown.rigid_work(own)
             whole = rigid_body = own
         if part.weight > 0:
             weights.append(gravity_work(v, finger, part.weight, whole, region_volume(mesh, whole, comm)))
@@ -187,11 +256,13 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Mate
     loads = pressures
     if weights:
         loads += (LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), sum(weights[1:], weights[0]), n),)
-    contact = valley_contact(V, ft, present, geometry.joint, contact_penalty,
-                             offsets=tuple(finger.rest_start(k) for k in finger.joints))
-    return Problem(mesh_data, u, internal, loads, np.array([PRESSURE_LIMIT] * n + [1.0]),
-                   tuple(clamp_and_symmetry(V, ft)), finger_probes(geometry), contact,
-                   averages=averages)
+    contact = valley_contact(unknown.U, ft, present, geometry.joint, contact_penalty,
+                             offsets=tuple(finger.rest_start(k) for k in finger.joints),
+                             parent=unknown.parent)
+    return Problem(mesh_data, unknown.w, internal, loads, np.array([PRESSURE_LIMIT] * n + [1.0]),
+                   unknown.bcs, finger_probes(geometry), contact, averages=averages,
+                   formulation=unknown.formulation,
+                   displacement_space=None if unknown.parent is None else unknown.U)
 
 
 def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
@@ -200,7 +271,8 @@ def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
     the global -Y in the finger frame. Returned as the residual term -∫ b·v dX."""
     e_g = rotation_matrix(-finger.base_angle) @ np.array([0.0, -1.0])
     gravity = ufl.as_vector([float(e_g[0]), float(e_g[1]), 0.0])
-    rho = fem.Constant(v.ufl_function_space().mesh, PETSc.ScalarType(weight / (2 * volume)))
+    mesh = ufl.domain.extract_unique_domain(v)     # v may be a block of a mixed test function
+    rho = fem.Constant(mesh, PETSc.ScalarType(weight / (2 * volume)))
     return -rho * ufl.inner(gravity, v) * region
 
 
@@ -215,15 +287,16 @@ def finger_probes(geometry: FingerGeometry) -> np.ndarray:
 
 class FingerSolver:
     """Static large-deflection solve of one whole finger (module docstring):
-    :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`."""
+    :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`.
+    ``formulation`` defaults to the production one (fem.discretisation.FORMULATION)."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: Material = Material(), rigid: RigidMaterial = RigidMaterial(),
-                 config: SolverConfig = FINGER_CONFIG):
-        self.finger, self.config = geometry.finger, config
+                 config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION):
+        self.finger, self.config, self.formulation = geometry.finger, config, formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
-                                      **config.discretisation())
+                                      formulation=formulation, **config.discretisation())
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
         self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
@@ -238,6 +311,10 @@ class FingerSolver:
 
     def mesh_info(self) -> dict:
         return self.solver.mesh_info()
+
+    def displacement(self) -> fem.Function:
+        """The displacement u (mm) in its own vector space (a copy, for the mixed form)."""
+        return self.problem.displacement()
 
     def rotation(self, k: int) -> float:
         """Rotation (rad) about +z of part k's rigid body: a rigid part, or a joint's cap."""
@@ -308,10 +385,11 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
     ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: contract/fingers/paper.toml)")
-    add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
+    add_mesh_size(ap, None, "joint tetrahedron size")
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
+    add_formulation(ap)
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
@@ -347,7 +425,7 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
     else:
         print("  tip = none (did not converge)")
     print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
-          f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes, {ranks} rank(s)")
+          f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes ({out['formulation']}), {ranks} rank(s)")
 
 
 def main(argv=None) -> int:
@@ -357,23 +435,26 @@ def main(argv=None) -> int:
     finger = args.finger or load_finger()
     load = FingerLoad(parsed_pressures(ap, args, finger), not args.no_gravity)
     cli.setup_logging(args.quiet, args.verbose)
-    joint = replace(JointGeometry(), mesh_size=args.mesh_size, wall_mesh_size=args.wall_mesh_size)
-    geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
+    geometry = FingerGeometry(finger, joint_geometry(args), args.rigid_mesh_size)
+    formulation = args.formulation or FORMULATION
     comm = MPI.COMM_WORLD
     with ap.errors(), cli.heartbeat(f"finger {finger.name!r}", enabled=comm.rank == 0):
         if comm.rank == 0:
             log.info("finger %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
                      finger.name)
-        solver = FingerSolver(geometry, comm)
+        solver = FingerSolver(geometry, comm, formulation=formulation)
         if comm.rank == 0:
             log.info("mesh ready (%d nodes); solving P = %s MPa, gravity %s", solver.mesh_info()["nodes"],
                      list(load.pressures), load.gravity)
         result = solver.solve(load)
         if args.xdmf and result.converged:
-            write_xdmf(args.xdmf, solver)
+            # write_xdmf takes anything with comm, mesh_data and u: here u's own space (mixed: no
+            # mixed field is written)
+            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.mesh_data,
+                                                  u=solver.displacement()))
     if comm.rank == 0:
         out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
-               "geometry": geometry.as_dict(), "ranks": comm.size}
+               "geometry": geometry.as_dict(), "formulation": formulation, "ranks": comm.size}
         if args.json:
             cli.print_json(out)
         else:

@@ -6,6 +6,11 @@
 * the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the box
   |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100 is checked by :func:`contract.spec.check_box` right
   after parsing (before any mesh), unless ``--allow-extrapolation``.
+* ``--formulation`` {displacement, mixed} (fem.problem: P2 displacement or Taylor-Hood
+  u-p); None, its default, means the production formulation fem.discretisation.FORMULATION,
+  which the tool resolves (this module imports no dolfinx);
+* :func:`joint_geometry`: the joint of ``--mesh-size`` and ``--wall-mesh-size``, the
+  production sizes (JointGeometry's defaults) when neither is given;
 * :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
   under mpirun ``with ap.errors():`` exits every rank with 2 and nothing hangs.
 """
@@ -16,10 +21,14 @@ import numpy as np
 
 from contract import cli
 from contract.spec import INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
+from fem.geometry import JointGeometry
 
 MESH_SIZE_RANGE = (0.3, 10.0)  # mm
 MESH_SIZE = cli.number(*MESH_SIZE_RANGE, "mm")   # argparse type
 MESH_SIZE_TEXT = f"mm in [{MESH_SIZE_RANGE[0]:g}, {MESH_SIZE_RANGE[1]:g}]"
+#: fem.problem.FORMULATIONS, spelled out here: this module imports no dolfinx
+#: (tests/test_formulation.py checks that the two agree).
+FORMULATION_CHOICES = ("displacement", "mixed")
 LOAD_HELP = ("chamber pressure P, MPa (signed)", "axial end force F1, N",
              "transverse end force F2, N", "end couple M about +z, N*mm")
 
@@ -35,6 +44,25 @@ def add_wall_mesh_size(ap: cli.Parser) -> None:
     """``--wall-mesh-size`` W in mm on the 1.2 mm chamber walls (None: ``--mesh-size``)."""
     ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None,
                     help=f"tetrahedron size on the chamber walls, {MESH_SIZE_TEXT} (default: --mesh-size)")
+
+
+def add_formulation(ap: cli.Parser) -> None:
+    """``--formulation`` {displacement, mixed}; default None: the production formulation
+    (fem.discretisation.FORMULATION), resolved by the tool."""
+    ap.add_argument("--formulation", choices=FORMULATION_CHOICES, default=None,
+                    help="finite elements: P2 displacement, or Taylor-Hood P2-P1 u-p 'mixed' "
+                         "(no volumetric locking); default: the production formulation "
+                         "(fem.discretisation.FORMULATION)")
+
+
+def joint_geometry(args) -> JointGeometry:
+    """The joint of ``args.mesh_size`` and ``args.wall_mesh_size`` (mm; add_mesh_size with
+    default None, add_wall_mesh_size): JointGeometry's production sizes when neither is
+    given; otherwise H (default the production H) and W (default H, i.e. None)."""
+    if args.mesh_size is None and args.wall_mesh_size is None:
+        return JointGeometry()
+    return JointGeometry(mesh_size=args.mesh_size or JointGeometry.mesh_size,
+                         wall_mesh_size=args.wall_mesh_size)
 
 
 def add_load(ap: cli.Parser, default=(0.0, 0.0, 0.0, 0.0)) -> None:

@@ -41,7 +41,8 @@ Newton, MUMPS, sensitivities), which knows nothing of the physics.
 
 The physics pieces, written once and shared by the joint, the beam and the finger:
 
-* :func:`elastic_work`: neo-Hookean internal virtual work of one region;
+* :func:`elastic_work`: neo-Hookean internal virtual work of one region (mixed:
+  :func:`mixed_elastic_work`);
 * :func:`bellow_work`: the joint's NinjaFlex body and its stiff distal cap (modulus
   ``cap_stiffness`` x E, so it moves rigidly to solver precision);
 * :func:`chamber_pressures`: follower pressure on the deformed chamber walls (Nanson)::
@@ -182,6 +183,11 @@ class Problem:
         """Set every load constant for the load vector ``a``."""
         for term in self.loads:
             term.constant.value = term.value(a)
+
+    def displacement(self) -> fem.Function:
+        """u (mm) as a Function of its own vector space: ``u`` itself, or for "mixed" a
+        copy of w's displacement block (for writers and plots, which take no mixed field)."""
+        return self.u if self.displacement_space is None else self.u.sub(0).collapse()
 
 
 # ---------------------------------------------------------------------- physics pieces
@@ -368,6 +374,12 @@ def mixed_bellow_work(fields: MixedFields, F, material: Material, body, cap):
           + mixed_energy_density(F, fields.p, material.cap_stiffness * material.E,
                                  material.cap_nu) * cap)
     return ufl.derivative(Pi, fields.w, fields.test)
+
+
+def mixed_elastic_work(fields: MixedFields, F, E: float, nu: float, dx):
+    """Internal virtual work in w = (u, p) of one neo-Hookean region (E MPa, nu > 0): the
+    variation of ∫ mixed_energy_density dX, the mixed counterpart of elastic_work."""
+    return ufl.derivative(mixed_energy_density(F, fields.p, E, nu) * dx, fields.w, fields.test)
 
 
 def mixed_clamp_and_symmetry(W, facet_tags) -> list:

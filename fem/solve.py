@@ -1,6 +1,7 @@
 """Command line: solve one joint load case.
 
     python -m fem.solve --p 0.2 --f1 1 --f2 -1 --m 20 --json
+    python -m fem.solve --p 0.2 --formulation mixed --mesh-size 2.4
     mpirun -n 2 python -m fem.solve --p -0.1 --m 50
 
 Inputs: P (MPa), F1, F2 (N), M (N·mm); outside |P|<=0.3, |F1|,|F2|<=3, |M|<=100 the load
@@ -9,7 +10,9 @@ is refused before meshing unless --allow-extrapolation (then recorded as
 (deg), Newton iterations and wall time; with --jacobian also d(anchors)/d(P, F1, F2, M),
 shape (20, 4), rows (x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm); with
 --xdmf the displacement field (NAME.xdmf + NAME.h5, written by all ranks into a hidden
-folder beside them, then renamed into place). Exit status 0 on convergence, 1 if the
+folder beside them, then renamed into place; for the mixed formulation u alone). The
+formulation (``--formulation``, default the production one) is in the output and the JSON
+("formulation"). Exit status 0 on convergence, 1 if the
 solve failed, 2 on bad input. Progress (mesh, load steps) goes to stderr unless --quiet;
 stdout holds the result alone.
 """
@@ -19,12 +22,14 @@ from __future__ import annotations
 import logging
 import sys
 from dataclasses import asdict, replace
+from types import SimpleNamespace
 
 from mpi4py import MPI
 
 from contract import cli
 from fem.geometry import JointGeometry
-from fem.options import add_load, add_mesh_size, parsed_load
+from fem.discretisation import FORMULATION
+from fem.options import add_formulation, add_load, add_mesh_size, parsed_load
 from fem.solver import JointSolver, Load
 from fem.xdmf import write_xdmf
 
@@ -36,6 +41,7 @@ def build_parser() -> cli.Parser:
                     description="Solve one bellow-joint load case with DOLFINx.")
     add_load(ap)
     add_mesh_size(ap, JointGeometry().mesh_size)
+    add_formulation(ap)
     ap.add_argument("--jacobian", action="store_true",
                     help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
     ap.add_output("--xdmf", suffix=".xdmf",
@@ -54,7 +60,8 @@ def _print_text(out: dict, result, jac) -> None:
     print(f"  phi_end = {out['phi_end_deg']:.3f} deg, cap rotation = "
           f"{out['cap_rotation_deg']:.3f} deg")
     print(f"  Newton iterations {result.newton_iterations}, {result.wall_time:.1f} s, "
-          f"{out['mesh']['nodes']} nodes, {out['mesh']['dofs']} dofs, {out['ranks']} rank(s)")
+          f"{out['mesh']['nodes']} nodes, {out['mesh']['dofs']} dofs ({out['formulation']}), "
+          f"{out['ranks']} rank(s)")
     if jac is not None:
         print("  d(anchors)/d(P, F1, F2, M), rows x_1, y_1, x_2, ...:")
         for row in jac:
@@ -68,19 +75,22 @@ def main(argv=None) -> int:
     comm = MPI.COMM_WORLD
     cli.setup_logging(args.quiet, args.verbose)
     geo = replace(JointGeometry(), mesh_size=args.mesh_size)
+    formulation = args.formulation or FORMULATION
     with ap.errors(), cli.heartbeat("joint", enabled=comm.rank == 0):
         if comm.rank == 0:
             log.info("joint: meshing and compiling the forms (the first run compiles for tens of seconds)")
-        solver = JointSolver(geo, comm)
+        solver = JointSolver(geo, comm, formulation=formulation)
         if comm.rank == 0:
             log.info("mesh ready (%d nodes); solving %s", solver.mesh_info()["nodes"], load)
         result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
         jac = solver.sensitivities() if args.jacobian and result.converged else None
         if args.xdmf and result.converged:
-            write_xdmf(args.xdmf, solver)
+            # write_xdmf takes anything with comm, mesh_data and u: u in its own space
+            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.mesh_data,
+                                                  u=solver.displacement()))
     if comm.rank == 0:
         out = {**result.summary(), "mesh": solver.mesh_info(), "geometry": asdict(geo),
-               "ranks": comm.size}
+               "formulation": formulation, "ranks": comm.size}
         if jac is not None:
             out["jacobian"] = jac.tolist()
         if args.json:

@@ -12,7 +12,9 @@ anchors r_1..r_10, phi_end and the cap rotation.
 The material is neo-Hookean, whose small-strain limit is exactly (E, nu) = (12.2 MPa,
 0.49); P2 displacements avoid the volumetric locking of P1 at nu = 0.49 (mesh convergence:
 ``make mesh-study``); ``formulation="mixed"`` solves the same energy in Taylor-Hood u-p
-form (fem.problem), which does not lock. The paper used ANSYS linear elasticity with large deflection (St
+form (fem.problem), which does not lock. JointSolver's default formulation is the
+production one, fem.discretisation.FORMULATION (with JointGeometry's default sizes, the
+PRODUCTION discretisation). The paper used ANSYS linear elasticity with large deflection (St
 Venant-Kirchhoff-like); neo-Hookean agrees with it at small strain and stays stable in
 compression.
 
@@ -31,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from mpi4py import MPI
 
+from fem.discretisation import FORMULATION
 from fem.geometry import BeamGeometry, JointGeometry, anchor_points
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
@@ -138,6 +141,11 @@ class EndLoadedSolver:
     def mesh_info(self) -> dict:
         return self.solver.mesh_info()
 
+    def displacement(self):
+        """The displacement u (mm) as a Function of its own vector space (for the mixed
+        formulation a copy of w's u block)."""
+        return self.problem.displacement()
+
     def cap_rotation(self) -> float:
         """Volume-averaged rotation of the distal cap about +z (rad)."""
         return self.solver.average("cap_rotation")
@@ -185,11 +193,12 @@ class EndLoadedSolver:
 
 class JointSolver(EndLoadedSolver):
     """The bellow joint: anchors r_1..r_10 (docs/physics.md), loads at r_10; loads outside
-    the input box are refused unless allowed."""
+    the input box are refused unless allowed. ``formulation`` defaults to the production
+    one (fem.discretisation.FORMULATION)."""
 
     def __init__(self, geometry: JointGeometry = JointGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
                  material: Material = Material(), config: SolverConfig = SolverConfig(),
-                 formulation: str = "displacement"):
+                 formulation: str = FORMULATION):
         X = anchor_points(geometry.length)
         super().__init__(create_mesh(geometry, comm), ref_point=X[-1], probe_points=X,
                          material=material, config=config, formulation=formulation)
@@ -206,7 +215,9 @@ class JointSolver(EndLoadedSolver):
 
 def beam_solver(geometry: BeamGeometry = BeamGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
                 E: float = 12.2, config: SolverConfig = SolverConfig()) -> EndLoadedSolver:
-    """The slender benchmark cantilever (nu = 0): probes at the beam end (L, 0, 0)."""
+    """The slender benchmark cantilever (nu = 0): probes at the beam end (L, 0, 0). P2
+    displacements: at nu = 0 there is no volumetric stiffness to lock (and lambda = 0
+    leaves the mixed form's pressure undefined)."""
     tip = np.array([geometry.length, 0.0, 0.0])
     return EndLoadedSolver(create_mesh(geometry, comm), ref_point=tip, probe_points=tip[None, :],
-                           material=Material(E=E, nu=0.0), config=config)
+                           material=Material(E=E, nu=0.0), config=config, formulation="displacement")

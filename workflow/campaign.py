@@ -36,6 +36,14 @@ Failures. A sample whose continuation fails is retried once from zero; if that f
 it goes to the shard's failure arrays with its inputs and both reasons (never as data),
 and the walk continues from the solver's last converged state.
 
+Formulation. ``--formulation`` (default the production one, fem.discretisation.FORMULATION)
+chooses the joint's elements (fem.problem: P2 displacement or Taylor-Hood u-p "mixed").
+The manifest's config records it only when it is not "displacement", so that every
+manifest written before the mixed formulation existed reads as what it is
+(fem.discretisation.recorded_formulation); resuming with another formulation is refused
+like any other config change. Without ``--mesh-size`` and ``--wall-mesh-size`` the mesh
+is the production one (JointGeometry's default sizes).
+
 Path check. Every ``--fresh-check-every``-th unit also re-solves its last sample from zero
 and records the largest anchor difference in the shard's meta (``fresh_checks``). If the
 two differ by more than ``FRESH_TOL_MM`` (a second equilibrium branch), the from-zero
@@ -74,8 +82,8 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.spec import INPUT_BOX, N_INPUTS
-from fem.geometry import JointGeometry
-from fem.options import add_mesh_size, add_wall_mesh_size
+from fem.discretisation import FORMULATION
+from fem.options import add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
 from fem.solver import JointSolver, Load, Material, SolverConfig
 from workflow import shards
 from workflow.shards import Manifest, ShardError
@@ -138,14 +146,19 @@ def git_commit() -> str:
         return "unknown"
 
 
-def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int) -> dict:
+def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int,
+                    formulation: str = FORMULATION) -> dict:
     """The manifest's ``config``: everything that determines the samples (not N, not ranks);
-    ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included)."""
-    return {"source": "fem-campaign", "geometry": geometry.as_dict(),
-            "material": asdict(Material()), "solver": asdict(SolverConfig()),
-            "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
-            "fresh_check_every": fresh_check_every,
-            "input_box": INPUT_BOX.tolist()}
+    ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included);
+    ``formulation`` recorded only when it is not "displacement" (module docstring)."""
+    config = {"source": "fem-campaign", "geometry": geometry.as_dict(),
+              "material": asdict(Material()), "solver": asdict(SolverConfig()),
+              "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
+              "fresh_check_every": fresh_check_every,
+              "input_box": INPUT_BOX.tolist()}
+    if formulation != "displacement":
+        config["formulation"] = formulation
+    return config
 
 
 # ---------------------------------------------------------------------------- one unit
@@ -222,6 +235,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="MPI ranks per FEM solve (default 1; must divide the rank count)")
     add_mesh_size(ap, None, "tetrahedron size (default: the FEM's production mesh)")
     add_wall_mesh_size(ap)
+    add_formulation(ap)
     ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
     ap.add_argument("--step", type=cli.number(0, 2, open_lo=True), default=DEFAULT_STEP,
@@ -268,8 +282,12 @@ class Progress:
 #: The manifest's config entries that a command-line option sets: key -> (flag, unit).
 CONFIG_FLAGS = {("geometry", "mesh_size"): ("--mesh-size", " mm"),
                 ("geometry", "wall_mesh_size"): ("--wall-mesh-size", " mm"),
+                ("formulation",): ("--formulation", ""),
                 ("unit_size",): ("--unit-size", ""), ("walk_step",): ("--step", ""),
                 ("fresh_check_every",): ("--fresh-check-every", "")}
+#: What an absent config entry means (shown instead of "unset"): a manifest without a
+#: formulation was made with P2 displacements.
+CONFIG_ABSENT = {("formulation",): "displacement"}
 
 
 def _differences(old: dict, new: dict, prefix: tuple = ()) -> list[tuple[tuple, object, object]]:
@@ -289,7 +307,8 @@ def describe_difference(path: tuple, old, new) -> str:
     code setting (the FEM code or its defaults changed) and both values."""
     if path in CONFIG_FLAGS:
         flag, unit = CONFIG_FLAGS[path]
-        show = lambda v: "unset" if v is None else f"{v:g}{unit}" if isinstance(v, (int, float)) else repr(v)
+        absent = CONFIG_ABSENT.get(path, "unset")
+        show = lambda v: absent if v is None else f"{v:g}{unit}" if isinstance(v, (int, float)) else str(v)
         return f"{flag} {show(old)} (this run: {show(new)})"
     return f"{'.'.join(path)} = {old!r} (this run, from the code: {new!r})"
 
@@ -338,9 +357,9 @@ def run(args) -> int:
             print(f"python -m workflow.campaign: error: --ranks-per-group {G} does not divide "
                   f"{size} ranks", file=sys.stderr)
         return 2
-    mesh_size = args.mesh_size or JointGeometry().mesh_size
-    geometry = JointGeometry(mesh_size=mesh_size, wall_mesh_size=args.wall_mesh_size)
-    config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every)
+    geometry = joint_geometry(args)
+    mesh_size, formulation = geometry.mesh_size, args.formulation or FORMULATION
+    config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every, formulation)
     out, t_start = Path(args.out), time.perf_counter()
 
     # --- world rank 0: check, lock, clean, scan, manifest; everyone learns the units to do.
@@ -379,9 +398,10 @@ def run(args) -> int:
                             args.progress_every)
         if not args.quiet:
             print(f"[campaign] {out}: {len(todo)} of {manifest.units_total} units to do on "
-                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size}"
-                  f"{':' + str(args.wall_mesh_size) if args.wall_mesh_size else ''} mm, "
-                  f"unit size {args.unit_size}, step {args.step}", flush=True)
+                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size:g}"
+                  f"{f':{geometry.wall_mesh_size:g}' if geometry.wall_mesh_size else ''} mm, "
+                  f"{formulation} formulation, unit size {args.unit_size}, step {args.step}",
+                  flush=True)
 
     state = {"in_unit": 0, "fail_in_unit": 0}
 
@@ -403,7 +423,7 @@ def run(args) -> int:
             stopped = True
             break
         if solver is None:
-            solver = JointSolver(geometry, group)
+            solver = JointSolver(geometry, group, formulation=formulation)
         ids = unit_ids(unit, args.samples, args.unit_size)
         inputs = unit_walk(args.seed, unit, len(ids), args.step)
         check = args.fresh_check_every > 0 and unit % args.fresh_check_every == 0
@@ -454,7 +474,7 @@ def run(args) -> int:
             "units_run": units_run, "complete": manifest.complete,
             "range_complete": range_done, "stopped_by_budget": stopped,
             "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
-            "wall_mesh_size": args.wall_mesh_size,
+            "wall_mesh_size": geometry.wall_mesh_size, "formulation": formulation,
             "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,
             "cpu_hours_dataset": manifest.cpu_hours, "git_commit": commit,
         }

@@ -2,8 +2,9 @@
 
 Mirroring y -> -y maps a solution (R, P, F1, F2, M) to (R diag(1, -1), -P, F1, -F2, -M)
 (docs/physics.md); the joint mesh is mirror symmetric, so a dataset's mirrored samples,
-solved from zero on one rank, must give the mirrored stored anchors and Jacobians to solver
-tolerance. ``workflow.dataset verify --mirror N`` hands ``mirror_check`` to
+solved from zero on one rank with the dataset's own discretisation (its geometry, solver
+settings and formulation, fem.discretisation.recorded_formulation), must give the mirrored
+stored anchors and Jacobians to solver tolerance. ``workflow.dataset verify --mirror N`` hands ``mirror_check`` to
 ``workflow.store.verify``. Needs dolfinx (the data layer sits on the FEM layer).
 """
 
@@ -13,6 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from contract.spec import mirror
+from fem.discretisation import recorded_formulation
 from fem.geometry import JointGeometry
 from fem.solver import JointSolver, Load, Material, SolverConfig
 from workflow.shards import Manifest
@@ -24,7 +26,8 @@ def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
     symmetric, so the relation holds to solver tolerance. Runs on one rank."""
     cfg = manifest.config
     solver = JointSolver(JointGeometry(**cfg["geometry"]), MPI.COMM_SELF,
-                         Material(**cfg["material"]), SolverConfig(**cfg["solver"]))
+                         Material(**cfg["material"]), SolverConfig(**cfg["solver"]),
+                         formulation=recorded_formulation(cfg))
     rng = np.random.default_rng([manifest.seed, 7])
     pick = np.sort(rng.choice(len(arrays["sample_id"]), size=min(n, len(arrays["sample_id"])),
                               replace=False))
