@@ -16,8 +16,10 @@ FEM_TITLE = "FEM bellow joint (issue 2)"
 CAMPAIGN_TITLE = "FEM dataset campaign (issue 3)"
 
 
-#: Issue 2's speed targets for one joint sample on one core (the paper: ~420 s in ANSYS).
-FEM_TARGETS = (Target("<", 60, "s"), Target("<", 10, "s"))
+#: The speed targets for one joint sample of the production discretisation on one core (the
+#: paper: ~420 s in ANSYS): issue 35's, which replace issue 2's (< 60 s, < 10 s at 1.8 mm) now
+#: that the production discretisation is chosen for convergence.
+FEM_TARGETS = (Target("<=", 120, "s"), Target("<=", 15, "s"))
 
 
 def fem_section(root: Path) -> tuple[list[str], list[Check]]:
@@ -87,7 +89,8 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
         checks += [mesh, zero, cont]
         paper_s = f"~{b['paper_seconds_per_sample']:g} s"
         out += ["| figure | ours | paper (ANSYS) | target | met |", "|---|---|---|---|---|",
-                f"| mesh | {b['nodes']} P2 nodes, {b['dofs']} dofs, h = {b['mesh_size']} mm | "
+                f"| mesh | {b['nodes']} P2 nodes, {b['dofs']} dofs, {b.get('mesh', b['mesh_size'])} mm, "
+                f"{b.get('formulation', 'displacement')} | "
                 f"{b['paper_nodes']:,} nodes, {PAPER['fem_mesh_mm']} mm |" + cells(mesh),
                 f"| solve from zero (median of {len(b['solve_from_zero_cases'])}) | "
                 f"{b['solve_from_zero_s']:.1f} s, {b['newton_iterations']:.0f} Newton iterations | {paper_s} |"
@@ -95,7 +98,12 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
                 f"| next sample by continuation (median, step {b['continuation_step_fraction_of_box']} "
                 f"of the box, with sensitivities) | {b['continuation_sample_s']:.1f} s | {paper_s} |" + cells(cont),
                 f"| speed-up vs paper | {b['speedup_vs_paper_from_zero']:.1f}x from zero, "
-                f"{b['speedup_vs_paper_continuation']:.1f}x continuation | |" + cells(None), ""]
+                f"{b['speedup_vs_paper_continuation']:.1f}x continuation | |" + cells(None)]
+        if b.get("continuation_sample_s_1.8") is not None:
+            out.append(f"| the paper-fidelity mesh 1.8 mm {b['formulation_1.8']}, same run: {b['nodes_1.8']:,} nodes | "
+                       f"{b['solve_from_zero_s_1.8']:.1f} s from zero, {b['continuation_sample_s_1.8']:.1f} s by "
+                       f"continuation (production / 1.8: {b['ratio_continuation_vs_1.8']:.2f}x) | |" + cells(None))
+        out.append("")
     else:
         out += missing("timings", "make bench-fem")
     return out, checks
