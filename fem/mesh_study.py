@@ -7,7 +7,8 @@
 A mesh is ``H`` or ``H:W``: tetrahedron size H mm, and W mm on the 1.2 mm chamber walls
 (W = 0.6 puts two P2 elements through the wall). The study solves fem.joint_cases.LOADS
 (four box corners, four interior loads) from zero on every mesh in one formulation, on
-the production discretisation (``--production``, same formulation) and on the paper's
+the production discretisation (fem.discretisation.PRODUCTION, its mesh ``--production``:
+what new data is generated on, judged against the reference) and on the paper's
 discretisation (fem.discretisation.PAPER, 1.8 mm displacement P2: the committed
 paper-fidelity data); each (discretisation, load) is one record in ``--work`` (shared with
 fem.mesh_causes), so a killed or time-limited study resumes where it stopped.
@@ -113,13 +114,15 @@ def family(meshes: list[dict]) -> list[int] | None:
         chain.insert(0, coarser[-1])
 
 
-def analyse(meshes: list[dict], production: str, paper: str | None = None) -> dict:
+def analyse(meshes: list[dict], production: str, paper: str | None = None,
+            formulation: str | None = None) -> dict:
     """The study's figures from its solved meshes (each with key, formulation, mesh_size,
     wall_mesh_size, nodes and ``cases``, one per load in one order). ``production`` and
-    ``paper`` name meshes by key; the family is sought among the production's formulation."""
+    ``paper`` name meshes by key; the family is sought among the meshes in ``formulation``
+    (default: the production's)."""
     X = anchor_points(JointGeometry().length)[:, :2]
     by_key = {m["key"]: m for m in meshes}
-    formulation = by_key[production]["formulation"]
+    formulation = formulation or by_key[production]["formulation"]
     own = [m for m in meshes if m["formulation"] == formulation]
     chain = family(own)
     n_loads = len(meshes[0]["cases"])
@@ -166,9 +169,10 @@ def mesh_entry(disc: Discretisation, cases: dict) -> dict:
 
 def plan(meshes: list[tuple], formulation: str, production: tuple) -> tuple[list, Discretisation]:
     """(discretisations, cheapest first; the production one): the family in
-    ``formulation``, the production mesh in it and the paper's discretisation."""
-    prod = replace(PRODUCTION, H=production[0], W=production[1], formulation=formulation)
-    discs = {replace(prod, H=h, W=w) for h, w in meshes} | {prod, PAPER}
+    ``formulation``, the production discretisation (PRODUCTION with the mesh
+    ``production``) and the paper's."""
+    prod = replace(PRODUCTION, H=production[0], W=production[1])
+    discs = {replace(PRODUCTION, H=h, W=w, formulation=formulation) for h, w in meshes} | {prod, PAPER}
     return sorted(discs, key=lambda d: -d.H * (d.W or d.H)), prod
 
 
@@ -188,7 +192,7 @@ def run(meshes: list[tuple], formulation: str, production: tuple, work: Path,
                 "extrapolation": [], "orders": [], "production": prod.key,
                 "production_mesh": [prod.H, prod.W], "production_error": None, "production_met": False,
                 "paper": PAPER.key, "paper_error": None}
-    return {**head, **analyse(solved, prod.key, PAPER.key)}
+    return {**head, **analyse(solved, prod.key, PAPER.key, formulation)}
 
 
 # ---------------------------------------------------------------- command line
@@ -227,7 +231,8 @@ def main(argv=None) -> int:
     ap.add_argument("--formulation", choices=FORMULATIONS, default=PRODUCTION.formulation,
                     help=f"the family's formulation (default {PRODUCTION.formulation}, the production one)")
     ap.add_argument("--production", type=_mesh, default=(PRODUCTION.H, PRODUCTION.W), metavar="H[:W]",
-                    help=f"the production mesh, judged against the reference (default {PRODUCTION.mesh})")
+                    help=f"the production mesh (in the production formulation, {PRODUCTION.formulation}), "
+                    f"judged against the reference (default {PRODUCTION.mesh})")
     ap.add_output("--work", folder=True, default="results/fem/joint_cases",
                   help="folder of the per-(discretisation, load) records (resumes from it; "
                   "default results/fem/joint_cases)")

@@ -190,10 +190,13 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
                 f"{', '.join(num(x, '.2f') for x in o['phi_end_deg'])}; "
                 f"{', '.join(num(x, '.2f') for x in o['cap_rotation_deg'])}."]
     if ms["orders"]:
-        out[-1] += (" P2 on smooth fields: 2; contact and curved walls lower it; n/a: the changes grow "
-                    "under refinement or the order is outside [0.5, 4].")
-    out += ["", f"Production discretisation: {mesh_label(*ms['production_mesh'])} {ms['formulation']}, the one "
-            f"new data is generated on; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
+        out[-1] += (" P2 on smooth fields: 2; contact and curved walls lower it; negative: the changes grow "
+                    "under refinement; n/a: no change.")
+    prod = next((m for m in ms["meshes"] if m["key"] == ms["production"]), None)
+    shown = (f"{mesh_label(*ms['production_mesh'])} {prod['formulation']}" if prod else
+             f"{ms['production']} (not solved at every load yet)")
+    out += ["", f"Production discretisation (fem.discretisation.PRODUCTION, what the datasets are generated on): "
+            f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
             f"{PAPER['mesh_change_percent']} %) and the paper's resolution. The others are shown, not judged.", ""]
     return out
 
