@@ -24,6 +24,7 @@ import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after i
 from mpi4py import MPI
 
 from contract import cli
+from contract.files import atomic_path
 from contract.joint import joint_digest
 from fem.options import (add_joint, add_load, add_mesh_size, formulation_of, joint_geometry, joint_of,
                          one_rank, parsed_load)

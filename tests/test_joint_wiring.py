@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contract.finger import FingerFileError, finger_from_dict, finger_to_dict, load_finger, parse_finger
+from contract.finger import FingerFileError, finger_from_dict, finger_to_dict, load_finger
 from contract.joint import DEFAULT_JOINT, joint_digest, load_joint, parse_joint
 
 ROOT = Path(__file__).resolve().parents[1]
