@@ -441,7 +441,7 @@ def build_parser() -> cli.Parser:
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
-    add_formulation(ap)
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")

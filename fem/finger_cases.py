@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help="rigid-part tetrahedron size, mm")
-    add_formulation(ap)
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default="", help="appended to each file name (e.g. _h1.2 for a finer mesh)")

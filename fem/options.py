@@ -55,13 +55,14 @@ def add_wall_mesh_size(ap: cli.Parser) -> None:
                     help=f"tetrahedron size on the chamber walls, {MESH_SIZE_TEXT} (default: --mesh-size)")
 
 
-def add_formulation(ap: cli.Parser) -> None:
+def add_formulation(ap: cli.Parser,
+                    shown: str = "the production formulation (fem.discretisation.FORMULATION)") -> None:
     """``--formulation`` {displacement, mixed}; default None: the production formulation
-    (fem.discretisation.FORMULATION), resolved by the tool."""
+    (fem.discretisation.FORMULATION) or, for a tool with ``--joint``, the joint file's
+    (formulation_of), resolved by the tool and described by ``shown``."""
     ap.add_argument("--formulation", choices=FORMULATION_CHOICES, default=None,
                     help="finite elements: P2 displacement, or Taylor-Hood P2-P1 u-p 'mixed' "
-                         "(no volumetric locking); default: the production formulation "
-                         "(fem.discretisation.FORMULATION)")
+                         f"(no volumetric locking); default: {shown}")
 
 
 def add_joint(ap: cli.Parser) -> None:

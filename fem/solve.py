@@ -47,7 +47,7 @@ def build_parser() -> cli.Parser:
     add_joint(ap)
     add_load(ap)
     add_mesh_size(ap, None, shown="the joint file's [mesh] size")
-    add_formulation(ap)
+    add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--jacobian", action="store_true",
                     help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
     ap.add_output("--xdmf", suffix=".xdmf",

@@ -255,7 +255,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_joint(ap)
     add_mesh_size(ap, None, "tetrahedron size", shown="the joint file's [mesh] size")
     add_wall_mesh_size(ap)
-    add_formulation(ap)
+    add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
     ap.add_argument("--step", type=cli.number(0, 2, open_lo=True), default=DEFAULT_STEP,
