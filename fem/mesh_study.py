@@ -2,7 +2,7 @@
 
     python -m fem.mesh_study --out results/fem/mesh_study.json [--formulation mixed] \\
         [--meshes 3.394:1.697 2.4:1.2 1.697:0.849 1.2:0.6] [--production 2.4:1.2] \\
-        [--work results/fem/joint_cases] [--max-hours 2]
+        [--loads 0 4] [--work results/fem/joint_cases] [--max-hours 2]
 
 A mesh is ``H`` or ``H:W``: tetrahedron size H mm, and W mm on the 1.2 mm chamber walls
 (W = 0.6 puts two P2 elements through the wall). The study solves fem.joint_cases.LOADS
@@ -157,9 +157,9 @@ def analyse(meshes: list[dict], production: str, paper: str | None = None,
 
 
 # ---------------------------------------------------------------- solves
-def mesh_entry(disc: Discretisation, cases: dict) -> dict:
+def mesh_entry(disc: Discretisation, cases: dict, loads=LOADS) -> dict:
     """One discretisation's results in load order, from its records {load key: record}."""
-    rows = [cases[load_key(load.as_array())] for load in LOADS]
+    rows = [cases[load_key(load.as_array())] for load in loads]
     keep = ("load", "anchors", "phi_end_deg", "cap_rotation_deg", "wall_time_s", "newton_iterations", "ranks")
     return {"key": disc.key, "formulation": disc.formulation, "mesh_size": disc.H, "wall_mesh_size": disc.W,
             "nodes": rows[0]["mesh"]["nodes"], "dofs": rows[0]["mesh"]["dofs"],
@@ -177,14 +177,15 @@ def plan(meshes: list[tuple], formulation: str, production: tuple) -> tuple[list
 
 
 def run(meshes: list[tuple], formulation: str, production: tuple, work: Path,
-        max_hours: float = 1000.0, comm=MPI.COMM_WORLD) -> dict:
-    """Solve what is missing (until ``max_hours``), then analyse the complete meshes; a
-    JSON-ready dict with ``complete`` false when a discretisation still lacks a load."""
+        max_hours: float = 1000.0, comm=MPI.COMM_WORLD, loads=LOADS) -> dict:
+    """Solve what is missing (until ``max_hours``), then analyse the meshes solved at every
+    load of ``loads``; a JSON-ready dict with ``complete`` false when a discretisation still
+    lacks a load."""
     discs, prod = plan(meshes, formulation, production)
-    complete = solve_missing(work, discs, LOADS, max_hours, comm)
-    records = read_records(work, discs, LOADS)
-    solved = [mesh_entry(d, records[d.key]) for d in discs if len(records.get(d.key, {})) == len(LOADS)]
-    head = {"loads": [load.as_array().tolist() for load in LOADS], "corners": [c.as_array().tolist() for c in CORNERS],
+    complete = solve_missing(work, discs, loads, max_hours, comm)
+    records = read_records(work, discs, loads)
+    solved = [mesh_entry(d, records[d.key], loads) for d in discs if len(records.get(d.key, {})) == len(loads)]
+    head = {"loads": [load.as_array().tolist() for load in loads], "corners": [c.as_array().tolist() for c in CORNERS],
             "wall_mm": JointGeometry().wall, "tolerance_percent": TOLERANCE_PERCENT, "tolerance_deg": TOLERANCE_DEG,
             "min_nodes": MIN_NODES, "complete": complete, "meshes": solved}
     if prod.key not in {m["key"] for m in solved}:
@@ -208,7 +209,7 @@ class _Distinct(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None):
         if len(set(values)) != len(values):
-            parser.error(f"{option_string}: give each mesh once")
+            parser.error(f"{option_string}: give each value once")
         setattr(namespace, self.dest, values)
 
 
@@ -233,6 +234,11 @@ def main(argv=None) -> int:
     ap.add_argument("--production", type=_mesh, default=(PRODUCTION.H, PRODUCTION.W), metavar="H[:W]",
                     help=f"the production mesh (in the production formulation, {PRODUCTION.formulation}), "
                     f"judged against the reference (default {PRODUCTION.mesh})")
+    ap.add_argument("--loads", type=cli.number(0, len(LOADS) - 1, integer=True), nargs="+",
+                    default=list(range(len(LOADS))), metavar="I", action=_Distinct,
+                    help="study only these of the eight loads, by index: " + ", ".join(
+                        f"{i} ({', '.join(f'{v:g}' for v in load.as_array())})" for i, load in enumerate(LOADS))
+                    + " (default all)")
     ap.add_output("--work", folder=True, default="results/fem/joint_cases",
                   help="folder of the per-(discretisation, load) records (resumes from it; "
                   "default results/fem/joint_cases)")
@@ -245,7 +251,8 @@ def main(argv=None) -> int:
         if comm.rank == 0:
             Path(args.work).mkdir(parents=True, exist_ok=True)
         comm.barrier()
-        study = run(args.meshes, args.formulation, args.production, Path(args.work), args.max_hours, comm)
+        study = run(args.meshes, args.formulation, args.production, Path(args.work), args.max_hours, comm,
+                    [LOADS[i] for i in args.loads])
         on_root(comm, lambda: MESH_STUDY.write(args.out, study))
     if comm.rank == 0:
         if args.json:
