@@ -31,7 +31,7 @@ MESH_STUDY = Format("fem-mesh-study", 2, "fem.mesh_study", {
     **each("", NUM, "tolerance_percent", "tolerance_deg", "wall_mm"), "min_nodes": int,
     "family": list | None, "production": str, "production_mesh": list, "production_met": bool,
     "meshes[].key": str, "meshes[].formulation": str, "meshes[].mesh_size": NUM,
-    "meshes[].wall_mesh_size": MAYBE, "meshes[].nodes": int, "meshes[].mean_solve_s": NUM,
+    "meshes[].wall_mesh_size": MAYBE, "meshes[].nodes": int, "meshes[].mean_solve_s": NUM, "meshes[].ranks": int,
     **each("meshes[].max_error?", NUM, *_ERRORS), "orders": list, "extrapolation?[].anchors.order": MAYBE,
     **each("production_error?", NUM, *_ERRORS), **each("paper_error?", NUM, *_ERRORS)})
 

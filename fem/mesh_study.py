@@ -163,7 +163,7 @@ def mesh_entry(disc: Discretisation, cases: dict, loads=LOADS) -> dict:
     keep = ("load", "anchors", "phi_end_deg", "cap_rotation_deg", "wall_time_s", "newton_iterations", "ranks")
     return {"key": disc.key, "formulation": disc.formulation, "mesh_size": disc.H, "wall_mesh_size": disc.W,
             "nodes": rows[0]["mesh"]["nodes"], "dofs": rows[0]["mesh"]["dofs"],
-            "mean_solve_s": float(np.mean([r["wall_time_s"] for r in rows])),
+            "mean_solve_s": float(np.mean([r["wall_time_s"] for r in rows])), "ranks": max(r["ranks"] for r in rows),
             "cases": [{**{k: r[k] for k in keep}, "closed_pairs": r["contact"]["closed_pairs"]} for r in rows]}
 
 
