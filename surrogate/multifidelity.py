@@ -48,8 +48,8 @@ Checked before any training (one line, exit 2, nothing written): every set loads
 its checksums; coarse and fine agree on source, input box, material and the geometry
 apart from the mesh sizes; the held-out set has the fine set's discretisation (geometry,
 material, solver, formulation) and a walk of its own (a seed neither training set has);
---coarse-model was trained on the coarse set's campaign (seed and config); every
-manifest records cpu_hours; the sizes fit the pool.
+--coarse-model was trained on the coarse set's campaign (seed and config); the coarse
+and fine manifests record cpu_hours; the sizes fit the pool; each --set key comes once.
 
 OUT (JSON, surrogate.artefacts.MULTIFIDELITY) and the figure (held-out errors against
 CPU hours, both curves) are rewritten atomically after every point; a re-run keeps the
@@ -309,6 +309,17 @@ def identity(kind: str, samples: int, seed: int, min_steps: int, configs, ids: d
                       "heldout_sha256": ids["heldout_sha256"], "split": ids["split"]})
 
 
+def is_current(point: dict, configs: dict, seed: int, min_steps: int, ids: dict) -> bool:
+    """A stored point is kept if it is a planned (kind, samples) with the configs, seed,
+    budget and data digests this run would give it."""
+    try:
+        want = identity(point["kind"], point["samples"], seed, min_steps, configs[(point["kind"], point["samples"])],
+                        ids)
+    except (KeyError, TypeError):
+        return False
+    return set(point) == set(POINT_KEYS) and all(point[k] == v for k, v in want.items())
+
+
 def interpolate_curve(doc: dict, m: float) -> dict | None:
     """The committed learning curve's held-out errors at m samples, log-log between its
     points with the Jacobian loss and its first seed; None outside its range."""
@@ -460,6 +471,9 @@ def parser() -> cli.Parser:
 
 def prepare(args) -> dict:
     """Everything checked and loaded before any training (ValueError / OSError on bad input)."""
+    keys = [parse_override(p)[0] for p in args.set]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"--set {', '.join(args.set)}: give each key once")
     parts, manifests, split = load_sets(args.coarse, args.fine, args.heldout)
     pool = len(parts["train"])
     for s in args.sizes:
@@ -548,10 +562,7 @@ def main(argv=None) -> int:
     ids = {"coarse_model_sha256": model_sha, "fine_sha256": s["fine_sha"], "heldout_sha256": s["heldout_sha"],
            "split": s["split"]}
     head = header(args, s, model_path, model_sha, trained_here, evaluate(coarse, s["parts"]["heldout"]))
-    old = load_points(out)
-    points = [p for p in old if set(p) == set(POINT_KEYS) and (p.get("kind"), p.get("samples")) in s["configs"]
-              and all(p.get(k) == v for k, v in identity(p["kind"], p["samples"], args.seed, args.min_steps,
-                                                         s["configs"][(p["kind"], p["samples"])], ids).items())]
+    points = [p for p in load_points(out) if is_current(p, s["configs"], args.seed, args.min_steps, ids)]
     for p in points:  # costs follow the manifests
         p["cpu_hours"] = point_cost(p["kind"], p["samples"], s["cost"])
     done = {(p["kind"], p["samples"]) for p in points}

@@ -222,6 +222,7 @@ def _foreign(sets, name, **change):
     ("size", "subset size 500 is outside [1, 112]"),
     ("cpu", "records no cpu_hours"),
     ("set", "unknown field 'width'"),
+    ("twice", "give each key once"),
 ])
 def test_bad_input_exits_2_with_one_line(sets, tmp_path, capsys, monkeypatch, case, message):
     for module in (mf, lc):
@@ -249,6 +250,8 @@ def test_bad_input_exits_2_with_one_line(sets, tmp_path, capsys, monkeypatch, ca
         dataclasses.replace(shards.Manifest.load(args["fine"]), cpu_hours=None).save(args["fine"])
     elif case == "set":
         extra = ["--set", "width=3"]
+    elif case == "twice":
+        extra = ["--set", "hidden=8", "--set", "hidden=16"]
     out = tmp_path / "out"
     out.mkdir()
     argv = [a for k, v in args.items() for a in (f"--{k}", v)] + ["--out", str(out / "mf.json"), *extra]
