@@ -69,5 +69,6 @@ MULTIFIDELITY = Format("surrogate-multifidelity", 1, "surrogate.multifidelity", 
     **each("comparison[]", int, "samples", "equal_cost_fine_samples", "fine_only_samples"),
     "comparison[].m_exceeds_data": bool, **each("comparison[]", NUM, "multifidelity_cpu_hours", "fine_only_cpu_hours"),
     **{f"{at}.{k}": MAYBE for at in ("coarse_only", "points[]", "comparison[].multifidelity",
-                                     "comparison[].fine_only?", "comparison[].reference_curve_at_m?")
+                                     "comparison[].fine_only?", "comparison[].scale_only?",
+                                     "comparison[].reference_curve_at_m?")
        for k in ("heldout_mean_anchor_error_mm", "heldout_tip_error_mm", "heldout_cap_rotation_error_deg")}})

@@ -6,22 +6,25 @@
         [--out results/surrogate/multifidelity.json] [--plot PNG] [--json]
 
 Model. A coarse surrogate C, trained on the coarse set (the improved config; or
---coarse-model), is frozen, and a small correction network D learns the fine-minus-coarse
-difference from n fine samples:
+--coarse-model), is frozen. On n fine samples a correction in two stages is fitted: least-
+squares scales of the coarse displacement u_C = R_C(x) - R_C(0) (the coarse mesh is
+stiffer: its error grows with the deflection), then a small network D on what is left:
 
-    R(x)     = R_C(x) + R_D(x)            anchors (10, 2) mm, inputs x = [P MPa, F1 N, F2 N, M N·mm]
-    theta(x) = theta_C(x) + theta_D(x)    distal cap rotation, rad
-    J(x)     = J_C(x) + J_D(x)            d R.reshape(20) / d x, (20, 4)
+    R(x)     = R_C(x) + rho u_C(x) + R_D(x)          anchors (10, 2) mm, x = [P MPa, F1 N, F2 N, M N·mm]
+    theta(x) = theta_C(x) (1 + rho_theta) + theta_D(x)          distal cap rotation, rad
+    J(x)     = (1 + rho) J_C(x) + J_D(x)             d R.reshape(20) / d x, (20, 4)
 
-    targets of D at a fine sample (x, R_f, theta_f, J_f):
-        R_f - R_C(x),   wrap(theta_f - theta_C(x)),   J_f - J_C(x)
+    rho (20,), one per anchor coordinate, and rho_theta: least squares over the n samples
+    (fit_scale); the targets of D at a fine sample (x, R_f, theta_f, J_f), with
+    B = R_C + rho u_C:  R_f - B(x),  wrap(theta_f - theta_B(x)),  J_f - J_B(x)
 
 with J_C the coarse surrogate's exact (forward-mode) Jacobian. D is a JointSurrogate of
 the improved config with CORRECTION overrides (two hidden layers of 32; w_phi = 0, since
 phi_end of a difference of anchors is no angle of the joint), fitted by
-surrogate.train.train. Its anchor loss |R_D - (R_f - R_C)| is |R - R_f|, the
-multi-fidelity model's own error, and D is mirror-equivariant like C, so R keeps the
-joint's mirror symmetry exactly.
+surrogate.train.train. Its anchor loss |R_D - (R_f - B)| is |R - R_f|, the
+multi-fidelity model's own error. u_C,y and theta_C are odd under the mirror y -> -y and
+D is mirror-equivariant like C, so R keeps the joint's mirror symmetry exactly. Each
+point also records the scaled coarse surrogate B alone (``scale_only``).
 
 Cost at equal FEM effort. c = 3600 cpu_hours / samples from each manifest (CPU s per
 sample). A multi-fidelity point with n fine samples spends n c_f + N_c c_c (the whole
@@ -93,9 +96,12 @@ SELF_SPLIT_SEED = 0
 REFERENCE_CURVE = Path("results/surrogate/learning_curve.json")
 ERRORS = ("heldout_mean_anchor_error_mm", "heldout_tip_error_mm", "heldout_cap_rotation_error_deg",
           "heldout_phi_end_error_deg", "heldout_jacobian_rel_error")
-POINT_KEYS = ("kind", "samples", "seed", "min_steps", "model_config", "train_config", "coarse_model_sha256",
-              "fine_sha256", "heldout_sha256", "split", *ERRORS, "val_mean_anchor_error_mm",
-              "train_anchor_error_mm", "best_epoch", "steps", "train_time_s", "cpu_hours")
+POINT_KEYS = ("kind", "samples", "seed", "min_steps", "model_config", "train_config", "correction_form",
+              "coarse_model_sha256", "fine_sha256", "heldout_sha256", "split", *ERRORS, "scale_only", "rho",
+              "rho_theta", "val_mean_anchor_error_mm", "train_anchor_error_mm", "best_epoch", "steps",
+              "train_time_s", "cpu_hours")
+#: What a multi-fidelity point fits on top of the frozen coarse surrogate (module docstring).
+FORM = "rho (R_C - R_C(0)) + network"
 #: Config keys coarse and fine must share (the same joint, loads and material), and the
 #: held-out set must share with the fine set (the same discretisation).
 SAME_JOINT = ("source", "input_box", "material")
@@ -104,41 +110,106 @@ MESH_KEYS = ("mesh_size", "wall_mesh_size")
 EXIT_STOPPED = 3
 
 
-class MultiFidelitySurrogate(nn.Module):
-    """R = R_C + R_D (module docstring): inputs (..., 4) [MPa, N, N, N·mm] -> anchors
-    (..., 10, 2) mm; ``with_cap`` adds the cap rotation (...) rad where both parts have
-    the head. The coarse part is frozen."""
+class ScaledCoarse(nn.Module):
+    """The coarse surrogate with its displacement scaled (module docstring):
+    R_C + rho (R_C - R_C(0)), theta_C (1 + rho_theta), J_C (1 + rho). Inputs (..., 4)
+    [MPa, N, N, N·mm] -> anchors (..., 10, 2) mm; ``with_cap`` adds the cap rotation rad.
+    Frozen; rho = 0 gives the coarse surrogate itself."""
 
-    def __init__(self, coarse: JointSurrogate, correction: JointSurrogate):
+    def __init__(self, coarse: JointSurrogate, rho: torch.Tensor, rho_theta: float):
         super().__init__()
         self.coarse = coarse.requires_grad_(False)
+        with torch.no_grad():
+            origin = coarse.outputs(torch.zeros(1, N_INPUTS, dtype=torch.float64))[0].reshape(2 * N_ANCHORS)
+        self.register_buffer("origin", origin, persistent=False)
+        self.register_buffer("rho", torch.as_tensor(rho, dtype=torch.float64).reshape(2 * N_ANCHORS),
+                             persistent=False)
+        self.rho_theta = float(rho_theta)
+
+    @property
+    def has_cap_rotation(self) -> bool:
+        return self.coarse.has_cap_rotation
+
+    def outputs(self, x: torch.Tensor, jacobian: bool = False, cap: bool = False):
+        """(anchors (n, 10, 2) mm, Jacobian (n, 20, 4) or None, cap (n,) rad or None)."""
+        r, j, c = self.coarse.outputs(x, jacobian, cap)
+        u = r.reshape(len(x), -1) - self.origin
+        r = r + (self.rho * u).reshape(r.shape)
+        return (r, None if j is None else j * (1 + self.rho)[:, None],
+                None if c is None else c * (1 + self.rho_theta))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return _anchors(self, x)
+
+    def with_cap(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return _anchors_and_cap(self, x)
+
+
+class MultiFidelitySurrogate(nn.Module):
+    """R = base + correction (module docstring), base a ScaledCoarse: inputs (..., 4)
+    [MPa, N, N, N·mm] -> anchors (..., 10, 2) mm; ``with_cap`` adds the cap rotation (...)
+    rad where both parts have the head."""
+
+    def __init__(self, base: ScaledCoarse, correction: JointSurrogate):
+        super().__init__()
+        self.base = base
         self.correction = correction
 
     @property
     def has_cap_rotation(self) -> bool:
-        return self.coarse.has_cap_rotation and self.correction.has_cap_rotation
+        return self.base.has_cap_rotation and self.correction.has_cap_rotation
 
     def outputs(self, x: torch.Tensor, jacobian: bool = False, cap: bool = False):
         """(anchors (n, 10, 2) mm, Jacobian (n, 20, 4) or None, cap (n,) rad or None)."""
-        a, ja, ca = self.coarse.outputs(x, jacobian, cap)
+        a, ja, ca = self.base.outputs(x, jacobian, cap)
         b, jb, cb = self.correction.outputs(x, jacobian, cap)
         return a + b, None if ja is None else ja + jb, None if ca is None else ca + cb
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        batch = x.shape[:-1]
-        return self.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, N_ANCHORS, 2)
+        return _anchors(self, x)
 
     def with_cap(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        batch = x.shape[:-1]
-        y, _, c = self.outputs(x.reshape(-1, N_INPUTS), cap=True)
-        return y.reshape(*batch, N_ANCHORS, 2), c.reshape(batch)
+        return _anchors_and_cap(self, x)
 
 
-def residual_samples(coarse: JointSurrogate, fine: Samples) -> Samples:
-    """The correction's targets (module docstring) at the fine samples: anchors mm, cap
-    rotation rad (0 for a coarse model without the head) and Jacobian (NaN rows stay NaN)."""
+def _anchors(model, x: torch.Tensor) -> torch.Tensor:
+    batch = x.shape[:-1]
+    return model.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, N_ANCHORS, 2)
+
+
+def _anchors_and_cap(model, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    batch = x.shape[:-1]
+    y, _, c = model.outputs(x.reshape(-1, N_INPUTS), cap=True)
+    return y.reshape(*batch, N_ANCHORS, 2), c.reshape(batch)
+
+
+def fit_scale(coarse: JointSurrogate, fine: Samples) -> ScaledCoarse:
+    """The least-squares scales of the coarse displacement u = R_C(x) - R_C(0) against
+    the fine data, per anchor coordinate c and for the cap rotation:
+
+        rho_c = sum_i u_ic d_ic / sum_i u_ic^2,       d = R_f - R_C(x)          (20,)
+        rho_theta = sum_i theta_C,i e_i / sum_i theta_C,i^2,  e = wrap(theta_f - theta_C)
+
+    (0 where the coarse displacement vanishes). Both are mirror-consistent: u_y and
+    theta_C are odd, so R_C + rho u keeps the symmetry."""
+    base = ScaledCoarse(coarse, torch.zeros(2 * N_ANCHORS), 0.0)
     with torch.no_grad():
-        r, j, c = coarse.outputs(fine.inputs, jacobian=True, cap=coarse.has_cap_rotation)
+        r, _, c = coarse.outputs(fine.inputs, cap=coarse.has_cap_rotation)
+    u = r.reshape(len(fine), -1) - base.origin
+    d = (fine.anchors - r).reshape(len(fine), -1)
+    rho = (u * d).sum(0) / (u * u).sum(0).clamp_min(1e-300)
+    rho_theta = 0.0
+    if c is not None and (c * c).sum() > 0:
+        rho_theta = ((c * wrap(fine.cap_rotation - c)).sum() / (c * c).sum()).item()
+    return ScaledCoarse(coarse, rho, rho_theta)
+
+
+def residual_samples(base, fine: Samples) -> Samples:
+    """The correction's targets at the fine samples (module docstring), from a frozen
+    ``base`` (a ScaledCoarse or a JointSurrogate): anchors mm, cap rotation rad (0 for a
+    base without the head) and Jacobian (NaN rows stay NaN)."""
+    with torch.no_grad():
+        r, j, c = base.outputs(fine.inputs, jacobian=True, cap=base.has_cap_rotation)
     cap = torch.zeros_like(fine.cap_rotation) if c is None else wrap(fine.cap_rotation - c)
     return Samples(fine.inputs, fine.anchors - r, fine.jacobian - j, fine.sample_id, cap)
 
@@ -270,14 +341,18 @@ def train_coarse(root: str, manifest: Manifest, path: Path, data_sha: str, log) 
 
 # ---------------------------------------------------------------------------- points
 def run_correction(coarse: JointSurrogate, parts: dict, index: torch.Tensor, model_cfg, cfg, log) -> dict:
-    """Train the correction on parts['train'][index] (residual targets; parts['val'] chooses
-    the epoch) and measure R_C + R_D on parts['heldout']; the figures of one point."""
-    splits = {"train": residual_samples(coarse, parts["train"].subset(index)),
-              "val": residual_samples(coarse, parts["val"])}
+    """Fit the scales and train the correction on parts['train'][index] (parts['val']
+    chooses the epoch); measure the model, and the scaled coarse surrogate alone, on
+    parts['heldout']. The figures of one point."""
+    base = fit_scale(coarse, parts["train"].subset(index))
+    splits = {"train": residual_samples(base, parts["train"].subset(index)),
+              "val": residual_samples(base, parts["val"])}
     correction, history = train(model_cfg, cfg, splits, log)
-    held = evaluate(MultiFidelitySurrogate(coarse, correction.requires_grad_(False)), parts["heldout"])
+    held = evaluate(MultiFidelitySurrogate(base, correction.requires_grad_(False)), parts["heldout"])
+    scaled = evaluate(base, parts["heldout"])
     best = history["best_epoch"]
-    return {**{k: held[k[8:]] for k in ERRORS},
+    return {**{k: held[k[8:]] for k in ERRORS}, "scale_only": {k: scaled[k[8:]] for k in ERRORS},
+            "rho": base.rho.tolist(), "rho_theta": base.rho_theta,
             "val_mean_anchor_error_mm": history["val_anchor_mm"][best - 1],
             "train_anchor_error_mm": history["train_anchor_mm"][best - 1],
             "best_epoch": best, "steps": cfg.epochs * math.ceil(len(index) / cfg.batch_size),
@@ -302,10 +377,11 @@ def point_cost(kind: str, samples: int, cost: dict) -> float:
 def identity(kind: str, samples: int, seed: int, min_steps: int, configs, ids: dict) -> dict:
     """The keys that decide whether a stored point is still valid (as stored in JSON)."""
     model_cfg, cfg = configs
-    model_sha = ids["coarse_model_sha256"] if kind == "multifidelity" else None
+    multi = kind == "multifidelity"
     return json_safe({"kind": kind, "samples": samples, "seed": seed, "min_steps": min_steps,
                       "model_config": asdict(model_cfg), "train_config": asdict(cfg),
-                      "coarse_model_sha256": model_sha, "fine_sha256": ids["fine_sha256"],
+                      "correction_form": FORM if multi else None,
+                      "coarse_model_sha256": ids["coarse_model_sha256"] if multi else None, "fine_sha256": ids["fine_sha256"],
                       "heldout_sha256": ids["heldout_sha256"], "split": ids["split"]})
 
 
@@ -350,7 +426,7 @@ def comparison(points: list[dict], pool: int, cost: dict, curve: dict | None) ->
         rows.append({"samples": p["samples"], "multifidelity_cpu_hours": p["cpu_hours"],
                      "equal_cost_fine_samples": m, "fine_only_samples": used, "m_exceeds_data": m > pool,
                      "fine_only_cpu_hours": point_cost("fine_only", used, cost),
-                     "multifidelity": {k: p[k] for k in ERRORS},
+                     "multifidelity": {k: p[k] for k in ERRORS}, "scale_only": p["scale_only"],
                      "fine_only": None if base is None else {k: base[k] for k in ERRORS},
                      "reference_curve_at_m": None if curve is None else interpolate_curve(curve, m)})
     return rows
@@ -378,6 +454,11 @@ def figure(path: Path, doc: dict, curve: dict | None) -> None:
                 for p in pts:
                     ax.annotate(str(p["samples"]), (p["cpu_hours"], p[key]), fontsize=7,
                                 textcoords="offset points", xytext=(3, 3), color=color)
+        pts = sorted((p for p in doc["points"] if p["kind"] == "multifidelity" and p["scale_only"]),
+                     key=lambda p: p["samples"])
+        if pts:
+            ax.loglog([p["cpu_hours"] for p in pts], [p["scale_only"][key] for p in pts], "^--", color="tab:blue",
+                      alpha=0.5, mfc="none", label="multi-fidelity, scales alone (no network)")
         coarse = doc["coarse_only"]
         if coarse[key] is not None:
             ax.loglog([doc["coarse"]["cpu_hours"]], [coarse[key]], "s", color="tab:gray",
@@ -584,7 +665,7 @@ def main(argv=None) -> int:
             figures = run_correction(coarse, s["parts"], subsets[n], model_cfg, cfg, progress)
         else:
             figures = run_point({k: s["parts"][k] for k in ("train", "val")}, s["parts"]["heldout"], subsets[n],
-                                model_cfg, cfg, progress)
+                                model_cfg, cfg, progress) | {"scale_only": None, "rho": None, "rho_theta": None}
         rate[kind] = figures["train_time_s"] / steps
         point = identity(kind, n, args.seed, args.min_steps, (model_cfg, cfg), ids) | figures \
             | {"cpu_hours": point_cost(kind, n, s["cost"])}
