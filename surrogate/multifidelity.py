@@ -451,7 +451,8 @@ def figure(path: Path, doc: dict, curve: dict | None) -> None:
                          key=lambda p: p["samples"])
             if pts:
                 ax.loglog([p["cpu_hours"] for p in pts], [p[key] for p in pts], "o-", color=color, label=name)
-                for p in pts:
+                # the multi-fidelity points sit close together (the coarse cost dominates): label the ends
+                for p in pts if kind == "fine_only" else pts[::max(1, len(pts) - 1)]:
                     ax.annotate(str(p["samples"]), (p["cpu_hours"], p[key]), fontsize=7,
                                 textcoords="offset points", xytext=(3, 3), color=color)
         pts = sorted((p for p in doc["points"] if p["kind"] == "multifidelity" and p["scale_only"]),
