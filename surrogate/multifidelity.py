@@ -81,9 +81,9 @@ from surrogate.artefacts import LEARNING_CURVE, MULTIFIDELITY
 from surrogate.data import Samples, load_samples, load_splits
 from surrogate.evaluate import evaluate
 from surrogate.learning_curve import (MIN_STEPS, load_points, nested_subsets, point_configs, progress,
-                                      run_point, say)
+                                      run_point, say, sizes_arg)
 from surrogate.model import JointSurrogate, ModelError, build_model, load_checkpoint, save_checkpoint, wrap
-from surrogate.train import CONFIGS, apply_overrides, parse_override, train
+from surrogate.train import CONFIGS, parse_override, train
 from workflow.shards import Manifest, ShardError, dataset_digest, split_of
 
 SIZES = (50, 100, 200, 400, "all")
@@ -511,14 +511,6 @@ def _deg(v) -> str:
     return "n/a" if v is None else f"{v:.3f} deg"
 
 
-def _sizes(text: str):
-    out = []
-    for part in text.split(","):
-        part = part.strip()
-        out.append("all" if part == "all" else cli.number(1, None, integer=True)(part))
-    return tuple(dict.fromkeys(out))
-
-
 def _override(text: str) -> str:
     try:
         parse_override(text)
@@ -534,7 +526,7 @@ def parser() -> cli.Parser:
     ap.add_argument("--heldout", help="fine held-out dataset (default: split off --fine, 4:1:3 by walk blocks)")
     ap.add_argument("--coarse-model", help="coarse surrogate checkpoint trained on --coarse "
                                            "(default: train the improved config, saved as OUT_coarse.pt)")
-    ap.add_argument("--sizes", type=_sizes, default=SIZES, help="comma-separated fine subset sizes and/or all")
+    ap.add_argument("--sizes", type=sizes_arg, default=SIZES, help="comma-separated fine subset sizes and/or all")
     ap.add_argument("--seed", type=cli.number(0, None, integer=True), default=0,
                     help="the subset draw and training seed")
     ap.add_argument("--min-steps", type=cli.number(1, None, integer=True), default=MIN_STEPS,
