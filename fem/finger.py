@@ -526,7 +526,7 @@ def main(argv=None) -> int:
     if comm.rank == 0:
         out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
                "geometry": geometry.as_dict(), "formulation": formulation,
-               "joints": [{"name": j.name, "sha256": joint_digest(j)} for j in finger_joints(finger)],
+               "joint_files": [{"name": j.name, "sha256": joint_digest(j)} for j in finger_joints(finger)],
                "ranks": comm.size}
         if args.json:
             cli.print_json(out)
