@@ -51,6 +51,8 @@ TAGS = {
     "proximal": 11, "distal": 12, "symmetry": 13,
     "top_chamber": 14, "bottom_chamber": 15, "valley_faces": 16,
 }
+#: most hexahedral divisions a joint may be meshed with (6: about 500k Q2 nodes)
+MAX_DIVISIONS = 6
 _EPS = 1e-6
 _GMSH_READY = False
 
@@ -60,7 +62,9 @@ class JointGeometry:
     """Dimensions of the bellow joint half-model (mm). Defaults: docs/physics.md.
 
     ``mesh_size`` is the target tetrahedron edge length; ``wall_mesh_size`` (default:
-    ``mesh_size``) is used on the chamber walls.
+    ``mesh_size``) is used on the chamber walls. ``divisions`` n >= 1 meshes the joint with
+    hexahedra instead (fem.mesh_hex: every interval between the profile's breakpoints cut
+    into n, so n elements through every wall; the two sizes are then unused); 0: tetrahedra.
     """
 
     length: float = JOINT_LENGTH
@@ -74,8 +78,11 @@ class JointGeometry:
     valley_width: float = 2.5      # outer gap between two neighbouring cells along x
     mesh_size: float = 1.8         # production mesh: 17,359 P2 nodes (make mesh-study)
     wall_mesh_size: float | None = None
+    divisions: int = 0
 
     def __post_init__(self):
+        if not (isinstance(self.divisions, int) and 0 <= self.divisions <= MAX_DIVISIONS):
+            raise ValueError(f"divisions must be a whole number in [0, {MAX_DIVISIONS}], not {self.divisions!r}")
         channel = self.valley_height / 2 - self.wall - self.spine / 2
         if channel <= 0:
             raise ValueError("valley_height leaves no channel between the cells")
@@ -94,7 +101,12 @@ class JointGeometry:
         return [(x0 + i * (w + g), x0 + i * (w + g) + w) for i in range(self.n_cells)]
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The fields; ``divisions`` only for a hexahedral mesh, so records written before
+        hexahedra existed read as what they are."""
+        out = asdict(self)
+        if not self.divisions:
+            del out["divisions"]
+        return out
 
 
 @dataclass(frozen=True)

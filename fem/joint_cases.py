@@ -21,7 +21,6 @@ import json
 import logging
 import math
 import time
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -74,7 +73,7 @@ def read_records(work: Path, discs, loads=LOADS) -> dict:
                 record = json.loads(case_file(work, disc, load).read_text())
             except (OSError, ValueError):
                 continue
-            if record.get("discretisation") == json_safe(asdict(disc)):
+            if record.get("discretisation") == json_safe(disc.as_dict()):
                 out.setdefault(disc.key, {})[load_key(load.as_array())] = record
     return out
 
@@ -92,7 +91,7 @@ def solve_record(solver: JointSolver, disc: Discretisation, load: Load, comm) ->
     r = solver.solve(load)
     if not r.converged:
         raise RuntimeError(f"{disc.key}: {load} did not converge ({r.reason})")
-    return {"load": load.as_array().tolist(), "discretisation": json_safe(asdict(disc)),
+    return {"load": load.as_array().tolist(), "discretisation": json_safe(disc.as_dict()),
             "anchors": r.anchors.tolist(), "phi_end_deg": math.degrees(r.phi_end),
             "cap_rotation_deg": math.degrees(r.cap_rotation), "wall_time_s": r.wall_time,
             "newton_iterations": r.iterations, "load_steps": r.load_steps,

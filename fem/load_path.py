@@ -215,22 +215,21 @@ class LoadPathSolver:
         return self.probes.values(self.u)
 
     def mesh_info(self) -> dict:
-        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs."""
+        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs, and the
+        mesh's size (mm; a hexahedral joint: its ``divisions`` instead)."""
         mesh_data = self.problem.mesh_data
         mesh = mesh_data.mesh
-        imap = mesh.topology.index_map(0)
-        cmap = mesh.topology.index_map(mesh.topology.dim)
+        divisions = getattr(mesh_data.geometry, "divisions", 0)
+        info = {"vertices": mesh.topology.index_map(0).size_global,
+                "cells": mesh.topology.index_map(mesh.topology.dim).size_global,
+                "degree": self.config.degree,
+                **({"divisions": divisions} if divisions else {"mesh_size": mesh_data.geometry.mesh_size})}
         if self.problem.displacement_space is None:
             nodes = self.V.dofmap.index_map.size_global
-            return {"vertices": imap.size_global, "cells": cmap.size_global,
-                    "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
-                    "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size}
+            return {**info, "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs}
         # mixed: nodes of u; dofs of the whole unknown (u and p)
-        imap_w = self.V.dofmap.index_map
-        return {"vertices": imap.size_global, "cells": cmap.size_global,
-                "nodes": self.problem.displacement_space.dofmap.index_map.size_global,
-                "dofs": imap_w.size_global * self.V.dofmap.index_map_bs,
-                "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size,
+        return {**info, "nodes": self.problem.displacement_space.dofmap.index_map.size_global,
+                "dofs": self.V.dofmap.index_map.size_global * self.V.dofmap.index_map_bs,
                 "formulation": self.problem.formulation}
 
     # ------------------------------------------------------------------ algebra

@@ -1,7 +1,7 @@
 """Mesh conversion: a geometry builder's gmsh model -> distributed DOLFINx mesh + tags.
 
 Collective over ``comm``: rank 0 builds and meshes the gmsh model; ``model_to_mesh``
-distributes it. Only entities in physical groups are imported (fem.geometry.TAGS).
+distributes it (a hexahedral joint, JointGeometry.divisions > 0: fem.mesh_hex). Only entities in physical groups are imported (fem.geometry.TAGS).
 """
 
 from __future__ import annotations
@@ -27,8 +27,14 @@ class MeshData:
 
 
 def create_mesh(geometry: JointGeometry | BeamGeometry | FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshData:
-    """Build ``geometry`` with gmsh on rank 0 of ``comm`` and distribute it (collective)."""
+    """Build ``geometry`` with gmsh on rank 0 of ``comm`` and distribute it (collective); a
+    joint with hexahedral ``divisions`` is built by fem.mesh_hex instead."""
     from dolfinx.io import gmshio
+
+    if isinstance(geometry, JointGeometry) and geometry.divisions:
+        from fem.mesh_hex import create_hex_mesh
+
+        return create_hex_mesh(geometry, comm)
 
     import gmsh
 

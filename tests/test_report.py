@@ -148,18 +148,19 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
         err = {"anchor_mm": percent / 10, "anchor_percent": percent, "tip_mm": percent / 20,
                "phi_end_deg": percent / 5, "cap_rotation_deg": percent / 3.75}
         key = f"h{h:g}_w{w if w is None else f'{w:g}'}_{formulation}_q2_k100"
-        return {"key": key, "formulation": formulation, "mesh_size": h, "wall_mesh_size": w, "nodes": nodes,
-                "mean_solve_s": 10.0, "ranks": 2, "max_error": err}
+        return {"key": key, "mesh": f"{h:g}" + (f":{w:g}" if w else ""), "element": "tet", "sizes": [h, w or h],
+                "formulation": formulation, "nodes": nodes, "mean_solve_s": 10.0, "ranks": 2, "max_error": err}
 
     meshes = [mesh(3.394, 1.697, 16195, 3.0), mesh(2.4, 1.2, 27908, 1.5), mesh(1.697, 0.849, 53179, 0.75),
               mesh(1.2, 0.6, 136875, 0.3), mesh(1.8, None, 17351, 6.0, "displacement")]
-    study = {"loads": [[0.3, 3, -3, -100]] * 8, "formulation": "mixed", "complete": True, "wall_mm": 1.2,
+    study = {"loads": [[0.3, 3, -3, -100]] * 8, "formulation": "mixed", "element": "tet", "complete": True,
+             "wall_mm": 1.2,
              "tolerance_percent": 1.0, "tolerance_deg": 0.3, "min_nodes": 16000, "meshes": meshes,
-             "family": [[3.394, 1.697], [2.4, 1.2], [1.697, 0.849], [1.2, 0.6]], "reference": "richardson",
+             "family": ["3.394:1.697", "2.4:1.2", "1.697:0.849", "1.2:0.6"], "reference": "richardson",
              "asymptotic": True, "extrapolation": [{"anchors": {"order": 2.0}}] * 8,
-             "orders": [{"meshes": [[2.4, 1.2], [1.697, 0.849], [1.2, 0.6]], "anchors": [2.0] * 8,
+             "orders": [{"meshes": ["2.4:1.2", "1.697:0.849", "1.2:0.6"], "anchors": [2.0] * 8,
                          "phi_end_deg": [1.5] * 8, "cap_rotation_deg": [None] * 8}],
-             "production": meshes[1]["key"], "production_mesh": [2.4, 1.2], "production_met": False,
+             "production": meshes[1]["key"], "production_mesh": "2.4:1.2", "production_met": False,
              "production_error": meshes[1]["max_error"], "paper": meshes[4]["key"],
              "paper_error": meshes[4]["max_error"]}
     (tmp_path / "fem").mkdir()

@@ -33,8 +33,7 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    + (f" --wall-mesh-size {wall}`" if wall else "`") + " |")
     study = load(root, "fem/mesh_study.json")
     if study:
-        label = {m["key"]: f"{mesh_label(m['mesh_size'], m['wall_mesh_size'])} mm {m['formulation']}"
-                 for m in study["meshes"]}
+        label = {m["key"]: f"mesh {m['mesh']} {m['formulation']}" for m in study["meshes"]}
         # one row per discretisation (production and paper are one while the data is the paper's)
         for key, e in {study["production"]: study["production_error"], study["paper"]: study.get("paper_error")}.items():
             if e:
