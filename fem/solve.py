@@ -33,7 +33,7 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.joint import joint_digest
-from fem.options import (add_formulation, add_joint, add_load, add_mesh_size, formulation_of,
+from fem.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, formulation_of,
                          joint_geometry, joint_of, parsed_load)
 from fem.solver import JointSolver, Load
 from fem.xdmf import write_xdmf
@@ -47,6 +47,7 @@ def build_parser() -> cli.Parser:
     add_joint(ap)
     add_load(ap)
     add_mesh_size(ap, None, shown="the joint file's [mesh] size")
+    add_divisions(ap)
     add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--jacobian", action="store_true",
                     help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
@@ -81,7 +82,8 @@ def main(argv=None) -> int:
     load = Load.from_array(parsed_load(ap, args, joint.input_box))
     comm = MPI.COMM_WORLD
     cli.setup_logging(args.quiet, args.verbose)
-    geo = joint_geometry(args, joint)
+    with ap.errors():
+        geo = joint_geometry(args, joint)
     formulation = formulation_of(args, joint)
     with ap.errors(), cli.heartbeat("joint", enabled=comm.rank == 0):
         if comm.rank == 0:

@@ -69,8 +69,9 @@ def recorded_joint(config: dict) -> JointSpec:
     if "joint" not in config:
         return load_joint()
     geometry = config.get("geometry", {})
-    mesh = {"size": geometry.get("mesh_size"), "formulation": config.get("formulation", "displacement")}
-    if geometry.get("wall_mesh_size") is not None:
+    mesh = ({"divisions": geometry["divisions"]} if geometry.get("divisions") else {"size": geometry.get("mesh_size")})
+    mesh["formulation"] = config.get("formulation", "displacement")
+    if geometry.get("wall_mesh_size") is not None and not geometry.get("divisions"):
         mesh["wall_size"] = geometry["wall_mesh_size"]
     sha = str(config.get("joint_sha256", ""))
     try:
