@@ -397,6 +397,13 @@ def _mesh(source: str, doc: dict, shape: BellowShape, material: MaterialLaw) -> 
     return size, wall, formulation, 0
 
 
+def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0) -> str:
+    """A mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
+    if divisions:
+        return f"hex{divisions}"
+    return f"{size:g}" + (f":{wall_size:g}" if wall_size else "")
+
+
 def joint_from_dict(doc: dict, source: str = "<joint>") -> JointSpec:
     """A JointSpec from the file's tables (TOML-decoded, or joint_to_dict's); every check
     of the module docstring, JointFileError (one line) on the first failure."""

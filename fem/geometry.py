@@ -43,7 +43,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from contract.finger import FingerSpec
-from contract.joint import MAX_DIVISIONS
+from contract.joint import MAX_DIVISIONS, mesh_text
 from contract.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.problem.
@@ -102,9 +102,7 @@ class JointGeometry:
     @property
     def mesh(self) -> str:
         """The mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
-        if self.divisions:
-            return f"hex{self.divisions}"
-        return f"{self.mesh_size:g}" + (f":{self.wall_mesh_size:g}" if self.wall_mesh_size else "")
+        return mesh_text(self.mesh_size, self.wall_mesh_size, self.divisions)
 
     def as_dict(self) -> dict:
         """The fields; ``divisions`` only for a hexahedral mesh, so records written before
