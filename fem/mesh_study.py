@@ -52,8 +52,7 @@ from mpi4py import MPI
 from contract import cli
 from fem.artefacts import MESH_STUDY
 from fem.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation, parse_mesh
-from fem.geometry import MAX_DIVISIONS
-from fem.geometry import JointGeometry, anchor_points
+from fem.geometry import MAX_DIVISIONS, JointGeometry, anchor_points
 from fem.joint_cases import CORNERS, LOADS, difference, load_key, read_records, solve_missing
 from fem.options import MESH_SIZE_TEXT, on_root
 
