@@ -424,7 +424,38 @@ class LoadPathSolver:
         self._set_load(self.state)
         return PathOutcome(converged, self.state, iters, steps, cutbacks, "" if converged else reason)
 
+    def converge(self) -> PathOutcome:
+        """Newton at the load ``state`` from the current iterate u, which is a guess
+        (e.g. fem.transfer.seed: another mesh's answer at that load) rather than a
+        converged state: no load path.
 
+        The first correction uses the consistent tangent at the guess, factorised afresh
+        (the LU in hand belongs to another state); a guess close to equilibrium carries
+        its pre-stress, so the consistent tangent is the right one (unlike a new load
+        from a converged state, see ``newton``). Converged: the lagged constants take
+        their values and the state is saved, as after a step of ``follow``, so
+        continuation and sensitivities work from it. Not converged: the guess had no
+        converged state behind it, so the solver returns to the undeformed, unloaded
+        state (``reset``), where ``follow`` from zero starts."""
+        self._set_load(self.state)
+        self._refactor, self._factor_fresh = True, False
+        reason = ""
+        try:
+            n, ok = self.newton(reuse_factor=False)
+            ok = ok and bool(np.isfinite(self.u.x.array).all())
+        except PETSc.Error as exc:          # MUMPS failure on a singular/NaN tangent
+            n, ok = self.config.max_it, False
+            reason = f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+        if self.comm.rank == 0:
+            log.info("converge from a guess: %d Newton iterations, converged=%s", n, ok)
+        if not ok:
+            self.reset()
+            return PathOutcome(False, self.state.copy(), [int(n)], 0, 0,
+                               reason or f"no convergence from the guess in {n} Newton iterations")
+        self._converged_step()
+        self._save()
+        self._factor_fresh = n > 1          # as in follow: _A is near the converged tangent
+        return PathOutcome(True, self.state.copy(), [int(n)], 1, 0, "")
 
     # ------------------------------------------------------------------ sensitivities
     def sensitivities(self) -> np.ndarray:

@@ -64,6 +64,7 @@ CASES_FEM = [
     ("fem.mesh_study", ["--meshes", "2:1", "2:1", "--out", "{tmp}/x.json"], "give each value once"),
     ("fem.mesh_study", ["--meshes", "2:x", "--out", "{tmp}/x.json"], "--meshes"),
     ("fem.mesh_study", ["--loads", "8", "--out", "{tmp}/x.json"], "--loads"),
+    ("fem.mesh_study", ["--seed-from", "hex9", "--out", "{tmp}/x.json"], "--seed-from"),
     ("fem.mesh_study", ["--loads", "1", "1", "--out", "{tmp}/x.json"], "give each value once"),
     ("fem.bench_finger", ["--cases", "free_0.1_0.1,nope", "--out", "{tmp}/x.json"], "--cases: 'nope'"),
     ("fem.bench_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
