@@ -152,7 +152,7 @@ def analyse(meshes: list[dict], production: str, paper: str | None = None,
     own = [m for m in meshes if m["formulation"] == formulation and m["element"] == element]
     chain = family(own)
     n_loads = len(meshes[0]["cases"])
-    extrapolation, orders = [None] * n_loads, []
+    extrapolation, orders = [], []
     if chain is not None:
         triples = [chain[i:i + 3] for i in range(len(chain) - 2)]
 
