@@ -128,11 +128,11 @@ dataset: | $(SETUP) ## FEM datasets: results/data/train (2560, seed 1) + heldout
 	$(PY) -m workflow.dataset verify results/data/train --require-complete --mirror 2
 	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
 
-# The datasets on the converged discretisation (issue 35): swept Q2 hexahedra of 2 divisions,
-# mixed u-p (fem.discretisation; docs/decisions.md §9), the held-out walk first. They go to
-# their own folders until everything downstream is retrained on them; then they become
+# The datasets on a swept-hexahedra discretisation (issue 35's candidates, docs/decisions.md
+# §9; NEW_MESH, default hex2 mixed u-p), the held-out walk first. They go to their own
+# folders until everything downstream is retrained on them; then they become
 # results/data/{train,heldout} and the 1.8 mm sets results/data/{train,heldout}_h1.8.
-NEW_MESH := --divisions 2 --formulation mixed
+NEW_MESH ?= --divisions 2 --formulation mixed
 NEW_DATA := results/data
 dataset-hex2: | $(SETUP) ## FEM datasets on hex2 mixed: heldout_hex2 (256, seed 2) then train_hex2 (2560, seed 1); DATASET_HOURS per run; re-run resumes
 	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(NEW_MESH) --out $(NEW_DATA)/heldout_hex2 --max-hours $(DATASET_HOURS)
