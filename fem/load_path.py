@@ -392,12 +392,8 @@ class LoadPathSolver:
                 self._tangent()
                 self._factor_fresh = True
             self._set_load(start + s_try * (target - start))
-            try:
-                n, ok = self.newton(reuse_factor=True)
-                ok = ok and bool(np.isfinite(self.u.x.array).all())
-            except PETSc.Error as exc:      # MUMPS failure on a singular/NaN tangent
-                n, ok = self.config.max_it, False
-                reason = f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+            n, ok, why = self._guarded_newton(reuse_factor=True)
+            reason = why or reason
             if ok:
                 s, steps = s_try, steps + 1
                 iters.append(int(n))
@@ -424,6 +420,15 @@ class LoadPathSolver:
         self._set_load(self.state)
         return PathOutcome(converged, self.state, iters, steps, cutbacks, "" if converged else reason)
 
+    def _guarded_newton(self, reuse_factor: bool) -> tuple[int, bool, str]:
+        """newton(), with a non-finite iterate or a MUMPS failure (a singular or NaN
+        tangent) as a failed solve: (iterations, converged, reason or "")."""
+        try:
+            n, ok = self.newton(reuse_factor=reuse_factor)
+            return n, ok and bool(np.isfinite(self.u.x.array).all()), ""
+        except PETSc.Error as exc:
+            return self.config.max_it, False, f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+
     def converge(self) -> PathOutcome:
         """Newton at the load ``state`` from the current iterate u, which is a guess
         (e.g. fem.transfer.seed: another mesh's answer at that load) rather than a
@@ -439,13 +444,7 @@ class LoadPathSolver:
         state (``reset``), where ``follow`` from zero starts."""
         self._set_load(self.state)
         self._refactor, self._factor_fresh = True, False
-        reason = ""
-        try:
-            n, ok = self.newton(reuse_factor=False)
-            ok = ok and bool(np.isfinite(self.u.x.array).all())
-        except PETSc.Error as exc:          # MUMPS failure on a singular/NaN tangent
-            n, ok = self.config.max_it, False
-            reason = f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+        n, ok, reason = self._guarded_newton(reuse_factor=False)
         if self.comm.rank == 0:
             log.info("converge from a guess: %d Newton iterations, converged=%s", n, ok)
         if not ok:
