@@ -15,8 +15,10 @@ checks, one-line errors and resume), in DIR (default results/joints/<joint name>
     5 evaluate  surrogate.evaluate on the held-out walk -> heldout.json, and on the
                 training split -> train_fit.json
     6 gesture   predictor.gesture with finger.toml (three joints of the joint, the paper
-                finger's 60 mm link between them and its 65 mm tip, pressures 0.5 x
-                min(P_max, 0.3 MPa) each, gravity) -> gesture.png, gesture.json
+                finger's 60 mm link between them and its 65 mm tip) at pressures (-p, p, p),
+                p = 0.5 min(P_max, 0.3 MPa): the base joint opens, the other two close (a
+                grasp-like pose that keeps the two fingers apart), gravity -> gesture.png,
+                gesture.json
     7 summary   metrics.json (``heldout`` -> mean_anchor_error_mm, cap_rotation_error_deg,
                 samples), summary.json and summary.txt: errors, sample counts, wall time
                 per stage
@@ -24,7 +26,7 @@ checks, one-line errors and resume), in DIR (default results/joints/<joint name>
 Budgets (docs/pipeline.md; the learning curve results/surrogate/learning_curve.json of
 the paper's joint): ``full`` is the paper joint's campaign, 2,560 training and 256
 held-out samples and the improved surrogate's 800 epochs. ``small`` is 256 training
-(a 7:2:1 split, so about 180 to train on) and 64 held-out samples, trained for the
+(a 7:2:1 split, so 192 to train on) and 64 held-out samples, trained for the
 learning curve's step budget, at least S = 22,400 Adam steps:
 
     epochs = max(E0, ceil(S / ceil(n_train / batch))),   lr_decay = d0^(E0 / epochs)
@@ -80,8 +82,8 @@ EXIT_INCOMPLETE = 3
 
 @dataclass(frozen=True)
 class Budget:
-    """Samples of the two campaigns and the training's epochs (None: the step budget of
-    the module docstring for ``small``, the config's 800 for ``full``)."""
+    """Samples of the two campaigns, and whether the training takes the step budget of the
+    module docstring (``small``) or the config's own 800 epochs (``full``)."""
 
     train_samples: int
     heldout_samples: int
@@ -95,9 +97,10 @@ MIN_STEPS = 22_400
 TRAIN_SEED = 1
 TRAIN_UNIT, HELDOUT_UNIT = 64, 16
 CONFIG = "improved"
-#: Gesture pressures: this fraction of the joint's pressure limit (capped at the
-#: predictor's 0.3 MPa), on every joint; P > 0 closes the right finger.
+#: Gesture pressures (-p, p, p): p is this fraction of the joint's pressure limit (capped
+#: at the predictor's 0.3 MPa); P > 0 closes the right finger, P < 0 opens it.
 GESTURE_FRACTION = 0.5
+GESTURE_SIGNS = (-1.0, 1.0, 1.0)
 
 
 # ---------------------------------------------------------------------- settings
@@ -446,17 +449,19 @@ def finger_text(s: Settings) -> str:
     return head + "\n".join([bellow(False), rigid(link), bellow(True), rigid(link), bellow(True), rigid(tip)])
 
 
-def gesture_pressure(s: Settings) -> float:
-    """MPa on every joint of the gesture (GESTURE_FRACTION of the joint's limit)."""
-    return GESTURE_FRACTION * min(s.joint.pressure_mpa, PRESSURE_LIMIT)
+def gesture_pressures(s: Settings) -> list[float]:
+    """The gesture's pressures (MPa), base to tip: GESTURE_SIGNS x GESTURE_FRACTION of the
+    joint's limit."""
+    p = GESTURE_FRACTION * min(s.joint.pressure_mpa, PRESSURE_LIMIT)
+    return [sign * p for sign in GESTURE_SIGNS]
 
 
 def gesture_stage(s: Settings) -> Stage:
-    p = f"{gesture_pressure(s)!r}"
+    pressures = ",".join(f"{p!r}" for p in gesture_pressures(s))
     argv = ["-m", "predictor.gesture", "--finger", str(s.out / "finger.toml"), "--model", str(s.out / "surrogate.pt"),
-            "--pressures", f"{p},{p},{p}", "--plot", str(s.out / "gesture.png"), "--json", "--quiet"]
+            f"--pressures={pressures}", "--plot", str(s.out / "gesture.png"), "--json", "--quiet"]
     key = key_of(joint=s.digest, model=sha256_file(s.out / "surrogate.pt"),
-                 finger=sha256_file(s.out / "finger.toml"), argv=argv[6:8])
+                 finger=sha256_file(s.out / "finger.toml"), argv=argv[6:7])
     return Stage("gesture", argv, ["gesture.png", "gesture.json"], key, stdout_to="gesture.json")
 
 
@@ -488,7 +493,7 @@ def summary(s: Settings, pipe: Pipeline, wall_s: float) -> dict:
         "train_fit": {k: fit.get(k) for k in ERROR_KEYS} | {"samples": fit.get("n")},
         "gesture": {k: gesture.get(k) for k in ("converged", "state", "tip", "tip_angle_deg",
                                                 "joint_end_angle_deg", "iterations", "time_ms")}
-                   | {"pressures_mpa": [gesture_pressure(s)] * 3, "finger": "finger.toml"},
+                   | {"pressures_mpa": gesture_pressures(s), "finger": "finger.toml"},
         "stages": stages,
         "stage_wall_s_total": sum(x["wall_s"] for x in stages),
         "this_run_wall_s": wall_s,
@@ -511,7 +516,8 @@ def summary_text(d: dict) -> str:
                      f"{e['p95_anchor_error_mm']:.4f} mm, cap rotation {_deg(e['cap_rotation_error_deg'])}")
     tip = "not converged" if not g["converged"] else \
         f"tip ({g['tip'][0]:.2f}, {g['tip'][1]:.2f}) mm, tip angle {g['tip_angle_deg']:.2f} deg"
-    lines.append(f"gesture (finger.toml, {g['pressures_mpa'][0]:g} MPa on each joint, gravity): {tip}")
+    pressures = ", ".join(f"{p:g}" for p in g["pressures_mpa"])
+    lines.append(f"gesture (finger.toml at ({pressures}) MPa, gravity): {tip}")
     return "\n".join(lines) + "\n"
 
 

@@ -137,8 +137,8 @@ def test_bad_input_exits_2_with_one_line(run, tmp_path):
 def test_generated_finger_and_gesture_pressure(tmp_path):
     """finger.toml: joint, 60 mm link, joint, 60 mm link, joint, 65 mm tip, every joint
     naming joint.toml (so its length is the joint's: 3 x 30 + 185 = 275 mm for a 30 mm
-    joint); the gesture pressure is half the joint's limit, capped at 0.3 MPa."""
-    from apps.pipeline import Settings, finger_text, gesture_pressure
+    joint); the gesture pressures are (-1, 1, 1) x half the joint's limit, capped at 0.3 MPa."""
+    from apps.pipeline import Settings, finger_text, gesture_pressures
     from contract.finger import load_finger
     from contract.joint import load_joint
 
@@ -151,4 +151,4 @@ def test_generated_finger_and_gesture_pressure(tmp_path):
     assert [p.kind for p in finger.parts] == ["joint", "rigid", "joint", "rigid", "joint", "rigid"]
     assert finger.length == pytest.approx(275.0, abs=1e-12) and finger.n_joints == 3
     assert all(finger.parts[k].joint_file == "joint.toml" for k in finger.joints)
-    assert gesture_pressure(s) == 0.025
+    assert gesture_pressures(s) == [-0.025, 0.025, 0.025]
