@@ -65,9 +65,10 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from contract import cli
-from contract.files import dumps, sha256_file, write_json, write_text
+from contract.files import sha256_file, write_json, write_text
 from contract.finger import load_finger, parse_finger
 from contract.joint import JointSpec, joint_digest, load_joint
 from contract.spec import INPUT_BOX, N_ANCHORS, PRESSURE_LIMIT
@@ -228,15 +229,15 @@ def file_digests(out: Path, files: list[str]) -> dict[str, str] | None:
 
 @dataclass
 class Stage:
-    """One stage: its command (argv after ``python``; None for an in-process stage), the
-    files it writes (relative to DIR), the key of what makes them, and an extra
+    """One stage: its command (argv after ``python``, run with the ``launcher`` prefix),
+    the files it writes (relative to DIR), the key of what makes them, and an extra
     completeness check (None when complete, else why not)."""
 
     name: str
-    argv: list[str] | None
+    argv: list[str]
     outputs: list[str]
     key: str
-    incomplete: object = None          # callable () -> str | None
+    incomplete: Callable[[], str | None] | None = None
     stdout_to: str | None = None       # save the stage's stdout (its --json) as this file
     launcher: list[str] = field(default_factory=list)
 
@@ -295,8 +296,6 @@ class Pipeline:
 
     def _execute(self, st: Stage, log: Path) -> tuple[int, str]:
         log.parent.mkdir(parents=True, exist_ok=True)
-        if st.argv is None:
-            return 0, ""
         cmd = [*st.launcher, sys.executable, *st.argv]
         env = {**os.environ, "PYVISTA_OFF_SCREEN": "true"}
         env.setdefault("OMP_NUM_THREADS", "1")

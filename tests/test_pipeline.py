@@ -142,7 +142,8 @@ def test_generated_finger_and_gesture_pressure(tmp_path):
     from contract.finger import load_finger
     from contract.joint import load_joint
 
-    text = PAPER.read_text().replace("length = 45.45 ", "length = 30.0 ").replace("pressure_mpa = 0.3", "pressure_mpa = 0.05")
+    text = PAPER.read_text().replace("length = 45.45 ", "length = 30.0 ")
+    text = text.replace("pressure_mpa = 0.3", "pressure_mpa = 0.05")
     (tmp_path / "joint.toml").write_text(text)
     joint = load_joint(tmp_path / "joint.toml")
     s = Settings(joint, tmp_path / "joint.toml", tmp_path, "small", 4, 4, None, None, 1, "", None)
