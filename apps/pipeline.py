@@ -1,7 +1,7 @@
 """One command from a joint description file to a validated gripper predictor (issue 37 §3).
 
     python -m apps.pipeline --joint FILE [--budget small|full] [--out DIR] [--ranks N]
-        [--launcher CMD] [--max-hours H] [--mesh-size MM] [--samples N]
+        [--launcher CMD] [--max-hours H] [--mesh-size MM | --divisions N] [--samples N]
         [--heldout-samples N] [--epochs N] [--json]
     make pipeline JOINT=FILE [BUDGET=small|full]
 
@@ -32,7 +32,8 @@ learning curve's step budget, at least S = 22,400 Adam steps:
     epochs = max(E0, ceil(S / ceil(n_train / batch))),   lr_decay = d0^(E0 / epochs)
 
 (E0 = 800 epochs, d0 = 0.995 per epoch, batch 64: the improved config). Both mesh the
-joint with its file's [mesh] unless ``--mesh-size`` is given; ``--samples``,
+joint with its file's [mesh] unless ``--mesh-size`` (tetrahedra) or ``--divisions``
+(hexahedra) is given; ``--samples``,
 ``--heldout-samples`` and ``--epochs`` override a budget's numbers (tests, trials).
 
 Resume. ``DIR/pipeline.json`` records, per finished stage, the key of what made it (the
@@ -70,8 +71,8 @@ from typing import Callable
 from contract import cli
 from contract.files import sha256_file, write_json, write_text
 from contract.finger import load_finger, parse_finger
-from contract.joint import JointSpec, joint_digest, load_joint
-from contract.spec import INPUT_BOX, N_ANCHORS, PRESSURE_LIMIT
+from contract.joint import MAX_DIVISIONS, JointSpec, joint_digest, load_joint
+from contract.spec import N_ANCHORS, PRESSURE_LIMIT
 from workflow.shards import Manifest, ShardError, dataset_digest, load_dataset, split_of
 from workflow.store import recorded_joint
 
@@ -117,6 +118,7 @@ class Settings:
     heldout_samples: int
     epochs: int | None
     mesh_size: float | None
+    divisions: int | None
     ranks: int
     launcher: str
     max_hours: float | None
@@ -128,6 +130,9 @@ class Settings:
         self.digest = joint_digest(self.joint)
 
     def mesh_args(self) -> list[str]:
+        """The render's and the campaigns' mesh options (none: the joint file's [mesh])."""
+        if self.divisions is not None:
+            return ["--divisions", str(self.divisions)]
         return [] if self.mesh_size is None else ["--mesh-size", f"{self.mesh_size!r}"]
 
 
@@ -146,8 +151,11 @@ def parse_args(argv=None) -> Settings:
                          "'srun --mpi=pmix')")
     ap.add_argument("--max-hours", type=cli.number(0, None, "h", open_lo=True),
                     help="time budget of each campaign (exit 3 when it stops: run again to resume)")
-    ap.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"),
-                    help="tetrahedron size of the render and the campaigns (default: the joint file's [mesh])")
+    mesh = ap.add_mutually_exclusive_group()
+    mesh.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"),
+                      help="tetrahedron size of the render and the campaigns (default: the joint file's [mesh])")
+    mesh.add_argument("--divisions", type=cli.number(1, MAX_DIVISIONS, integer=True),
+                      help="swept Q2 hexahedra of N divisions instead (fem.mesh_hex; default: the joint file's [mesh])")
     count = cli.number(1, 1_000_000, integer=True)
     ap.add_argument("--samples", type=count, help="training campaign samples (default: the budget's)")
     ap.add_argument("--heldout-samples", type=count, help="held-out campaign samples (default: the budget's)")
@@ -169,7 +177,7 @@ def parse_args(argv=None) -> Settings:
         ap.error(why)
     settings = Settings(joint, Path(args.joint).resolve(), out.resolve(), args.budget,
                         args.samples or budget.train_samples, args.heldout_samples or budget.heldout_samples,
-                        args.epochs, args.mesh_size, args.ranks, args.launcher, args.max_hours, args.seed, args.json)
+                        args.epochs, args.mesh_size, args.divisions, args.ranks, args.launcher, args.max_hours, args.seed, args.json)
     with ap.errors():
         check_folder(settings)
     return settings
@@ -363,7 +371,7 @@ def campaign_stage(s: Settings, name: str, samples: int, seed: int, unit: int) -
             return f"{root}: a campaign of another joint"
         return None
 
-    key = key_of(joint=s.digest, samples=samples, seed=seed, unit=unit, mesh=s.mesh_size)
+    key = key_of(joint=s.digest, samples=samples, seed=seed, unit=unit, mesh=s.mesh_args())
     return Stage(f"{name}-data", argv, [f"data/{name}/manifest.json"], key, incomplete, launcher=launcher)
 
 
@@ -406,13 +414,6 @@ def checkpoint_mismatch(s: Settings) -> str | None:
     return None if digest == s.digest else f"{path} is a surrogate of joint sha256 {digest[:12]}"
 
 
-def extrapolation(s: Settings) -> list[str]:
-    """surrogate.evaluate checks samples against contract.spec.INPUT_BOX, the paper's box:
-    a joint whose own box is wider needs --allow-extrapolation (its samples are inside
-    its own box by construction of the walk)."""
-    return ["--allow-extrapolation"] if (s.joint.input_box > INPUT_BOX * (1 + 1e-9)).any() else []
-
-
 def evaluate_stages(s: Settings) -> list[Stage]:
     ckpt = sha256_file(s.out / "surrogate.pt")
     stages = []
@@ -420,7 +421,7 @@ def evaluate_stages(s: Settings) -> list[Stage]:
                                    ("train-fit", "train", "train", "train_fit.json")):
         argv = ["-m", "surrogate.evaluate", "--model", str(s.out / "surrogate.pt"),
                 "--data", str(s.out / "data" / data), "--split", split, "--out", str(s.out / out),
-                *extrapolation(s), "--json"]
+                "--json"]
         key = key_of(joint=s.digest, model=ckpt, data=dataset_digest(s.out / "data" / data), split=split)
         stages.append(Stage(name, argv, [out], key))
     return stages
@@ -486,7 +487,7 @@ def summary(s: Settings, pipe: Pipeline, wall_s: float) -> dict:
         "joint": {"name": s.joint.name, "sha256": s.digest, "file": str(s.joint_file)},
         "budget": s.budget, "out": str(s.out),
         "settings": {"train_samples": s.train_samples, "heldout_samples": s.heldout_samples,
-                     "mesh_size_mm": s.mesh_size, "epochs": train_epochs(s), "ranks": s.ranks},
+                     "mesh_size_mm": s.mesh_size, "divisions": s.divisions, "epochs": train_epochs(s), "ranks": s.ranks},
         "samples": data,
         "heldout": {k: heldout.get(k) for k in ERROR_KEYS} | {"samples": heldout.get("n")},
         "train_fit": {k: fit.get(k) for k in ERROR_KEYS} | {"samples": fit.get("n")},

@@ -40,9 +40,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from contract.joint import JointFileError, JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint
-# fem.finger_cases still imports is_paper_joint from here; it lives in contract.joint now.
-# Drop this line once fem/finger_cases.py imports it from contract.joint.
-from contract.joint import is_paper_joint  # noqa: F401
 from contract.spec import JOINT_LENGTH
 
 FORMAT = "softjoint-finger/1"
