@@ -65,13 +65,16 @@ FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
 
 #: results/fem/joint_cases/<discretisation>_<load>.json (make mesh-study, make mesh-causes;
 #: fem.joint_cases): one joint solve of one load under one discretisation (mesh H:W,
-#: formulation, quadrature degree, penalty factor), kept so that the studies resume.
+#: formulation, quadrature degree, penalty factor), kept so that the studies resume; a solve
+#: seeded from another discretisation's answer names it (``seeded_from``, its key) and the
+#: seed's own solve time (``seed_wall_time_s``).
 JOINT_CASE = Format("fem-joint-case", 1, "fem.joint_cases", {
     "load": list, "discretisation.H": MAYBE, "discretisation.W": MAYBE, "discretisation.divisions?": int,
     "discretisation.formulation": str,
     "discretisation.quadrature": int, "discretisation.penalty": NUM, "anchors": list,
     **each("", NUM, "phi_end_deg", "cap_rotation_deg", "wall_time_s"), "newton_iterations": int,
-    "contact.closed_pairs": int, "contact.min_gap_mm": MAYBE, "mesh.nodes": int, "ranks": int})
+    "contact.closed_pairs": int, "contact.min_gap_mm": MAYBE, "mesh.nodes": int, "ranks": int,
+    "seeded_from?": str, "seed_wall_time_s?": NUM})
 
 #: results/fem/mesh_causes.json (make mesh-causes; fem.mesh_causes): each factor's effect on
 #: the answer against the production discretisation, its time, and the error against the

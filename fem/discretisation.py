@@ -66,10 +66,8 @@ class Discretisation:
 
     @property
     def mesh(self) -> str:
-        """``H``, ``H:W`` (mm) or ``hexN``."""
-        if self.divisions:
-            return f"hex{self.divisions}"
-        return f"{self.H:g}" if self.W is None else f"{self.H:g}:{self.W:g}"
+        """``H``, ``H:W`` (mm) or ``hexN`` (JointGeometry.mesh)."""
+        return self.geometry().mesh
 
     @property
     def sizes(self) -> tuple[float, float]:

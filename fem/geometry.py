@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from contract.finger import FingerSpec
+from contract.joint import MAX_DIVISIONS, mesh_text
 from contract.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.problem.
@@ -51,8 +52,6 @@ TAGS = {
     "proximal": 11, "distal": 12, "symmetry": 13,
     "top_chamber": 14, "bottom_chamber": 15, "valley_faces": 16,
 }
-#: most hexahedral divisions a joint may be meshed with (6: about 500k Q2 nodes)
-MAX_DIVISIONS = 6
 _EPS = 1e-6
 _GMSH_READY = False
 
@@ -99,6 +98,11 @@ class JointGeometry:
         """(x_start, x_end) of every cell's outer wall (mm)."""
         x0, w, g = self.cap, self.cell_width, self.valley_width
         return [(x0 + i * (w + g), x0 + i * (w + g) + w) for i in range(self.n_cells)]
+
+    @property
+    def mesh(self) -> str:
+        """The mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
+        return mesh_text(self.mesh_size, self.wall_mesh_size, self.divisions)
 
     def as_dict(self) -> dict:
         """The fields; ``divisions`` only for a hexahedral mesh, so records written before

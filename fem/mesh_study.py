@@ -2,7 +2,7 @@
 
     python -m fem.mesh_study --out results/fem/mesh_study.json [--formulation mixed] \\
         [--meshes 3.394:1.697 2.4:1.2 1.697:0.849 1.2:0.6 | hex2 hex3 hex4] [--production hex2] \\
-        [--loads 0 4] [--work results/fem/joint_cases] [--max-hours 2]
+        [--loads 0 4] [--work results/fem/joint_cases] [--max-hours 2] [--seed-from hex2]
 
 A mesh is ``H`` or ``H:W``: tetrahedron size H mm, and W mm on the 1.2 mm chamber walls
 (W = 0.6 puts two P2 elements through the wall), or ``hexN``: the swept hexahedral mesh of
@@ -13,7 +13,11 @@ every mesh (one kind) in one formulation, on the production discretisation
 judged against the reference) and on the paper's discretisation
 (fem.discretisation.PAPER, 1.8 mm displacement P2: the committed paper-fidelity data);
 each (discretisation, load) is one record in ``--work`` (shared with fem.mesh_causes), so
-a killed or time-limited study resumes where it stopped.
+a killed or time-limited study resumes where it stopped. With ``--seed-from MESH`` (one
+rank) every discretisation with more nodes than MESH (in the family's formulation) starts
+from MESH's answer at the same load instead of from zero (fem.transfer; the same
+equilibrium to the Newton tolerance, a few Newton iterations instead of the load path);
+such a record's ``wall_time_s`` is its own solve, the seed's is ``seed_wall_time_s``.
 
 Richardson extrapolation (Roache's grid convergence index) on the finest three meshes of a
 consistently refined family (sizes h1 > h2 > h3, in-plane and wall sizes scaled alike at
@@ -52,9 +56,8 @@ from mpi4py import MPI
 from contract import cli
 from fem.artefacts import MESH_STUDY
 from fem.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation, parse_mesh
-from fem.geometry import MAX_DIVISIONS
-from fem.geometry import JointGeometry, anchor_points
-from fem.joint_cases import CORNERS, LOADS, difference, load_key, read_records, solve_missing
+from fem.geometry import MAX_DIVISIONS, JointGeometry, anchor_points
+from fem.joint_cases import CORNERS, LOADS, difference, load_key, node_estimate, read_records, solve_missing
 from fem.options import MESH_SIZE_TEXT, on_root
 
 __all__ = ["CORNERS", "LOADS", "analyse", "family", "richardson", "run"]
@@ -149,7 +152,7 @@ def analyse(meshes: list[dict], production: str, paper: str | None = None,
     own = [m for m in meshes if m["formulation"] == formulation and m["element"] == element]
     chain = family(own)
     n_loads = len(meshes[0]["cases"])
-    extrapolation, orders = [None] * n_loads, []
+    extrapolation, orders = [], []
     if chain is not None:
         triples = [chain[i:i + 3] for i in range(len(chain) - 2)]
 
@@ -183,13 +186,16 @@ def analyse(meshes: list[dict], production: str, paper: str | None = None,
 
 # ---------------------------------------------------------------- solves
 def mesh_entry(disc: Discretisation, cases: dict, loads=LOADS) -> dict:
-    """One discretisation's results in load order, from its records {load key: record}."""
+    """One discretisation's results in load order, from its records {load key: record}
+    (``seeded_from``: the seed's key of a seeded record, else None; its wall time is then
+    its own Newton from the seed's answer)."""
     rows = [cases[load_key(load.as_array())] for load in loads]
     keep = ("load", "anchors", "phi_end_deg", "cap_rotation_deg", "wall_time_s", "newton_iterations", "ranks")
     return {"key": disc.key, "mesh": disc.mesh, "element": disc.element, "sizes": list(disc.sizes),
             "formulation": disc.formulation, "nodes": rows[0]["mesh"]["nodes"], "dofs": rows[0]["mesh"]["dofs"],
             "mean_solve_s": float(np.mean([r["wall_time_s"] for r in rows])), "ranks": max(r["ranks"] for r in rows),
-            "cases": [{**{k: r[k] for k in keep}, "closed_pairs": r["contact"]["closed_pairs"]} for r in rows]}
+            "cases": [{**{k: r[k] for k in keep}, "closed_pairs": r["contact"]["closed_pairs"],
+                       "seeded_from": r.get("seeded_from")} for r in rows]}
 
 
 def plan(meshes: list[str], formulation: str, production: str,
@@ -199,20 +205,20 @@ def plan(meshes: list[str], formulation: str, production: str,
     ``production`` in ``production_formulation``) and the paper's."""
     prod = discretisation(production, formulation=production_formulation)
     discs = {discretisation(m, formulation=formulation) for m in meshes} | {prod, PAPER}
-    # tetrahedra: nodes ~ 1 / (H W); hexahedra (fem.mesh_hex): ~ 2,700 n^3
-    cost = lambda d: 2700 * d.divisions ** 3 if d.divisions else 2.6e4 * 1.8 ** 2 / np.prod(d.sizes)
-    return sorted(discs, key=cost), prod
+    return sorted(discs, key=node_estimate), prod
 
 
 def run(meshes: list[str], formulation: str, production: str, work: Path,
         max_hours: float = 1000.0, comm=MPI.COMM_WORLD, loads=LOADS,
-        production_formulation: str = PRODUCTION.formulation) -> dict:
-    """Solve what is missing (until ``max_hours``), then analyse the meshes solved at every
-    load of ``loads``; a JSON-ready dict with ``complete`` false when a discretisation still
-    lacks a load."""
+        production_formulation: str = PRODUCTION.formulation, seed_from: str | None = None) -> dict:
+    """Solve what is missing (until ``max_hours``; the meshes finer than ``seed_from``, a
+    mesh text, seeded from its answer in ``formulation``), then analyse the meshes solved at
+    every load of ``loads``; a JSON-ready dict with ``complete`` false when a
+    discretisation still lacks a load."""
     discs, prod = plan(meshes, formulation, production, production_formulation)
     element = discretisation(meshes[0]).element
-    complete = solve_missing(work, discs, loads, max_hours, comm)
+    seed = discretisation(seed_from, formulation=formulation) if seed_from else None
+    complete = solve_missing(work, discs, loads, max_hours, comm, seed)
     records = read_records(work, discs, loads)
     solved = [mesh_entry(d, records[d.key], loads) for d in discs if len(records.get(d.key, {})) == len(loads)]
     head = {"loads": [load.as_array().tolist() for load in loads], "corners": [c.as_array().tolist() for c in CORNERS],
@@ -279,17 +285,22 @@ def main(argv=None) -> int:
                   "default results/fem/joint_cases)")
     ap.add_argument("--max-hours", type=cli.number(0, 1000, "h"), default=1000.0,
                     help="start no new solve after this many hours (default 1000)")
+    ap.add_argument("--seed-from", type=_mesh, default=None, metavar="MESH",
+                    help="start every mesh with more nodes than MESH (e.g. hex2) from MESH's answer at the same "
+                    "load, in --formulation, instead of from zero (one rank; default: all from zero)")
     args = ap.parse_args(argv)
     comm = MPI.COMM_WORLD
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     with ap.errors():
         if len({discretisation(m).element for m in args.meshes}) > 1:
             raise ValueError("--meshes: give one kind of mesh, tetrahedra H[:W] or hexahedra hexN")
+        if args.seed_from and comm.size > 1:
+            raise ValueError(f"--seed-from runs on one rank (fem.transfer), not {comm.size}")
         if comm.rank == 0:
             Path(args.work).mkdir(parents=True, exist_ok=True)
         comm.barrier()
         study = run(args.meshes, args.formulation, args.production, Path(args.work), args.max_hours, comm,
-                    [LOADS[i] for i in args.loads], args.production_formulation)
+                    [LOADS[i] for i in args.loads], args.production_formulation, args.seed_from)
         on_root(comm, lambda: MESH_STUDY.write(args.out, study))
     if comm.rank == 0:
         if args.json:

@@ -308,6 +308,10 @@ def test_mesh_study_finds_the_hexahedral_family_of_the_production_mesh():
     np.testing.assert_allclose(out["orders"][0]["anchors"] + out["orders"][0]["phi_end_deg"], 3.0, atol=1e-9)
     assert abs(out["production_error"]["anchor_mm"] - 0.8 / 8) < 1e-9
     assert abs(out["production_error"]["phi_end_deg"] - 1.0) < 1e-9
+    # two hexahedral meshes are no family: no extrapolation (an empty list, which the
+    # format accepts), the finest hex mesh is the reference
+    out = mesh_study.analyse(tets + hexes[:2], "hex2")
+    assert out["family"] is None and out["extrapolation"] == [] and out["reference"] == "finest mesh"
 
 
 def test_a_problem_composed_from_the_pieces_is_solved_by_the_same_solver():

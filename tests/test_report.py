@@ -206,3 +206,18 @@ def test_finger_fem_time_is_judged_on_the_bench(tmp_path):
                          if c["converged"])
     row = next(r for h, rows in _tables(text) for r in rows if r[0].startswith("finger FEM per gesture in the validation"))
     assert row[1] == f"{validation_max:.0f} s" and row[-1] == report_app.NOT_JUDGED
+
+
+def test_multifidelity_verdict_compares_equal_cost_figures(tmp_path):
+    """The committed multifidelity.json with its best point's learning-curve proxy set
+    below and then above the multi-fidelity error: the verdict says fine-only wins by the
+    ratio (0.100 / 0.020 = 5.0x), then that the correction wins."""
+    m = json.loads((Path(report_app.__file__).parents[2] / "results/surrogate/multifidelity.json").read_text())
+    best = min(m["comparison"], key=lambda r: r["multifidelity"]["heldout_mean_anchor_error_mm"])
+    (tmp_path / "surrogate").mkdir()
+    for proxy, words in ((0.2 * best["multifidelity"]["heldout_mean_anchor_error_mm"], "is 5.0× more accurate"),
+                         (2.0 * best["multifidelity"]["heldout_mean_anchor_error_mm"], "better than the learning curve")):
+        best["reference_curve_at_m"]["heldout_mean_anchor_error_mm"] = proxy
+        (tmp_path / "surrogate/multifidelity.json").write_text(json.dumps(m))
+        text = "\n".join(report_app.learning.multifidelity_lines(tmp_path))
+        assert words in text and f"n = {best['samples']}" in text

@@ -96,9 +96,9 @@ from contract.finger import is_paper_joint
 from contract.joint import JointSpec, joint_digest, load_joint, material_dict
 from contract.spec import INPUT_BOX, N_ANCHORS, N_INPUTS
 from fem.discretisation import FORMULATION
-from fem.options import (add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
+from fem.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
                          joint_geometry, joint_of)
-from fem.solver import JointSolver, Load, Material, SolverConfig
+from fem.solver import JointSolver, Load, Material, config_for
 from workflow import shards
 from workflow.shards import Manifest, ShardError
 from workflow.store import (ShardScanner, build_manifest, clean_temporaries, joint_record, shard_file,
@@ -171,7 +171,7 @@ def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: in
     paper = is_paper_joint(joint)
     config = {"source": "fem-campaign", "geometry": geometry.as_dict(),
               "material": asdict(Material()) if paper else material_dict(joint.material),
-              "solver": asdict(SolverConfig()),
+              "solver": asdict(config_for(geometry)),
               "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
               "fresh_check_every": fresh_check_every,
               "input_box": joint.input_box.tolist(), **joint_record(joint)}
@@ -255,6 +255,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_joint(ap)
     add_mesh_size(ap, None, "tetrahedron size", shown="the joint file's [mesh] size")
     add_wall_mesh_size(ap)
+    add_divisions(ap)
     add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
@@ -273,6 +274,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     if why:
         ap.error(why)
     args.joint = joint_of(args)
+    with ap.errors():
+        args.geometry = joint_geometry(args, args.joint)
     if args.joint.anchors != N_ANCHORS:
         ap.error(f"--joint: joint {args.joint.name!r} has anchors.count = {args.joint.anchors}; the dataset "
                  f"format holds {N_ANCHORS} anchors (contract.spec.N_ANCHORS)")
@@ -306,12 +309,13 @@ class Progress:
 #: The manifest's config entries that a command-line option sets: key -> (flag, unit).
 CONFIG_FLAGS = {("geometry", "mesh_size"): ("--mesh-size", " mm"),
                 ("geometry", "wall_mesh_size"): ("--wall-mesh-size", " mm"),
+                ("geometry", "divisions"): ("--divisions", ""),
                 ("formulation",): ("--formulation", ""),
                 ("unit_size",): ("--unit-size", ""), ("walk_step",): ("--step", ""),
                 ("fresh_check_every",): ("--fresh-check-every", "")}
 #: What an absent config entry means (shown instead of "unset"): a manifest without a
 #: formulation was made with P2 displacements.
-CONFIG_ABSENT = {("formulation",): "displacement"}
+CONFIG_ABSENT = {("formulation",): "displacement", ("geometry", "divisions"): "tetrahedra"}
 
 
 def _differences(old: dict, new: dict, prefix: tuple = ()) -> list[tuple[tuple, object, object]]:
@@ -400,7 +404,7 @@ def run(args) -> int:
                   f"{size} ranks", file=sys.stderr)
         return 2
     joint = args.joint
-    geometry = joint_geometry(args, joint)
+    geometry = args.geometry
     mesh_size, formulation = geometry.mesh_size, formulation_of(args, joint)
     config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every, formulation, joint)
     out, t_start = Path(args.out), time.perf_counter()
@@ -441,8 +445,7 @@ def run(args) -> int:
                             args.progress_every)
         if not args.quiet:
             print(f"[campaign] {out}: joint {joint.name!r}, {len(todo)} of {manifest.units_total} units to do on "
-                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size:g}"
-                  f"{f':{geometry.wall_mesh_size:g}' if geometry.wall_mesh_size else ''} mm, "
+                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {geometry.mesh}, "
                   f"{formulation} formulation, unit size {args.unit_size}, step {args.step}",
                   flush=True)
 
@@ -516,7 +519,7 @@ def run(args) -> int:
             "units_total": manifest.units_total, "units_done": manifest.units_done,
             "units_run": units_run, "complete": manifest.complete,
             "range_complete": range_done, "stopped_by_budget": stopped,
-            "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
+            "ranks": size, "ranks_per_group": G, "mesh": geometry.mesh, "mesh_size": mesh_size,
             "wall_mesh_size": geometry.wall_mesh_size, "formulation": formulation,
             "joint": {"name": joint.name, "sha256": joint_digest(joint)},
             "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,

@@ -42,17 +42,17 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                            f"phi_end {e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst load; the "
                            "corners load a joint far more than the finger's cases do) | `make mesh-study` |")
     c, fine = load(root, "fem/heldout_mesh.json"), load(root, "surrogate/heldout_fine.json")
-    mesh = lambda m: mesh_label(m["mesh_size"], m["wall_mesh_size"])
+    mesh = lambda m: m.get("mesh") or mesh_label(m["mesh_size"], m["wall_mesh_size"])
     if c:
-        out.append(f"| discretisation: one joint over the held-out walk, the committed set ({mesh(c['ref_mesh'])} mm) -> "
-                   f"{mesh(c['other_mesh'])} mm, {c['samples']} of {c['ref_samples']} samples"
+        out.append(f"| discretisation: one joint over the held-out walk, the committed set (mesh {mesh(c['ref_mesh'])}) -> "
+                   f"mesh {mesh(c['other_mesh'])}, {c['samples']} of {c['ref_samples']} samples"
                    f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
                    f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
                    f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
                    "| `make dataset-fine` (results/fem/heldout_mesh.json) |")
     if c and fine:
-        out.append(f"| surrogate improved.pt (trained on {mesh(c['ref_mesh'])} mm) against the {fine['n']} held-out samples "
-                   f"on {mesh(c['other_mesh'])} mm | tip "
+        out.append(f"| surrogate improved.pt (trained on mesh {mesh(c['ref_mesh'])}) against the {fine['n']} held-out samples "
+                   f"on mesh {mesh(c['other_mesh'])} | tip "
                    f"{fine['tip_error_mm']:.3f} mm, cap rotation {fine['cap_rotation_error_deg']:.3f}° mean "
                    f"({fine['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
                    "| results/surrogate/heldout_fine.json (`make dataset-fine`) |")
