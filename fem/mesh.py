@@ -38,7 +38,7 @@ def create_mesh(geometry: JointGeometry | BeamGeometry | FingerGeometry, comm: M
         from fem.mesh_hex import create_hex_mesh
 
         return create_hex_mesh(geometry, comm)
-    if isinstance(geometry, FingerGeometry) and geometry.joint.divisions:
+    if isinstance(geometry, FingerGeometry) and geometry.divisions:
         from fem.mesh_hex import create_hex_finger_mesh
 
         return create_hex_finger_mesh(geometry, comm)

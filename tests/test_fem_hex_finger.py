@@ -8,10 +8,14 @@
 * a free pressurisation of the paper's finger (Q2-Q1 mixed, hex1 joints, quadrature 4):
   (P1, P2) and (-P1, -P2) give mirror-image fingers about the mount's vertical line, and
   the fingertip agrees with the coarse tetrahedral finger's (4 mm P2-P1, frozen) within
-  the tolerance measured below, an independent discretisation of the same problem.
+  the tolerance measured below, an independent discretisation of the same problem;
+* the command line: ``python -m fem.finger --divisions 1`` solves the same hexahedral
+  finger as the Python call (same answer to round-off, the hexahedra's quadrature
+  raised by fem.solver.config_for) and records its mesh as ``hex1``.
 """
+
+import json
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -24,7 +28,7 @@ from petsc4py import PETSc  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
-from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver  # noqa: E402
+from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, main  # noqa: E402
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags  # noqa: E402
 from fem.mesh import create_mesh  # noqa: E402
 from fem.mesh_hex import QUADRATURE, hexahedra  # noqa: E402
@@ -80,9 +84,11 @@ def test_hex_finger_is_mirrored_node_by_node_and_holds_the_joint_mesh():
 
 @pytest.fixture(scope="module")
 def hex_free():
-    """The paper's finger, hex1 joints, mixed, at FREE and at -FREE."""
-    solver = FingerSolver(HEX1, MPI.COMM_SELF, config=replace(FINGER_CONFIG, quadrature_degree=QUADRATURE),
-                          formulation="mixed")
+    """The paper's finger, hex1 joints, mixed, at FREE and at -FREE; FINGER_CONFIG's
+    quadrature degree 2 is raised to the hexahedra's (fem.solver.config_for)."""
+    assert FINGER_CONFIG.quadrature_degree < QUADRATURE
+    solver = FingerSolver(HEX1, MPI.COMM_SELF, formulation="mixed")
+    assert solver.config.quadrature_degree == QUADRATURE
     plus = solver.solve(FingerLoad(FREE, False))
     minus = solver.solve(FingerLoad(tuple(-p for p in FREE), False))
     assert plus.converged and minus.converged
@@ -113,3 +119,23 @@ def test_hex_finger_agrees_with_the_tetrahedral_finger(hex_free):
     assert np.linalg.norm(plus.tip - rest) > 30.0
     assert np.linalg.norm(plus.tip - TET_FREE["tip"]) < 1.5
     assert abs(math.degrees(plus.tip_angle) - TET_FREE["tip_angle_deg"]) < 0.6
+
+
+def test_cli_divisions_solves_the_python_calls_finger(hex_free, capsys):
+    """``python -m fem.finger --divisions 1 --formulation mixed --no-gravity --json`` at
+    FREE: the fingertip, tip angle and every joint's end angle of the Python call to 1e-8
+    (one rank, the same mesh and solver), the same node count, and the record says hex1:
+    ``mesh.mesh`` "hex1" and ``mesh.divisions`` 1 with no tetrahedron ``mesh_size``, and
+    the geometry's joint ``divisions`` 1."""
+    solver, plus, _ = hex_free
+    argv = ["--p1", str(FREE[0]), "--p2", str(FREE[1]), "--no-gravity", "--divisions", "1",
+            "--formulation", "mixed", "--json", "--quiet"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["converged"]
+    np.testing.assert_allclose(out["tip"], plus.tip, atol=1e-8)
+    assert out["tip_angle_deg"] == pytest.approx(math.degrees(plus.tip_angle), abs=1e-8)
+    np.testing.assert_allclose(out["joint_end_angle_deg"], np.degrees(plus.end_angle), atol=1e-8)
+    assert out["mesh"]["mesh"] == "hex1" and out["mesh"]["divisions"] == 1 and "mesh_size" not in out["mesh"]
+    assert out["mesh"]["nodes"] == solver.mesh_info()["nodes"] == 10561
+    assert out["geometry"]["joint"]["divisions"] == 1 and out["formulation"] == "mixed"
