@@ -55,10 +55,10 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.artefacts import MESH_STUDY
-from fem.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation, parse_mesh
+from fem.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation
 from fem.geometry import MAX_DIVISIONS, JointGeometry, anchor_points
 from fem.joint_cases import CORNERS, LOADS, difference, load_key, node_estimate, read_records, solve_missing
-from fem.options import MESH_SIZE_TEXT, on_root
+from fem.options import MESH_SIZE_TEXT, mesh_text, on_root
 
 __all__ = ["CORNERS", "LOADS", "analyse", "family", "richardson", "run"]
 
@@ -233,15 +233,6 @@ def run(meshes: list[str], formulation: str, production: str, work: Path,
 
 
 # ---------------------------------------------------------------- command line
-def _mesh(text: str) -> str:
-    """argparse type: "H", "H:W" (mm) or "hexN" (fem.discretisation.parse_mesh)."""
-    try:
-        parse_mesh(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text.strip()
-
-
 class _Distinct(argparse.Action):
     """Store a list, refusing a repeated value while parsing (before any output folder
     is created)."""
@@ -265,13 +256,13 @@ def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.mesh_study", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".json", default="results/fem/mesh_study.json",
                   help="result file (default results/fem/mesh_study.json)")
-    ap.add_argument("--meshes", type=_mesh, nargs="+", default=DEFAULT_MESHES, metavar="MESH",
+    ap.add_argument("--meshes", type=mesh_text, nargs="+", default=DEFAULT_MESHES, metavar="MESH",
                     action=_Distinct, help=f"distinct meshes of one kind: tetrahedra H[:W] (size H and wall size "
                     f"W, {MESH_SIZE_TEXT}) or hexahedra hexN (N divisions, N elements through every wall, in "
                     f"[1, {MAX_DIVISIONS}]) (default {' '.join(DEFAULT_MESHES)})")
     ap.add_argument("--formulation", choices=FORMULATIONS, default=PRODUCTION.formulation,
                     help=f"the family's formulation (default {PRODUCTION.formulation}, the production one)")
-    ap.add_argument("--production", type=_mesh, default=PRODUCTION.mesh, metavar="MESH",
+    ap.add_argument("--production", type=mesh_text, default=PRODUCTION.mesh, metavar="MESH",
                     help=f"the production mesh, judged against the reference (default {PRODUCTION.mesh})")
     ap.add_argument("--production-formulation", choices=FORMULATIONS, default=PRODUCTION.formulation,
                     help=f"the production discretisation's formulation (default {PRODUCTION.formulation})")
@@ -285,7 +276,7 @@ def main(argv=None) -> int:
                   "default results/fem/joint_cases)")
     ap.add_argument("--max-hours", type=cli.number(0, 1000, "h"), default=1000.0,
                     help="start no new solve after this many hours (default 1000)")
-    ap.add_argument("--seed-from", type=_mesh, default=None, metavar="MESH",
+    ap.add_argument("--seed-from", type=mesh_text, default=None, metavar="MESH",
                     help="start every mesh with more nodes than MESH (e.g. hex2) from MESH's answer at the same "
                     "load, in --formulation, instead of from zero (one rank; default: all from zero)")
     args = ap.parse_args(argv)

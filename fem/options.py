@@ -19,12 +19,14 @@
   or ``--divisions`` (hexahedra): the joint file's shape and its [mesh] when none is given
   (without a joint file, the production mesh, JointGeometry's defaults);
   :func:`formulation_of` likewise;
+* :func:`mesh_text`: an argparse type for a discretisation's mesh text ("H", "H:W", "hexN");
 * :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
   under mpirun ``with ap.errors():`` exits every rank with 2 and nothing hangs.
 """
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import replace
 
 import numpy as np
@@ -64,6 +66,19 @@ def add_divisions(ap: cli.Parser) -> None:
     ap.add_argument("--divisions", type=cli.number(1, MAX_DIVISIONS, integer=True), default=None,
                     help=f"mesh the joint with swept Q2 hexahedra, N elements through every wall, N in [1, "
                          f"{MAX_DIVISIONS}] (instead of --mesh-size/--wall-mesh-size tetrahedra)")
+
+
+def mesh_text(text: str) -> str:
+    """argparse type: a discretisation's mesh, "H", "H:W" (tetrahedra, mm) or "hexN"
+    (hexahedra), checked by fem.discretisation.parse_mesh (imported when called: it
+    imports dolfinx)."""
+    from fem.discretisation import parse_mesh
+
+    try:
+        parse_mesh(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text.strip()
 
 
 def add_formulation(ap: cli.Parser,

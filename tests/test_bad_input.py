@@ -70,6 +70,8 @@ CASES_FEM = [
     ("fem.bench_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("fem.bench_joint", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("fem.bench_joint", ["--walk", "2.5", "--out", "{tmp}/x.json"], "--walk: '2.5' is not an integer"),
+    ("fem.bench_joint", ["--mesh", "hex0", "--out", "{tmp}/x.json"], "--mesh: 'hex0': hexN needs N in [1, 6]"),
+    ("fem.bench_joint", ["--mesh", "1.8", "--formulation", "plastic", "--out", "{tmp}/x.json"], "--formulation"),
     ("fem.validation", ["table", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("fem.validation", ["cantilever", "--alpha", "nan"], "--alpha: 'nan' is not a finite number (allowed [0, 10])"),
     ("fem.validation", ["rollup", "--theta", "7"], "--theta: 7 is outside [0, 6.2832] rad"),

@@ -73,10 +73,11 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                 f"{j['tip_error_mm_max']:.2f} mm). "
                 + ("So the datasets are not regenerated on a finer mesh for the finger's sake"
                    if largest != "discretisation" else
-                   "Decision: the datasets are to be regenerated on the wall-resolved joint mesh 1.697:0.849 (the "
-                   "train set is one `MESH_SIZE=1.697 WALL_MESH_SIZE=0.849 OUT=results/data/train_h1.697w0.849 sbatch "
-                   "workflow/slurm/campaign.sbatch`), then the surrogate retrained and what depends on it re-run. Not "
-                   "done yet: the committed datasets, and every figure in this report, are on the production mesh")
+                   "Decision: the datasets are to be regenerated on the discretisation the joint mesh study "
+                   "chooses (its section: swept Q2 hexahedra with the mixed formulation are the candidates; "
+                   "`make dataset-hex2` runs the walks on one), then the surrogate retrained and what depends "
+                   "on it re-run. Not done yet: the committed datasets, and every figure in this report, are on "
+                   "the 1.8 mm mesh")
                 + (". The joint study at the box corners has no extrapolation in the asymptotic range (its figure "
                    "is a lower bound) and decides it for loads near the corners." if study and study["reference"] != "richardson"
                    else ".")]
