@@ -19,8 +19,9 @@ joint file whose [mesh] gives divisions) meshes the whole finger with swept Q2 h
 instead (fem.mesh_hex: N elements through every joint wall, the same grid as the joint
 alone), integrated with the hexahedra's quadrature (fem.solver.config_for). The record's
 ``mesh.mesh`` names the joints' mesh in words (``1.8``, ``1.697:0.849``, ``hex2``;
-contract.joint.mesh_text). fem.geometry.build_finger meshes one joint shape, so the joints of one finger may differ in law, box and anchors but must
-share their shape (a finger whose joints differ in shape is refused with one line). Every
+contract.joint.mesh_text). fem.geometry.build_finger (and fem.mesh_hex) mesh one joint
+shape, so the joints of one finger may differ in law, box and anchors but must share their
+shape (a finger whose joints differ in shape is refused with one line). Every
 rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35), bonded to its
 neighbours (one conforming mesh). The base face x = 0 is clamped.
 
@@ -352,7 +353,8 @@ class FingerSolver:
                  material: MaterialLaw | Material | None = None, rigid: RigidMaterial = RigidMaterial(),
                  config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION):
         config = config_for(geometry, config)
-        self.finger, self.geometry, self.config, self.formulation = geometry.finger, geometry, config, formulation
+        self.finger, self.geometry, self.config = geometry.finger, geometry, config
+        self.formulation = formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
                                       formulation=formulation, **config.discretisation())
