@@ -274,6 +274,19 @@ results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predic
 	$(MAKE) --no-print-directory finger-fem
 	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(PRED_JOINT) --out $@ --figures results/validation
 
+# ---------------------------------------------------------------- one joint file to a predictor (issue 37)
+# (section owned by apps/pipeline.py) Render, the two campaigns, training, held-out errors and
+# a three-joint gesture of JOINT into results/joints/<its name>/ (docs/pipeline.md); every
+# stage resumes, so a killed or time-limited run (exit 3) is finished by running it again.
+# The same through Slurm: JOINT=FILE sbatch workflow/slurm/pipeline.sbatch.
+JOINT          ?=
+BUDGET         ?= small
+PIPELINE_RANKS ?= 2
+PIPELINE_HOURS ?=
+.PHONY: pipeline
+pipeline: | $(SETUP) ## one joint file -> FEM data, surrogate, held-out errors, gesture: make pipeline JOINT=file.toml [BUDGET=small|full] -> results/joints/<name>/
+	nice $(PY) -m apps.pipeline --joint "$(JOINT)" --budget "$(BUDGET)" --ranks $(PIPELINE_RANKS) \
+	  $(if $(PIPELINE_HOURS),--max-hours $(PIPELINE_HOURS))
 
 report: ## results/REPORT.md from the committed JSON artefacts
 	$(PY) -m apps.report --out results/REPORT.md

@@ -61,6 +61,7 @@ fem.materials energies of spec.material), campaign manifests (joint_to_dict, joi
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import math
@@ -486,3 +487,16 @@ def joint_digest(joint: JointSpec) -> str:
     d = joint_to_dict(joint)
     body = {k: d[k] for k in ("format", "geometry", "material", "input_box", "anchors")}
     return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def paper_joint_digest() -> str:
+    """``joint_digest`` of the paper's joint (DEFAULT_JOINT), read once."""
+    return joint_digest(load_joint())
+
+
+def is_paper_joint(joint: JointSpec) -> bool:
+    """Whether ``joint`` has the paper's physics and contract (its digest: name and [mesh]
+    aside): the joint a stage uses without ``--joint``, a finger's joint part without a
+    ``joint`` key, and a manifest or checkpoint that records none."""
+    return joint_digest(joint) == paper_joint_digest()

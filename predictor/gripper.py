@@ -31,8 +31,9 @@ Weights (N): a rigid part's at its midpoint; a joint's, with ``joint_weight``
 ``lumped`` (the paper's), at the mean of its 10 anchors, or ``split`` (the default): half at
 its proximal centre O_i, half at its distal end r_10,i (predictor.statics says which joint
 balances each enters). Contact sample points, in chain order: each rigid part's
-``contact_points`` segment midpoints (each carrying l/n of length) and the 10 anchors of each
-joint with ``contact = true`` (each carrying L/10); the paper's finger gives link (12),
+``contact_points`` segment midpoints (each carrying l/n of length) and the n anchors of each
+joint with ``contact = true`` (each carrying L/n, L and n its own joint description's: 45.45 mm
+and 10 for the paper's joint); the paper's finger gives link (12),
 joint 2 (10), tip (65).
 
 All lengths mm, forces N, angles rad. Batched: pressures (B, J), tau (B, J, 3). The joint
@@ -48,7 +49,7 @@ from dataclasses import dataclass, field, fields
 import torch
 
 from contract.finger import DEFAULT_FINGER, FingerSpec, load_finger
-from contract.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
+from contract.spec import PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
 KINEMATICS = ("tangent", "cap")
@@ -144,10 +145,11 @@ def chain_layout(finger: FingerSpec, joint_weight: str = "lumped") -> ChainLayou
     loads = [ld for ld in loads if any(ld[2])]
     c_part, c_len = [], []
     for k, part in enumerate(finger.parts):
-        n = N_ANCHORS if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
+        # A joint's anchors are its own description's (count and length: contract.finger).
+        n = part.spec.anchors if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
         if n:
             c_part += [k] * n
-            c_len += [(JOINT_LENGTH if part.kind == "joint" else part.length) / n] * n
+            c_len += [part.length / n] * n
     mask = lambda rows: torch.tensor(rows, dtype=torch.float64).reshape(J, -1)  # noqa: E731
     w_mask = mask([[float(ld[2][i]) for ld in loads] for i in range(J)])
     c_mask = mask([[float(k > jp[i]) for k in c_part] for i in range(J)])

@@ -43,8 +43,8 @@ default mesh ([mesh]: sizes and formulation). The manifest's config records the 
 (workflow.store.joint_record: its description and sha256) only when it is not the
 paper's, so every manifest written before joint files existed is unchanged and resumes;
 resuming with another joint is refused with one line naming --joint and both joints.
-The dataset format holds 10 anchors (contract.spec.N_ANCHORS): a joint with another
-anchor count is refused before any work.
+Its shards hold the joint's anchor count (workflow.shards.anchor_count reads it back
+from the config).
 
 Formulation. ``--formulation`` (default the joint file's, for the paper's joint the
 production one, fem.discretisation.FORMULATION) chooses the joint's elements
@@ -92,8 +92,7 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.finger import is_paper_joint
-from contract.joint import JointSpec, joint_digest, load_joint, material_dict
+from contract.joint import JointSpec, is_paper_joint, joint_digest, load_joint, material_dict
 from contract.spec import INPUT_BOX, N_ANCHORS, N_INPUTS
 from fem.discretisation import FORMULATION
 from fem.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
@@ -182,9 +181,10 @@ def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: in
 
 # ---------------------------------------------------------------------------- one unit
 def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
-               on_sample=None) -> tuple[dict, dict]:
+               on_sample=None, anchors: int = N_ANCHORS) -> tuple[dict, dict]:
     """Solve the walk ``inputs`` (n, 4) of one unit by continuation (collective over the
-    solver's communicator). Returns (arrays for write_shard, meta figures)."""
+    solver's communicator), ``anchors`` per sample (the joint's count). Returns (arrays for
+    write_shard, meta figures)."""
     data = {k: [] for k in ("sample_id", "inputs", "anchors", "jacobian", "phi_end",
                             "cap_rotation", "newton_iterations", "wall_time_s")}
     fail = {"failed_sample_id": [], "failed_inputs": [], "failed_reason": []}
@@ -228,7 +228,7 @@ def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
             fail["failed_reason"].append(res.reason or "no convergence")
         if on_sample is not None:
             on_sample(res.converged)
-    arrays = shards.empty_arrays()
+    arrays = shards.empty_arrays(anchors)
     for k, v in {**data, **fail}.items():
         if v:
             arrays[k] = np.asarray(v, dtype=arrays[k].dtype if k != "failed_reason" else str)
@@ -276,9 +276,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.joint = joint_of(args)
     with ap.errors():
         args.geometry = joint_geometry(args, args.joint)
-    if args.joint.anchors != N_ANCHORS:
-        ap.error(f"--joint: joint {args.joint.name!r} has anchors.count = {args.joint.anchors}; the dataset "
-                 f"format holds {N_ANCHORS} anchors (contract.spec.N_ANCHORS)")
     n_units = unit_count(args.samples, args.unit_size)
     args.unit_range = args.units or (0, n_units)
     if args.unit_range[1] > n_units:
@@ -474,7 +471,7 @@ def run(args) -> int:
         inputs = unit_walk(args.seed, unit, len(ids), args.step, box=joint.input_box)
         check = args.fresh_check_every > 0 and unit % args.fresh_check_every == 0
         state["in_unit"] = state["fail_in_unit"] = 0
-        arrays, figures = solve_unit(solver, ids, inputs, check, on_sample)
+        arrays, figures = solve_unit(solver, ids, inputs, check, on_sample, joint.anchors)
         unit_times.append(figures["wall_s"])
         if group.rank == 0:
             meta = {"config": config, "seed": args.seed, "unit": unit, "git_commit": commit,

@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from contract.files import atomic_path, sha256_file
-from contract.finger import is_paper_joint
-from contract.joint import JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint, mesh_text
+from contract.joint import (JointSpec, is_paper_joint, joint_digest, joint_from_dict, joint_to_dict, load_joint,
+                            mesh_text)
 from contract.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, outside_box
 from workflow.shards import (DATA_KEYS, FAILURE_KEYS, Manifest, ShardEntry, ShardError,
                              array_digest, load_dataset, read_shard, split_of)
