@@ -139,7 +139,8 @@ class FingerGeometry:
     The finger frame is the joint frame of the first joint, extended: x runs along the
     straight rest finger from the base mount (x = 0) to the fingertip (x = finger.length),
     y in the bending plane, z >= 0 the half-model. Every joint is the bellow joint of
-    ``joint`` (its mesh size and wall refinement included) with its proximal face at
+    ``joint`` (its mesh size and wall refinement, or its hexahedral divisions, included:
+    ``divisions`` > 0 meshes the whole finger with fem.mesh_hex) with its proximal face at
     finger.rest_start(k); every rigid part is a solid box of its cross-section
     (y in [-height/2, height/2], z in [0, width/2]), bonded to its neighbours' end faces
     (one conforming mesh), meshed at ``rigid_mesh_size`` (mm).
@@ -152,6 +153,17 @@ class FingerGeometry:
     @property
     def mesh_size(self) -> float:
         return self.joint.mesh_size
+
+    @property
+    def divisions(self) -> int:
+        """The joints' hexahedral divisions (fem.mesh_hex meshes the whole finger); 0:
+        gmsh tetrahedra."""
+        return self.joint.divisions
+
+    @property
+    def mesh(self) -> str:
+        """The joints' mesh in words (JointGeometry.mesh): ``hexN``, or ``H`` / ``H:W`` (mm)."""
+        return self.joint.mesh
 
     def as_dict(self) -> dict:
         return {"finger": self.finger.summary(), "joint": self.joint.as_dict(),
