@@ -22,9 +22,9 @@ union of the joint's and every rigid part's (+-h_k/2; 0, w_k/2).
 One tensor grid over those breakpoints (a :class:`Layout`): the mesh of ``divisions`` n
 cuts every interval of length d into n * max(1, ceil(d / S0)) equal elements, S0 =
 FingerGeometry.rigid_mesh_size for a finger (6 mm: the long rigid intervals get elements
-of at most S0 / n) and infinite for a joint, except that a joint's ``hex_size`` S grades it
-in the bending plane: its x and y intervals take S0 = S (the long spans of the cells'
-walls get more elements than the walls' thickness; z is left at n). A hexahedron is kept
+of at most S0 / n) and infinite for a joint, except that a joint's ``hex_size`` S grades it:
+its intervals take S0 = S (the long spans of the cells' walls and of the chambers along z
+get more elements than the walls' thickness). A hexahedron is kept
 when its midpoint lies in the solid (a joint's outer box less its chambers and valley
 gaps, or a rigid box).
 So every joint wall is n elements thick, element sizes scale exactly as 1/n, and the
@@ -242,8 +242,7 @@ def joint_layout(geo: JointGeometry) -> Layout:
         return tag
 
     S = geo.hex_size or math.inf
-    return Layout(breakpoints(geo), lambda x, y, z: in_joint(geo, x, y, z), cell_tags, facet_tags,
-                  (S, S, math.inf))
+    return Layout(breakpoints(geo), lambda x, y, z: in_joint(geo, x, y, z), cell_tags, facet_tags, (S, S, S))
 
 
 def part_spans(geo: FingerGeometry) -> list[tuple[float, float]]:
@@ -304,13 +303,13 @@ def finger_layout(geo: FingerGeometry) -> Layout:
         return tag
 
     bx, by, bz = breaks = finger_breakpoints(geo)
-    rigid, plane = geo.rigid_mesh_size, min(geo.rigid_mesh_size, jg.hex_size or math.inf)
+    rigid, joint = geo.rigid_mesh_size, min(geo.rigid_mesh_size, jg.hex_size or math.inf)
     mid = (bx[:-1] + bx[1:]) / 2
     in_a_joint = np.zeros(len(mid), dtype=bool)
     for _, (part, (x0, x1)) in parts:
         in_a_joint |= (part.kind == "joint") & (mid > x0) & (mid < x1)
     return Layout(breaks, lambda x, y, z: in_finger(geo, x, y, z), cell_tags, facet_tags,
-                  (np.where(in_a_joint, plane, rigid), plane, rigid))
+                  (np.where(in_a_joint, joint, rigid), joint, joint))
 
 
 # ---------------------------------------------------------------------- DOLFINx
