@@ -26,13 +26,13 @@ of at most S0 / n) and infinite for a joint, except that a joint's ``hex_size`` 
 its intervals take S0 = S (the long spans of the cells' walls and of the chambers along z
 get more elements than the walls' thickness). A hexahedron is kept
 when its midpoint lies in the solid (a joint's outer box less its chambers and valley
-gaps, or a rigid box).
-So every joint wall is n elements thick, element sizes scale exactly as 1/n, and the
-meshes of n = 1, 2, 3, ... are nested (the Richardson family of fem.mesh_study). A joint
-whose intervals are all shorter than S0 (the paper's: at most 5.8 mm, the chambers' z
-extent Z - t; 4.69 mm along x) and whose section the rigid parts share (their y, z
-breakpoints are the joint's) is meshed in the finger exactly as alone. The profile is polygonal, so straight-sided hexahedra represent the
-solid exactly (volumes and areas to round-off).
+gaps, or a rigid box). So every joint wall is n elements thick, element sizes scale
+exactly as 1/n, and the meshes of n = 1, 2, 3, ... (one S) are nested (the Richardson
+family of fem.mesh_study). A joint whose intervals are all shorter than S0 (the paper's:
+at most 5.8 mm, the chambers' z extent Z - t; 4.69 mm along x) and whose section the
+rigid parts share (their y, z breakpoints are the joint's) is meshed in the finger exactly
+as alone. The profile is polygonal, so straight-sided hexahedra represent the solid
+exactly (volumes and areas to round-off).
 
 The y breakpoints are symmetric (every box is centred on y = 0) and the grid is
 symmetrised, so the node set is exactly its own y-mirror, node by node, as the
