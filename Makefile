@@ -144,7 +144,7 @@ dataset: | $(SETUP) ## FEM datasets: results/data/train (2560, seed 1) + heldout
 NEW_MESH ?= --divisions 2 --hex-size 3 --formulation mixed
 NEW_TAG  ?= hex2s3
 NEW_DATA := results/data
-dataset-new: | $(SETUP) ## FEM datasets on the new discretisation (NEW_MESH): heldout_$(NEW_TAG) (256, seed 2) then train_$(NEW_TAG) (2560, seed 1); DATASET_HOURS per run; re-run resumes
+dataset-new: | $(SETUP) ## FEM datasets on the new discretisation (NEW_MESH, default hex2:3 mixed): results/data/heldout_hex2s3 (256, seed 2) then train_hex2s3 (2560, seed 1); DATASET_HOURS per run; re-run resumes
 	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(NEW_MESH) --out $(NEW_DATA)/heldout_$(NEW_TAG) --max-hours $(DATASET_HOURS)
 	$(CAMPAIGN) --samples 2560 --seed 1 $(NEW_MESH) --out $(NEW_DATA)/train_$(NEW_TAG) --max-hours $(DATASET_HOURS)
 	$(PY) -m workflow.dataset verify $(NEW_DATA)/heldout_$(NEW_TAG) --require-complete
