@@ -40,7 +40,7 @@ endif
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -304,6 +304,9 @@ FINGER_CASES := $(PY) -m fem.finger_cases --out $(FINGER_FEM)
 
 finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases at the production mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
+
+finger-grid: | $(SETUP) ## whole-finger FEM at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, hours; resumes) -> results/fem/finger_grid.json
+	nice $(PY) -m fem.finger_grid --out results/fem/finger_grid.json
 
 validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
 results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)

@@ -67,6 +67,14 @@ FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
     "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh?": str, "mesh.mesh_size?": NUM, "mesh.divisions?": int,
     "mesh.nodes": int})
 
+#: results/fem/finger_grid.json (make finger-grid; fem.finger_grid): the finger FEM over an
+#: N x N grid of gravity pressure pairs, each case's convergence, time and Newton figures.
+FINGER_GRID = Format("fem-finger-grid", 1, "fem.finger_grid", {
+    "settings.points": int, **each("", int, "pairs", "solved", "converged"), "complete": bool,
+    "max_wall_s": MAYBE, "mesh.nodes": int, "cases[].p1": NUM, "cases[].p2": NUM, "cases[].converged": bool,
+    "cases[].wall_s": NUM, **each("cases[]", int, "newton_iterations", "load_steps", "cutbacks"),
+    "cases[].reason": str})
+
 #: results/fem/joint_cases/<discretisation>_<load>.json (make mesh-study, make mesh-causes;
 #: fem.joint_cases): one joint solve of one load under one discretisation (mesh H:W,
 #: formulation, quadrature degree, penalty factor), kept so that the studies resume; a solve
