@@ -25,7 +25,8 @@ from fem.solver import JointSolver, Load  # noqa: E402
 from contract.spec import JOINT_LENGTH  # noqa: E402
 
 pytestmark = pytest.mark.fem
-COARSE = JointGeometry(mesh_size=4.0)
+#: a coarse tetrahedral joint, solved in P2 displacement (the defaults are the production hex2:3 mixed)
+COARSE = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)
 W, TIP = 0.5, 65.0          # N, mm: the rigid part's weight and length
 ONE_JOINT = f"""
 format = "softjoint-finger/1"
@@ -43,7 +44,7 @@ weight = {W}
 
 @pytest.fixture(scope="module")
 def finger():
-    return FingerSolver(FingerGeometry(parse_finger(ONE_JOINT), COARSE, 6.0), MPI.COMM_SELF)
+    return FingerSolver(FingerGeometry(parse_finger(ONE_JOINT), COARSE, 6.0), MPI.COMM_SELF, formulation="displacement")
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +71,7 @@ def test_finger_of_one_joint_is_the_joint_under_the_weight_of_its_tip(bent):
     of the joint differ (the finger's is graded into its rigid part), which at h = 4 mm
     moves the anchors by up to ~0.1 mm and the cap by ~0.1 deg."""
     plus, _ = bent
-    joint = JointSolver(COARSE, MPI.COMM_SELF)
+    joint = JointSolver(COARSE, MPI.COMM_SELF, formulation="displacement")
     M = 0.0
     for _ in range(4):              # fixed point on the couple of the tip weight
         res = joint.solve(Load(0.15, W, 0.0, M))
