@@ -35,7 +35,8 @@ with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista
 colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
 lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
 and the |u| colour range. Files are written atomically; a case whose JSON exists for
-the same finger file, mesh and formulation is skipped, so a killed run resumes (the
+the same finger (by its values: contract.finger.same_finger), mesh and formulation is
+skipped, so a killed run resumes (the
 settings record the formulation only when it is not "displacement", and the joints'
 digests, ``joints``, only when some joint is not the paper's, so the cases solved before
 the mixed formulation and joint files existed stand). A solve that does not
@@ -63,7 +64,7 @@ from fem.artefacts import FINGER_CASE
 from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
                         pressure_limits, rotation_matrix)
 from fem.solver import config_for
-from contract.finger import finger_arg, load_finger
+from contract.finger import finger_arg, load_finger, same_finger
 from contract.joint import is_paper_joint, joint_digest
 from fem.geometry import FingerGeometry, JointGeometry
 from fem.options import MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
@@ -102,6 +103,19 @@ def pressure_cases(text: str) -> list[tuple[str, float, float, bool]]:
     if twice:
         raise argparse.ArgumentTypeError(f"{text!r}: {', '.join(twice)} given twice")
     return cases
+
+
+def same_settings(recorded: dict | None, settings: dict, finger) -> bool:
+    """Whether a case's recorded ``settings`` are ``settings`` (JSON-safe) of ``finger``: the
+    same mesh, formulation and joints, and the same finger by its values
+    (contract.finger.same_finger), so a finger file whose comments changed, and with them
+    its sha256, keeps its solved cases."""
+    if not isinstance(recorded, dict) or not isinstance(recorded.get("geometry"), dict):
+        return False
+    strip = lambda d: {**{k: v for k, v in d.items() if k != "finger_sha256"},   # noqa: E731
+                       "geometry": {k: v for k, v in d["geometry"].items() if k != "finger"}}
+    return (strip(recorded) == strip(settings) and isinstance(recorded["geometry"].get("finger"), dict)
+            and same_finger(recorded["geometry"]["finger"], finger))
 
 
 def default_suffix(joint: JointGeometry, formulation: str) -> str:
@@ -217,7 +231,7 @@ def main(argv=None) -> int:
                 done = {}       # a foreign or damaged file: solve again and replace it
             # A converged case stands while the finger and mesh are the same; a failed one
             # is tried again once the solver's controls change.
-            if done.get("settings") == json_safe(settings) and (
+            if same_settings(done.get("settings"), json_safe(settings), finger) and (
                     done.get("converged") or done.get("solver") == solver_settings):
                 continue
         todo.append((name, p1, p2, gravity, path))

@@ -119,3 +119,31 @@ def test_finger_sensitivities_match_finite_differences(finger):
         scale = np.abs(S[:, :, j]).max()
         assert scale > 1.0                             # the tip moves by mm per MPa or per g
         np.testing.assert_allclose(S[:, :, j], fd, atol=1e-3 * scale)
+
+
+def test_committed_finger_cases_are_recognised_by_their_finger_values():
+    """fem.finger_cases skips a case solved for the same finger, mesh and formulation. The
+    committed cases (1.8 mm, displacement) were written when the paper's finger file had
+    other comments, so another sha256: they are still its cases (by values), while a finger
+    of another tip weight, or another joint mesh, is not."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from contract.finger import load_finger
+    from contract.files import json_safe
+    from fem.finger_cases import same_settings
+
+    case = json.loads((Path(__file__).resolve().parents[1] / "results/validation/finger_fem/"
+                       "gravity_0.2_0.2.json").read_text())
+    finger = load_finger()
+    assert case["settings"]["finger_sha256"] != finger.digest
+
+    def settings(f, joint=JointGeometry(mesh_size=1.8, divisions=0, hex_size=None)):
+        return json_safe({"finger_sha256": f.digest, "geometry": FingerGeometry(f, joint).as_dict()})
+
+    heavier = dataclasses.replace(finger, parts=finger.parts[:-1] + (
+        dataclasses.replace(finger.parts[-1], weight=finger.parts[-1].weight * 1.2),))
+    assert same_settings(case["settings"], settings(finger), finger)
+    assert not same_settings(case["settings"], settings(heavier), heavier)
+    assert not same_settings(case["settings"], settings(finger, COARSE), finger)
