@@ -439,6 +439,19 @@ class FingerSolver:
 
 
 # ---------------------------------------------------------------------- command line
+def add_finger_mesh(ap: cli.Parser) -> None:
+    """The finger's discretisation options, read by :func:`finger_discretisation`: the
+    joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'
+    element size and the formulation; each absent one is the first joint file's [mesh]."""
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
+                         "--divisions N their hexahedra are at most this / N long)")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+
+
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
     pressure = cli.number(unit="MPa")     # each joint's box is checked once the finger is read
@@ -451,13 +464,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: contract/fingers/paper.toml); its joint parts "
                          "name their joint files (default: the paper's joint)")
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
-                         "--divisions N their hexahedra are at most this / N long)")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+    add_finger_mesh(ap)
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")

@@ -61,13 +61,13 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
-from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
-                        pressure_limits, rotation_matrix)
+from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
+                        finger_joints, pressure_limits, rotation_matrix)
 from fem.solver import config_for
 from contract.finger import finger_arg, load_finger, same_finger
 from contract.joint import is_paper_joint, joint_digest
-from fem.geometry import FingerGeometry, JointGeometry
-from fem.options import MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
+from fem.geometry import JointGeometry
+from fem.options import one_rank
 
 #: (name, P1, P2, gravity)
 CASES = [
@@ -172,12 +172,7 @@ def main(argv=None) -> int:
     ap.add_output("--out", folder=True, default="results/validation/finger_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
     ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help="rigid-part element size, mm")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+    add_finger_mesh(ap)
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--pressures", type=pressure_cases, metavar="P1,P2;...",
                     help="solve these gravity pressure pairs (MPa, ';' between pairs) instead of the validation cases")

@@ -34,9 +34,10 @@ from contract import cli
 from contract.files import json_safe
 from contract.finger import finger_arg, load_finger
 from fem.artefacts import FINGER_GRID
-from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, pressure_limits
+from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
+                        pressure_limits)
 from fem.geometry import FingerGeometry
-from fem.options import MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
+from fem.options import one_rank
 from fem.solver import config_for
 
 
@@ -93,12 +94,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--points", type=cli.number(2, 21, integer=True), default=7,
                     help="grid points per pressure axis (default 7: 49 pairs)")
     ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help="rigid-part element size, mm")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+    add_finger_mesh(ap)
     cli.add_quiet(ap)
     return ap
 
