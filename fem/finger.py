@@ -78,7 +78,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from contract import cli
-from contract.finger import FingerSpec, finger_arg, load_finger
+from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
 from contract.joint import GEOMETRY_KEYS, JointSpec, MaterialLaw, joint_digest
 from fem.discretisation import FORMULATION
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
@@ -439,6 +439,19 @@ class FingerSolver:
 
 
 # ---------------------------------------------------------------------- command line
+def same_settings(recorded: dict | None, settings: dict, finger: FingerSpec) -> bool:
+    """Whether a case's recorded ``settings`` are ``settings`` (JSON-safe) of ``finger``: the
+    same mesh, formulation and joints, and the same finger by its values
+    (contract.finger.same_finger), so a finger file whose comments changed, and with them
+    its sha256, keeps its solved cases."""
+    if not isinstance(recorded, dict) or not isinstance(recorded.get("geometry"), dict):
+        return False
+    strip = lambda d: {**{k: v for k, v in d.items() if k != "finger_sha256"},   # noqa: E731
+                       "geometry": {k: v for k, v in d["geometry"].items() if k != "finger"}}
+    return (strip(recorded) == strip(settings) and isinstance(recorded["geometry"].get("finger"), dict)
+            and same_finger(recorded["geometry"]["finger"], finger))
+
+
 def add_finger_mesh(ap: cli.Parser) -> None:
     """The finger's discretisation options, read by :func:`finger_discretisation`: the
     joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'

@@ -62,9 +62,9 @@ from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
 from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
-                        finger_joints, pressure_limits, rotation_matrix)
+                        finger_joints, pressure_limits, rotation_matrix, same_settings)
 from fem.solver import config_for
-from contract.finger import finger_arg, load_finger, same_finger
+from contract.finger import finger_arg, load_finger
 from contract.joint import is_paper_joint, joint_digest
 from fem.geometry import JointGeometry
 from fem.options import one_rank
@@ -103,19 +103,6 @@ def pressure_cases(text: str) -> list[tuple[str, float, float, bool]]:
     if twice:
         raise argparse.ArgumentTypeError(f"{text!r}: {', '.join(twice)} given twice")
     return cases
-
-
-def same_settings(recorded: dict | None, settings: dict, finger) -> bool:
-    """Whether a case's recorded ``settings`` are ``settings`` (JSON-safe) of ``finger``: the
-    same mesh, formulation and joints, and the same finger by its values
-    (contract.finger.same_finger), so a finger file whose comments changed, and with them
-    its sha256, keeps its solved cases."""
-    if not isinstance(recorded, dict) or not isinstance(recorded.get("geometry"), dict):
-        return False
-    strip = lambda d: {**{k: v for k, v in d.items() if k != "finger_sha256"},   # noqa: E731
-                       "geometry": {k: v for k, v in d["geometry"].items() if k != "finger"}}
-    return (strip(recorded) == strip(settings) and isinstance(recorded["geometry"].get("finger"), dict)
-            and same_finger(recorded["geometry"]["finger"], finger))
 
 
 def default_suffix(joint: JointGeometry, formulation: str) -> str:

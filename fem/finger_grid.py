@@ -32,10 +32,10 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import json_safe
-from contract.finger import finger_arg, load_finger
+from contract.finger import FingerSpec, finger_arg, load_finger
 from fem.artefacts import FINGER_GRID
 from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
-                        pressure_limits)
+                        pressure_limits, same_settings)
 from fem.geometry import FingerGeometry
 from fem.options import one_rank
 from fem.solver import config_for
@@ -64,15 +64,16 @@ def case_record(p1: float, p2: float, result) -> dict:
             "reason": result.reason, "load_average": os.getloadavg()[0]}
 
 
-def kept_cases(path: Path, settings: dict, solver: dict) -> dict:
-    """{(p1, p2): case} of an earlier run of the same settings that stand (module docstring)."""
+def kept_cases(path: Path, settings: dict, solver: dict, finger: FingerSpec) -> dict:
+    """{(p1, p2): case} of an earlier run of the same settings (the same finger by its
+    values, fem.finger.same_settings) that stand (module docstring)."""
     if not path.is_file():
         return {}
     try:
         done = json.loads(path.read_text())
     except ValueError:
         return {}           # a damaged file: the grid starts afresh
-    if done.get("settings") != settings:
+    if not same_settings(done.get("settings"), settings, finger):
         return {}
     same_solver = done.get("solver") == solver
     return {(c["p1"], c["p2"]): c for c in done.get("cases", []) if c.get("converged") or same_solver}
@@ -115,7 +116,7 @@ def main(argv=None) -> int:
     solver = solver_settings(geometry)
     pairs = grid_pairs(pressure_limits(finger), args.points)
     out = Path(args.out)
-    kept = kept_cases(out, settings, solver)
+    kept = kept_cases(out, settings, solver, finger)
     todo = [p for p in pairs if p not in kept]
     doc = {"finger": finger.summary(), "settings": settings, "solver": solver, "cases": []}
     if not todo:

@@ -132,7 +132,7 @@ def test_committed_finger_cases_are_recognised_by_their_finger_values():
 
     from contract.finger import load_finger
     from contract.files import json_safe
-    from fem.finger_cases import same_settings
+    from fem.finger import same_settings
 
     case = json.loads((Path(__file__).resolve().parents[1] / "results/validation/finger_fem/"
                        "gravity_0.2_0.2.json").read_text())

@@ -9,15 +9,20 @@
 """
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from apps.report import build
+from contract.files import json_safe
+from contract.finger import load_finger
 from apps.report.finger_grid import finger_grid_section
 from fem.artefacts import FINGER_GRID
 from fem.finger_grid import case_record, grid_pairs, kept_cases, summary
+
+FINGER = load_finger()
 
 
 def test_grid_is_the_box_lattice():
@@ -38,7 +43,9 @@ def _result(converged: bool, wall: float):
 
 
 def _grid(tmp_path, cases, pairs=4, points=2):
-    doc = {"finger": {"name": "paper"}, "settings": {"points": points, "formulation": "displacement"},
+    settings = json_safe({"finger_sha256": FINGER.digest, "points": points, "formulation": "displacement",
+                          "geometry": {"finger": FINGER.summary(), "joint": {"mesh_size": 4.0}}})
+    doc = {"finger": {"name": "paper"}, "settings": settings,
            "solver": {"max_it": 25}, "mesh": {"nodes": 11159, "mesh": "4"}, "cases": cases,
            **summary(cases, pairs)}
     path = tmp_path / "fem" / "finger_grid.json"
@@ -51,9 +58,15 @@ def test_resume_keeps_converged_and_retries_failures_under_new_controls(tmp_path
     cases = [case_record(-0.3, -0.3, _result(True, 80.0)), case_record(0.3, -0.3, _result(False, 900.0))]
     path, doc = _grid(tmp_path, cases)
     assert cases[1]["tip"] is None and cases[0]["newton_iterations"] == 16
-    assert set(kept_cases(path, doc["settings"], doc["solver"])) == {(-0.3, -0.3), (0.3, -0.3)}
-    assert set(kept_cases(path, doc["settings"], {"max_it": 30})) == {(-0.3, -0.3)}
-    assert kept_cases(path, {**doc["settings"], "points": 7}, doc["solver"]) == {}
+    assert set(kept_cases(path, doc["settings"], doc["solver"], FINGER)) == {(-0.3, -0.3), (0.3, -0.3)}
+    assert set(kept_cases(path, doc["settings"], {"max_it": 30}, FINGER)) == {(-0.3, -0.3)}
+    assert kept_cases(path, {**doc["settings"], "points": 7}, doc["solver"], FINGER) == {}
+    # the same finger by its values (a file whose comments changed) keeps them; a heavier tip does not
+    recommented = {**doc["settings"], "finger_sha256": "0" * 64}
+    assert set(kept_cases(path, recommented, doc["solver"], FINGER)) == {(-0.3, -0.3), (0.3, -0.3)}
+    heavier = dataclasses.replace(FINGER, digest="1" * 64, parts=FINGER.parts[:-1] + (
+        dataclasses.replace(FINGER.parts[-1], weight=2 * FINGER.parts[-1].weight),))
+    assert kept_cases(path, doc["settings"], doc["solver"], heavier) == {}
 
 
 def test_report_draws_the_grid_and_judges_it_when_complete(tmp_path):
