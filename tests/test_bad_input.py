@@ -184,6 +184,13 @@ CASES_WORKFLOW = [
     ("apps.report", ["--out", "/etc/passwd/x.md"], "cannot create /etc/passwd/x.md"),
     ("apps.report", ["--out", "{tmp}/x.txt"], "expected a .md file"),
     ("apps.report", ["--results", "/nonexistent", "--out", "{tmp}/x.md"], "--results /nonexistent: not a folder"),
+    # apps.material_fit: the test file's columns and numbers, the law, the strain range
+    ("apps.material_fit", ["--csv", "/nonexistent.csv"], "/nonexistent.csv"),
+    ("apps.material_fit", ["--csv", "README.md"], "no header row with columns 'Engineering Strain'"),
+    ("apps.material_fit", ["--csv", "results/joints/soft4/dragon_skin_30.csv", "--law", "ogden"], "invalid choice: 'ogden'"),
+    ("apps.material_fit", ["--csv", "results/joints/soft4/dragon_skin_30.csv", "--max-strain", "0.05"],
+     "1 samples with 0 < strain < 0.05: yeoh needs at least 4"),
+    ("apps.material_fit", ["--csv", "results/joints/soft4/dragon_skin_30.csv", "--nu", "nan"], "--nu: 'nan' is not a finite number"),
     ("workflow.bench_campaign", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("workflow.bench_campaign", ["--fresh", "nan", "--out", "{tmp}/x.json"], "--fresh: 'nan' is not an integer"),
     ("workflow.bench_campaign", ["--unit-size", "1", "--out", "{tmp}/x.json"], "--unit-size: 1 is outside [2, inf]"),
