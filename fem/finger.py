@@ -17,13 +17,18 @@ and default mesh ([mesh]: sizes and formulation, of the first joint, unless give
 P2 elements and the valley self-contact of fem.contact. ``--divisions`` N (or a first
 joint file whose [mesh] gives divisions) meshes the whole finger with swept Q2 hexahedra
 instead (fem.mesh_hex: N elements through every joint wall, the same grid as the joint
-alone), integrated with the hexahedra's quadrature (fem.solver.config_for). The record's
-``mesh.mesh`` names the joints' mesh in words (``1.8``, ``1.697:0.849``, ``hex2``;
-contract.joint.mesh_text). fem.geometry.build_finger (and fem.mesh_hex) mesh one joint
-shape, so the joints of one finger may differ in law, box and anchors but must share their
-shape (a finger whose joints differ in shape is refused with one line). Every
-rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35), bonded to its
-neighbours (one conforming mesh). The base face x = 0 is clamped.
+alone when the joints share their section), integrated with the hexahedra's quadrature
+(fem.solver.config_for). The record's ``mesh.mesh`` names the joints' mesh in words (``1.8``, ``1.697:0.849``, ``hex2``;
+contract.joint.mesh_text). Each joint is meshed in its own shape (its joint description's
+[geometry]: length, cells, walls, section; fem.geometry.FingerGeometry.joint_at) with the
+finger's one set of mesh settings, so the joints of one finger may differ in shape, law,
+box and anchor count (results/joints/soft4/finger_mixed.toml: the paper's joint at the
+base, soft4 at the tip); on hexahedra the finger's one swept (y, z) grid holds every
+joint's section lines (fem.mesh_hex). Every rigid part is a neo-Hookean PLA-like solid
+(E = 3.5 GPa, nu = 0.35), bonded to its neighbours' end faces (one conforming mesh). The
+base face x = 0 is clamped. Each joint's probes (proximal centre and anchors), valley
+contact pairs (fem.contact, on its own cells) and contact penalty
+(fem.problem.contact_penalty_for of its law) are its own.
 
 Formulation (the joint's discretisation, fem.discretisation; default the first joint's
 [mesh] formulation, for the paper's joint the production FORMULATION): "displacement", P2
@@ -51,7 +56,8 @@ fem.problem that the joint uses) and handed to the joint's load-path solver
 
 Outputs, in the predictor's global frame (docs/gripper.md; the right finger, base mount at
 (base_gap/2, 0), finger frame rotated by base_angle): x_global = B + Rot(base_angle)·(x + u)
-for the centre line points (z = 0, y = 0). Per joint: its 10 anchors, proximal centre,
+for the centre line points (z = 0, y = 0). Per joint: its n_j anchors (its joint
+description's count: 10 for the paper's, 8 for soft4), proximal centre,
 proximal orientation theta (the rotation of the part it is bonded to), its distal cap's
 orientation (``end_angle``, the direction the next part leaves along) and its chord angle
 from the last two anchors (the paper's tangent connection), plus the joint-frame anchors,
@@ -79,9 +85,9 @@ from petsc4py import PETSc
 
 from contract import cli
 from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
-from contract.joint import GEOMETRY_KEYS, JointSpec, MaterialLaw, joint_digest
+from contract.joint import JointSpec, MaterialLaw, joint_digest
 from fem.discretisation import FORMULATION
-from fem.geometry import FingerGeometry, JointGeometry, finger_tags
+from fem.geometry import FingerGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
 from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
@@ -103,21 +109,6 @@ def finger_joints(finger: FingerSpec) -> list[JointSpec]:
     """The joint description of every joint part, base to tip (contract.finger: a part's
     own joint file, or the paper's joint)."""
     return [finger.parts[k].spec for k in finger.joints]
-
-
-def shape_mismatch(finger: FingerSpec, joint: JointGeometry) -> str | None:
-    """Why the finger's joints cannot all be meshed as ``joint`` (their shapes and anchor
-    counts must be one, fem.geometry.build_finger meshes one joint shape), or None."""
-    shape = {k: getattr(joint, k) for k in GEOMETRY_KEYS}
-    joints = finger_joints(finger)
-    for j, spec in enumerate(joints):
-        own = {k: getattr(spec.shape, k) for k in GEOMETRY_KEYS}
-        if own != shape or spec.anchors != joints[0].anchors:
-            key = next((k for k in GEOMETRY_KEYS if own[k] != shape[k]), "anchors.count")
-            return (f"finger {finger.name!r}: joint {j + 1} ({spec.name!r}) differs in {key} from the finger "
-                    f"mesh's joint shape: fem.geometry.build_finger meshes one joint shape, so the joints of "
-                    f"a finger may differ in material and box, not in shape or anchors")
-    return None
 
 
 def joint_laws(finger: FingerSpec, material: MaterialLaw | Material | None = None) -> dict:
@@ -160,12 +151,12 @@ class FingerResult:
     converged: bool
     tip: np.ndarray                 # (2,)
     tip_angle: float
-    anchors: np.ndarray             # (n_joints, 10, 2) global
+    anchors: np.ndarray | tuple     # (n_joints, n, 2) global; per joint (n_j, 2): per_joint
     proximal: np.ndarray            # (n_joints, 2) global proximal centres
     theta: np.ndarray               # (n_joints,) proximal orientation
     end_angle: np.ndarray           # (n_joints,) orientation of the distal cap
-    chord_angle: np.ndarray         # (n_joints,) atan2 of r_10 - r_9
-    local_anchors: np.ndarray       # (n_joints, 10, 2) in each joint's frame
+    chord_angle: np.ndarray         # (n_joints,) atan2 of r_n - r_(n-1)
+    local_anchors: np.ndarray | tuple   # as anchors, in each joint's frame
     newton_iterations: list[int] = field(default_factory=list)
     load_steps: int = 0
     cutbacks: int = 0
@@ -276,13 +267,10 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData,
     body force. Load vector a = (P_1 .. P_n, g) in MPa and [0, 1]; probes: each joint's
     proximal centre and anchors, then the fingertip; averages ``rotation{k}`` (rad): part
     k's rigid body (a rigid part, or a joint's cap). ``formulation``: "displacement" or
-    "mixed" (module docstring). ValueError for joints of another shape than the mesh's
-    (shape_mismatch). Collective."""
+    "mixed" (module docstring). Every per-joint quantity (probes, valley contact pairs and
+    their penalty) is that joint's own (FingerGeometry.joint_at, its law). Collective."""
     if formulation not in FORMULATIONS:
         raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
-    why = shape_mismatch(geometry.finger, geometry.joint)
-    if why:
-        raise ValueError(why)
     build = mixed_unknown if formulation == "mixed" else displacement_unknown
     unknown = build(mesh_data, rigid, degree, quadrature_degree)
     finger, comm = geometry.finger, mesh_data.mesh.comm
@@ -311,9 +299,8 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData,
     loads = pressures
     if weights:
         loads += (LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), sum(weights[1:], weights[0]), n),)
-    contact = valley_contact(unknown.U, ft, present, geometry.joint,
+    contact = joints_contact(unknown.U, ft, present, geometry,
                              tuple(contact_penalty_for(contact_penalty, laws[k]) for k in finger.joints),
-                             offsets=tuple(finger.rest_start(k) for k in finger.joints),
                              parent=unknown.parent)
     return Problem(mesh_data, unknown.w, internal, loads, np.append(pressure_limits(finger), 1.0),
                    unknown.bcs, finger_probes(geometry), contact, averages=averages,
@@ -333,14 +320,73 @@ def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
 
 
 def finger_probes(geometry: FingerGeometry) -> np.ndarray:
-    """Every joint's proximal centre and its anchors (the joints' count, 10 for the
-    paper's), then the fingertip: (n, 3) mm."""
-    finger, L = geometry.finger, geometry.joint.length
-    n = finger_joints(finger)[0].anchors
-    points = [[finger.rest_start(k) + i * L / n, 0.0, 0.0]
-              for k in finger.joints for i in range(n + 1)]
+    """Every joint's proximal centre and its own anchors (n_j of them at i L_j / n_j, its
+    joint description's count and length: 10 at 4.545 mm for the paper's), then the
+    fingertip: (sum_j (n_j + 1) + 1, 3) mm, finger frame."""
+    finger = geometry.finger
+    points = [[finger.rest_start(k) + i * geometry.joint_at(k).length / n, 0.0, 0.0]
+              for k, n in zip(finger.joints, anchor_counts(finger)) for i in range(n + 1)]
     points.append([finger.length, 0.0, 0.0])
     return np.array(points)
+
+
+def anchor_counts(finger: FingerSpec) -> list[int]:
+    """Every joint's anchor count n_j (its joint description's), base to tip."""
+    return [spec.anchors for spec in finger_joints(finger)]
+
+
+def per_joint(arrays: list[np.ndarray]):
+    """Per-joint arrays as one (n_joints, ...) array when their shapes agree (joints of
+    one anchor count, every finger before joint files could differ), else a tuple."""
+    return np.stack(arrays) if len({a.shape for a in arrays}) == 1 else tuple(arrays)
+
+
+class JointsContact:
+    """The valley self-contact of a finger whose joints differ in shape: one
+    fem.contact.ValleyContact per joint (its own cells, valley size and penalty), seen as
+    one (the interface fem.load_path uses). ``first[i]``: the number of valleys before
+    part i's joint, so that valleys are numbered along x across the joints, as one
+    ValleyContact numbers them."""
+
+    def __init__(self, parts: list, first: list[int]):
+        self.parts, self.first = parts, first
+        self.comm = parts[0].comm
+
+    def coupled_dofs(self) -> np.ndarray:
+        return np.vstack([part.coupled_dofs() for part in self.parts])
+
+    def gaps(self, u: fem.Function) -> dict:
+        """Signed gap g (mm) of every pair, per (valley, side), valleys along x."""
+        return {(first + k, side): g for part, first in zip(self.parts, self.first)
+                for (k, side), g in part.gaps(u).items()}
+
+    def add_residual(self, b, u: fem.Function) -> None:
+        for part in self.parts:
+            part.add_residual(b, u)
+
+    def add_tangent(self, A, u: fem.Function) -> None:
+        for part in self.parts:
+            part.add_tangent(A, u)
+
+
+def joints_contact(V, facet_tags, present: set, geometry: FingerGeometry, penalties: tuple[float, ...],
+                   parent=None):
+    """The finger's valley contact (fem.problem.valley_contact; ``penalties`` MPa/mm, one
+    per joint): one ValleyContact over every joint when they share one shape, else a
+    :class:`JointsContact` of one per joint of its own geometry; None without valleys or
+    with every penalty 0."""
+    finger = geometry.finger
+    offsets = tuple(finger.rest_start(k) for k in finger.joints)
+    if geometry.same_shape:
+        return valley_contact(V, facet_tags, present, geometry.joint, penalties, offsets=offsets, parent=parent)
+    parts, first, valleys = [], [], 0
+    for jg, kappa, x0 in zip(geometry.joints, penalties, offsets):
+        part = valley_contact(V, facet_tags, present, jg, kappa, offsets=(x0,), parent=parent)
+        if part is not None:
+            parts.append(part)
+            first.append(valleys)
+        valleys += jg.n_cells - 1
+    return JointsContact(parts, first) if parts else None
 
 
 class FingerSolver:
@@ -416,23 +462,24 @@ class FingerSolver:
         base, turn = np.array([0.5 * finger.base_gap, 0.0]), rotation_matrix(finger.base_angle)
         x = (self.probe_points + self.solver.probe_displacements())[:, :2]
         x = base + x @ turn.T
-        n = finger_joints(finger)[0].anchors + 1
-        polylines = x[:-1].reshape(-1, n, 2)
+        # each joint's polyline: its proximal centre, then its own anchors
+        polylines = np.split(x[:-1], np.cumsum([n + 1 for n in anchor_counts(finger)])[:-1])
         rot = {k: self.rotation(k) for k in range(len(finger.parts))}
         theta, end = [], []
         for k in finger.joints:
             theta.append(finger.base_angle + (rot[k - 1] if k > 0 else 0.0))
             end.append(finger.base_angle + rot[k])
         theta, end = np.array(theta), np.array(end)
-        d = polylines[:, -1] - polylines[:, -2]
+        d = np.array([line[-1] - line[-2] for line in polylines])
         chord = np.arctan2(d[:, 1], d[:, 0])
         # joint frame: x_local = Rot(-theta)·(x - proximal centre)
-        local = np.stack([(polylines[j, 1:] - polylines[j, 0]) @ rotation_matrix(theta[j]) for j in range(len(theta))])
+        local = [(line[1:] - line[0]) @ rotation_matrix(t) for line, t in zip(polylines, theta)]
         last = len(finger.parts) - 1
         return FingerResult(
             load=load, converged=path.converged, tip=x[-1], tip_angle=finger.base_angle + rot[last],
-            anchors=polylines[:, 1:], proximal=polylines[:, 0], theta=theta, end_angle=end,
-            chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi, local_anchors=local,
+            anchors=per_joint([line[1:] for line in polylines]), proximal=np.array([line[0] for line in polylines]),
+            theta=theta, end_angle=end, chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi,
+            local_anchors=per_joint(local),
             newton_iterations=path.newton_iterations, load_steps=path.load_steps,
             cutbacks=path.cutbacks, factorisations=factorisations, wall_time=wall, cpu_time=cpu,
             reason=path.reason)
@@ -511,17 +558,14 @@ def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
                           finger: FingerSpec) -> tuple[FingerGeometry, str]:
     """(FingerGeometry, formulation) of the options on the finger's joints: the first
     joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size,
-    --divisions (a parser without it: none) or --formulation are given; --divisions with a
-    tetrahedron size, or joints of several shapes, are usage errors (shape_mismatch)."""
+    --divisions (a parser without it: none) or --formulation are given, every other joint
+    of its own shape with the same mesh settings (FingerGeometry); --divisions with a
+    tetrahedron size is a usage error."""
     first = finger_joints(finger)[0]
     try:
-        joint = joint_geometry(args, first)
+        geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
     except ValueError as exc:
         ap.error(exc)
-    geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
-    why = shape_mismatch(finger, geometry.joint)
-    if why:
-        ap.error(why)
     return geometry, args.formulation or first.formulation
 
 
