@@ -72,6 +72,7 @@ ARTEFACTS = (
     Artefact("bench/calibrate.json", "make bench-calibrate", predictor.CALIBRATION_BENCH),
     Artefact("validation/finger.json", "make validate-finger", predictor.VALIDATION),
     Artefact("validation/finger_fem/*.json", "make finger-fem", fem.FINGER_CASE),
+    Artefact("fem/finger_grid.json", "make finger-grid", fem.FINGER_GRID),
     Artefact("demo/finger.json", "make demo", predictor.VALIDATION),
     Artefact("demo/finger_fem/*.json", "make demo", fem.FINGER_CASE),
     Artefact("demo/summary.json", "make demo", demo.SUMMARY),

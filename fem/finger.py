@@ -79,7 +79,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from contract import cli
-from contract.finger import FingerSpec, finger_arg, load_finger
+from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
 from contract.grasp import APPROACH_P1, FRICTION, OBJECT_WEIGHT, ObjectSpec, approach_for, parse_object
 from contract.joint import GEOMETRY_KEYS, JointSpec, MaterialLaw, joint_digest
 from fem.discretisation import FORMULATION
@@ -458,6 +458,32 @@ class FingerSolver:
 
 
 # ---------------------------------------------------------------------- command line
+def same_settings(recorded: dict | None, settings: dict, finger: FingerSpec) -> bool:
+    """Whether a case's recorded ``settings`` are ``settings`` (JSON-safe) of ``finger``: the
+    same mesh, formulation and joints, and the same finger by its values
+    (contract.finger.same_finger), so a finger file whose comments changed, and with them
+    its sha256, keeps its solved cases."""
+    if not isinstance(recorded, dict) or not isinstance(recorded.get("geometry"), dict):
+        return False
+    strip = lambda d: {**{k: v for k, v in d.items() if k != "finger_sha256"},   # noqa: E731
+                       "geometry": {k: v for k, v in d["geometry"].items() if k != "finger"}}
+    return (strip(recorded) == strip(settings) and isinstance(recorded["geometry"].get("finger"), dict)
+            and same_finger(recorded["geometry"]["finger"], finger))
+
+
+def add_finger_mesh(ap: cli.Parser) -> None:
+    """The finger's discretisation options, read by :func:`finger_discretisation`: the
+    joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'
+    element size and the formulation; each absent one is the first joint file's [mesh]."""
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
+                         "--divisions N their hexahedra are at most this / N long)")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+
+
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
     pressure = cli.number(unit="MPa")     # each joint's box is checked once the finger is read
@@ -470,13 +496,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: contract/fingers/paper.toml); its joint parts "
                          "name their joint files (default: the paper's joint)")
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
-                         "--divisions N their hexahedra are at most this / N long)")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+    add_finger_mesh(ap)
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
     add_grasp_arguments(ap)
     cli.add_quiet(ap)

@@ -56,17 +56,26 @@ _EPS = 1e-6
 _GMSH_READY = False
 
 
+#: The paper-fidelity tetrahedron size (mm): fem.discretisation.PAPER's (1.8 mm P2
+#: displacement, the discretisation of the committed datasets, surrogate and finger cases)
+#: and JointGeometry's tetrahedral size; named here so that code without dolfinx can use it.
+PAPER_MESH_SIZE = 1.8
+
+
 @dataclass(frozen=True)
 class JointGeometry:
     """Dimensions of the bellow joint half-model (mm). Defaults: docs/physics.md.
 
-    ``mesh_size`` is the target tetrahedron edge length; ``wall_mesh_size`` (default:
-    ``mesh_size``) is used on the chamber walls. ``divisions`` n >= 1 meshes the joint with
-    hexahedra instead (fem.mesh_hex: every interval between the profile's breakpoints cut
-    into n, so n elements through every wall; the two sizes are then unused); 0: tetrahedra.
-    ``hex_size`` S (mm, hexahedra only) grades them: an interval of length d is cut into
-    n ceil(d / S) elements (None: n), so walls keep n elements through their thickness and
-    long spans get elements of at most S / n.
+    The default mesh is the production one (fem.discretisation.PRODUCTION, "hex2:3"):
+    ``divisions`` n >= 1 meshes the joint with swept Q2 hexahedra (fem.mesh_hex: every
+    interval between the profile's breakpoints cut into n, so n elements through every
+    wall), and ``hex_size`` S (mm, hexahedra only) grades them: an interval of length d is
+    cut into n ceil(d / S) elements (None: n), so walls keep n elements through their
+    thickness and long spans get elements of at most S / n. ``divisions=0, hex_size=None``
+    meshes tetrahedra instead: ``mesh_size`` is their target edge length (default the
+    paper-fidelity PAPER_MESH_SIZE) and ``wall_mesh_size`` (default: ``mesh_size``) the one
+    on the chamber walls; on hexahedra the two sizes are unused (but recorded by as_dict,
+    as every manifest since hexahedra records them).
     """
 
     length: float = JOINT_LENGTH
@@ -78,10 +87,10 @@ class JointGeometry:
     cap: float = 3.0
     valley_height: float = 8.8     # outer height in a valley (y in [-4.4, 4.4])
     valley_width: float = 2.5      # outer gap between two neighbouring cells along x
-    mesh_size: float = 1.8         # production mesh: 17,359 P2 nodes (make mesh-study)
+    mesh_size: float = PAPER_MESH_SIZE   # tetrahedra only: 17,359 P2 nodes at 1.8 mm
     wall_mesh_size: float | None = None
-    divisions: int = 0
-    hex_size: float | None = None  # mm, hexahedra only
+    divisions: int = 2                   # production: hex2:3, 42,105 Q2 nodes (make mesh-study)
+    hex_size: float | None = 3.0         # mm, hexahedra only
 
     def __post_init__(self):
         if not (isinstance(self.divisions, int) and 0 <= self.divisions <= MAX_DIVISIONS):
@@ -112,13 +121,19 @@ class JointGeometry:
 
     def as_dict(self) -> dict:
         """The fields; ``divisions`` only for a hexahedral mesh and ``hex_size`` only when
-        set, so records written before them read as what they are."""
+        set, so records written before them read as what they are (from_record)."""
         out = asdict(self)
         if not self.divisions:
             del out["divisions"]
         if self.hex_size is None:
             del out["hex_size"]
         return out
+
+    @classmethod
+    def from_record(cls, record: dict) -> JointGeometry:
+        """The geometry an as_dict record describes: an absent ``divisions`` is tetrahedra
+        (0) and an absent ``hex_size`` ungraded (None), not the production defaults."""
+        return cls(**{"divisions": 0, "hex_size": None, **record})
 
 
 @dataclass(frozen=True)

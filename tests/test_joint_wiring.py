@@ -51,8 +51,12 @@ LAWS = {
 
 def joint_text(law: str = "neo-hookean", name: str = "paper", **replace) -> str:
     """The paper's joint file with another law, name and ``key = value`` lines replaced
-    (keys of any table, e.g. size="4.0", pressure_mpa="0.05", count="8")."""
+    (keys of any table, e.g. pressure_mpa="0.05", count="8"; size="4.0" meshes tetrahedra
+    of that size instead of the file's hexahedra)."""
     text = re.sub(r'law = "neo-hookean"\nE = 12.2[^\n]*', LAWS[law], PAPER_TEXT)
+    if "size" in replace:
+        text, n = re.subn(r"^divisions = [^\n]*\nhex_size = [^\n]*$", "size = 0", text, flags=re.M)
+        assert n == 1
     text = text.replace('name = "paper"', f'name = "{name}"')
     for key, value in replace.items():
         text, n = re.subn(rf"^{key} = [^\n]*$", f"{key} = {value}", text, flags=re.M)
@@ -114,7 +118,7 @@ def test_paper_joint_file_reproduces_todays_solve(formulation):
     signature) as today's (E, nu) forms, and the same anchors and cap rotation to 1e-12
     mm / rad at a load that bends the joint by ~17 deg."""
     joint = load_joint()
-    geometry = JointGeometry(**{**joint.geometry_kwargs(), "mesh_size": COARSE})
+    geometry = JointGeometry(**{**joint.geometry_kwargs(), "mesh_size": COARSE, "divisions": 0, "hex_size": None})
     solver = JointSolver.for_joint(joint, MPI.COMM_SELF, geometry, formulation=formulation)
     today = todays_internal(solver.problem)
     assert solver.problem.internal.signature() == today.signature()
@@ -185,7 +189,8 @@ def _config(joint=None, **kw):
     from fem.options import joint_geometry
     from types import SimpleNamespace
 
-    geometry = joint_geometry(SimpleNamespace(mesh_size=None, wall_mesh_size=None), joint or load_joint())
+    # the committed sets' paper-fidelity mesh, as `make dataset` passes it (--mesh-size 1.8)
+    geometry = joint_geometry(SimpleNamespace(mesh_size=1.8, wall_mesh_size=None), joint or load_joint())
     return campaign_config(geometry, kw.get("unit_size", 16), 0.1, 8, "displacement", joint)
 
 
@@ -253,7 +258,8 @@ def test_dataset_holds_the_joints_anchor_count(tmp_path):
     data = {}
     for name, joint in (("eight", ["--joint", str(tmp_path / "eight.toml")]), ("paper", [])):
         run = subprocess.run([sys.executable, "-m", "workflow.campaign", "--samples", "2", "--seed", "5",
-                              "--unit-size", "2", "--mesh-size", "6", "--fresh-check-every", "0", "--quiet",
+                              "--unit-size", "2", "--mesh-size", "6", "--formulation", "displacement",
+                              "--fresh-check-every", "0", "--quiet",
                               "--out", str(tmp_path / name), *joint], cwd=ROOT, env=env, capture_output=True,
                              text=True, timeout=300)
         assert run.returncode == 0, run.stderr[-2000:]

@@ -19,20 +19,44 @@ def _variant_label(e: dict) -> str:
         return f"surrogate chain (tau = 0), {e['kinematics']} kinematics"
     return f"{e['kinematics']} kinematics, {e['joint_weight']} joint weights"
 
+def _words(mesh: str, formulation: str) -> str:
+    """A discretisation in the report's words: "1.8 mm displacement", "hex2:3 mixed"."""
+    return f"{mesh}{'' if mesh.startswith('hex') else ' mm'} {formulation}"
+
+
+def _options(mesh: str, formulation: str) -> str:
+    """The fem.finger_cases options of a mesh text ("H", "H:W", "hexN", "hexN:S") and formulation."""
+    a, _, b = mesh[3:].partition(":") if mesh.startswith("hex") else mesh.partition(":")
+    names = ("--divisions", "--hex-size") if mesh.startswith("hex") else ("--mesh-size", "--wall-mesh-size")
+    return " ".join([f"{names[0]} {a}"] + ([f"{names[1]} {b}"] if b else []) + [f"--formulation {formulation}"])
+
+
+def _recorded(mesh: dict, formulation: str) -> str:
+    """A recorded mesh (``mesh``, or a tetrahedral ``mesh_size``) in words, "" if it has neither."""
+    text = mesh.get("mesh") or (mesh_label(mesh["mesh_size"], None) if mesh.get("mesh_size") else None)
+    return _words(text, formulation) if text else ""
+
+
+def _validated(v: dict) -> str:
+    """The discretisation finger.json validates on, in words: its record, or (written before
+    it recorded one) its first case's mesh in displacement ("" if it records no mesh)."""
+    d = v.get("discretisation")
+    return _words(d["mesh"], d["formulation"]) if d else _recorded(v["fem"][0]["mesh"], "displacement")
+
+
 def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
     """The fingertip error budget: discretisation (the finger FEM on a finer mesh, and
     the joint mesh study), surrogate (held-out set) and finger model (the validation)."""
     out = ["", "Fingertip error budget (how far each stage can move the fingertip):", "",
            "| term | figure | source |", "|---|---|---|"]
     for m in v.get("mesh_check", []):
-        wall = m.get("wall_mesh_size")
-        other = m.get("mesh") or mesh_label(m["mesh_size"], wall)
-        option = (f"--divisions {other[3:]}" if other.startswith("hex") else
-                  f"--mesh-size {m['mesh_size']}" + (f" --wall-mesh-size {wall}" if wall else ""))
-        out.append(f"| discretisation: finger FEM, joint mesh {m.get('production_mesh', m['production_mesh_size'])} -> "
-                   f"{other}{'' if other.startswith('hex') else ' mm'} ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
+        other = m.get("mesh") or mesh_label(m["mesh_size"], m.get("wall_mesh_size"))
+        base = m.get("production_mesh") or mesh_label(m["production_mesh_size"], None)
+        formulation = m.get("formulation", "displacement")
+        out.append(f"| discretisation: finger FEM, joint mesh {_words(base, m.get('production_formulation', 'displacement'))}"
+                   f" -> {_words(other, formulation)} ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
                    f"{m['case']} | {m['tip_change_mm']:.2f} mm, {m['tip_angle_change_deg']:+.2f}° | "
-                   f"`python -m fem.finger_cases {option}` |")
+                   f"`python -m fem.finger_cases {_options(other, formulation)}` |")
     study = load(root, "fem/mesh_study.json")
     if study:
         label = {m["key"]: f"mesh {m['mesh']} {m['formulation']}" for m in study["meshes"]}
@@ -137,7 +161,11 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
     return out
 
 
-def _finger_fem_time(root: Path, validation_max: float, target_s: float) -> list[tuple]:
+def _joint_mesh(words: str) -> str:
+    return f", joint mesh {words}" if words else ""
+
+
+def _finger_fem_time(root: Path, validation_max: float, target_s: float, validated: str) -> list[tuple]:
     """The finger FEM's time per gesture: judged on `make bench-finger` (one rank, the
     cases it names, with the load average it recorded), the validation run's slowest case
     shown beside it (that run shares the machine with other jobs); judged on the
@@ -145,12 +173,13 @@ def _finger_fem_time(root: Path, validation_max: float, target_s: float) -> list
     b = load(root, "bench/finger.json")
     where = "(max over the validation's cases; timed while the machine ran other jobs)"
     if not b:
-        return [(f"finger FEM per gesture, production mesh, one core {where}", f"{validation_max:.0f} s",
+        return [(f"finger FEM per gesture{_joint_mesh(validated)}, one core {where}", f"{validation_max:.0f} s",
                  Target("<=", target_s, "s"), validation_max, PAPER["finger_fem"])]
     shown = (f"finger FEM per gesture in the validation run {where}", f"{validation_max:.0f} s")
     cases = ", ".join(c["case"] for c in b["cases"])
     peak = max(c["load_average_before"] for c in b["cases"])
-    return [(f"finger FEM per gesture, production mesh, one core (`make bench-finger`, max over {cases}; "
+    timed = _recorded(b, b.get("formulation", "displacement"))   # a bench without one ran displacement
+    return [(f"finger FEM per gesture{_joint_mesh(timed)}, one core (`make bench-finger`, max over {cases}; "
              f"load average up to {peak:.1f} at the start of a case)",
              f"{b['finger_fem_max_s']:.0f} s (median {b['finger_fem_median_s']:.0f} s)",
              Target("<=", b["target_s"], "s"), b["finger_fem_max_s"], PAPER["finger_fem"]),
@@ -182,7 +211,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
     name = f"{label.get(judged, judged)} (`{judged}`)"
     out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validate_finger`): the "
             f"finger FEM (`python -m fem.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
-            f"joint mesh {mesh['mesh_size']} mm, one rank) against the predictor on the same finger file and the "
+            f"joint mesh {_validated(v) or 'unrecorded'}, one rank) against the predictor on the same finger file and the "
             f"joint model {joint_model(root, v['joint'], 'make validate-finger')}; every predictor figure is a "
             f"single-query Newton solve (median of {v['repeats']}), timed in this validation run. Angle errors are "
             f"predictor minus FEM. The variant finger.json judges is **{name}**; the others are shown beside it"
@@ -218,7 +247,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
             (f"speed-up of {judged} over the finger FEM (min; both timed in finger.json)",
              f"{j['speedup_min']:,.0f}x", Target(">=", t["speedup"], "x"), j["speedup_min"],
              PAPER["predictor_speedup"]),
-            *_finger_fem_time(root, fem_max, t["fem_s"]),
+            *_finger_fem_time(root, fem_max, t["fem_s"], _validated(v)),
             (f"validation cases the FEM solved ({n_free} free, {len(solved) - n_free} with gravity)",
              f"{len(solved)} of {len(fem)} run", Target(">=", t["fem_cases"], "cases"), len(solved), "")]
     out += ["", "| figure | measured | paper | target | met |", "|---|---|---|---|---|"]
