@@ -21,16 +21,19 @@ residual term and its consistent tangent are
     R_o = -∫ f·v dA = -∫ N n·v dA + lambda_c G·v,     G = ∫ N t·v dA
     dR_o = dR_o|lambda fixed + G ⊗ dlambda,           dlambda = (d num - lambda d den) / den
 
-dR_o|lambda fixed is UFL's derivative of the facet form; the second term couples every
-candidate dof to every other (lambda is one number for the whole contact), and is zero
-where the friction is clipped (slip) or nothing touches. It is inserted as one dense block
-over the candidate (x, y) dofs on every tangent (zeros where inactive), so the tangent's
-sparsity pattern is fixed by the first assembly; ``coupled_dofs`` hands the block to the
-solver's pattern (fem.load_path). The block grows as the square of the candidate nodes.
+dR_o|lambda fixed is UFL's derivative of the facet form, assembled into the tangent's matrix
+(its entries couple dofs of one cell, already in the pattern). The second term couples
+every candidate dof to every other (lambda is one number for the whole contact): assembled
+it would be a dense block over the m candidate (x, y) dofs (m² entries, ~4,000² on the
+coarse mesh, which the LU then fills around). It stays out of the matrix: ``low_rank``
+hands the pair (G, dlambda) to the solver (fem.load_path), whose Krylov operator is the
+matrix plus G dlambdaᵀ while the LU preconditioner factorises the matrix alone, so Newton
+keeps the exact tangent. It is zero where the friction is clipped (slip) or nothing touches.
 
 ``ContactTerms`` sums several contact terms (the joints' valley contact, fem.contact, and
 this one) behind the one interface the solver calls (add_residual, add_tangent,
-coupled_dofs); a problem with one term keeps that term itself, so its answers are unchanged.
+coupled_dofs, low_rank); a problem with one term keeps that term itself, so its answers are
+unchanged.
 """
 from __future__ import annotations
 
@@ -73,6 +76,10 @@ class ContactTerms:
     def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
         for t in self.terms:
             t.add_tangent(A, u)
+
+    def low_rank(self, u: fem.Function) -> list:
+        """Every term's low-rank tangent pairs (a, b), dR += a bᵀ (a term without them: none)."""
+        return [pair for t in self.terms if hasattr(t, "low_rank") for pair in t.low_rank(u)]
 
 
 def smooth_penetration(pen, delta: float):
@@ -159,7 +166,7 @@ class ObjectContact:
     finger description and its joints' full width; obstacle: the object. stiffness k_c
     (N/mm²), smoothing delta (mm), mu, weight W (N): contract.grasp's law. ``active``
     False makes the term add nothing (the approach gesture before the object is brought
-    in) while keeping its block in the tangent's pattern. Collective."""
+    in). Collective."""
 
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float, obstacle: ObjectSpec,
                  excluded_tags: list[int], *, stiffness: float = CONTACT_STIFFNESS,
@@ -205,23 +212,20 @@ class ObjectContact:
 
     # ------------------------------------------------------------------ dofs
     def _dofs(self, facets: np.ndarray) -> None:
-        """The candidate (x, y) dofs: owned local indices and their global ones (all ranks'
-        gathered into self.gdofs), and the candidate nodes' reference points."""
+        """The candidate (x, y) dofs this rank owns (``candidate_dofs``, local indices of the
+        unknown) and the candidate nodes' x and y dofs (``nodes``)."""
         fdim = self.w.function_space.mesh.topology.dim - 1
         W = self.w.function_space
-        imap, bs = W.dofmap.index_map, W.dofmap.index_map_bs
-        local = np.concatenate([fem.locate_dofs_topological(self.U.sub(c), fdim, facets) for c in (0, 1)])
-        local = np.unique(local[local < imap.size_local * bs])
-        self._local = local.astype(np.int32)
-        mine = imap.local_to_global(local // bs) * bs + local % bs
-        self.gdofs = np.concatenate(self.comm.allgather(mine)).astype(PETSc.IntType)
-        xdofs = fem.locate_dofs_topological(self.U.sub(0), fdim, facets)
-        ydofs = fem.locate_dofs_topological(self.U.sub(1), fdim, facets)
-        self._xy = (np.asarray(xdofs), np.asarray(ydofs))
+        owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
+        xdofs, ydofs = (np.asarray(fem.locate_dofs_topological(self.U.sub(c), fdim, facets)) for c in (0, 1))
+        local = np.unique(np.concatenate([xdofs, ydofs]))
+        self.candidate_dofs = local[local < owned].astype(np.int32)
+        self._xy = (xdofs, ydofs)
 
     def coupled_dofs(self) -> list[np.ndarray]:
-        """One row: every candidate (x, y) global dof (the friction's dense block)."""
-        return [self.gdofs]
+        """None: the facet form couples only dofs that share a cell (already in the tangent's
+        pattern), and the friction's rank-one part stays out of the matrix (low_rank)."""
+        return []
 
     # ------------------------------------------------------------------ law
     def _sum(self, name: str) -> float:
@@ -252,35 +256,34 @@ class ObjectContact:
         b.axpy(1.0, vec)
         vec.destroy()
 
-    def _rank_one(self, lam: float, free: bool) -> np.ndarray:
-        """The dense block G ⊗ dlambda (m, m) over the gathered candidate dofs (zeros when
-        clipped or nothing touches), on every rank."""
-        m = len(self.gdofs)
-        den = 2.0 * self._sum("den")
-        vecs = [self._assembled(f) for f in (self._G, self._dnum, self._dden)]
-        G, dnum, dden = (np.concatenate(self.comm.allgather(v.array_r[self._local])) for v in vecs)
-        for v in vecs:
-            v.destroy()
-        if not (free and den > 1e-9):
-            return np.zeros((m, m))
-        dlam = (2.0 * dnum - lam * 2.0 * dden) / den
-        return np.outer(G, dlam)
-
     def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
-        """A += dR_o/du (collective; A is left flush-assembled, call A.assemble() after).
-        Inactive: the dense block's zeros only (the pattern)."""
+        """A += dR_o/du at fixed lambda_c (collective; A is left flush-assembled, call
+        A.assemble() after; nothing when inactive). The rest of the tangent: low_rank."""
+        if not self.active:
+            return
+        self._update()
         A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
         A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
-        if self.active:
-            lam, free = self._update()
-            assemble_matrix(A, self._K)
-            A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
-            A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
-            block = self._rank_one(lam, free)
-        else:
-            block = np.zeros((len(self.gdofs),) * 2)
-        if self.comm.rank == 0:
-            A.setValues(self.gdofs, self.gdofs, block.reshape(-1), addv=PETSc.InsertMode.ADD)
+        assemble_matrix(A, self._K)
+        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
+        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+
+    def low_rank(self, u: fem.Function) -> list[tuple[PETSc.Vec, PETSc.Vec]]:
+        """The tangent's part that add_tangent leaves out: [(G, dlambda)], dR_o += G dlambdaᵀ
+        (module docstring), two vectors of the unknown's layout (N per mm, N/mm per mm);
+        [] when inactive, when the friction is clipped (|lambda| > mu) or when nothing
+        touches (Σ N t_y <= 1e-9 N). The caller owns (and destroys) the vectors. Collective."""
+        if not self.active:
+            return []
+        lam, free = self._update()
+        den = 2.0 * self._sum("den")
+        if not (free and den > 1e-9):
+            return []
+        G, dlam, dden = (self._assembled(f) for f in (self._G, self._dnum, self._dden))
+        dlam.axpy(-lam, dden)               # dlambda = (2 d num - lambda 2 d den) / den
+        dlam.scale(2.0 / den)
+        dden.destroy()
+        return [(G, dlam)]
 
     # ------------------------------------------------------------------ figures
     def nodes(self, u: fem.Function) -> np.ndarray:
