@@ -5,8 +5,9 @@ Units: mm, N, MPa (= N/mm²), N·mm; angles in rad.
 :class:`LoadPathSolver` solves R(u; v; a) = 0 (the problem's residual, :mod:`fem.problem`)
 along the linear load path a(s) = a_0 + s (a_1 - a_0), s from 0 to 1:
 
-* steps in s with automatic cut-back: a step whose Newton iteration fails is undone and
-  halved, and the path stops at its last converged state below ``min_step``;
+* steps in s with automatic cut-back: a step whose Newton iteration fails (or whose
+  converged state the contact refuses, its optional ``refuses``) is undone and halved, and
+  the path stops at its last converged state below ``min_step``;
 * Newton with the exact tangent K = dR/du (contact blocks included), each correction by
   GMRES preconditioned with the MUMPS LU of a recent tangent, plus cheap chord steps; a
   contact term may keep a low-rank part a bᵀ of K out of the matrix (``low_rank``, e.g. the
@@ -499,12 +500,15 @@ class LoadPathSolver:
 
     def _guarded_newton(self, reuse_factor: bool) -> tuple[int, bool, str]:
         """newton(), with a non-finite iterate or a MUMPS failure (a singular or NaN
-        tangent) as a failed solve: (iterations, converged, reason or "")."""
+        tangent) as a failed solve, and a converged state that the contact refuses (its
+        optional ``refuses(u)``: a one-line reason, e.g. the finger tunnelled into an
+        object) too: (iterations, converged, reason or "")."""
         try:
             n, ok = self.newton(reuse_factor=reuse_factor)
-            return n, ok and bool(np.isfinite(self.u.x.array).all()), ""
         except PETSc.Error as exc:
             return self.config.max_it, False, f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+        why = self.contact.refuses(self.u) if ok and hasattr(self.contact, "refuses") else ""
+        return n, ok and not why and bool(np.isfinite(self.u.x.array).all()), why
 
     def converge(self) -> PathOutcome:
         """Newton at the load ``state`` from the current iterate u, which is a guess

@@ -31,10 +31,16 @@ operator is the matrix plus G dlambdaᵀ while the LU preconditioner factorises 
 alone, so Newton keeps the exact tangent. It is zero where the friction is clipped (slip)
 or nothing touches.
 
+A penalty holds whatever lies inside the object, however deep: a Newton iterate that
+carries part of the finger through the surface can converge there (a coarse mixed grasp
+did, 20 mm deep under 2,500 N). ``refuses`` makes the solver reject a converged state with
+a candidate node deeper than MAX_PENETRATION inside the object, so the load step is cut
+back instead.
+
 ``ContactTerms`` sums several contact terms (the joints' valley contact, fem.contact, and
 this one) behind the one interface the solver calls (add_residual, add_tangent,
-coupled_dofs, low_rank); a problem with one term keeps that term itself, so its answers are
-unchanged.
+coupled_dofs, low_rank, refuses); a problem with one term keeps that term itself, so its
+answers are unchanged.
 """
 from __future__ import annotations
 
@@ -55,6 +61,9 @@ from contract.grasp import (CONTACT_SMOOTHING, CONTACT_STIFFNESS, FRICTION, OBJE
 
 #: Facet quadrature degree of the contact integrals (6 points per triangle).
 CONTACT_QUADRATURE = 4
+#: mm: the deepest a candidate node may lie inside the object in a converged state
+#: (``refuses``): 40 times the law's ramp width delta, 20 times the coarse grasp's 0.09 mm.
+MAX_PENETRATION = 2.0
 
 
 class ContactTerms:
@@ -77,6 +86,11 @@ class ContactTerms:
     def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
         for t in self.terms:
             t.add_tangent(A, u)
+
+    def refuses(self, u: fem.Function) -> str:
+        """The first term's reason to refuse a converged state (``refuses``), or ""."""
+        reasons = (t.refuses(u) for t in self.terms if hasattr(t, "refuses"))
+        return next((why for why in reasons if why), "")
 
     def low_rank(self, u: fem.Function) -> list:
         """Every term's low-rank tangent pairs (a, b), dR += a bᵀ (a term without them: none)."""
@@ -214,14 +228,24 @@ class ObjectContact:
     # ------------------------------------------------------------------ dofs
     def _dofs(self, facets: np.ndarray) -> None:
         """The candidate (x, y) dofs this rank owns (``candidate_dofs``, local indices of the
-        unknown) and the candidate nodes' x and y dofs (``nodes``)."""
-        fdim = self.w.function_space.mesh.topology.dim - 1
+        unknown), the owned candidate nodes' x and y dofs (``xy_dofs``, two arrays in node
+        order) and their reference points (mm), for ``nodes``; through the displacement
+        space, collapsed out of a mixed unknown (dolfinx tabulates no mixed space's
+        coordinates)."""
         W = self.w.function_space
-        owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
-        xdofs, ydofs = (np.asarray(fem.locate_dofs_topological(self.U.sub(c), fdim, facets)) for c in (0, 1))
-        local = np.unique(np.concatenate([xdofs, ydofs]))
-        self.candidate_dofs = local[local < owned].astype(np.int32)
-        self._xy = (xdofs, ydofs)
+        fdim = W.mesh.topology.dim - 1
+        if self.U is W:
+            imap = W.dofmap.index_map
+            U, to_parent = W, np.arange((imap.size_local + imap.num_ghosts) * W.dofmap.index_map_bs)
+        else:
+            U, to_parent = self.U.collapse()
+            to_parent = np.asarray(to_parent)
+        bs = U.dofmap.index_map_bs
+        nodes = np.asarray(fem.locate_dofs_topological(U, fdim, facets))
+        nodes = nodes[nodes < U.dofmap.index_map.size_local]
+        xdofs, ydofs = to_parent[bs * nodes], to_parent[bs * nodes + 1]
+        self.candidate_dofs = np.sort(np.concatenate([xdofs, ydofs])).astype(np.int32)
+        self.xy_dofs, self._ref = (xdofs, ydofs), U.tabulate_dof_coordinates()[nodes]
 
     def coupled_dofs(self) -> list[np.ndarray]:
         """None: the facet form couples only dofs that share a cell (already in the tangent's
@@ -286,14 +310,26 @@ class ObjectContact:
         dden.destroy()
         return [(G, dlam)]
 
+    def refuses(self, u: fem.Function) -> str:
+        """Why the solver must not accept u as a converged state (one line), or "": a
+        candidate node more than MAX_PENETRATION inside the object (module docstring).
+        Collective."""
+        if not self.active:
+            return ""
+        pts, _ = self.nodes(u)
+        mine = float(-self.obstacle.signed_distance(pts).min()) if len(pts) else -math.inf
+        depth = self.comm.allreduce(mine, op=MPI.MAX)
+        if depth > MAX_PENETRATION:
+            return (f"the finger went {depth:.3g} mm into the object (more than {MAX_PENETRATION:g} mm: "
+                    "a Newton iterate carried it through the surface)")
+        return ""
+
     # ------------------------------------------------------------------ figures
-    def nodes(self, u: fem.Function) -> np.ndarray:
-        """Global deformed positions (n, 2) mm of the candidate nodes on this rank."""
-        V = self.w.function_space
-        x_ref = V.tabulate_dof_coordinates()
-        bs = V.dofmap.index_map_bs
-        xd, yd = self._xy
-        ref = x_ref[xd // bs] if bs > 1 else x_ref[xd]
+    def nodes(self, u: fem.Function) -> tuple[np.ndarray, np.ndarray]:
+        """Global deformed positions (n, 2) mm of the candidate nodes this rank owns, and
+        their reference x (n,) mm along the rest finger."""
+        xd, yd = self.xy_dofs
+        ref = self._ref
         local = np.column_stack([ref[:, 0] + u.x.array[xd], ref[:, 1] + u.x.array[yd]])
         turn = np.array([[math.cos(self.finger.base_angle), -math.sin(self.finger.base_angle)],
                          [math.sin(self.finger.base_angle), math.cos(self.finger.base_angle)]])
