@@ -69,6 +69,7 @@ of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import math
 import sys
@@ -85,7 +86,9 @@ from petsc4py import PETSc
 
 from contract import cli
 from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
+from contract.grasp import APPROACH_P1, FRICTION, OBJECT_WEIGHT, ObjectSpec, approach_for, parse_object
 from contract.joint import JointSpec, MaterialLaw, joint_digest
+from fem.contact import ContactTerms
 from fem.discretisation import FORMULATION
 from fem.geometry import FingerGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
@@ -341,32 +344,20 @@ def per_joint(arrays: list[np.ndarray]):
     return np.stack(arrays) if len({a.shape for a in arrays}) == 1 else tuple(arrays)
 
 
-class JointsContact:
+class JointsContact(ContactTerms):
     """The valley self-contact of a finger whose joints differ in shape: one
-    fem.contact.ValleyContact per joint (its own cells, valley size and penalty), seen as
-    one (the interface fem.load_path uses). ``first[i]``: the number of valleys before
-    part i's joint, so that valleys are numbered along x across the joints, as one
-    ValleyContact numbers them."""
+    fem.contact.ValleyContact per joint (its own cells, valley size and penalty) summed as
+    ContactTerms. ``first[i]``: the number of valleys before the i-th term's joint, so that
+    :meth:`gaps` numbers valleys along x across the joints, as one ValleyContact does."""
 
     def __init__(self, parts: list, first: list[int]):
-        self.parts, self.first = parts, first
-        self.comm = parts[0].comm
-
-    def coupled_dofs(self) -> np.ndarray:
-        return np.vstack([part.coupled_dofs() for part in self.parts])
+        super().__init__(*parts)
+        self.first, self.comm = first, parts[0].comm
 
     def gaps(self, u: fem.Function) -> dict:
         """Signed gap g (mm) of every pair, per (valley, side), valleys along x."""
-        return {(first + k, side): g for part, first in zip(self.parts, self.first)
+        return {(first + k, side): g for part, first in zip(self.terms, self.first)
                 for (k, side), g in part.gaps(u).items()}
-
-    def add_residual(self, b, u: fem.Function) -> None:
-        for part in self.parts:
-            part.add_residual(b, u)
-
-    def add_tangent(self, A, u: fem.Function) -> None:
-        for part in self.parts:
-            part.add_tangent(A, u)
 
 
 def joints_contact(V, facet_tags, present: set, geometry: FingerGeometry, penalties: tuple[float, ...],
@@ -398,13 +389,17 @@ class FingerSolver:
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: MaterialLaw | Material | None = None, rigid: RigidMaterial = RigidMaterial(),
-                 config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION):
+                 config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION,
+                 extra_contact: Callable[[Problem], object] | None = None):
         config = config_for(geometry, config)
         self.finger, self.geometry, self.config = geometry.finger, geometry, config
         self.formulation = formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
                                       formulation=formulation, **config.discretisation())
+        if extra_contact is not None:   # e.g. fem.grasp's object, beside the valley contact
+            self.problem = dataclasses.replace(self.problem, contact=ContactTerms(
+                self.problem.contact, extra_contact(self.problem)))
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
         self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
@@ -454,6 +449,18 @@ class FingerSolver:
             log.info("finger %s: converged=%s, %d steps, %.1f s", load.pressures, path.converged,
                      path.load_steps, result.wall_time)
         return result
+
+    def follow(self, load: FingerLoad) -> FingerResult:
+        """Continue from the current converged state to ``load`` along a straight load path
+        (a history: fem.grasp's approach, then its pressure ramp); OutOfBoxError before any
+        work for a pressure beyond its joint's box."""
+        check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(self.finger.joints))],
+                  box=pressure_limits(self.finger), units=["MPa"] * len(self.finger.joints))
+        solver = self.solver
+        t0, c0, lu0 = time.perf_counter(), time.process_time(), solver.factorisations
+        path = solver.follow(solver.state.copy(), load.as_array())
+        return self._result(load, path, solver.factorisations - lu0, time.perf_counter() - t0,
+                            time.process_time() - c0)
 
     def _result(self, load: FingerLoad, path, factorisations: int, wall: float,
                 cpu: float) -> FingerResult:
@@ -526,6 +533,7 @@ def build_parser() -> cli.Parser:
                          "name their joint files (default: the paper's joint)")
     add_finger_mesh(ap)
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
+    add_grasp_arguments(ap)
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
     return ap
@@ -586,14 +594,57 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
           f"{ranks} rank(s)")
 
 
+def add_grasp_arguments(ap: cli.Parser) -> None:
+    """--object, --approach, --mu, --object-weight: a grasp (fem.grasp)."""
+    ap.add_argument("--object", type=object_arg, default=None,
+                    help="hold a rigid object, kind[:key=value,...] as predictor.gesture --object "
+                         "(circle, ellipse, rectangle; mm, deg): the approach, the object, the pressure ramp")
+    ap.add_argument("--approach", type=cli.number_list(unit="MPa"), metavar="P1,P2", default=None,
+                    help="with --object: the approach pressures, one per joint (default joint 1 at "
+                         f"{APPROACH_P1:g} MPa, the others 0)")
+    ap.add_argument("--mu", type=cli.number(0.0, 10.0), default=FRICTION,
+                    help=f"with --object: friction coefficient (default {FRICTION:g})")
+    ap.add_argument("--object-weight", type=cli.number(0.0, 100.0, unit="N"), default=OBJECT_WEIGHT,
+                    help=f"with --object: its weight, N (default {OBJECT_WEIGHT:g})")
+
+
+def object_arg(text: str) -> ObjectSpec:
+    """argparse type of --object (contract.grasp.parse_object)."""
+    try:
+        return parse_object(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def parsed_approach(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpec) -> tuple[float, ...]:
+    """The approach pressures (MPa) of a grasp: one per joint, each within its box."""
+    if args.object is None:
+        if args.approach is not None:
+            ap.error("--approach needs --object")
+        return ()
+    if args.no_gravity:
+        ap.error("--object: a grasp lifts the object's weight; drop --no-gravity")
+    approach = approach_for(finger.n_joints) if args.approach is None else tuple(args.approach)
+    if len(approach) != finger.n_joints:
+        ap.error(f"--approach: {len(approach)} values for finger {finger.name!r} of {finger.n_joints} joint(s)")
+    for j, (p, limit) in enumerate(zip(approach, pressure_limits(finger))):
+        if abs(p) > limit:
+            ap.error(f"argument --approach: P{j + 1} = {p:g} is outside [{-limit:g}, {limit:g}] MPa")
+    return approach
+
+
 def main(argv=None) -> int:
 
     ap = build_parser()
     args = ap.parse_args(argv)
     finger = args.finger or load_finger()
     load = FingerLoad(parsed_pressures(ap, args, finger), not args.no_gravity)
+    approach = parsed_approach(ap, args, finger)
     cli.setup_logging(args.quiet, args.verbose)
     geometry, formulation = finger_discretisation(ap, args, finger)
+    if args.object is not None:
+        from fem.grasp import grasp_main     # fem.grasp builds on this module's solver
+        return grasp_main(ap, args, geometry, formulation, load, approach)
     comm = MPI.COMM_WORLD
     with ap.errors(), cli.heartbeat(f"finger {finger.name!r}", enabled=comm.rank == 0):
         if comm.rank == 0:

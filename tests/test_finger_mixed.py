@@ -158,7 +158,7 @@ def test_valley_contact_is_each_joints_own(tip_only):
     gaps = solver.contact.gaps(solver.u)
     assert sorted(gaps) == [(k, side) for k in range(7) for side in ("bottom", "top")]
     assert min(g.min() for g in gaps.values()) > 0
-    for part, spec in zip(solver.contact.parts, (PAPER, SOFT4)):
+    for part, spec in zip(solver.contact.terms, (PAPER, SOFT4)):
         s = spec.shape
         area = (s.height - s.valley_height) / 2 * s.width / 2
         for a, _, kw in part.groups.values():
