@@ -18,6 +18,12 @@ finger's surface (the FEM, whose finger is ``width`` deep: k_area = k_c / width)
 with d, n the object's signed distance (negative inside) and outward normal, t the
 object's tangent turned upwards, W the object's weight (each of the two mirror fingers
 lifts W/2); the grasp slips when |lambda| > mu or nothing touches. friction_use = |lambda|/mu.
+
+Where the fingers meet: the two mirror fingers touch at X = 0, and each pushes the other
+along X only (frictionless by symmetry). The right finger's faces towards the plane (its
+inner and end faces) carry the same ramp against it, with its own stiffness:
+
+    N = k_p · s(max(0, -X))  along +X      (per mm of outline; the FEM: per mm², k_p / width)
 """
 from __future__ import annotations
 
@@ -28,6 +34,10 @@ import numpy as np
 
 #: k_c: penalty stiffness, N per mm of penetration per mm of finger outline (N/mm²).
 CONTACT_STIFFNESS = 2.0
+#: k_p: penalty stiffness of the plane X = 0 where the fingers meet (N per mm of overlap per
+#: mm of finger outline, N/mm²): 100 times k_c, so that where the fingers meet at a corner of
+#: the outline (a force ~ k_p q²) the overlap stays within 0.1 mm (docs/gripper.md §7).
+PLANE_STIFFNESS = 200.0
 #: delta: width (mm) of the penalty's C1 ramp s(q).
 CONTACT_SMOOTHING = 0.05
 #: mu: Coulomb friction coefficient of the finger on the object.

@@ -3,6 +3,7 @@
     python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H | --divisions N]
                          [--finger FILE] [--formulation mixed] --json
     python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
+    python -m fem.finger --p1 0.2 --p2 0.2 --plane     # the fingers meet at X = 0
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
 Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one half-model
@@ -65,6 +66,14 @@ phi_end and cap rotation comparable with the single-joint FEM. A solve that does
 converge reports no figures (null in the JSON) and exits 1 with its reason on stderr. The fingertip is the centre
 of the last part's distal face, ``tip_angle`` the orientation of the last part. Rotations
 of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
+
+Where the fingers meet (``--plane``, FingerSolver(plane=True)): the mirror finger's
+contact at X = 0, the predictor's frictionless penalty k_p s(max(0, -X)) on the inner and
+end faces (fem.plane_contact); without it the right finger passes through X = 0 as in the
+paper. With it the record gains ``plane_force_N`` (N, the plane's push along +X on the
+full finger), ``plane_overlap_mm`` (how far its surface crosses X = 0) and
+``base_force_N`` (the clamp's reaction, global, N: it balances the weights and the plane's
+push), and ``"plane": true``.
 """
 from __future__ import annotations
 
@@ -81,6 +90,7 @@ from typing import Callable
 import numpy as np
 import ufl
 from dolfinx import fem
+from dolfinx.fem.petsc import assemble_vector
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -93,6 +103,7 @@ from fem.discretisation import FORMULATION
 from fem.geometry import FingerGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
+from fem.plane_contact import PlaneContact
 from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
                          joint_geometry)
 from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
@@ -167,19 +178,27 @@ class FingerResult:
     wall_time: float = 0.0
     cpu_time: float = 0.0           # this process's CPU time: one core's share under load
     reason: str = ""
+    plane: dict | None = None       # with the plane X = 0: PlaneContact.state and base_force_N
+
+    def plane_figures(self) -> dict:
+        """plane_force_N (N), plane_overlap_mm (mm) and base_force_N (N, global) of a
+        converged solve with the plane X = 0 (fem.plane_contact); each null otherwise."""
+        plane = self.plane if self.converged and self.plane is not None else {}
+        return {k: plane.get(k) for k in ("plane_force_N", "plane_overlap_mm", "base_force_N")}
 
     def summary(self) -> dict:
         """JSON-ready figures (degrees for angles); ``tip`` and ``tip_angle_deg`` mean
         what they mean in ``predictor.gesture --json``. A solve that did not converge has
         no figures: tip, angles and joints are null (the state it stopped in is not an
-        answer), ``reason`` says why."""
+        answer), ``reason`` says why. ``plane_force_N``, ``plane_overlap_mm`` and
+        ``base_force_N``: the plane X = 0's figures (plane_figures), null without it."""
         out = {"pressures_MPa": list(self.load.pressures), "gravity": self.load.gravity,
                "converged": self.converged, "tip": None, "tip_angle_deg": None,
                "joint_end_angle_deg": None, "joints": None}
         if self.converged:
             out.update(tip=self.tip.tolist(), tip_angle_deg=math.degrees(self.tip_angle),
                        joint_end_angle_deg=np.degrees(self.end_angle).tolist(), joints=self._joints())
-        return {**out, "newton_iterations": self.newton_iterations,
+        return {**out, **self.plane_figures(), "newton_iterations": self.newton_iterations,
                 "iterations": int(sum(self.newton_iterations)), "load_steps": self.load_steps,
                 "cutbacks": self.cutbacks, "factorisations": self.factorisations,
                 "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
@@ -380,29 +399,45 @@ def joints_contact(V, facet_tags, present: set, geometry: FingerGeometry, penalt
     return JointsContact(parts, first) if parts else None
 
 
+def closed_tags(finger: FingerSpec) -> list[int]:
+    """Facet tags of the finger's surfaces that touch nothing outside it: every joint's
+    chamber walls, the half-model's plane z = 0 and the clamped base face."""
+    tags = finger_tags(finger)
+    return [tags[f"{side}{k}"] for k in finger.joints for side in ("top", "bottom")] + [
+        tags["symmetry"], tags["proximal"]]
+
+
 class FingerSolver:
     """Static large-deflection solve of one whole finger (module docstring):
     :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`; every joint
     of its own law unless ``material`` is given. ``formulation`` defaults to the
     production one (fem.discretisation.FORMULATION); ``config`` is raised to the
-    hexahedra's quadrature on hexahedral joints (fem.solver.config_for)."""
+    hexahedra's quadrature on hexahedral joints (fem.solver.config_for). ``plane``: the
+    mirror finger's contact at X = 0 (fem.plane_contact, ``plane_term``), beside the
+    valley contact and ``extra_contact``'s term (e.g. fem.grasp's object)."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: MaterialLaw | Material | None = None, rigid: RigidMaterial = RigidMaterial(),
                  config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION,
-                 extra_contact: Callable[[Problem], object] | None = None):
+                 extra_contact: Callable[[Problem], object] | None = None, plane: bool = False):
         config = config_for(geometry, config)
         self.finger, self.geometry, self.config = geometry.finger, geometry, config
         self.formulation = formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
                                       formulation=formulation, **config.discretisation())
-        if extra_contact is not None:   # e.g. fem.grasp's object, beside the valley contact
-            self.problem = dataclasses.replace(self.problem, contact=ContactTerms(
-                self.problem.contact, extra_contact(self.problem)))
+        extra = [] if extra_contact is None else [extra_contact(self.problem)]
+        self.plane_term = None
+        if plane:
+            self.plane_term = PlaneContact(self.problem.u, self.mesh_data, self.finger, geometry.joint.width,
+                                           closed_tags(self.finger))
+            extra.append(self.plane_term)
+        if extra:
+            self.problem = dataclasses.replace(self.problem, contact=ContactTerms(self.problem.contact, *extra))
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
         self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
+        self._reaction = None       # (residual form, clamped dofs): base_force, built on first use
 
     # The solver's running totals and state, read through (diagnostics).
     factorisations = property(lambda self: self.solver.factorisations)
@@ -421,6 +456,34 @@ class FingerSolver:
     def displacement(self) -> fem.Function:
         """The displacement u (mm) in its own vector space (a copy, for the mixed form)."""
         return self.problem.displacement()
+
+    def _clamped_dofs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Owned local (x, y) dofs of the clamped base face."""
+        problem = self.problem
+        W = problem.u.function_space
+        U = W.sub(0) if problem.displacement_space is not None else W
+        ft, fdim = problem.mesh_data.facet_tags, W.mesh.topology.dim - 1
+        owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
+        out = []
+        for c in (0, 1):
+            dofs = fem.locate_dofs_topological(U.sub(c), fdim, ft.find(finger_tags(self.finger)["proximal"]))
+            out.append(dofs[dofs < owned])
+        return tuple(out)
+
+    def base_force(self) -> list[float]:
+        """The clamp's reaction (N, global, full finger) at the current state: the residual
+        of the finger's internal forces, weights and pressures summed over the clamped
+        dofs (x 2: the half-model). The contact terms (valleys, object, plane) act away from
+        the clamp, so at equilibrium it balances the weights and the contact forces."""
+        if self._reaction is None:
+            self._reaction = (fem.form(self.problem.residual()), self._clamped_dofs())
+        form, clamped = self._reaction
+        b = assemble_vector(form)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        local = np.array([b.array_r[d].sum() for d in clamped])
+        b.destroy()
+        total = 2.0 * self.comm.allreduce(local, op=MPI.SUM)
+        return (rotation_matrix(self.finger.base_angle) @ total).tolist()
 
     def rotation(self, k: int) -> float:
         """Rotation (rad) about +z of part k's rigid body: a rigid part, or a joint's cap."""
@@ -489,7 +552,14 @@ class FingerSolver:
             local_anchors=per_joint(local),
             newton_iterations=path.newton_iterations, load_steps=path.load_steps,
             cutbacks=path.cutbacks, factorisations=factorisations, wall_time=wall, cpu_time=cpu,
-            reason=path.reason)
+            reason=path.reason, plane=self._plane_state() if path.converged else None)
+
+    def _plane_state(self) -> dict | None:
+        """The plane's figures and the clamp's reaction at the current state (None without
+        the plane). Collective."""
+        if self.plane_term is None:
+            return None
+        return {**self.plane_term.state(self.u), "base_force_N": self.base_force()}
 
 
 # ---------------------------------------------------------------------- command line
@@ -528,6 +598,9 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--pressures", type=cli.number_list(unit="MPa"), metavar="P1,P2,...",
                     help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
+    ap.add_argument("--plane", action="store_true",
+                    help="the mirror finger's contact at X = 0 (frictionless penalty, the predictor's): the "
+                         "fingers meet instead of passing through each other")
     ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: contract/fingers/paper.toml); its joint parts "
                          "name their joint files (default: the paper's joint)")
@@ -587,6 +660,10 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
         for j, s in enumerate(out["joints"]):
             print(f"  joint {j + 1}: end angle {s['end_angle_deg']:.3f} deg, chord {s['chord_angle_deg']:.3f} deg, "
                   f"cap rotation {s['cap_rotation_deg']:.3f} deg")
+        if out["plane_force_N"] is not None:
+            bx, by = out["base_force_N"]
+            print(f"  plane X = 0: force {out['plane_force_N']:.4f} N, overlap {out['plane_overlap_mm']:.4f} mm, "
+                  f"base force ({bx:.4f}, {by:.4f}) N")
     else:
         print("  tip = none (did not converge)")
     print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
@@ -650,7 +727,7 @@ def main(argv=None) -> int:
         if comm.rank == 0:
             log.info("finger %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
                      finger.name)
-        solver = FingerSolver(geometry, comm, formulation=formulation)
+        solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
         if comm.rank == 0:
             log.info("mesh ready (%d nodes); solving P = %s MPa, gravity %s", solver.mesh_info()["nodes"],
                      list(load.pressures), load.gravity)
@@ -662,7 +739,7 @@ def main(argv=None) -> int:
                                                   u=solver.displacement()))
     if comm.rank == 0:
         out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
-               "geometry": geometry.as_dict(), "formulation": formulation,
+               "geometry": geometry.as_dict(), "formulation": formulation, "plane": args.plane,
                "joint_files": [{"name": j.name, "sha256": joint_digest(j)} for j in finger_joints(finger)],
                "ranks": comm.size}
         if args.json:

@@ -1,7 +1,7 @@
 """The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
 
     python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8 | --divisions N]
-                               [--part 1/2] [--formulation displacement]
+                               [--part 1/2] [--formulation displacement] [--plane]
     python -m fem.finger_cases --finger FILE --pressures "0.2,0.2;-0.1,0.05" --out DIR
 
 Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
@@ -42,6 +42,12 @@ digests, ``joints``, only when some joint is not the paper's, so the cases solve
 the mixed formulation and joint files existed stand). A solve that does not
 converge is recorded as such (``converged: false``, no figures) with the solver controls
 it ran with (``solver``), and is tried again when they change.
+
+``--plane``: every case with the mirror finger's contact at X = 0 (fem.plane_contact; the
+fingers meet instead of passing through each other). Its records carry ``plane_force_N``,
+``plane_overlap_mm`` and ``base_force_N``, their settings ``"plane": true`` (absent
+without it, so the cases solved before the plane stand) and their default suffix ends in
+``_plane``: a plane case never resumes from, nor replaces, a case without it.
 """
 from __future__ import annotations
 
@@ -105,14 +111,32 @@ def pressure_cases(text: str) -> list[tuple[str, float, float, bool]]:
     return cases
 
 
-def default_suffix(joint: JointGeometry, formulation: str) -> str:
+def default_suffix(joint: JointGeometry, formulation: str, plane: bool = False) -> str:
     """The default file-name suffix of a finger whose joints are ``joint`` (module
     docstring): ``_hexN`` or ``_hexNsS`` on hexahedra (fem.discretisation.Discretisation.key's
     spelling; a colon is no file name), ``_mixed`` on tetrahedra in the mixed formulation,
-    else none."""
+    else none; then ``_plane`` with the plane X = 0."""
     if joint.divisions:
-        return f"_hex{joint.divisions}" + (f"s{joint.hex_size:g}" if joint.hex_size else "")
-    return "" if formulation == "displacement" else f"_{formulation}"
+        kind = f"_hex{joint.divisions}" + (f"s{joint.hex_size:g}" if joint.hex_size else "")
+    else:
+        kind = "" if formulation == "displacement" else f"_{formulation}"
+    return kind + ("_plane" if plane else "")
+
+
+def case_settings(finger, geometry, formulation: str, plane: bool = False) -> dict:
+    """The settings a case records, by which a later run resumes it (fem.finger.same_settings;
+    module docstring): the finger's digest and geometry, and only where they differ from
+    the first cases' the formulation (not "displacement"), the plane X = 0 (on) and the
+    joints' digests (some joint not the paper's)."""
+    settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
+    if formulation != "displacement":
+        settings["formulation"] = formulation
+    if plane:
+        settings["plane"] = True
+    joints = finger_joints(finger)
+    if not all(is_paper_joint(j) for j in joints):
+        settings["joints"] = [joint_digest(j) for j in joints]
+    return settings
 
 
 def render(solver: FingerSolver, path: Path) -> dict:
@@ -163,6 +187,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--pressures", type=pressure_cases, metavar="P1,P2;...",
                     help="solve these gravity pressure pairs (MPa, ';' between pairs) instead of the validation cases")
+    ap.add_argument("--plane", action="store_true",
+                    help="the mirror finger's contact at X = 0 (the fingers meet; file names end in _plane)")
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default=None, help="appended to each file name (e.g. _h1.2 for a finer mesh; "
                     "default: _hexN or _hexNsS on hexahedra, _mixed on mixed tetrahedra, so that they never replace "
@@ -194,14 +220,9 @@ def main(argv=None) -> int:
                 ap.error(f"case {name}: P{j} = {p:g} is outside [{-limit:g}, {limit:g}] MPa (its joint's input box)")
     cli.setup_logging(args.quiet)
     geometry, formulation = finger_discretisation(ap, args, finger)
-    settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
-    if formulation != "displacement":
-        settings["formulation"] = formulation
-    joints = finger_joints(finger)
-    if not all(is_paper_joint(j) for j in joints):
-        settings["joints"] = [joint_digest(j) for j in joints]
+    settings = case_settings(finger, geometry, formulation, args.plane)
     solver_settings = json_safe(asdict(config_for(geometry, FINGER_CONFIG)))     # FingerSolver's own
-    suffix = default_suffix(geometry.joint, formulation) if args.suffix is None else args.suffix
+    suffix = default_suffix(geometry.joint, formulation, args.plane) if args.suffix is None else args.suffix
     out = Path(args.out)
     todo = []
     for name, p1, p2, gravity in cases:
@@ -222,7 +243,7 @@ def main(argv=None) -> int:
         return 0
     with ap.errors(), cli.heartbeat("finger cases"):
         t0 = time.perf_counter()
-        solver = FingerSolver(geometry, comm, formulation=formulation)
+        solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
         setup_s = time.perf_counter() - t0
         for name, p1, p2, gravity, path in todo:
             res = solver.solve(FingerLoad((p1, p2), gravity))

@@ -1,7 +1,7 @@
 """FEM grasps: the whole finger holding a rigid object, along the predictor's history.
 
     python -m fem.finger --p1 0.2 --p2 0.25 --object circle [--approach -0.15,0]
-                         [--mu 0.3] [--object-weight 0.2] [--xdmf out.xdmf] --json
+                         [--mu 0.3] [--object-weight 0.2] [--plane] [--xdmf out.xdmf] --json
 
 Model: the finger of fem.finger (gravity on) with the object's contact of
 fem.object_contact (the predictor's law: penalty k_c per length spread over the part's
@@ -15,6 +15,10 @@ docs/fem-grasps.md). History, as the predictor's (docs/gripper.md §9):
 3. the ramp: the pressures go in a straight line to the target (the load path's steps
    and cut-backs, fem.load_path), with the object.
 
+With ``--plane`` the mirror finger's contact at X = 0 (fem.plane_contact) acts throughout
+the history, approach included, and the record carries ``plane_force_N`` and
+``plane_overlap_mm`` beside ``"plane": true``.
+
 Outputs (GraspResult.summary), with the predictor's meanings: ``tip`` [X, Y] mm,
 ``tip_angle_deg``, ``state`` (no_contact, holds, slips; not_converged), ``contact_force_N``
 (the full finger's normal force), ``friction_N``, ``friction_use`` = |lambda|/mu, ``slip``,
@@ -22,7 +26,8 @@ Outputs (GraspResult.summary), with the predictor's meanings: ``tip`` [X, Y] mm,
 object: count, extent, parts), ``penetration_mm``, ``object_force_N`` (the object's
 resultant on the finger, global) and ``base_force_N``: the clamp's reaction, the sum of the
 FEM residual over the clamped dofs (x 2: the half-model), which balances the finger's
-weight and the object's force (the finger's equilibrium, a check of the coupling).
+weight, the object's force and the plane's (the finger's equilibrium, a check of the
+coupling).
 """
 from __future__ import annotations
 
@@ -30,15 +35,11 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-from dolfinx import fem
-from dolfinx.fem.petsc import assemble_vector
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from contract.grasp import FRICTION, OBJECT_WEIGHT, ObjectSpec
-from fem.finger import FingerLoad, FingerResult, FingerSolver, rotation_matrix
-from fem.geometry import FingerGeometry, TAGS, finger_tags
+from fem.finger import FingerLoad, FingerResult, FingerSolver, closed_tags
+from fem.geometry import FingerGeometry
 from fem.object_contact import ObjectContact
 
 
@@ -75,48 +76,27 @@ class GraspResult:
 
 
 class GraspSolver:
-    """A finger FEM with an object (module docstring). Collective."""
+    """A finger FEM with an object (module docstring), and with ``plane`` the mirror
+    finger's contact at X = 0 (fem.plane_contact) throughout its history. Collective."""
 
     def __init__(self, geometry: FingerGeometry, obstacle: ObjectSpec, comm: MPI.Comm = MPI.COMM_WORLD,
-                 formulation: str | None = None, mu: float = FRICTION, weight: float = OBJECT_WEIGHT):
+                 formulation: str | None = None, mu: float = FRICTION, weight: float = OBJECT_WEIGHT,
+                 plane: bool = False):
         self.geometry, self.obstacle, self.mu, self.weight = geometry, obstacle, mu, weight
         kwargs = {} if formulation is None else {"formulation": formulation}
-        self.fem = FingerSolver(geometry, comm, extra_contact=self._object_term, **kwargs)
+        self.fem = FingerSolver(geometry, comm, extra_contact=self._object_term, plane=plane, **kwargs)
         self.comm = comm
-        self._reaction_form = fem.form(self.fem.problem.residual())
-        self._clamped = self._clamped_dofs()
 
     def _object_term(self, problem) -> ObjectContact:
         finger = self.geometry.finger
-        tags = finger_tags(finger)
-        walls = [tags[f"{side}{k}"] for k in finger.joints for side in ("top", "bottom")]
         self.object = ObjectContact(problem.u, problem.mesh_data, finger, self.geometry.joint.width, self.obstacle,
-                                    walls + [TAGS["symmetry"], TAGS["proximal"]], mu=self.mu, weight=self.weight)
+                                    closed_tags(finger), mu=self.mu, weight=self.weight)
         return self.object
 
-    def _clamped_dofs(self) -> tuple[np.ndarray, np.ndarray]:
-        """Owned local (x, y) dofs of the clamped base face."""
-        problem = self.fem.problem
-        W = problem.u.function_space
-        U = W.sub(0) if problem.displacement_space is not None else W
-        ft, fdim = problem.mesh_data.facet_tags, W.mesh.topology.dim - 1
-        owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
-        out = []
-        for c in (0, 1):
-            dofs = fem.locate_dofs_topological(U.sub(c), fdim, ft.find(TAGS["proximal"]))
-            out.append(dofs[dofs < owned])
-        return tuple(out)
-
     def base_force(self) -> list[float]:
-        """The clamp's reaction (N, global, full finger): the residual of the finger's
-        internal forces, weights and pressures summed over the clamped dofs (module
-        docstring); the object's and the valleys' terms act away from the clamp."""
-        b = assemble_vector(self._reaction_form)
-        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        local = np.array([b.array_r[d].sum() for d in self._clamped])
-        b.destroy()
-        total = 2.0 * self.comm.allreduce(local, op=MPI.SUM)
-        return (rotation_matrix(self.geometry.finger.base_angle) @ total).tolist()
+        """The clamp's reaction (N, global, full finger; FingerSolver.base_force): it
+        balances the finger's weight, the object's force and the plane's."""
+        return self.fem.base_force()
 
     def clearance(self) -> float:
         """The least signed distance (mm) of the finger's candidate surface nodes from the
@@ -167,7 +147,8 @@ def grasp_main(ap, args, geometry: FingerGeometry, formulation: str, load: Finge
 
     comm = MPI.COMM_WORLD
     with ap.errors(), cli.heartbeat("grasp", enabled=comm.rank == 0):
-        solver = GraspSolver(geometry, args.object, comm, formulation, mu=args.mu, weight=args.object_weight)
+        solver = GraspSolver(geometry, args.object, comm, formulation, mu=args.mu, weight=args.object_weight,
+                             plane=args.plane)
         try:
             result = solver.solve(load.pressures, approach)
         except ObjectCutsFinger as exc:
@@ -178,7 +159,8 @@ def grasp_main(ap, args, geometry: FingerGeometry, formulation: str, load: Finge
     if comm.rank == 0:
         out = {**result.summary(), "object": args.object.__dict__, "mu": args.mu,
                "object_weight_N": args.object_weight, "finger": geometry.finger.summary(),
-               "mesh": solver.fem.mesh_info(), "formulation": formulation, "ranks": comm.size}
+               "mesh": solver.fem.mesh_info(), "formulation": formulation, "plane": args.plane,
+               "ranks": comm.size}
         if args.json:
             cli.print_json(out)
         else:

@@ -70,7 +70,8 @@ def smooth_penetration(pen, delta: float):
                            ufl.conditional(ufl.lt(pen, delta), pen * pen / (2.0 * delta), pen - 0.5 * delta))
 
 
-def _turn(angle: float, v):
+def turn(angle: float, v):
+    """UFL 2-vector v turned counter-clockwise by angle (rad)."""
     c, s = math.cos(angle), math.sin(angle)
     return ufl.as_vector([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
@@ -79,7 +80,7 @@ def signed_distance(ob: ObjectSpec, x):
     """UFL (d mm, n unit 2-vector) of the global point x (2-vector): contract.grasp's
     ObjectSpec.signed_distance, with the outward normal (a rectangle: the rounded corner's
     radial direction where both offsets are positive, else the nearest face's)."""
-    q = _turn(-ob.angle, ufl.as_vector([x[0] - ob.x, x[1] - ob.y]))
+    q = turn(-ob.angle, ufl.as_vector([x[0] - ob.x, x[1] - ob.y]))
     if ob.kind == "circle":
         r = ufl.max_value(ufl.sqrt(ufl.dot(q, q)), 1e-12)
         d, n = r - ob.a, q / r
@@ -96,7 +97,7 @@ def signed_distance(ob: ObjectSpec, x):
         d = ufl.conditional(arc, r, ufl.max_value(e0, e1)) - ob.corner
         face = ufl.conditional(ufl.ge(e0, e1), ufl.as_vector([sx, 0.0]), ufl.as_vector([0.0, sy]))
         n = ufl.conditional(arc, ufl.as_vector([sx * e0 / r, sy * e1 / r]), face)
-    return d, (_turn(ob.angle, n) if ob.angle else n)
+    return d, (turn(ob.angle, n) if ob.angle else n)
 
 
 def upward_tangent(n):
@@ -119,10 +120,10 @@ def part_width(finger: FingerSpec, k: int, joint_width: float) -> float:
     return part.width if part.kind == "rigid" else joint_width
 
 
-def candidate_facets(mesh, facet_tags, finger: FingerSpec, excluded: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """(facets, part index) of the candidate facets (module docstring), local to this rank:
-    exterior, normal in the bending plane, not tagged with any of ``excluded`` (the chamber
-    walls), on a part that takes contact (by the facet's midpoint x along the rest finger)."""
+def bending_facets(mesh, facet_tags, excluded: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(facets, midpoints (f, 3) mm, unit normals (f, 3), sign arbitrary) of the exterior
+    facets local to this rank whose normal lies in the bending plane (|n_z| < 1/2) and that
+    carry none of the tags ``excluded`` (the chamber walls), in the reference finger frame."""
     fdim = mesh.topology.dim - 1
     mesh.topology.create_connectivity(fdim, fdim + 1)
     facets = exterior_facet_indices(mesh.topology)
@@ -132,13 +133,60 @@ def candidate_facets(mesh, facet_tags, finger: FingerSpec, excluded: list[int]) 
     x = mesh.geometry.x[nodes]                       # (f, vertices, 3)
     normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    mid = x.mean(axis=1)[:, 0]
+    keep = np.abs(normal[:, 2]) < 0.5
+    return facets[keep], x.mean(axis=1)[keep], normal[keep]
+
+
+def candidate_facets(mesh, facet_tags, finger: FingerSpec, excluded: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(facets, part index) of the candidate facets (module docstring), local to this rank:
+    bending_facets on a part that takes contact (by the facet's midpoint x along the rest
+    finger, strictly inside the part)."""
+    facets, mid, _ = bending_facets(mesh, facet_tags, excluded)
     part = np.full(len(facets), -1)
     for k in contact_parts(finger):
         x0 = finger.rest_start(k)
-        part[(mid > x0) & (mid < x0 + finger.parts[k].length)] = k
-    keep = (np.abs(normal[:, 2]) < 0.5) & (part >= 0)
+        part[(mid[:, 0] > x0) & (mid[:, 0] < x0 + finger.parts[k].length)] = k
+    keep = part >= 0
     return facets[keep], part[keep]
+
+
+def split_unknown(w: fem.Function):
+    """(U, u, v, test) of the unknown w: the displacement space U (W.sub(0) of a mixed
+    (u, p)), the displacement u and its test function v (UFL), and W's test function."""
+    W = w.function_space
+    mixed = type(W.ufl_element()) is ufl.MixedElement
+    test = ufl.TestFunction(W)
+    u, v = (ufl.split(w)[0], ufl.split(test)[0]) if mixed else (w, test)
+    return (W.sub(0) if mixed else W), u, v, test
+
+
+def global_frame(finger: FingerSpec, mesh, u, v):
+    """UFL (x_g, v_g): the deformed point x_g = B + Rot(base_angle)·(X + u)_xy (mm, the
+    gripper's global plane, B the right finger's base mount) and the test function's global
+    (x, y) components v_g = Rot(base_angle)·v_xy."""
+    base, angle = np.array([0.5 * finger.base_gap, 0.0]), finger.base_angle
+    X = ufl.SpatialCoordinate(mesh)
+    xg = ufl.as_vector(base.tolist()) + turn(angle, ufl.as_vector([X[0] + u[0], X[1] + u[1]]))
+    return xg, turn(angle, ufl.as_vector([v[0], v[1]]))
+
+
+def owned_xy_dofs(w: fem.Function, U, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x dofs, y dofs, reference points (n, 3) mm) of the nodes of ``facets`` that this
+    rank owns: local indices of the unknown w, in node order; through the displacement
+    space U, collapsed out of a mixed unknown (dolfinx tabulates no mixed space's
+    coordinates)."""
+    W = w.function_space
+    fdim = W.mesh.topology.dim - 1
+    if U is W:
+        imap = W.dofmap.index_map
+        U, to_parent = W, np.arange((imap.size_local + imap.num_ghosts) * W.dofmap.index_map_bs)
+    else:
+        U, to_parent = U.collapse()
+        to_parent = np.asarray(to_parent)
+    bs = U.dofmap.index_map_bs
+    nodes = np.asarray(fem.locate_dofs_topological(U, fdim, facets))
+    nodes = nodes[nodes < U.dofmap.index_map.size_local]
+    return to_parent[bs * nodes], to_parent[bs * nodes + 1], U.tabulate_dof_coordinates()[nodes]
 
 
 class ObjectContact:
@@ -158,18 +206,12 @@ class ObjectContact:
         mesh = mesh_data.mesh
         self.comm = mesh.comm
         W = w.function_space
-        mixed = type(W.ufl_element()) is ufl.MixedElement
-        test = ufl.TestFunction(W)
-        u, v = (ufl.split(w)[0], ufl.split(test)[0]) if mixed else (w, test)
-        self.U = W.sub(0) if mixed else W
+        self.U, u, v, test = split_unknown(w)
         facets, parts = candidate_facets(mesh, mesh_data.facet_tags, finger, excluded_tags)
         order = np.argsort(facets)
         tags = meshtags(mesh, mesh.topology.dim - 1, facets[order], (parts[order] + 1).astype(np.int32))
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags, metadata={"quadrature_degree": CONTACT_QUADRATURE})
-        base, angle = np.array([0.5 * finger.base_gap, 0.0]), finger.base_angle
-        X = ufl.SpatialCoordinate(mesh)
-        xg = ufl.as_vector(base.tolist()) + _turn(angle, ufl.as_vector([X[0] + u[0], X[1] + u[1]]))
-        vg = _turn(angle, ufl.as_vector([v[0], v[1]]))
+        xg, vg = global_frame(finger, mesh, u, v)
         d, n = signed_distance(obstacle, xg)
         t = upward_tangent(n)
         s = smooth_penetration(-d, smoothing)
@@ -196,23 +238,10 @@ class ObjectContact:
     def _dofs(self, facets: np.ndarray) -> None:
         """The candidate (x, y) dofs this rank owns (``candidate_dofs``, local indices of the
         unknown), the owned candidate nodes' x and y dofs (``xy_dofs``, two arrays in node
-        order) and their reference points (mm), for ``nodes``; through the displacement
-        space, collapsed out of a mixed unknown (dolfinx tabulates no mixed space's
-        coordinates)."""
-        W = self.w.function_space
-        fdim = W.mesh.topology.dim - 1
-        if self.U is W:
-            imap = W.dofmap.index_map
-            U, to_parent = W, np.arange((imap.size_local + imap.num_ghosts) * W.dofmap.index_map_bs)
-        else:
-            U, to_parent = self.U.collapse()
-            to_parent = np.asarray(to_parent)
-        bs = U.dofmap.index_map_bs
-        nodes = np.asarray(fem.locate_dofs_topological(U, fdim, facets))
-        nodes = nodes[nodes < U.dofmap.index_map.size_local]
-        xdofs, ydofs = to_parent[bs * nodes], to_parent[bs * nodes + 1]
+        order) and their reference points (mm), for ``nodes`` (owned_xy_dofs)."""
+        xdofs, ydofs, self._ref = owned_xy_dofs(self.w, self.U, facets)
         self.candidate_dofs = np.sort(np.concatenate([xdofs, ydofs])).astype(np.int32)
-        self.xy_dofs, self._ref = (xdofs, ydofs), U.tabulate_dof_coordinates()[nodes]
+        self.xy_dofs = (xdofs, ydofs)
 
     def coupled_dofs(self) -> list[np.ndarray]:
         """None: the facet form couples only dofs that share a cell (already in the tangent's
