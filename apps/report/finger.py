@@ -13,6 +13,24 @@ from apps.report.common import (MESH_REFERENCE, NOT_JUDGED, PAPER, Check, Target
 FINGER_TITLE = "Whole-finger validation (issue 14)"
 
 
+
+#: (held-out comparison in results/fem, the committed surrogate on that walk in
+#: results/surrogate, the make target that writes both): the committed 1.8 mm walk
+#: against the same walk on a finer mesh and on the production discretisation.
+HELDOUT_COMPARISONS = (("heldout_mesh", "heldout_fine", "make dataset-fine"),
+                       ("heldout_production", "heldout_production", "make production-compare"))
+
+
+def _walk_row(c: dict, mesh, target: str) -> str:
+    """The error-budget row of one held-out comparison (workflow.dataset compare)."""
+    other = _words(mesh(c["other_mesh"]), c["other_mesh"].get("formulation", "displacement"))
+    return (f"| discretisation: one joint over the held-out walk, the committed set (mesh {mesh(c['ref_mesh'])}) -> "
+            f"mesh {other}, {c['samples']} of {c['ref_samples']} samples"
+            f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
+            f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
+            f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
+            f"| `{target}` |")
+
 def _variant_label(e: dict) -> str:
     """A finger.json variant in words, from its entry's own fields."""
     if e["method"] == "chain":
@@ -67,21 +85,19 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                            f"{MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, "
                            f"phi_end {e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst load; the "
                            "corners load a joint far more than the finger's cases do) | `make mesh-study` |")
-    c, fine = load(root, "fem/heldout_mesh.json"), load(root, "surrogate/heldout_fine.json")
     mesh = lambda m: m.get("mesh") or mesh_label(m["mesh_size"], m["wall_mesh_size"])
-    if c:
-        out.append(f"| discretisation: one joint over the held-out walk, the committed set (mesh {mesh(c['ref_mesh'])}) -> "
-                   f"mesh {mesh(c['other_mesh'])}, {c['samples']} of {c['ref_samples']} samples"
-                   f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
-                   f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
-                   f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
-                   "| `make dataset-fine` (results/fem/heldout_mesh.json) |")
-    if c and fine:
-        out.append(f"| surrogate improved.pt (trained on mesh {mesh(c['ref_mesh'])}) against the {fine['n']} held-out samples "
-                   f"on mesh {mesh(c['other_mesh'])} | tip "
-                   f"{fine['tip_error_mm']:.3f} mm, cap rotation {fine['cap_rotation_error_deg']:.3f}° mean "
-                   f"({fine['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
-                   "| results/surrogate/heldout_fine.json (`make dataset-fine`) |")
+    comparisons = [(load(root, f"fem/{a}.json"), load(root, f"surrogate/{b}.json"), target)
+                   for a, b, target in HELDOUT_COMPARISONS]
+    for cmp, fem_eval, target in comparisons:
+        if cmp:
+            out.append(_walk_row(cmp, mesh, target))
+        if cmp and fem_eval:
+            out.append(f"| surrogate improved.pt (trained on mesh {mesh(cmp['ref_mesh'])}) against the {fem_eval['n']} "
+                       f"held-out samples on mesh {_words(mesh(cmp['other_mesh']), cmp['other_mesh'].get('formulation', 'displacement'))} | tip "
+                       f"{fem_eval['tip_error_mm']:.3f} mm, cap rotation {fem_eval['cap_rotation_error_deg']:.3f}° mean "
+                       f"({fem_eval['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
+                       f"| `{target}` |")
+    c = comparisons[0][0]
     surrogate = load(root, "surrogate/metrics.json")
     held = (surrogate or {}).get("improved", {}).get("heldout", {})
     if held.get("cap_rotation_error_deg") is not None:
@@ -121,6 +137,12 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                         f"{train['samples']:,}-sample train set on it would take at most about {hours:.0f} CPU hours "
                         f"({hours / 2:.0f} h on this 2-core machine, about {hours / 64:.1f} h on the 2 x 32 tasks of "
                         "`workflow/slurm/campaign.sbatch`; its units of 64 solve fewer samples from zero).")
+    prod = comparisons[1][0]
+    if prod and held.get("tip_error_mm"):
+        out[-1] += (f" On the production discretisation (mesh {mesh(prod['other_mesh'])}, its complete held-out walk) "
+                    f"the committed set's tip moves {prod['tip_mm']['mean'] / held['tip_error_mm']:.1f}x as far "
+                    f"({prod['tip_mm']['mean']:.3f} mm mean, {prod['tip_mm']['max']:.3f} max; "
+                    f"{prod['cpu_s_per_sample']['other']:.1f} CPU s per sample over its pieces, most beside other jobs).")
     return out
 
 
