@@ -299,9 +299,10 @@ results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.
 
 # Issue 38 §3(b): the whole-finger FEM of a deliberately different finger (CAL_TRUTH: joints
 # E x 1.15, the tip 20 % heavier, the mount turned 2 deg) at CAL_PRESSURES with gravity, all
-# inside |P| <= 0.2 MPa where the finger FEM converges; predictor.calibration_fem.PRESSURES is
-# the same list (tests/test_calibration_fem.py checks). One core, niced, hours at the
-# production mesh; a converged case is skipped, so a killed run resumes.
+# inside |P| <= 0.2 MPa; predictor.calibration_fem.PRESSURES is the same list
+# (tests/test_calibration_fem.py checks). One core, niced, on the truth joint file's 1.8 mm
+# mesh (the surrogate's): 15 min for the committed run; a converged case is skipped, so a
+# killed run resumes.
 CAL_TRUTH     := results/calibration/truth/finger.toml
 CAL_FEM       := results/calibration/fem
 CAL_PRESSURES := 0.2,0.2;-0.2,0.15;0.15,-0.2;-0.15,-0.15;0,0;0.1,0.05;-0.1,0.2;0.05,-0.1
@@ -309,7 +310,7 @@ CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py
                  predictor/calibration_file.py predictor/calibration_fem.py predictor/calibration_plot.py \
                  predictor/calibrate.py
 
-calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, hours; resumes) -> results/calibration/fem/
+calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, ~15 min; resumes) -> results/calibration/fem/
 	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --out $(CAL_FEM)
 
 calibrate-demo: results/calibration/calibration.json ## calibrate the paper's predictor on 4 FEM gestures of the true finger, predict the other 4 (~1 min; needs make calibration-fem) -> results/calibration/{calibration.json,heldout.png,calibrated.toml}
