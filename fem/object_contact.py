@@ -150,6 +150,14 @@ def candidate_facets(mesh, facet_tags, finger: FingerSpec, excluded: list[int]) 
     return facets[keep], part[keep]
 
 
+def part_measure(mesh, facets: np.ndarray, parts: np.ndarray) -> ufl.Measure:
+    """The facet measure of the candidate facets, ``ds(k + 1)`` over part k's (parts: the
+    part index of each facet), at the contact quadrature."""
+    order = np.argsort(facets)
+    tags = meshtags(mesh, mesh.topology.dim - 1, facets[order], (parts[order] + 1).astype(np.int32))
+    return ufl.Measure("ds", domain=mesh, subdomain_data=tags, metadata={"quadrature_degree": CONTACT_QUADRATURE})
+
+
 def split_unknown(w: fem.Function):
     """(U, u, v, test) of the unknown w: the displacement space U (W.sub(0) of a mixed
     (u, p)), the displacement u and its test function v (UFL), and W's test function."""
@@ -208,9 +216,7 @@ class ObjectContact:
         W = w.function_space
         self.U, u, v, test = split_unknown(w)
         facets, parts = candidate_facets(mesh, mesh_data.facet_tags, finger, excluded_tags)
-        order = np.argsort(facets)
-        tags = meshtags(mesh, mesh.topology.dim - 1, facets[order], (parts[order] + 1).astype(np.int32))
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags, metadata={"quadrature_degree": CONTACT_QUADRATURE})
+        ds = part_measure(mesh, facets, parts)
         xg, vg = global_frame(finger, mesh, u, v)
         d, n = signed_distance(obstacle, xg)
         t = upward_tangent(n)

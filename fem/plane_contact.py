@@ -47,13 +47,13 @@ import numpy as np
 import ufl
 from dolfinx import fem
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector
-from dolfinx.mesh import exterior_facet_indices, meshtags
+from dolfinx.mesh import exterior_facet_indices
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from contract.finger import FingerSpec
 from contract.grasp import CONTACT_SMOOTHING, PLANE_STIFFNESS
-from fem.object_contact import (CONTACT_QUADRATURE, bending_facets, global_frame, owned_xy_dofs, part_width,
+from fem.object_contact import (bending_facets, global_frame, owned_xy_dofs, part_measure, part_width,
                                 smooth_penetration, split_unknown)
 
 
@@ -89,9 +89,7 @@ class PlaneContact:
         self.comm = mesh.comm
         self.U, u, v, _ = split_unknown(w)
         facets, parts = plane_facets(mesh, mesh_data.facet_tags, finger, excluded_tags)
-        order = np.argsort(facets)
-        tags = meshtags(mesh, mesh.topology.dim - 1, facets[order], (parts[order] + 1).astype(np.int32))
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags, metadata={"quadrature_degree": CONTACT_QUADRATURE})
+        ds = part_measure(mesh, facets, parts)
         xg, vg = global_frame(finger, mesh, u, v)
         s = smooth_penetration(-xg[0], smoothing)
         # N per part: k_p / width of that part, over its own facet tag
