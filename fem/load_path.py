@@ -253,7 +253,7 @@ class LoadPathSolver:
         self._K = TangentAction(R, self.u, self.bcs, self.contact, self._P)   # GMRES's operator
         self._load = np.zeros(len(problem.load_scale))   # the load of the residual now
         self._held = self._load                  # the load the problem's constants hold now
-        self._factor_load = None                     # the load _P was assembled at (None: none)
+        self._factor_load = None                 # the load of the factorised tangent (None: none yet)
         self._u_saved, self._du, self._chord = (fem.Function(self.V) for _ in range(3))
         self._lagged_saved = [0.0] * len(problem.lagged)
         self._factor_type = "cholesky"           # MUMPS LDL^T; "lu" once a tangent is not symmetric
