@@ -166,6 +166,11 @@ class ContactTerms:
     def __bool__(self) -> bool:
         return bool(self.terms)
 
+    @property
+    def tangent_in_cells(self) -> bool:
+        """Whether a term's tangent is a facet form (fem.load_path.TangentAction)."""
+        return any(getattr(t, "tangent_in_cells", False) for t in self.terms)
+
     def coupled_dofs(self) -> list[np.ndarray]:
         """Every term's rows of coupled global dofs (each row: one dense block)."""
         return [row for t in self.terms for row in t.coupled_dofs()]

@@ -206,6 +206,9 @@ class ObjectContact:
     False makes the term add nothing (the approach gesture before the object is brought
     in). Collective."""
 
+    #: its tangent is a facet form, in the tangent's own pattern (fem.load_path.TangentAction)
+    tangent_in_cells = True
+
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float, obstacle: ObjectSpec,
                  excluded_tags: list[int], *, stiffness: float = CONTACT_STIFFNESS,
                  smoothing: float = CONTACT_SMOOTHING, mu: float = FRICTION, weight: float = OBJECT_WEIGHT):

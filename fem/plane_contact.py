@@ -81,6 +81,9 @@ class PlaneContact:
     (mm): contract.grasp's. ``active`` False makes the term add nothing (the finger then
     passes through X = 0). Collective."""
 
+    #: its tangent is a facet form, in the tangent's own pattern (fem.load_path.TangentAction)
+    tangent_in_cells = True
+
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float,
                  excluded_tags: list[int], *, stiffness: float = PLANE_STIFFNESS,
                  smoothing: float = CONTACT_SMOOTHING):

@@ -84,7 +84,7 @@ class SolveResult:
     newton_iterations: list[int] = field(default_factory=list)
     load_steps: int = 0
     cutbacks: int = 0
-    factorisations: int = 0         # LU factorisations this solve needed
+    factorisations: int = 0         # factorisations (LDL^T or LU) this solve needed
     krylov_iterations: int = 0      # GMRES iterations over its tangent solves
     wall_time: float = 0.0
     reason: str = ""

@@ -7,7 +7,8 @@ shared by the tests:
 
 * the finger's equilibrium: the clamp's reaction balances the finger's weight (0.28 N)
   and the object's force, whose vertical part is the object's half weight (holds);
-  measured to 3e-13 N, asserted to Newton's residual tolerance (1e-8 N);
+  measured to 1.3e-8 N (Newton stops at |R| <= 1e-8 N, and the net force of the free rows'
+  residual is bounded by sqrt(rows) |R|, not |R|), asserted at 5x that tolerance;
 * agreement with the predictor's outline law (contact36's predictor.gesture --object
   circle --p1 0.2 --p2 0.25: holds, tip (37.7655, -214.4284) mm, N 0.4187 N, friction
   use 0.382, contact on the tip). Measured on this mesh: tip (37.7383, -214.3886) mm,
@@ -62,8 +63,8 @@ def test_grasp_balances_half_weight_and_base(grasp):
     fx, fy = out["object_force_N"]
     assert fy == pytest.approx(-0.1, abs=1e-12)             # W/2 carried by the friction
     bx, by = out["base_force_N"]
-    assert bx + fx == pytest.approx(0.0, abs=NEWTON_ATOL)     # the clamp takes the object's push
-    assert by == pytest.approx(FINGER_WEIGHT + 0.1, abs=NEWTON_ATOL)
+    assert bx + fx == pytest.approx(0.0, abs=5 * NEWTON_ATOL)     # the clamp takes the object's push
+    assert by == pytest.approx(FINGER_WEIGHT + 0.1, abs=5 * NEWTON_ATOL)
     assert abs(fx) > 0.3                                      # the push is there to be balanced
     assert out["contact_patch"]["parts"] == ["tip"]
 

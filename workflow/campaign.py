@@ -28,10 +28,10 @@ the samples are the same whatever the number of ranks or groups.
 
 Speed. The first sample of a unit is solved from zero (the solver's load path with
 cut-back); every further sample continues from the previous converged state along the
-short walk step (Euler predictor with the converged tangent, then Newton). The assembled
-sparsity, forms and MUMPS symbolic factorisation are reused throughout. The Jacobian
-comes from ``solver.sensitivities()``: one back-substitution per input with the existing
-factorisation.
+short walk step (Euler predictor from the previous sample's sensitivities, then Newton).
+The assembled sparsity, forms and MUMPS symbolic factorisation are reused throughout. The
+Jacobian comes from ``solver.sensitivities()``: one block GMRES solve for the four inputs,
+preconditioned with the sample's factorisation (fem.load_path).
 
 Failures. A sample whose continuation fails is retried once from zero; if that fails too
 it goes to the shard's failure arrays with its inputs and both reasons (never as data),
