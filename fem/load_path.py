@@ -697,6 +697,28 @@ class LoadPathSolver:
         self._save()
         return PathOutcome(True, self.state.copy(), [int(n)], 1, 0, "")
 
+    def tangent_products(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """K(u) x at the current state twice, (assembled, matrix-free): by the assembled
+        tangent (contact blocks included) and by GMRES's operator :class:`TangentAction`;
+        x and both products are this rank's entries. A check of the matrix-free operator
+        (they agree to round-off); the next solve refactorises. Collective."""
+        self._K.update()
+        self._assemble_tangent()
+        self._refactor = True           # _P now holds this state's tangent, not its factors'
+        vx = self._P.createVecRight()
+        vx.array[:] = x
+        assembled, free = vx.duplicate(), vx.duplicate()
+        self._P.mult(vx, assembled)
+        self._K.mat.mult(vx, free)
+        out = assembled.array.copy(), free.array.copy()
+        for vec in (vx, assembled, free):
+            vec.destroy()
+        return out
+
+    def constrained_dofs(self) -> np.ndarray:
+        """This rank's dofs under a Dirichlet condition (local indices, owned)."""
+        return self._K.fixed_owned
+
     # ------------------------------------------------------------------ sensitivities
     def sensitivities(self) -> np.ndarray:
         """du/da at the probe points at the current converged state, shape (n, 3, len(a)):
