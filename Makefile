@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -334,6 +334,14 @@ finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases on the committed
 
 finger-grid: | $(SETUP) ## whole-finger FEM at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, hours; resumes) -> results/fem/finger_grid.json
 	nice $(PY) -m fem.finger_grid --out results/fem/finger_grid.json
+
+# The FEM side of the grasp validation (issue 36 §3, fem/grasp_cases.py, docs/fem-grasps.md):
+# the paper's six grasps and ten atlas cases on the production discretisation (the joint
+# file's [mesh], hex2:3 mixed), the plane X = 0 on; a converged case is skipped, so a killed
+# run resumes. Never part of `make test` (tests/test_grasp_cases.py runs no grasp).
+GRASP_FEM := results/validation/grasps_fem
+grasp-fem: | $(SETUP) ## whole-finger FEM grasps: the paper's six + ten atlas cases on the production mesh, plane X = 0 (one process, niced, hours; resumes) -> results/validation/grasps_fem/
+	nice $(PY) -m fem.grasp_cases --out $(GRASP_FEM)
 
 validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
 results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)

@@ -68,6 +68,19 @@ FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
     "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh?": str, "mesh.mesh_size?": NUM, "mesh.divisions?": int,
     "mesh.nodes": int})
 
+#: results/validation/grasps_fem/<case>.json (make grasp-fem; fem.grasp_cases): one FEM grasp
+#: along the predictor's history (GraspResult.summary and the case); the figures are null
+#: unless converged, ``friction_use`` and ``contact_point_mm`` also when nothing touches;
+#: ``render`` (the PNG's extent) only when converged.
+GRASP_CASE = Format("fem-grasp-case", 1, "fem.grasp_cases", {
+    **each("", str, "case", "region", "object", "state", "formulation"), "object_geometry.kind": str,
+    **each("", NUM, "p1", "p2", "mu", "object_weight_N", "fem_s", "fem_cpu_s", "setup_s"),
+    **each("", list, "pressures_MPa", "approach_MPa"), **each("", bool, "gravity", "plane", "converged"),
+    **each("", list | None, "tip", "contact_point_mm", "object_force_N", "base_force_N"),
+    **each("", MAYBE, "tip_angle_deg", "contact_force_N", "friction_use", "penetration_mm", "plane_force_N"),
+    "contact_patch": dict | None, "mesh.mesh": str, "mesh.nodes": int, "ranks": int,
+    "render?.extent_mm": list, "render?.u_max_mm": NUM})
+
 #: results/fem/finger_grid.json (make finger-grid; fem.finger_grid): the finger FEM over an
 #: N x N grid of gravity pressure pairs, each case's convergence, time and Newton figures.
 FINGER_GRID = Format("fem-finger-grid", 1, "fem.finger_grid", {

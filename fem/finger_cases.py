@@ -36,7 +36,7 @@ colour bar or axes, so that predictor.validate_finger can draw the predictor's c
 lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
 and the |u| colour range. Files are written atomically; a case whose JSON exists for
 the same finger (by its values: contract.finger.same_finger), mesh and formulation is
-skipped, so a killed run resumes (the
+skipped (``record_stands``, the rule fem.grasp_cases shares), so a killed run resumes (the
 settings record the formulation only when it is not "displacement", and the joints'
 digests, ``joints``, only when some joint is not the paper's, so the cases solved before
 the mixed formulation and joint files existed stand). A solve that does not
@@ -139,9 +139,47 @@ def case_settings(finger, geometry, formulation: str, plane: bool = False) -> di
     return settings
 
 
-def render(solver: FingerSolver, path: Path) -> dict:
+def solver_settings(geometry) -> dict:
+    """The controls FingerSolver solves with on ``geometry`` (fem.finger.FINGER_CONFIG,
+    fem.solver.config_for), as a case records them (``solver``)."""
+    return json_safe(asdict(config_for(geometry, FINGER_CONFIG)))
+
+
+def record_stands(path: Path, settings: dict, solver: dict, finger) -> bool:
+    """Whether the case record at ``path`` stands, so that a run skips the case (module
+    docstring): it is a JSON object of the same ``settings`` (fem.finger.same_settings: the
+    same finger by its values, mesh, formulation, ...) that converged, or that failed with
+    the same ``solver`` controls. A missing, damaged or foreign file does not stand."""
+    if not path.is_file():
+        return False
+    try:
+        done = json.loads(path.read_text())
+    except ValueError:
+        return False        # a foreign or damaged file: solve again and replace it
+    if not isinstance(done, dict):
+        return False
+    # A converged case stands while the finger and mesh are the same; a failed one is
+    # tried again once the solver's controls change.
+    return same_settings(done.get("settings"), json_safe(settings), finger) and bool(
+        done.get("converged") or done.get("solver") == solver)
+
+
+def part_slice(ap: cli.Parser, text: str) -> slice:
+    """The cases of ``--part K/N``: every N-th starting at the K-th (a usage error unless
+    1 <= K <= N)."""
+    try:
+        k, n = (int(v) for v in text.split("/"))
+        assert 1 <= k <= n
+    except (ValueError, AssertionError):
+        ap.error(f"--part {text!r}: use K/N with 1 <= K <= N")
+    return slice(k - 1, None, n)
+
+
+def render(solver: FingerSolver, path: Path, outline: np.ndarray | None = None) -> dict:
     """The deformed finger in the global plane, coloured by |u|, to ``path`` (PNG, atomic).
-    Returns {"extent_mm": [X0, X1, Y0, Y1], "u_max_mm": ...} for the overlay."""
+    ``outline`` (n, 2) mm, global: a closed polyline drawn over it in black (fem.grasp_cases:
+    the object's outline), which the extent then takes in too. Returns {"extent_mm": [X0,
+    X1, Y0, Y1], "u_max_mm": ..., "cmap": ...} for the overlay."""
     from dolfinx import plot
 
     finger = solver.finger
@@ -159,7 +197,8 @@ def render(solver: FingerSolver, path: Path) -> dict:
     xy = moved[:, :2] @ turn.T + [0.5 * finger.base_gap, 0.0]
     full.points = np.column_stack([xy, moved[:, 2]])
     full.point_data["|u|"] = np.linalg.norm(full.point_data["u"], axis=1)
-    lo, hi = xy.min(0) - 15.0, xy.max(0) + 15.0
+    shown = xy if outline is None else np.vstack([xy, outline])
+    lo, hi = shown.min(0) - 15.0, shown.max(0) + 15.0
     centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo).max()
     extent = [centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half]
     umax = float(full.point_data["|u|"].max())
@@ -167,6 +206,10 @@ def render(solver: FingerSolver, path: Path) -> dict:
     p.set_background("white")
     p.add_mesh(full.extract_surface(nonlinear_subdivision=0, algorithm='dataset_surface'), scalars="|u|", cmap="viridis",
                clim=(0.0, umax), show_scalar_bar=False)
+    if outline is not None:
+        # above the finger (|z| <= width / 2) so that the camera on +z sees it on top
+        line = pyvista.lines_from_points(np.column_stack([outline, np.full(len(outline), 100.0)]), close=True)
+        p.add_mesh(line, color="black", line_width=3)
     p.enable_parallel_projection()
     p.camera.focal_point = (centre[0], centre[1], 0.0)
     p.camera.position = (centre[0], centre[1], 1000.0)
@@ -203,12 +246,7 @@ def main(argv=None) -> int:
     for name in chosen:
         if name not in names:
             ap.error(f"unknown case {name!r}: use {', '.join(names)}")
-    try:
-        k, n = (int(v) for v in args.part.split("/"))
-        assert 1 <= k <= n
-    except (ValueError, AssertionError):
-        ap.error(f"--part {args.part!r}: use K/N with 1 <= K <= N")
-    cases = [c for c in table if c[0] in chosen][k - 1::n]
+    cases = [c for c in table if c[0] in chosen][part_slice(ap, args.part)]
     finger = args.finger or load_finger()
     if finger.n_joints != 2:
         ap.error(f"--finger: finger {finger.name!r} has {finger.n_joints} joint(s); the validation cases "
@@ -221,39 +259,30 @@ def main(argv=None) -> int:
     cli.setup_logging(args.quiet)
     geometry, formulation = finger_discretisation(ap, args, finger)
     settings = case_settings(finger, geometry, formulation, args.plane)
-    solver_settings = json_safe(asdict(config_for(geometry, FINGER_CONFIG)))     # FingerSolver's own
+    solver = solver_settings(geometry)
     suffix = default_suffix(geometry.joint, formulation, args.plane) if args.suffix is None else args.suffix
     out = Path(args.out)
     todo = []
     for name, p1, p2, gravity in cases:
         path = out / f"{name}{suffix}.json"
-        if path.is_file():
-            try:
-                done = json.loads(path.read_text())
-            except ValueError:
-                done = {}       # a foreign or damaged file: solve again and replace it
-            # A converged case stands while the finger and mesh are the same; a failed one
-            # is tried again once the solver's controls change.
-            if same_settings(done.get("settings"), json_safe(settings), finger) and (
-                    done.get("converged") or done.get("solver") == solver_settings):
-                continue
-        todo.append((name, p1, p2, gravity, path))
+        if not record_stands(path, settings, solver, finger):
+            todo.append((name, p1, p2, gravity, path))
     if not todo:
         print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
         return 0
     with ap.errors(), cli.heartbeat("finger cases"):
         t0 = time.perf_counter()
-        solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
+        fem_solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
         setup_s = time.perf_counter() - t0
         for name, p1, p2, gravity, path in todo:
-            res = solver.solve(FingerLoad((p1, p2), gravity))
+            res = fem_solver.solve(FingerLoad((p1, p2), gravity))
             record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
                       "load_average": os.getloadavg()[0], "setup_s": setup_s,
-                      "mesh": solver.mesh_info(), "formulation": formulation, "settings": settings,
-                      "solver": solver_settings,
+                      "mesh": fem_solver.mesh_info(), "formulation": formulation, "settings": settings,
+                      "solver": solver,
                       "ranks": comm.size}
             if res.converged:
-                record["render"] = render(solver, path.with_suffix(".png"))
+                record["render"] = render(fem_solver, path.with_suffix(".png"))
             cli.make_output_folder(out)
             FINGER_CASE.write(path, record)
             print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "

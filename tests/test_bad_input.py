@@ -134,6 +134,20 @@ CASES_FEM = [
     ("fem.finger_cases", ["--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/f"],
      "--finger: finger 'three' has 3 joint(s); the validation cases are pressure pairs for a two-joint finger"),
     ("fem.finger_cases", ["--finger", "tests/data/fingers/heavy.toml", "--out", "{tmp}/f"], "weight = 1000000000.0 is outside"),
+    # fem.grasp_cases (issue 36 §3): cases, pressures, objects and --out, before any mesh
+    ("fem.grasp_cases", ["--cases", "circle_0.2_0.3,nope", "--out", "{tmp}/g"], "unknown case 'nope'"),
+    ("fem.grasp_cases", ["--grasps", "circle@0.2,0.35", "--out", "{tmp}/g"],
+     "case circle_0.2_0.35: P2 = 0.35 is outside [-0.3, 0.3] MPa"),
+    ("fem.grasp_cases", ["--grasps", "circle@0.2,nan", "--out", "{tmp}/g"], "'nan' is not a finite number"),
+    ("fem.grasp_cases", ["--grasps", "circle:x=5@0.2,0.3", "--out", "{tmp}/g"], "object centre x = 5 mm"),
+    ("fem.grasp_cases", ["--grasps", "circle", "--out", "{tmp}/g"], "'circle': use SPEC@P1,P2"),
+    ("fem.grasp_cases", ["--grasps", "ellipse@0.1,0.1;ellipse@0.1,0.1", "--out", "{tmp}/g"],
+     "ellipse_0.1_0.1 given twice"),
+    ("fem.grasp_cases", ["--part", "2/1", "--out", "{tmp}/g"], "--part '2/1': use K/N with 1 <= K <= N"),
+    ("fem.grasp_cases", ["--out", "/proc/g"], "cannot write /proc/g: /proc:"),
+    ("fem.grasp_cases", ["--out", "{tmp}/a/b"], "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
+    ("fem.grasp_cases", ["--out", "README.md"], "README.md is a file, not a folder"),
+    ("fem.grasp_cases", ["--divisions", "2", "--mesh-size", "4", "--out", "{tmp}/g"], "--divisions (hexahedra) excludes"),
     # --- fem cases (end)
 ]
 CASES_WORKFLOW = [
