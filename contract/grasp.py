@@ -96,6 +96,22 @@ class ObjectSpec:
         c, s = math.cos(self.angle), math.sin(self.angle)
         return q @ np.array([[c, -s], [s, c]])
 
+    def outline(self, n: int = 720) -> np.ndarray:
+        """(n, 2) points (mm, global) of the boundary, counter-clockwise, for figures: the
+        ellipse (a cos t, b sin t), or the rounded rectangle's four corner arcs of radius
+        ``corner`` about (±(a - corner), ±(b - corner)), its sides the chords between
+        them; turned by the angle and moved to the centre (``local``'s inverse)."""
+        t = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+        if self.kind in ("circle", "ellipse"):
+            q = np.column_stack([self.a * np.cos(t), self.b * np.sin(t)])
+        else:
+            # each quarter of t goes round one corner's arc; its centre is in that quadrant
+            centre = np.column_stack([np.sign(np.cos(t + 1e-12)) * (self.a - self.corner),
+                                      np.sign(np.sin(t + 1e-12)) * (self.b - self.corner)])
+            q = centre + self.corner * np.column_stack([np.cos(t), np.sin(t)])
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return q @ np.array([[c, s], [-s, c]]) + (self.x, self.y)
+
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """d (...) mm of global points (..., 2), negative inside: exact for the circle and
         the rounded rectangle, first order (g/|grad g|) for the ellipse."""

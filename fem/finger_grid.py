@@ -24,7 +24,6 @@ import math
 import os
 import sys
 import time
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -34,11 +33,10 @@ from contract import cli
 from contract.files import json_safe
 from contract.finger import FingerSpec, finger_arg, load_finger
 from fem.artefacts import FINGER_GRID
-from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
+from fem.finger import (FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
                         pressure_limits, same_settings)
-from fem.geometry import FingerGeometry
+from fem.finger_cases import solver_settings
 from fem.options import one_rank
-from fem.solver import config_for
 
 
 def grid_pairs(limits: np.ndarray, points: int) -> list[tuple[float, float]]:
@@ -46,11 +44,6 @@ def grid_pairs(limits: np.ndarray, points: int) -> list[tuple[float, float]]:
     P1 varying fastest; values rounded to 1e-12 so that 0 is 0."""
     axes = [np.round(np.linspace(-limit, limit, points), 12) + 0.0 for limit in limits]
     return [(float(p1), float(p2)) for p2 in axes[1] for p1 in axes[0]]
-
-
-def solver_settings(geometry: FingerGeometry) -> dict:
-    """The controls FingerSolver solves with (fem.finger.FINGER_CONFIG on this mesh), as recorded."""
-    return json_safe(asdict(config_for(geometry, FINGER_CONFIG)))
 
 
 def case_record(p1: float, p2: float, result) -> dict:

@@ -60,7 +60,6 @@ whose records stood).
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import re
 import sys
@@ -159,23 +158,6 @@ def object_geometry(ob: ObjectSpec) -> dict:
     return out
 
 
-def object_outline(ob: ObjectSpec, n: int = OUTLINE_POINTS) -> np.ndarray:
-    """(n, 2) points (mm, global) of the object's boundary, counter-clockwise: the ellipse
-    (a cos t, b sin t), or the rounded rectangle's four corner arcs of radius rc about
-    (±(a - rc), ±(b - rc)) joined by its sides; turned by the object's angle and moved to
-    its centre (ObjectSpec.local's inverse)."""
-    t = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
-    if ob.kind in ("circle", "ellipse"):
-        q = np.column_stack([ob.a * np.cos(t), ob.b * np.sin(t)])
-    else:
-        # each quarter of t goes round one corner's arc; its centre is in that quadrant
-        centre = np.column_stack([np.sign(np.cos(t + 1e-12)) * (ob.a - ob.corner),
-                                  np.sign(np.sin(t + 1e-12)) * (ob.b - ob.corner)])
-        q = centre + ob.corner * np.column_stack([np.cos(t), np.sin(t)])
-    c, s = math.cos(ob.angle), math.sin(ob.angle)
-    return q @ np.array([[c, s], [-s, c]]) + (ob.x, ob.y)
-
-
 def grasp_settings(base: dict, ob: ObjectSpec, approach, mu: float, weight: float) -> dict:
     """A case's settings (the resume key): fem.finger_cases.case_settings ``base`` and the
     grasp's object, approach (MPa), mu and W (N)."""
@@ -259,7 +241,7 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
                               "mesh": solver.fem.mesh_info(), "formulation": formulation, "settings": settings,
                               **run})
         if result.finger.converged:
-            record["render"] = finger_cases.render(solver.fem, path.with_suffix(".png"), object_outline(ob))
+            record["render"] = finger_cases.render(solver.fem, path.with_suffix(".png"), ob.outline(OUTLINE_POINTS))
         cli.make_output_folder(out)
         GRASP_CASE.write(path, record)
         say(case_line(record))

@@ -38,7 +38,7 @@ from fem import grasp_cases  # noqa: E402
 from fem.artefacts import GRASP_CASE  # noqa: E402
 from fem.finger import FingerLoad, FingerResult, pressure_limits  # noqa: E402
 from fem.grasp import GraspResult  # noqa: E402
-from fem.grasp_cases import CASES, GraspCase, object_outline  # noqa: E402
+from fem.grasp_cases import CASES, GraspCase  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OBJECTS = ("circle", "ellipse", "rectangle")
@@ -97,7 +97,7 @@ def _shoelace(xy):
 ])
 def test_outline_lies_on_the_object(spec, area):
     ob = parse_object(spec)
-    xy = object_outline(ob, 4000)
+    xy = ob.outline(4000)
     assert np.abs(ob.signed_distance(xy)).max() < 1e-9 * max(ob.a, ob.b)
     # counter-clockwise, enclosing the area to the polygon's chord error (~ (2 pi / n)^2)
     assert _shoelace(xy) == pytest.approx(area, rel=2e-5)
@@ -216,7 +216,7 @@ def test_render_extent_maps_the_outline_and_the_finger(tmp_path):
     for kind in OBJECTS:
         assert parse_object(kind).signed_distance(xy).min() > 10.0, kind
     ob = parse_object("rectangle")
-    out = render(solver, tmp_path / "r.png", object_outline(ob))
+    out = render(solver, tmp_path / "r.png", ob.outline())
     image = plt.imread(tmp_path / "r.png")[:, :, :3]
     h, w = image.shape[:2]
     x0, x1, y0, y1 = out["extent_mm"]
@@ -231,7 +231,7 @@ def test_render_extent_maps_the_outline_and_the_finger(tmp_path):
         return np.min([image[np.clip(rows + dr, 0, h - 1), np.clip(cols + dc, 0, w - 1)].mean(-1)
                        for dr in (-1, 0, 1) for dc in (-1, 0, 1)], axis=0)
 
-    assert np.mean(darkest(*pixel(object_outline(ob, 200))) < 0.2) > 0.95
+    assert np.mean(darkest(*pixel(ob.outline(200))) < 0.2) > 0.95
     rows, cols = pixel(np.array([[ob.x, ob.y]]))
     assert image[rows[0], cols[0]].min() > 0.99                     # white inside the object
     pick = np.random.default_rng(1).choice(len(xy), 300, replace=False)
