@@ -28,10 +28,13 @@ def within(force: torch.Tensor, moment: torch.Tensor, in_box: torch.Tensor, opts
 
 def lm_step(J: torch.Tensor, r: torch.Tensor, mu) -> torch.Tensor:
     """The damped Gauss-Newton step -(JᵀJ + mu·I)⁻¹ Jᵀ r (B, n) of J (B, m, n), r (B, m),
-    mu (B,) or a number."""
+    mu (B,) or a number; zero for a sample whose system is singular."""
     JT = J.transpose(1, 2)
     mu = torch.as_tensor(mu, dtype=J.dtype).reshape(-1, 1, 1)
-    return -torch.linalg.solve(JT @ J + mu * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])[..., 0]
+    step, info = torch.linalg.solve_ex(JT @ J + mu * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])
+    # A singular system (a pose far across a stiff penalty, where the forces swamp mu)
+    # takes no step: the LM then raises mu, as for a step that fails.
+    return torch.where((info == 0)[:, None] & step[..., 0].isfinite().all(-1, keepdim=True), -step[..., 0], 0.0)
 
 
 def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):

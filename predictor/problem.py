@@ -15,6 +15,7 @@ Data flow: model, object spec, options -> load_problem -> GripperProblem (checke
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -148,8 +149,7 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
     (one line) for any bad value and for an object badly placed (``placement_error``)."""
     params = params or GripperParams()
     if object_weight is not None:
-        params = GripperParams(params.finger, OBJECT_WEIGHT.value("object_weight", object_weight),
-                               params.kinematics, params.joint_weight)
+        params = dataclasses.replace(params, object_weight=OBJECT_WEIGHT.value("object_weight", object_weight))
     contact = ContactParams() if mu is None else ContactParams(mu=MU.value("mu", mu))
     obstacle = parse_object(spec) if spec else None
     if approach == DEFAULT:

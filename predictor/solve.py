@@ -14,7 +14,10 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
   land within the tolerances across the box); the answer's own residual is the check,
   and where it fails more Newton steps, then the LM below, go on (``_newton_then_lm``).
   From a given x0 (a network's tau) one Newton step and its statics, also one graph
-  (``newton_polish``).
+  (``newton_polish``). Where the two fingers meet at X = 0 (statics.plane_contact) the
+  answer depends on how they closed: rows whose load-free pose already lies across the
+  plane, and rows that fail or end across it deeper than max_penetration, are ramped from
+  zero pressure instead (predictor.ramp.plane_ramp).
   With an object: the LM below (predictor.nn_answer starts the same Newton steps,
   ``newton_iterate``, from the contact network's tau and checks their branch itself).
 - ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
@@ -52,7 +55,8 @@ and chooses the path.
 
 Data flow: ``solve(problem, pressures, options)`` with a statics.GripperProblem (joint,
 finger, object, contact law, gravity, approach) -> GestureResult (tau, residuals, contact
-figures, pose); ``result.summary(i)`` is sample i as a JSON-ready dict.
+figures, where it touches, the fingers' meeting, pose); ``result.summary(i)`` is sample i
+as a JSON-ready dict.
 """
 from __future__ import annotations
 
@@ -67,8 +71,9 @@ from predictor.lm import within
 from predictor.newton import (COLD_STEPS, NEWTON_STEPS, bounds, newton_iterate, newton_step, traced_cold_fn,
                               traced_warm_fn)
 from predictor.options import SolverOptions
-from predictor.ramp import APPROACH, approach_for, attempts, ramp_method, solve_path
-from predictor.result import GestureResult, result_labels
+from predictor.ramp import (APPROACH, approach_for, attempts, plane_first, plane_ramp, plane_rows, ramp_method,
+                            solve_path)
+from predictor.result import GestureResult, contact_fields, result_labels
 from predictor.statics import GripperProblem, Statics, box_scale, out_of_reach, residual_norms
 
 __all__ = ["APPROACH", "GRAPHS", "GestureResult", "SolverOptions", "approach_for", "gesture_result", "graph_mode",
@@ -103,9 +108,12 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
     t0 = time.perf_counter()
     if options.method == "newton" and problem.obstacle is None and options.jacobian != "exact":
         if x0 is None and options.max_iter >= COLD_STEPS:
-            return _cold_newton(problem, pressures, options, t0)
+            deep = plane_first(problem, pressures, options)
+            if bool(deep.any()):
+                return _plane_then_newton(problem, pressures, options, deep, t0)
+            return _fingers_meet(problem, pressures, options, _cold_newton(problem, pressures, options, t0), t0)
         start = torch.zeros(len(pressures), n_joints, 3, dtype=torch.float64) if x0 is None else x0
-        return newton_polish(problem, pressures, start, options, t0)[0]
+        return _fingers_meet(problem, pressures, options, newton_polish(problem, pressures, start, options, t0)[0], t0)
     if options.method == "lbfgs":
         options = dataclasses.replace(options, tol_force=options.lbfgs_tol_force,
                                       tol_moment=options.lbfgs_tol_moment, cutbacks=0)
@@ -120,6 +128,40 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
         iterations[bad] += its
     return gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options),
                           None if problem.obstacle is None else first_contact)
+
+
+def _plane_then_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, deep: torch.Tensor,
+                       t0: float) -> GestureResult:
+    """The cold solve where the rows ``deep`` (B,) bool start across X = 0 (ramp.plane_first):
+    those by the ramp from zero pressure, the others by the cold Newton solve (and
+    ``_fingers_meet``), in one result."""
+    B, n = len(pressures), 3 * problem.n_joints
+    x = torch.full((B, n), float("nan"), dtype=torch.float64)
+    ok, iterations = torch.zeros(B, dtype=torch.bool), torch.zeros(B, dtype=torch.long)
+    x[deep], ok[deep], iterations[deep] = plane_ramp(problem, pressures[deep], options)
+    method = "lm"
+    if not bool(deep.all()):
+        rest = _fingers_meet(problem, pressures[~deep], options,
+                             _cold_newton(problem, pressures[~deep], options, t0), t0)
+        x[~deep], ok[~deep], iterations[~deep] = rest.tau.reshape(-1, n), rest.converged, rest.iterations
+        method = joined(rest.method, "lm")
+    return gesture_result(problem, pressures, x, ok, iterations, t0, method, None)
+
+
+def _fingers_meet(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, res: GestureResult,
+                  t0: float) -> GestureResult:
+    """An object-free result whose rows failed, or ended with the finger across X = 0
+    deeper than max_penetration (Newton from tau = 0, whose load-free pose can lie far
+    across), solved again by the ramp from zero pressure (predictor.ramp.plane_ramp); the
+    other rows as they are."""
+    B = len(pressures)
+    again = plane_rows(problem, res.tau.reshape(B, -1), pressures, res.converged, options)
+    if not bool(again.any()):
+        return res
+    x, ok, its = plane_ramp(problem, pressures[again], options)
+    more = gesture_result(problem, pressures[again], x, ok, its + res.iterations[again], t0, "lm", None)
+    return dataclasses.replace(res.with_rows(again, more), method=joined(res.method, "lm"),
+                               time_ms=1e3 * (time.perf_counter() - t0))
 
 
 def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Tensor, ok: torch.Tensor,
@@ -139,7 +181,7 @@ def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Te
         pressures=pressures, tau=tau, converged=ok, residual_force_mN=force, residual_moment_Nmm=moment,
         normal_force_N=st.contact.normal, friction_N=st.contact.friction, friction_ratio=st.contact.ratio,
         slip=st.contact.slip, iterations=iterations, time_ms=1e3 * (time.perf_counter() - t0), pose=pose,
-        method=method, first_contact=first_contact, **result_labels(problem),
+        method=method, first_contact=first_contact, **result_labels(problem), **contact_fields(problem, st),
     )
 
 
