@@ -122,11 +122,12 @@ class Obstacle:
     corner: a rectangle's corner radius, mm (RECTANGLE_CORNER; ignored by the others).
     Default placement (a documented departure from "230 mm below the base"): centre at
     Y = -195 mm, between the fingers' distal parts. The objects are wider (60-70 mm)
-    than the 50 mm free opening, so an object that clears the zero-pressure gesture has
-    to lie below the fingertips (Y_centre < -233 mm for the circle); there only its upper
-    shoulder can be reached, and mu = 0.3 cannot hold it (the solver reports slip, see
-    the tests). The grasp therefore starts from an open approach gesture (P = (-0.15, 0)
-    MPa, contact-free for these defaults), brings the object in, and ramps to the target.
+    than the free opening (30 mm between the fingers' inner faces), so an object that
+    clears the zero-pressure gesture has to lie below the fingertips (Y_centre < -242 mm
+    for the circle); there the closing fingers meet at X = 0 above it or reach only its
+    upper shoulder, and mu = 0.3 cannot hold it. The grasp therefore starts from an open
+    approach gesture (P = (-0.15, 0) MPa, contact-free for these defaults), brings the
+    object in, and ramps to the target.
     """
 
     kind: str = "circle"
