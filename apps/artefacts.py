@@ -58,6 +58,7 @@ ARTEFACTS = (
     Artefact("surrogate/metrics.json", "make train", surrogate.METRICS),
     Artefact("surrogate/heldout_fine.json", "make fine-compare", surrogate.EVALUATION),
     Artefact("surrogate/learning_curve.json", "make learning-curve", surrogate.LEARNING_CURVE),
+    Artefact("surrogate/multifidelity.json", "make multifidelity", surrogate.MULTIFIDELITY),
     Artefact("surrogate/sweep/*.json", "make sweep", surrogate.SWEEP),
     Artefact("predictor/gestures.json", "make gestures", predictor.GESTURES),
     Artefact("predictor/atlas_*.json", "make atlas", predictor.ATLAS),

@@ -2,8 +2,12 @@
 
 A finger is an ordered chain of parts from the base mount to the fingertip (docs/gripper.md):
 
-* ``joint``: one bellow joint of docs/physics.md (length contract.spec.JOINT_LENGTH, the
-  surrogate's geometry), with its weight (N) and whether its anchors take contact;
+* ``joint``: one bellow joint, with its weight (N) and whether its anchors take contact.
+  Its optional key ``joint`` names its joint description file (contract.joint,
+  docs/joints.md; a path relative to the finger file), which gives its shape (and length),
+  law, anchors and input box; absent, it is the paper's joint (contract/joints/paper.toml,
+  length contract.spec.JOINT_LENGTH, the committed surrogate's joint). So a finger may mix
+  joint designs;
 * ``rigid``: a straight segment of ``length`` (mm) and cross-section ``height`` x
   ``width`` (mm, in and normal to the bending plane), with its weight (N) and the number
   of contact sample points along it (0: none).
@@ -29,12 +33,14 @@ imports it without FEniCSx.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from contract.joint import JointFileError, JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint
 from contract.spec import JOINT_LENGTH
 
 FORMAT = "softjoint-finger/1"
@@ -49,17 +55,32 @@ class FingerFileError(ValueError):
     """A finger file that cannot be used (one line: file, key, reason)."""
 
 
+@functools.lru_cache(maxsize=1)
+def paper_joint_digest() -> str:
+    """contract.joint.joint_digest of the paper's joint, the joint of a part naming none."""
+    return joint_digest(load_joint())
+
+
+def is_paper_joint(joint: JointSpec) -> bool:
+    """Whether ``joint`` has the paper's physics and contract (its digest: name and [mesh]
+    aside), i.e. is the joint a joint part without a ``joint`` key stands for."""
+    return joint_digest(joint) == paper_joint_digest()
+
+
 @dataclass(frozen=True)
 class JointPart:
-    """A bellow joint: weight (N); contact: its 10 anchors are contact sample points;
+    """A bellow joint: weight (N); contact: its anchors are contact sample points;
     pressure_gain, pressure_offset (MPa), stiffness_scale: its calibration (module
-    docstring; 1, 0, 1 = the joint model as it is)."""
+    docstring; 1, 0, 1 = the joint model as it is); ``joint``: its description (None: the
+    paper's joint) and ``joint_file`` the file's name as the finger file gives it."""
 
     weight: float = 0.09
     contact: bool = True
     pressure_gain: float = 1.0
     pressure_offset: float = 0.0
     stiffness_scale: float = 1.0
+    joint: JointSpec | None = None
+    joint_file: str | None = field(default=None, compare=False)
     kind = "joint"
 
     @property
@@ -68,8 +89,13 @@ class JointPart:
         return (self.pressure_gain, self.pressure_offset, self.stiffness_scale) != (1.0, 0.0, 1.0)
 
     @property
+    def spec(self) -> JointSpec:
+        """The joint's description: its own, or the paper's."""
+        return self.joint if self.joint is not None else load_joint()
+
+    @property
     def length(self) -> float:
-        return JOINT_LENGTH
+        return JOINT_LENGTH if self.joint is None else self.joint.length
 
 
 @dataclass(frozen=True)
@@ -135,10 +161,20 @@ class FingerSpec:
 JOINT_CALIBRATION = {"pressure_gain": 1.0, "pressure_offset": 0.0, "stiffness_scale": 1.0}
 
 
+#: A joint's description fields: part_dict gives them as the file name and its sha256,
+#: and only for a joint that names a file (an unnamed one is the paper's).
+JOINT_FILE_FIELDS = ("joint", "joint_file")
+
+
 def part_dict(part) -> dict:
-    """A part's keys and values (kind first), calibration keys only when not the identity."""
-    return {"kind": part.kind, **{k: getattr(part, k) for k in part.__dataclass_fields__
-                                  if JOINT_CALIBRATION.get(k, object()) != getattr(part, k)}}
+    """A part's keys and values (kind first), calibration keys only when not the identity,
+    and a named joint as ``joint`` (its file) and ``joint_sha256`` (contract.joint)."""
+    out = {"kind": part.kind, **{k: getattr(part, k) for k in part.__dataclass_fields__
+                                 if k not in JOINT_FILE_FIELDS
+                                 and JOINT_CALIBRATION.get(k, object()) != getattr(part, k)}}
+    if getattr(part, "joint", None) is not None:
+        out.update(joint=part.joint_file, joint_sha256=joint_digest(part.joint))
+    return out
 
 
 #: Working ranges (inclusive) of every value that sizes the mesh or the predictor's
@@ -156,7 +192,7 @@ RANGES = {
 _PART_KEYS = {
     "joint": {"weight": (float, 0.0, False), "contact": (bool, None, False),
               "pressure_gain": (float, 0.0, True), "pressure_offset": (float, None, False),
-              "stiffness_scale": (float, 0.0, True)},
+              "stiffness_scale": (float, 0.0, True), "joint": (str, None, False)},
     "rigid": {"length": (float, 0.0, True), "weight": (float, 0.0, False), "height": (float, 0.0, True),
               "width": (float, 0.0, True), "contact_points": (int, 0, False)},
 }
@@ -197,8 +233,24 @@ def _part(source: str, k: int, table) -> JointPart | RigidPart:
     for key in _REQUIRED[kind]:
         if key not in table:
             raise FingerFileError(f"{where}: missing {key!r}")
-    values = {key: _value(where, key, table[key], *keys[key]) for key in table if key != "kind"}
-    return JointPart(**values) if kind == "joint" else RigidPart(**values)
+    values = {key: _value(where, key, table[key], *keys[key]) for key in table
+              if key not in ("kind", "joint")}
+    if kind == "rigid":
+        return RigidPart(**values)
+    if "joint" in table:
+        values.update(joint=_joint_file(where, source, table["joint"]), joint_file=table["joint"])
+    return JointPart(**values)
+
+
+def _joint_file(where: str, source: str, name) -> JointSpec:
+    """The joint description file ``name`` of a joint part, relative to the finger file
+    ``source`` (one-line FingerFileError naming the part and the joint file's problem)."""
+    if not isinstance(name, str) or not name:
+        raise FingerFileError(f"{where}: joint = {name!r} must be a joint file name (relative to the finger file)")
+    try:
+        return load_joint(Path(source).parent / name)
+    except JointFileError as exc:
+        raise FingerFileError(f"{where}: joint = {name!r}: {exc}") from None
 
 
 def parse_finger(text: str, source: str = "<finger>") -> FingerSpec:
@@ -256,13 +308,30 @@ def finger_arg(text: str) -> FingerSpec:
 
 def finger_to_dict(finger: FingerSpec) -> dict:
     """Plain-JSON description of a finger that ``finger_from_dict`` rebuilds exactly
-    (angles in rad, so the round trip is bit for bit; for checkpoints' configs)."""
+    (angles in rad, so the round trip is bit for bit; for checkpoints' configs). A named
+    joint also carries its description (``joint_description``, contract.joint.joint_to_dict)."""
     return {"name": finger.name, "base_gap": finger.base_gap, "base_angle": finger.base_angle,
-            "parts": [part_dict(p) for p in finger.parts]}
+            "parts": [_part_record(p) for p in finger.parts]}
+
+
+def _part_record(part) -> dict:
+    record = part_dict(part)
+    if getattr(part, "joint", None) is not None:
+        record["joint_description"] = joint_to_dict(part.joint)
+    return record
 
 
 def finger_from_dict(d: dict) -> FingerSpec:
     """The FingerSpec of ``finger_to_dict`` (ValueError/TypeError/KeyError if malformed)."""
-    parts = tuple(JointPart(**{k: v for k, v in p.items() if k != "kind"}) if p["kind"] == "joint" else
+    parts = tuple(_joint_part(p) if p["kind"] == "joint" else
                   RigidPart(**{k: v for k, v in p.items() if k != "kind"}) for p in d["parts"])
     return FingerSpec(parts, float(d["base_gap"]), float(d["base_angle"]), str(d["name"]))
+
+
+def _joint_part(record: dict) -> JointPart:
+    """A JointPart of a finger_to_dict part record (its joint rebuilt from its description)."""
+    values = {k: v for k, v in record.items()
+              if k not in ("kind", "joint", "joint_sha256", "joint_description")}
+    if "joint_description" in record:
+        values.update(joint=joint_from_dict(record["joint_description"]), joint_file=record["joint"])
+    return JointPart(**values)

@@ -1,11 +1,13 @@
-"""Solver timings of one joint at the production mesh -> results/bench/fem.json.
+"""Solver timings of one joint: the production discretisation, and the paper's for
+comparison -> results/bench/fem.json.
 
     python -m fem.bench_joint --out results/bench/fem.json [--json]
 
 (The accuracy checks are ``fem.validation``; the campaign's throughput is
 ``workflow.bench_campaign``.)
 
-Measures on one rank (the machine is noisy: medians of several solves in one run):
+Measures on one rank (the machine is noisy: medians of several solves in one run), for a
+discretisation (fem.discretisation: mesh H or H:W mm, formulation):
 
 * ``solve_from_zero_s``: median wall time of full solves from u = 0 for three mid-box
   load cases, with their Newton iterations (``newton_iterations``: median total);
@@ -13,6 +15,12 @@ Measures on one rank (the machine is noisy: medians of several solves in one run
   from a neighbouring converged state (steps of ``--step`` x the box half-width along a
   random walk, as the campaign harvests samples), with the sensitivities included;
 * mesh figures: ``nodes`` (P2, incl. mid-side nodes), ``dofs``, vertices, element size.
+
+The unsuffixed keys are PRODUCTION's (what new data is generated on; ``formulation``,
+``mesh``); the same figures of PAPER (the committed datasets' 1.8 mm P2 displacement)
+carry its mesh as suffix (``continuation_sample_s_1.8``, ``solve_from_zero_s_1.8``,
+``nodes_1.8``), and ``ratio_continuation_vs_1.8`` = production / paper continuation time.
+When the two are one discretisation it is timed once (ratio 1).
 
 The paper's ANSYS figure is ~7 min per sample at 16,000 nodes (docs/decisions.md §0). ``--json``
 prints the headline figures (SUMMARY_KEYS) that the text line shows.
@@ -30,24 +38,30 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.artefacts import BENCH_JOINT
-from fem.geometry import JointGeometry
+from fem.discretisation import PAPER, PRODUCTION, Discretisation
 from fem.options import one_rank
 from fem.solver import JointSolver, Load
 from contract.spec import INPUT_BOX
 
 FROM_ZERO = [Load(0.2, 1.0, -1.0, 20.0), Load(-0.15, -1.0, 1.5, -40.0), Load(0.1, 2.0, 2.0, 60.0)]
 PAPER_SECONDS_PER_SAMPLE = 7 * 60
-SUMMARY_KEYS = ("nodes", "dofs", "solve_from_zero_s", "continuation_sample_s", "newton_iterations")
+SUMMARY_KEYS = ("mesh", "formulation", "nodes", "dofs", "solve_from_zero_s", "continuation_sample_s",
+                "newton_iterations", f"continuation_sample_s_{PAPER.mesh}",
+                f"ratio_continuation_vs_{PAPER.mesh}")
 
 
-def run(n_walk: int = 6, step: float = 0.1, seed: int = 0) -> dict:
-    geo = JointGeometry()
+def time_discretisation(disc: Discretisation, n_walk: int = 6, step: float = 0.1,
+                        seed: int = 0) -> dict:
+    """Timings (s) and mesh figures of the joint in discretisation ``disc`` on one rank
+    (module docstring): FROM_ZERO solved from zero, then ``n_walk`` continuation samples
+    of a random walk of ``step`` x the box from the last of them."""
+    geo = disc.geometry()
     t0 = time.perf_counter()
-    solver = JointSolver(geo, MPI.COMM_SELF)
+    solver = JointSolver(geo, MPI.COMM_SELF, config=disc.config(), formulation=disc.formulation)
     setup = time.perf_counter() - t0
     zero = [solver.solve(load) for load in FROM_ZERO]
     if not all(r.converged for r in zero):
-        raise RuntimeError("a from-zero benchmark solve did not converge")
+        raise RuntimeError(f"a from-zero benchmark solve did not converge ({disc.key})")
     rng = np.random.default_rng(seed)
     x = FROM_ZERO[-1].as_array()
     walk = []
@@ -57,27 +71,40 @@ def run(n_walk: int = 6, step: float = 0.1, seed: int = 0) -> dict:
         r = solver.solve(Load.from_array(x), continuation=True)
         solver.sensitivities()
         if not r.converged:
-            raise RuntimeError("a continuation benchmark solve did not converge")
+            raise RuntimeError(f"a continuation benchmark solve did not converge ({disc.key})")
         walk.append((time.perf_counter() - t, r.iterations, r.factorisations))
-    info = solver.mesh_info()
-    from_zero_s = statistics.median(r.wall_time for r in zero)
-    cont_s = statistics.median(t for t, _, _ in walk)
     return {
-        **info,
+        **solver.mesh_info(), "formulation": disc.formulation, "mesh": disc.mesh,
         "wall_mesh_size_mm": geo.wall_mesh_size or geo.mesh_size, "wall_thickness_mm": geo.wall,
         "setup_s": setup,
-        "solve_from_zero_s": from_zero_s,
+        "solve_from_zero_s": statistics.median(r.wall_time for r in zero),
         "solve_from_zero_cases": [{"load": r.load.as_array().tolist(), "wall_time_s": r.wall_time,
                                    "newton_iterations": r.newton_iterations,
                                    "factorisations": r.factorisations} for r in zero],
         "newton_iterations": statistics.median(r.iterations for r in zero),
-        "continuation_sample_s": cont_s,
+        "continuation_sample_s": statistics.median(t for t, _, _ in walk),
         "continuation_newton_iterations": statistics.median(n for _, n, _ in walk),
         "continuation_factorisations": statistics.median(f for _, _, f in walk),
         "continuation_step_fraction_of_box": step,
+    }
+
+
+def run(n_walk: int = 6, step: float = 0.1, seed: int = 0,
+        production: Discretisation = PRODUCTION, paper: Discretisation = PAPER) -> dict:
+    """The bench document: ``production``'s figures, ``paper``'s under keys suffixed with
+    its mesh, their continuation-time ratio and the speed-ups over the paper's ANSYS."""
+    prod = time_discretisation(production, n_walk, step, seed)
+    ref = prod if paper == production else time_discretisation(paper, n_walk, step, seed)
+    tag = f"_{paper.mesh}"
+    return {
+        **prod,
+        f"solve_from_zero_s{tag}": ref["solve_from_zero_s"],
+        f"continuation_sample_s{tag}": ref["continuation_sample_s"],
+        f"nodes{tag}": ref["nodes"], f"formulation{tag}": paper.formulation,
+        f"ratio_continuation_vs{tag}": prod["continuation_sample_s"] / ref["continuation_sample_s"],
         "paper_seconds_per_sample": PAPER_SECONDS_PER_SAMPLE, "paper_nodes": 16000,
-        "speedup_vs_paper_from_zero": PAPER_SECONDS_PER_SAMPLE / from_zero_s,
-        "speedup_vs_paper_continuation": PAPER_SECONDS_PER_SAMPLE / cont_s,
+        "speedup_vs_paper_from_zero": PAPER_SECONDS_PER_SAMPLE / prod["solve_from_zero_s"],
+        "speedup_vs_paper_continuation": PAPER_SECONDS_PER_SAMPLE / prod["continuation_sample_s"],
         "ranks": 1,
     }
 
@@ -100,7 +127,8 @@ def main(argv=None) -> int:
     if args.json:
         cli.print_json({**summary, "out": args.out})
     else:
-        print(", ".join(f"{k} {v:g}" for k, v in summary.items()) + f" -> {args.out}")
+        print(", ".join(f"{k} {v:g}" if isinstance(v, (int, float)) else f"{k} {v}"
+                        for k, v in summary.items()) + f" -> {args.out}")
     return 0
 
 

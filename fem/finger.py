@@ -1,6 +1,7 @@
 """The whole finger in DOLFINx: the ground truth for the gesture predictor (issue 14).
 
-    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE] --json
+    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE]
+                         [--formulation mixed] --json
     python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
@@ -8,10 +9,28 @@ Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one ha
 (z >= 0, u_z = 0 on z = 0) of the finger described by a finger file
 (contract.finger; default the paper's, contract/fingers/paper.toml), built by
 fem.geometry.build_finger in the finger frame (x along the straight rest finger from the
-base mount, y in the bending plane). Every joint is the bellow joint of fem.problem (the
-same neo-Hookean NinjaFlex, stiff distal cap, P2 elements, valley self-contact of
-fem.contact); every rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35),
-bonded to its neighbours (one conforming mesh). The base face x = 0 is clamped.
+base mount, y in the bending plane). Every joint is the bellow joint of fem.problem built
+from its own joint description (the finger file's optional ``joint`` key per joint part,
+contract.joint; absent: the paper's joint, NinjaFlex as a neo-Hookean solid): its law
+(fem.materials), stiff distal cap, input box (the pressure limit of its P_j), anchor count
+and default mesh ([mesh]: sizes and formulation, of the first joint, unless given), with
+P2 elements and the valley self-contact of fem.contact. fem.geometry.build_finger meshes
+one joint shape, so the joints of one finger may differ in law, box and anchors but must
+share their shape (a finger whose joints differ in shape is refused with one line). Every
+rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35), bonded to its
+neighbours (one conforming mesh). The base face x = 0 is clamped.
+
+Formulation (the joint's discretisation, fem.discretisation; default the first joint's
+[mesh] formulation, for the paper's joint the production FORMULATION): "displacement", P2
+displacements u; or "mixed", one Taylor-Hood space (P2 u, continuous P1 pressure p, MPa)
+over the whole finger, whose internal work is the variation of the perturbed Lagrangian
+of fem.problem with each region's own law,
+
+    Pi(u, p) = sum_regions ∫ psi_dev,r - p ln J - p² / (2 kappa_r) dX,
+
+(each joint's body, its stiff cap, PLA parts), one pressure continuous across them as in
+the joint's body and cap. It removes the volumetric locking of P2 at nu = 0.49 in the joints
+(results/fem/mesh_causes.md; the stiff parts move rigidly in either formulation).
 
 Loads, all ramped together along one load path (load vector a = (P_1 .. P_n, g)):
 
@@ -43,7 +62,9 @@ import logging
 import math
 import sys
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Callable
 
 import numpy as np
 import ufl
@@ -53,18 +74,55 @@ from petsc4py import PETSc
 
 from contract import cli
 from contract.finger import FingerSpec, finger_arg, load_finger
+from contract.joint import GEOMETRY_KEYS, JointSpec, MaterialLaw, joint_digest
+from fem.discretisation import FORMULATION
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
-from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size
-from fem.problem import (Average, LoadTerm, Material, Problem, bellow_work, chamber_pressures,
-                         clamp_and_symmetry, deformation_gradient, displacement_space, elastic_work,
-                         facet_tags_present, region_volume, rotation_about_z, valley_contact)
-from contract.spec import N_ANCHORS, PRESSURE_LIMIT, check_box
+from fem.options import MESH_SIZE, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
+                         chamber_pressures, clamp_and_symmetry, deformation_gradient,
+                         displacement_space, elastic_work, facet_tags_present, mixed_bellow_work,
+                         mixed_clamp_and_symmetry, mixed_elastic_work, mixed_space, region_volume,
+                         rotation_about_z, valley_contact)
+from contract.spec import check_box
 from fem.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
 MAX_JOINTS = 4        # --p1 .. --p4
+
+
+def finger_joints(finger: FingerSpec) -> list[JointSpec]:
+    """The joint description of every joint part, base to tip (contract.finger: a part's
+    own joint file, or the paper's joint)."""
+    return [finger.parts[k].spec for k in finger.joints]
+
+
+def shape_mismatch(finger: FingerSpec, joint: JointGeometry) -> str | None:
+    """Why the finger's joints cannot all be meshed as ``joint`` (their shapes and anchor
+    counts must be one, fem.geometry.build_finger meshes one joint shape), or None."""
+    shape = {k: getattr(joint, k) for k in GEOMETRY_KEYS}
+    joints = finger_joints(finger)
+    for j, spec in enumerate(joints):
+        own = {k: getattr(spec.shape, k) for k in GEOMETRY_KEYS}
+        if own != shape or spec.anchors != joints[0].anchors:
+            key = next((k for k in GEOMETRY_KEYS if own[k] != shape[k]), "anchors.count")
+            return (f"finger {finger.name!r}: joint {j + 1} ({spec.name!r}) differs in {key} from the finger "
+                    f"mesh's joint shape: fem.geometry.build_finger meshes one joint shape, so the joints of "
+                    f"a finger may differ in material and box, not in shape or anchors")
+    return None
+
+
+def joint_laws(finger: FingerSpec, material: MaterialLaw | Material | None = None) -> dict:
+    """{part index k: the body's law of joint part k}: each joint's own (None), or
+    ``material`` for every joint."""
+    return {k: as_law(material) if material is not None else finger.parts[k].spec.material
+            for k in finger.joints}
+
+
+def pressure_limits(finger: FingerSpec) -> np.ndarray:
+    """|P_j| bound (MPa) of every joint, base to tip: its input box's pressure_mpa."""
+    return np.array([spec.pressure_mpa for spec in finger_joints(finger)])
 
 
 @dataclass(frozen=True)
@@ -152,19 +210,78 @@ def rotation_matrix(angle: float) -> np.ndarray:
 FINGER_CONFIG = SolverConfig(max_it=25, min_step=1.0 / 1024)
 
 
-def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Material = Material(),
-                   rigid: RigidMaterial = RigidMaterial(), *, degree: int = 2,
-                   quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
-    """The whole finger as a :class:`fem.problem.Problem` (module docstring): every joint
-    the bellow joint's body, stiff cap, chamber pressures and valley contact, every rigid
-    part a PLA-like solid, gravity a dead body force. Load vector a = (P_1 .. P_n, g) in
-    MPa and [0, 1]; probes: each joint's proximal centre and anchors, then the fingertip;
-    averages ``rotation{k}`` (rad): part k's rigid body (a rigid part, or a joint's cap).
-    Collective."""
-    finger, comm = geometry.finger, mesh_data.mesh.comm
+@dataclass(frozen=True, eq=False)
+class FingerUnknown:
+    """The finger's unknown in one formulation: ``w`` the Function solved for (u, or the
+    mixed pair (u, p)), F = I + grad u (UFL variable), ``v`` the displacement test function,
+    the measures, the internal virtual work of a joint (``joint_work(body, cap, law)``) and
+    of a rigid part (``rigid_work(region)``), the clamp and symmetry conditions, and the
+    displacement space ``U`` the contact acts on (with ``parent`` = (W, to_parent) when it
+    is collapsed out of the mixed space W)."""
+
+    w: fem.Function
+    F: object
+    v: object
+    dx: object
+    ds: object
+    joint_work: Callable
+    rigid_work: Callable
+    bcs: tuple
+    U: object
+    parent: tuple | None = None
+    formulation: str = "displacement"
+
+
+def displacement_unknown(mesh_data: MeshData, rigid: RigidMaterial,
+                         degree: int, quadrature_degree: int) -> FingerUnknown:
+    """P``degree`` displacements u (mm) over the whole finger."""
     u, v, dx, ds = displacement_space(mesh_data, degree, quadrature_degree)
-    V, ft, mesh = u.function_space, mesh_data.facet_tags, mesh_data.mesh
     F = deformation_gradient(u)
+    return FingerUnknown(u, F, v, dx, ds,
+                         lambda body, cap, law: bellow_work(F, v, law, body, cap),
+                         lambda region: elastic_work(F, v, rigid.E, rigid.nu, region),
+                         tuple(clamp_and_symmetry(u.function_space, mesh_data.facet_tags)),
+                         u.function_space)
+
+
+def mixed_unknown(mesh_data: MeshData, rigid: RigidMaterial,
+                  degree: int, quadrature_degree: int) -> FingerUnknown:
+    """One Taylor-Hood space (P``degree`` u mm, continuous P``degree - 1`` p MPa) over the
+    whole finger; every region's work the variation of its perturbed Lagrangian."""
+    fields, dx, ds = mixed_space(mesh_data, degree, quadrature_degree)
+    W = fields.w.function_space
+    F = deformation_gradient(fields.u)
+    return FingerUnknown(fields.w, F, fields.v, dx, ds,
+                         lambda body, cap, law: mixed_bellow_work(fields, F, law, body, cap),
+                         lambda region: mixed_elastic_work(fields, F, rigid.E, rigid.nu, region),
+                         tuple(mixed_clamp_and_symmetry(W, mesh_data.facet_tags)), fields.U,
+                         parent=(W, fields.to_parent), formulation="mixed")
+
+
+def finger_problem(geometry: FingerGeometry, mesh_data: MeshData,
+                   material: MaterialLaw | Material | None = None,
+                   rigid: RigidMaterial = RigidMaterial(), *, degree: int = 2,
+                   quadrature_degree: int = 2, contact_penalty: float = 100.0,
+                   formulation: str = "displacement") -> Problem:
+    """The whole finger as a :class:`fem.problem.Problem` (module docstring): every joint
+    the bellow joint's body (its own law, or ``material`` for every joint), stiff cap,
+    chamber pressures and valley contact, every rigid part a PLA-like solid, gravity a dead
+    body force. Load vector a = (P_1 .. P_n, g) in MPa and [0, 1]; probes: each joint's
+    proximal centre and anchors, then the fingertip; averages ``rotation{k}`` (rad): part
+    k's rigid body (a rigid part, or a joint's cap). ``formulation``: "displacement" or
+    "mixed" (module docstring). ValueError for joints of another shape than the mesh's
+    (shape_mismatch). Collective."""
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
+    why = shape_mismatch(geometry.finger, geometry.joint)
+    if why:
+        raise ValueError(why)
+    build = mixed_unknown if formulation == "mixed" else displacement_unknown
+    unknown = build(mesh_data, rigid, degree, quadrature_degree)
+    finger, comm = geometry.finger, mesh_data.mesh.comm
+    laws = joint_laws(finger, material)
+    F, v, dx, ds = unknown.F, unknown.v, unknown.dx, unknown.ds
+    ft, mesh = mesh_data.facet_tags, mesh_data.mesh
     tags = finger_tags(finger)
     present = facet_tags_present(ft)
     internal, weights, pressures, averages = 0, [], (), {}
@@ -172,12 +289,12 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Mate
         own = dx(tags[f"part{k}"])
         if part.kind == "joint":
             rigid_body = dx(tags[f"cap{k}"])
-            internal = internal + bellow_work(F, v, material, own, rigid_body)
+            internal = internal + unknown.joint_work(own, rigid_body, laws[k])
             whole = own + rigid_body
             pressures += chamber_pressures(F, v, ds, tags[f"top{k}"], tags[f"bottom{k}"], present,
                                            finger.joints.index(k))
         else:
-            internal = internal + elastic_work(F, v, rigid.E, rigid.nu, own)
+            internal = internal + unknown.rigid_work(own)
             whole = rigid_body = own
         if part.weight > 0:
             weights.append(gravity_work(v, finger, part.weight, whole, region_volume(mesh, whole, comm)))
@@ -187,11 +304,13 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData, material: Mate
     loads = pressures
     if weights:
         loads += (LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), sum(weights[1:], weights[0]), n),)
-    contact = valley_contact(V, ft, present, geometry.joint, contact_penalty,
-                             offsets=tuple(finger.rest_start(k) for k in finger.joints))
-    return Problem(mesh_data, u, internal, loads, np.array([PRESSURE_LIMIT] * n + [1.0]),
-                   tuple(clamp_and_symmetry(V, ft)), finger_probes(geometry), contact,
-                   averages=averages)
+    contact = valley_contact(unknown.U, ft, present, geometry.joint, contact_penalty,
+                             offsets=tuple(finger.rest_start(k) for k in finger.joints),
+                             parent=unknown.parent)
+    return Problem(mesh_data, unknown.w, internal, loads, np.append(pressure_limits(finger), 1.0),
+                   unknown.bcs, finger_probes(geometry), contact, averages=averages,
+                   formulation=unknown.formulation,
+                   displacement_space=None if unknown.parent is None else unknown.U)
 
 
 def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
@@ -200,30 +319,35 @@ def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
     the global -Y in the finger frame. Returned as the residual term -∫ b·v dX."""
     e_g = rotation_matrix(-finger.base_angle) @ np.array([0.0, -1.0])
     gravity = ufl.as_vector([float(e_g[0]), float(e_g[1]), 0.0])
-    rho = fem.Constant(v.ufl_function_space().mesh, PETSc.ScalarType(weight / (2 * volume)))
+    mesh = ufl.domain.extract_unique_domain(v)     # v may be a block of a mixed test function
+    rho = fem.Constant(mesh, PETSc.ScalarType(weight / (2 * volume)))
     return -rho * ufl.inner(gravity, v) * region
 
 
 def finger_probes(geometry: FingerGeometry) -> np.ndarray:
-    """Every joint's proximal centre and 10 anchors, then the fingertip: (n, 3) mm."""
+    """Every joint's proximal centre and its anchors (the joints' count, 10 for the
+    paper's), then the fingertip: (n, 3) mm."""
     finger, L = geometry.finger, geometry.joint.length
-    points = [[finger.rest_start(k) + i * L / N_ANCHORS, 0.0, 0.0]
-              for k in finger.joints for i in range(N_ANCHORS + 1)]
+    n = finger_joints(finger)[0].anchors
+    points = [[finger.rest_start(k) + i * L / n, 0.0, 0.0]
+              for k in finger.joints for i in range(n + 1)]
     points.append([finger.length, 0.0, 0.0])
     return np.array(points)
 
 
 class FingerSolver:
     """Static large-deflection solve of one whole finger (module docstring):
-    :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`."""
+    :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`; every joint
+    of its own law unless ``material`` is given. ``formulation`` defaults to the
+    production one (fem.discretisation.FORMULATION)."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
-                 material: Material = Material(), rigid: RigidMaterial = RigidMaterial(),
-                 config: SolverConfig = FINGER_CONFIG):
-        self.finger, self.config = geometry.finger, config
+                 material: MaterialLaw | Material | None = None, rigid: RigidMaterial = RigidMaterial(),
+                 config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION):
+        self.finger, self.config, self.formulation = geometry.finger, config, formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
-                                      **config.discretisation())
+                                      formulation=formulation, **config.discretisation())
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
         self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
@@ -239,6 +363,10 @@ class FingerSolver:
     def mesh_info(self) -> dict:
         return self.solver.mesh_info()
 
+    def displacement(self) -> fem.Function:
+        """The displacement u (mm) in its own vector space (a copy, for the mixed form)."""
+        return self.problem.displacement()
+
     def rotation(self, k: int) -> float:
         """Rotation (rad) about +z of part k's rigid body: a rigid part, or a joint's cap."""
         return self.solver.average(f"rotation{k}")
@@ -250,12 +378,12 @@ class FingerSolver:
 
     def solve(self, load: FingerLoad) -> FingerResult:
         """Solve one finger gesture from the unloaded state; raises OutOfBoxError
-        (before any work) for a pressure that is not finite or beyond ±PRESSURE_LIMIT."""
+        (before any work) for a pressure that is not finite or beyond its joint's box."""
         joints = self.finger.joints
         if len(load.pressures) != len(joints):
             raise ValueError(f"{len(load.pressures)} pressures for a finger with {len(joints)} joints")
         check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(joints))],
-                  box=[PRESSURE_LIMIT] * len(joints), units=["MPa"] * len(joints))
+                  box=pressure_limits(self.finger), units=["MPa"] * len(joints))
         solver = self.solver
         t0, c0, lu0 = time.perf_counter(), time.process_time(), solver.factorisations
         solver.reset()
@@ -274,7 +402,7 @@ class FingerSolver:
         base, turn = np.array([0.5 * finger.base_gap, 0.0]), rotation_matrix(finger.base_angle)
         x = (self.probe_points + self.solver.probe_displacements())[:, :2]
         x = base + x @ turn.T
-        n = N_ANCHORS + 1
+        n = finger_joints(finger)[0].anchors + 1
         polylines = x[:-1].reshape(-1, n, 2)
         rot = {k: self.rotation(k) for k in range(len(finger.parts))}
         theta, end = [], []
@@ -299,19 +427,21 @@ class FingerSolver:
 # ---------------------------------------------------------------------- command line
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
-    pressure = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
+    pressure = cli.number(unit="MPa")     # each joint's box is checked once the finger is read
     for j in range(1, MAX_JOINTS + 1):
         ap.add_argument(f"--p{j}", type=pressure, default=None,
-                        help=f"joint-{j} pressure, MPa (|P| <= {PRESSURE_LIMIT:g}; default 0)")
-    ap.add_argument("--pressures", type=cli.number_list(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa"), metavar="P1,P2,...",
+                        help=f"joint-{j} pressure, MPa (|P| <= its joint's input box, the paper's 0.3; default 0)")
+    ap.add_argument("--pressures", type=cli.number_list(unit="MPa"), metavar="P1,P2,...",
                     help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
     ap.add_argument("--finger", type=finger_arg, default=None,
-                    help="finger description file (default: contract/fingers/paper.toml)")
-    add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
+                    help="finger description file (default: contract/fingers/paper.toml); its joint parts "
+                         "name their joint files (default: the paper's joint)")
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
@@ -320,7 +450,8 @@ def build_parser() -> cli.Parser:
 
 def parsed_pressures(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpec) -> tuple[float, ...]:
     """One pressure per joint of ``finger`` (MPa) from --pressures or --p1..--p4 (missing
-    ones 0); a count that does not fit the finger is a usage error."""
+    ones 0), each within its joint's box; a count that does not fit the finger, or a
+    pressure beyond its box, is a usage error."""
     n = finger.n_joints
     given = [j for j in range(1, MAX_JOINTS + 1) if getattr(args, f"p{j}") is not None]
     if args.pressures is not None:
@@ -328,10 +459,29 @@ def parsed_pressures(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpe
             ap.error(f"give either --p1..--p{MAX_JOINTS} or --pressures, not both")
         if len(args.pressures) != n:
             ap.error(f"--pressures: {len(args.pressures)} values for finger {finger.name!r} of {n} joint(s)")
-        return tuple(args.pressures)
-    if given and max(given) > n:
-        ap.error(f"--p{max(given)} given, but finger {finger.name!r} has {n} joint(s)")
-    return tuple(getattr(args, f"p{j}", None) or 0.0 for j in range(1, n + 1))
+        flags, pressures = ["--pressures"] * n, tuple(args.pressures)
+    else:
+        if given and max(given) > n:
+            ap.error(f"--p{max(given)} given, but finger {finger.name!r} has {n} joint(s)")
+        flags = [f"--p{j}" for j in range(1, n + 1)]
+        pressures = tuple(getattr(args, f"p{j}", None) or 0.0 for j in range(1, n + 1))
+    for flag, p, limit in zip(flags, pressures, pressure_limits(finger)):
+        if abs(p) > limit:
+            ap.error(f"argument {flag}: {p:g} is outside [{-limit:g}, {limit:g}] MPa (its joint's input box)")
+    return pressures
+
+
+def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
+                          finger: FingerSpec) -> tuple[FingerGeometry, str]:
+    """(FingerGeometry, formulation) of the options on the finger's joints: the first
+    joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size or
+    --formulation are given; joints of several shapes are a usage error (shape_mismatch)."""
+    first = finger_joints(finger)[0]
+    geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
+    why = shape_mismatch(finger, geometry.joint)
+    if why:
+        ap.error(why)
+    return geometry, args.formulation or first.formulation
 
 
 def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int) -> None:
@@ -347,7 +497,7 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
     else:
         print("  tip = none (did not converge)")
     print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
-          f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes, {ranks} rank(s)")
+          f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes ({out['formulation']}), {ranks} rank(s)")
 
 
 def main(argv=None) -> int:
@@ -357,23 +507,27 @@ def main(argv=None) -> int:
     finger = args.finger or load_finger()
     load = FingerLoad(parsed_pressures(ap, args, finger), not args.no_gravity)
     cli.setup_logging(args.quiet, args.verbose)
-    joint = replace(JointGeometry(), mesh_size=args.mesh_size, wall_mesh_size=args.wall_mesh_size)
-    geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
+    geometry, formulation = finger_discretisation(ap, args, finger)
     comm = MPI.COMM_WORLD
     with ap.errors(), cli.heartbeat(f"finger {finger.name!r}", enabled=comm.rank == 0):
         if comm.rank == 0:
             log.info("finger %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
                      finger.name)
-        solver = FingerSolver(geometry, comm)
+        solver = FingerSolver(geometry, comm, formulation=formulation)
         if comm.rank == 0:
             log.info("mesh ready (%d nodes); solving P = %s MPa, gravity %s", solver.mesh_info()["nodes"],
                      list(load.pressures), load.gravity)
         result = solver.solve(load)
         if args.xdmf and result.converged:
-            write_xdmf(args.xdmf, solver)
+            # write_xdmf takes anything with comm, mesh_data and u: here u's own space (mixed: no
+            # mixed field is written)
+            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.mesh_data,
+                                                  u=solver.displacement()))
     if comm.rank == 0:
         out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
-               "geometry": geometry.as_dict(), "ranks": comm.size}
+               "geometry": geometry.as_dict(), "formulation": formulation,
+               "joint_files": [{"name": j.name, "sha256": joint_digest(j)} for j in finger_joints(finger)],
+               "ranks": comm.size}
         if args.json:
             cli.print_json(out)
         else:

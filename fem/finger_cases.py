@@ -1,6 +1,7 @@
 """The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
 
     python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8] [--part 1/2]
+                               [--formulation mixed]
 
 Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
 * free pressurisation without gravity (the paper's Figure 3): (0.05, 0.05), (0.1, 0.1),
@@ -11,7 +12,9 @@ Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
   along the finger at rest the mirror case is the mirror finger (tests/test_finger.py),
   so it would add no information.
 
-Each case is one ``FingerSolver.solve`` on one mesh built once (the mesh build and the
+Each case is one ``FingerSolver.solve`` (every joint of its own joint file, fem.finger;
+``--formulation`` and the mesh sizes default to the first joint file's [mesh], for the
+paper's joint the production discretisation) on one mesh built once (the mesh build and the
 form compilation are reported apart from each case's solve time, ``fem_s``). It writes
 ``<case>.json`` (FingerResult.summary plus the run's settings) and ``<case>.png``: the
 deformed finger (the full model, mirrored about z = 0), seen along -z in the global plane
@@ -19,7 +22,10 @@ with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista
 colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
 lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
 and the |u| colour range. Files are written atomically; a case whose JSON exists for
-the same finger file and mesh is skipped, so a killed run resumes. A solve that does not
+the same finger file, mesh and formulation is skipped, so a killed run resumes (the
+settings record the formulation only when it is not "displacement", and the joints'
+digests, ``joints``, only when some joint is not the paper's, so the cases solved before
+the mixed formulation and joint files existed stand). A solve that does not
 converge is recorded as such (``converged: false``, no figures) with the solver controls
 it ran with (``solver``), and is tried again when they change.
 """
@@ -30,7 +36,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -40,10 +46,12 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
-from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, rotation_matrix
-from contract.finger import finger_arg, load_finger
-from fem.geometry import FingerGeometry, JointGeometry
-from fem.options import MESH_SIZE, add_mesh_size, add_wall_mesh_size, one_rank
+from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
+                        rotation_matrix)
+from contract.finger import finger_arg, is_paper_joint, load_finger
+from contract.joint import joint_digest
+from fem.geometry import FingerGeometry
+from fem.options import MESH_SIZE, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
 
 #: (name, P1, P2, gravity)
 CASES = [
@@ -66,8 +74,9 @@ def render(solver: FingerSolver, path: Path) -> dict:
     from dolfinx import plot
 
     finger = solver.finger
-    topology, cell_types, x = plot.create_vtk_mesh(solver.V)
-    u = solver.u.x.array.reshape(-1, 3)
+    field = solver.displacement()       # u in its own P2 space (mixed: w's u block)
+    topology, cell_types, x = plot.create_vtk_mesh(field.function_space)
+    u = field.x.array.reshape(-1, 3)
     grid = pyvista.UnstructuredGrid(topology, cell_types, x)
     grid.point_data["u"] = u.copy()
     mirror = grid.copy()
@@ -103,10 +112,11 @@ def main(argv=None) -> int:
     ap.add_output("--out", folder=True, default="results/validation/finger_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
     ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
-    add_mesh_size(ap, JointGeometry().mesh_size, "joint tetrahedron size")
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
     add_wall_mesh_size(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
                     help="rigid-part tetrahedron size, mm")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default="", help="appended to each file name (e.g. _h1.2 for a finer mesh)")
@@ -130,9 +140,13 @@ def main(argv=None) -> int:
         ap.error(f"--finger: finger {finger.name!r} has {finger.n_joints} joint(s); the validation cases "
                  "are pressure pairs for a two-joint finger (use python -m fem.finger --pressures for others)")
     cli.setup_logging(args.quiet)
-    geometry = FingerGeometry(finger, replace(JointGeometry(), mesh_size=args.mesh_size,
-                                              wall_mesh_size=args.wall_mesh_size), args.rigid_mesh_size)
+    geometry, formulation = finger_discretisation(ap, args, finger)
     settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
+    if formulation != "displacement":
+        settings["formulation"] = formulation
+    joints = finger_joints(finger)
+    if not all(is_paper_joint(j) for j in joints):
+        settings["joints"] = [joint_digest(j) for j in joints]
     solver_settings = json_safe(asdict(FINGER_CONFIG))
     out = Path(args.out)
     todo = []
@@ -154,13 +168,14 @@ def main(argv=None) -> int:
         return 0
     with ap.errors(), cli.heartbeat("finger cases"):
         t0 = time.perf_counter()
-        solver = FingerSolver(geometry, comm)
+        solver = FingerSolver(geometry, comm, formulation=formulation)
         setup_s = time.perf_counter() - t0
         for name, p1, p2, gravity, path in todo:
             res = solver.solve(FingerLoad((p1, p2), gravity))
             record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
                       "load_average": os.getloadavg()[0], "setup_s": setup_s,
-                      "mesh": solver.mesh_info(), "settings": settings, "solver": solver_settings,
+                      "mesh": solver.mesh_info(), "formulation": formulation, "settings": settings,
+                      "solver": solver_settings,
                       "ranks": comm.size}
             if res.converged:
                 record["render"] = render(solver, path.with_suffix(".png"))

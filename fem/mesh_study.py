@@ -2,12 +2,13 @@
 
     python -m fem.mesh_study --out results/fem/mesh_study.json [--formulation mixed] \\
         [--meshes 3.394:1.697 2.4:1.2 1.697:0.849 1.2:0.6] [--production 2.4:1.2] \\
-        [--work results/fem/joint_cases] [--max-hours 2]
+        [--loads 0 4] [--work results/fem/joint_cases] [--max-hours 2]
 
 A mesh is ``H`` or ``H:W``: tetrahedron size H mm, and W mm on the 1.2 mm chamber walls
 (W = 0.6 puts two P2 elements through the wall). The study solves fem.joint_cases.LOADS
 (four box corners, four interior loads) from zero on every mesh in one formulation, on
-the production discretisation (``--production``, same formulation) and on the paper's
+the production discretisation (fem.discretisation.PRODUCTION, its mesh ``--production``:
+what new data is generated on, judged against the reference) and on the paper's
 discretisation (fem.discretisation.PAPER, 1.8 mm displacement P2: the committed
 paper-fidelity data); each (discretisation, load) is one record in ``--work`` (shared with
 fem.mesh_causes), so a killed or time-limited study resumes where it stopped.
@@ -113,13 +114,15 @@ def family(meshes: list[dict]) -> list[int] | None:
         chain.insert(0, coarser[-1])
 
 
-def analyse(meshes: list[dict], production: str, paper: str | None = None) -> dict:
+def analyse(meshes: list[dict], production: str, paper: str | None = None,
+            formulation: str | None = None) -> dict:
     """The study's figures from its solved meshes (each with key, formulation, mesh_size,
     wall_mesh_size, nodes and ``cases``, one per load in one order). ``production`` and
-    ``paper`` name meshes by key; the family is sought among the production's formulation."""
+    ``paper`` name meshes by key; the family is sought among the meshes in ``formulation``
+    (default: the production's)."""
     X = anchor_points(JointGeometry().length)[:, :2]
     by_key = {m["key"]: m for m in meshes}
-    formulation = by_key[production]["formulation"]
+    formulation = formulation or by_key[production]["formulation"]
     own = [m for m in meshes if m["formulation"] == formulation]
     chain = family(own)
     n_loads = len(meshes[0]["cases"])
@@ -154,33 +157,35 @@ def analyse(meshes: list[dict], production: str, paper: str | None = None) -> di
 
 
 # ---------------------------------------------------------------- solves
-def mesh_entry(disc: Discretisation, cases: dict) -> dict:
+def mesh_entry(disc: Discretisation, cases: dict, loads=LOADS) -> dict:
     """One discretisation's results in load order, from its records {load key: record}."""
-    rows = [cases[load_key(load.as_array())] for load in LOADS]
+    rows = [cases[load_key(load.as_array())] for load in loads]
     keep = ("load", "anchors", "phi_end_deg", "cap_rotation_deg", "wall_time_s", "newton_iterations", "ranks")
     return {"key": disc.key, "formulation": disc.formulation, "mesh_size": disc.H, "wall_mesh_size": disc.W,
             "nodes": rows[0]["mesh"]["nodes"], "dofs": rows[0]["mesh"]["dofs"],
-            "mean_solve_s": float(np.mean([r["wall_time_s"] for r in rows])),
+            "mean_solve_s": float(np.mean([r["wall_time_s"] for r in rows])), "ranks": max(r["ranks"] for r in rows),
             "cases": [{**{k: r[k] for k in keep}, "closed_pairs": r["contact"]["closed_pairs"]} for r in rows]}
 
 
 def plan(meshes: list[tuple], formulation: str, production: tuple) -> tuple[list, Discretisation]:
     """(discretisations, cheapest first; the production one): the family in
-    ``formulation``, the production mesh in it and the paper's discretisation."""
-    prod = replace(PRODUCTION, H=production[0], W=production[1], formulation=formulation)
-    discs = {replace(prod, H=h, W=w) for h, w in meshes} | {prod, PAPER}
+    ``formulation``, the production discretisation (PRODUCTION with the mesh
+    ``production``) and the paper's."""
+    prod = replace(PRODUCTION, H=production[0], W=production[1])
+    discs = {replace(PRODUCTION, H=h, W=w, formulation=formulation) for h, w in meshes} | {prod, PAPER}
     return sorted(discs, key=lambda d: -d.H * (d.W or d.H)), prod
 
 
 def run(meshes: list[tuple], formulation: str, production: tuple, work: Path,
-        max_hours: float = 1000.0, comm=MPI.COMM_WORLD) -> dict:
-    """Solve what is missing (until ``max_hours``), then analyse the complete meshes; a
-    JSON-ready dict with ``complete`` false when a discretisation still lacks a load."""
+        max_hours: float = 1000.0, comm=MPI.COMM_WORLD, loads=LOADS) -> dict:
+    """Solve what is missing (until ``max_hours``), then analyse the meshes solved at every
+    load of ``loads``; a JSON-ready dict with ``complete`` false when a discretisation still
+    lacks a load."""
     discs, prod = plan(meshes, formulation, production)
-    complete = solve_missing(work, discs, LOADS, max_hours, comm)
-    records = read_records(work, discs, LOADS)
-    solved = [mesh_entry(d, records[d.key]) for d in discs if len(records.get(d.key, {})) == len(LOADS)]
-    head = {"loads": [load.as_array().tolist() for load in LOADS], "corners": [c.as_array().tolist() for c in CORNERS],
+    complete = solve_missing(work, discs, loads, max_hours, comm)
+    records = read_records(work, discs, loads)
+    solved = [mesh_entry(d, records[d.key], loads) for d in discs if len(records.get(d.key, {})) == len(loads)]
+    head = {"loads": [load.as_array().tolist() for load in loads], "corners": [c.as_array().tolist() for c in CORNERS],
             "wall_mm": JointGeometry().wall, "tolerance_percent": TOLERANCE_PERCENT, "tolerance_deg": TOLERANCE_DEG,
             "min_nodes": MIN_NODES, "complete": complete, "meshes": solved}
     if prod.key not in {m["key"] for m in solved}:
@@ -188,7 +193,7 @@ def run(meshes: list[tuple], formulation: str, production: tuple, work: Path,
                 "extrapolation": [], "orders": [], "production": prod.key,
                 "production_mesh": [prod.H, prod.W], "production_error": None, "production_met": False,
                 "paper": PAPER.key, "paper_error": None}
-    return {**head, **analyse(solved, prod.key, PAPER.key)}
+    return {**head, **analyse(solved, prod.key, PAPER.key, formulation)}
 
 
 # ---------------------------------------------------------------- command line
@@ -204,7 +209,7 @@ class _Distinct(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None):
         if len(set(values)) != len(values):
-            parser.error(f"{option_string}: give each mesh once")
+            parser.error(f"{option_string}: give each value once")
         setattr(namespace, self.dest, values)
 
 
@@ -227,7 +232,13 @@ def main(argv=None) -> int:
     ap.add_argument("--formulation", choices=FORMULATIONS, default=PRODUCTION.formulation,
                     help=f"the family's formulation (default {PRODUCTION.formulation}, the production one)")
     ap.add_argument("--production", type=_mesh, default=(PRODUCTION.H, PRODUCTION.W), metavar="H[:W]",
-                    help=f"the production mesh, judged against the reference (default {PRODUCTION.mesh})")
+                    help=f"the production mesh (in the production formulation, {PRODUCTION.formulation}), "
+                    f"judged against the reference (default {PRODUCTION.mesh})")
+    ap.add_argument("--loads", type=cli.number(0, len(LOADS) - 1, integer=True), nargs="+",
+                    default=list(range(len(LOADS))), metavar="I", action=_Distinct,
+                    help="study only these of the eight loads, by index: " + ", ".join(
+                        f"{i} ({', '.join(f'{v:g}' for v in load.as_array())})" for i, load in enumerate(LOADS))
+                    + " (default all)")
     ap.add_output("--work", folder=True, default="results/fem/joint_cases",
                   help="folder of the per-(discretisation, load) records (resumes from it; "
                   "default results/fem/joint_cases)")
@@ -240,7 +251,8 @@ def main(argv=None) -> int:
         if comm.rank == 0:
             Path(args.work).mkdir(parents=True, exist_ok=True)
         comm.barrier()
-        study = run(args.meshes, args.formulation, args.production, Path(args.work), args.max_hours, comm)
+        study = run(args.meshes, args.formulation, args.production, Path(args.work), args.max_hours, comm,
+                    [LOADS[i] for i in args.loads])
         on_root(comm, lambda: MESH_STUDY.write(args.out, study))
     if comm.rank == 0:
         if args.json:

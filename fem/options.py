@@ -3,30 +3,48 @@
 * ``--mesh-size`` h (mm) in MESH_SIZE_RANGE = [0.3, 10]: finer meshes than 0.3 mm do not
   fit in memory (the production 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser
   ones than 10 mm no longer resolve the 2.5 mm valleys of the joint or the 2 mm beam.
-* the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the box
-  |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100 is checked by :func:`contract.spec.check_box` right
-  after parsing (before any mesh), unless ``--allow-extrapolation``.
+* the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the joint's box
+  (the paper's: |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100) is checked by
+  :func:`contract.spec.check_box` right after parsing (before any mesh), unless
+  ``--allow-extrapolation``.
+* ``--formulation`` {displacement, mixed} (fem.problem: P2 displacement or Taylor-Hood
+  u-p); None, its default, means the production formulation fem.discretisation.FORMULATION,
+  which the tool resolves (this module imports no dolfinx);
+* ``--joint FILE`` (:func:`add_joint`): a joint description file (contract.joint,
+  docs/joints.md), read and checked while parsing (a bad file: one line, exit 2); absent:
+  the paper's joint, contract/joints/paper.toml (:func:`joint_of`);
+* :func:`joint_geometry`: the joint of ``--mesh-size`` and ``--wall-mesh-size``: the
+  joint file's shape and its [mesh] sizes when neither is given (without a joint file,
+  the production sizes, JointGeometry's defaults); :func:`formulation_of` likewise;
 * :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
   under mpirun ``with ap.errors():`` exits every rank with 2 and nothing hangs.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from contract import cli
-from contract.spec import INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
+from contract.joint import JointSpec, joint_arg, load_joint
+from contract.spec import INPUT_BOX, INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
+from fem.geometry import JointGeometry
 
 MESH_SIZE_RANGE = (0.3, 10.0)  # mm
 MESH_SIZE = cli.number(*MESH_SIZE_RANGE, "mm")   # argparse type
 MESH_SIZE_TEXT = f"mm in [{MESH_SIZE_RANGE[0]:g}, {MESH_SIZE_RANGE[1]:g}]"
+#: fem.problem.FORMULATIONS, spelled out here: this module imports no dolfinx
+#: (tests/test_formulation.py checks that the two agree).
+FORMULATION_CHOICES = ("displacement", "mixed")
 LOAD_HELP = ("chamber pressure P, MPa (signed)", "axial end force F1, N",
              "transverse end force F2, N", "end couple M about +z, N*mm")
 
 
-def add_mesh_size(ap: cli.Parser, default: float | None, what: str = "tetrahedron size") -> None:
-    """``--mesh-size`` in mm (None: the geometry's production default)."""
-    shown = "the production mesh" if default is None else f"{default:g}"
+def add_mesh_size(ap: cli.Parser, default: float | None, what: str = "tetrahedron size",
+                  shown: str = "the production mesh") -> None:
+    """``--mesh-size`` in mm (None: the geometry's default, described by ``shown``)."""
+    shown = shown if default is None else f"{default:g}"
     ap.add_argument("--mesh-size", type=MESH_SIZE, default=default,
                     help=f"{what}, {MESH_SIZE_TEXT} (default {shown})")
 
@@ -35,6 +53,48 @@ def add_wall_mesh_size(ap: cli.Parser) -> None:
     """``--wall-mesh-size`` W in mm on the 1.2 mm chamber walls (None: ``--mesh-size``)."""
     ap.add_argument("--wall-mesh-size", type=MESH_SIZE, default=None,
                     help=f"tetrahedron size on the chamber walls, {MESH_SIZE_TEXT} (default: --mesh-size)")
+
+
+def add_formulation(ap: cli.Parser,
+                    shown: str = "the production formulation (fem.discretisation.FORMULATION)") -> None:
+    """``--formulation`` {displacement, mixed}; default None: the production formulation
+    (fem.discretisation.FORMULATION) or, for a tool with ``--joint``, the joint file's
+    (formulation_of), resolved by the tool and described by ``shown``."""
+    ap.add_argument("--formulation", choices=FORMULATION_CHOICES, default=None,
+                    help="finite elements: P2 displacement, or Taylor-Hood P2-P1 u-p 'mixed' "
+                         f"(no volumetric locking); default: {shown}")
+
+
+def add_joint(ap: cli.Parser) -> None:
+    """``--joint FILE``: a joint description file, checked while parsing; default None,
+    the paper's joint (:func:`joint_of`)."""
+    ap.add_argument("--joint", type=joint_arg, default=None, metavar="FILE",
+                    help="joint description file (docs/joints.md; default contract/joints/paper.toml, "
+                         "the paper's joint)")
+
+
+def joint_of(args) -> JointSpec:
+    """The joint of ``--joint`` (add_joint), or the paper's when it is not given."""
+    return getattr(args, "joint", None) or load_joint()
+
+
+def joint_geometry(args, joint: JointSpec | None = None) -> JointGeometry:
+    """The joint of ``args.mesh_size`` and ``getattr(args, "wall_mesh_size")`` (mm;
+    add_mesh_size with default None, add_wall_mesh_size) on the shape of ``joint``: the
+    joint file's [mesh] sizes when neither is given, otherwise H (default the joint's H)
+    and W (default H, i.e. None). Without ``joint``: JointGeometry's production shape and
+    sizes."""
+    base = JointGeometry(**joint.geometry_kwargs()) if joint is not None else JointGeometry()
+    wall = getattr(args, "wall_mesh_size", None)
+    if args.mesh_size is None and wall is None:
+        return base
+    return replace(base, mesh_size=args.mesh_size or base.mesh_size, wall_mesh_size=wall)
+
+
+def formulation_of(args, joint: JointSpec) -> str:
+    """``--formulation`` (add_formulation, if the tool has it), or the joint file's [mesh]
+    formulation."""
+    return getattr(args, "formulation", None) or joint.formulation
 
 
 def add_load(ap: cli.Parser, default=(0.0, 0.0, 0.0, 0.0)) -> None:
@@ -50,21 +110,21 @@ def add_extrapolation(ap: cli.Parser) -> None:
                     help="accept loads outside the training box (recorded as extrapolated)")
 
 
-def checked_loads(ap: cli.Parser, loads, allow_extrapolation: bool) -> np.ndarray:
+def checked_loads(ap: cli.Parser, loads, allow_extrapolation: bool, box=INPUT_BOX) -> np.ndarray:
     """(n, 4) or (4,) loads as float64, or one error line naming the first value
-    outside the box (exit 2)."""
+    outside ``box`` (4,), the joint's input box (exit 2)."""
     x = np.asarray(loads, dtype=np.float64)
     try:
-        check_box(x, allow_extrapolation)
+        check_box(x, allow_extrapolation, box=box)
     except OutOfBoxError as exc:
         ap.error(exc)
     return x
 
 
-def parsed_load(ap: cli.Parser, args) -> np.ndarray:
-    """The (4,) load of :func:`add_load`'s options, box-checked."""
+def parsed_load(ap: cli.Parser, args, box=INPUT_BOX) -> np.ndarray:
+    """The (4,) load of :func:`add_load`'s options, checked against ``box`` (4,)."""
     return checked_loads(ap, [getattr(args, n.lower()) for n in INPUT_NAMES],
-                         args.allow_extrapolation)
+                         args.allow_extrapolation, box)
 
 
 def one_rank(ap: cli.Parser, comm) -> None:

@@ -9,20 +9,26 @@ A :class:`Problem` holds one static boundary-value problem in the unknown displa
 
 * R_int, the internal virtual work of a hyperelastic energy psi, P = d psi / d F::
 
-      F = I + grad u,   J = det F,   I1 = tr(F^T F)
-      psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2
+      F = I + grad u,   J = det F,   psi(F) = psi_dev(F) + kappa/2 (ln J)^2
+
+  where the law (psi_dev, kappa) is a contract.joint.MaterialLaw written as a UFL energy
+  by fem.materials (neo-Hookean, Mooney-Rivlin, Yeoh, Ogden). The paper's NinjaFlex is the
+  compressible neo-Hookean law
+
+      psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2,   I1 = tr(F^T F)
       mu = E / (2 (1 + nu)),   lambda = E nu / ((1 + nu)(1 - 2 nu))
 
-  or, with ``formulation="mixed"``, the same energy split by a pressure p (MPa, positive
-  in compression; Taylor-Hood: P``degree`` u, continuous P``degree - 1`` p) as the
-  stationary point of the perturbed Lagrangian
+  (:func:`neo_hookean_psi`; fem.materials builds the same UFL expression, so its forms,
+  and the committed data, are unchanged). With ``formulation="mixed"`` the same energy
+  is split by a pressure p (MPa, positive in compression; Taylor-Hood: P``degree`` u,
+  continuous P``degree - 1`` p) as the stationary point of the perturbed Lagrangian
 
-      Pi(u, p) = ∫ mu/2 (I1 - 3) - mu ln J - p ln J - p² / (2 lambda) dX
+      Pi(u, p) = ∫ psi_dev - p ln J - p² / (2 kappa) dX
 
-  whose p-equation ∫ q (ln J + p / lambda) dX = 0 makes p the projection of
-  -lambda ln J, i.e. J = exp(-p / lambda) ≈ 1 - p / lambda: at the solution Pi is the
+  whose p-equation ∫ q (ln J + p / kappa) dX = 0 makes p the projection of
+  -kappa ln J, i.e. J = exp(-p / kappa) ≈ 1 - p / kappa: at the solution Pi is the
   displacement energy above, so both formulations converge to one answer, but the
-  near-incompressible lambda ~ 50 mu no longer enters the displacement stiffness
+  near-incompressible kappa ~ 50 mu no longer enters the displacement stiffness
   directly (no volumetric locking). The unknown is then w = (u, p); its first three
   components are u;
 
@@ -41,9 +47,12 @@ Newton, MUMPS, sensitivities), which knows nothing of the physics.
 
 The physics pieces, written once and shared by the joint, the beam and the finger:
 
-* :func:`elastic_work`: neo-Hookean internal virtual work of one region;
-* :func:`bellow_work`: the joint's NinjaFlex body and its stiff distal cap (modulus
-  ``cap_stiffness`` x E, so it moves rigidly to solver precision);
+* :func:`law_work`: internal virtual work of one region of a MaterialLaw (mixed:
+  :func:`mixed_law_work`); :func:`elastic_work` the same for a neo-Hookean (E, nu) region
+  (the beam, the finger's rigid parts);
+* :func:`bellow_work`: a joint's body of its law and its stiff distal cap (neo-Hookean,
+  modulus ``cap_stiffness`` x the body's small-strain E, MaterialLaw.cap(), so it moves
+  rigidly to solver precision);
 * :func:`chamber_pressures`: follower pressure on the deformed chamber walls (Nanson)::
 
       t0 = -p J F^-T N = -p cofac(F) N,   p_top = max(P, 0),  p_bottom = max(-P, 0)
@@ -58,8 +67,8 @@ The physics pieces, written once and shared by the joint, the beam and the finge
   branch cut; the half-model carries half of each resultant;
 * :func:`valley_contact`: penalty self-contact of the valley walls (:mod:`fem.contact`).
 
-Data flow: MeshData (fem.mesh) -> joint_problem / fem.finger.finger_problem -> Problem
--> fem.load_path.LoadPathSolver.
+Data flow: MeshData (fem.mesh), MaterialLaw (contract.joint, a joint file's [material])
+-> joint_problem / fem.finger.finger_problem -> Problem -> fem.load_path.LoadPathSolver.
 """
 
 from __future__ import annotations
@@ -72,14 +81,17 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from contract.joint import MaterialLaw
 from fem.contact import ValleyContact
 from fem.geometry import TAGS, JointGeometry
+from fem.materials import energy, mixed_energy
 from fem.mesh import MeshData
 
 
 @dataclass(frozen=True)
 class Material:
-    """Neo-Hookean material (MPa). Defaults: NinjaFlex (docs/physics.md)."""
+    """Neo-Hookean material (MPa) by (E, nu). Defaults: NinjaFlex, the paper's joint
+    (contract/joints/paper.toml). :meth:`law` is the same material as a MaterialLaw."""
 
     E: float = 12.2
     nu: float = 0.49
@@ -90,6 +102,16 @@ class Material:
     # The connector need not be nearly incompressible; nu = 0.3 keeps lambda_cap small,
     # since lambda * theta^2/2 is the spurious stress a linearised rotation step creates.
     cap_nu: float = 0.3
+
+    def law(self) -> MaterialLaw:
+        """This material as a contract.joint.MaterialLaw ("neo-hookean", E, nu, cap)."""
+        return MaterialLaw("neo-hookean", (self.E,), nu=self.nu, cap_stiffness=self.cap_stiffness,
+                           cap_nu=self.cap_nu)
+
+
+def as_law(material: MaterialLaw | Material) -> MaterialLaw:
+    """A MaterialLaw, given one or an (E, nu) Material."""
+    return material.law() if isinstance(material, Material) else material
 
 
 # ---------------------------------------------------------------------- problem types
@@ -183,6 +205,11 @@ class Problem:
         for term in self.loads:
             term.constant.value = term.value(a)
 
+    def displacement(self) -> fem.Function:
+        """u (mm) as a Function of its own vector space: ``u`` itself, or for "mixed" a
+        copy of w's displacement block (for writers and plots, which take no mixed field)."""
+        return self.u if self.displacement_space is None else self.u.sub(0).collapse()
+
 
 # ---------------------------------------------------------------------- physics pieces
 def lame(E: float, nu: float) -> tuple[float, float]:
@@ -191,7 +218,8 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 
 
 def neo_hookean_psi(F, mu, lmbda):
-    """Strain energy density psi(F) (MPa = N·mm/mm³), compressible neo-Hookean."""
+    """Strain energy density psi(F) (MPa = N·mm/mm³), compressible neo-Hookean: the
+    reference expression that fem.materials.energy reproduces for the law "neo-hookean"."""
     J = ufl.det(F)
     I1 = ufl.tr(F.T * F)
     return mu / 2 * (I1 - 3) - mu * ufl.ln(J) + lmbda / 2 * ufl.ln(J) ** 2
@@ -202,16 +230,28 @@ def deformation_gradient(u):
     return ufl.variable(ufl.Identity(len(u)) + ufl.grad(u))
 
 
-def elastic_work(F, v, E: float, nu: float, dx):
-    """Internal virtual work ∫ P : grad v dX (N·mm per mm of v) of a neo-Hookean region."""
-    P = ufl.diff(neo_hookean_psi(F, *lame(E, nu)), F)
+def law_work(F, v, law: MaterialLaw, dx):
+    """Internal virtual work ∫ P : grad v dX (N·mm per mm of v) of a region of ``law``,
+    P = d psi / d F of fem.materials.energy."""
+    P = ufl.diff(energy(law, F), F)
     return ufl.inner(P, ufl.grad(v)) * dx
 
 
-def bellow_work(F, v, material: Material, body, cap):
-    """The joint's internal virtual work: NinjaFlex ``body`` and its stiff distal ``cap``."""
-    return (elastic_work(F, v, material.E, material.nu, body)
-            + elastic_work(F, v, material.cap_stiffness * material.E, material.cap_nu, cap))
+def neo_hookean(E: float, nu: float) -> MaterialLaw:
+    """The compressible neo-Hookean law of Young's modulus E (MPa) and Poisson's ratio nu."""
+    return MaterialLaw("neo-hookean", (E,), nu=nu)
+
+
+def elastic_work(F, v, E: float, nu: float, dx):
+    """Internal virtual work of a neo-Hookean (E MPa, nu) region (:func:`law_work`)."""
+    return law_work(F, v, neo_hookean(E, nu), dx)
+
+
+def bellow_work(F, v, material: MaterialLaw | Material, body, cap):
+    """A joint's internal virtual work: ``body`` of its law and its stiff distal ``cap``
+    (MaterialLaw.cap(): neo-Hookean, cap_stiffness x the body's small-strain E)."""
+    law = as_law(material)
+    return law_work(F, v, law, body) + law_work(F, v, law.cap(), cap)
 
 
 def rotation_about_z(F, theta_ref=0.0):
@@ -353,7 +393,8 @@ def mixed_space(mesh_data: MeshData, degree: int, quadrature_degree: int):
 def mixed_energy_density(F, p, E: float, nu: float):
     """The perturbed-Lagrangian density (MPa) of the module docstring,
     mu/2 (I1 - 3) - mu ln J - p ln J - p²/(2 lambda); stationary in p at p = -lambda ln J,
-    where it equals neo_hookean_psi. Needs lambda > 0 (nu > 0)."""
+    where it equals neo_hookean_psi (the reference of fem.materials.mixed_energy for the
+    law "neo-hookean"). Needs lambda > 0 (nu > 0)."""
     mu, lmbda = lame(E, nu)
     if lmbda <= 0:
         raise ValueError(f"the mixed formulation needs nu > 0 (lambda > 0), not nu = {nu}")
@@ -361,13 +402,24 @@ def mixed_energy_density(F, p, E: float, nu: float):
     return mu / 2 * (ufl.tr(F.T * F) - 3) - mu * ufl.ln(J) - p * ufl.ln(J) - p ** 2 / (2 * lmbda)
 
 
-def mixed_bellow_work(fields: MixedFields, F, material: Material, body, cap):
-    """The joint's internal virtual work in w = (u, p): the variation of Pi(u, p) over the
-    NinjaFlex ``body`` and the stiff ``cap`` (one continuous pressure across both)."""
-    Pi = (mixed_energy_density(F, fields.p, material.E, material.nu) * body
-          + mixed_energy_density(F, fields.p, material.cap_stiffness * material.E,
-                                 material.cap_nu) * cap)
+def mixed_bellow_work(fields: MixedFields, F, material: MaterialLaw | Material, body, cap):
+    """A joint's internal virtual work in w = (u, p): the variation of Pi(u, p) over the
+    ``body`` of its law and the stiff ``cap`` (MaterialLaw.cap(); one continuous pressure
+    across both)."""
+    law = as_law(material)
+    Pi = mixed_energy(law, F, fields.p) * body + mixed_energy(law.cap(), F, fields.p) * cap
     return ufl.derivative(Pi, fields.w, fields.test)
+
+
+def mixed_law_work(fields: MixedFields, F, law: MaterialLaw, dx):
+    """Internal virtual work in w = (u, p) of one region of ``law`` (kappa > 0): the
+    variation of ∫ fem.materials.mixed_energy dX, the mixed counterpart of law_work."""
+    return ufl.derivative(mixed_energy(law, F, fields.p) * dx, fields.w, fields.test)
+
+
+def mixed_elastic_work(fields: MixedFields, F, E: float, nu: float, dx):
+    """Internal virtual work in w = (u, p) of one neo-Hookean region (E MPa, nu > 0)."""
+    return mixed_law_work(fields, F, neo_hookean(E, nu), dx)
 
 
 def mixed_clamp_and_symmetry(W, facet_tags) -> list:
@@ -385,12 +437,13 @@ def mixed_clamp_and_symmetry(W, facet_tags) -> list:
 
 # ---------------------------------------------------------------------- the joint
 def joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
-                  material: Material = Material(), *, degree: int = 2,
+                  material: MaterialLaw | Material = Material(), *, degree: int = 2,
                   quadrature_degree: int = 2, contact_penalty: float = 100.0,
                   formulation: str = "displacement") -> Problem:
     """One joint-like body clamped at x = 0 (the bellow joint, or the benchmark beam):
     body and stiff cap, chamber pressure, valley contact where the mesh has them, and the
-    end loads at ``ref_point`` (3,) mm. Load vector a = (P, F1, F2, M) in MPa, N, N, N·mm,
+    end loads at ``ref_point`` (3,) mm. ``material``: the body's law (a contract.joint
+    MaterialLaw, or an (E, nu) Material). Load vector a = (P, F1, F2, M) in MPa, N, N, N·mm,
     with full-range magnitudes ``load_scale`` (4,). ``formulation``: "displacement"
     (P``degree`` u) or "mixed" (Taylor-Hood u-p, module docstring). Collective."""
     if formulation not in FORMULATIONS:
@@ -413,7 +466,7 @@ def joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
 
 
 def mixed_joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
-                        material: Material = Material(), *, degree: int = 2,
+                        material: MaterialLaw | Material = Material(), *, degree: int = 2,
                         quadrature_degree: int = 2, contact_penalty: float = 100.0) -> Problem:
     """:func:`joint_problem` in the mixed u-p formulation: the same loads, contact, cap
     rotation and probes, with the internal work of Pi(u, p). Collective."""

@@ -1,11 +1,14 @@
 """Off-screen pyvista render of the joint: undeformed geometry and one deformed case.
 
-    python -m fem.render --out results/fem/joint.png [--p 0.2 --f2 -1 --m 20]
+    python -m fem.render --out results/fem/joint.png [--p 0.2 --f2 -1 --m 20] [--joint FILE]
 
 The half-model is mirrored about z = 0 so the full joint is shown. Left: the undeformed
 joint, cut open at z = 0 to show the two chambers and bellow cells. Right: the deformed
 joint coloured by displacement magnitude |u| (mm), with the 10 anchor points (like the
-paper's Figure 2C). Runs on one rank; needs no display (Plotter(off_screen=True)).
+paper's Figure 2C). The joint is ``--joint FILE`` (contract.joint; default the paper's,
+contract/joints/paper.toml), meshed and solved with its [mesh] defaults unless
+``--mesh-size`` is given; its box bounds the load. A bad joint file exits 2 with one line.
+Runs on one rank; needs no display (Plotter(off_screen=True)).
 The PNG is written atomically (screenshot and caption go to a temporary name beside it);
 ``--json`` prints the file and the solve's figures, as ``fem.solve --json`` does.
 """
@@ -14,7 +17,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import asdict, replace
+from dataclasses import asdict
 
 import numpy as np
 import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
@@ -22,8 +25,9 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import atomic_path
-from fem.geometry import JointGeometry
-from fem.options import add_load, add_mesh_size, one_rank, parsed_load
+from contract.joint import joint_digest
+from fem.options import (add_joint, add_load, add_mesh_size, formulation_of, joint_geometry, joint_of,
+                         one_rank, parsed_load)
 from fem.solver import JointSolver, Load
 
 
@@ -31,9 +35,10 @@ def _grid(solver):
     """pyvista grid of the P2 mesh with point data 'u' (mm), mirrored to z <= 0 too."""
     from dolfinx import plot
 
-    topology, cell_types, x = plot.create_vtk_mesh(solver.V)
+    field = solver.displacement()       # u in its own space (mixed: w's u block)
+    topology, cell_types, x = plot.create_vtk_mesh(field.function_space)
     grid = pyvista.UnstructuredGrid(topology, cell_types, x)
-    grid.point_data["u"] = solver.u.x.array.reshape(-1, 3).copy()
+    grid.point_data["u"] = field.x.array.reshape(-1, 3).copy()
     mirror = grid.copy()
     mirror.points[:, 2] *= -1
     mirror.point_data["u"][:, 2] *= -1
@@ -62,7 +67,7 @@ def _render(solver, result, out: str) -> None:
     p.add_mesh(deformed.extract_surface(nonlinear_subdivision=0, algorithm='dataset_surface'), scalars="|u| (mm)",
                cmap="viridis", scalar_bar_args={"title": "|u| (mm)", "vertical": True})
     anchors = np.column_stack([result.anchors, np.zeros(len(result.anchors))])
-    p.add_points(anchors + [0, 0, JointGeometry().width / 2 + 0.5], color="red",
+    p.add_points(anchors + [0, 0, solver.mesh_data.geometry.width / 2 + 0.5], color="red",
                  point_size=12, render_points_as_spheres=True)
     p.view_xy()
     p.camera.zoom(1.1)
@@ -97,14 +102,16 @@ def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.render", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".png", default="results/fem/joint.png",
                   help="PNG file (default results/fem/joint.png)")
+    add_joint(ap)
     add_load(ap, default=(0.2, 0.0, -1.0, 20.0))
-    add_mesh_size(ap, JointGeometry().mesh_size)
+    add_mesh_size(ap, None, shown="the joint file's [mesh] size")
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
     args = ap.parse_args(argv)
-    load = Load.from_array(parsed_load(ap, args))
-    geo = replace(JointGeometry(), mesh_size=args.mesh_size)
-    solver = JointSolver(geo, comm)
+    joint = joint_of(args)
+    load = Load.from_array(parsed_load(ap, args, joint.input_box))
+    geo = joint_geometry(args, joint)
+    solver = JointSolver.for_joint(joint, comm, geo, formulation=formulation_of(args, joint))
     result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
     if not result.converged:
         print(f"{ap.prog}: the solve did not converge: {result.reason}", file=sys.stderr)
@@ -113,7 +120,8 @@ def main(argv=None) -> int:
         render(solver, result, args.out)
     if args.json:
         cli.print_json({"out": args.out, **result.summary(), "mesh": solver.mesh_info(), "geometry": asdict(geo),
-                        "ranks": comm.size})
+                        "formulation": solver.formulation,
+                        "joint": {"name": joint.name, "sha256": joint_digest(joint)}, "ranks": comm.size})
     else:
         print(f"wrote {args.out}: phi_end {math.degrees(result.phi_end):.1f} deg, "
               f"cap {math.degrees(result.cap_rotation):.1f} deg")

@@ -1,6 +1,6 @@
 """Self-contact check: the outer bellow walls facing each other across each valley.
 
-    python -m fem.self_contact --out results/fem/self_contact.json [--penalty 0]
+    python -m fem.self_contact --out results/fem/self_contact.json [--penalty 0] [--formulation mixed]
 
 When one chamber is pressurised (or M, F2 bend the joint) the other side's bellows close
 up: the two outer cell walls across a valley (gap ``valley_width`` = 2.5 mm undeformed)
@@ -12,7 +12,9 @@ the joint and reports, for every valley on each side, the smallest signed gap
 over the node pairs of the two periodic faces (:mod:`fem.contact`; n the best-fit
 normal of the valley). g < 0 is overlap. The production solver carries penalty contact
 (SolverConfig.contact_penalty), so g stays near 0; ``--penalty 0`` switches it off and
-shows how far the walls would interpenetrate without it. Units: mm. One rank.
+shows how far the walls would interpenetrate without it. ``--formulation`` (default the
+production one) chooses the joint's elements; the JSON records it ("formulation"). Units:
+mm. One rank.
 ``--json`` prints the minimum gap and the figures of every case.
 """
 
@@ -28,23 +30,34 @@ from mpi4py import MPI
 from contract import cli
 from fem.contact import ValleyContact
 from fem.artefacts import SELF_CONTACT
+from fem.discretisation import FORMULATION
 from fem.geometry import JointGeometry
 from fem.mesh_study import CORNERS
-from fem.options import add_extrapolation, add_mesh_size, checked_loads, one_rank
+from fem.options import add_extrapolation, add_formulation, add_mesh_size, checked_loads, one_rank
 from fem.solver import JointSolver, Load, SolverConfig
 from contract.spec import INPUT_MIRROR
 
 PENALTY_MAX = 1e5  # MPa/mm: 1000 x the production penalty
 
 
+def valley_gaps(solver: JointSolver, geo: JointGeometry) -> dict:
+    """Signed gaps g (mm) of every valley's node pairs at the solver's state, per (valley,
+    side) (fem.contact). Without contact (penalty 0) they are measured on u in its own
+    space: the solver's u, or for the mixed formulation a copy of w's u block."""
+    if solver.contact is not None:
+        return solver.contact.gaps(solver.u)
+    u = solver.displacement()
+    return ValleyContact(u.function_space, solver.mesh_data.facet_tags, geo, 0.0).gaps(u)
+
+
 def run(mesh_size: float | None = None, loads: list[Load] | None = None,
-        penalty: float | None = None, allow_extrapolation: bool = False) -> dict:
-    """Gaps for ``loads`` (default: CORNERS and their mirrors) on the given mesh."""
+        penalty: float | None = None, allow_extrapolation: bool = False,
+        formulation: str = FORMULATION) -> dict:
+    """Gaps (mm) for ``loads`` (default: CORNERS and their mirrors) on the given mesh (mm)
+    and formulation, with the contact penalty (MPa/mm; None: the solver's)."""
     geo = JointGeometry() if mesh_size is None else replace(JointGeometry(), mesh_size=mesh_size)
     config = SolverConfig() if penalty is None else SolverConfig(contact_penalty=penalty)
-    solver = JointSolver(geo, MPI.COMM_SELF, config=config)
-    mesh = solver.mesh_data
-    contact = solver.contact or ValleyContact(solver.V, mesh.facet_tags, geo, 0.0)
+    solver = JointSolver(geo, MPI.COMM_SELF, config=config, formulation=formulation)
     cases = []
     if loads is None:
         loads = CORNERS + [Load.from_array(c.as_array() * INPUT_MIRROR) for c in CORNERS]
@@ -54,12 +67,13 @@ def run(mesh_size: float | None = None, loads: list[Load] | None = None,
                  "phi_end_deg": float(np.degrees(r.phi_end)),
                  "newton_iterations": r.iterations, "wall_time_s": r.wall_time}
         if r.converged:
-            gaps = {f"{side}_{k}": float(g.min()) for (k, side), g in contact.gaps(solver.u).items()}
+            gaps = {f"{side}_{k}": float(g.min()) for (k, side), g in valley_gaps(solver, geo).items()}
             entry.update(gaps=gaps, min_gap_mm=min(gaps.values()))
         cases.append(entry)
     solved = [c for c in cases if c["converged"]]
     min_gap = min(c["min_gap_mm"] for c in solved) if solved else None
     return {"undeformed_gap_mm": geo.valley_width, "mesh_size": geo.mesh_size,
+            "formulation": formulation,
             "contact_penalty_MPa_per_mm": config.contact_penalty, "cases": cases,
             "min_gap_mm": min_gap, "unsolved_cases": len(cases) - len(solved)}
 
@@ -75,13 +89,15 @@ def main(argv=None) -> int:
     ap.add_argument("--loads", type=cli.numbers(4), nargs="+", metavar="P,F1,F2,M",
                     help="solve these loads (MPa, N, N, N*mm) instead of the box corners")
     add_extrapolation(ap)
+    add_formulation(ap)
     one_rank(ap, MPI.COMM_WORLD)
     args = ap.parse_args(argv)
     loads = None
     if args.loads:
         loads = [Load.from_array(x) for x in checked_loads(ap, args.loads, args.allow_extrapolation)]
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
-    out = run(args.mesh_size, loads, args.penalty, args.allow_extrapolation)
+    out = run(args.mesh_size, loads, args.penalty, args.allow_extrapolation,
+              args.formulation or FORMULATION)
     with ap.errors():
         SELF_CONTACT.write(args.out, out)
     if args.json:
@@ -92,7 +108,7 @@ def main(argv=None) -> int:
               f"{c.get('min_gap_mm', float('nan')):.3f} mm")
     print(f"minimum valley gap over these loads: {out['min_gap_mm']} mm "
           f"(undeformed {out['undeformed_gap_mm']} mm, penalty "
-          f"{out['contact_penalty_MPa_per_mm']} MPa/mm)")
+          f"{out['contact_penalty_MPa_per_mm']} MPa/mm, {out['formulation']} formulation)")
     return 0
 
 

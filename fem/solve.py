@@ -1,15 +1,23 @@
 """Command line: solve one joint load case.
 
     python -m fem.solve --p 0.2 --f1 1 --f2 -1 --m 20 --json
+    python -m fem.solve --p 0.2 --formulation mixed --mesh-size 2.4
+    python -m fem.solve --joint my_joint.toml --p 0.1 --json
     mpirun -n 2 python -m fem.solve --p -0.1 --m 50
 
-Inputs: P (MPa), F1, F2 (N), M (N·mm); outside |P|<=0.3, |F1|,|F2|<=3, |M|<=100 the load
+The joint is a joint description file (``--joint``, contract.joint, docs/joints.md;
+default the paper's, contract/joints/paper.toml): its shape, material law, anchors, input
+box and default mesh (``--mesh-size`` and ``--formulation`` override the file's [mesh]).
+A bad file exits 2 with one line naming its key. Inputs: P (MPa), F1, F2 (N), M (N·mm);
+outside the joint's box (the paper's: |P|<=0.3, |F1|,|F2|<=3, |M|<=100) the load
 is refused before meshing unless --allow-extrapolation (then recorded as
-"extrapolated": true). Prints the anchors r_1..r_10 (mm), phi_end and the cap rotation
+"extrapolated": true). Prints the anchors r_1..r_n (mm), phi_end and the cap rotation
 (deg), Newton iterations and wall time; with --jacobian also d(anchors)/d(P, F1, F2, M),
-shape (20, 4), rows (x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm); with
+shape (2n, 4), rows (x_1, y_1, x_2, ...), columns mm/MPa, mm/N, mm/N, mm/(N·mm); with
 --xdmf the displacement field (NAME.xdmf + NAME.h5, written by all ranks into a hidden
-folder beside them, then renamed into place). Exit status 0 on convergence, 1 if the
+folder beside them, then renamed into place; for the mixed formulation u alone). The
+formulation is in the output and the JSON ("formulation"), and so is the joint
+("joint": its name and sha256, contract.joint.joint_digest). Exit status 0 on convergence, 1 if the
 solve failed, 2 on bad input. Progress (mesh, load steps) goes to stderr unless --quiet;
 stdout holds the result alone.
 """
@@ -18,13 +26,15 @@ from __future__ import annotations
 
 import logging
 import sys
-from dataclasses import asdict, replace
+from dataclasses import asdict
+from types import SimpleNamespace
 
 from mpi4py import MPI
 
 from contract import cli
-from fem.geometry import JointGeometry
-from fem.options import add_load, add_mesh_size, parsed_load
+from contract.joint import joint_digest
+from fem.options import (add_formulation, add_joint, add_load, add_mesh_size, formulation_of,
+                         joint_geometry, joint_of, parsed_load)
 from fem.solver import JointSolver, Load
 from fem.xdmf import write_xdmf
 
@@ -34,8 +44,10 @@ log = logging.getLogger("softjoint.fem")
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.solve",
                     description="Solve one bellow-joint load case with DOLFINx.")
+    add_joint(ap)
     add_load(ap)
-    add_mesh_size(ap, JointGeometry().mesh_size)
+    add_mesh_size(ap, None, shown="the joint file's [mesh] size")
+    add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--jacobian", action="store_true",
                     help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
     ap.add_output("--xdmf", suffix=".xdmf",
@@ -54,7 +66,8 @@ def _print_text(out: dict, result, jac) -> None:
     print(f"  phi_end = {out['phi_end_deg']:.3f} deg, cap rotation = "
           f"{out['cap_rotation_deg']:.3f} deg")
     print(f"  Newton iterations {result.newton_iterations}, {result.wall_time:.1f} s, "
-          f"{out['mesh']['nodes']} nodes, {out['mesh']['dofs']} dofs, {out['ranks']} rank(s)")
+          f"{out['mesh']['nodes']} nodes, {out['mesh']['dofs']} dofs ({out['formulation']}), "
+          f"{out['ranks']} rank(s)")
     if jac is not None:
         print("  d(anchors)/d(P, F1, F2, M), rows x_1, y_1, x_2, ...:")
         for row in jac:
@@ -64,22 +77,28 @@ def _print_text(out: dict, result, jac) -> None:
 def main(argv=None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
-    load = Load.from_array(parsed_load(ap, args))
+    joint = joint_of(args)
+    load = Load.from_array(parsed_load(ap, args, joint.input_box))
     comm = MPI.COMM_WORLD
     cli.setup_logging(args.quiet, args.verbose)
-    geo = replace(JointGeometry(), mesh_size=args.mesh_size)
+    geo = joint_geometry(args, joint)
+    formulation = formulation_of(args, joint)
     with ap.errors(), cli.heartbeat("joint", enabled=comm.rank == 0):
         if comm.rank == 0:
-            log.info("joint: meshing and compiling the forms (the first run compiles for tens of seconds)")
-        solver = JointSolver(geo, comm)
+            log.info("joint %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
+                     joint.name)
+        solver = JointSolver.for_joint(joint, comm, geo, formulation=formulation)
         if comm.rank == 0:
             log.info("mesh ready (%d nodes); solving %s", solver.mesh_info()["nodes"], load)
         result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
         jac = solver.sensitivities() if args.jacobian and result.converged else None
         if args.xdmf and result.converged:
-            write_xdmf(args.xdmf, solver)
+            # write_xdmf takes anything with comm, mesh_data and u: u in its own space
+            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.mesh_data,
+                                                  u=solver.displacement()))
     if comm.rank == 0:
         out = {**result.summary(), "mesh": solver.mesh_info(), "geometry": asdict(geo),
+               "formulation": formulation, "joint": {"name": joint.name, "sha256": joint_digest(joint)},
                "ranks": comm.size}
         if jac is not None:
             out["jacobian"] = jac.tolist()

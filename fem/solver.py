@@ -2,23 +2,30 @@
 
 Units: mm, N, MPa (= N/mm²), N·mm; angles in rad.
 
-The joint's physics is :func:`fem.problem.joint_problem` (neo-Hookean body, stiff distal
+The joint's physics is :func:`fem.problem.joint_problem` (hyperelastic body, stiff distal
 cap, follower chamber pressure, valley self-contact, end loads F1, F2, M on the rigid cap;
 equations there); it is solved by :class:`fem.load_path.LoadPathSolver` (load path with
 cut-back, Newton/MUMPS, sensitivities). This module adds the joint's load vector
 (P, F1, F2, M) in MPa, N, N, N·mm (docs/physics.md), its input box, and its result: the
-anchors r_1..r_10, phi_end and the cap rotation.
+anchors r_1..r_n (n = 10 for the paper's joint), phi_end and the cap rotation.
 
-The material is neo-Hookean, whose small-strain limit is exactly (E, nu) = (12.2 MPa,
-0.49); P2 displacements avoid the volumetric locking of P1 at nu = 0.49 (mesh convergence:
-``make mesh-study``); ``formulation="mixed"`` solves the same energy in Taylor-Hood u-p
-form (fem.problem), which does not lock. The paper used ANSYS linear elasticity with large deflection (St
-Venant-Kirchhoff-like); neo-Hookean agrees with it at small strain and stays stable in
-compression.
+A joint is described by a joint file (contract.joint, docs/joints.md):
+:meth:`JointSolver.for_joint` builds its geometry (JointGeometry(**joint.geometry_kwargs())),
+its law (fem.materials), its anchors X_i = (i L / n, 0, 0) and its input box from it. The
+defaults of JointSolver are the paper's joint: NinjaFlex as a compressible neo-Hookean
+solid, whose small-strain limit is exactly (E, nu) = (12.2 MPa, 0.49), and
+contract.spec.INPUT_BOX. P2 displacements avoid the volumetric locking of P1 at nu = 0.49
+(mesh convergence: ``make mesh-study``); ``formulation="mixed"`` solves the same energy in
+Taylor-Hood u-p form (fem.problem), which does not lock. JointSolver's default
+formulation is the production one, fem.discretisation.FORMULATION (with JointGeometry's
+default sizes, the PRODUCTION discretisation). The paper used ANSYS linear elasticity with
+large deflection (St Venant-Kirchhoff-like); neo-Hookean agrees with it at small strain
+and stays stable in compression.
 
-Data flow: JointGeometry -> fem.mesh.create_mesh -> fem.problem.joint_problem ->
-LoadPathSolver; JointSolver.solve(Load) -> SolveResult (anchors (10, 2) mm, phi_end, cap
-rotation, u, Newton figures); JointSolver.sensitivities() -> d anchors / d load (20, 4).
+Data flow: joint file -> contract.joint.JointSpec -> JointSolver.for_joint; JointGeometry
+-> fem.mesh.create_mesh -> fem.problem.joint_problem -> LoadPathSolver;
+JointSolver.solve(Load) -> SolveResult (anchors (n, 2) mm, phi_end, cap rotation, u,
+Newton figures); JointSolver.sensitivities() -> d anchors / d load (2n, 4).
 """
 
 from __future__ import annotations
@@ -31,11 +38,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from mpi4py import MPI
 
+from contract.joint import JointSpec, MaterialLaw
+from contract.spec import INPUT_BOX, N_ANCHORS, check_box, outside_box, phi_end
+from fem.discretisation import FORMULATION
 from fem.geometry import BeamGeometry, JointGeometry, anchor_points
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
-from fem.problem import Material, joint_problem
-from contract.spec import INPUT_BOX, check_box, outside_box, phi_end
+from fem.problem import Material, as_law, joint_problem
 
 # Material and SolverConfig are re-exported: the joint's public configuration.
 __all__ = ["Load", "Material", "SolverConfig", "SolveResult", "JointSolver", "EndLoadedSolver",
@@ -105,17 +114,21 @@ class EndLoadedSolver:
     rigid cap loaded at ``ref_point`` (3,) mm: :func:`fem.problem.joint_problem` handed
     to a :class:`LoadPathSolver`. Load vector (P, F1, F2, M); ``probe_points`` (n, 3) are
     material points whose deformed (x, y) are reported (the joint's anchors).
+    ``material``: the body's law (a contract.joint.MaterialLaw, or an (E, nu) Material);
+    ``input_box`` (4,): the load half-widths (P MPa, F1 N, F2 N, M N·mm) that size the
+    solver's first step.
 
     ``formulation``: "displacement" (the datasets' P2 displacement form) or "mixed"
     (Taylor-Hood u-p, fem.problem). It is an argument rather than a SolverConfig field so
     that every recorded SolverConfig (campaign manifests) stays what it is."""
 
     def __init__(self, mesh_data: MeshData, ref_point, probe_points,
-                 material: Material = Material(), config: SolverConfig = SolverConfig(),
-                 formulation: str = "displacement"):
-        self.mesh_data, self.material, self.config = mesh_data, material, config
+                 material: MaterialLaw | Material = Material(), config: SolverConfig = SolverConfig(),
+                 formulation: str = "displacement", input_box=INPUT_BOX):
+        self.mesh_data, self.material, self.config = mesh_data, as_law(material), config
         self.formulation = formulation
-        self.problem = joint_problem(mesh_data, ref_point, probe_points, INPUT_BOX, material,
+        self.input_box = np.asarray(input_box, dtype=float)
+        self.problem = joint_problem(mesh_data, ref_point, probe_points, self.input_box, self.material,
                                      formulation=formulation, **config.discretisation())
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
@@ -137,6 +150,11 @@ class EndLoadedSolver:
 
     def mesh_info(self) -> dict:
         return self.solver.mesh_info()
+
+    def displacement(self):
+        """The displacement u (mm) as a Function of its own vector space (for the mixed
+        formulation a copy of w's u block)."""
+        return self.problem.displacement()
 
     def cap_rotation(self) -> float:
         """Volume-averaged rotation of the distal cap about +z (rad)."""
@@ -184,29 +202,46 @@ class EndLoadedSolver:
 
 
 class JointSolver(EndLoadedSolver):
-    """The bellow joint: anchors r_1..r_10 (docs/physics.md), loads at r_10; loads outside
-    the input box are refused unless allowed."""
+    """The bellow joint: ``anchors`` anchor points r_1..r_n (docs/physics.md), loads at r_n;
+    loads outside ``input_box`` (4,) are refused unless allowed. Defaults: the paper's
+    joint (material, 10 anchors, contract.spec.INPUT_BOX); ``formulation`` defaults to the
+    production one (fem.discretisation.FORMULATION). A joint file's joint:
+    :meth:`for_joint`."""
 
     def __init__(self, geometry: JointGeometry = JointGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
-                 material: Material = Material(), config: SolverConfig = SolverConfig(),
-                 formulation: str = "displacement"):
-        X = anchor_points(geometry.length)
+                 material: MaterialLaw | Material = Material(), config: SolverConfig = SolverConfig(),
+                 formulation: str = FORMULATION, *, anchors: int = N_ANCHORS, input_box=INPUT_BOX):
+        X = anchor_points(geometry.length, anchors)
         super().__init__(create_mesh(geometry, comm), ref_point=X[-1], probe_points=X,
-                         material=material, config=config, formulation=formulation)
+                         material=material, config=config, formulation=formulation,
+                         input_box=input_box)
+
+    @classmethod
+    def for_joint(cls, joint: JointSpec, comm: MPI.Comm = MPI.COMM_WORLD,
+                  geometry: JointGeometry | None = None, config: SolverConfig = SolverConfig(),
+                  formulation: str | None = None) -> "JointSolver":
+        """The solver of a joint description: its shape, law, anchors and input box;
+        ``geometry`` (default: the joint's shape and [mesh] sizes) and ``formulation``
+        (default: the joint's [mesh] formulation) override its discretisation."""
+        geometry = geometry or JointGeometry(**joint.geometry_kwargs())
+        return cls(geometry, comm, joint.material, config, formulation or joint.formulation,
+                   anchors=joint.anchors, input_box=joint.input_box)
 
     def solve(self, load: Load, continuation: bool = False,
               allow_extrapolation: bool = False) -> SolveResult:
         """Solve one load case. Raises contract.spec.OutOfBoxError, before any work, for a
-        load that is not finite, or outside the box unless ``allow_extrapolation``."""
-        check_box(load.as_array(), allow_extrapolation)
+        load that is not finite, or outside the joint's box unless ``allow_extrapolation``."""
+        check_box(load.as_array(), allow_extrapolation, box=self.input_box)
         result = super().solve(load, continuation)
-        result.extrapolated = bool(outside_box(load.as_array()))
+        result.extrapolated = bool(outside_box(load.as_array(), self.input_box))
         return result
 
 
 def beam_solver(geometry: BeamGeometry = BeamGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
                 E: float = 12.2, config: SolverConfig = SolverConfig()) -> EndLoadedSolver:
-    """The slender benchmark cantilever (nu = 0): probes at the beam end (L, 0, 0)."""
+    """The slender benchmark cantilever (nu = 0): probes at the beam end (L, 0, 0). P2
+    displacements: at nu = 0 there is no volumetric stiffness to lock (and lambda = 0
+    leaves the mixed form's pressure undefined)."""
     tip = np.array([geometry.length, 0.0, 0.0])
     return EndLoadedSolver(create_mesh(geometry, comm), ref_point=tip, probe_points=tip[None, :],
-                           material=Material(E=E, nu=0.0), config=config)
+                           material=Material(E=E, nu=0.0), config=config, formulation="displacement")

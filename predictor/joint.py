@@ -38,8 +38,16 @@ angle of the last segment plus its turn). SurrogateJoint: the surrogate's cap-ro
 head (``module.with_cap``) when the checkpoint has one (``module.has_cap_rotation``),
 otherwise a one-line ValueError (use tangent kinematics).
 
-The joint's contract (length, anchors, input box, phi_end) is contract.spec's; this module
-only implements it.
+Joint descriptions (contract.joint, docs/joints.md). Every joint model is a model of one
+joint description, ``model.joint``: a surrogate's is the one its checkpoint carries
+(surrogate.model.checkpoint_joint; absent in checkpoints written before joint files: the
+paper's), the analytic stand-in's is the paper's. A finger file names the joint of each
+joint part (contract.finger; absent: the paper's), and ``check_finger`` refuses, with one
+line, a model whose joint is not the one every joint part of the finger names (compared
+by contract.joint.joint_digest): ``load_joint(spec, finger)`` loads and checks in one call.
+
+The joint's contract (length, anchors, input box, phi_end) is contract.spec's for the
+paper's joint; this module only implements it.
 """
 from __future__ import annotations
 
@@ -50,7 +58,10 @@ from pathlib import Path
 
 import torch
 
+from contract import joint as joint_file
 from contract.files import sha256_file
+from contract.finger import FingerSpec
+from contract.joint import JointSpec, joint_digest
 from contract.spec import JOINT_LENGTH, N_ANCHORS
 from predictor.defaults import ANALYTIC, joint_spec
 
@@ -64,6 +75,11 @@ class JointModel:
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
+
+    @property
+    def joint(self) -> JointSpec:
+        """The joint description this model stands for (module docstring): the paper's."""
+        return joint_file.load_joint()
 
     @property
     def has_cap_rotation(self) -> bool:
@@ -142,7 +158,12 @@ class SurrogateJoint(JointModel):
         # The content digest ties what was built on this joint (the NN predictors) to
         # this exact checkpoint: a retrained file under the same name is another joint.
         self.name = f"surrogate:{path.name}@{sha256_file(path)[:12]}"
-        self.length = JOINT_LENGTH
+        self.length = self.module.joint.length
+
+    @property
+    def joint(self) -> JointSpec:
+        """The joint description the checkpoint was trained on."""
+        return self.module.joint
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
         return self.module(inputs)
@@ -164,15 +185,30 @@ class SurrogateJoint(JointModel):
         return other
 
 
-def load_joint(spec: str | None) -> JointModel:
+def check_finger(model: JointModel, finger: FingerSpec) -> None:
+    """ValueError (one line) unless every joint part of ``finger`` names the joint
+    description ``model`` was made for (module docstring; compared by digest)."""
+    want = joint_digest(model.joint)
+    for j, k in enumerate(finger.joints):
+        named = finger.parts[k].spec
+        if joint_digest(named) != want:
+            where = finger.parts[k].joint_file or "no joint file: the paper's joint"
+            raise ValueError(f"joint model {model.name} was trained on joint {model.joint.name!r} (sha256 "
+                             f"{want[:12]}), but joint {j + 1} of finger {finger.name!r} is {named.name!r} "
+                             f"({where}, sha256 {joint_digest(named)[:12]}): use a model of that joint")
+
+
+def load_joint(spec: str | None, finger: FingerSpec | None = None) -> JointModel:
     """``"analytic"`` -> AnalyticJoint(); a checkpoint path -> SurrogateJoint; None -> the
     default surrogate (predictor.defaults: found from the package, never the working
-    directory).
+    directory). With ``finger``, the model must be of the joint its joint parts name
+    (check_finger).
 
     Raises ValueError (surrogate.ModelError is one) with a one-line reason, also when the
     default surrogate is missing (the analytic joint is only used when named).
     """
     spec = joint_spec(spec)
-    if spec == ANALYTIC:
-        return AnalyticJoint()
-    return SurrogateJoint(spec)
+    model = AnalyticJoint() if spec == ANALYTIC else SurrogateJoint(spec)
+    if finger is not None:
+        check_finger(model, finger)
+    return model

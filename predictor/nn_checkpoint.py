@@ -4,7 +4,8 @@ GRAVITY_FORMAT ``softjoint-gravity-nn/1`` (trained without an object) or CONTACT
 weights), ``joint`` (the joint model's name), ``normalisation`` {p_scale_MPa: 0.3,
 tau_scale: TAU_SCALE}, ``metrics`` and ``history`` (per logged epoch). ``load_predictor``
 needs only the file, and refuses a damaged, foreign or other-kind file, another joint or
-another finger with one line.
+another finger with one line, and a joint model whose joint description is not the one
+the finger's joint parts name (predictor.joint.check_finger).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from pathlib import Path
 
 from predictor.defaults import default_nn_dir
 from predictor.gripper import GripperParams
-from predictor.joint import JointModel
+from predictor.joint import JointModel, check_finger
 from predictor.networks import P_SCALE, TAU_SCALE, NNConfig, Predictor, network
 from surrogate import checkpoint
 
@@ -47,7 +48,8 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
     """Load a checkpoint of the gravity (or, with ``contact``, the contact) kind; path
     None picks results/predictor/{gravity,contact}_nn.pt. ``joint`` None skips the check
     that the NN was trained on that joint (reading its history only); ``params`` None
-    skips the check that it was trained for that finger, kinematics and joint weights.
+    skips the check that it was trained for that finger, kinematics and joint weights;
+    with both, ``joint`` must be of the joint description the finger names (check_finger).
 
     Raises ValueError (one line): a missing, damaged, foreign or other-kind file
     (surrogate.checkpoint.CheckpointError), a joint mismatch or a finger/options mismatch.
@@ -70,6 +72,8 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
         raise ValueError(f"{path} was trained for {trained_params.describe()}, not {params.describe()}")
     if joint is not None and joint_name != joint.name:
         raise ValueError(f"{path} was trained with joint {joint_name!r}, not {joint.name!r}")
+    if joint is not None and params is not None:
+        check_finger(joint, params.finger)
     return Predictor(net.eval(), cfg, joint_name, metrics, history)
 
 

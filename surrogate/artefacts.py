@@ -56,3 +56,19 @@ SWEEP = Format("surrogate-sweep", 1, "surrogate.sweep", {
     "name": str, "overrides": list, "epochs": int, "data_sha256": str, "model_config": dict,
     "train_config": dict, "best_epoch": int, "train_time_s": NUM,
     **{f"{split}.{k}": kind for split in ("val", "heldout") for k, kind in _METRICS.items()}})
+
+#: results/surrogate/multifidelity.json (surrogate.multifidelity): the multi-fidelity
+#: surrogate against fine-only training at equal FEM cost; one point per (kind, samples),
+#: one comparison row per multi-fidelity point.
+MULTIFIDELITY = Format("surrogate-multifidelity", 1, "surrogate.multifidelity", {
+    **each("coarse", NUM, "cpu_hours", "cpu_s_per_sample"), "coarse.samples": int,
+    **each("fine", NUM, "cpu_hours", "cpu_s_per_sample"), **each("fine", int, "samples", "pool", "val"),
+    "heldout.n": int, "heldout.split": str, "min_steps": int, "complete": bool, "coarse_only.cpu_hours": NUM,
+    "points[].kind": str, **each("points[]", int, "samples", "seed", "steps"), "points[].cpu_hours": NUM,
+    **each("points[]", MAYBE, "heldout_phi_end_error_deg", "heldout_jacobian_rel_error"),
+    **each("comparison[]", int, "samples", "equal_cost_fine_samples", "fine_only_samples"),
+    "comparison[].m_exceeds_data": bool, **each("comparison[]", NUM, "multifidelity_cpu_hours", "fine_only_cpu_hours"),
+    **{f"{at}.{k}": MAYBE for at in ("coarse_only", "points[]", "comparison[].multifidelity",
+                                     "comparison[].fine_only?", "comparison[].scale_only?",
+                                     "comparison[].reference_curve_at_m?")
+       for k in ("heldout_mean_anchor_error_mm", "heldout_tip_error_mm", "heldout_cap_rotation_error_deg")}})

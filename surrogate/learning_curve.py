@@ -197,7 +197,8 @@ def figure(path: Path, points: list[dict], title: str) -> None:
     plt.close(fig)
 
 
-def _sizes(text: str):
+def sizes_arg(text: str):
+    """argparse type: comma-separated subset sizes and/or "all", each once, in order."""
     out = []
     for part in text.split(","):
         part = part.strip()
@@ -217,7 +218,7 @@ def _repeat(text: str):
     size, sep, seed = text.partition(":")
     if not sep:
         raise argparse.ArgumentTypeError(f"{text!r}: expected SAMPLES:SEED, e.g. 400:1")
-    return (_sizes(size)[0] if size.strip() == "all" else cli.number(1, None, integer=True)(size),
+    return (sizes_arg(size)[0] if size.strip() == "all" else cli.number(1, None, integer=True)(size),
             cli.number(0, None, integer=True)(seed))
 
 
@@ -228,7 +229,7 @@ def main(argv=None) -> int:
     ap.add_argument("--config", choices=sorted(CONFIGS), default="improved", help="the 'with' config")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="override a field of the config (surrogate.train --set), for every point")
-    ap.add_argument("--sizes", type=_sizes, default=SIZES, help="comma-separated subset sizes and/or all")
+    ap.add_argument("--sizes", type=sizes_arg, default=SIZES, help="comma-separated subset sizes and/or all")
     ap.add_argument("--modes", type=_modes, default=tuple(MODES), help="with and/or without the Jacobian loss")
     ap.add_argument("--seed", type=cli.number(0, None, integer=True), default=0,
                     help="the curve's subset draw and training seed")

@@ -44,7 +44,11 @@ symmetry is kept.
 A checkpoint is an integrity-checked file of kind ``softjoint-surrogate/2``
 (surrogate.checkpoint: a header line with the archive's length and sha256, then a
 weights_only torch archive), whose payload holds model_config, normalisation,
-model_state (float64), train_config, metrics and dataset. Loading needs only the file;
+model_state (float64), train_config, metrics, dataset and joint: the joint description it
+was trained on ({"sha256": contract.joint.joint_digest, "description":
+contract.joint.joint_to_dict}; a checkpoint written before joint files existed has none and
+is the paper's joint, contract/joints/paper.toml). The loaded module carries it as
+``module.joint`` (a contract.joint.JointSpec). Loading needs only the file;
 a file with any flipped, missing or added byte, a foreign file or another kind of
 checkpoint is refused with one line (ModelError). A checkpoint written before the cap head
 existed has no cap_rotation in its model_config: it loads as a model without the head
@@ -60,6 +64,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from contract.joint import JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint
 from contract.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS, phi_end
 from surrogate import checkpoint
 from surrogate.checkpoint import CheckpointError
@@ -294,8 +299,10 @@ class JointSurrogate(nn.Module):
 
 
 def save_checkpoint(path: str | Path, model: JointSurrogate, train_config: dict,
-                    metrics: dict, dataset: dict) -> None:
-    """Write a self-contained checkpoint of kind FORMAT, atomically (surrogate.checkpoint)."""
+                    metrics: dict, dataset: dict, joint: JointSpec | None = None) -> None:
+    """Write a self-contained checkpoint of kind FORMAT, atomically (surrogate.checkpoint),
+    for the joint description ``joint`` it was trained on (None: the paper's joint)."""
+    joint = joint or load_joint()
     checkpoint.save(path, FORMAT, {
         "model_config": asdict(model.config),
         "normalisation": model.normalisation,
@@ -304,7 +311,25 @@ def save_checkpoint(path: str | Path, model: JointSurrogate, train_config: dict,
         "train_config": train_config,
         "metrics": metrics,
         "dataset": dataset,
+        "joint": {"sha256": joint_digest(joint), "description": joint_to_dict(joint)},
     })
+
+
+def checkpoint_joint(ckpt: dict, where: str = "checkpoint") -> JointSpec:
+    """The joint description a checkpoint dict was trained on (module docstring): its
+    ``joint`` entry, or the paper's joint for a checkpoint without one; ModelError (one
+    line) for an entry that is not a valid joint or does not match its sha256."""
+    entry = ckpt.get("joint")
+    if entry is None:
+        return load_joint()
+    try:
+        joint = joint_from_dict(entry["description"], f"{where}: joint")
+        sha = entry["sha256"]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"{where}: inconsistent surrogate checkpoint joint ({_one_line(exc)})") from None
+    if joint_digest(joint) != sha:
+        raise ModelError(f"{where}: the checkpoint's joint description does not match its sha256")
+    return joint
 
 
 def _one_line(exc: BaseException) -> str:
@@ -344,8 +369,11 @@ def load_surrogate(path: str | Path) -> JointSurrogate:
 
     The module maps inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] to anchors (..., 10, 2) mm
     in the joint frame; it is batched and differentiable in its inputs (the weights do not
-    require grad). Raises ModelError with a one-line message if the file is missing or bad.
+    require grad); ``module.joint`` is the joint it was trained on (checkpoint_joint).
+    Raises ModelError with a one-line message if the file is missing or bad.
     """
-    model = build_model(load_checkpoint(path), str(path))
+    ckpt = load_checkpoint(path)
+    model = build_model(ckpt, str(path))
+    model.joint = checkpoint_joint(ckpt, str(path))
     model.eval().requires_grad_(False)
     return model

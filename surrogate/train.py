@@ -63,6 +63,7 @@ from surrogate.evaluate import evaluate
 from surrogate.model import (ACTIVATIONS, CAP_TARGETS, JointSurrogate, ModelConfig, save_checkpoint,
                              wrap)
 from workflow.shards import ShardError
+from workflow.store import recorded_joint
 
 
 @dataclass(frozen=True)
@@ -311,6 +312,7 @@ def main(argv=None) -> int:
             splits, manifest = load_splits(args.data)
         except ShardError as exc:
             raise ShardError(f"{exc}; the campaign writes datasets: make dataset") from None
+        joint = recorded_joint(manifest.config)      # the checkpoint carries it (surrogate.model)
     log = (lambda s: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     log(f"{args.config}: {model_cfg}\n{cfg}\n"
         f"data {args.data}: " + ", ".join(f"{k} {len(v)}" for k, v in splits.items()))
@@ -322,7 +324,7 @@ def main(argv=None) -> int:
                "n": {k: len(v) for k, v in splits.items()}}
     curve = out.with_name(out.stem + "_curve.png")
     with ap.errors():
-        save_checkpoint(out, model, {"name": args.config, **asdict(cfg)}, metrics, dataset)
+        save_checkpoint(out, model, {"name": args.config, **asdict(cfg)}, metrics, dataset, joint)
         source = manifest.config.get("source", "FEM campaign")
         learning_curve(history, curve,
                        f"{args.config} surrogate: {len(splits['train'])} training samples ({source})")

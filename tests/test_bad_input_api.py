@@ -219,7 +219,7 @@ def test_fem_solve_progress_on_stderr_json_alone_on_stdout():
         out = json.loads(r.stdout)
         assert out["converged"] and out["phi_end_deg"] > 0        # P and M both bend it the + way
     lines = loud.stderr.splitlines()
-    assert lines[0].startswith("joint: meshing") and any(ln.startswith("mesh ready") for ln in lines)
+    assert lines[0].startswith("joint 'paper': meshing") and any(ln.startswith("mesh ready") for ln in lines)
     steps = [ln for ln in lines if ln.startswith("load step")]
     assert len(steps) == json.loads(loud.stdout)["load_steps"]
     assert quiet.stderr == ""
@@ -233,7 +233,7 @@ def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys
     import fem.finger as finger_cli
 
     class Unconverged:
-        def __init__(self, geometry, comm):
+        def __init__(self, geometry, comm, **settings):
             pass
 
         def solve(self, load):

@@ -149,7 +149,7 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
                "phi_end_deg": percent / 5, "cap_rotation_deg": percent / 3.75}
         key = f"h{h:g}_w{w if w is None else f'{w:g}'}_{formulation}_q2_k100"
         return {"key": key, "formulation": formulation, "mesh_size": h, "wall_mesh_size": w, "nodes": nodes,
-                "mean_solve_s": 10.0, "max_error": err}
+                "mean_solve_s": 10.0, "ranks": 2, "max_error": err}
 
     meshes = [mesh(3.394, 1.697, 16195, 3.0), mesh(2.4, 1.2, 27908, 1.5), mesh(1.697, 0.849, 53179, 0.75),
               mesh(1.2, 0.6, 136875, 0.3), mesh(1.8, None, 17351, 6.0, "displacement")]

@@ -1,7 +1,7 @@
 """MPI data campaign: random load cases of the joint -> FEM -> sharded dataset (issue 3).
 
-``python -m workflow.campaign --samples N --seed S --out DIR [options]``, on 1 rank or
-under ``mpirun -n K`` / ``srun``. Running the same command again resumes.
+``python -m workflow.campaign --samples N --seed S --out DIR [--joint FILE] [options]``, on
+1 rank or under ``mpirun -n K`` / ``srun``. Running the same command again resumes.
 
 Data flow::
 
@@ -16,7 +16,8 @@ persistent walk drawn from its own stream ``np.random.default_rng([seed, u])``: 
 start y_0 in the box and a uniform direction d_0 on the unit sphere, then
 
     y_k = y_{k-1} + h d_{k-1},   d_k = (d_{k-1} + s xi_k) / |d_{k-1} + s xi_k|,   xi_k ~ N(0, I)
-    x_k = fold(y_k)   (mirror reflection into [-1, 1]^4, box-normalised coordinates)
+    x_k = fold(y_k)   (mirror reflection into [-1, 1]^4, box-normalised coordinates;
+                       inputs x_k * B, B the joint's input box)
 
 with h = ``--step`` and s = ``WALK_TURN``. The cost of a continuation sample depends on h
 only; the gently turning direction makes a unit sweep the box like a billiard ball where a
@@ -35,6 +36,24 @@ factorisation.
 Failures. A sample whose continuation fails is retried once from zero; if that fails too
 it goes to the shard's failure arrays with its inputs and both reasons (never as data),
 and the walk continues from the solver's last converged state.
+
+Joint. ``--joint FILE`` (contract.joint, docs/joints.md; default the paper's joint,
+contract/joints/paper.toml) gives the joint's shape, law, input box B and anchors, and its
+default mesh ([mesh]: sizes and formulation). The manifest's config records the joint
+(workflow.store.joint_record: its description and sha256) only when it is not the
+paper's, so every manifest written before joint files existed is unchanged and resumes;
+resuming with another joint is refused with one line naming --joint and both joints.
+The dataset format holds 10 anchors (contract.spec.N_ANCHORS): a joint with another
+anchor count is refused before any work.
+
+Formulation. ``--formulation`` (default the joint file's, for the paper's joint the
+production one, fem.discretisation.FORMULATION) chooses the joint's elements
+(fem.problem: P2 displacement or Taylor-Hood u-p "mixed"). The manifest's config records
+it only when it is not "displacement", so that every manifest written before the mixed
+formulation existed reads as what it is (fem.discretisation.recorded_formulation);
+resuming with another formulation is refused like any other config change. Without
+``--mesh-size`` and ``--wall-mesh-size`` the mesh is the joint file's (the paper's: the
+production one, JointGeometry's default sizes).
 
 Path check. Every ``--fresh-check-every``-th unit also re-solves its last sample from zero
 and records the largest anchor difference in the shard's meta (``fresh_checks``). If the
@@ -73,13 +92,16 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.spec import INPUT_BOX, N_INPUTS
-from fem.geometry import JointGeometry
-from fem.options import add_mesh_size, add_wall_mesh_size
+from contract.finger import is_paper_joint
+from contract.joint import JointSpec, joint_digest, load_joint, material_dict
+from contract.spec import INPUT_BOX, N_ANCHORS, N_INPUTS
+from fem.discretisation import FORMULATION
+from fem.options import (add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
+                         joint_geometry, joint_of)
 from fem.solver import JointSolver, Load, Material, SolverConfig
 from workflow import shards
 from workflow.shards import Manifest, ShardError
-from workflow.store import (ShardScanner, build_manifest, clean_temporaries, shard_file,
+from workflow.store import (ShardScanner, build_manifest, clean_temporaries, joint_record, shard_file,
                             unit_count, unit_ids, unit_range)
 
 EXIT_INCOMPLETE = 3
@@ -104,11 +126,12 @@ def reflect(x: np.ndarray) -> np.ndarray:
     return np.where(y > 2.0, 4.0 - y, y) - 1.0
 
 
-def unit_walk(seed: int, unit: int, n: int, step: float, turn: float = WALK_TURN) -> np.ndarray:
+def unit_walk(seed: int, unit: int, n: int, step: float, turn: float = WALK_TURN,
+              box=INPUT_BOX) -> np.ndarray:
     """Inputs (n, 4) [P MPa, F1 N, F2 N, M N·mm] of unit ``unit``: the persistent walk of the
     module docstring (step ``step``, direction kick ``turn``) from the stream
-    default_rng([seed, unit]). The first k rows do not depend on n (a longer unit extends a
-    shorter one)."""
+    default_rng([seed, unit]), scaled by the input box ``box`` (4,). The first k rows do
+    not depend on n (a longer unit extends a shorter one)."""
     rng = np.random.default_rng([seed, unit])
     z = np.empty((n, N_INPUTS))
     y = rng.uniform(-1.0, 1.0, N_INPUTS)
@@ -120,7 +143,7 @@ def unit_walk(seed: int, unit: int, n: int, step: float, turn: float = WALK_TURN
             d = d + turn * rng.normal(size=N_INPUTS)
             d /= np.linalg.norm(d)
         z[j] = reflect(y)
-    return z * INPUT_BOX
+    return z * np.asarray(box, dtype=float)
 
 
 def git_commit() -> str:
@@ -138,14 +161,23 @@ def git_commit() -> str:
         return "unknown"
 
 
-def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int) -> dict:
+def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int,
+                    formulation: str = FORMULATION, joint: JointSpec | None = None) -> dict:
     """The manifest's ``config``: everything that determines the samples (not N, not ranks);
-    ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included)."""
-    return {"source": "fem-campaign", "geometry": geometry.as_dict(),
-            "material": asdict(Material()), "solver": asdict(SolverConfig()),
-            "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
-            "fresh_check_every": fresh_check_every,
-            "input_box": INPUT_BOX.tolist()}
+    ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included);
+    ``formulation`` recorded only when it is not "displacement", ``joint`` (default the
+    paper's) only when it is not the paper's (module docstring)."""
+    joint = joint or load_joint()
+    paper = is_paper_joint(joint)
+    config = {"source": "fem-campaign", "geometry": geometry.as_dict(),
+              "material": asdict(Material()) if paper else material_dict(joint.material),
+              "solver": asdict(SolverConfig()),
+              "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
+              "fresh_check_every": fresh_check_every,
+              "input_box": joint.input_box.tolist(), **joint_record(joint)}
+    if formulation != "displacement":
+        config["formulation"] = formulation
+    return config
 
 
 # ---------------------------------------------------------------------------- one unit
@@ -220,8 +252,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="time budget: start no unit that would end past it (exit 3 if unfinished)")
     ap.add_argument("--ranks-per-group", type=count, default=1,
                     help="MPI ranks per FEM solve (default 1; must divide the rank count)")
-    add_mesh_size(ap, None, "tetrahedron size (default: the FEM's production mesh)")
+    add_joint(ap)
+    add_mesh_size(ap, None, "tetrahedron size", shown="the joint file's [mesh] size")
     add_wall_mesh_size(ap)
+    add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
     ap.add_argument("--step", type=cli.number(0, 2, open_lo=True), default=DEFAULT_STEP,
@@ -238,6 +272,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     why = cli.check_output(args.out, folder=True)   # checked now, created in run()
     if why:
         ap.error(why)
+    args.joint = joint_of(args)
+    if args.joint.anchors != N_ANCHORS:
+        ap.error(f"--joint: joint {args.joint.name!r} has anchors.count = {args.joint.anchors}; the dataset "
+                 f"format holds {N_ANCHORS} anchors (contract.spec.N_ANCHORS)")
     n_units = unit_count(args.samples, args.unit_size)
     args.unit_range = args.units or (0, n_units)
     if args.unit_range[1] > n_units:
@@ -268,8 +306,12 @@ class Progress:
 #: The manifest's config entries that a command-line option sets: key -> (flag, unit).
 CONFIG_FLAGS = {("geometry", "mesh_size"): ("--mesh-size", " mm"),
                 ("geometry", "wall_mesh_size"): ("--wall-mesh-size", " mm"),
+                ("formulation",): ("--formulation", ""),
                 ("unit_size",): ("--unit-size", ""), ("walk_step",): ("--step", ""),
                 ("fresh_check_every",): ("--fresh-check-every", "")}
+#: What an absent config entry means (shown instead of "unset"): a manifest without a
+#: formulation was made with P2 displacements.
+CONFIG_ABSENT = {("formulation",): "displacement"}
 
 
 def _differences(old: dict, new: dict, prefix: tuple = ()) -> list[tuple[tuple, object, object]]:
@@ -289,20 +331,39 @@ def describe_difference(path: tuple, old, new) -> str:
     code setting (the FEM code or its defaults changed) and both values."""
     if path in CONFIG_FLAGS:
         flag, unit = CONFIG_FLAGS[path]
-        show = lambda v: "unset" if v is None else f"{v:g}{unit}" if isinstance(v, (int, float)) else repr(v)
+        absent = CONFIG_ABSENT.get(path, "unset")
+        show = lambda v: absent if v is None else f"{v:g}{unit}" if isinstance(v, (int, float)) else str(v)
         return f"{flag} {show(old)} (this run: {show(new)})"
     return f"{'.'.join(path)} = {old!r} (this run, from the code: {new!r})"
 
 
-def check_compatible(out: Path, config: dict, seed: int, samples: int | None = None) -> Manifest | None:
+def joint_label(config: dict) -> str:
+    """The joint of a campaign config in a message: the paper's, or its sha256 prefix."""
+    sha = config.get("joint_sha256")
+    return "the paper's joint" if sha is None else f"joint sha256 {sha[:12]}"
+
+
+def check_joint(out: Path, old: dict, new: dict, joint: JointSpec | None) -> None:
+    """ShardError (one line naming --joint and both joints) if ``out``'s campaign (config
+    ``old``) was made for another joint than this run's (config ``new``, joint ``joint``)."""
+    if old.get("joint_sha256") == new.get("joint_sha256"):
+        return
+    this = joint_label(new) if joint is None else f"--joint {joint.name!r} ({joint_label(new)})"
+    raise ShardError(f"{out} holds a campaign of {joint_label(old)}, not of {this}; rerun with the "
+                     "--joint it was made with, or use another --out")
+
+
+def check_compatible(out: Path, config: dict, seed: int, samples: int | None = None,
+                     joint: JointSpec | None = None) -> Manifest | None:
     """The manifest already in ``out`` (None if there is none). Raises ShardError (one
     line naming the option or setting and both values) if ``out`` holds a dataset this
-    run must not touch: an unreadable manifest, a campaign with another seed or config,
-    or more samples than ``samples`` (a smaller run would drop its shards from the
-    manifest)."""
+    run must not touch: an unreadable manifest, a campaign of another joint (check_joint;
+    ``joint`` this run's, for its name), seed or config, or more samples than ``samples``
+    (a smaller run would drop its shards from the manifest)."""
     if not Manifest.exists(out):
         return None
     old = Manifest.load(out)
+    check_joint(out, old.config, config, joint)
     differ = _differences(old.config, config)
     if differ:
         shown = "; ".join(describe_difference(*d) for d in differ[:3])
@@ -338,9 +399,10 @@ def run(args) -> int:
             print(f"python -m workflow.campaign: error: --ranks-per-group {G} does not divide "
                   f"{size} ranks", file=sys.stderr)
         return 2
-    mesh_size = args.mesh_size or JointGeometry().mesh_size
-    geometry = JointGeometry(mesh_size=mesh_size, wall_mesh_size=args.wall_mesh_size)
-    config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every)
+    joint = args.joint
+    geometry = joint_geometry(args, joint)
+    mesh_size, formulation = geometry.mesh_size, formulation_of(args, joint)
+    config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every, formulation, joint)
     out, t_start = Path(args.out), time.perf_counter()
 
     # --- world rank 0: check, lock, clean, scan, manifest; everyone learns the units to do.
@@ -348,11 +410,11 @@ def run(args) -> int:
     status, lock, scanner, manifest, todo = None, None, None, None, None
     if rank == 0:
         try:
-            check_compatible(out, config, args.seed, args.samples)
+            check_compatible(out, config, args.seed, args.samples, joint)
             (cli.make_output_folder(out) / "shards").mkdir(exist_ok=True)
             lock = open(out / ".campaign.lock", "w")
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            old = check_compatible(out, config, args.seed, args.samples)   # again: a writer may have raced us
+            old = check_compatible(out, config, args.seed, args.samples, joint)   # again: a writer may have raced us
             clean_temporaries(out)
             scanner = ShardScanner(out, args.samples, config, args.seed)
             done = scanner.scan()
@@ -378,10 +440,11 @@ def run(args) -> int:
         progress = Progress(args.samples, manifest.samples + manifest.failures, args.quiet,
                             args.progress_every)
         if not args.quiet:
-            print(f"[campaign] {out}: {len(todo)} of {manifest.units_total} units to do on "
-                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size}"
-                  f"{':' + str(args.wall_mesh_size) if args.wall_mesh_size else ''} mm, "
-                  f"unit size {args.unit_size}, step {args.step}", flush=True)
+            print(f"[campaign] {out}: joint {joint.name!r}, {len(todo)} of {manifest.units_total} units to do on "
+                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size:g}"
+                  f"{f':{geometry.wall_mesh_size:g}' if geometry.wall_mesh_size else ''} mm, "
+                  f"{formulation} formulation, unit size {args.unit_size}, step {args.step}",
+                  flush=True)
 
     state = {"in_unit": 0, "fail_in_unit": 0}
 
@@ -403,9 +466,9 @@ def run(args) -> int:
             stopped = True
             break
         if solver is None:
-            solver = JointSolver(geometry, group)
+            solver = JointSolver.for_joint(joint, group, geometry, formulation=formulation)
         ids = unit_ids(unit, args.samples, args.unit_size)
-        inputs = unit_walk(args.seed, unit, len(ids), args.step)
+        inputs = unit_walk(args.seed, unit, len(ids), args.step, box=joint.input_box)
         check = args.fresh_check_every > 0 and unit % args.fresh_check_every == 0
         state["in_unit"] = state["fail_in_unit"] = 0
         arrays, figures = solve_unit(solver, ids, inputs, check, on_sample)
@@ -454,7 +517,8 @@ def run(args) -> int:
             "units_run": units_run, "complete": manifest.complete,
             "range_complete": range_done, "stopped_by_budget": stopped,
             "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
-            "wall_mesh_size": args.wall_mesh_size,
+            "wall_mesh_size": geometry.wall_mesh_size, "formulation": formulation,
+            "joint": {"name": joint.name, "sha256": joint_digest(joint)},
             "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,
             "cpu_hours_dataset": manifest.cpu_hours, "git_commit": commit,
         }

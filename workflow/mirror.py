@@ -2,8 +2,10 @@
 
 Mirroring y -> -y maps a solution (R, P, F1, F2, M) to (R diag(1, -1), -P, F1, -F2, -M)
 (docs/physics.md); the joint mesh is mirror symmetric, so a dataset's mirrored samples,
-solved from zero on one rank, must give the mirrored stored anchors and Jacobians to solver
-tolerance. ``workflow.dataset verify --mirror N`` hands ``mirror_check`` to
+solved from zero on one rank with the dataset's own joint and discretisation (its joint,
+workflow.store.recorded_joint, absent: the paper's; its geometry, solver settings and
+formulation, fem.discretisation.recorded_formulation), must give the mirrored stored
+anchors and Jacobians to solver tolerance. ``workflow.dataset verify --mirror N`` hands ``mirror_check`` to
 ``workflow.store.verify``. Needs dolfinx (the data layer sits on the FEM layer).
 """
 
@@ -13,9 +15,12 @@ import numpy as np
 from mpi4py import MPI
 
 from contract.spec import mirror
+from fem.discretisation import recorded_formulation
 from fem.geometry import JointGeometry
-from fem.solver import JointSolver, Load, Material, SolverConfig
+from fem.problem import Material
+from fem.solver import JointSolver, Load, SolverConfig
 from workflow.shards import Manifest
+from workflow.store import recorded_joint
 
 
 def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
@@ -23,8 +28,13 @@ def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
     with the mirrored stored anchors and Jacobian (docs/physics.md). The mesh is mirror
     symmetric, so the relation holds to solver tolerance. Runs on one rank."""
     cfg = manifest.config
-    solver = JointSolver(JointGeometry(**cfg["geometry"]), MPI.COMM_SELF,
-                         Material(**cfg["material"]), SolverConfig(**cfg["solver"]))
+    joint = recorded_joint(cfg)
+    # A manifest without a joint has the (E, nu) record of the paper's Material; with one,
+    # the law is the joint's.
+    material = joint.material if "joint" in cfg else Material(**cfg["material"])
+    solver = JointSolver(JointGeometry(**cfg["geometry"]), MPI.COMM_SELF, material,
+                         SolverConfig(**cfg["solver"]), formulation=recorded_formulation(cfg),
+                         anchors=joint.anchors, input_box=joint.input_box)
     rng = np.random.default_rng([manifest.seed, 7])
     pick = np.sort(rng.choice(len(arrays["sample_id"]), size=min(n, len(arrays["sample_id"])),
                               replace=False))

@@ -16,6 +16,14 @@ Campaign layout: unit u holds sample ids [u K, u K + n_u), K = ``config["unit_si
 n_u = min(K, N - u K) for N requested samples. A unit's shard stores the converged ones
 as data and the others as failures, so data ids + failure ids = exactly that range.
 Units: inputs P MPa, F1 F2 N, M N·mm; anchors mm.
+
+The joint (contract.joint, docs/joints.md). A manifest's config records the joint it was
+solved for only when it is not the paper's: ``joint`` (the description's physics and
+contract: its format, geometry, material, input box and anchors, i.e. what
+contract.joint.joint_digest covers; not its name, not its [mesh], which the config's
+geometry and formulation record) and ``joint_sha256`` (its digest). Absent: the paper's
+joint, contract/joints/paper.toml, so every manifest written before joint files existed
+reads as what it is (``recorded_joint``). The box checks use the config's ``input_box``.
 """
 
 from __future__ import annotations
@@ -29,6 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from contract.files import atomic_path, sha256_file
+from contract.finger import is_paper_joint
+from contract.joint import JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint
 from contract.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, outside_box
 from workflow.shards import (DATA_KEYS, FAILURE_KEYS, Manifest, ShardEntry, ShardError,
                              array_digest, load_dataset, read_shard, split_of)
@@ -37,6 +47,46 @@ SHARD_DIR = "shards"
 SHARD_RE = re.compile(r"^unit-(\d{5,})\.npz$")
 #: Arrays that must be identical between two runs of the same unit (timings excluded).
 REPRODUCIBLE_KEYS = tuple(k for k in DATA_KEYS + FAILURE_KEYS if k != "wall_time_s")
+
+
+#: The tables of a joint description a config records (the digest's: no name, no mesh).
+JOINT_TABLES = ("format", "geometry", "material", "input_box", "anchors")
+
+
+def joint_record(joint: JointSpec) -> dict:
+    """The config entries of ``joint`` (module docstring): {} for the paper's joint, else
+    ``joint`` (JOINT_TABLES of contract.joint.joint_to_dict) and ``joint_sha256``."""
+    if is_paper_joint(joint):
+        return {}
+    d = joint_to_dict(joint)
+    return {"joint": {k: d[k] for k in JOINT_TABLES}, "joint_sha256": joint_digest(joint)}
+
+
+def recorded_joint(config: dict) -> JointSpec:
+    """The joint a manifest's ``config`` was solved for: its ``joint`` entry, with the
+    config's mesh sizes and formulation as the [mesh] table, named by its digest; absent,
+    the paper's joint. ShardError (one line) for a record that is not a valid joint."""
+    if "joint" not in config:
+        return load_joint()
+    geometry = config.get("geometry", {})
+    mesh = {"size": geometry.get("mesh_size"), "formulation": config.get("formulation", "displacement")}
+    if geometry.get("wall_mesh_size") is not None:
+        mesh["wall_size"] = geometry["wall_mesh_size"]
+    sha = str(config.get("joint_sha256", ""))
+    try:
+        joint = joint_from_dict({**config["joint"], "name": f"sha256:{sha[:12]}", "mesh": mesh},
+                                "manifest joint")
+    except ValueError as exc:
+        raise ShardError(str(exc)) from None
+    if joint_digest(joint) != sha:
+        raise ShardError(f"manifest joint: its description's sha256 {joint_digest(joint)[:12]} is not the "
+                         f"recorded joint_sha256 {sha[:12]}")
+    return joint
+
+
+def recorded_box(config: dict) -> np.ndarray:
+    """The input box half-widths (4,) of a manifest's config (absent: contract.spec.INPUT_BOX)."""
+    return np.asarray(config.get("input_box", INPUT_BOX), dtype=float)
 
 
 def shard_file(unit: int) -> str:
@@ -159,13 +209,14 @@ def clean_temporaries(root: str | Path) -> int:
 
 
 # ---------------------------------------------------------------------------- info
-def coverage(inputs: np.ndarray, bins: int = 4) -> dict:
-    """Input coverage of (n, 4) inputs over the box: per-input range and the fraction of
-    the bins^4 grid cells of the box that hold at least one sample."""
-    z = np.clip((inputs / INPUT_BOX + 1) / 2, 0, 1 - 1e-12)          # (n, 4) in [0, 1)
+def coverage(inputs: np.ndarray, bins: int = 4, box=INPUT_BOX) -> dict:
+    """Input coverage of (n, 4) inputs over ``box`` (4,): per-input range and the fraction
+    of the bins^4 grid cells of the box that hold at least one sample."""
+    box = np.asarray(box, dtype=float)
+    z = np.clip((inputs / box + 1) / 2, 0, 1 - 1e-12)          # (n, 4) in [0, 1)
     cells = np.unique(np.floor(z * bins).astype(int) @ bins ** np.arange(N_INPUTS))
     per = {name: {"min": float(inputs[:, i].min()), "max": float(inputs[:, i].max()),
-                  "box": float(INPUT_BOX[i]),
+                  "box": float(box[i]),
                   "histogram": np.histogram(z[:, i], bins=bins, range=(0, 1))[0].tolist()}
            for i, name in enumerate(INPUT_NAMES)} if len(inputs) else {}
     return {"per_input": per, "grid": f"{bins}^{N_INPUTS}", "cells_occupied": len(cells) / bins ** N_INPUTS}
@@ -186,7 +237,7 @@ def info(root: str | Path) -> dict:
         "split": {"train": int(split[0]), "val": int(split[1]), "test": int(split[2])},
         "shards": len(manifest.shards), "complete": manifest.complete,
         "samples_requested": manifest.samples_requested,
-        "coverage": coverage(arrays["inputs"]),
+        "coverage": coverage(arrays["inputs"], box=recorded_box(manifest.config)),
         "jacobian_finite": bool(np.isfinite(arrays["jacobian"]).all()),
         "newton_iterations_median": float(np.median(arrays["newton_iterations"])) if n else None,
         "wall_time_s_median": float(np.median(arrays["wall_time_s"])) if n else None,
@@ -243,9 +294,10 @@ def verify(root: str | Path, mirror_check=None, tol_mm: float = 1e-5, jac_tol: f
     if manifest.complete is False:
         warnings.append(f"incomplete campaign: {manifest.units_done}/{manifest.units_total} units "
                         "(re-run the campaign to resume)")
-    outside = int(outside_box(arrays["inputs"]).sum())
+    box = recorded_box(cfg)
+    outside = int(outside_box(arrays["inputs"], box).sum())
     if outside:
-        allowed = ", ".join(f"|{n}| <= {b:g}" for n, b in zip(INPUT_NAMES, INPUT_BOX))
+        allowed = ", ".join(f"|{n}| <= {b:g}" for n, b in zip(INPUT_NAMES, box))
         errors.append(f"{outside} input(s) non-finite or outside the box {allowed}")
     if not np.isfinite(arrays["anchors"]).all():
         errors.append("non-finite anchors")
@@ -337,7 +389,7 @@ def compare(ref: str | Path, other: str | Path) -> dict:
     if not len(ids):
         raise ShardError(f"{ref} and {other}: no sample solved in both")
     # the walk is the same to rounding (1e-17 seen between the committed set and a re-run)
-    if np.abs(a["inputs"][ia] - b["inputs"][ib]).max() > 1e-12 * INPUT_BOX.max():
+    if np.abs(a["inputs"][ia] - b["inputs"][ib]).max() > 1e-12 * recorded_box(ma.config).max():
         raise ShardError(f"{ref} and {other}: the same sample ids hold different loads")
     d = np.linalg.norm(b["anchors"][ib] - a["anchors"][ia], axis=-1)        # (n, 10) mm
     wrap = lambda x: np.degrees(np.abs(np.angle(np.exp(1j * x))))

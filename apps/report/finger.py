@@ -33,9 +33,12 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    + (f" --wall-mesh-size {wall}`" if wall else "`") + " |")
     study = load(root, "fem/mesh_study.json")
     if study:
-        for name, e in ((study["production"], study["production_error"]), (study["paper"], study.get("paper_error"))):
+        label = {m["key"]: f"{mesh_label(m['mesh_size'], m['wall_mesh_size'])} mm {m['formulation']}"
+                 for m in study["meshes"]}
+        # one row per discretisation (production and paper are one while the data is the paper's)
+        for key, e in {study["production"]: study["production_error"], study["paper"]: study.get("paper_error")}.items():
             if e:
-                out.append(f"| discretisation: one joint at eight loads (four box corners), {name} against "
+                out.append(f"| discretisation: one joint at eight loads (four box corners), {label[key]} against "
                            f"{MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, "
                            f"phi_end {e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst load; the "
                            "corners load a joint far more than the finger's cases do) | `make mesh-study` |")

@@ -16,8 +16,10 @@ FEM_TITLE = "FEM bellow joint (issue 2)"
 CAMPAIGN_TITLE = "FEM dataset campaign (issue 3)"
 
 
-#: Issue 2's speed targets for one joint sample on one core (the paper: ~420 s in ANSYS).
-FEM_TARGETS = (Target("<", 60, "s"), Target("<", 10, "s"))
+#: The speed targets for one joint sample of the production discretisation on one core (the
+#: paper: ~420 s in ANSYS): issue 35's, which replace issue 2's (< 60 s, < 10 s at 1.8 mm) now
+#: that the production discretisation is chosen for convergence.
+FEM_TARGETS = (Target("<=", 120, "s"), Target("<=", 15, "s"))
 
 
 def fem_section(root: Path) -> tuple[list[str], list[Check]]:
@@ -87,7 +89,8 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
         checks += [mesh, zero, cont]
         paper_s = f"~{b['paper_seconds_per_sample']:g} s"
         out += ["| figure | ours | paper (ANSYS) | target | met |", "|---|---|---|---|---|",
-                f"| mesh | {b['nodes']} P2 nodes, {b['dofs']} dofs, h = {b['mesh_size']} mm | "
+                f"| mesh | {b['nodes']} P2 nodes, {b['dofs']} dofs, {b.get('mesh', b['mesh_size'])} mm, "
+                f"{b.get('formulation', 'displacement')} | "
                 f"{b['paper_nodes']:,} nodes, {PAPER['fem_mesh_mm']} mm |" + cells(mesh),
                 f"| solve from zero (median of {len(b['solve_from_zero_cases'])}) | "
                 f"{b['solve_from_zero_s']:.1f} s, {b['newton_iterations']:.0f} Newton iterations | {paper_s} |"
@@ -95,7 +98,12 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
                 f"| next sample by continuation (median, step {b['continuation_step_fraction_of_box']} "
                 f"of the box, with sensitivities) | {b['continuation_sample_s']:.1f} s | {paper_s} |" + cells(cont),
                 f"| speed-up vs paper | {b['speedup_vs_paper_from_zero']:.1f}x from zero, "
-                f"{b['speedup_vs_paper_continuation']:.1f}x continuation | |" + cells(None), ""]
+                f"{b['speedup_vs_paper_continuation']:.1f}x continuation | |" + cells(None)]
+        if b.get("continuation_sample_s_1.8") is not None:
+            out.append(f"| the paper-fidelity mesh 1.8 mm {b['formulation_1.8']}, same run: {b['nodes_1.8']:,} nodes | "
+                       f"{b['solve_from_zero_s_1.8']:.1f} s from zero, {b['continuation_sample_s_1.8']:.1f} s by "
+                       f"continuation (production / 1.8: {b['ratio_continuation_vs_1.8']:.2f}x) | |" + cells(None))
+        out.append("")
     else:
         out += missing("timings", "make bench-fem")
     return out, checks
@@ -155,9 +163,9 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
            f"{ms['wall_mm'] / 2:g} puts two P2 elements through the wall) and formulation (displacement P2, or "
            f"mixed Taylor-Hood P2-P1 u-p). Reference: {ref}. Errors are the worst over the loads: the largest "
            "anchor distance (mm, and % of the largest anchor displacement), phi_end and the cap rotation; "
-           "solve s: mean from zero, 2 ranks, beside other work.", "",
+           "solve s: mean from zero on that many MPI ranks, beside other work.", "",
            "| discretisation | P2 nodes | anchors (mm) | anchors (%) | tip (mm) | phi_end (°) | cap rotation (°) "
-           "| solve s | target | met |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "| solve s (ranks) | target | met |", "|---|---|---|---|---|---|---|---|---|---|"]
     for m in ms["meshes"]:
         e, check = m["max_error"], None
         label = f"{mesh_label(m['mesh_size'], m['wall_mesh_size'])} {m['formulation']}"
@@ -175,17 +183,20 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
             label += " (paper-fidelity data)"
         out.append(f"| {label} | {m['nodes']:,} | {e['anchor_mm']:.4f} | {e['anchor_percent']:.2f} | "
                    f"{e['tip_mm']:.4f} | {e['phi_end_deg']:.3f} | {e['cap_rotation_deg']:.3f} | "
-                   f"{m['mean_solve_s']:.0f} |" + cells(check))
+                   f"{m['mean_solve_s']:.0f} ({m['ranks']}) |" + cells(check))
     for o in ms["orders"]:
         out += ["", f"Observed orders on {', '.join(mesh_label(*m) for m in o['meshes'])}, per load "
                 f"(anchors; phi_end; cap rotation): {', '.join(num(x, '.2f') for x in o['anchors'])}; "
                 f"{', '.join(num(x, '.2f') for x in o['phi_end_deg'])}; "
                 f"{', '.join(num(x, '.2f') for x in o['cap_rotation_deg'])}."]
     if ms["orders"]:
-        out[-1] += (" P2 on smooth fields: 2; contact and curved walls lower it; n/a: the changes grow "
-                    "under refinement or the order is outside [0.5, 4].")
-    out += ["", f"Production discretisation: {mesh_label(*ms['production_mesh'])} {ms['formulation']}, the one "
-            f"new data is generated on; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
+        out[-1] += (" P2 on smooth fields: 2; contact and curved walls lower it; negative: the changes grow "
+                    "under refinement; n/a: no change.")
+    prod = next((m for m in ms["meshes"] if m["key"] == ms["production"]), None)
+    shown = (f"{mesh_label(*ms['production_mesh'])} {prod['formulation']}" if prod else
+             f"{ms['production']} (not solved at every load yet)")
+    out += ["", f"Production discretisation (fem.discretisation.PRODUCTION, what the datasets are generated on): "
+            f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
             f"{PAPER['mesh_change_percent']} %) and the paper's resolution. The others are shown, not judged.", ""]
     return out
 
