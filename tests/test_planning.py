@@ -5,6 +5,7 @@ Fast: the committed surrogate, small grids over the holding corner of the pressu
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -19,6 +20,7 @@ import torch
 from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify
+from predictor.inverse import where_it_touches
 from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
 from predictor.solve import solve
 
@@ -165,6 +167,13 @@ def test_inverse_hold_beats_the_atlas(circle, atlas):
     assert classify(check, circle.problem.contact.mu)[0][0] == HOLDS
     assert len(ans.stencil_states) == 9
     json.loads(dumps(ans.summary()))
+    # Where the answer touches (make inverse's cases): its verifying gesture's places, the
+    # ramp solve at the answer's pressures; a hold touches, the finger within 0.1 mm of X = 0.
+    where = where_it_touches(ans)
+    assert where == check.where_it_touches(0)
+    assert where["contact_part"] is not None and where["plane_overlap_mm"] <= 0.1
+    assert sum(c["normal_force_N"] for c in where["contacts"]) == pytest.approx(ans.normal_N, rel=1e-9)
+    assert set(where_it_touches(dataclasses.replace(ans, gesture=None)).values()) == {None}
 
 
 def test_bad_placement_and_cli_exit_codes(tmp_path):
