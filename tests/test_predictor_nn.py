@@ -160,9 +160,12 @@ def test_nn_predictor_cli_matches_solver():
 def test_float32_batched_gravity_nn_agrees_with_float64():
     """The float32 throughput mode (Predictor.astype, GripperProblem.astype) on 2,000
     pressures of the committed gravity NN's domain: computed in float32 throughout, and
-    against float64 the same samples pass the NN bound, tau agrees to 1e-4 N / N·mm, the
-    fingertip to 1e-3 mm and the residuals to 1e-3 mN / N·mm (float32's 6e-8 relative
-    rounding on ~200 mm and ~1 N is 1e-5 of those)."""
+    against float64 the same samples pass the NN bound, and on those tau agrees to 1e-4
+    N / N·mm, the fingertip to 1e-3 mm and the residuals to 1e-3 mN / N·mm (float32's 6e-8
+    relative rounding on ~200 mm and ~1 N is 1e-5 of those). The network answers within
+    the bound only where the fingers stay apart (777 of the 2,000; where they meet at X = 0
+    the plane's penalty puts its residual far over the bound, docs/gripper.md §11), so the
+    refused samples' residuals, hundreds of mN, are compared only through the verdict."""
     from predictor.networks import sample_pressures
     from predictor.nn_answer import predict_gesture
     from predictor.nn_checkpoint import load_predictor
@@ -175,12 +178,12 @@ def test_float32_batched_gravity_nn_agrees_with_float64():
     a = predict_gesture(pred, problem, p)
     b = predict_gesture(pred.astype(torch.float32), problem.astype(torch.float32), p.float())
     assert b.tau.dtype == b.pose.tip_end.dtype == b.residual_force_mN.dtype == torch.float32
-    assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 1990
+    assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 750
     ok = a.converged
     assert float((a.tau[ok] - b.tau[ok].double()).abs().max()) <= 1e-4
     assert float((a.pose.tip_end[ok] - b.pose.tip_end[ok].double()).abs().max()) <= 1e-3
-    assert float((a.residual_force_mN - b.residual_force_mN.double()).abs().max()) <= 1e-3
-    assert float((a.residual_moment_Nmm - b.residual_moment_Nmm.double()).abs().max()) <= 1e-3
+    assert float((a.residual_force_mN[ok] - b.residual_force_mN[ok].double()).abs().max()) <= 1e-3
+    assert float((a.residual_moment_Nmm[ok] - b.residual_moment_Nmm[ok].double()).abs().max()) <= 1e-3
     # the analytic joint follows its inputs' dtype: its float32 anchors are float64's to 1e-4 mm
     inputs = t([[0.2, 1.0, -2.0, 50.0], [-0.3, -3.0, 3.0, -100.0]])
     a32 = AnalyticJoint().astype(torch.float32)(inputs.float())
