@@ -1,7 +1,8 @@
 """predictor.contact_change and the report's contact section (issue 36) on small hand-made
 artefacts whose answers are known: the atlas points whose state changed and how, the
 reference ramps' failures, the gestures' tip shifts (a 3-4-5 triangle), the worst overlap
-across X = 0 judged against 0.1 mm, and bad input (exit 2, one line, nothing written)."""
+across X = 0 judged against 0.1 mm, what the section says the model costs from the bench's
+own figures, and bad input (exit 2, one line, nothing written)."""
 from __future__ import annotations
 
 import json
@@ -11,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from apps.report import contact
 from apps.report.contact import contact_section
 from predictor.contact_change import compare
 
@@ -113,6 +115,24 @@ def test_report_judges_the_worst_overlap(folders, tmp_path):
     (after / "inverse.json").write_text(json.dumps(inv))
     _, checks = contact_section(root)
     assert checks[0].met and checks[0].values == (0.08,)
+
+
+def test_costs_quote_the_bench_and_its_machine(monkeypatch, tmp_path):
+    """The section's costs take the bench's own figures: how many gravity fastest-path
+    cases the LM finished, and, where the bench's runs on every core were slower than on
+    one (2e4 against 3e4 gestures per second at load 3.8), that its times are the
+    machine's; with every core faster than one, the load without that clause."""
+    thr = {"one_thread": {"nn_and_kinematics_per_s": 3.0e4}, "every_core_float64": {"nn_and_kinematics_per_s": 2.0e4}}
+    bench = {"load_average_at_start": [3.84, 3.7, 4.1], "batched_threads": 2,
+             "details": {"gravity_fast": {"n": 30, "fallbacks": 28}, "gravity_nn_throughput": thr}}
+    monkeypatch.setattr(contact, "load", lambda root, rel: bench if rel == "bench/predictor.json" else None)
+    text = "\n".join(contact_section(tmp_path)[0])
+    assert "so the LM finishes it (28 of 30 bench cases)." in text
+    assert ("a load average of 3.8 on this machine's 2 cores, where its runs on every core were slower than on one "
+            "(the gravity NN's network and kinematics, float64: 2e+04 against 3e+04 gestures per second)") in text
+    thr["every_core_float64"]["nn_and_kinematics_per_s"] = 6.0e4
+    text = "\n".join(contact_section(tmp_path)[0])
+    assert "a load average of 3.8 on this machine's 2 cores." in text and "slower than on one" not in text
 
 
 def test_bad_input_exits_2_and_writes_nothing(tmp_path):

@@ -17,6 +17,57 @@ CONTACT_TITLE = "Contact on the finger's outline, fingers that meet (issue 36)"
 #: this far across X = 0 (mm).
 PLANE_OVERLAP_MM = 0.1
 
+#: Why targets of other sections moved with this model (met by the model before it, the
+#: centre-line contact without the plane; docs/gripper.md §9-11 give the measurements).
+COSTS = (
+    "Gravity gestures without an object (the Newton solve from tau = 0; the gravity NN's single query and "
+    "delivered path, whose residual check evaluates the plane): where the fingers meet, the finger presses on the "
+    "plane X = 0, whose penalty is a hundred times the object's (docs/gripper.md §7), so the gesture is a contact "
+    "problem; rows whose load-free pose lies across the plane, or whose Newton answer ends across it, are ramped "
+    "from zero pressure (docs/gripper.md §9) instead of a few Newton steps.",
+    "The gravity networks' raw residual: a network's tau that misses the equilibrium by a fraction of a "
+    "millimetre where the fingers meet has a residual of hundreds of mN there, and the network trained across "
+    "the plane's kink is less accurate where the fingers stay apart too (docs/gripper.md §11 splits it); the raw "
+    "answer is refused where it is over the NN bound, and the fastest path's one Newton step from it misses "
+    "its check, so the LM finishes it{lm}.",
+    "Contact gestures, the atlases and the inverse: every solve with an object integrates the penalty over the "
+    "outline's edges instead of summing it at fixed centre-line points; the inverse's tip goals start from a "
+    "coarse grid of object-free gestures (plane solves), and every answer is verified and checked at the "
+    "regulators' stencil by ramp solves (Grasp planning).",
+)
+
+
+def _load_note(root: Path) -> str:
+    """What the bench's machine was doing (bench/predictor.json): its load average at the
+    start and whether its runs on every core were slower than on one (the gravity NN's
+    float64 throughput), which makes its times and batched rates the machine's too."""
+    b = load(root, "bench/predictor.json")
+    if not b or "load_average_at_start" not in b:
+        return ""
+    thr = b["details"].get("gravity_nn_throughput") or {}
+    one, every = (thr.get(k, {}).get("nn_and_kinematics_per_s") for k in ("one_thread", "every_core_float64"))
+    text = (f"The bench's timings (bench/predictor.json) were measured at a load average of "
+            f"{b['load_average_at_start'][0]:.1f} on this machine's {b.get('batched_threads', '?')} cores")
+    if one and every and every < one:
+        text += (f", where its runs on every core were slower than on one (the gravity NN's network and "
+                 f"kinematics, float64: {every:.3g} against {one:.3g} gestures per second): its times and batched "
+                 "rates there are the machine's as much as the model's, until `make bench-predictor` runs on an "
+                 "idle machine")
+    return text + "."
+
+
+def _costs(root: Path) -> list[str]:
+    """The targets of other sections this model moves, and why (COSTS), with the bench's
+    own figures where it has them."""
+    b = load(root, "bench/predictor.json")
+    fast = (b or {}).get("details", {}).get("gravity_fast")
+    lm = f" ({fast['fallbacks']} of {fast['n']} bench cases)" if fast else ""
+    out = ["Targets of other sections that this model moves, and why:", ""]
+    out += ["- " + COSTS[0], "- " + COSTS[1].format(lm=lm), "- " + COSTS[2]]
+    note = _load_note(root)
+    return out + ([f"- {note}"] if note else []) + [""]
+
+
 OBJECTS = ("circle", "ellipse", "rectangle")
 ATLASES = (("atlas_{}.json", "atlas, sweep", "make atlas"), ("ramp/atlas_{}.json", "atlas, 12-step reference ramp",
                                                               "make atlas-reference"),
@@ -119,4 +170,6 @@ def contact_section(root: Path) -> tuple[list[str], list[Check]]:
     out += _overlap(root, checks)
     out += ["### What it changed", ""]
     out += _changes(root)
+    out += ["### What it costs", ""]
+    out += _costs(root)
     return out, checks
