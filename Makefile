@@ -40,11 +40,11 @@ endif
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-causes materials joint-render self-contact validation \
-        dataset dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery finger-fem validate-finger report clean
+        dataset dataset-hex2 dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery finger-fem validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
-	@grep -hE '^[a-zA-Z_./%-]+:.*## ' $(MAKEFILE_LIST) | \
+	@grep -hE '^[a-zA-Z0-9_./%-]+:.*## ' $(MAKEFILE_LIST) | \
 	  awk 'BEGIN {FS = ":.*## "}; {printf "  \033[36m%-34s\033[0m %s\n", $$1, $$2}'
 
 # ---------------------------------------------------------------- set-up
@@ -127,6 +127,18 @@ dataset: | $(SETUP) ## FEM datasets: results/data/train (2560, seed 1) + heldout
 	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 --out results/data/heldout --max-hours $(DATASET_HOURS)
 	$(PY) -m workflow.dataset verify results/data/train --require-complete --mirror 2
 	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
+
+# The datasets on a swept-hexahedra discretisation (issue 35's candidates, docs/decisions.md
+# §9; NEW_MESH, default hex2 mixed u-p), the held-out walk first. They go to their own
+# folders until everything downstream is retrained on them; then they become
+# results/data/{train,heldout} and the 1.8 mm sets results/data/{train,heldout}_h1.8.
+NEW_MESH ?= --divisions 2 --formulation mixed
+NEW_DATA := results/data
+dataset-hex2: | $(SETUP) ## FEM datasets on hex2 mixed: heldout_hex2 (256, seed 2) then train_hex2 (2560, seed 1); DATASET_HOURS per run; re-run resumes
+	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(NEW_MESH) --out $(NEW_DATA)/heldout_hex2 --max-hours $(DATASET_HOURS)
+	$(CAMPAIGN) --samples 2560 --seed 1 $(NEW_MESH) --out $(NEW_DATA)/train_hex2 --max-hours $(DATASET_HOURS)
+	$(PY) -m workflow.dataset verify $(NEW_DATA)/heldout_hex2 --require-complete
+	$(PY) -m workflow.dataset verify $(NEW_DATA)/train_hex2 --require-complete --mirror 2
 
 # The held-out walk again on the finer joint mesh H:W = 1.697:0.849 (two P2 elements through
 # the wall, 3x the nodes): the production datasets' discretisation change over the load
@@ -262,6 +274,19 @@ results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predic
 	$(MAKE) --no-print-directory finger-fem
 	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(PRED_JOINT) --out $@ --figures results/validation
 
+# ---------------------------------------------------------------- one joint file to a predictor (issue 37)
+# (section owned by apps/pipeline.py) Render, the two campaigns, training, held-out errors and
+# a three-joint gesture of JOINT into results/joints/<its name>/ (docs/pipeline.md); every
+# stage resumes, so a killed or time-limited run (exit 3) is finished by running it again.
+# The same through Slurm: JOINT=FILE sbatch workflow/slurm/pipeline.sbatch.
+JOINT          ?=
+BUDGET         ?= small
+PIPELINE_RANKS ?= 2
+PIPELINE_HOURS ?=
+.PHONY: pipeline
+pipeline: | $(SETUP) ## one joint file -> FEM data, surrogate, held-out errors, gesture: make pipeline JOINT=file.toml [BUDGET=small|full] -> results/joints/<name>/
+	nice $(PY) -m apps.pipeline --joint "$(JOINT)" --budget "$(BUDGET)" --ranks $(PIPELINE_RANKS) \
+	  $(if $(PIPELINE_HOURS),--max-hours $(PIPELINE_HOURS))
 
 report: ## results/REPORT.md from the committed JSON artefacts
 	$(PY) -m apps.report --out results/REPORT.md

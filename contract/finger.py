@@ -33,7 +33,6 @@ imports it without FEniCSx.
 from __future__ import annotations
 
 import argparse
-import functools
 import hashlib
 import math
 import tomllib
@@ -53,18 +52,6 @@ MAX_LENGTH = 1000.0
 
 class FingerFileError(ValueError):
     """A finger file that cannot be used (one line: file, key, reason)."""
-
-
-@functools.lru_cache(maxsize=1)
-def paper_joint_digest() -> str:
-    """contract.joint.joint_digest of the paper's joint, the joint of a part naming none."""
-    return joint_digest(load_joint())
-
-
-def is_paper_joint(joint: JointSpec) -> bool:
-    """Whether ``joint`` has the paper's physics and contract (its digest: name and [mesh]
-    aside), i.e. is the joint a joint part without a ``joint`` key stands for."""
-    return joint_digest(joint) == paper_joint_digest()
 
 
 @dataclass(frozen=True)

@@ -31,8 +31,10 @@ A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
 * ``[input_box]``: the training box half-widths ``pressure_mpa`` (|P|), ``force_n``
   (|F1| and |F2|) and ``moment_nmm`` (|M|): contract.spec.INPUT_BOX for this joint;
 * ``[anchors]``: ``count``, the anchor points X_i = (i L / count, 0, 0), i = 1..count;
-* ``[mesh]``: the defaults it is meshed with: ``size`` (mm), ``wall_size`` (mm, absent:
-  ``size``) and ``formulation`` ("displacement" or "mixed").
+* ``[mesh]``: the defaults it is meshed with: tetrahedra of ``size`` (mm) and
+  ``wall_size`` (mm, absent: ``size``), or swept hexahedra of ``divisions`` (a whole number
+  in [1, 6]: that many elements through every wall, fem.mesh_hex) instead of the sizes;
+  and ``formulation`` ("displacement" or "mixed").
 
 Shape rules, from fem.geometry's construction of the y >= 0 quarter (a core bar of height
 valley_height/2, caps and cells raised to height/2, one cavity of the cell pockets joined
@@ -44,7 +46,8 @@ by a channel above the spine), checked before any meshing:
 * every cell holds a pocket: cell_width = (length - 2 cap - (n_cells - 1) valley_width) /
   n_cells > 2 wall;
 * the pocket has a side wall: width/2 > wall;
-* the mesh is not absurdly fine: length height width / size^3 <= MAX_MESH_BOXES.
+* the mesh is not absurdly fine: length height width / size^3 <= MAX_MESH_BOXES, or
+  divisions <= MAX_DIVISIONS.
 
 Every error is a JointFileError (a ValueError), one line naming the file, the table and
 key, and the allowed range; unknown keys, a key given twice, a non-number, NaN or inf and
@@ -58,6 +61,7 @@ fem.materials energies of spec.material), campaign manifests (joint_to_dict, joi
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import math
@@ -84,6 +88,8 @@ GEOMETRY_KEYS = ("length", "wall", "height", "width", "spine", "n_cells", "cap",
                  "valley_width")
 #: key -> (low, high, unit), inclusive, for every number of the file; the law's own
 #: parameters take PARAMETER_RANGES.
+#: most hexahedral divisions of a [mesh] (6: about 500k Q2 nodes in the paper's joint)
+MAX_DIVISIONS = 6
 RANGES = {
     "length": (5.0, 1000.0, "mm"), "wall": (0.1, 50.0, "mm"), "height": (1.0, 500.0, "mm"),
     "width": (1.0, 500.0, "mm"), "spine": (0.1, 100.0, "mm"), "n_cells": (2, 50, ""),
@@ -92,7 +98,7 @@ RANGES = {
     "cap_stiffness": (1.0, 1e4, ""), "cap_nu": (0.0, 0.49, ""),
     "pressure_mpa": (1e-4, 10.0, "MPa"), "force_n": (1e-4, 1000.0, "N"),
     "moment_nmm": (1e-3, 1e5, "N*mm"), "count": (2, 100, ""),
-    "size": (0.1, 50.0, "mm"), "wall_size": (0.05, 50.0, "mm"),
+    "size": (0.1, 50.0, "mm"), "wall_size": (0.05, 50.0, "mm"), "divisions": (1, MAX_DIVISIONS, ""),
 }
 PARAMETER_RANGES = {"C10": (-1e3, 1e3, "MPa"), "C01": (-1e3, 1e3, "MPa"), "C20": (-1e3, 1e3, "MPa"),
                     "C30": (-1e3, 1e3, "MPa"), "mu": (-1e3, 1e3, "MPa"), "alpha": (-30.0, 30.0, "")}
@@ -101,10 +107,10 @@ MIN_ABS_ALPHA = 0.1
 #: The small-strain shear modulus mu0 of any law, MPa.
 MU0_RANGE = (1e-4, 1e3)
 _TABLES = {"geometry": GEOMETRY_KEYS, "input_box": ("pressure_mpa", "force_n", "moment_nmm"),
-           "anchors": ("count",), "mesh": ("size", "wall_size", "formulation")}
+           "anchors": ("count",), "mesh": ("size", "wall_size", "divisions", "formulation")}
 _TOP_KEYS = ("format", "name", "geometry", "material", "input_box", "anchors", "mesh")
 _MATERIAL_COMMON = ("law", "nu", "K", "cap_stiffness", "cap_nu")
-_OPTIONAL = {"wall_size", "formulation", "cap_stiffness", "cap_nu", "nu", "K"}
+_OPTIONAL = {"size", "wall_size", "divisions", "formulation", "cap_stiffness", "cap_nu", "nu", "K"}
 
 
 class JointFileError(ValueError):
@@ -227,9 +233,10 @@ class JointSpec:
     force_n: float
     moment_nmm: float
     anchors: int
-    mesh_size: float
+    mesh_size: float | None
     wall_mesh_size: float | None = None
     formulation: str = "displacement"
+    divisions: int = 0
     name: str = "joint"
 
     @property
@@ -243,8 +250,9 @@ class JointSpec:
 
     def geometry_kwargs(self) -> dict:
         """Keyword arguments of fem.geometry.JointGeometry for this joint (mm)."""
-        return {**{k: getattr(self.shape, k) for k in GEOMETRY_KEYS},
-                "mesh_size": self.mesh_size, "wall_mesh_size": self.wall_mesh_size}
+        mesh = ({"divisions": self.divisions} if self.divisions else
+                {"mesh_size": self.mesh_size, "wall_mesh_size": self.wall_mesh_size})
+        return {**{k: getattr(self.shape, k) for k in GEOMETRY_KEYS}, **mesh}
 
     def anchor_points(self) -> np.ndarray:
         """Material anchor points X_i = (i L / n, 0, 0), i = 1..n: (n, 3) mm."""
@@ -367,20 +375,34 @@ def _check_moduli(where: str, m: MaterialLaw) -> None:
 
 def _mesh(source: str, doc: dict, shape: BellowShape, material: MaterialLaw) -> tuple:
     where, t = _table(source, doc, "mesh", _TABLES["mesh"])
-    size = _number(where, "size", t["size"])
-    wall = _number(where, "wall_size", t["wall_size"]) if "wall_size" in t else None
     formulation = t.get("formulation", "displacement")
     if formulation not in FORMULATIONS:
         raise JointFileError(f"{where}.formulation = {formulation!r}, use one of {', '.join(FORMULATIONS)}")
+    if formulation == "mixed" and material.kappa <= 0:
+        raise JointFileError(f"{where}.formulation = 'mixed' needs a volumetric modulus kappa > 0: "
+                             f"material.nu must be > 0")
+    if ("divisions" in t) == ("size" in t):
+        raise JointFileError(f"{where}: give either size (tetrahedra, mm) or divisions (hexahedra), not "
+                             f"{'both' if 'size' in t else 'neither'}")
+    if "divisions" in t:
+        if "wall_size" in t:
+            raise JointFileError(f"{where}.wall_size: tetrahedra only; hexahedra have divisions through every wall")
+        return None, None, formulation, _number(where, "divisions", t["divisions"], integer=True)
+    size = _number(where, "size", t["size"])
+    wall = _number(where, "wall_size", t["wall_size"]) if "wall_size" in t else None
     boxes = shape.length * shape.height * shape.width / size ** 3
     if boxes > MAX_MESH_BOXES:
         low = (shape.length * shape.height * shape.width / MAX_MESH_BOXES) ** (1 / 3)
         raise JointFileError(f"{where}.size = {size:g} mm is too fine for this joint: allowed >= {low:.3g} mm "
                              f"(at most {MAX_MESH_BOXES:.0e} size^3 boxes)")
-    if formulation == "mixed" and material.kappa <= 0:
-        raise JointFileError(f"{where}.formulation = 'mixed' needs a volumetric modulus kappa > 0: "
-                             f"material.nu must be > 0")
-    return size, wall, formulation
+    return size, wall, formulation, 0
+
+
+def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0) -> str:
+    """A mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
+    if divisions:
+        return f"hex{divisions}"
+    return f"{size:g}" + (f":{wall_size:g}" if wall_size else "")
 
 
 def joint_from_dict(doc: dict, source: str = "<joint>") -> JointSpec:
@@ -402,9 +424,9 @@ def joint_from_dict(doc: dict, source: str = "<joint>") -> JointSpec:
     box = {k: _number(where, k, box[k]) for k in _TABLES["input_box"]}
     where, anchors = _table(source, doc, "anchors", _TABLES["anchors"])
     count = _number(where, "count", anchors["count"], integer=True)
-    size, wall, formulation = _mesh(source, doc, shape, material)
+    size, wall, formulation, divisions = _mesh(source, doc, shape, material)
     return JointSpec(shape, material, **box, anchors=count, mesh_size=size, wall_mesh_size=wall,
-                     formulation=formulation, name=name)
+                     formulation=formulation, divisions=divisions, name=name)
 
 
 def parse_joint(text: str, source: str = "<joint>") -> JointSpec:
@@ -446,7 +468,8 @@ def material_dict(m: MaterialLaw) -> dict:
 def joint_to_dict(joint: JointSpec) -> dict:
     """The joint's tables as plain JSON, which ``joint_from_dict`` rebuilds exactly (the
     file's structure; ``wall_size`` absent when it is the size)."""
-    mesh = {"size": joint.mesh_size, "formulation": joint.formulation}
+    mesh = {"divisions": joint.divisions} if joint.divisions else {"size": joint.mesh_size}
+    mesh["formulation"] = joint.formulation
     if joint.wall_mesh_size is not None:
         mesh["wall_size"] = joint.wall_mesh_size
     return {"format": FORMAT, "name": joint.name,
@@ -464,3 +487,16 @@ def joint_digest(joint: JointSpec) -> str:
     d = joint_to_dict(joint)
     body = {k: d[k] for k in ("format", "geometry", "material", "input_box", "anchors")}
     return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def paper_joint_digest() -> str:
+    """``joint_digest`` of the paper's joint (DEFAULT_JOINT), read once."""
+    return joint_digest(load_joint())
+
+
+def is_paper_joint(joint: JointSpec) -> bool:
+    """Whether ``joint`` has the paper's physics and contract (its digest: name and [mesh]
+    aside): the joint a stage uses without ``--joint``, a finger's joint part without a
+    ``joint`` key, and a manifest or checkpoint that records none."""
+    return joint_digest(joint) == paper_joint_digest()

@@ -84,13 +84,13 @@ def phi_end(anchors):
 
 
 def mirror(inputs, anchors, jacobian=None):
-    """The y-mirror of a batch: inputs (n, 4), anchors (n, 10, 2), jacobian (n, 20, 4) or
-    None -> the same shapes (numpy or torch, whichever is given)."""
+    """The y-mirror of a batch: inputs (n, 4), anchors (n, k, 2), jacobian (n, 2k, 4) or
+    None -> the same shapes (numpy or torch, whichever is given); k anchors (the joint's)."""
     inputs_m = inputs * _like(INPUT_MIRROR, inputs)
     anchors_m = anchors * _like(ANCHOR_MIRROR, anchors)
     if jacobian is None:
         return inputs_m, anchors_m, None
-    s = np.tile(ANCHOR_MIRROR, N_ANCHORS)
+    s = np.tile(ANCHOR_MIRROR, anchors.shape[-2])
     return inputs_m, anchors_m, jacobian * _like(s[:, None] * INPUT_MIRROR[None, :], jacobian)
 
 

@@ -26,12 +26,12 @@ _ERRORS = ("anchor_mm", "anchor_percent", "tip_mm", "phi_end_deg", "cap_rotation
 #: results/fem/mesh_study.json (make mesh-study): every discretisation's worst error over the
 #: eight loads against the reference (Richardson extrapolation of the family, or its finest
 #: mesh), the production discretisation's judged against the tolerances.
-MESH_STUDY = Format("fem-mesh-study", 2, "fem.mesh_study", {
-    "loads": list, "formulation": str, "complete": bool, "asymptotic": bool, "reference": str | None,
-    **each("", NUM, "tolerance_percent", "tolerance_deg", "wall_mm"), "min_nodes": int,
-    "family": list | None, "production": str, "production_mesh": list, "production_met": bool,
-    "meshes[].key": str, "meshes[].formulation": str, "meshes[].mesh_size": NUM,
-    "meshes[].wall_mesh_size": MAYBE, "meshes[].nodes": int, "meshes[].mean_solve_s": NUM, "meshes[].ranks": int,
+MESH_STUDY = Format("fem-mesh-study", 3, "fem.mesh_study", {
+    "loads": list, "formulation": str, "element": str, "complete": bool, "asymptotic": bool,
+    "reference": str | None, **each("", NUM, "tolerance_percent", "tolerance_deg", "wall_mm"), "min_nodes": int,
+    "family": list | None, "production": str, "production_mesh": str, "production_met": bool,
+    "meshes[].key": str, "meshes[].mesh": str, "meshes[].element": str, "meshes[].sizes": list,
+    "meshes[].formulation": str, "meshes[].nodes": int, "meshes[].mean_solve_s": NUM, "meshes[].ranks": int,
     **each("meshes[].max_error?", NUM, *_ERRORS), "orders": list, "extrapolation?[].anchors.order": MAYBE,
     **each("production_error?", NUM, *_ERRORS), **each("paper_error?", NUM, *_ERRORS)})
 
@@ -65,12 +65,16 @@ FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
 
 #: results/fem/joint_cases/<discretisation>_<load>.json (make mesh-study, make mesh-causes;
 #: fem.joint_cases): one joint solve of one load under one discretisation (mesh H:W,
-#: formulation, quadrature degree, penalty factor), kept so that the studies resume.
+#: formulation, quadrature degree, penalty factor), kept so that the studies resume; a solve
+#: seeded from another discretisation's answer names it (``seeded_from``, its key) and the
+#: seed's own solve time (``seed_wall_time_s``).
 JOINT_CASE = Format("fem-joint-case", 1, "fem.joint_cases", {
-    "load": list, "discretisation.H": NUM, "discretisation.W": MAYBE, "discretisation.formulation": str,
+    "load": list, "discretisation.H": MAYBE, "discretisation.W": MAYBE, "discretisation.divisions?": int,
+    "discretisation.formulation": str,
     "discretisation.quadrature": int, "discretisation.penalty": NUM, "anchors": list,
     **each("", NUM, "phi_end_deg", "cap_rotation_deg", "wall_time_s"), "newton_iterations": int,
-    "contact.closed_pairs": int, "contact.min_gap_mm": MAYBE, "mesh.nodes": int, "ranks": int})
+    "contact.closed_pairs": int, "contact.min_gap_mm": MAYBE, "mesh.nodes": int, "ranks": int,
+    "seeded_from?": str, "seed_wall_time_s?": NUM})
 
 #: results/fem/mesh_causes.json (make mesh-causes; fem.mesh_causes): each factor's effect on
 #: the answer against the production discretisation, its time, and the error against the

@@ -2,6 +2,7 @@
 comparison -> results/bench/fem.json.
 
     python -m fem.bench_joint --out results/bench/fem.json [--json]
+    python -m fem.bench_joint --mesh hex2 --formulation mixed --out build/bench_hex2.json
 
 (The accuracy checks are ``fem.validation``; the campaign's throughput is
 ``workflow.bench_campaign``.)
@@ -14,10 +15,13 @@ discretisation (fem.discretisation: mesh H or H:W mm, formulation):
 * ``continuation_sample_s``: median wall time of the next sample when the solve starts
   from a neighbouring converged state (steps of ``--step`` x the box half-width along a
   random walk, as the campaign harvests samples), with the sensitivities included;
+  ``continuation_sample_cpu_s`` the same samples' median CPU time of this process (one
+  thread: OMP_NUM_THREADS=1), which other jobs on the machine inflate less;
 * mesh figures: ``nodes`` (P2, incl. mid-side nodes), ``dofs``, vertices, element size.
 
 The unsuffixed keys are PRODUCTION's (what new data is generated on; ``formulation``,
-``mesh``); the same figures of PAPER (the committed datasets' 1.8 mm P2 displacement)
+``mesh``), or a candidate's given by ``--mesh`` / ``--formulation`` (a discretisation the
+mesh study weighs before it becomes PRODUCTION); the same figures of PAPER (the committed datasets' 1.8 mm P2 displacement)
 carry its mesh as suffix (``continuation_sample_s_1.8``, ``solve_from_zero_s_1.8``,
 ``nodes_1.8``), and ``ratio_continuation_vs_1.8`` = production / paper continuation time.
 When the two are one discretisation it is timed once (ratio 1).
@@ -38,8 +42,8 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.artefacts import BENCH_JOINT
-from fem.discretisation import PAPER, PRODUCTION, Discretisation
-from fem.options import one_rank
+from fem.discretisation import PAPER, PRODUCTION, Discretisation, discretisation
+from fem.options import FORMULATION_CHOICES, mesh_text, one_rank
 from fem.solver import JointSolver, Load
 from contract.spec import INPUT_BOX
 
@@ -67,12 +71,12 @@ def time_discretisation(disc: Discretisation, n_walk: int = 6, step: float = 0.1
     walk = []
     for _ in range(n_walk):
         x = np.clip(x + step * INPUT_BOX * rng.uniform(-1, 1, 4), -INPUT_BOX, INPUT_BOX)
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         r = solver.solve(Load.from_array(x), continuation=True)
         solver.sensitivities()
         if not r.converged:
             raise RuntimeError(f"a continuation benchmark solve did not converge ({disc.key})")
-        walk.append((time.perf_counter() - t, r.iterations, r.factorisations))
+        walk.append((time.perf_counter() - t, r.iterations, r.factorisations, time.process_time() - cpu))
     return {
         **solver.mesh_info(), "formulation": disc.formulation, "mesh": disc.mesh,
         "wall_mesh_size_mm": geo.wall_mesh_size or geo.mesh_size, "wall_thickness_mm": geo.wall,
@@ -82,9 +86,10 @@ def time_discretisation(disc: Discretisation, n_walk: int = 6, step: float = 0.1
                                    "newton_iterations": r.newton_iterations,
                                    "factorisations": r.factorisations} for r in zero],
         "newton_iterations": statistics.median(r.iterations for r in zero),
-        "continuation_sample_s": statistics.median(t for t, _, _ in walk),
-        "continuation_newton_iterations": statistics.median(n for _, n, _ in walk),
-        "continuation_factorisations": statistics.median(f for _, _, f in walk),
+        "continuation_sample_s": statistics.median(t for t, _, _, _ in walk),
+        "continuation_sample_cpu_s": statistics.median(c for _, _, _, c in walk),
+        "continuation_newton_iterations": statistics.median(n for _, n, _, _ in walk),
+        "continuation_factorisations": statistics.median(f for _, _, f, _ in walk),
         "continuation_step_fraction_of_box": step,
     }
 
@@ -100,6 +105,7 @@ def run(n_walk: int = 6, step: float = 0.1, seed: int = 0,
         **prod,
         f"solve_from_zero_s{tag}": ref["solve_from_zero_s"],
         f"continuation_sample_s{tag}": ref["continuation_sample_s"],
+        f"continuation_sample_cpu_s{tag}": ref["continuation_sample_cpu_s"],
         f"nodes{tag}": ref["nodes"], f"formulation{tag}": paper.formulation,
         f"ratio_continuation_vs{tag}": prod["continuation_sample_s"] / ref["continuation_sample_s"],
         "paper_seconds_per_sample": PAPER_SECONDS_PER_SAMPLE, "paper_nodes": 16000,
@@ -117,10 +123,15 @@ def main(argv=None) -> int:
                     help="continuation samples to time, in [1, 100] (default 6)")
     ap.add_argument("--step", type=cli.number(0, 1, open_lo=True), default=0.1,
                     help="walk step, fraction of the box in (0, 1] (default 0.1)")
+    ap.add_argument("--mesh", type=mesh_text, default=PRODUCTION.mesh, metavar="MESH",
+                    help=f"the discretisation timed: tetrahedra H[:W] (mm) or hexahedra hexN "
+                    f"(default {PRODUCTION.mesh}, the production mesh)")
+    ap.add_argument("--formulation", choices=FORMULATION_CHOICES, default=PRODUCTION.formulation,
+                    help=f"its formulation (default {PRODUCTION.formulation}, the production one)")
     one_rank(ap, MPI.COMM_WORLD)
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
-    out = run(args.walk, args.step)
+    out = run(args.walk, args.step, production=discretisation(args.mesh, formulation=args.formulation))
     with ap.errors():
         BENCH_JOINT.write(args.out, out)
     summary = {k: out[k] for k in SUMMARY_KEYS}

@@ -79,6 +79,12 @@ class ValleyContact:
                 area = (geometry.height - geometry.valley_height) / 2 * geometry.width / 2
                 self.groups[(k, side)] = (a, b[j], area / len(a))
 
+    def coupled_dofs(self) -> np.ndarray:
+        """Global (x, y) dofs of both nodes of every pair, (n_pairs, 4): the entries
+        add_tangent writes (for the tangent's sparsity pattern)."""
+        return np.vstack([np.column_stack([self._dofs[a][:, :2], self._dofs[b][:, :2]])
+                          for a, b, _ in self.groups.values()])
+
     def positions(self, u: fem.Function) -> np.ndarray:
         """Deformed positions of all contact nodes, gathered on every rank. (n, 3) mm."""
         mine = u.x.array[self._local]

@@ -1,9 +1,12 @@
 """The joint's discretisations: what the FEM data is generated on, named once.
 
-A discretisation is (H, W, formulation, q, kappa): tetrahedron size H mm and W mm on the
-1.2 mm chamber walls (JointGeometry.mesh_size, wall_mesh_size; W = None: H), the
-formulation ("displacement": P2 displacement; "mixed": Taylor-Hood P2-P1 u-p, see
-fem.problem), the quadrature degree q and the valley-contact penalty kappa (MPa/mm).
+A discretisation is (mesh, formulation, q, kappa). The mesh is either tetrahedra of size H
+mm and W mm on the 1.2 mm chamber walls (JointGeometry.mesh_size, wall_mesh_size; W = None:
+H; written "H" or "H:W"), or the swept hexahedra of n divisions (JointGeometry.divisions,
+fem.mesh_hex: n elements through every wall; written "hexN"). Then the formulation
+("displacement": P2 / Q2 displacement; "mixed": Taylor-Hood P2-P1 / Q2-Q1 u-p, see
+fem.problem), the quadrature degree q (at least fem.mesh_hex.QUADRATURE on hexahedra) and
+the valley-contact penalty kappa (MPa/mm).
 
 * PAPER: the discretisation of the paper-fidelity datasets (1.8 mm P2 displacement), kept
   as the reference that REPORT compares against;
@@ -17,10 +20,11 @@ read as what they are).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
-from fem.geometry import JointGeometry
+from fem.geometry import MAX_DIVISIONS, JointGeometry
 from fem.load_path import SolverConfig
+from fem.mesh_hex import QUADRATURE as HEX_QUADRATURE
 from fem.problem import FORMULATIONS
 
 #: the formulation new data is generated on (PRODUCTION's)
@@ -29,31 +33,67 @@ FORMULATION = "displacement"
 
 @dataclass(frozen=True)
 class Discretisation:
-    """One discretisation of the joint: sizes in mm, penalty in MPa/mm."""
+    """One discretisation of the joint: sizes in mm (None on hexahedra), penalty in MPa/mm.
+    Build one from its mesh text with :func:`discretisation`."""
 
-    H: float = JointGeometry.mesh_size
+    H: float | None = JointGeometry.mesh_size
     W: float | None = JointGeometry.wall_mesh_size
     formulation: str = FORMULATION
     quadrature: int = SolverConfig.quadrature_degree
     penalty: float = SolverConfig.contact_penalty
+    divisions: int = JointGeometry.divisions
 
     def __post_init__(self):
         if self.formulation not in FORMULATIONS:
             raise ValueError(f"formulation must be one of {FORMULATIONS}, not {self.formulation!r}")
+        if not (isinstance(self.divisions, int) and 0 <= self.divisions <= MAX_DIVISIONS):
+            raise ValueError(f"divisions must be a whole number in [0, {MAX_DIVISIONS}], not {self.divisions!r}")
+        if self.divisions and (self.H, self.W) != (None, None):
+            raise ValueError("a hexahedral discretisation has no tetrahedron sizes (H = W = None)")
+        if self.divisions and self.quadrature < HEX_QUADRATURE:
+            raise ValueError(f"Q2 hexahedra need quadrature degree >= {HEX_QUADRATURE} "
+                             f"(fewer points leave hourglass modes), not {self.quadrature}")
+        if not self.divisions and self.H is None:
+            raise ValueError("a tetrahedral discretisation needs its size H (mm)")
 
     @property
     def key(self) -> str:
-        """File-name key, e.g. ``h2.4_w1.2_mixed_q2_k100``."""
+        """File-name key, e.g. ``h2.4_w1.2_mixed_q2_k100`` or ``hex2_mixed_q4_k100``."""
+        if self.divisions:
+            return f"hex{self.divisions}_{self.formulation}_q{self.quadrature}_k{self.penalty:g}"
         w = "none" if self.W is None else f"{self.W:g}"
         return f"h{self.H:g}_w{w}_{self.formulation}_q{self.quadrature}_k{self.penalty:g}"
 
     @property
     def mesh(self) -> str:
-        """``H`` or ``H:W`` (mm)."""
-        return f"{self.H:g}" if self.W is None else f"{self.H:g}:{self.W:g}"
+        """``H``, ``H:W`` (mm) or ``hexN`` (JointGeometry.mesh)."""
+        return self.geometry().mesh
+
+    @property
+    def sizes(self) -> tuple[float, float]:
+        """Element sizes (in-plane, wall) up to one factor per mesh kind: (H, W) mm on
+        tetrahedra, (1/n, 1/n) on hexahedra; two meshes of one kind whose sizes share one
+        ratio are refinements of each other (fem.mesh_study's families)."""
+        if self.divisions:
+            return (1.0 / self.divisions,) * 2
+        return self.H, self.W or self.H
+
+    def as_dict(self) -> dict:
+        """The fields; ``divisions`` only on hexahedra, so records written before hexahedra
+        existed read as what they are."""
+        out = asdict(self)
+        if not self.divisions:
+            del out["divisions"]
+        return out
+
+    @property
+    def element(self) -> str:
+        return "hex" if self.divisions else "tet"
 
     def geometry(self, base: JointGeometry = JointGeometry()) -> JointGeometry:
-        return replace(base, mesh_size=self.H, wall_mesh_size=self.W)
+        if self.divisions:
+            return replace(base, divisions=self.divisions)
+        return replace(base, mesh_size=self.H, wall_mesh_size=self.W, divisions=0)
 
     def config(self, base: SolverConfig = SolverConfig()) -> SolverConfig:
         return replace(base, quadrature_degree=self.quadrature, contact_penalty=self.penalty)
@@ -61,6 +101,31 @@ class Discretisation:
 
 PAPER = Discretisation(H=1.8, W=None, formulation="displacement", quadrature=2, penalty=100.0)
 PRODUCTION = Discretisation()
+
+
+def parse_mesh(text: str) -> dict:
+    """The mesh fields of a Discretisation from its text: "H" or "H:W" (mm, each in
+    fem.options.MESH_SIZE's range) or "hexN" (N divisions, with the hexahedra's quadrature
+    degree). Raises ValueError with a one-line reason."""
+    from fem.options import MESH_SIZE
+
+    text = text.strip()
+    if text.startswith("hex"):
+        n = text[3:]
+        if not (n.isdigit() and 1 <= int(n) <= MAX_DIVISIONS):
+            raise ValueError(f"{text!r}: hexN needs N in [1, {MAX_DIVISIONS}]")
+        return {"H": None, "W": None, "divisions": int(n), "quadrature": HEX_QUADRATURE}
+    h, _, w = text.partition(":")
+    return {"H": MESH_SIZE(h), "W": MESH_SIZE(w) if w else None, "divisions": 0}
+
+
+def discretisation(mesh: str, base: Discretisation = PRODUCTION, **fields) -> Discretisation:
+    """``base`` on the mesh ``mesh`` (parse_mesh's text), with ``fields`` replaced; a
+    tetrahedral mesh keeps base's quadrature unless base is hexahedral."""
+    kw = parse_mesh(mesh)
+    if not kw["divisions"] and base.divisions:
+        kw["quadrature"] = SolverConfig.quadrature_degree
+    return replace(base, **{**kw, **fields})
 
 
 def recorded_formulation(config: dict) -> str:

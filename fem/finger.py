@@ -1,7 +1,7 @@
 """The whole finger in DOLFINx: the ground truth for the gesture predictor (issue 14).
 
-    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H] [--finger FILE]
-                         [--formulation mixed] --json
+    python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H | --divisions N]
+                         [--finger FILE] [--formulation mixed] --json
     python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
@@ -14,9 +14,14 @@ from its own joint description (the finger file's optional ``joint`` key per joi
 contract.joint; absent: the paper's joint, NinjaFlex as a neo-Hookean solid): its law
 (fem.materials), stiff distal cap, input box (the pressure limit of its P_j), anchor count
 and default mesh ([mesh]: sizes and formulation, of the first joint, unless given), with
-P2 elements and the valley self-contact of fem.contact. fem.geometry.build_finger meshes
-one joint shape, so the joints of one finger may differ in law, box and anchors but must
-share their shape (a finger whose joints differ in shape is refused with one line). Every
+P2 elements and the valley self-contact of fem.contact. ``--divisions`` N (or a first
+joint file whose [mesh] gives divisions) meshes the whole finger with swept Q2 hexahedra
+instead (fem.mesh_hex: N elements through every joint wall, the same grid as the joint
+alone), integrated with the hexahedra's quadrature (fem.solver.config_for). The record's
+``mesh.mesh`` names the joints' mesh in words (``1.8``, ``1.697:0.849``, ``hex2``;
+contract.joint.mesh_text). fem.geometry.build_finger (and fem.mesh_hex) mesh one joint
+shape, so the joints of one finger may differ in law, box and anchors but must share their
+shape (a finger whose joints differ in shape is refused with one line). Every
 rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35), bonded to its
 neighbours (one conforming mesh). The base face x = 0 is clamped.
 
@@ -79,13 +84,15 @@ from fem.discretisation import FORMULATION
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
-from fem.options import MESH_SIZE, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
+                         joint_geometry)
 from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
                          chamber_pressures, clamp_and_symmetry, deformation_gradient,
                          displacement_space, elastic_work, facet_tags_present, mixed_bellow_work,
                          mixed_clamp_and_symmetry, mixed_elastic_work, mixed_space, region_volume,
                          rotation_about_z, valley_contact)
 from contract.spec import check_box
+from fem.solver import config_for
 from fem.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
@@ -339,12 +346,15 @@ class FingerSolver:
     """Static large-deflection solve of one whole finger (module docstring):
     :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`; every joint
     of its own law unless ``material`` is given. ``formulation`` defaults to the
-    production one (fem.discretisation.FORMULATION)."""
+    production one (fem.discretisation.FORMULATION); ``config`` is raised to the
+    hexahedra's quadrature on hexahedral joints (fem.solver.config_for)."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: MaterialLaw | Material | None = None, rigid: RigidMaterial = RigidMaterial(),
                  config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION):
-        self.finger, self.config, self.formulation = geometry.finger, config, formulation
+        config = config_for(geometry, config)
+        self.finger, self.geometry, self.config = geometry.finger, geometry, config
+        self.formulation = formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
                                       formulation=formulation, **config.discretisation())
@@ -361,7 +371,10 @@ class FingerSolver:
         self.solver.reset()
 
     def mesh_info(self) -> dict:
-        return self.solver.mesh_info()
+        """The solver's mesh figures (LoadPathSolver.mesh_info) and ``mesh``, the joints'
+        mesh in words (FingerGeometry.mesh: ``hexN``, ``H`` or ``H:W``), so that a record of
+        hexahedra never reads as one of tetrahedra."""
+        return {**self.solver.mesh_info(), "mesh": self.geometry.mesh}
 
     def displacement(self) -> fem.Function:
         """The displacement u (mm) in its own vector space (a copy, for the mixed form)."""
@@ -439,8 +452,10 @@ def build_parser() -> cli.Parser:
                          "name their joint files (default: the paper's joint)")
     add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
     add_wall_mesh_size(ap)
+    add_divisions(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help=f"tetrahedron size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g})")
+                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
+                         "--divisions N their hexahedra are at most this / N long)")
     add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
     cli.add_quiet(ap)
@@ -474,10 +489,15 @@ def parsed_pressures(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpe
 def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
                           finger: FingerSpec) -> tuple[FingerGeometry, str]:
     """(FingerGeometry, formulation) of the options on the finger's joints: the first
-    joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size or
-    --formulation are given; joints of several shapes are a usage error (shape_mismatch)."""
+    joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size,
+    --divisions (a parser without it: none) or --formulation are given; --divisions with a
+    tetrahedron size, or joints of several shapes, are usage errors (shape_mismatch)."""
     first = finger_joints(finger)[0]
-    geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
+    try:
+        joint = joint_geometry(args, first)
+    except ValueError as exc:
+        ap.error(exc)
+    geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
     why = shape_mismatch(finger, geometry.joint)
     if why:
         ap.error(why)
@@ -497,7 +517,8 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
     else:
         print("  tip = none (did not converge)")
     print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
-          f"{result.wall_time:.1f} s, {out['mesh']['nodes']} nodes ({out['formulation']}), {ranks} rank(s)")
+          f"{result.wall_time:.1f} s, mesh {out['mesh']['mesh']}: {out['mesh']['nodes']} nodes ({out['formulation']}), "
+          f"{ranks} rank(s)")
 
 
 def main(argv=None) -> int:

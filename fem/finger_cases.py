@@ -48,7 +48,8 @@ from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
 from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
                         rotation_matrix)
-from contract.finger import finger_arg, is_paper_joint, load_finger
+from contract.finger import finger_arg, load_finger
+from contract.joint import is_paper_joint
 from contract.joint import joint_digest
 from fem.geometry import FingerGeometry
 from fem.options import MESH_SIZE, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank

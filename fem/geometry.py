@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from contract.finger import FingerSpec
+from contract.joint import MAX_DIVISIONS, mesh_text
 from contract.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.problem.
@@ -60,7 +61,9 @@ class JointGeometry:
     """Dimensions of the bellow joint half-model (mm). Defaults: docs/physics.md.
 
     ``mesh_size`` is the target tetrahedron edge length; ``wall_mesh_size`` (default:
-    ``mesh_size``) is used on the chamber walls.
+    ``mesh_size``) is used on the chamber walls. ``divisions`` n >= 1 meshes the joint with
+    hexahedra instead (fem.mesh_hex: every interval between the profile's breakpoints cut
+    into n, so n elements through every wall; the two sizes are then unused); 0: tetrahedra.
     """
 
     length: float = JOINT_LENGTH
@@ -74,8 +77,11 @@ class JointGeometry:
     valley_width: float = 2.5      # outer gap between two neighbouring cells along x
     mesh_size: float = 1.8         # production mesh: 17,359 P2 nodes (make mesh-study)
     wall_mesh_size: float | None = None
+    divisions: int = 0
 
     def __post_init__(self):
+        if not (isinstance(self.divisions, int) and 0 <= self.divisions <= MAX_DIVISIONS):
+            raise ValueError(f"divisions must be a whole number in [0, {MAX_DIVISIONS}], not {self.divisions!r}")
         channel = self.valley_height / 2 - self.wall - self.spine / 2
         if channel <= 0:
             raise ValueError("valley_height leaves no channel between the cells")
@@ -93,8 +99,18 @@ class JointGeometry:
         x0, w, g = self.cap, self.cell_width, self.valley_width
         return [(x0 + i * (w + g), x0 + i * (w + g) + w) for i in range(self.n_cells)]
 
+    @property
+    def mesh(self) -> str:
+        """The mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
+        return mesh_text(self.mesh_size, self.wall_mesh_size, self.divisions)
+
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The fields; ``divisions`` only for a hexahedral mesh, so records written before
+        hexahedra existed read as what they are."""
+        out = asdict(self)
+        if not self.divisions:
+            del out["divisions"]
+        return out
 
 
 @dataclass(frozen=True)
@@ -123,7 +139,8 @@ class FingerGeometry:
     The finger frame is the joint frame of the first joint, extended: x runs along the
     straight rest finger from the base mount (x = 0) to the fingertip (x = finger.length),
     y in the bending plane, z >= 0 the half-model. Every joint is the bellow joint of
-    ``joint`` (its mesh size and wall refinement included) with its proximal face at
+    ``joint`` (its mesh size and wall refinement, or its hexahedral divisions, included:
+    ``divisions`` > 0 meshes the whole finger with fem.mesh_hex) with its proximal face at
     finger.rest_start(k); every rigid part is a solid box of its cross-section
     (y in [-height/2, height/2], z in [0, width/2]), bonded to its neighbours' end faces
     (one conforming mesh), meshed at ``rigid_mesh_size`` (mm).
@@ -136,6 +153,17 @@ class FingerGeometry:
     @property
     def mesh_size(self) -> float:
         return self.joint.mesh_size
+
+    @property
+    def divisions(self) -> int:
+        """The joints' hexahedral divisions (fem.mesh_hex meshes the whole finger); 0:
+        gmsh tetrahedra."""
+        return self.joint.divisions
+
+    @property
+    def mesh(self) -> str:
+        """The joints' mesh in words (JointGeometry.mesh): ``hexN``, or ``H`` / ``H:W`` (mm)."""
+        return self.joint.mesh
 
     def as_dict(self) -> dict:
         return {"finger": self.finger.summary(), "joint": self.joint.as_dict(),

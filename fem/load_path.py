@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+import dolfinx.cpp
 from dolfinx import fem, geometry
 from dolfinx.fem.petsc import (apply_lifting, assemble_matrix, assemble_vector, create_matrix,
                                create_vector, set_bc)
@@ -132,10 +133,7 @@ class LoadPathSolver:
         self._R = fem.form(R)
         self._J = fem.form(ufl.derivative(R, self.u, ufl.TrialFunction(self.V)))
         self._load_forms = [fem.form(term.form) for term in problem.loads]
-        self._A = create_matrix(self._J)       # the tangent at the current iterate
-        if self.contact is not None:
-            # The pair blocks couple nodes that share no cell: allow them in the pattern.
-            self._A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self._A = self._tangent_matrix()       # the tangent at the current iterate
         self._b = create_vector(self._R)
         self._tangent()                          # fixes the sparsity pattern
         self._P = self._A.duplicate(copy=True)   # the last tangent that was factorised
@@ -215,22 +213,21 @@ class LoadPathSolver:
         return self.probes.values(self.u)
 
     def mesh_info(self) -> dict:
-        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs."""
+        """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs, and the
+        mesh's size (mm; a hexahedral joint: its ``divisions`` instead)."""
         mesh_data = self.problem.mesh_data
         mesh = mesh_data.mesh
-        imap = mesh.topology.index_map(0)
-        cmap = mesh.topology.index_map(mesh.topology.dim)
+        divisions = getattr(mesh_data.geometry, "divisions", 0)
+        info = {"vertices": mesh.topology.index_map(0).size_global,
+                "cells": mesh.topology.index_map(mesh.topology.dim).size_global,
+                "degree": self.config.degree,
+                **({"divisions": divisions} if divisions else {"mesh_size": mesh_data.geometry.mesh_size})}
         if self.problem.displacement_space is None:
             nodes = self.V.dofmap.index_map.size_global
-            return {"vertices": imap.size_global, "cells": cmap.size_global,
-                    "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs,
-                    "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size}
+            return {**info, "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs}
         # mixed: nodes of u; dofs of the whole unknown (u and p)
-        imap_w = self.V.dofmap.index_map
-        return {"vertices": imap.size_global, "cells": cmap.size_global,
-                "nodes": self.problem.displacement_space.dofmap.index_map.size_global,
-                "dofs": imap_w.size_global * self.V.dofmap.index_map_bs,
-                "degree": self.config.degree, "mesh_size": mesh_data.geometry.mesh_size,
+        return {**info, "nodes": self.problem.displacement_space.dofmap.index_map.size_global,
+                "dofs": self.V.dofmap.index_map.size_global * self.V.dofmap.index_map_bs,
                 "formulation": self.problem.formulation}
 
     # ------------------------------------------------------------------ algebra
@@ -246,6 +243,28 @@ class LoadPathSolver:
             self.contact.add_residual(b, self.u)
         set_bc(b, self.bcs, self.u.vector, -1.0)
         return b.norm()
+
+    def _tangent_matrix(self) -> PETSc.Mat:
+        """The tangent's matrix: the form's sparsity pattern plus the contact pairs' blocks,
+        which couple nodes that share no cell. On one rank the pairs are put in the
+        pattern before the matrix is made; inserting them afterwards reallocates the
+        matrix for every new row, which took 120 s (a minute per ~10k Q2 nodes) on a
+        hexahedral joint, whose valley faces carry many nodes. On several ranks a pair's
+        nodes may lie on ranks that do not see each other, so the entries are allowed
+        into the pattern as they come."""
+        if self.contact is None:
+            return create_matrix(self._J)
+        if self.comm.size > 1:
+            A = create_matrix(self._J)
+            A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+            return A
+        pattern = fem.create_sparsity_pattern(self._J)
+        bs = self.V.dofmap.index_map_bs
+        for dofs in self.contact.coupled_dofs():
+            blocks = np.unique(dofs // bs).astype(np.int32)   # one rank: local = global
+            pattern.insert(blocks, blocks)
+        pattern.assemble()
+        return dolfinx.cpp.la.petsc.create_matrix(self.comm, pattern)
 
     def _tangent(self) -> None:
         """Assemble the tangent K(u) at the current iterate into _A."""
@@ -373,12 +392,8 @@ class LoadPathSolver:
                 self._tangent()
                 self._factor_fresh = True
             self._set_load(start + s_try * (target - start))
-            try:
-                n, ok = self.newton(reuse_factor=True)
-                ok = ok and bool(np.isfinite(self.u.x.array).all())
-            except PETSc.Error as exc:      # MUMPS failure on a singular/NaN tangent
-                n, ok = self.config.max_it, False
-                reason = f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+            n, ok, why = self._guarded_newton(reuse_factor=True)
+            reason = why or reason
             if ok:
                 s, steps = s_try, steps + 1
                 iters.append(int(n))
@@ -405,7 +420,41 @@ class LoadPathSolver:
         self._set_load(self.state)
         return PathOutcome(converged, self.state, iters, steps, cutbacks, "" if converged else reason)
 
+    def _guarded_newton(self, reuse_factor: bool) -> tuple[int, bool, str]:
+        """newton(), with a non-finite iterate or a MUMPS failure (a singular or NaN
+        tangent) as a failed solve: (iterations, converged, reason or "")."""
+        try:
+            n, ok = self.newton(reuse_factor=reuse_factor)
+            return n, ok and bool(np.isfinite(self.u.x.array).all()), ""
+        except PETSc.Error as exc:
+            return self.config.max_it, False, f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
 
+    def converge(self) -> PathOutcome:
+        """Newton at the load ``state`` from the current iterate u, which is a guess
+        (e.g. fem.transfer.seed: another mesh's answer at that load) rather than a
+        converged state: no load path.
+
+        The first correction uses the consistent tangent at the guess, factorised afresh
+        (the LU in hand belongs to another state); a guess close to equilibrium carries
+        its pre-stress, so the consistent tangent is the right one (unlike a new load
+        from a converged state, see ``newton``). Converged: the lagged constants take
+        their values and the state is saved, as after a step of ``follow``, so
+        continuation and sensitivities work from it. Not converged: the guess had no
+        converged state behind it, so the solver returns to the undeformed, unloaded
+        state (``reset``), where ``follow`` from zero starts."""
+        self._set_load(self.state)
+        self._refactor, self._factor_fresh = True, False
+        n, ok, reason = self._guarded_newton(reuse_factor=False)
+        if self.comm.rank == 0:
+            log.info("converge from a guess: %d Newton iterations, converged=%s", n, ok)
+        if not ok:
+            self.reset()
+            return PathOutcome(False, self.state.copy(), [int(n)], 0, 0,
+                               reason or f"no convergence from the guess in {n} Newton iterations")
+        self._converged_step()
+        self._save()
+        self._factor_fresh = n > 1          # as in follow: _A is near the converged tangent
+        return PathOutcome(True, self.state.copy(), [int(n)], 1, 0, "")
 
     # ------------------------------------------------------------------ sensitivities
     def sensitivities(self) -> np.ndarray:

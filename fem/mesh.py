@@ -1,7 +1,9 @@
 """Mesh conversion: a geometry builder's gmsh model -> distributed DOLFINx mesh + tags.
 
 Collective over ``comm``: rank 0 builds and meshes the gmsh model; ``model_to_mesh``
-distributes it. Only entities in physical groups are imported (fem.geometry.TAGS).
+distributes it. Only entities in physical groups are imported (fem.geometry.TAGS). A joint
+of hexahedral divisions (JointGeometry.divisions > 0), or a finger whose joint has them, is
+meshed by fem.mesh_hex instead (one structured grid, no gmsh).
 """
 
 from __future__ import annotations
@@ -27,8 +29,19 @@ class MeshData:
 
 
 def create_mesh(geometry: JointGeometry | BeamGeometry | FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshData:
-    """Build ``geometry`` with gmsh on rank 0 of ``comm`` and distribute it (collective)."""
+    """Build ``geometry`` with gmsh on rank 0 of ``comm`` and distribute it (collective); a
+    joint with hexahedral ``divisions``, or a finger whose joint has them, is built by
+    fem.mesh_hex instead."""
     from dolfinx.io import gmshio
+
+    if isinstance(geometry, JointGeometry) and geometry.divisions:
+        from fem.mesh_hex import create_hex_mesh
+
+        return create_hex_mesh(geometry, comm)
+    if isinstance(geometry, FingerGeometry) and geometry.divisions:
+        from fem.mesh_hex import create_hex_finger_mesh
+
+        return create_hex_finger_mesh(geometry, comm)
 
     import gmsh
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -99,7 +99,7 @@ def reference_cases(study: dict | None) -> tuple[dict, str | None]:
     if study["reference"] == "richardson":
         refs = {load_key(load): {k: e[k]["extrapolated"] for k in e}
                 for load, e in zip(study["loads"], study["extrapolation"])}
-        family = ", ".join(f"{h:g}" + (f":{w:g}" if w else "") for h, w in study["family"])
+        family = ", ".join(study["family"])
         return refs, f"mesh study, Richardson extrapolation of the {study['formulation']} family {family}"
     finest = max(study["meshes"], key=lambda m: m["nodes"])
     return {load_key(c["load"]): c for c in finest["cases"]}, f"mesh study, finest mesh ({finest['key']})"
@@ -115,7 +115,7 @@ def analyse(records: dict, study: dict | None) -> dict:
         if not cases:
             continue
         times = [c["wall_time_s"] for c in cases.values()]
-        row = {"factor": factor, "discretisation": asdict(variant), "key": variant.key,
+        row = {"factor": factor, "discretisation": variant.as_dict(), "key": variant.key,
                "loads_solved": len(cases), "nodes": next(iter(cases.values()))["mesh"]["nodes"],
                "dofs": next(iter(cases.values()))["mesh"]["dofs"],
                "mean_solve_s": float(np.mean(times)), "against_reference": compare(cases, refs, X)}
@@ -136,7 +136,7 @@ def analyse(records: dict, study: dict | None) -> dict:
     contact = {load_key(c["load"]): c["contact"] for c in records.get(BASE.key, {}).values()}
     return {"loads": [load.as_array().tolist() for load in LOADS],
             "interior_loads": [load.as_array().tolist() for load in INTERIOR],
-            "base": asdict(BASE), "reference": reference, "base_contact": contact, "rows": rows,
+            "base": BASE.as_dict(), "reference": reference, "base_contact": contact, "rows": rows,
             "ranking": sorted(([f, v] for f, v in ranking.items()), key=lambda fv: -fv[1]),
             "dominant": {"factor": dominant["factor"], "key": dominant["key"],
                          "worst_anchor_percent": dominant["effect"]["worst"]["anchor_percent"]}

@@ -13,21 +13,26 @@
 * ``--joint FILE`` (:func:`add_joint`): a joint description file (contract.joint,
   docs/joints.md), read and checked while parsing (a bad file: one line, exit 2); absent:
   the paper's joint, contract/joints/paper.toml (:func:`joint_of`);
-* :func:`joint_geometry`: the joint of ``--mesh-size`` and ``--wall-mesh-size``: the
-  joint file's shape and its [mesh] sizes when neither is given (without a joint file,
-  the production sizes, JointGeometry's defaults); :func:`formulation_of` likewise;
+* ``--divisions`` N (:func:`add_divisions`): the joint as swept Q2 hexahedra of N divisions
+  (fem.mesh_hex) instead of tetrahedra;
+* :func:`joint_geometry`: the joint of ``--mesh-size`` and ``--wall-mesh-size`` (tetrahedra)
+  or ``--divisions`` (hexahedra): the joint file's shape and its [mesh] when none is given
+  (without a joint file, the production mesh, JointGeometry's defaults);
+  :func:`formulation_of` likewise;
+* :func:`mesh_text`: an argparse type for a discretisation's mesh text ("H", "H:W", "hexN");
 * :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
   under mpirun ``with ap.errors():`` exits every rank with 2 and nothing hangs.
 """
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import replace
 
 import numpy as np
 
 from contract import cli
-from contract.joint import JointSpec, joint_arg, load_joint
+from contract.joint import MAX_DIVISIONS, JointSpec, joint_arg, load_joint
 from contract.spec import INPUT_BOX, INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
 from fem.geometry import JointGeometry
 
@@ -55,6 +60,27 @@ def add_wall_mesh_size(ap: cli.Parser) -> None:
                     help=f"tetrahedron size on the chamber walls, {MESH_SIZE_TEXT} (default: --mesh-size)")
 
 
+def add_divisions(ap: cli.Parser) -> None:
+    """``--divisions`` N: hexahedra of N divisions (fem.mesh_hex), exclusive with the
+    tetrahedron sizes (joint_geometry checks)."""
+    ap.add_argument("--divisions", type=cli.number(1, MAX_DIVISIONS, integer=True), default=None,
+                    help=f"mesh the joint with swept Q2 hexahedra, N elements through every wall, N in [1, "
+                         f"{MAX_DIVISIONS}] (instead of --mesh-size/--wall-mesh-size tetrahedra)")
+
+
+def mesh_text(text: str) -> str:
+    """argparse type: a discretisation's mesh, "H", "H:W" (tetrahedra, mm) or "hexN"
+    (hexahedra), checked by fem.discretisation.parse_mesh (imported when called: it
+    imports dolfinx)."""
+    from fem.discretisation import parse_mesh
+
+    try:
+        parse_mesh(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text.strip()
+
+
 def add_formulation(ap: cli.Parser,
                     shown: str = "the production formulation (fem.discretisation.FORMULATION)") -> None:
     """``--formulation`` {displacement, mixed}; default None: the production formulation
@@ -79,16 +105,22 @@ def joint_of(args) -> JointSpec:
 
 
 def joint_geometry(args, joint: JointSpec | None = None) -> JointGeometry:
-    """The joint of ``args.mesh_size`` and ``getattr(args, "wall_mesh_size")`` (mm;
-    add_mesh_size with default None, add_wall_mesh_size) on the shape of ``joint``: the
-    joint file's [mesh] sizes when neither is given, otherwise H (default the joint's H)
-    and W (default H, i.e. None). Without ``joint``: JointGeometry's production shape and
-    sizes."""
+    """The joint of ``args.mesh_size``, ``getattr(args, "wall_mesh_size")`` (mm;
+    add_mesh_size with default None, add_wall_mesh_size) and ``getattr(args, "divisions")``
+    (add_divisions) on the shape of ``joint``: the joint file's [mesh] when none is given;
+    hexahedra of N divisions with --divisions; otherwise tetrahedra of H (default the
+    joint's H, or JointGeometry's when the joint is hexahedral) and W (default H, i.e.
+    None). Without ``joint``: JointGeometry's production shape and mesh. Both kinds at
+    once: ValueError."""
     base = JointGeometry(**joint.geometry_kwargs()) if joint is not None else JointGeometry()
-    wall = getattr(args, "wall_mesh_size", None)
+    wall, divisions = getattr(args, "wall_mesh_size", None), getattr(args, "divisions", None)
+    if divisions is not None and (args.mesh_size is not None or wall is not None):
+        raise ValueError("--divisions (hexahedra) excludes --mesh-size and --wall-mesh-size (tetrahedra)")
+    if divisions is not None:
+        return replace(base, divisions=int(divisions))
     if args.mesh_size is None and wall is None:
         return base
-    return replace(base, mesh_size=args.mesh_size or base.mesh_size, wall_mesh_size=wall)
+    return replace(base, mesh_size=args.mesh_size or base.mesh_size, wall_mesh_size=wall, divisions=0)
 
 
 def formulation_of(args, joint: JointSpec) -> str:

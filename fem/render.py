@@ -26,7 +26,7 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path
 from contract.joint import joint_digest
-from fem.options import (add_joint, add_load, add_mesh_size, formulation_of, joint_geometry, joint_of,
+from fem.options import (add_divisions, add_joint, add_load, add_mesh_size, formulation_of, joint_geometry, joint_of,
                          one_rank, parsed_load)
 from fem.solver import JointSolver, Load
 
@@ -105,12 +105,14 @@ def main(argv=None) -> int:
     add_joint(ap)
     add_load(ap, default=(0.2, 0.0, -1.0, 20.0))
     add_mesh_size(ap, None, shown="the joint file's [mesh] size")
+    add_divisions(ap)
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
     args = ap.parse_args(argv)
     joint = joint_of(args)
     load = Load.from_array(parsed_load(ap, args, joint.input_box))
-    geo = joint_geometry(args, joint)
+    with ap.errors():
+        geo = joint_geometry(args, joint)
     solver = JointSolver.for_joint(joint, comm, geo, formulation=formulation_of(args, joint))
     result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
     if not result.converged:

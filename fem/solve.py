@@ -1,13 +1,15 @@
 """Command line: solve one joint load case.
 
     python -m fem.solve --p 0.2 --f1 1 --f2 -1 --m 20 --json
-    python -m fem.solve --p 0.2 --formulation mixed --mesh-size 2.4
+    python -m fem.solve --p 0.2 --formulation mixed --mesh-size 2.4 --wall-mesh-size 1.2
+    python -m fem.solve --p 0.2 --formulation mixed --divisions 2
     python -m fem.solve --joint my_joint.toml --p 0.1 --json
     mpirun -n 2 python -m fem.solve --p -0.1 --m 50
 
 The joint is a joint description file (``--joint``, contract.joint, docs/joints.md;
 default the paper's, contract/joints/paper.toml): its shape, material law, anchors, input
-box and default mesh (``--mesh-size`` and ``--formulation`` override the file's [mesh]).
+box and default mesh (``--mesh-size`` and ``--wall-mesh-size`` for tetrahedra, or
+``--divisions`` for swept Q2 hexahedra, and ``--formulation`` override the file's [mesh]).
 A bad file exits 2 with one line naming its key. Inputs: P (MPa), F1, F2 (N), M (N·mm);
 outside the joint's box (the paper's: |P|<=0.3, |F1|,|F2|<=3, |M|<=100) the load
 is refused before meshing unless --allow-extrapolation (then recorded as
@@ -33,7 +35,7 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.joint import joint_digest
-from fem.options import (add_formulation, add_joint, add_load, add_mesh_size, formulation_of,
+from fem.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, add_wall_mesh_size, formulation_of,
                          joint_geometry, joint_of, parsed_load)
 from fem.solver import JointSolver, Load
 from fem.xdmf import write_xdmf
@@ -47,6 +49,8 @@ def build_parser() -> cli.Parser:
     add_joint(ap)
     add_load(ap)
     add_mesh_size(ap, None, shown="the joint file's [mesh] size")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
     add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--jacobian", action="store_true",
                     help="also print d(anchors)/d(P, F1, F2, M) from the converged tangent")
@@ -81,7 +85,8 @@ def main(argv=None) -> int:
     load = Load.from_array(parsed_load(ap, args, joint.input_box))
     comm = MPI.COMM_WORLD
     cli.setup_logging(args.quiet, args.verbose)
-    geo = joint_geometry(args, joint)
+    with ap.errors():
+        geo = joint_geometry(args, joint)
     formulation = formulation_of(args, joint)
     with ap.errors(), cli.heartbeat("joint", enabled=comm.rank == 0):
         if comm.rank == 0:

@@ -33,7 +33,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from mpi4py import MPI
@@ -44,6 +44,7 @@ from fem.discretisation import FORMULATION
 from fem.geometry import BeamGeometry, JointGeometry, anchor_points
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
+from fem.mesh_hex import QUADRATURE as HEX_QUADRATURE
 from fem.problem import Material, as_law, joint_problem
 
 # Material and SolverConfig are re-exported: the joint's public configuration.
@@ -201,11 +202,21 @@ class EndLoadedSolver:
         return self.solver.sensitivities()[:, :2, :].reshape(-1, len(self.solver.state))
 
 
+def config_for(geometry, config: SolverConfig = SolverConfig()) -> SolverConfig:
+    """``config`` with at least the quadrature degree Q2 hexahedra need
+    (fem.mesh_hex.QUADRATURE: fewer points leave hourglass modes) when ``geometry`` is a
+    hexahedral joint (JointGeometry.divisions > 0); unchanged otherwise."""
+    if getattr(geometry, "divisions", 0) and config.quadrature_degree < HEX_QUADRATURE:
+        return replace(config, quadrature_degree=HEX_QUADRATURE)
+    return config
+
+
 class JointSolver(EndLoadedSolver):
     """The bellow joint: ``anchors`` anchor points r_1..r_n (docs/physics.md), loads at r_n;
     loads outside ``input_box`` (4,) are refused unless allowed. Defaults: the paper's
     joint (material, 10 anchors, contract.spec.INPUT_BOX); ``formulation`` defaults to the
-    production one (fem.discretisation.FORMULATION). A joint file's joint:
+    production one (fem.discretisation.FORMULATION); ``config`` is raised to the
+    hexahedra's quadrature on a hexahedral mesh (config_for). A joint file's joint:
     :meth:`for_joint`."""
 
     def __init__(self, geometry: JointGeometry = JointGeometry(), comm: MPI.Comm = MPI.COMM_WORLD,
@@ -213,7 +224,7 @@ class JointSolver(EndLoadedSolver):
                  formulation: str = FORMULATION, *, anchors: int = N_ANCHORS, input_box=INPUT_BOX):
         X = anchor_points(geometry.length, anchors)
         super().__init__(create_mesh(geometry, comm), ref_point=X[-1], probe_points=X,
-                         material=material, config=config, formulation=formulation,
+                         material=material, config=config_for(geometry, config), formulation=formulation,
                          input_box=input_box)
 
     @classmethod

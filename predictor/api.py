@@ -107,7 +107,7 @@ def calibrate(observations: str | Path, fit=("gain", "offset", "stiffness"), fin
         finger = load_finger(finger)
     finger = finger or default_finger()
     obs = load_observations(observations, finger)
-    cal = CalibrationModel(load_joint(model), finger, kinematics, joint_weight)
+    cal = CalibrationModel(load_joint(model, finger), finger, kinematics, joint_weight)
     res = fit_calibration(cal, obs, tuple(fit), {k: Prior(*v) for k, v in (priors or {}).items()}, starts=starts,
                           loo=loo)
     if out is not None:

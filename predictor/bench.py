@@ -61,6 +61,7 @@ import torch
 from contract import cli
 from contract.spec import PRESSURE_LIMIT
 from predictor.artefacts import BENCH
+from predictor.gripper import default_finger
 from predictor.joint import load_joint
 from predictor.networks import sample_pressures
 from predictor.nn_answer import predict_gesture
@@ -345,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
     use_graphs(args.graphs)
     load = os.getloadavg()
     with ap.errors():  # every input is read before the timings
-        joint = load_joint(args.model)
+        joint = load_joint(args.model, default_finger())   # the benchmark's finger: the paper's
         grav_pred = load_predictor(args.nn_dir / "gravity_nn.pt", joint)
         paper_pred = load_predictor(args.nn_dir / "gravity_nn_paper.pt", joint)
         cont_pred = load_predictor(args.nn_dir / "contact_nn.pt", joint, contact=True)

@@ -65,7 +65,7 @@ def _model_args(ap) -> None:
 def _model(args):
     from predictor.calibration import CalibrationModel
 
-    return CalibrationModel(load_joint(args.model), args.finger, args.kinematics, args.joint_weight)
+    return CalibrationModel(load_joint(args.model, args.finger), args.finger, args.kinematics, args.joint_weight)
 
 
 def main_fit(argv) -> int:

@@ -27,6 +27,7 @@ import torch  # noqa: E402
 from contract import cli  # noqa: E402
 from contract.files import dumps, json_safe, write_text  # noqa: E402
 from predictor.artefacts import GESTURES  # noqa: E402
+from predictor.gripper import default_finger  # noqa: E402
 from predictor.joint import load_joint  # noqa: E402
 from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
 from predictor.plot import draw_gesture, save_figure  # noqa: E402
@@ -103,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     out = Path(args.out)
     with ap.errors():  # every input is read before the solves
-        joint = load_joint(args.model)
+        joint = load_joint(args.model, default_finger())   # the figures' finger: the paper's
         curves = load_curves(args.nn_dir)
     summary: dict = {"joint": joint.name, "approach_MPa": APPROACH}
 

@@ -107,7 +107,7 @@ def prepare(args: argparse.Namespace):
     if args.approach not in (None, "zero") and len(args.approach) != n_joints:
         raise ValueError(f"--approach: {len(args.approach)} values for finger {args.finger.name!r} of "
                          f"{n_joints} joints")
-    joint = load_joint(args.model)
+    joint = load_joint(args.model, args.finger)
     options = dict(params=params, mu=args.mu, object_weight=args.object_weight, joint=joint)
     if args.method == "nn":
         from predictor.nn_checkpoint import load_predictor

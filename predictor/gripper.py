@@ -50,8 +50,9 @@ mm for the circle, 0.04 mm for the ellipse's 17.9 mm ends at the rest gap), whic
 band neglects, as it neglects the cells' ballooning (the joint model gives the centre
 line only). ``surface = centre_line`` keeps the paper's sample points on the parts'
 centre lines instead: each rigid part's ``contact_points`` segment midpoints (each
-carrying l/n of length) and the 10 anchors of each joint with ``contact = true`` (each
-carrying L/10); the paper's finger gives link (12), joint 2 (10), tip (65).
+carrying l/n of length) and the n anchors of each joint with ``contact = true`` (each
+carrying L/n, L and n its own joint description's: 45.45 mm and 10 for the paper's
+joint); the paper's finger gives link (12), joint 2 (10), tip (65).
 
 All lengths mm, forces N, angles rad. Batched: pressures (B, J), tau (B, J, 3). The joint
 model is evaluated once per call for all J joints, inputs (B, J, 4). Layouts that depend on
@@ -66,7 +67,7 @@ from dataclasses import dataclass, field, fields
 import torch
 
 from contract.finger import DEFAULT_FINGER, FingerSpec, load_finger
-from contract.spec import JOINT_LENGTH, N_ANCHORS, PRESSURE_LIMIT, check_box, phi_end
+from contract.spec import PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
 KINEMATICS = ("tangent", "cap")
@@ -282,10 +283,11 @@ def _chain_layout(finger: FingerSpec, joint_weight: str, surface: str) -> ChainL
         c_face = [edges[e][3] for e in object_edges for _ in range(EDGE_GAUSS)]
     else:
         for k, part in enumerate(finger.parts):
-            n = N_ANCHORS if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
+            # A joint's anchors are its own description's (count and length: contract.finger).
+            n = part.spec.anchors if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
             if n:
                 c_part += [k] * n
-                c_len += [(JOINT_LENGTH if part.kind == "joint" else part.length) / n] * n
+                c_len += [part.length / n] * n
                 c_face += [-1] * n
     mask = lambda rows: torch.tensor(rows, dtype=torch.float64).reshape(J, -1)  # noqa: E731
     w_mask = mask([[float(ld[2][i]) for ld in loads] for i in range(J)])

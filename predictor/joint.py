@@ -8,7 +8,9 @@ equilibrium solver can take exact autograd Jacobians through them.
 
 ``AnalyticJoint`` is the stand-in (``--model analytic``), used before the FEM-trained
 surrogate existed, and the test oracle (its anchors have a closed form). It is a planar
-beam of length L = 45.45 mm cut into 10 segments (one per anchor interval, h = L/10).
+beam of length L = 45.45 mm cut into 10 segments (one per anchor interval, h = L/10);
+``AnalyticJoint.for_joint(spec)`` is the same beam with another joint description's
+length L and anchor count n (h = L/n), standing for that joint.
 Segment k (midpoint s_k) has constant curvature
 
     kappa_k = (M - c_p·P + F2·(L - s_k)) / EI                          [1/mm]
@@ -113,6 +115,24 @@ class AnalyticJoint(JointModel):
     EA: float = 300.0
     length: float = JOINT_LENGTH
     name: str = "analytic"
+    #: The joint description it stands for (None: the paper's); ``for_joint`` sets it.
+    description: JointSpec | None = None
+
+    @classmethod
+    def for_joint(cls, spec: JointSpec) -> "AnalyticJoint":
+        """The stand-in beam with the length and anchor count of the joint ``spec`` (and
+        the paper's stand-in stiffnesses EI, c_p, EA): a joint model of that description,
+        e.g. to test a finger of another joint without training a surrogate."""
+        return cls(length=spec.length, name=f"analytic:{spec.name}", description=spec)
+
+    @property
+    def joint(self) -> JointSpec:
+        return self.description if self.description is not None else joint_file.load_joint()
+
+    @property
+    def anchors(self) -> int:
+        """Anchor count n (10 for the paper's joint); segment length h = L/n."""
+        return self.description.anchors if self.description is not None else N_ANCHORS
 
     def __call__(self, inputs: torch.Tensor) -> torch.Tensor:
         return self._beam(inputs)[0]
@@ -125,12 +145,13 @@ class AnalyticJoint(JointModel):
         return self._beam(inputs)
 
     def _beam(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(anchors (..., 10, 2), end-section angle (...) = a_10 + kappa_10·h)."""
+        """(anchors (..., n, 2), end-section angle (...) = a_n + kappa_n·h)."""
         P, F1, F2, M = inputs.unbind(-1)
-        h = self.length / N_ANCHORS
-        s_mid = (torch.arange(N_ANCHORS, dtype=inputs.dtype) + 0.5) * h  # (10,)
+        n = self.anchors
+        h = self.length / n
+        s_mid = (torch.arange(n, dtype=inputs.dtype) + 0.5) * h  # (n,)
         kappa = (M - self.c_p * P)[..., None] + F2[..., None] * (self.length - s_mid)
-        kappa = kappa / self.EI  # (..., 10) 1/mm
+        kappa = kappa / self.EI  # (..., n) 1/mm
         turn = kappa * h
         start = torch.cumsum(turn, -1) - turn  # angle at each segment start
         mid = start + 0.5 * turn

@@ -59,9 +59,9 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     cfg = VARIANTS[args.variant]
     with ap.errors():
-        joint = load_joint(args.model)
-        params = GripperParams(args.finger or default_finger(), kinematics=args.kinematics,
-                               joint_weight=args.joint_weight)
+        finger = args.finger or default_finger()
+        joint = load_joint(args.model, finger)
+        params = GripperParams(finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
         if params != cfg.params() or params.n_joints != cfg.widths[0]:
             cfg = cfg.for_params(params)
         if cfg.approach is not None and len(cfg.approach) != params.n_joints:

@@ -23,7 +23,7 @@ import torch
 from contract import cli
 from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import GripperParams, check_pressures
-from predictor.joint import load_joint
+from predictor.joint import check_finger, load_joint
 from predictor.solve import APPROACH, approach_for, solve
 from predictor.statics import ContactParams, GripperProblem, parse_object
 
@@ -146,7 +146,9 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
     the contact law's friction coefficient and the object's weight (None: the defaults,
     0.3 and GripperParams.object_weight); approach: DEFAULT (APPROACH, or approach_for(J),
     with an object; none without), None (ramp from zero) or J pressures MPa. ValueError
-    (one line) for any bad value and for an object badly placed (``placement_error``)."""
+    (one line) for any bad value, for a model of another joint than the finger's joint
+    parts name (predictor.joint.check_finger) and for an object badly placed
+    (``placement_error``)."""
     params = params or GripperParams()
     if object_weight is not None:
         params = dataclasses.replace(params, object_weight=OBJECT_WEIGHT.value("object_weight", object_weight))
@@ -156,7 +158,10 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
         approach = (APPROACH if params.n_joints == 2 else approach_for(params.n_joints)) if spec else None
     elif approach is not None:
         check_pressures(torch.as_tensor(approach, dtype=torch.float64).reshape(1, -1))
-    joint = joint if joint is not None else load_joint(model)
+    if joint is None:
+        joint = load_joint(model, params.finger)
+    else:
+        check_finger(joint, params.finger)   # the model must be of the finger's joints
     problem = GripperProblem(joint, params, obstacle=obstacle, contact=contact, gravity=gravity,
                              approach=None if approach is None else tuple(approach))
     why = placement_error(problem)

@@ -284,7 +284,7 @@ def main(argv=None) -> int:
             samples, _ = load_samples(args.data)
         else:
             samples = load_splits(args.data)[0][args.split]
-        outside = check_box(samples.inputs, args.allow_extrapolation)
+        outside = check_box(samples.inputs, args.allow_extrapolation, box=model.joint.input_box)
         result = evaluate(model, samples) | {"split": args.split, "extrapolated_samples": outside}
         if args.out:
             EVALUATION.write(args.out, result | {"model": args.model, "data": args.data})

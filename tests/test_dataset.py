@@ -197,7 +197,7 @@ def test_compare_two_meshes_of_one_walk(tmp_path):
     assert r.returncode == 0, r.stderr
     d = json.loads(out.read_text())
     assert d == json.loads(r.stdout) and d["samples"] == 5 and d["ref_samples"] == 9
-    assert d["other_mesh"] == {"mesh_size": 2.0, "wall_mesh_size": 1.0}
+    assert d["other_mesh"] == {"mesh": "2:1", "mesh_size": 2.0, "wall_mesh_size": 1.0, "formulation": "displacement"}
     for key, exact in (("anchor_mm", 0.5), ("tip_mm", 0.5), ("phi_end_deg", np.degrees(0.1)),
                        ("cap_rotation_deg", np.degrees(0.02))):
         assert np.allclose(list(d[key].values()), exact, atol=1e-9), key

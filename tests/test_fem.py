@@ -225,6 +225,22 @@ def test_richardson_recovers_a_known_order_and_limit():
     assert not out["asymptotic"] and out["extrapolated"] == 58.0
 
 
+def test_richardson_on_nested_hexahedra_of_two_three_and_four_divisions():
+    """Exact solution f(h) = f* + C h^p on h = 1/2, 1/3, 1/4 (fem.mesh_hex's nested meshes,
+    ratios 1.5 and 4/3, not one ratio): the observed order is p (2.5 and 0.7 here) and the
+    extrapolated value f*; the constant-ratio formula would give neither. A change that
+    grows under refinement has no order in ORDER_RANGE and is not asymptotic."""
+    from fem.mesh_study import richardson
+
+    hs = [1 / 2, 1 / 3, 1 / 4]
+    for p in (2.5, 0.7):
+        out = richardson(*[7.0 - 3.0 * h ** p for h in hs], hs[0] / hs[1], hs[1] / hs[2])
+        assert out["asymptotic"] and abs(out["order"] - p) < 1e-9 and abs(out["extrapolated"] - 7.0) < 1e-9
+        assert abs(richardson(*[7.0 - 3.0 * h ** p for h in hs], 1.5)["order"] - p) > 0.05
+    out = richardson(1.0, 1.1, 1.3, 1.5, 4 / 3)
+    assert not out["asymptotic"] and out["extrapolated"] == 1.3
+
+
 def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
     """A synthetic study whose results follow f(h) = f* + C h^2 exactly (anchors shifted by
     C h^2 along x, phi_end and cap rotation by 0.1 h^2 deg) on a sqrt(2) chain of four mixed
@@ -243,15 +259,15 @@ def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
         shift, angle = ([0.01 * e, 0.0], 0.1 * e) if offset is None else ([offset, 0.0], 1.0)
         cases = [{"anchors": (star + shift).tolist(), "phi_end_deg": 60.0 + angle,
                   "cap_rotation_deg": 58.0 + angle} for _ in range(n)]
-        return {"key": f"{h}:{w}:{formulation}", "formulation": formulation, "mesh_size": h,
-                "wall_mesh_size": w, "nodes": int(1e5 / (h * (w or h))), "cases": cases}
+        return {"key": f"{h}:{w}:{formulation}", "mesh": f"{h}:{w}", "element": "tet", "sizes": [h, w or h],
+                "formulation": formulation, "nodes": int(1e5 / (h * (w or h))), "cases": cases}
 
     r = math.sqrt(2.0)
     chain = [mesh(2.4 * r, 1.2 * r), mesh(2.4, 1.2), mesh(2.4 / r, 1.2 / r), mesh(1.2, 0.6)]
     paper = mesh(1.8, None, "displacement", offset=0.5)
     out = mesh_study.analyse(chain + [paper], chain[1]["key"], paper["key"])
     assert out["asymptotic"] and out["reference"] == "richardson"
-    assert out["family"] == [[m["mesh_size"], m["wall_mesh_size"]] for m in chain]
+    assert out["family"] == [m["mesh"] for m in chain]
     assert len(out["orders"]) == 2
     for triple in out["orders"]:
         np.testing.assert_allclose(triple["anchors"] + triple["phi_end_deg"], 2.0, atol=1e-9)
@@ -267,6 +283,35 @@ def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
     chain[3]["cases"][0]["phi_end_deg"] += 5.0
     out = mesh_study.analyse(chain + [paper], chain[1]["key"], paper["key"])
     assert not out["asymptotic"] and out["reference"] == "finest mesh" and not out["production_met"]
+
+
+def test_mesh_study_finds_the_hexahedral_family_of_the_production_mesh():
+    """Synthetic records f(n) = f* + C n^-3 on hex2, hex3, hex4 (fem.mesh_hex's nested
+    divisions, h = 1/n) beside a tetrahedral sqrt(2) chain of other values: with hex2 as
+    the production mesh the family is the hexahedra (never a chain across the two kinds),
+    the order 3 at every load, and hex2's error exactly C / 8 against f*."""
+    from fem import mesh_study
+
+    X = anchor_points(JointGeometry().length)[:, :2]
+    star, n_loads = X + np.array([5.0, 2.0]), len(mesh_study.LOADS)
+
+    def mesh(mesh_text, element, h, C):
+        cases = [{"anchors": (star + [C * h ** 3, 0.0]).tolist(), "phi_end_deg": 60.0 + 10 * C * h ** 3,
+                  "cap_rotation_deg": 58.0} for _ in range(n_loads)]
+        return {"key": mesh_text, "mesh": mesh_text, "element": element, "sizes": [h, h], "formulation": "mixed",
+                "nodes": int(1e4 / h ** 3), "cases": cases}
+
+    hexes = [mesh(f"hex{n}", "hex", 1 / n, 0.8) for n in (2, 3, 4)]
+    tets = [mesh(f"{h:g}", "tet", h, -0.3) for h in (2.4, 2.4 / 2 ** 0.5, 1.2)]
+    out = mesh_study.analyse(tets + hexes, "hex2")
+    assert out["family"] == ["hex2", "hex3", "hex4"] and out["element"] == "hex" and out["asymptotic"]
+    np.testing.assert_allclose(out["orders"][0]["anchors"] + out["orders"][0]["phi_end_deg"], 3.0, atol=1e-9)
+    assert abs(out["production_error"]["anchor_mm"] - 0.8 / 8) < 1e-9
+    assert abs(out["production_error"]["phi_end_deg"] - 1.0) < 1e-9
+    # two hexahedral meshes are no family: no extrapolation (an empty list, which the
+    # format accepts), the finest hex mesh is the reference
+    out = mesh_study.analyse(tets + hexes[:2], "hex2")
+    assert out["family"] is None and out["extrapolation"] == [] and out["reference"] == "finest mesh"
 
 
 def test_a_problem_composed_from_the_pieces_is_solved_by_the_same_solver():

@@ -4,7 +4,7 @@ solve), and its command line's bad input."""
 import json
 import subprocess
 import sys
-from dataclasses import asdict, replace
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ def record(disc, load, shift, phi=10.0, cap=12.0, t=10.0):
     bend = np.outer(np.linspace(0.0, 1.0, len(X)), [-2.0, 10.0])   # tip moves by |(-2, 10)|
     anchors = X + bend
     anchors[-1] += shift
-    return {"load": load.as_array().tolist(), "discretisation": asdict(disc), "anchors": anchors.tolist(),
+    return {"load": load.as_array().tolist(), "discretisation": disc.as_dict(), "anchors": anchors.tolist(),
             "phi_end_deg": phi, "cap_rotation_deg": cap, "wall_time_s": t,
             "contact": {"closed_pairs": 0, "min_gap_mm": 1.0},
             "mesh": {"nodes": 100, "dofs": 300}}
@@ -80,7 +80,7 @@ def test_reference_is_the_study_s_finest_mesh_at_its_loads():
     assert row["against_reference"]["worst"]["anchor_mm"] == pytest.approx(1.0)
     ext = {k: {"extrapolated": ref[k]} for k in ("anchors", "phi_end_deg", "cap_rotation_deg")}
     study.update(reference="richardson", formulation="mixed", loads=[ref["load"]], extrapolation=[ext],
-                 family=[[2.4, 1.2], [1.697, 0.849], [1.2, 0.6]])
+                 family=["2.4:1.2", "1.697:0.849", "1.2:0.6"])
     table = mc.analyse(base, study)
     assert table["reference"] == "mesh study, Richardson extrapolation of the mixed family 2.4:1.2, 1.697:0.849, 1.2:0.6"
     assert table["rows"][0]["against_reference"]["worst"]["anchor_mm"] == pytest.approx(1.0)

@@ -40,6 +40,7 @@ from fem.problem import FORMULATIONS  # noqa: E402
 from fem.solver import JointSolver, Load  # noqa: E402
 from workflow import campaign, dataset  # noqa: E402
 from workflow.shards import Manifest  # noqa: E402
+from test_finger import ONE_JOINT  # noqa: E402  (one joint + a 65 mm, 0.5 N rigid part)
 
 PY = sys.executable
 ROOT = Path(__file__).resolve().parents[1]
@@ -120,20 +121,6 @@ def test_displacement_resume_of_a_mixed_campaign_is_refused(mixed_campaign):
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "--formulation mixed (this run: displacement)" in r.stderr
     assert {p: p.read_bytes() for p in mixed_campaign.rglob("*") if p.is_file()} == before
-
-
-ONE_JOINT = """
-format = "softjoint-finger/1"
-name = "one-joint"
-base_gap = 50.0
-[[part]]
-kind = "joint"
-weight = 0.0
-[[part]]
-kind = "rigid"
-length = 65.0
-weight = 0.5
-"""
 
 
 @pytest.mark.fem

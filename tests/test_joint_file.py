@@ -109,6 +109,20 @@ def test_dict_and_json_round_trip_is_exact(law):
     assert again == j and joint_digest(again) == joint_digest(j)
 
 
+def test_a_hexahedral_mesh_default_reaches_the_fem_geometry():
+    """[mesh] divisions = 2 (no size): the JointGeometry of the file is the hexahedral mesh
+    of 2 divisions, its tetrahedron sizes JointGeometry's (unused); the round trip is exact
+    and the digest, which leaves [mesh] out, is the paper's."""
+    doc = paper_doc()
+    doc["mesh"] = {"divisions": 2, "formulation": "mixed"}
+    j = joint_from_dict(doc)
+    from fem.geometry import JointGeometry
+
+    geo = JointGeometry(**j.geometry_kwargs())
+    assert (geo.divisions, geo.mesh, j.mesh_size) == (2, "hex2", None)
+    assert joint_from_dict(json.loads(json.dumps(joint_to_dict(j)))) == j and joint_digest(j) == PAPER_DIGEST
+
+
 def test_digest_is_the_joints_physics():
     """Frozen for the paper; unchanged by comments, key order, 45 for 45.0, the name and the
     mesh defaults; changed by any value of geometry, material, input box or anchors."""
@@ -168,6 +182,12 @@ BAD_DOCS = {
     "neither nu nor K": (_set("material.nu", None), r"give exactly one of nu .* not neither"),
     "formulation": (_set("mesh.formulation", "hybrid"), r"mesh\.formulation = 'hybrid', use one of displacement, mixed"),
     "too fine": (_set("mesh.size", 0.1), r"mesh\.size = 0\.1 mm is too fine for this joint: allowed >= 0\.233 mm"),
+    "size and divisions": (_set("mesh.divisions", 2), r"mesh: give either size \(tetrahedra, mm\) or divisions \(hexahedra\), not both"),
+    "no mesh size": (_set("mesh.size", None), r"mesh: give either size .* not neither"),
+    "divisions range": (lambda d: (d["mesh"].pop("size"), d["mesh"].update(divisions=7)), r"mesh\.divisions = 7 is outside \[1, 6\]"),
+    "divisions float": (lambda d: (d["mesh"].pop("size"), d["mesh"].update(divisions=2.0)), r"mesh\.divisions = 2\.0 must be an integer"),
+    "divisions wall size": (lambda d: (d["mesh"].pop("size"), d["mesh"].update(divisions=2, wall_size=0.6)),
+                            r"mesh\.wall_size: tetrahedra only"),
     "no channel": (_set("geometry.valley_height", 4.8), r"valley_height = 4\.8 mm leaves no channel .* > 2 wall \+ spine = 4\.8 mm"),
     "flat valley": (_set("geometry.valley_height", 20.0), r"valley_height = 20 mm must be < height = 20 mm"),
     "wide valleys": (_set("geometry.valley_width", 7.0), r"valley_width = 7 mm leaves cells 2\.29 mm long, not more than 2 wall = 2\.4 mm: need valley_width < 6\.86[23] mm"),

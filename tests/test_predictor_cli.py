@@ -161,3 +161,82 @@ def test_no_private_imports_and_no_library_imports_a_command_line():
     cli_only = clis - {"predictor.atlas", "predictor.inverse"}
     upward = [f for f in found if f[0] not in clis and f[1] in cli_only]
     assert upward == []
+
+
+# ---------------------------------------------------------------------- a finger of another joint
+J30 = (ROOT / "contract/joints/paper.toml").read_text().replace('name = "paper"', 'name = "j30"').replace(
+    "length = 45.45 ", "length = 30.0 ")
+FINGER_J30 = """format = "softjoint-finger/1"
+name = "j30_finger"
+base_gap = 50.0
+base_angle_deg = -90.0
+{parts}"""
+JOINT_PART = '[[part]]\nkind = "joint"\nweight = 0.09\ncontact = true\njoint = "j30.toml"\n'
+RIGID_PART = '[[part]]\nkind = "rigid"\nlength = {length}\nweight = {weight}\ncontact_points = 6\n'
+
+
+def j30_finger(folder):
+    """A 3-joint finger of a 30 mm joint file: joint, 60 mm link, joint, 60 mm link, joint,
+    65 mm tip (the paper's rigid parts; joint weight 0.09 N, links 0.04 N, tip 0.06 N)."""
+    from contract.finger import load_finger
+
+    (folder / "j30.toml").write_text(J30)
+    parts = [JOINT_PART, RIGID_PART.format(length=60.0, weight=0.04), JOINT_PART,
+             RIGID_PART.format(length=60.0, weight=0.04), JOINT_PART, RIGID_PART.format(length=65.0, weight=0.06)]
+    path = folder / "j30_finger.toml"
+    path.write_text(FINGER_J30.format(parts="\n".join(parts)))
+    return path, load_finger(path)
+
+
+def test_finger_of_a_30mm_joint_has_its_own_chain(tmp_path):
+    """Issue 37 §2: a finger of three joints of a 30 mm joint file, with the analytic
+    stand-in of that joint (AnalyticJoint.for_joint: L = 30 mm, h = 3 mm). Without
+    gravity at zero pressure the tip sits at the summed lengths, 3 x 30 + 60 + 60 + 65 =
+    275 mm below the mount, exactly (to 1e-12 mm); under gravity each joint stretches
+    axially by L F1 / EA (EA = 300 N) with F1 the weight hanging below its middle: half its
+    own and everything distal (0.365, 0.235, 0.105 N), so the tip is 275 + 30 (0.705)/300
+    mm down (to 1e-6 mm). Each contact anchor of a joint carries 30/10 = 3 mm of length,
+    not the paper joint's 4.545 mm. The paper's joint model is refused for this finger
+    (one line naming both joints)."""
+    from predictor.gripper import chain_layout
+    from predictor.joint import AnalyticJoint
+    from predictor.problem import load_problem
+
+    _, finger = j30_finger(tmp_path)
+    assert [round(p.length, 12) for p in finger.parts] == [30.0, 60.0, 30.0, 60.0, 30.0, 65.0]
+    model = AnalyticJoint.for_joint(finger.parts[0].spec)
+    params = GripperParams(finger)
+    free = solve(load_problem(None, None, gravity=False, params=params, joint=model), t([[0.0, 0.0, 0.0]]))
+    assert bool(free.converged[0])
+    np.testing.assert_allclose(free.pose.tip_end[0].numpy(), [25.0, -275.0], rtol=0, atol=1e-12)
+    hanging = solve(load_problem(None, None, params=params, joint=model), t([[0.0, 0.0, 0.0]]))
+    loads = [0.09 / 2 + 0.04 + 0.09 + 0.04 + 0.09 + 0.06, 0.09 / 2 + 0.04 + 0.09 + 0.06, 0.09 / 2 + 0.06]
+    np.testing.assert_allclose(hanging.tau[0, :, 0].numpy(), loads, rtol=0, atol=1e-9)
+    stretch = sum(30.0 * f / 300.0 for f in loads)
+    np.testing.assert_allclose(hanging.pose.tip_end[0].numpy(), [25.0, -275.0 - stretch], rtol=0, atol=1e-6)
+    layout = chain_layout(finger, "split", "centre_line")   # the anchors of the paper's centre-line contact
+    for k in finger.joints:
+        np.testing.assert_array_equal(layout.contact_length[layout.contact_part == k].numpy(), [3.0] * 10)
+    with pytest.raises(ValueError) as err:
+        load_problem("analytic", None, params=params)
+    assert "\n" not in str(err.value) and "'paper'" in str(err.value) and "'j30'" in str(err.value)
+
+
+def test_commands_refuse_a_model_of_another_joint_than_the_fingers(tmp_path):
+    """Every command with a model and a finger checks them together (predictor.joint.
+    load_joint(model, finger)): predictor.gesture and predictor.nn with the paper's
+    analytic joint and the 30 mm joint's finger exit 2 with one line naming the finger's
+    joint, before any solve or training; predictor.api.load_gripper refuses the pair too."""
+    from predictor import api
+
+    path, _ = j30_finger(tmp_path)
+    gesture = run_gesture_cli("--finger", str(path), "--pressures", "0,0,0", "--model", "analytic")
+    nn = subprocess.run([sys.executable, "-m", "predictor.nn", "--variant", "gravity-improved", "--model", "analytic",
+                         "--finger", str(path), "--epochs", "1", "--out", str(tmp_path / "nn.pt")],
+                        cwd=ROOT, capture_output=True, text=True, timeout=60)
+    for bad in (gesture, nn):
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
+        assert "joint 1 of finger 'j30_finger' is 'j30'" in bad.stderr
+    assert not (tmp_path / "nn.pt").exists()
+    with pytest.raises(ValueError, match="joint 1 of finger 'j30_finger' is 'j30'"):
+        api.load_gripper("analytic", finger=path)

@@ -148,18 +148,19 @@ def test_mesh_study_judges_the_production_mesh_only(tmp_path):
         err = {"anchor_mm": percent / 10, "anchor_percent": percent, "tip_mm": percent / 20,
                "phi_end_deg": percent / 5, "cap_rotation_deg": percent / 3.75}
         key = f"h{h:g}_w{w if w is None else f'{w:g}'}_{formulation}_q2_k100"
-        return {"key": key, "formulation": formulation, "mesh_size": h, "wall_mesh_size": w, "nodes": nodes,
-                "mean_solve_s": 10.0, "ranks": 2, "max_error": err}
+        return {"key": key, "mesh": f"{h:g}" + (f":{w:g}" if w else ""), "element": "tet", "sizes": [h, w or h],
+                "formulation": formulation, "nodes": nodes, "mean_solve_s": 10.0, "ranks": 2, "max_error": err}
 
     meshes = [mesh(3.394, 1.697, 16195, 3.0), mesh(2.4, 1.2, 27908, 1.5), mesh(1.697, 0.849, 53179, 0.75),
               mesh(1.2, 0.6, 136875, 0.3), mesh(1.8, None, 17351, 6.0, "displacement")]
-    study = {"loads": [[0.3, 3, -3, -100]] * 8, "formulation": "mixed", "complete": True, "wall_mm": 1.2,
+    study = {"loads": [[0.3, 3, -3, -100]] * 8, "formulation": "mixed", "element": "tet", "complete": True,
+             "wall_mm": 1.2,
              "tolerance_percent": 1.0, "tolerance_deg": 0.3, "min_nodes": 16000, "meshes": meshes,
-             "family": [[3.394, 1.697], [2.4, 1.2], [1.697, 0.849], [1.2, 0.6]], "reference": "richardson",
+             "family": ["3.394:1.697", "2.4:1.2", "1.697:0.849", "1.2:0.6"], "reference": "richardson",
              "asymptotic": True, "extrapolation": [{"anchors": {"order": 2.0}}] * 8,
-             "orders": [{"meshes": [[2.4, 1.2], [1.697, 0.849], [1.2, 0.6]], "anchors": [2.0] * 8,
+             "orders": [{"meshes": ["2.4:1.2", "1.697:0.849", "1.2:0.6"], "anchors": [2.0] * 8,
                          "phi_end_deg": [1.5] * 8, "cap_rotation_deg": [None] * 8}],
-             "production": meshes[1]["key"], "production_mesh": [2.4, 1.2], "production_met": False,
+             "production": meshes[1]["key"], "production_mesh": "2.4:1.2", "production_met": False,
              "production_error": meshes[1]["max_error"], "paper": meshes[4]["key"],
              "paper_error": meshes[4]["max_error"]}
     (tmp_path / "fem").mkdir()
@@ -205,3 +206,18 @@ def test_finger_fem_time_is_judged_on_the_bench(tmp_path):
                          if c["converged"])
     row = next(r for h, rows in _tables(text) for r in rows if r[0].startswith("finger FEM per gesture in the validation"))
     assert row[1] == f"{validation_max:.0f} s" and row[-1] == report_app.NOT_JUDGED
+
+
+def test_multifidelity_verdict_compares_equal_cost_figures(tmp_path):
+    """The committed multifidelity.json with its best point's learning-curve proxy set
+    below and then above the multi-fidelity error: the verdict says fine-only wins by the
+    ratio (0.100 / 0.020 = 5.0x), then that the correction wins."""
+    m = json.loads((Path(report_app.__file__).parents[2] / "results/surrogate/multifidelity.json").read_text())
+    best = min(m["comparison"], key=lambda r: r["multifidelity"]["heldout_mean_anchor_error_mm"])
+    (tmp_path / "surrogate").mkdir()
+    for proxy, words in ((0.2 * best["multifidelity"]["heldout_mean_anchor_error_mm"], "is 5.0× more accurate"),
+                         (2.0 * best["multifidelity"]["heldout_mean_anchor_error_mm"], "better than the learning curve")):
+        best["reference_curve_at_m"]["heldout_mean_anchor_error_mm"] = proxy
+        (tmp_path / "surrogate/multifidelity.json").write_text(json.dumps(m))
+        text = "\n".join(report_app.learning.multifidelity_lines(tmp_path))
+        assert words in text and f"n = {best['samples']}" in text

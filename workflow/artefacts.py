@@ -28,8 +28,8 @@ _MESH = ("mesh_size", "wall_mesh_size")
 #: results/fem/heldout_mesh.json (make fine-compare; workflow.dataset compare --out): one
 #: walk solved on two meshes, the differences' mean, p95 and max.
 MESH_COMPARISON = Format("workflow-mesh-comparison", 1, "workflow.dataset", {
-    "ref_mesh.mesh_size": NUM, "ref_mesh.wall_mesh_size": MAYBE,
-    "other_mesh.mesh_size": NUM, "other_mesh.wall_mesh_size": MAYBE,
+    "ref_mesh.mesh_size": NUM, "ref_mesh.wall_mesh_size": MAYBE, "ref_mesh.mesh?": str,
+    "other_mesh.mesh_size": NUM, "other_mesh.wall_mesh_size": MAYBE, "other_mesh.mesh?": str,
     "samples": int, "ref_samples": int,
     **each("tip_mm", NUM, "mean", "p95", "max"), "phi_end_deg.mean": NUM,
     **each("cap_rotation_deg", NUM, "mean", "p95"), "cpu_s_per_sample.other": NUM})

@@ -43,8 +43,8 @@ default mesh ([mesh]: sizes and formulation). The manifest's config records the 
 (workflow.store.joint_record: its description and sha256) only when it is not the
 paper's, so every manifest written before joint files existed is unchanged and resumes;
 resuming with another joint is refused with one line naming --joint and both joints.
-The dataset format holds 10 anchors (contract.spec.N_ANCHORS): a joint with another
-anchor count is refused before any work.
+Its shards hold the joint's anchor count (workflow.shards.anchor_count reads it back
+from the config).
 
 Formulation. ``--formulation`` (default the joint file's, for the paper's joint the
 production one, fem.discretisation.FORMULATION) chooses the joint's elements
@@ -92,13 +92,12 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.finger import is_paper_joint
-from contract.joint import JointSpec, joint_digest, load_joint, material_dict
+from contract.joint import JointSpec, is_paper_joint, joint_digest, load_joint, material_dict
 from contract.spec import INPUT_BOX, N_ANCHORS, N_INPUTS
 from fem.discretisation import FORMULATION
-from fem.options import (add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
+from fem.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
                          joint_geometry, joint_of)
-from fem.solver import JointSolver, Load, Material, SolverConfig
+from fem.solver import JointSolver, Load, Material, config_for
 from workflow import shards
 from workflow.shards import Manifest, ShardError
 from workflow.store import (ShardScanner, build_manifest, clean_temporaries, joint_record, shard_file,
@@ -171,7 +170,7 @@ def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: in
     paper = is_paper_joint(joint)
     config = {"source": "fem-campaign", "geometry": geometry.as_dict(),
               "material": asdict(Material()) if paper else material_dict(joint.material),
-              "solver": asdict(SolverConfig()),
+              "solver": asdict(config_for(geometry)),
               "unit_size": unit_size, "walk_step": step, "walk_turn": WALK_TURN,
               "fresh_check_every": fresh_check_every,
               "input_box": joint.input_box.tolist(), **joint_record(joint)}
@@ -182,9 +181,10 @@ def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: in
 
 # ---------------------------------------------------------------------------- one unit
 def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
-               on_sample=None) -> tuple[dict, dict]:
+               on_sample=None, anchors: int = N_ANCHORS) -> tuple[dict, dict]:
     """Solve the walk ``inputs`` (n, 4) of one unit by continuation (collective over the
-    solver's communicator). Returns (arrays for write_shard, meta figures)."""
+    solver's communicator), ``anchors`` per sample (the joint's count). Returns (arrays for
+    write_shard, meta figures)."""
     data = {k: [] for k in ("sample_id", "inputs", "anchors", "jacobian", "phi_end",
                             "cap_rotation", "newton_iterations", "wall_time_s")}
     fail = {"failed_sample_id": [], "failed_inputs": [], "failed_reason": []}
@@ -228,7 +228,7 @@ def solve_unit(solver, ids: np.ndarray, inputs: np.ndarray, fresh_check: bool,
             fail["failed_reason"].append(res.reason or "no convergence")
         if on_sample is not None:
             on_sample(res.converged)
-    arrays = shards.empty_arrays()
+    arrays = shards.empty_arrays(anchors)
     for k, v in {**data, **fail}.items():
         if v:
             arrays[k] = np.asarray(v, dtype=arrays[k].dtype if k != "failed_reason" else str)
@@ -255,6 +255,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_joint(ap)
     add_mesh_size(ap, None, "tetrahedron size", shown="the joint file's [mesh] size")
     add_wall_mesh_size(ap)
+    add_divisions(ap)
     add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--unit-size", type=count, default=DEFAULT_UNIT_SIZE,
                     help=f"samples per work unit / shard (default {DEFAULT_UNIT_SIZE})")
@@ -273,9 +274,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     if why:
         ap.error(why)
     args.joint = joint_of(args)
-    if args.joint.anchors != N_ANCHORS:
-        ap.error(f"--joint: joint {args.joint.name!r} has anchors.count = {args.joint.anchors}; the dataset "
-                 f"format holds {N_ANCHORS} anchors (contract.spec.N_ANCHORS)")
+    with ap.errors():
+        args.geometry = joint_geometry(args, args.joint)
     n_units = unit_count(args.samples, args.unit_size)
     args.unit_range = args.units or (0, n_units)
     if args.unit_range[1] > n_units:
@@ -306,12 +306,13 @@ class Progress:
 #: The manifest's config entries that a command-line option sets: key -> (flag, unit).
 CONFIG_FLAGS = {("geometry", "mesh_size"): ("--mesh-size", " mm"),
                 ("geometry", "wall_mesh_size"): ("--wall-mesh-size", " mm"),
+                ("geometry", "divisions"): ("--divisions", ""),
                 ("formulation",): ("--formulation", ""),
                 ("unit_size",): ("--unit-size", ""), ("walk_step",): ("--step", ""),
                 ("fresh_check_every",): ("--fresh-check-every", "")}
 #: What an absent config entry means (shown instead of "unset"): a manifest without a
 #: formulation was made with P2 displacements.
-CONFIG_ABSENT = {("formulation",): "displacement"}
+CONFIG_ABSENT = {("formulation",): "displacement", ("geometry", "divisions"): "tetrahedra"}
 
 
 def _differences(old: dict, new: dict, prefix: tuple = ()) -> list[tuple[tuple, object, object]]:
@@ -400,7 +401,7 @@ def run(args) -> int:
                   f"{size} ranks", file=sys.stderr)
         return 2
     joint = args.joint
-    geometry = joint_geometry(args, joint)
+    geometry = args.geometry
     mesh_size, formulation = geometry.mesh_size, formulation_of(args, joint)
     config = campaign_config(geometry, args.unit_size, args.step, args.fresh_check_every, formulation, joint)
     out, t_start = Path(args.out), time.perf_counter()
@@ -441,8 +442,7 @@ def run(args) -> int:
                             args.progress_every)
         if not args.quiet:
             print(f"[campaign] {out}: joint {joint.name!r}, {len(todo)} of {manifest.units_total} units to do on "
-                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {mesh_size:g}"
-                  f"{f':{geometry.wall_mesh_size:g}' if geometry.wall_mesh_size else ''} mm, "
+                  f"{size} rank(s) in {n_groups} group(s) of {G}; mesh {geometry.mesh}, "
                   f"{formulation} formulation, unit size {args.unit_size}, step {args.step}",
                   flush=True)
 
@@ -471,7 +471,7 @@ def run(args) -> int:
         inputs = unit_walk(args.seed, unit, len(ids), args.step, box=joint.input_box)
         check = args.fresh_check_every > 0 and unit % args.fresh_check_every == 0
         state["in_unit"] = state["fail_in_unit"] = 0
-        arrays, figures = solve_unit(solver, ids, inputs, check, on_sample)
+        arrays, figures = solve_unit(solver, ids, inputs, check, on_sample, joint.anchors)
         unit_times.append(figures["wall_s"])
         if group.rank == 0:
             meta = {"config": config, "seed": args.seed, "unit": unit, "git_commit": commit,
@@ -516,7 +516,7 @@ def run(args) -> int:
             "units_total": manifest.units_total, "units_done": manifest.units_done,
             "units_run": units_run, "complete": manifest.complete,
             "range_complete": range_done, "stopped_by_budget": stopped,
-            "ranks": size, "ranks_per_group": G, "mesh_size": mesh_size,
+            "ranks": size, "ranks_per_group": G, "mesh": geometry.mesh, "mesh_size": mesh_size,
             "wall_mesh_size": geometry.wall_mesh_size, "formulation": formulation,
             "joint": {"name": joint.name, "sha256": joint_digest(joint)},
             "wall_s": wall, "samples_per_hour": solved / wall * 3600 if solved else 0.0,

@@ -9,14 +9,14 @@ Layout of a dataset directory ``DIR``::
     DIR/manifest.json            Manifest: {"format", "seed", "config", "shards": [...], ...}
     DIR/shards/unit-00000.npz    one shard per work unit
 
-Arrays of one shard (n stored samples, m failures)::
+Arrays of one shard (n stored samples, m failures, k anchors)::
 
     sample_id          (n,)        int64    global index of the sample in the campaign
     inputs             (n, 4)      float64  [P MPa, F1 N, F2 N, M N·mm]
-    anchors            (n, 10, 2)  float64  r_1..r_10 in mm, joint frame
-    jacobian           (n, 20, 4)  float64  d anchors.reshape(20) / d inputs
+    anchors            (n, k, 2)   float64  r_1..r_k in mm, joint frame
+    jacobian           (n, 2k, 4)  float64  d anchors.reshape(2k) / d inputs
                                             (mm/MPa, mm/N, mm/N, mm/(N·mm)); NaN if absent
-    phi_end            (n,)        float64  rad, from r_9 -> r_10
+    phi_end            (n,)        float64  rad, from r_(k-1) -> r_k
     cap_rotation       (n,)        float64  rad, rotation of the distal cap itself
     newton_iterations  (n,)        int64    Newton iterations spent on the sample
     wall_time_s        (n,)        float64  s
@@ -26,6 +26,12 @@ Arrays of one shard (n stored samples, m failures)::
     failed_reason      (m,)        str
     meta               ()          str      JSON: config, mesh parameters, git commit, seed, unit
     checksum           ()          str      sha256 over the arrays above (see array_digest)
+
+The anchor count k is the joint's (contract.joint ``[anchors] count``): the one its
+config records (``anchor_count``: ``config["joint"]["anchors"]["count"]``; a config without
+a joint is the paper's, k = contract.spec.N_ANCHORS = 10). A shard's meta carries its
+config, so writing and reading a shard check its arrays against that k, and
+``load_dataset`` against the manifest's.
 
 Shards and the manifest are written atomically (``contract.files``: temporary name in the same
 directory, fsync, rename), so a killed writer never leaves half a file under its name.
@@ -61,13 +67,29 @@ class ShardError(ValueError):
     """A shard or manifest is missing, partial, corrupt, foreign or inconsistent."""
 
 
-def empty_arrays() -> dict[str, np.ndarray]:
-    """Zero-sample arrays with the right dtypes and trailing shapes."""
+def anchor_count(config: dict | None) -> int:
+    """Anchors k per sample of a dataset ``config`` (module docstring): its joint's
+    ``anchors.count``; N_ANCHORS without a recorded joint (the paper's). ShardError (one
+    line) for a recorded count that is not a whole number >= 2."""
+    joint = (config or {}).get("joint")
+    if joint is None:
+        return N_ANCHORS
+    try:
+        k = joint["anchors"]["count"]
+    except (KeyError, TypeError):
+        raise ShardError("config: the recorded joint has no anchors.count") from None
+    if isinstance(k, bool) or not isinstance(k, int) or k < 2:
+        raise ShardError(f"config: the recorded joint's anchors.count = {k!r} is not a whole number >= 2")
+    return k
+
+
+def empty_arrays(anchors: int = N_ANCHORS) -> dict[str, np.ndarray]:
+    """Zero-sample arrays with the right dtypes and trailing shapes (``anchors`` k per sample)."""
     return {
         "sample_id": np.zeros(0, np.int64),
         "inputs": np.zeros((0, N_INPUTS)),
-        "anchors": np.zeros((0, N_ANCHORS, 2)),
-        "jacobian": np.zeros((0, 2 * N_ANCHORS, N_INPUTS)),
+        "anchors": np.zeros((0, anchors, 2)),
+        "jacobian": np.zeros((0, 2 * anchors, N_INPUTS)),
         "phi_end": np.zeros(0),
         "cap_rotation": np.zeros(0),
         "newton_iterations": np.zeros(0, np.int64),
@@ -91,13 +113,14 @@ def array_digest(arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def _check_shapes(arrays: dict[str, np.ndarray], where: str) -> None:
+def _check_shapes(arrays: dict[str, np.ndarray], where: str, anchors: int) -> None:
+    """Every array present, of n samples and ``anchors`` k anchors (module docstring)."""
     missing = [k for k in DATA_KEYS + FAILURE_KEYS if k not in arrays]
     if missing:
         raise ShardError(f"{where}: missing arrays {missing}")
     n = len(arrays["sample_id"])
-    expect = {"inputs": (n, N_INPUTS), "anchors": (n, N_ANCHORS, 2),
-              "jacobian": (n, 2 * N_ANCHORS, N_INPUTS)}
+    expect = {"inputs": (n, N_INPUTS), "anchors": (n, anchors, 2),
+              "jacobian": (n, 2 * anchors, N_INPUTS)}
     for key in DATA_KEYS:
         shape = expect.get(key, (n,))
         if arrays[key].shape != shape:
@@ -110,12 +133,13 @@ def _check_shapes(arrays: dict[str, np.ndarray], where: str) -> None:
 def write_shard(path: str | Path, arrays: dict[str, np.ndarray], meta: dict) -> str:
     """Atomically write one shard; return the sha256 of the written file.
 
-    ``arrays`` holds every key of DATA_KEYS and FAILURE_KEYS (see module docstring).
+    ``arrays`` holds every key of DATA_KEYS and FAILURE_KEYS (see module docstring), with
+    the anchor count of ``meta["config"]`` (anchor_count).
     """
     path = Path(path)
     arrays = {k: np.asarray(v) for k, v in arrays.items()}
     arrays["failed_reason"] = arrays["failed_reason"].astype(str)
-    _check_shapes(arrays, str(path))
+    _check_shapes(arrays, str(path), anchor_count(meta.get("config")))
     if not np.all(arrays["converged"]):
         raise ShardError(f"{path}: refusing to store non-converged samples as data")
     payload = {k: arrays[k] for k in DATA_KEYS + FAILURE_KEYS}
@@ -126,7 +150,8 @@ def write_shard(path: str | Path, arrays: dict[str, np.ndarray], meta: dict) -> 
 
 
 def read_shard(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
-    """Read and verify one shard; return (arrays, meta). Raises ShardError if bad."""
+    """Read and verify one shard; return (arrays, meta). Raises ShardError if bad, also
+    when its arrays do not hold the anchor count of its meta's config."""
     path = Path(path)
     if not path.is_file():
         raise ShardError(f"{path}: shard file is missing")
@@ -135,15 +160,17 @@ def read_shard(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
             arrays = {k: z[k] for k in z.files}
     except Exception as exc:  # truncated zip, bad header, not an NPZ at all, ...
         raise ShardError(f"{path}: unreadable shard ({type(exc).__name__}: {exc})") from None
-    _check_shapes(arrays, str(path))
     if "checksum" not in arrays or "meta" not in arrays:
         raise ShardError(f"{path}: no checksum/meta record")
-    if array_digest(arrays) != str(arrays.pop("checksum")):
-        raise ShardError(f"{path}: checksum mismatch (corrupt shard)")
     try:
-        meta = json.loads(str(arrays.pop("meta")))
+        meta = json.loads(str(arrays["meta"]))
     except json.JSONDecodeError as exc:
         raise ShardError(f"{path}: corrupt meta record ({exc})") from None
+    config = meta.get("config") if isinstance(meta, dict) else None
+    _check_shapes(arrays, str(path), anchor_count(config if isinstance(config, dict) else None))
+    if array_digest(arrays) != str(arrays.pop("checksum")):
+        raise ShardError(f"{path}: checksum mismatch (corrupt shard)")
+    arrays.pop("meta")
     return arrays, meta
 
 
@@ -361,7 +388,7 @@ def load_dataset(root: str | Path) -> tuple[dict[str, np.ndarray], Manifest]:
         if json.dumps(meta.get("config"), sort_keys=True) != config_key:
             raise ShardError(f"{path}: shard config differs from the manifest's config")
         parts.append(arrays)
-    out = empty_arrays()
+    out = empty_arrays(anchor_count(manifest.config))
     if parts:
         out = {k: np.concatenate([p[k] for p in parts]) for k in out}
     order = np.argsort(out["sample_id"], kind="stable")

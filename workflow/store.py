@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from contract.files import atomic_path, sha256_file
-from contract.finger import is_paper_joint
-from contract.joint import JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint
+from contract.joint import (JointSpec, is_paper_joint, joint_digest, joint_from_dict, joint_to_dict, load_joint,
+                            mesh_text)
 from contract.spec import INPUT_BOX, INPUT_NAMES, N_INPUTS, outside_box
 from workflow.shards import (DATA_KEYS, FAILURE_KEYS, Manifest, ShardEntry, ShardError,
                              array_digest, load_dataset, read_shard, split_of)
@@ -69,8 +69,9 @@ def recorded_joint(config: dict) -> JointSpec:
     if "joint" not in config:
         return load_joint()
     geometry = config.get("geometry", {})
-    mesh = {"size": geometry.get("mesh_size"), "formulation": config.get("formulation", "displacement")}
-    if geometry.get("wall_mesh_size") is not None:
+    mesh = ({"divisions": geometry["divisions"]} if geometry.get("divisions") else {"size": geometry.get("mesh_size")})
+    mesh["formulation"] = config.get("formulation", "displacement")
+    if geometry.get("wall_mesh_size") is not None and not geometry.get("divisions"):
         mesh["wall_size"] = geometry["wall_mesh_size"]
     sha = str(config.get("joint_sha256", ""))
     try:
@@ -394,7 +395,12 @@ def compare(ref: str | Path, other: str | Path) -> dict:
     d = np.linalg.norm(b["anchors"][ib] - a["anchors"][ia], axis=-1)        # (n, 10) mm
     wrap = lambda x: np.degrees(np.abs(np.angle(np.exp(1j * x))))
     worst = int(np.argmax(d.max(axis=1)))
-    mesh = lambda m: {k: m.config["geometry"].get(k) for k in ("mesh_size", "wall_mesh_size")}
+    def mesh(m):
+        g = m.config["geometry"]
+        return {"mesh": mesh_text(g.get("mesh_size"), g.get("wall_mesh_size"), g.get("divisions", 0)),
+                "mesh_size": g.get("mesh_size"), "wall_mesh_size": g.get("wall_mesh_size"),
+                "formulation": m.config.get("formulation", "displacement")}
+
     return {
         "ref": str(ref), "other": str(other), "ref_mesh": mesh(ma), "other_mesh": mesh(mb),
         "samples": int(len(ids)), "ref_samples": int(len(a["sample_id"])),

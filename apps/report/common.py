@@ -19,6 +19,7 @@ from pathlib import Path
 from apps.artefacts import find
 from contract.files import sha256_file
 from contract.records import Target
+from contract.joint import mesh_text
 
 __all__ = ["Check", "MESH_REFERENCE", "Malformed", "NOT_JUDGED", "PAPER", "Target", "cells", "figure",
            "figure_grid", "joint_model", "judge", "load", "mesh_label", "missing", "num"]
@@ -126,8 +127,8 @@ MESH_REFERENCE = {"richardson": "the Richardson extrapolation", "finest mesh": "
 
 
 def mesh_label(h: float, w: float | None) -> str:
-    """A mesh as fem.mesh_study names it: "H" or "H:W" (mm)."""
-    return f"{h:g}" + (f":{w:g}" if w else "")
+    """A tetrahedral mesh as fem.mesh_study names it: "H" or "H:W" (mm)."""
+    return mesh_text(h, w)
 
 
 def num(v, spec: str = ".4g") -> str:

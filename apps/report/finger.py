@@ -33,8 +33,7 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    + (f" --wall-mesh-size {wall}`" if wall else "`") + " |")
     study = load(root, "fem/mesh_study.json")
     if study:
-        label = {m["key"]: f"{mesh_label(m['mesh_size'], m['wall_mesh_size'])} mm {m['formulation']}"
-                 for m in study["meshes"]}
+        label = {m["key"]: f"mesh {m['mesh']} {m['formulation']}" for m in study["meshes"]}
         # one row per discretisation (production and paper are one while the data is the paper's)
         for key, e in {study["production"]: study["production_error"], study["paper"]: study.get("paper_error")}.items():
             if e:
@@ -43,17 +42,17 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                            f"phi_end {e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst load; the "
                            "corners load a joint far more than the finger's cases do) | `make mesh-study` |")
     c, fine = load(root, "fem/heldout_mesh.json"), load(root, "surrogate/heldout_fine.json")
-    mesh = lambda m: mesh_label(m["mesh_size"], m["wall_mesh_size"])
+    mesh = lambda m: m.get("mesh") or mesh_label(m["mesh_size"], m["wall_mesh_size"])
     if c:
-        out.append(f"| discretisation: one joint over the held-out walk, the committed set ({mesh(c['ref_mesh'])} mm) -> "
-                   f"{mesh(c['other_mesh'])} mm, {c['samples']} of {c['ref_samples']} samples"
+        out.append(f"| discretisation: one joint over the held-out walk, the committed set (mesh {mesh(c['ref_mesh'])}) -> "
+                   f"mesh {mesh(c['other_mesh'])}, {c['samples']} of {c['ref_samples']} samples"
                    f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
                    f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
                    f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
                    "| `make dataset-fine` (results/fem/heldout_mesh.json) |")
     if c and fine:
-        out.append(f"| surrogate improved.pt (trained on {mesh(c['ref_mesh'])} mm) against the {fine['n']} held-out samples "
-                   f"on {mesh(c['other_mesh'])} mm | tip "
+        out.append(f"| surrogate improved.pt (trained on mesh {mesh(c['ref_mesh'])}) against the {fine['n']} held-out samples "
+                   f"on mesh {mesh(c['other_mesh'])} | tip "
                    f"{fine['tip_error_mm']:.3f} mm, cap rotation {fine['cap_rotation_error_deg']:.3f}° mean "
                    f"({fine['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
                    "| results/surrogate/heldout_fine.json (`make dataset-fine`) |")
@@ -74,10 +73,11 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                 f"{j['tip_error_mm_max']:.2f} mm). "
                 + ("So the datasets are not regenerated on a finer mesh for the finger's sake"
                    if largest != "discretisation" else
-                   "Decision: the datasets are to be regenerated on the wall-resolved joint mesh 1.697:0.849 (the "
-                   "train set is one `MESH_SIZE=1.697 WALL_MESH_SIZE=0.849 OUT=results/data/train_h1.697w0.849 sbatch "
-                   "workflow/slurm/campaign.sbatch`), then the surrogate retrained and what depends on it re-run. Not "
-                   "done yet: the committed datasets, and every figure in this report, are on the production mesh")
+                   "Decision: the datasets are to be regenerated on the discretisation the joint mesh study "
+                   "chooses (its section: swept Q2 hexahedra with the mixed formulation are the candidates; "
+                   "`make dataset-hex2` runs the walks on one), then the surrogate retrained and what depends "
+                   "on it re-run. Not done yet: the committed datasets, and every figure in this report, are on "
+                   "the 1.8 mm mesh")
                 + (". The joint study at the box corners has no extrapolation in the asymptotic range (its figure "
                    "is a lower bound) and decides it for loads near the corners." if study and study["reference"] != "richardson"
                    else ".")]

@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from apps.report.common import (MESH_REFERENCE, NOT_JUDGED, PAPER, Check, Target, cells, figure, judge, load,
-                                mesh_label, missing, num)
+                                missing, num)
 from workflow.artefacts import CAMPAIGN_TARGETS
 
 FEM_TITLE = "FEM bellow joint (issue 2)"
@@ -146,7 +146,7 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     tol, deg = ms["tolerance_percent"], ms["tolerance_deg"]
     targets = [Target("<=", tol, "%"), Target("<=", deg, "°"), Target("<=", deg, "°"),
                Target(">=", ms["min_nodes"], "nodes", shown=f"{ms['min_nodes']:,}")]
-    family = ", ".join(mesh_label(*m) for m in ms["family"] or [])
+    family = ", ".join(ms["family"] or [])
     extrapolated = ms["reference"] == "richardson"   # a family in the asymptotic range
     if extrapolated:
         ref = f"the Richardson extrapolation (h -> 0) of the {ms['formulation']} family {family}, in the asymptotic range"
@@ -160,15 +160,16 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     out = [f"Eight loads (four corners of the input box, four interior loads; results/fem/mesh_study.json "
            f"`loads`{'' if ms['complete'] else ', not complete yet'}), solved from zero on each discretisation: "
            f"mesh `H[:W]` (tetrahedron size H, W on the {ms['wall_mm']} mm chamber walls; W = "
-           f"{ms['wall_mm'] / 2:g} puts two P2 elements through the wall) and formulation (displacement P2, or "
-           f"mixed Taylor-Hood P2-P1 u-p). Reference: {ref}. Errors are the worst over the loads: the largest "
+           f"{ms['wall_mm'] / 2:g} puts two P2 elements through the wall) or `hexN` (swept Q2 hexahedra, N "
+           "elements through every wall, nested in N), and formulation (displacement P2/Q2, or mixed "
+           f"Taylor-Hood u-p, P2-P1 / Q2-Q1). Reference: {ref}. Errors are the worst over the loads: the largest "
            "anchor distance (mm, and % of the largest anchor displacement), phi_end and the cap rotation; "
            "solve s: mean from zero on that many MPI ranks, beside other work.", "",
-           "| discretisation | P2 nodes | anchors (mm) | anchors (%) | tip (mm) | phi_end (°) | cap rotation (°) "
+           "| discretisation | nodes | anchors (mm) | anchors (%) | tip (mm) | phi_end (°) | cap rotation (°) "
            "| solve s (ranks) | target | met |", "|---|---|---|---|---|---|---|---|---|---|"]
     for m in ms["meshes"]:
         e, check = m["max_error"], None
-        label = f"{mesh_label(m['mesh_size'], m['wall_mesh_size'])} {m['formulation']}"
+        label = f"{m['mesh']} {m['formulation']}"
         if m["key"] == ms["production"]:
             check = judge(title, f"production discretisation {label} against {MESH_REFERENCE[ms['reference']]}",
                           list(zip(targets, (e["anchor_percent"], e["phi_end_deg"], e["cap_rotation_deg"], m["nodes"]))))
@@ -185,15 +186,15 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
                    f"{e['tip_mm']:.4f} | {e['phi_end_deg']:.3f} | {e['cap_rotation_deg']:.3f} | "
                    f"{m['mean_solve_s']:.0f} ({m['ranks']}) |" + cells(check))
     for o in ms["orders"]:
-        out += ["", f"Observed orders on {', '.join(mesh_label(*m) for m in o['meshes'])}, per load "
+        out += ["", f"Observed orders on {', '.join(o['meshes'])}, per load "
                 f"(anchors; phi_end; cap rotation): {', '.join(num(x, '.2f') for x in o['anchors'])}; "
                 f"{', '.join(num(x, '.2f') for x in o['phi_end_deg'])}; "
                 f"{', '.join(num(x, '.2f') for x in o['cap_rotation_deg'])}."]
     if ms["orders"]:
-        out[-1] += (" P2 on smooth fields: 2; contact and curved walls lower it; negative: the changes grow "
-                    "under refinement; n/a: no change.")
+        out[-1] += (" P2/Q2 on smooth fields: 2 or more; contact and re-entrant corners lower it; negative: "
+                    "the changes grow under refinement; n/a: no change or no order in [-20, 20].")
     prod = next((m for m in ms["meshes"] if m["key"] == ms["production"]), None)
-    shown = (f"{mesh_label(*ms['production_mesh'])} {prod['formulation']}" if prod else
+    shown = (f"{ms['production_mesh']} {prod['formulation']}" if prod else
              f"{ms['production']} (not solved at every load yet)")
     out += ["", f"Production discretisation (fem.discretisation.PRODUCTION, what the datasets are generated on): "
             f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "

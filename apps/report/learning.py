@@ -139,4 +139,45 @@ def learning_curve_section(root: Path) -> tuple[list[str], list[Check]]:
                    "`make learning-curve` (`python -m surrogate.learning_curve`): held-out mean anchor, tip and "
                    "cap-rotation errors against the training samples, with and without the Jacobian loss; other "
                    "seeds as open markers.", "make learning-curve")
-    return out, []
+    return out + multifidelity_lines(root), []
+
+
+def multifidelity_lines(root: Path) -> list[str]:
+    """Fewer fine solves (surrogate.multifidelity): the coarse surrogate plus a correction
+    learned from n fine samples, against fine-only training on the same n and, at equal
+    FEM CPU hours, the learning curve at m samples (a proxy: its own data)."""
+    m = load(root, "surrogate/multifidelity.json")
+    out = ["### Fewer fine solves: a multi-fidelity surrogate", ""]
+    if not m or not m.get("comparison"):
+        return out + missing("learns a fine-minus-coarse correction", "make multifidelity")
+    c, f, h = m["coarse"], m["fine"], m["heldout"]
+    out += [f"`make multifidelity` (results/surrogate/multifidelity.json, `python -m surrogate.multifidelity`): the "
+            f"coarse surrogate ({c['model']}, trained on {c['samples']:,} samples of {c['root']}, "
+            f"{c['cpu_s_per_sample']:.1f} CPU s each) frozen, plus a correction (a least-squares scale of the coarse "
+            f"displacement and a small network) trained on n samples of {f['root']} ({f['cpu_s_per_sample']:.1f} CPU s "
+            f"each; a development stand-in for the new fine data), measured on {h['n']} held-out samples of it "
+            f"({h['split']}). Equal cost: {m['equal_cost']}. The coarse surrogate alone is "
+            f"{m['coarse_only']['heldout_mean_anchor_error_mm']:.3f} mm (mean anchor) and "
+            f"{m['coarse_only']['heldout_cap_rotation_error_deg']:.2f}° (cap rotation) from the fine answers. "
+            + ("" if m.get("complete") else "**Not finished**: `make multifidelity` resumes it."), "",
+            "| n fine | multi-fidelity: anchor (mm), cap (°) | scale only | fine-only (its samples) | CPU h | equal-cost fine m "
+            "| learning curve at m (proxy) |", "|---|---|---|---|---|---|---|"]
+    pair = lambda r: f"{r['heldout_mean_anchor_error_mm']:.3f}, {r['heldout_cap_rotation_error_deg']:.2f}"
+    for r in m["comparison"]:
+        ref = r.get("reference_curve_at_m")
+        out.append(f"| {r['samples']} | {pair(r['multifidelity'])} | {pair(r['scale_only'])} | "
+                   f"{pair(r['fine_only'])} ({r['fine_only_samples']}) | {r['multifidelity_cpu_hours']:.2f} | "
+                   f"{r['equal_cost_fine_samples']:,} | {pair(ref) if ref else 'n/a'} |")
+    best = min(m["comparison"], key=lambda r: r["multifidelity"]["heldout_mean_anchor_error_mm"])
+    ref = best.get("reference_curve_at_m")
+    verdict = ("so at equal CPU hours fine-only training on m samples (the learning curve's figure) is "
+               f"{best['multifidelity']['heldout_mean_anchor_error_mm'] / ref['heldout_mean_anchor_error_mm']:.1f}× "
+               "more accurate: the correction does not pay on this data, and the new campaign is sized from "
+               "the learning curve alone" if ref and ref["heldout_mean_anchor_error_mm"]
+               < best["multifidelity"]["heldout_mean_anchor_error_mm"] else
+               "better than the learning curve's figure at equal cost")
+    out += ["", f"Best multi-fidelity point: n = {best['samples']}, {pair(best['multifidelity'])} against "
+            f"fine-only on {best['fine_only_samples']} samples {pair(best['fine_only'])}; the coarse data's cost "
+            f"({c['cpu_hours']:.1f} CPU h) buys {best['equal_cost_fine_samples'] - best['samples']:,} fine samples, "
+            f"{verdict}.", ""]
+    return out
