@@ -37,18 +37,18 @@ with the cross-section normal nu = Rot(a + pi/2)·e_x of a part's direction a (g
 for the hanging right finger, so its -nu side faces the gripper's axis X = 0),
 
     rigid part of height h from S to E:  corners S -/+ (h/2) nu, E -/+ (h/2) nu
-    joint (outer height H, joint_height):  P_m -/+ (H/2) nu_m, m = 0..10,
+    joint (outer height H, joint_height):  P_m -/+ (H/2) nu_m, m = 0..n,
 
-with P_0 = O_i, P_1..P_10 its anchors and nu_m the normal of theta_i at m = 0, of the exit
-angle phi_i at m = 10 and of the bisector of the two anchor chords meeting at P_m between
-(so each joint's band meets its neighbours' faces). The outline's straight edges are
-each part's ``inner`` (-nu) and ``outer`` (+nu) faces (a joint's: its 10 chords) and the
-last part's distal ``end`` face. The joint's band is its outer envelope over the cells
-and caps (height H = 20 mm); its 2.5 mm valleys, 5.6 mm deeper, are bridged: a convex
-object of least radius of curvature rho sinks g²/(8 rho) into a valley of width g (0.03
-mm for the circle, 0.04 mm for the ellipse's 17.9 mm ends at the rest gap), which the
-band neglects, as it neglects the cells' ballooning (the joint model gives the centre
-line only). ``surface = centre_line`` keeps the paper's sample points on the parts'
+with P_0 = O_i, P_1..P_n its n anchors (its joint description's, 10 for the paper's
+joint) and nu_m the normal of theta_i at m = 0, of the exit angle phi_i at m = n and of
+the bisector of the two anchor chords meeting at P_m between (so each joint's band meets
+its neighbours' faces). The outline's straight edges are each part's ``inner`` (-nu) and
+``outer`` (+nu) faces (a joint's: its n chords) and the last part's distal ``end`` face.
+The joint's band is its outer envelope over the cells and caps (height H = 20 mm); its
+2.5 mm valleys, 5.6 mm deeper, are bridged: a convex object of least radius of curvature
+rho sinks g²/(8 rho) into a valley of width g (0.03 mm for the circle, 0.04 mm for the
+ellipse's 17.9 mm ends at the rest gap), which the band neglects, as it neglects the
+cells' ballooning (the joint model gives the centre line only). ``surface = centre_line`` keeps the paper's sample points on the parts'
 centre lines instead: each rigid part's ``contact_points`` segment midpoints (each
 carrying l/n of length) and the n anchors of each joint with ``contact = true`` (each
 carrying L/n, L and n its own joint description's: 45.45 mm and 10 for the paper's
@@ -176,8 +176,8 @@ class ChainLayout:
     GripperProblem.residual stacks the loads.
 
     The outline (module docstring; ``outline_vertices`` stacks its V vertices: per joint
-    its 11 inner then 11 outer band vertices, then per rigid part its corners S-, E-, S+,
-    E+): ``edge_start``, ``edge_end`` (E,) vertex indices of each straight edge,
+    its n + 1 inner then n + 1 outer band vertices (band_size), then per rigid part its
+    corners S-, E-, S+, E+): ``edge_start``, ``edge_end`` (E,) vertex indices of each straight edge,
     ``edge_part`` (E,) its part, ``edge_face`` (E,) its face (FACES), ``object_edges``
     (Eo,) the edges the object can touch (parts with ``contact``). With ``surface`` faces
     the contact points are EDGE_GAUSS Gauss points per object edge, so ``contact_part``,
@@ -208,23 +208,35 @@ class ChainLayout:
     rigid_half_height: torch.Tensor = None
 
 
+def band_size(finger: FingerSpec) -> int:
+    """Vertices of each joint's band in ``outline_vertices``: its n + 1 inner then n + 1
+    outer points, n the joints' anchor count (their description's; 10 for the paper's
+    joint). One joint model poses every joint of a finger, so its joints share one count;
+    ValueError (one line) for a finger whose joints differ."""
+    counts = sorted({part.spec.anchors for part in finger.parts if part.kind == "joint"})
+    if len(counts) != 1:
+        raise ValueError(f"finger {finger.name!r}: its joints have {counts} anchors; the outline needs one count")
+    return 2 * (counts[0] + 1)
+
+
 def outline_edges(finger: FingerSpec) -> list[tuple[int, int, int, int, bool]]:
     """The outline's straight edges of ``finger`` in chain order: (start vertex, end
     vertex, part, face code, the object can touch it) (ChainLayout's vertex order)."""
-    J = finger.n_joints
+    J, size = finger.n_joints, band_size(finger)
+    n = size // 2 - 1
     edges, j, r = [], 0, 0
     for k, part in enumerate(finger.parts):
         last = k == len(finger.parts) - 1
         if part.kind == "joint":
-            inner, outer = 22 * j, 22 * j + 11
+            inner, outer = size * j, size * j + n + 1
             touch = bool(part.contact)
-            edges += [(inner + m, inner + m + 1, k, 0, touch) for m in range(10)]
-            edges += [(outer + m, outer + m + 1, k, 1, touch) for m in range(10)]
+            edges += [(inner + m, inner + m + 1, k, 0, touch) for m in range(n)]
+            edges += [(outer + m, outer + m + 1, k, 1, touch) for m in range(n)]
             if last:
-                edges.append((inner + 10, outer + 10, k, 2, touch))
+                edges.append((inner + n, outer + n, k, 2, touch))
             j += 1
         else:
-            base = 22 * J + 4 * r
+            base = size * J + 4 * r
             touch = part.contact_points > 0
             edges += [(base, base + 1, k, 0, touch), (base + 2, base + 3, k, 1, touch)]
             if last:
@@ -590,9 +602,9 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
 
 def outline_vertices(pose: FingerPose, layout: ChainLayout) -> torch.Tensor:
     """The outline's vertices (B, V, 2) mm of a pose (module docstring; ChainLayout's
-    order: per joint its 11 inner then 11 outer band vertices, then per rigid part its
-    corners S-, E-, S+, E+, where - is the inner (-nu) side)."""
-    P = pose.joints                                     # (B, J, 11, 2) O_i and the anchors
+    order: per joint its n + 1 inner then n + 1 outer band vertices (band_size), then per
+    rigid part its corners S-, E-, S+, E+, where - is the inner (-nu) side)."""
+    P = pose.joints                                     # (B, J, n + 1, 2) O_i and the anchors
     chord = P[:, :, 1:] - P[:, :, :-1]
     chord = chord / chord.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     bisector = chord[:, :, :-1] + chord[:, :, 1:]

@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from contract.files import atomic_path  # noqa: E402
-from predictor.gripper import FingerPose, chain_layout, outline_vertices  # noqa: E402
+from predictor.gripper import FingerPose, band_size, chain_layout, outline_vertices  # noqa: E402
 from predictor.statics import STATES, GripperProblem, Obstacle  # noqa: E402
 
 
@@ -52,13 +52,14 @@ def part_outlines(pose: FingerPose, index: int) -> list[tuple[str, np.ndarray]]:
     a joint's band (inner vertices base to tip, then the outer ones back), a rigid part's
     rectangle (predictor.gripper.outline_vertices' order)."""
     V = outline_vertices(pose.rows(slice(index, index + 1)), chain_layout(pose.finger))[0].detach().numpy()
-    out, j, r, J = [], 0, 0, pose.finger.n_joints
+    out, j, r, J, size = [], 0, 0, pose.finger.n_joints, band_size(pose.finger)
     for part in pose.finger.parts:
         if part.kind == "joint":
-            ring = np.concatenate((V[22 * j:22 * j + 11], V[22 * j + 11:22 * j + 22][::-1]))
+            band = V[size * j:size * (j + 1)]
+            ring = np.concatenate((band[:size // 2], band[size // 2:][::-1]))
             j += 1
         else:
-            base = 22 * J + 4 * r
+            base = size * J + 4 * r
             ring = V[[base, base + 1, base + 3, base + 2]]
             r += 1
         out.append((part.kind, np.concatenate((ring, ring[:1]))))

@@ -60,6 +60,59 @@ def test_straight_finger_outline_is_two_lines_and_an_end():
     np.testing.assert_allclose(torch.cat((a, b), 1)[0].numpy(), [[15.0, -215.9], [35.0, -215.9]], atol=1e-9)
 
 
+def _joint_finger(folder, counts):
+    """The paper's finger with its two joints of joint files of ``counts`` anchors (the
+    paper's joint otherwise), written in ``folder``, and loaded."""
+    from contract.finger import load_finger
+
+    joint = (ROOT / "contract/joints/paper.toml").read_text()
+    parts = PAPER.split("[[part]]")
+    for i, n in zip((1, 3), counts):
+        (folder / f"j{n}.toml").write_text(joint.replace('name = "paper"', f'name = "j{n}"').replace(
+            "count = 10", f"count = {n}"))
+        parts[i] = parts[i].replace("contact = ", f'joint = "j{n}.toml"\ncontact = ')
+    path = folder / "finger.toml"
+    path.write_text("[[part]]".join(parts))
+    return load_finger(path)
+
+
+def test_outline_of_a_joint_of_twelve_anchors(tmp_path):
+    """A joint description of 12 anchors (the joint model poses them; the analytic
+    stand-in of that joint): each joint's band has 12 inner and 12 outer chords, each
+    45.45 / 12 mm long on the straight hanging finger, inner vertices at X = 15 mm and
+    outer ones at 35 mm, the links' faces and the tip's end face where they are with the
+    paper's 10 (same lengths); the figures' polygons close each band over its 26 points.
+    A finger whose joints differ in their counts is refused (one line)."""
+    from predictor.gripper import band_size
+    from predictor.joint import AnalyticJoint
+    from predictor.plot import part_outlines
+
+    finger = _joint_finger(tmp_path, (12, 12))
+    params = GripperParams(finger)
+    assert band_size(finger) == 26
+    pose = finger_pose(AnalyticJoint.for_joint(finger.parts[0].spec), params, t([[0.0, 0.0]]),
+                       torch.zeros(1, 2, 3, dtype=torch.float64))
+    lay = params.layout
+    V = outline_vertices(pose, lay)[0]
+    a, b = edge_ends(V[None], lay)
+    length = (b - a)[0].norm(dim=-1)
+    for k in (0, 2):
+        for face, x in ((0, 15.0), (1, 35.0)):
+            sel = (lay.edge_part == k) & (lay.edge_face == face)
+            assert int(sel.sum()) == 12
+            np.testing.assert_allclose(length[sel].numpy(), 45.45 / 12, rtol=1e-12)
+            np.testing.assert_allclose(torch.cat((a[0, sel, 0], b[0, sel, 0])).numpy(), x, rtol=0, atol=1e-12)
+    end = (lay.edge_face == 2).nonzero().flatten()
+    np.testing.assert_allclose(torch.cat((a[0, end], b[0, end]), 0).numpy(), [[15.0, -215.9], [35.0, -215.9]],
+                               atol=1e-9)
+    rings = part_outlines(pose, 0)
+    assert [len(r) for kind, r in rings if kind == "joint"] == [27, 27]
+    (tmp_path / "mixed").mkdir()
+    mixed = _joint_finger(tmp_path / "mixed", (10, 12))
+    with pytest.raises(ValueError) as err:
+        band_size(mixed)
+    assert "\n" not in str(err.value) and "[10, 12] anchors" in str(err.value)
+
 def test_bent_outline_is_closed_where_parts_meet():
     """At a bent pose (cap kinematics, loads on both joints) each joint's band ends where
     the next rigid part's faces start and starts where the previous one's end (its end
