@@ -45,6 +45,7 @@ class Artefact:
 ARTEFACTS = (
     Artefact("fem/validation.json", "make validation", fem.VALIDATION),
     Artefact("fem/mesh_study.json", "make mesh-study", fem.MESH_STUDY),
+    Artefact("fem/mesh_study_tet.json", "make mesh-study-tet", fem.MESH_STUDY),
     Artefact("fem/joint_cases/*.json", "make mesh-study", fem.JOINT_CASE),
     Artefact("fem/mesh_causes.json", "make mesh-causes", fem.MESH_CAUSES),
     Artefact("fem/self_contact.json", "make self-contact", fem.SELF_CONTACT),

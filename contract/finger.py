@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -141,6 +142,16 @@ class FingerSpec:
         """JSON-ready description (angles in degrees)."""
         return {"name": self.name, "sha256": self.digest, "base_gap": self.base_gap,
                 "base_angle_deg": math.degrees(self.base_angle), "parts": [part_dict(p) for p in self.parts]}
+
+
+def same_finger(recorded: dict, finger: FingerSpec) -> bool:
+    """Whether ``recorded`` (a FingerSpec.summary() read back from a result file)
+    describes ``finger``: the same file (sha256), or the same values when only the file's
+    comments or name changed (its sha256 is of the text)."""
+    if recorded.get("sha256") == finger.digest:
+        return True
+    values = lambda d: {k: v for k, v in d.items() if k not in ("name", "sha256")}   # noqa: E731
+    return values(recorded) == values(json.loads(json.dumps(finger.summary())))
 
 
 #: A joint's calibration keys and their identity values: part_dict leaves them out when

@@ -33,8 +33,10 @@ A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
 * ``[anchors]``: ``count``, the anchor points X_i = (i L / count, 0, 0), i = 1..count;
 * ``[mesh]``: the defaults it is meshed with: tetrahedra of ``size`` (mm) and
   ``wall_size`` (mm, absent: ``size``), or swept hexahedra of ``divisions`` (a whole number
-  in [1, 6]: that many elements through every wall, fem.mesh_hex) instead of the sizes;
-  and ``formulation`` ("displacement" or "mixed").
+  in [1, 6]: that many elements through every wall, fem.mesh_hex) instead of the sizes,
+  optionally graded in the bending plane by ``hex_size`` S (mm: an x or y interval of
+  length d is cut into divisions x ceil(d / S) elements); and ``formulation``
+  ("displacement" or "mixed").
 
 Shape rules, from fem.geometry's construction of the y >= 0 quarter (a core bar of height
 valley_height/2, caps and cells raised to height/2, one cavity of the cell pockets joined
@@ -99,6 +101,7 @@ RANGES = {
     "pressure_mpa": (1e-4, 10.0, "MPa"), "force_n": (1e-4, 1000.0, "N"),
     "moment_nmm": (1e-3, 1e5, "N*mm"), "count": (2, 100, ""),
     "size": (0.1, 50.0, "mm"), "wall_size": (0.05, 50.0, "mm"), "divisions": (1, MAX_DIVISIONS, ""),
+    "hex_size": (0.3, 50.0, "mm"),
 }
 PARAMETER_RANGES = {"C10": (-1e3, 1e3, "MPa"), "C01": (-1e3, 1e3, "MPa"), "C20": (-1e3, 1e3, "MPa"),
                     "C30": (-1e3, 1e3, "MPa"), "mu": (-1e3, 1e3, "MPa"), "alpha": (-30.0, 30.0, "")}
@@ -107,10 +110,10 @@ MIN_ABS_ALPHA = 0.1
 #: The small-strain shear modulus mu0 of any law, MPa.
 MU0_RANGE = (1e-4, 1e3)
 _TABLES = {"geometry": GEOMETRY_KEYS, "input_box": ("pressure_mpa", "force_n", "moment_nmm"),
-           "anchors": ("count",), "mesh": ("size", "wall_size", "divisions", "formulation")}
+           "anchors": ("count",), "mesh": ("size", "wall_size", "divisions", "hex_size", "formulation")}
 _TOP_KEYS = ("format", "name", "geometry", "material", "input_box", "anchors", "mesh")
 _MATERIAL_COMMON = ("law", "nu", "K", "cap_stiffness", "cap_nu")
-_OPTIONAL = {"size", "wall_size", "divisions", "formulation", "cap_stiffness", "cap_nu", "nu", "K"}
+_OPTIONAL = {"size", "wall_size", "divisions", "hex_size", "formulation", "cap_stiffness", "cap_nu", "nu", "K"}
 
 
 class JointFileError(ValueError):
@@ -238,6 +241,7 @@ class JointSpec:
     formulation: str = "displacement"
     divisions: int = 0
     name: str = "joint"
+    hex_size: float | None = None
 
     @property
     def input_box(self) -> np.ndarray:
@@ -250,7 +254,7 @@ class JointSpec:
 
     def geometry_kwargs(self) -> dict:
         """Keyword arguments of fem.geometry.JointGeometry for this joint (mm)."""
-        mesh = ({"divisions": self.divisions} if self.divisions else
+        mesh = ({"divisions": self.divisions, "hex_size": self.hex_size} if self.divisions else
                 {"mesh_size": self.mesh_size, "wall_mesh_size": self.wall_mesh_size})
         return {**{k: getattr(self.shape, k) for k in GEOMETRY_KEYS}, **mesh}
 
@@ -387,7 +391,10 @@ def _mesh(source: str, doc: dict, shape: BellowShape, material: MaterialLaw) -> 
     if "divisions" in t:
         if "wall_size" in t:
             raise JointFileError(f"{where}.wall_size: tetrahedra only; hexahedra have divisions through every wall")
-        return None, None, formulation, _number(where, "divisions", t["divisions"], integer=True)
+        hex_size = _number(where, "hex_size", t["hex_size"]) if "hex_size" in t else None
+        return None, None, formulation, _number(where, "divisions", t["divisions"], integer=True), hex_size
+    if "hex_size" in t:
+        raise JointFileError(f"{where}.hex_size: hexahedra only (give divisions)")
     size = _number(where, "size", t["size"])
     wall = _number(where, "wall_size", t["wall_size"]) if "wall_size" in t else None
     boxes = shape.length * shape.height * shape.width / size ** 3
@@ -395,13 +402,15 @@ def _mesh(source: str, doc: dict, shape: BellowShape, material: MaterialLaw) -> 
         low = (shape.length * shape.height * shape.width / MAX_MESH_BOXES) ** (1 / 3)
         raise JointFileError(f"{where}.size = {size:g} mm is too fine for this joint: allowed >= {low:.3g} mm "
                              f"(at most {MAX_MESH_BOXES:.0e} size^3 boxes)")
-    return size, wall, formulation, 0
+    return size, wall, formulation, 0, None
 
 
-def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0) -> str:
-    """A mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
+def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0,
+              hex_size: float | None = None) -> str:
+    """A mesh in words: ``hexN`` (hexahedra of N divisions), ``hexN:S`` (graded in x-y by
+    S mm), or ``H`` / ``H:W`` (tetrahedra, mm)."""
     if divisions:
-        return f"hex{divisions}"
+        return f"hex{divisions}" + (f":{hex_size:g}" if hex_size else "")
     return f"{size:g}" + (f":{wall_size:g}" if wall_size else "")
 
 
@@ -424,9 +433,9 @@ def joint_from_dict(doc: dict, source: str = "<joint>") -> JointSpec:
     box = {k: _number(where, k, box[k]) for k in _TABLES["input_box"]}
     where, anchors = _table(source, doc, "anchors", _TABLES["anchors"])
     count = _number(where, "count", anchors["count"], integer=True)
-    size, wall, formulation, divisions = _mesh(source, doc, shape, material)
+    size, wall, formulation, divisions, hex_size = _mesh(source, doc, shape, material)
     return JointSpec(shape, material, **box, anchors=count, mesh_size=size, wall_mesh_size=wall,
-                     formulation=formulation, divisions=divisions, name=name)
+                     formulation=formulation, divisions=divisions, name=name, hex_size=hex_size)
 
 
 def parse_joint(text: str, source: str = "<joint>") -> JointSpec:
@@ -469,6 +478,8 @@ def joint_to_dict(joint: JointSpec) -> dict:
     """The joint's tables as plain JSON, which ``joint_from_dict`` rebuilds exactly (the
     file's structure; ``wall_size`` absent when it is the size)."""
     mesh = {"divisions": joint.divisions} if joint.divisions else {"size": joint.mesh_size}
+    if joint.hex_size is not None:
+        mesh["hex_size"] = joint.hex_size
     mesh["formulation"] = joint.formulation
     if joint.wall_mesh_size is not None:
         mesh["wall_size"] = joint.wall_mesh_size

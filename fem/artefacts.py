@@ -47,7 +47,8 @@ SELF_CONTACT = Format("fem-self-contact", 1, "fem.self_contact", {
 #: hold a dot, so the report reads them as optional).
 BENCH_JOINT = Format("fem-bench-joint", 1, "fem.bench_joint", {
     **each("", int, "paper_nodes", "nodes", "dofs"), "formulation?": str, "mesh?": str,
-    **each("", NUM, "mesh_size", "solve_from_zero_s", "continuation_sample_s", "newton_iterations",
+    "mesh_size?": NUM, "divisions?": int, "continuation_sample_cpu_s?": NUM,   # tetrahedra: mesh_size
+    **each("", NUM, "solve_from_zero_s", "continuation_sample_s", "newton_iterations",
            "continuation_step_fraction_of_box", "paper_seconds_per_sample",
            "speedup_vs_paper_from_zero", "speedup_vs_paper_continuation"),
     "solve_from_zero_cases": list})
@@ -58,10 +59,13 @@ BENCH_FINGER = Format("fem-bench-finger", 1, "fem.bench_finger", {
     **each("", NUM, "finger_fem_max_s", "finger_fem_median_s", "target_s")})
 
 #: results/validation/finger_fem/<case>.json (make finger-fem): one finger FEM case
-#: (FingerResult.summary); tip and angles are null unless converged.
+#: (FingerResult.summary); tip and angles are null unless converged. ``mesh.mesh`` names the
+#: joints' mesh (contract.joint.mesh_text: "1.8", "1.697:0.849", "hex2"); records written
+#: before hexahedra have only ``mesh.mesh_size``, hexahedral ones ``mesh.divisions`` instead.
 FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
     "case": str, "pressures_MPa": list, "gravity": bool, "converged": bool, "tip": list | None,
-    "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh_size": NUM, "mesh.nodes": int})
+    "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh?": str, "mesh.mesh_size?": NUM, "mesh.divisions?": int,
+    "mesh.nodes": int})
 
 #: results/fem/joint_cases/<discretisation>_<load>.json (make mesh-study, make mesh-causes;
 #: fem.joint_cases): one joint solve of one load under one discretisation (mesh H:W,

@@ -3,7 +3,8 @@
 A discretisation is (mesh, formulation, q, kappa). The mesh is either tetrahedra of size H
 mm and W mm on the 1.2 mm chamber walls (JointGeometry.mesh_size, wall_mesh_size; W = None:
 H; written "H" or "H:W"), or the swept hexahedra of n divisions (JointGeometry.divisions,
-fem.mesh_hex: n elements through every wall; written "hexN"). Then the formulation
+fem.mesh_hex: n elements through every wall; written "hexN"), optionally graded in the
+bending plane by S mm (JointGeometry.hex_size; written "hexN:S"). Then the formulation
 ("displacement": P2 / Q2 displacement; "mixed": Taylor-Hood P2-P1 / Q2-Q1 u-p, see
 fem.problem), the quadrature degree q (at least fem.mesh_hex.QUADRATURE on hexahedra) and
 the valley-contact penalty kappa (MPa/mm).
@@ -42,6 +43,7 @@ class Discretisation:
     quadrature: int = SolverConfig.quadrature_degree
     penalty: float = SolverConfig.contact_penalty
     divisions: int = JointGeometry.divisions
+    hex_size: float | None = JointGeometry.hex_size
 
     def __post_init__(self):
         if self.formulation not in FORMULATIONS:
@@ -55,12 +57,16 @@ class Discretisation:
                              f"(fewer points leave hourglass modes), not {self.quadrature}")
         if not self.divisions and self.H is None:
             raise ValueError("a tetrahedral discretisation needs its size H (mm)")
+        if self.hex_size is not None and not (self.divisions and self.hex_size > 0):
+            raise ValueError(f"hex_size = {self.hex_size!r}: a positive size (mm), for hexahedra only")
 
     @property
     def key(self) -> str:
-        """File-name key, e.g. ``h2.4_w1.2_mixed_q2_k100`` or ``hex2_mixed_q4_k100``."""
+        """File-name key, e.g. ``h2.4_w1.2_mixed_q2_k100``, ``hex2_mixed_q4_k100`` or
+        ``hex2s2.5_mixed_q4_k100``."""
         if self.divisions:
-            return f"hex{self.divisions}_{self.formulation}_q{self.quadrature}_k{self.penalty:g}"
+            graded = f"s{self.hex_size:g}" if self.hex_size else ""
+            return f"hex{self.divisions}{graded}_{self.formulation}_q{self.quadrature}_k{self.penalty:g}"
         w = "none" if self.W is None else f"{self.W:g}"
         return f"h{self.H:g}_w{w}_{self.formulation}_q{self.quadrature}_k{self.penalty:g}"
 
@@ -73,27 +79,34 @@ class Discretisation:
     def sizes(self) -> tuple[float, float]:
         """Element sizes (in-plane, wall) up to one factor per mesh kind: (H, W) mm on
         tetrahedra, (1/n, 1/n) on hexahedra; two meshes of one kind whose sizes share one
-        ratio are refinements of each other (fem.mesh_study's families)."""
+        ratio are refinements of each other (fem.mesh_study's families; a graded hexahedral
+        mesh is its own kind, ``element``)."""
         if self.divisions:
             return (1.0 / self.divisions,) * 2
         return self.H, self.W or self.H
 
     def as_dict(self) -> dict:
-        """The fields; ``divisions`` only on hexahedra, so records written before hexahedra
-        existed read as what they are."""
+        """The fields; ``divisions`` only on hexahedra and ``hex_size`` only when set, so
+        records written before them read as what they are."""
         out = asdict(self)
         if not self.divisions:
             del out["divisions"]
+        if self.hex_size is None:
+            del out["hex_size"]
         return out
 
     @property
     def element(self) -> str:
-        return "hex" if self.divisions else "tet"
+        """The mesh kind: "tet", "hex", or "hex:S" (graded by S mm: refinements in n of one
+        S are nested, and no uniform hexN is one of them)."""
+        if not self.divisions:
+            return "tet"
+        return "hex" if self.hex_size is None else f"hex:{self.hex_size:g}"
 
     def geometry(self, base: JointGeometry = JointGeometry()) -> JointGeometry:
         if self.divisions:
-            return replace(base, divisions=self.divisions)
-        return replace(base, mesh_size=self.H, wall_mesh_size=self.W, divisions=0)
+            return replace(base, divisions=self.divisions, hex_size=self.hex_size)
+        return replace(base, mesh_size=self.H, wall_mesh_size=self.W, divisions=0, hex_size=None)
 
     def config(self, base: SolverConfig = SolverConfig()) -> SolverConfig:
         return replace(base, quadrature_degree=self.quadrature, contact_penalty=self.penalty)
@@ -105,18 +118,20 @@ PRODUCTION = Discretisation()
 
 def parse_mesh(text: str) -> dict:
     """The mesh fields of a Discretisation from its text: "H" or "H:W" (mm, each in
-    fem.options.MESH_SIZE's range) or "hexN" (N divisions, with the hexahedra's quadrature
-    degree). Raises ValueError with a one-line reason."""
+    fem.options.MESH_SIZE's range), "hexN" (N divisions, with the hexahedra's quadrature
+    degree) or "hexN:S" (graded by S mm, in MESH_SIZE's range). Raises ValueError with a
+    one-line reason."""
     from fem.options import MESH_SIZE
 
     text = text.strip()
     if text.startswith("hex"):
-        n = text[3:]
+        n, _, s = text[3:].partition(":")
         if not (n.isdigit() and 1 <= int(n) <= MAX_DIVISIONS):
             raise ValueError(f"{text!r}: hexN needs N in [1, {MAX_DIVISIONS}]")
-        return {"H": None, "W": None, "divisions": int(n), "quadrature": HEX_QUADRATURE}
+        return {"H": None, "W": None, "divisions": int(n), "quadrature": HEX_QUADRATURE,
+                "hex_size": MESH_SIZE(s) if s else None}
     h, _, w = text.partition(":")
-    return {"H": MESH_SIZE(h), "W": MESH_SIZE(w) if w else None, "divisions": 0}
+    return {"H": MESH_SIZE(h), "W": MESH_SIZE(w) if w else None, "divisions": 0, "hex_size": None}
 
 
 def discretisation(mesh: str, base: Discretisation = PRODUCTION, **fields) -> Discretisation:

@@ -1,7 +1,7 @@
 """The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
 
-    python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8] [--part 1/2]
-                               [--formulation mixed]
+    python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8 | --divisions N]
+                               [--part 1/2] [--formulation mixed]
 
 Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
 * free pressurisation without gravity (the paper's Figure 3): (0.05, 0.05), (0.1, 0.1),
@@ -14,9 +14,12 @@ Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
 
 Each case is one ``FingerSolver.solve`` (every joint of its own joint file, fem.finger;
 ``--formulation`` and the mesh sizes default to the first joint file's [mesh], for the
-paper's joint the production discretisation) on one mesh built once (the mesh build and the
-form compilation are reported apart from each case's solve time, ``fem_s``). It writes
-``<case>.json`` (FingerResult.summary plus the run's settings) and ``<case>.png``: the
+paper's joint the production discretisation; ``--divisions`` N: the finger on swept Q2
+hexahedra, fem.mesh_hex, its records' ``mesh.mesh`` "hexN") on one mesh built once (the
+mesh build and the form compilation are reported apart from each case's solve time,
+``fem_s``). It writes ``<case><suffix>.json`` (FingerResult.summary plus the run's
+settings; suffix ``--suffix``, by default ``_hexN`` for hexahedra and none for
+tetrahedra) and ``<case><suffix>.png``: the
 deformed finger (the full model, mirrored about z = 0), seen along -z in the global plane
 with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista with no
 colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
@@ -48,11 +51,11 @@ from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
 from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
                         rotation_matrix)
+from fem.solver import config_for
 from contract.finger import finger_arg, load_finger
-from contract.joint import is_paper_joint
-from contract.joint import joint_digest
+from contract.joint import is_paper_joint, joint_digest
 from fem.geometry import FingerGeometry
-from fem.options import MESH_SIZE, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
+from fem.options import MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
 
 #: (name, P1, P2, gravity)
 CASES = [
@@ -115,12 +118,14 @@ def main(argv=None) -> int:
     ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
     add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
     add_wall_mesh_size(ap)
+    add_divisions(ap)
     ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help="rigid-part tetrahedron size, mm")
+                    help="rigid-part element size, mm")
     add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
-    ap.add_argument("--suffix", default="", help="appended to each file name (e.g. _h1.2 for a finer mesh)")
+    ap.add_argument("--suffix", default=None, help="appended to each file name (e.g. _h1.2 for a finer mesh; "
+                    "default: _hexN with --divisions N, so hexahedra never replace the tetrahedral cases, else none)")
     cli.add_quiet(ap)
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
@@ -148,11 +153,12 @@ def main(argv=None) -> int:
     joints = finger_joints(finger)
     if not all(is_paper_joint(j) for j in joints):
         settings["joints"] = [joint_digest(j) for j in joints]
-    solver_settings = json_safe(asdict(FINGER_CONFIG))
+    solver_settings = json_safe(asdict(config_for(geometry, FINGER_CONFIG)))     # FingerSolver's own
+    suffix = f"_{geometry.mesh}" if args.suffix is None and geometry.divisions else (args.suffix or "")
     out = Path(args.out)
     todo = []
     for name, p1, p2, gravity in cases:
-        path = out / f"{name}{args.suffix}.json"
+        path = out / f"{name}{suffix}.json"
         if path.is_file():
             try:
                 done = json.loads(path.read_text())

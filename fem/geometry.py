@@ -64,6 +64,8 @@ class JointGeometry:
     ``mesh_size``) is used on the chamber walls. ``divisions`` n >= 1 meshes the joint with
     hexahedra instead (fem.mesh_hex: every interval between the profile's breakpoints cut
     into n, so n elements through every wall; the two sizes are then unused); 0: tetrahedra.
+    ``hex_size`` S (mm, hexahedra only) grades them in the bending plane: an x or y
+    interval of length d is cut into n ceil(d / S) elements (None: n).
     """
 
     length: float = JOINT_LENGTH
@@ -78,10 +80,13 @@ class JointGeometry:
     mesh_size: float = 1.8         # production mesh: 17,359 P2 nodes (make mesh-study)
     wall_mesh_size: float | None = None
     divisions: int = 0
+    hex_size: float | None = None  # mm, hexahedra only
 
     def __post_init__(self):
         if not (isinstance(self.divisions, int) and 0 <= self.divisions <= MAX_DIVISIONS):
             raise ValueError(f"divisions must be a whole number in [0, {MAX_DIVISIONS}], not {self.divisions!r}")
+        if self.hex_size is not None and not (self.divisions and self.hex_size > 0):
+            raise ValueError(f"hex_size = {self.hex_size!r}: a positive size (mm), for hexahedra (divisions > 0) only")
         channel = self.valley_height / 2 - self.wall - self.spine / 2
         if channel <= 0:
             raise ValueError("valley_height leaves no channel between the cells")
@@ -102,14 +107,16 @@ class JointGeometry:
     @property
     def mesh(self) -> str:
         """The mesh in words: ``hexN`` (hexahedra of N divisions), or ``H`` / ``H:W`` (mm)."""
-        return mesh_text(self.mesh_size, self.wall_mesh_size, self.divisions)
+        return mesh_text(self.mesh_size, self.wall_mesh_size, self.divisions, self.hex_size)
 
     def as_dict(self) -> dict:
-        """The fields; ``divisions`` only for a hexahedral mesh, so records written before
-        hexahedra existed read as what they are."""
+        """The fields; ``divisions`` only for a hexahedral mesh and ``hex_size`` only when
+        set, so records written before them read as what they are."""
         out = asdict(self)
         if not self.divisions:
             del out["divisions"]
+        if self.hex_size is None:
+            del out["hex_size"]
         return out
 
 

@@ -214,14 +214,16 @@ class LoadPathSolver:
 
     def mesh_info(self) -> dict:
         """Global mesh figures: vertices, cells, nodes (incl. mid-side for P2), dofs, and the
-        mesh's size (mm; a hexahedral joint: its ``divisions`` instead)."""
+        mesh's size (mm; a hexahedral joint: its ``divisions`` instead, and its ``hex_size``
+        when graded)."""
         mesh_data = self.problem.mesh_data
-        mesh = mesh_data.mesh
-        divisions = getattr(mesh_data.geometry, "divisions", 0)
+        mesh, geometry = mesh_data.mesh, mesh_data.geometry
+        divisions, hex_size = getattr(geometry, "divisions", 0), getattr(geometry, "hex_size", None)
         info = {"vertices": mesh.topology.index_map(0).size_global,
                 "cells": mesh.topology.index_map(mesh.topology.dim).size_global,
                 "degree": self.config.degree,
-                **({"divisions": divisions} if divisions else {"mesh_size": mesh_data.geometry.mesh_size})}
+                **({"divisions": divisions} if divisions else {"mesh_size": geometry.mesh_size}),
+                **({"hex_size": hex_size} if hex_size else {})}
         if self.problem.displacement_space is None:
             nodes = self.V.dofmap.index_map.size_global
             return {**info, "nodes": nodes, "dofs": nodes * self.V.dofmap.index_map_bs}
@@ -343,7 +345,9 @@ class LoadPathSolver:
                 return it, False
             if self.comm.rank == 0:
                 log.debug("  Newton %d: |R| = %.3e N, |du| = %.3e mm", it, norm, du)
-            if norm <= cfg.atol or du <= cfg.stol * self.u.vector.norm():
+            # u is written through numpy (x.array), which PETSc does not see: u.vector.norm()
+            # would return the norm PETSc cached at u = 0, so the step test never fired
+            if norm <= cfg.atol or du <= cfg.stol * self.u.x.norm():
                 return it, True
             if it == cfg.max_it:
                 return it, False

@@ -22,8 +22,11 @@ union of the joint's and every rigid part's (+-h_k/2; 0, w_k/2).
 One tensor grid over those breakpoints (a :class:`Layout`): the mesh of ``divisions`` n
 cuts every interval of length d into n * max(1, ceil(d / S0)) equal elements, S0 =
 FingerGeometry.rigid_mesh_size for a finger (6 mm: the long rigid intervals get elements
-of at most S0 / n) and infinite for a joint; a hexahedron is kept when its midpoint lies
-in the solid (a joint's outer box less its chambers and valley gaps, or a rigid box).
+of at most S0 / n) and infinite for a joint, except that a joint's ``hex_size`` S grades it
+in the bending plane: its x and y intervals take S0 = S (the long spans of the cells'
+walls get more elements than the walls' thickness; z is left at n). A hexahedron is kept
+when its midpoint lies in the solid (a joint's outer box less its chambers and valley
+gaps, or a rigid box).
 So every joint wall is n elements thick, element sizes scale exactly as 1/n, and the
 meshes of n = 1, 2, 3, ... are nested (the Richardson family of fem.mesh_study). A joint
 whose intervals are all shorter than S0 (the paper's: at most 5.8 mm, the chambers' z
@@ -150,7 +153,8 @@ class Layout:
     """A solid made of axis-aligned boxes on one tensor grid (module docstring).
 
     ``breaks``: the (x, y, z) breakpoints (mm, sorted, y symmetric); ``max_size`` S0
-    (mm): an interval of length d is cut into n * max(1, ceil(d / S0)) elements;
+    (mm) per axis, a number or one per interval: an interval of length d is cut into
+    n * max(1, ceil(d / S0)) elements;
     ``solid(x, y, z)``: whether cell midpoints (mm, arrays) are in the solid;
     ``cell_tags(m)`` / ``facet_tags(m)``: the tag (0: none) of cells / boundary facets by
     their midpoints m (k, 3) mm."""
@@ -159,7 +163,7 @@ class Layout:
     solid: Callable
     cell_tags: Callable
     facet_tags: Callable
-    max_size: float = math.inf
+    max_size: tuple = (math.inf, math.inf, math.inf)
 
 
 def _unique(values) -> np.ndarray:
@@ -167,9 +171,9 @@ def _unique(values) -> np.ndarray:
     return v[np.concatenate([[True], np.diff(v) > _TOL])]
 
 
-def interval_counts(breaks: np.ndarray, n: int, max_size: float = math.inf) -> np.ndarray:
+def interval_counts(breaks: np.ndarray, n: int, max_size=math.inf) -> np.ndarray:
     """Elements per interval of ``breaks``: n * max(1, ceil(d / max_size)), d (mm) the
-    interval's length."""
+    interval's length, max_size (mm) a number or one per interval."""
     return n * np.maximum(1, np.ceil(np.diff(breaks) / max_size - 1e-9)).astype(int)
 
 
@@ -184,7 +188,7 @@ def subdivide(breaks: np.ndarray, counts) -> np.ndarray:
 def grid(lay: Layout, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Node coordinates (mm) along x, y and z of the tensor grid of ``n`` divisions; y is
     symmetrised, y_i = (y_i - y_{m-1-i}) / 2, so that y_{m-1-i} = -y_i exactly."""
-    gx, gy, gz = (subdivide(b, interval_counts(b, n, lay.max_size)) for b in lay.breaks)
+    gx, gy, gz = (subdivide(b, interval_counts(b, n, s)) for b, s in zip(lay.breaks, lay.max_size))
     return gx, (gy - gy[::-1]) / 2, gz
 
 
@@ -209,6 +213,12 @@ def hexahedra(geometry: JointGeometry | FingerGeometry, n: int) -> tuple[np.ndar
     return xyz[used], cells.reshape(-1, 8).astype(np.int64)
 
 
+def q2_nodes(geometry: JointGeometry | FingerGeometry) -> int:
+    """Q2 node count of the mesh of ``geometry.divisions`` n (vertices, edge, face and
+    cell midpoints): the vertices of the grid of 2n, whose extra lines are those midpoints."""
+    return len(hexahedra(geometry, 2 * geometry.divisions)[0])
+
+
 # ---------------------------------------------------------------------- the layouts
 def layout(geometry: JointGeometry | FingerGeometry) -> Layout:
     """The Layout of a joint or of a finger."""
@@ -231,7 +241,9 @@ def joint_layout(geo: JointGeometry) -> Layout:
         tag[np.abs(x - geo.length) < _TOL] = TAGS["distal"]
         return tag
 
-    return Layout(breakpoints(geo), lambda x, y, z: in_joint(geo, x, y, z), cell_tags, facet_tags)
+    S = geo.hex_size or math.inf
+    return Layout(breakpoints(geo), lambda x, y, z: in_joint(geo, x, y, z), cell_tags, facet_tags,
+                  (S, S, math.inf))
 
 
 def part_spans(geo: FingerGeometry) -> list[tuple[float, float]]:
@@ -291,8 +303,14 @@ def finger_layout(geo: FingerGeometry) -> Layout:
         tag[np.abs(x) < _TOL] = tags["proximal"]
         return tag
 
-    return Layout(finger_breakpoints(geo), lambda x, y, z: in_finger(geo, x, y, z), cell_tags, facet_tags,
-                  geo.rigid_mesh_size)
+    bx, by, bz = breaks = finger_breakpoints(geo)
+    rigid, plane = geo.rigid_mesh_size, min(geo.rigid_mesh_size, jg.hex_size or math.inf)
+    mid = (bx[:-1] + bx[1:]) / 2
+    in_a_joint = np.zeros(len(mid), dtype=bool)
+    for _, (part, (x0, x1)) in parts:
+        in_a_joint |= (part.kind == "joint") & (mid > x0) & (mid < x1)
+    return Layout(breaks, lambda x, y, z: in_finger(geo, x, y, z), cell_tags, facet_tags,
+                  (np.where(in_a_joint, plane, rigid), plane, rigid))
 
 
 # ---------------------------------------------------------------------- DOLFINx

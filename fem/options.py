@@ -62,10 +62,13 @@ def add_wall_mesh_size(ap: cli.Parser) -> None:
 
 def add_divisions(ap: cli.Parser) -> None:
     """``--divisions`` N: hexahedra of N divisions (fem.mesh_hex), exclusive with the
-    tetrahedron sizes (joint_geometry checks)."""
+    tetrahedron sizes (joint_geometry checks); ``--hex-size`` S grades them in x-y."""
     ap.add_argument("--divisions", type=cli.number(1, MAX_DIVISIONS, integer=True), default=None,
                     help=f"mesh the joint with swept Q2 hexahedra, N elements through every wall, N in [1, "
                          f"{MAX_DIVISIONS}] (instead of --mesh-size/--wall-mesh-size tetrahedra)")
+    ap.add_argument("--hex-size", type=MESH_SIZE, default=None,
+                    help=f"with --divisions N: grade the hexahedra in the bending plane, an x or y interval of "
+                         f"length d cut into N ceil(d / S) elements, S {MESH_SIZE_TEXT} (default: N)")
 
 
 def mesh_text(text: str) -> str:
@@ -114,10 +117,13 @@ def joint_geometry(args, joint: JointSpec | None = None) -> JointGeometry:
     once: ValueError."""
     base = JointGeometry(**joint.geometry_kwargs()) if joint is not None else JointGeometry()
     wall, divisions = getattr(args, "wall_mesh_size", None), getattr(args, "divisions", None)
+    hex_size = getattr(args, "hex_size", None)
     if divisions is not None and (args.mesh_size is not None or wall is not None):
         raise ValueError("--divisions (hexahedra) excludes --mesh-size and --wall-mesh-size (tetrahedra)")
+    if hex_size is not None and divisions is None:
+        raise ValueError("--hex-size grades hexahedra: give --divisions too")
     if divisions is not None:
-        return replace(base, divisions=int(divisions))
+        return replace(base, divisions=int(divisions), hex_size=hex_size)
     if args.mesh_size is None and wall is None:
         return base
     return replace(base, mesh_size=args.mesh_size or base.mesh_size, wall_mesh_size=wall, divisions=0)

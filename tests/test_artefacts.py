@@ -132,3 +132,16 @@ def test_a_writer_command_refuses_a_renamed_key_and_writes_nothing(tmp_path, mon
     monkeypatch.setattr(store, "compare", lambda ref, other: doc)
     assert dataset.main(["compare", "a", "b", "--out", str(out), "--json"]) == 0
     assert find("fem/heldout_mesh.json").load(out) == doc
+
+
+def test_bench_fem_format_takes_a_hexahedral_discretisation():
+    """fem.bench_joint --mesh hexN writes mesh_info's keys of a hexahedral mesh (divisions,
+    no mesh_size): the format accepts them, and still needs one of the timings."""
+    from fem.artefacts import BENCH_JOINT
+
+    doc = json.loads((RESULTS / "bench/fem.json").read_text())
+    hexdoc = {k: v for k, v in doc.items() if k != "mesh_size"} | {
+        "mesh": "hex2", "divisions": 2, "formulation": "mixed", "continuation_sample_cpu_s": 9.5}
+    assert BENCH_JOINT.check(hexdoc) is hexdoc
+    with pytest.raises(ValueError, match="continuation_sample_s: missing"):
+        BENCH_JOINT.check({k: v for k, v in hexdoc.items() if k != "continuation_sample_s"})

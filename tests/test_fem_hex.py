@@ -75,6 +75,27 @@ def test_hex_meshes_are_mirrored_node_by_node_and_nested():
     assert cKDTree(p2).query(p1)[0].max() < 1e-12 and len(c2) == 8 * len(c1)
 
 
+def test_graded_hex_mesh_lies_between_hex2_and_hex4():
+    """hex2:2.5 (JointGeometry.hex_size = 2.5 mm): an x or y interval of length d is cut
+    into 2 ceil(d / 2.5) elements, z into 2. So it holds every hex2 vertex and is held by
+    hex4 (nested between them); its node set is its own y-mirror; the joint's volume and
+    tag areas are hex2's to 1e-9 relative; its x-y element lengths are at most 1.25 mm,
+    through-wall ones 0.6 mm, and the z intervals are hex2's (2.9 and 0.6 mm)."""
+    graded = JointGeometry(divisions=2, hex_size=2.5)
+    assert graded.mesh == "hex2:2.5" and discretisation("hex2:2.5").key == "hex2s2.5_displacement_q4_k100"
+    (p2, _), (pg, cg), (p4, _) = hexahedra(GEO, 2), hexahedra(graded, 2), hexahedra(GEO, 4)
+    assert cKDTree(pg).query(p2)[0].max() < 1e-12 and cKDTree(p4).query(pg)[0].max() < 1e-12
+    assert cKDTree(pg).query(pg * [1.0, -1.0, 1.0])[0].max() == 0.0
+    for axis, longest in ((0, 1.25), (1, 1.25), (2, 2.9)):
+        steps = np.diff(np.unique(pg[:, axis]))
+        assert steps.max() <= longest + 1e-9 and steps.min() == pytest.approx(0.6, abs=1e-9)
+    meshes = {g: measures(create_mesh(g, MPI.COMM_SELF)) for g in (graded, JointGeometry(divisions=2))}
+    for name in TAGS:
+        assert meshes[graded][name] == pytest.approx(meshes[JointGeometry(divisions=2)][name], rel=1e-9), name
+    with pytest.raises(ValueError, match="hexahedra"):
+        JointGeometry(hex_size=2.5)
+
+
 def test_a_hexahedral_discretisation_needs_its_quadrature_and_no_sizes():
     """Q2 hexahedra under-integrated (degree 2: 2 x 2 x 2 points) are refused, as are
     tetrahedron sizes on a hexahedral mesh; the key names the divisions."""

@@ -121,6 +121,10 @@ def test_a_hexahedral_mesh_default_reaches_the_fem_geometry():
     geo = JointGeometry(**j.geometry_kwargs())
     assert (geo.divisions, geo.mesh, j.mesh_size) == (2, "hex2", None)
     assert joint_from_dict(json.loads(json.dumps(joint_to_dict(j)))) == j and joint_digest(j) == PAPER_DIGEST
+    doc["mesh"]["hex_size"] = 2.5          # graded in the bending plane (fem.mesh_hex)
+    j = joint_from_dict(doc)
+    assert JointGeometry(**j.geometry_kwargs()).mesh == "hex2:2.5" and joint_digest(j) == PAPER_DIGEST
+    assert joint_from_dict(json.loads(json.dumps(joint_to_dict(j)))) == j
 
 
 def test_digest_is_the_joints_physics():
@@ -188,6 +192,9 @@ BAD_DOCS = {
     "divisions float": (lambda d: (d["mesh"].pop("size"), d["mesh"].update(divisions=2.0)), r"mesh\.divisions = 2\.0 must be an integer"),
     "divisions wall size": (lambda d: (d["mesh"].pop("size"), d["mesh"].update(divisions=2, wall_size=0.6)),
                             r"mesh\.wall_size: tetrahedra only"),
+    "hex size on tetrahedra": (_set("mesh.hex_size", 2.5), r"mesh\.hex_size: hexahedra only \(give divisions\)"),
+    "hex size range": (lambda d: (d["mesh"].pop("size"), d["mesh"].update(divisions=2, hex_size=0.1)),
+                       r"mesh\.hex_size = 0\.1 is outside \[0\.3, 50\] mm"),
     "no channel": (_set("geometry.valley_height", 4.8), r"valley_height = 4\.8 mm leaves no channel .* > 2 wall \+ spine = 4\.8 mm"),
     "flat valley": (_set("geometry.valley_height", 20.0), r"valley_height = 20 mm must be < height = 20 mm"),
     "wide valleys": (_set("geometry.valley_width", 7.0), r"valley_width = 7 mm leaves cells 2\.29 mm long, not more than 2 wall = 2\.4 mm: need valley_width < 6\.86[23] mm"),

@@ -146,7 +146,7 @@ def test_generated_finger_and_gesture_pressure(tmp_path):
     text = text.replace("pressure_mpa = 0.3", "pressure_mpa = 0.05")
     (tmp_path / "joint.toml").write_text(text)
     joint = load_joint(tmp_path / "joint.toml")
-    s = Settings(joint, tmp_path / "joint.toml", tmp_path, "small", 4, 4, None, None, 1, "", None)
+    s = Settings(joint, tmp_path / "joint.toml", tmp_path, "small", 4, 4, None, None, None, 1, "", None)
     (tmp_path / "finger.toml").write_text(finger_text(s))
     finger = load_finger(tmp_path / "finger.toml")
     assert [p.kind for p in finger.parts] == ["joint", "rigid", "joint", "rigid", "joint", "rigid"]

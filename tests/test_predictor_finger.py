@@ -419,3 +419,23 @@ def test_surrogate_cap_head_drives_cap_kinematics(tmp_path):
     np.testing.assert_allclose((pose.phi - pose.theta).numpy(), cap.numpy(), rtol=0, atol=1e-15)
     with pytest.raises(ValueError, match="has no cap-rotation head: use --kinematics tangent"):
         GripperProblem(SurrogateJoint(paths[False]), GripperParams(kinematics="cap"))
+
+
+def test_finger_cases_match_their_finger_by_values():
+    """contract.finger.same_finger: a finger file whose text (so its sha256) changed in
+    comments only is the same finger, as the committed finger FEM cases
+    (results/validation/finger_fem, solved before the paper file's comments moved) are of
+    today's paper finger; a changed value or part is another finger."""
+    from contract.finger import DEFAULT_FINGER, load_finger, parse_finger, same_finger
+
+    finger = load_finger()
+    text = DEFAULT_FINGER.read_text()
+    edited = parse_finger(text + "\n# a comment\n", "edited.toml")
+    assert edited.digest != finger.digest and same_finger(json.loads(json.dumps(finger.summary())), edited)
+    recorded = json.loads((ROOT / "results/validation/finger_fem/free_0.1_0.1.json").read_text())
+    recorded = recorded["settings"]["geometry"]["finger"]
+    assert same_finger(recorded, finger)
+    for key, value in (("base_gap", recorded["base_gap"] + 1e-9), ("parts", recorded["parts"][:-1])):
+        assert not same_finger({**recorded, key: value}, finger)
+    tip = {**recorded["parts"][-1], "weight": 0.07}
+    assert not same_finger({**recorded, "parts": recorded["parts"][:-1] + [tip]}, finger)

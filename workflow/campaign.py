@@ -307,12 +307,14 @@ class Progress:
 CONFIG_FLAGS = {("geometry", "mesh_size"): ("--mesh-size", " mm"),
                 ("geometry", "wall_mesh_size"): ("--wall-mesh-size", " mm"),
                 ("geometry", "divisions"): ("--divisions", ""),
+                ("geometry", "hex_size"): ("--hex-size", " mm"),
                 ("formulation",): ("--formulation", ""),
                 ("unit_size",): ("--unit-size", ""), ("walk_step",): ("--step", ""),
                 ("fresh_check_every",): ("--fresh-check-every", "")}
 #: What an absent config entry means (shown instead of "unset"): a manifest without a
 #: formulation was made with P2 displacements.
-CONFIG_ABSENT = {("formulation",): "displacement", ("geometry", "divisions"): "tetrahedra"}
+CONFIG_ABSENT = {("formulation",): "displacement", ("geometry", "divisions"): "tetrahedra",
+                 ("geometry", "hex_size"): "uniform"}
 
 
 def _differences(old: dict, new: dict, prefix: tuple = ()) -> list[tuple[tuple, object, object]]:

@@ -70,6 +70,8 @@ def recorded_joint(config: dict) -> JointSpec:
         return load_joint()
     geometry = config.get("geometry", {})
     mesh = ({"divisions": geometry["divisions"]} if geometry.get("divisions") else {"size": geometry.get("mesh_size")})
+    if geometry.get("hex_size") is not None:
+        mesh["hex_size"] = geometry["hex_size"]
     mesh["formulation"] = config.get("formulation", "displacement")
     if geometry.get("wall_mesh_size") is not None and not geometry.get("divisions"):
         mesh["wall_size"] = geometry["wall_mesh_size"]
@@ -397,7 +399,8 @@ def compare(ref: str | Path, other: str | Path) -> dict:
     worst = int(np.argmax(d.max(axis=1)))
     def mesh(m):
         g = m.config["geometry"]
-        return {"mesh": mesh_text(g.get("mesh_size"), g.get("wall_mesh_size"), g.get("divisions", 0)),
+        return {"mesh": mesh_text(g.get("mesh_size"), g.get("wall_mesh_size"), g.get("divisions", 0),
+                                  g.get("hex_size")),
                 "mesh_size": g.get("mesh_size"), "wall_mesh_size": g.get("wall_mesh_size"),
                 "formulation": m.config.get("formulation", "displacement")}
 

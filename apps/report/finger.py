@@ -26,11 +26,13 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
            "| term | figure | source |", "|---|---|---|"]
     for m in v.get("mesh_check", []):
         wall = m.get("wall_mesh_size")
-        out.append(f"| discretisation: finger FEM, joint mesh {m['production_mesh_size']} -> "
-                   f"{mesh_label(m['mesh_size'], wall)} mm ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
+        other = m.get("mesh") or mesh_label(m["mesh_size"], wall)
+        option = (f"--divisions {other[3:]}" if other.startswith("hex") else
+                  f"--mesh-size {m['mesh_size']}" + (f" --wall-mesh-size {wall}" if wall else ""))
+        out.append(f"| discretisation: finger FEM, joint mesh {m.get('production_mesh', m['production_mesh_size'])} -> "
+                   f"{other}{'' if other.startswith('hex') else ' mm'} ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
                    f"{m['case']} | {m['tip_change_mm']:.2f} mm, {m['tip_angle_change_deg']:+.2f}° | "
-                   f"`python -m fem.finger_cases --mesh-size {m['mesh_size']}"
-                   + (f" --wall-mesh-size {wall}`" if wall else "`") + " |")
+                   f"`python -m fem.finger_cases {option}` |")
     study = load(root, "fem/mesh_study.json")
     if study:
         label = {m["key"]: f"mesh {m['mesh']} {m['formulation']}" for m in study["meshes"]}

@@ -164,7 +164,8 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
            "elements through every wall, nested in N), and formulation (displacement P2/Q2, or mixed "
            f"Taylor-Hood u-p, P2-P1 / Q2-Q1). Reference: {ref}. Errors are the worst over the loads: the largest "
            "anchor distance (mm, and % of the largest anchor displacement), phi_end and the cap rotation; "
-           "solve s: mean from zero on that many MPI ranks, beside other work.", "",
+           "solve s: mean from zero on that many MPI ranks, beside other work (\"seeded\": the mean Newton "
+           "from another mesh's answer at the same load, `--seed-from`, not a solve from zero).", "",
            "| discretisation | nodes | anchors (mm) | anchors (%) | tip (mm) | phi_end (°) | cap rotation (°) "
            "| solve s (ranks) | target | met |", "|---|---|---|---|---|---|---|---|---|---|"]
     for m in ms["meshes"]:
@@ -182,9 +183,14 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
             checks.append(check)
         elif m["key"] == ms["paper"]:
             label += " (paper-fidelity data)"
+        cases = m.get("cases", [])
+        seeds = sorted({c["seeded_from"] for c in cases if c.get("seeded_from")})
+        n_seeded = sum(bool(c.get("seeded_from")) for c in cases)
+        seeded = (f", {'all' if n_seeded == len(cases) else f'{n_seeded} of {len(cases)}'} seeded from "
+                  f"{' and '.join(s.split('_')[0] for s in seeds)}" if seeds else "")
         out.append(f"| {label} | {m['nodes']:,} | {e['anchor_mm']:.4f} | {e['anchor_percent']:.2f} | "
                    f"{e['tip_mm']:.4f} | {e['phi_end_deg']:.3f} | {e['cap_rotation_deg']:.3f} | "
-                   f"{m['mean_solve_s']:.0f} ({m['ranks']}) |" + cells(check))
+                   f"{m['mean_solve_s']:.0f} ({m['ranks']}{seeded}) |" + cells(check))
     for o in ms["orders"]:
         out += ["", f"Observed orders on {', '.join(o['meshes'])}, per load "
                 f"(anchors; phi_end; cap rotation): {', '.join(num(x, '.2f') for x in o['anchors'])}; "
@@ -196,7 +202,9 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     prod = next((m for m in ms["meshes"] if m["key"] == ms["production"]), None)
     shown = (f"{ms['production_mesh']} {prod['formulation']}" if prod else
              f"{ms['production']} (not solved at every load yet)")
-    out += ["", f"Production discretisation (fem.discretisation.PRODUCTION, what the datasets are generated on): "
+    paper = next((f"{m['mesh']} {m['formulation']}" for m in ms["meshes"] if m["key"] == ms["paper"]), ms["paper"])
+    out += ["", f"Production discretisation (the study's `--production`: what the datasets are to be generated on; "
+            f"the committed ones are on the paper-fidelity {paper} until then): "
             f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
             f"{PAPER['mesh_change_percent']} %) and the paper's resolution. The others are shown, not judged.", ""]
     return out
