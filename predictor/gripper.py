@@ -126,14 +126,26 @@ def joint_height() -> float:
     return float(load_joint_file().shape.height)
 
 
-@functools.lru_cache(maxsize=16)
-def gauss_rule(m: int = EDGE_GAUSS) -> tuple[torch.Tensor, torch.Tensor]:
-    """Gauss-Legendre nodes xi (m,) in [0, 1] and weights (m,) summing to 1 (read only)."""
+def _legendre(m: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gauss-Legendre nodes xi (m,) in [0, 1] and weights (m,) summing to 1."""
     import numpy as np
 
     x, w = np.polynomial.legendre.leggauss(m)
-    with torch.inference_mode(False):   # cached: never an inference tensor, autograd may use it
+    with torch.inference_mode(False):   # kept: never an inference tensor, autograd may use it
         return torch.tensor(0.5 * (x + 1.0), dtype=torch.float64), torch.tensor(0.5 * w, dtype=torch.float64)
+
+
+# The rules the outline uses, built at import: a recorded graph (torch.compile) reads them
+# as constants; building one inside it would trace numpy and fail the compiled graph's guards.
+_GAUSS_RULES = {m: _legendre(m) for m in (EDGE_GAUSS, PLANE_GAUSS)}
+
+
+def gauss_rule(m: int = EDGE_GAUSS) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gauss-Legendre nodes xi (m,) in [0, 1] and weights (m,) summing to 1 (read only;
+    EDGE_GAUSS and PLANE_GAUSS are built at import, another m on first use)."""
+    if m not in _GAUSS_RULES:
+        _GAUSS_RULES[m] = _legendre(m)
+    return _GAUSS_RULES[m]
 
 
 def part_names(finger: FingerSpec) -> tuple[str, ...]:
@@ -185,6 +197,8 @@ class ChainLayout:
     unused: each point's length comes with its interval). ``plane_edges`` (Ep,): the
     inner and end edges, which meet the mirror finger at X = 0 (the outer faces face
     away from it), and ``plane_mask`` (J, Ep·PLANE_GAUSS) that of their Gauss points.
+    ``joint_half_height`` H/2 (mm, ``joint_height``) and ``rigid_half_height`` (R,) mm:
+    the outline's half heights, read once here so that a recorded graph sees constants.
     """
 
     joint_parts: tuple[int, ...]
@@ -206,6 +220,7 @@ class ChainLayout:
     plane_edges: torch.Tensor = None
     plane_mask: torch.Tensor = None
     rigid_half_height: torch.Tensor = None
+    joint_half_height: float = None
 
 
 def band_size(finger: FingerSpec) -> int:
@@ -324,6 +339,7 @@ def _chain_layout(finger: FingerSpec, joint_weight: str, surface: str) -> ChainL
         contact_face=long(c_face),
         plane_edges=long([e for e, edge in enumerate(edges) if edge[3] != 1]),
         plane_mask=_part_mask([e[2] for e in edges if e[3] != 1 for _ in range(PLANE_GAUSS)], jp),
+        joint_half_height=0.5 * joint_height(),
         rigid_half_height=torch.tensor([0.5 * p.height for p in finger.parts if p.kind == "rigid"],
                                        dtype=torch.float64))
 
@@ -544,11 +560,14 @@ def joint_calibration(finger: FingerSpec) -> tuple[tuple[float, ...], ...] | Non
     return tuple(tuple(getattr(p, k) for p in joints) for k in ("pressure_gain", "pressure_offset", "stiffness_scale"))
 
 
-def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
+def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tensor, tau: torch.Tensor,
+                face_points: bool = True) -> FingerPose:
     """Forward kinematics of the right finger (module docstring).
 
     pressures: (B, J) MPa [P1 .. PJ]; tau: (B, J, 3) joint loads [F1 N, F2 N, M N·mm] in
-    each joint's undeformed frame. Returns the FingerPose (global mm, rad).
+    each joint's undeformed frame. Returns the FingerPose (global mm, rad). With surface
+    ``faces`` its points are ``edge_points`` (not without ``face_points``: the residual
+    sets them from the outline it builds anyway).
     """
     finger = params.finger
     B = pressures.shape[0]
@@ -592,12 +611,17 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
         points=torch.cat(points, 1) if points else torch.zeros(B, 0, 2, dtype=tau.dtype),
         finger=finger,
     )
-    if params.surface == "faces":   # the object edges' Gauss points over whole edges
-        layout = params.layout
-        start, end = edge_ends(outline_vertices(pose, layout), layout, layout.object_edges)
-        xi = gauss_rule()[0].to(tau.dtype)
-        pose.points = (start[:, :, None] + xi[:, None] * (end - start)[:, :, None]).flatten(1, 2)
+    if params.surface == "faces" and face_points:
+        pose.points = edge_points(outline_vertices(pose, params.layout), params.layout)
     return pose
+
+
+def edge_points(vertices: torch.Tensor, layout: ChainLayout) -> torch.Tensor:
+    """The object edges' Gauss points (B, Eo·EDGE_GAUSS, 2) mm over whole edges of the
+    outline ``vertices`` (B, V, 2): a pose's points with surface ``faces``."""
+    start, end = edge_ends(vertices, layout, layout.object_edges)
+    xi = gauss_rule()[0].to(vertices.dtype)
+    return (start[:, :, None] + xi[:, None] * (end - start)[:, :, None]).flatten(1, 2)
 
 
 def outline_vertices(pose: FingerPose, layout: ChainLayout) -> torch.Tensor:
@@ -610,7 +634,7 @@ def outline_vertices(pose: FingerPose, layout: ChainLayout) -> torch.Tensor:
     bisector = chord[:, :, :-1] + chord[:, :, 1:]
     bisector = bisector / bisector.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     d = torch.cat((_unit(pose.theta)[:, :, None], bisector, _unit(pose.phi)[:, :, None]), 2)
-    nu = 0.5 * joint_height() * torch.stack((-d[..., 1], d[..., 0]), -1)
+    nu = layout.joint_half_height * torch.stack((-d[..., 1], d[..., 0]), -1)
     joints = torch.cat((P - nu, P + nu), 2).flatten(1, 2)
     S, E = pose.segments[:, :, 0], pose.segments[:, :, 1]        # (B, R, 2)
     u = (E - S) / (E - S).norm(dim=-1, keepdim=True).clamp_min(1e-12)

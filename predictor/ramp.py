@@ -25,7 +25,7 @@ from predictor.jacobians import jacobian_fn
 from predictor.lm import lbfgs, levenberg_marquardt
 from predictor.options import SolverOptions
 from predictor.progress import Heartbeat
-from predictor.statics import GripperProblem, contact_loads, plane_overlap
+from predictor.statics import GripperProblem, contact_loads, meets, plane_overlap
 
 
 # Default grasp approach gesture (MPa): open joint 1, bring the object in (statics.Obstacle).
@@ -47,11 +47,6 @@ def ramp_method(options: SolverOptions) -> str:
 
 #: The plane stiffness factors of the homotopy a failed ramp step retries through (runner).
 PLANE_HOMOTOPY = (0.01, 0.1)
-
-
-def meets(problem: GripperProblem) -> bool:
-    """Whether the fingers meet at the symmetry plane X = 0 (its penalty is on)."""
-    return problem.contact.plane_stiffness > 0
 
 
 def ramped(problem: GripperProblem) -> bool:

@@ -15,9 +15,12 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
   and where it fails more Newton steps, then the LM below, go on (``_newton_then_lm``).
   From a given x0 (a network's tau) one Newton step and its statics, also one graph
   (``newton_polish``). Where the two fingers meet at X = 0 (statics.plane_contact) the
-  answer depends on how they closed: rows whose load-free pose already lies across the
-  plane, and rows that fail or end across it deeper than max_penetration, are ramped from
-  zero pressure instead (predictor.ramp.plane_ramp).
+  problem without the plane is solved first (``_apart_first``: its answer is this one's
+  where no vertex of the outline lies at X < 0, the plane's penalty being exactly zero
+  there), and only its rows that fail or cross X = 0 go on with the plane; the answer
+  then depends on how the fingers closed: rows whose load-free pose already lies across
+  the plane, and rows that fail or end across it deeper than max_penetration, are ramped
+  from zero pressure instead (predictor.ramp.plane_ramp).
   With an object: the LM below (predictor.nn_answer starts the same Newton steps,
   ``newton_iterate``, from the contact network's tau and checks their branch itself).
 - ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
@@ -74,7 +77,7 @@ from predictor.options import SolverOptions
 from predictor.ramp import (APPROACH, approach_for, attempts, plane_first, plane_ramp, plane_rows, ramp_method,
                             solve_path)
 from predictor.result import GestureResult, contact_fields, result_labels
-from predictor.statics import GripperProblem, Statics, box_scale, out_of_reach, residual_norms
+from predictor.statics import GripperProblem, Statics, apart, box_scale, meets, out_of_reach, residual_norms
 
 __all__ = ["APPROACH", "GRAPHS", "GestureResult", "SolverOptions", "approach_for", "gesture_result", "graph_mode",
            "meets_tolerances", "newton_iterate", "newton_polish", "newton_step", "result_labels", "solve",
@@ -107,13 +110,9 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
                                    **result_labels(problem))
     t0 = time.perf_counter()
     if options.method == "newton" and problem.obstacle is None and options.jacobian != "exact":
-        if x0 is None and options.max_iter >= COLD_STEPS:
-            deep = plane_first(problem, pressures, options)
-            if bool(deep.any()):
-                return _plane_then_newton(problem, pressures, options, deep, t0)
-            return _fingers_meet(problem, pressures, options, _cold_newton(problem, pressures, options, t0), t0)
-        start = torch.zeros(len(pressures), n_joints, 3, dtype=torch.float64) if x0 is None else x0
-        return _fingers_meet(problem, pressures, options, newton_polish(problem, pressures, start, options, t0)[0], t0)
+        if meets(problem):
+            return _apart_first(problem, pressures, options, x0, t0)
+        return _free_newton(problem, pressures, options, x0, t0)
     if options.method == "lbfgs":
         options = dataclasses.replace(options, tol_force=options.lbfgs_tol_force,
                                       tol_moment=options.lbfgs_tol_moment, cutbacks=0)
@@ -128,6 +127,38 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
         iterations[bad] += its
     return gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options),
                           None if problem.obstacle is None else first_contact)
+
+
+def _free_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, x0: torch.Tensor | None,
+                 t0: float) -> GestureResult:
+    """The object-free Newton solve: from tau = 0 the cold graph (``_cold_newton``; the
+    rows that start across X = 0 by the ramp, ``_plane_then_newton``), from x0 a step
+    (``newton_polish``), then ``_fingers_meet``."""
+    if x0 is None and options.max_iter >= COLD_STEPS:
+        deep = plane_first(problem, pressures, options)
+        if bool(deep.any()):
+            return _plane_then_newton(problem, pressures, options, deep, t0)
+        return _fingers_meet(problem, pressures, options, _cold_newton(problem, pressures, options, t0), t0)
+    start = torch.zeros(len(pressures), problem.n_joints, 3, dtype=torch.float64) if x0 is None else x0
+    return _fingers_meet(problem, pressures, options, newton_polish(problem, pressures, start, options, t0)[0], t0)
+
+
+def _apart_first(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, x0: torch.Tensor | None,
+                 t0: float) -> GestureResult:
+    """The object-free Newton solve where the fingers meet at X = 0, broad phase first:
+    ``_free_newton`` of the problem without the plane's penalty (statics.apart), whose
+    answer is this problem's wherever it converged with no vertex of the outline at X < 0
+    (the plane's penalty is exactly zero there: same residual, same check); the rows that
+    failed or cross X = 0 are solved again by ``_free_newton`` of ``problem`` (the plane's
+    ramp where they need it), their iterations added."""
+    res = _free_newton(apart(problem), pressures, options, x0, t0)
+    again = ~res.converged | (res.plane_overlap_mm > 0)
+    if not bool(again.any()):
+        return res
+    more = _free_newton(problem, pressures[again], options, None if x0 is None else x0[again], t0)
+    more = dataclasses.replace(more, iterations=more.iterations + res.iterations[again])
+    return dataclasses.replace(res.with_rows(again, more), method=joined(res.method, more.method),
+                               time_ms=1e3 * (time.perf_counter() - t0))
 
 
 def _plane_then_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, deep: torch.Tensor,

@@ -70,7 +70,7 @@ import torch
 
 from contract.spec import INPUT_BOX
 from predictor.gripper import (EDGE_GAUSS, PLANE_GAUSS, FingerPose, GripperParams, check_pressures, edge_ends,
-                               finger_pose, gauss_rule, outline_vertices, rot)
+                               edge_points, finger_pose, gauss_rule, outline_vertices, rot)
 from predictor.joint import JointModel, no_cap_message
 
 MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
@@ -366,12 +366,25 @@ class ContactState:
                    torch.zeros(B, dtype=torch.bool), zeros)
 
 
+def meets(problem: "GripperProblem") -> bool:
+    """Whether the fingers meet at the symmetry plane X = 0 (its penalty is on)."""
+    return problem.contact.plane_stiffness > 0
+
+
+def apart(problem: "GripperProblem") -> "GripperProblem":
+    """``problem`` without the plane X = 0's penalty: the same residual wherever no vertex
+    of the outline lies at X < 0 (the broad phase of predictor.graphs.gated)."""
+    return dataclasses.replace(problem, contact=dataclasses.replace(problem.contact, plane_stiffness=0.0))
+
+
 @dataclass
 class PlaneContact:
     """The right finger's contact with the symmetry plane X = 0 (the left finger's mirror
     face): points, forces (B, Kp, 2) mm, N, the Gauss points of every outline edge's part
     at X < 0 and the force on the finger there (+X); force (B,) N their sum; overlap (B,)
-    mm, how far the outline crosses X = 0 (max(0, -min X of its vertices))."""
+    mm, how far the outline crosses X = 0 (max(0, -min X of its vertices)). A Statics
+    rebuilt from a recorded graph (predictor.graphs.as_statics) has the figures force and
+    overlap only (points and forces None)."""
 
     points: torch.Tensor
     forces: torch.Tensor
@@ -383,13 +396,14 @@ class PlaneContact:
 class Statics:
     """Residual (B, J, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame), the pose it
     was evaluated at, the contact state with the object and the symmetry-plane contact
-    (None when it is off; a Statics rebuilt from a recorded graph leaves it None:
-    ``plane_contact`` of the pose gives it)."""
+    (None when it is off; a Statics rebuilt from a recorded graph has its figures only),
+    and the pose's ``outline_vertices`` (B, V, 2) mm where the residual built them."""
 
     residual: torch.Tensor
     pose: FingerPose
     contact: ContactState
     plane: PlaneContact | None = None
+    vertices: torch.Tensor | None = None
 
 
 def _cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -535,7 +549,7 @@ class GripperProblem:
         pressures: (B, J) MPa; tau: (B, J, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
         Returns Statics with residual (B, J, 3) in N, N, N·mm.
         """
-        pose = self.pose(pressures, tau)
+        pose = finger_pose(self.joint, self.params, pressures, tau, face_points=False)
         B, dt, params = tau.shape[0], tau.dtype, self.params
         layout = params.layout
         g = 1.0 if self.gravity else 0.0
@@ -549,10 +563,11 @@ class GripperProblem:
         w_frc = (g * layout.weights.to(dt)[:, None] * down).expand(B, -1, 2)
         pts, frc, distal = [w_pts], [w_frc], [layout.weight_mask]
         meet = self.contact.plane_stiffness > 0
-        V = outline_vertices(pose, layout) if meet or (self.obstacle is not None and layout.surface == "faces") \
-            else None
+        V = outline_vertices(pose, layout) if meet or layout.surface == "faces" else None
         if self.obstacle is None:
             contact = ContactState.none(B, dt)
+            if layout.surface == "faces":
+                pose.points = edge_points(V, layout)   # finger_pose's, from the outline built here
         else:
             contact = contact_loads(pose, params, self.obstacle, self.contact, g * params.object_weight, V)
             pts, frc, distal = pts + [contact.points], frc + [contact.forces], distal + [layout.contact_mask]
@@ -571,7 +586,7 @@ class GripperProblem:
         m_sum = sums[..., 2] - _cross(ends, f_sum)
         g_force = rot(pose.theta, tau[..., :2])
         res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
-        return Statics(res, pose, contact, plane)
+        return Statics(res, pose, contact, plane, V)
 
 
 #: A joint's reach (its chord, mm) is bounded by this multiple of its length: an
