@@ -150,13 +150,14 @@ def _apart_first(problem: GripperProblem, pressures: torch.Tensor, options: Solv
     answer is this problem's wherever it converged with no vertex of the outline at X < 0
     (the plane's penalty is exactly zero there: same residual, same check); the rows that
     failed or cross X = 0 are solved again by ``_free_newton`` of ``problem`` (the plane's
-    ramp where they need it), their iterations added."""
+    ramp where they need it), as if alone: their iterations and method are that solve's
+    (the broad phase's try is in ``time_ms`` only), so a result is the one the plane's
+    path gives."""
     res = _free_newton(apart(problem), pressures, options, x0, t0)
     again = ~res.converged | (res.plane_overlap_mm > 0)
     if not bool(again.any()):
         return res
     more = _free_newton(problem, pressures[again], options, None if x0 is None else x0[again], t0)
-    more = dataclasses.replace(more, iterations=more.iterations + res.iterations[again])
     return dataclasses.replace(res.with_rows(again, more), method=joined(res.method, more.method),
                                time_ms=1e3 * (time.perf_counter() - t0))
 
