@@ -69,6 +69,9 @@ ARTEFACTS = (
     Artefact("predictor/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
              "--out results/predictor/contact_change.json", predictor.CONTACT_CHANGE),
     Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),
+    Artefact("calibration/calibration.json", "make calibrate-demo", predictor.CALIBRATION),
+    Artefact("calibration/fem/*.json", "make calibration-fem", fem.FINGER_CASE),
+    Artefact("bench/calibrate.json", "make bench-calibrate", predictor.CALIBRATION_BENCH),
     Artefact("validation/finger.json", "make validate-finger", predictor.VALIDATION),
     Artefact("validation/finger_fem/*.json", "make finger-fem", fem.FINGER_CASE),
     Artefact("demo/finger.json", "make demo", predictor.VALIDATION),

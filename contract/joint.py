@@ -34,8 +34,8 @@ A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
 * ``[mesh]``: the defaults it is meshed with: tetrahedra of ``size`` (mm) and
   ``wall_size`` (mm, absent: ``size``), or swept hexahedra of ``divisions`` (a whole number
   in [1, 6]: that many elements through every wall, fem.mesh_hex) instead of the sizes,
-  optionally graded in the bending plane by ``hex_size`` S (mm: an x or y interval of
-  length d is cut into divisions x ceil(d / S) elements); and ``formulation``
+  optionally graded by ``hex_size`` S (mm: an interval of length d is cut into
+  divisions x ceil(d / S) elements); and ``formulation``
   ("displacement" or "mixed").
 
 Shape rules, from fem.geometry's construction of the y >= 0 quarter (a core bar of height
@@ -407,8 +407,8 @@ def _mesh(source: str, doc: dict, shape: BellowShape, material: MaterialLaw) -> 
 
 def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0,
               hex_size: float | None = None) -> str:
-    """A mesh in words: ``hexN`` (hexahedra of N divisions), ``hexN:S`` (graded in x-y by
-    S mm), or ``H`` / ``H:W`` (tetrahedra, mm)."""
+    """A mesh in words: ``hexN`` (hexahedra of N divisions), ``hexN:S`` (graded: elements
+    of at most S / N mm), or ``H`` / ``H:W`` (tetrahedra, mm)."""
     if divisions:
         return f"hex{divisions}" + (f":{hex_size:g}" if hex_size else "")
     return f"{size:g}" + (f":{wall_size:g}" if wall_size else "")

@@ -10,7 +10,8 @@ the one-sided quadratic penalty energy::
     g   = (x_b - x_a) · n                      signed gap (mm), x = X + u
     Pi_c = sum_pairs  kappa w / 2  <-g>^2      <s> = max(s, 0)
 
-with ``kappa`` the penalty (MPa/mm, i.e. contact pressure per mm of overlap), w the
+with ``kappa`` the penalty (MPa/mm, i.e. contact pressure per mm of overlap; one per joint
+of a finger, fem.problem.contact_penalty_for: it scales with the joint's modulus), w the
 face area per node (mm²) and n the unit normal of the best-fit plane through both faces
 of the valley, projected on the bending plane (z-component dropped: the load is planar).
 n is lagged: taken from the current iterate and not differentiated, so the tangent is
@@ -40,15 +41,16 @@ from fem.geometry import TAGS, JointGeometry
 class ValleyContact:
     """Node-to-node penalty contact between the periodic valley faces of the joint."""
 
-    def __init__(self, V, facet_tags, geometry: JointGeometry, penalty: float,
+    def __init__(self, V, facet_tags, geometry: JointGeometry, penalty: float | tuple[float, ...],
                  offsets: tuple[float, ...] = (0.0,), parent=None):
         """``V``: the blocked (3-component) displacement space. ``offsets``: x (mm) of the
         proximal face of every joint in the mesh (a finger holds several); valleys are
-        numbered along x across all joints. ``parent`` = (W, to_parent) when V is the
+        numbered along x across all joints. ``penalty`` (MPa/mm): one for every joint, or
+        one per joint (as ``offsets``). ``parent`` = (W, to_parent) when V is the
         displacement block collapsed out of the unknown's mixed space W: ``to_parent[i]``
         is the local dof of W of V's unrolled local dof i."""
         self.comm = V.mesh.comm
-        self.penalty = penalty
+        penalties = np.broadcast_to(np.asarray(penalty, dtype=float), (len(offsets),))
         imap = V.dofmap.index_map
         nodes = fem.locate_dofs_topological(V, 2, facet_tags.find(TAGS["valley_faces"]))
         owned = nodes[nodes < imap.size_local]
@@ -67,8 +69,9 @@ class ValleyContact:
         # Pairs per valley and side, as indices into the gathered arrays.
         self.groups = {}
         cells = geometry.cells()
-        valleys = [(x0 + a, x0 + b) for x0 in offsets for (_, a), (b, _) in zip(cells[:-1], cells[1:])]
-        for k, (x1, x2) in enumerate(valleys):
+        valleys = [(x0 + a, x0 + b, kappa) for x0, kappa in zip(offsets, penalties)
+                   for (_, a), (b, _) in zip(cells[:-1], cells[1:])]
+        for k, (x1, x2, kappa) in enumerate(valleys):
             for side, sign in (("top", 1.0), ("bottom", -1.0)):
                 half = sign * X[:, 1] > 0
                 a = np.flatnonzero(half & (np.abs(X[:, 0] - x1) < 1e-6))
@@ -77,7 +80,7 @@ class ValleyContact:
                 if len(a) != len(b) or len(a) == 0 or dist.max() > 1e-6:
                     raise RuntimeError(f"valley {k} ({side}): faces are not meshed periodically")
                 area = (geometry.height - geometry.valley_height) / 2 * geometry.width / 2
-                self.groups[(k, side)] = (a, b[j], area / len(a))
+                self.groups[(k, side)] = (a, b[j], kappa * area / len(a))   # kappa w (N/mm)
 
     def coupled_dofs(self) -> np.ndarray:
         """Global (x, y) dofs of both nodes of every pair, (n_pairs, 4): the entries
@@ -113,13 +116,11 @@ class ValleyContact:
     def _terms(self, u: fem.Function):
         """Per pair: global (x, y, z) dofs of a and b (n, 3), normal, k w <-g>, k w H(-g)."""
         x = self.positions(u)
-        for a, b, w in self.groups.values():
+        for a, b, kw in self.groups.values():
             n = self.normal(x[a], x[b])
             g = (x[b] - x[a]) @ n
             closed = g < 0
-            yield (self._dofs[a], self._dofs[b], n,
-                   self.penalty * w * np.where(closed, -g, 0.0),
-                   self.penalty * w * closed)
+            yield (self._dofs[a], self._dofs[b], n, kw * np.where(closed, -g, 0.0), kw * closed)
 
     def add_residual(self, b: PETSc.Vec, u: fem.Function) -> None:
         """b += dPi_c/du (collective)."""

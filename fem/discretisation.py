@@ -3,8 +3,8 @@
 A discretisation is (mesh, formulation, q, kappa). The mesh is either tetrahedra of size H
 mm and W mm on the 1.2 mm chamber walls (JointGeometry.mesh_size, wall_mesh_size; W = None:
 H; written "H" or "H:W"), or the swept hexahedra of n divisions (JointGeometry.divisions,
-fem.mesh_hex: n elements through every wall; written "hexN"), optionally graded in the
-bending plane by S mm (JointGeometry.hex_size; written "hexN:S"). Then the formulation
+fem.mesh_hex: n elements through every wall; written "hexN"), optionally graded by S mm
+(JointGeometry.hex_size: long intervals cut into elements of at most S / n; "hexN:S"). Then the formulation
 ("displacement": P2 / Q2 displacement; "mixed": Taylor-Hood P2-P1 / Q2-Q1 u-p, see
 fem.problem), the quadrature degree q (at least fem.mesh_hex.QUADRATURE on hexahedra) and
 the valley-contact penalty kappa (MPa/mm).

@@ -87,7 +87,7 @@ from fem.mesh import MeshData, create_mesh
 from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
                          joint_geometry)
 from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
-                         chamber_pressures, clamp_and_symmetry, deformation_gradient,
+                         chamber_pressures, clamp_and_symmetry, contact_penalty_for, deformation_gradient,
                          displacement_space, elastic_work, facet_tags_present, mixed_bellow_work,
                          mixed_clamp_and_symmetry, mixed_elastic_work, mixed_space, region_volume,
                          rotation_about_z, valley_contact)
@@ -311,7 +311,8 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData,
     loads = pressures
     if weights:
         loads += (LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), sum(weights[1:], weights[0]), n),)
-    contact = valley_contact(unknown.U, ft, present, geometry.joint, contact_penalty,
+    contact = valley_contact(unknown.U, ft, present, geometry.joint,
+                             tuple(contact_penalty_for(contact_penalty, laws[k]) for k in finger.joints),
                              offsets=tuple(finger.rest_start(k) for k in finger.joints),
                              parent=unknown.parent)
     return Problem(mesh_data, unknown.w, internal, loads, np.append(pressure_limits(finger), 1.0),

@@ -2,6 +2,7 @@
 
     python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8 | --divisions N]
                                [--part 1/2] [--formulation mixed]
+    python -m fem.finger_cases --finger FILE --pressures "0.2,0.2;-0.1,0.05" --out DIR
 
 Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
 * free pressurisation without gravity (the paper's Figure 3): (0.05, 0.05), (0.1, 0.1),
@@ -11,6 +12,10 @@ Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
   (0.2, 0.2) and (0.3, 0.3), none the mirror image (-P1, -P2) of another: with gravity
   along the finger at rest the mirror case is the mirror finger (tests/test_finger.py),
   so it would add no information.
+
+``--pressures "P1,P2;P1,P2;..."`` solves other gravity cases instead (each pair within the
+joints' boxes, named ``gravity_P1_P2`` as above; ``pressure_cases``): the calibration's
+FEM observations of a deliberately different finger (``make calibration-fem``).
 
 Each case is one ``FingerSolver.solve`` (every joint of its own joint file, fem.finger;
 ``--formulation`` and the mesh sizes default to the first joint file's [mesh], for the
@@ -34,6 +39,7 @@ it ran with (``solver``), and is tried again when they change.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -50,7 +56,7 @@ from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
 from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
-                        rotation_matrix)
+                        pressure_limits, rotation_matrix)
 from fem.solver import config_for
 from contract.finger import finger_arg, load_finger
 from contract.joint import is_paper_joint, joint_digest
@@ -70,6 +76,27 @@ CASES = [
     ("gravity_0.05_-0.2", 0.05, -0.2, True), ("gravity_-0.25_0.2", -0.25, 0.2, True),
 ]
 WINDOW = (900, 900)   # render size, pixels
+
+
+def case_name(p1: float, p2: float, gravity: bool = True) -> str:
+    """A case's name as CASES spell it: gravity_P1_P2 or free_P1_P2 (MPa, %g)."""
+    return f"{'gravity' if gravity else 'free'}_{p1:g}_{p2:g}"
+
+
+def pressure_cases(text: str) -> list[tuple[str, float, float, bool]]:
+    """argparse type of --pressures: "P1,P2;P1,P2;..." (MPa) -> gravity cases as CASES
+    holds them; a pair given twice, or not two finite numbers, is refused (one line; the
+    joints' boxes are checked once the finger is read)."""
+    pair = cli.numbers(2, unit="MPa")
+    cases = []
+    for item in text.split(";"):
+        p1, p2 = pair(item.strip())
+        cases.append((case_name(p1, p2), p1, p2, True))
+    names = [c[0] for c in cases]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise argparse.ArgumentTypeError(f"{text!r}: {', '.join(twice)} given twice")
+    return cases
 
 
 def render(solver: FingerSolver, path: Path) -> dict:
@@ -123,6 +150,8 @@ def main(argv=None) -> int:
                     help="rigid-part element size, mm")
     add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
+    ap.add_argument("--pressures", type=pressure_cases, metavar="P1,P2;...",
+                    help="solve these gravity pressure pairs (MPa, ';' between pairs) instead of the validation cases")
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default=None, help="appended to each file name (e.g. _h1.2 for a finer mesh; "
                     "default: _hexN with --divisions N, so hexahedra never replace the tetrahedral cases, else none)")
@@ -130,7 +159,8 @@ def main(argv=None) -> int:
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
     args = ap.parse_args(argv)
-    names = [c[0] for c in CASES]
+    table = args.pressures or CASES
+    names = [c[0] for c in table]
     chosen = args.cases.split(",") if args.cases else names
     for name in chosen:
         if name not in names:
@@ -140,11 +170,16 @@ def main(argv=None) -> int:
         assert 1 <= k <= n
     except (ValueError, AssertionError):
         ap.error(f"--part {args.part!r}: use K/N with 1 <= K <= N")
-    cases = [c for c in CASES if c[0] in chosen][k - 1::n]
+    cases = [c for c in table if c[0] in chosen][k - 1::n]
     finger = args.finger or load_finger()
     if finger.n_joints != 2:
         ap.error(f"--finger: finger {finger.name!r} has {finger.n_joints} joint(s); the validation cases "
                  "are pressure pairs for a two-joint finger (use python -m fem.finger --pressures for others)")
+    limits = pressure_limits(finger)
+    for name, *pressures, _ in cases:
+        for j, (p, limit) in enumerate(zip(pressures, limits), 1):
+            if abs(p) > limit:
+                ap.error(f"case {name}: P{j} = {p:g} is outside [{-limit:g}, {limit:g}] MPa (its joint's input box)")
     cli.setup_logging(args.quiet)
     geometry, formulation = finger_discretisation(ap, args, finger)
     settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}

@@ -64,8 +64,9 @@ class JointGeometry:
     ``mesh_size``) is used on the chamber walls. ``divisions`` n >= 1 meshes the joint with
     hexahedra instead (fem.mesh_hex: every interval between the profile's breakpoints cut
     into n, so n elements through every wall; the two sizes are then unused); 0: tetrahedra.
-    ``hex_size`` S (mm, hexahedra only) grades them in the bending plane: an x or y
-    interval of length d is cut into n ceil(d / S) elements (None: n).
+    ``hex_size`` S (mm, hexahedra only) grades them: an interval of length d is cut into
+    n ceil(d / S) elements (None: n), so walls keep n elements through their thickness and
+    long spans get elements of at most S / n.
     """
 
     length: float = JOINT_LENGTH

@@ -22,17 +22,17 @@ union of the joint's and every rigid part's (+-h_k/2; 0, w_k/2).
 One tensor grid over those breakpoints (a :class:`Layout`): the mesh of ``divisions`` n
 cuts every interval of length d into n * max(1, ceil(d / S0)) equal elements, S0 =
 FingerGeometry.rigid_mesh_size for a finger (6 mm: the long rigid intervals get elements
-of at most S0 / n) and infinite for a joint, except that a joint's ``hex_size`` S grades it
-in the bending plane: its x and y intervals take S0 = S (the long spans of the cells'
-walls get more elements than the walls' thickness; z is left at n). A hexahedron is kept
+of at most S0 / n) and infinite for a joint, except that a joint's ``hex_size`` S grades it:
+its intervals take S0 = S (the long spans of the cells' walls and of the chambers along z
+get more elements than the walls' thickness). A hexahedron is kept
 when its midpoint lies in the solid (a joint's outer box less its chambers and valley
-gaps, or a rigid box).
-So every joint wall is n elements thick, element sizes scale exactly as 1/n, and the
-meshes of n = 1, 2, 3, ... are nested (the Richardson family of fem.mesh_study). A joint
-whose intervals are all shorter than S0 (the paper's: at most 5.8 mm, the chambers' z
-extent Z - t; 4.69 mm along x) and whose section the rigid parts share (their y, z
-breakpoints are the joint's) is meshed in the finger exactly as alone. The profile is polygonal, so straight-sided hexahedra represent the
-solid exactly (volumes and areas to round-off).
+gaps, or a rigid box). So every joint wall is n elements thick, element sizes scale
+exactly as 1/n, and the meshes of n = 1, 2, 3, ... (one S) are nested (the Richardson
+family of fem.mesh_study). A joint whose intervals are all shorter than S0 (the paper's:
+at most 5.8 mm, the chambers' z extent Z - t; 4.69 mm along x) and whose section the
+rigid parts share (their y, z breakpoints are the joint's) is meshed in the finger exactly
+as alone. The profile is polygonal, so straight-sided hexahedra represent the solid
+exactly (volumes and areas to round-off).
 
 The y breakpoints are symmetric (every box is centred on y = 0) and the grid is
 symmetrised, so the node set is exactly its own y-mirror, node by node, as the
@@ -242,8 +242,7 @@ def joint_layout(geo: JointGeometry) -> Layout:
         return tag
 
     S = geo.hex_size or math.inf
-    return Layout(breakpoints(geo), lambda x, y, z: in_joint(geo, x, y, z), cell_tags, facet_tags,
-                  (S, S, math.inf))
+    return Layout(breakpoints(geo), lambda x, y, z: in_joint(geo, x, y, z), cell_tags, facet_tags, (S, S, S))
 
 
 def part_spans(geo: FingerGeometry) -> list[tuple[float, float]]:
@@ -304,13 +303,13 @@ def finger_layout(geo: FingerGeometry) -> Layout:
         return tag
 
     bx, by, bz = breaks = finger_breakpoints(geo)
-    rigid, plane = geo.rigid_mesh_size, min(geo.rigid_mesh_size, jg.hex_size or math.inf)
+    rigid, joint = geo.rigid_mesh_size, min(geo.rigid_mesh_size, jg.hex_size or math.inf)
     mid = (bx[:-1] + bx[1:]) / 2
     in_a_joint = np.zeros(len(mid), dtype=bool)
     for _, (part, (x0, x1)) in parts:
         in_a_joint |= (part.kind == "joint") & (mid > x0) & (mid < x1)
     return Layout(breaks, lambda x, y, z: in_finger(geo, x, y, z), cell_tags, facet_tags,
-                  (np.where(in_a_joint, plane, rigid), plane, rigid))
+                  (np.where(in_a_joint, joint, rigid), joint, joint))
 
 
 # ---------------------------------------------------------------------- DOLFINx

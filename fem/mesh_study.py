@@ -6,7 +6,8 @@
 
 A mesh is ``H`` or ``H:W``: tetrahedron size H mm, and W mm on the 1.2 mm chamber walls
 (W = 0.6 puts two P2 elements through the wall), or ``hexN``: the swept hexahedral mesh of
-N divisions (fem.mesh_hex; N elements through every wall, nested for N = 1, 2, 3, ...).
+N divisions (fem.mesh_hex; N elements through every wall, nested for N = 1, 2, 3, ...), or
+``hexN:S``: the same graded, every interval of length d cut into N ceil(d / S).
 The study solves fem.joint_cases.LOADS (four box corners, four interior loads) from zero on
 every mesh (one kind) in one formulation, on the production discretisation
 (fem.discretisation.PRODUCTION, its mesh ``--production``: what new data is generated on,
@@ -259,7 +260,8 @@ def main(argv=None) -> int:
     ap.add_argument("--meshes", type=mesh_text, nargs="+", default=DEFAULT_MESHES, metavar="MESH",
                     action=_Distinct, help=f"distinct meshes of one kind: tetrahedra H[:W] (size H and wall size "
                     f"W, {MESH_SIZE_TEXT}) or hexahedra hexN (N divisions, N elements through every wall, in "
-                    f"[1, {MAX_DIVISIONS}]) (default {' '.join(DEFAULT_MESHES)})")
+                    f"[1, {MAX_DIVISIONS}]) or hexN:S (graded: elements of at most S / N mm) (default "
+                    f"{' '.join(DEFAULT_MESHES)})")
     ap.add_argument("--formulation", choices=FORMULATIONS, default=PRODUCTION.formulation,
                     help=f"the family's formulation (default {PRODUCTION.formulation}, the production one)")
     ap.add_argument("--production", type=mesh_text, default=PRODUCTION.mesh, metavar="MESH",

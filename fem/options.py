@@ -62,13 +62,13 @@ def add_wall_mesh_size(ap: cli.Parser) -> None:
 
 def add_divisions(ap: cli.Parser) -> None:
     """``--divisions`` N: hexahedra of N divisions (fem.mesh_hex), exclusive with the
-    tetrahedron sizes (joint_geometry checks); ``--hex-size`` S grades them in x-y."""
+    tetrahedron sizes (joint_geometry checks); ``--hex-size`` S grades them."""
     ap.add_argument("--divisions", type=cli.number(1, MAX_DIVISIONS, integer=True), default=None,
                     help=f"mesh the joint with swept Q2 hexahedra, N elements through every wall, N in [1, "
                          f"{MAX_DIVISIONS}] (instead of --mesh-size/--wall-mesh-size tetrahedra)")
     ap.add_argument("--hex-size", type=MESH_SIZE, default=None,
-                    help=f"with --divisions N: grade the hexahedra in the bending plane, an x or y interval of "
-                         f"length d cut into N ceil(d / S) elements, S {MESH_SIZE_TEXT} (default: N)")
+                    help=f"with --divisions N: grade the hexahedra, an interval of length d cut into N ceil(d / S) "
+                         f"elements (walls keep N, long spans get at most S / N), S {MESH_SIZE_TEXT} (default: N)")
 
 
 def mesh_text(text: str) -> str:

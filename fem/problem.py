@@ -316,12 +316,22 @@ def facet_tags_present(facet_tags) -> set:
     return comm.allreduce(tags, op=MPI.BOR) if comm.size > 1 else tags
 
 
-def valley_contact(V, facet_tags, present: set, joint: JointGeometry, penalty: float,
+def contact_penalty_for(penalty: float, material: MaterialLaw | Material) -> float:
+    """The valley-contact penalty (MPa/mm) of a joint of ``material``: ``penalty`` (the
+    solver's, SolverConfig.contact_penalty) holds for the paper's E = 12.2 MPa and scales
+    with the law's small-strain modulus E0, so that an overlap costs the same strain in any
+    elastomer. (A fixed 100 MPa/mm on a 0.5 MPa silicone is a spring 23x too stiff for
+    its walls: Newton stalls where the valleys close.) The paper's joint keeps ``penalty``
+    exactly."""
+    return penalty * (as_law(material).youngs_modulus / Material().E)
+
+
+def valley_contact(V, facet_tags, present: set, joint: JointGeometry, penalty: float | tuple[float, ...],
                    offsets: tuple[float, ...] = (0.0,), parent=None) -> ValleyContact | None:
     """The valley self-contact of the joints at x = ``offsets`` (mm), or None when the
-    mesh has no valley faces or the penalty (MPa/mm) is 0. ``parent``: see ValleyContact
-    (V a displacement space collapsed out of the mixed space)."""
-    if TAGS["valley_faces"] not in present or penalty <= 0:
+    mesh has no valley faces or the penalty (MPa/mm; one, or one per joint) is 0.
+    ``parent``: see ValleyContact (V a displacement space collapsed out of the mixed space)."""
+    if TAGS["valley_faces"] not in present or np.max(penalty) <= 0:
         return None
     return ValleyContact(V, facet_tags, joint, penalty, offsets=offsets, parent=parent)
 
@@ -461,7 +471,8 @@ def joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale,
     forces, cap = end_loads(F, u, v, dx(TAGS["distal_cap"]), ref_point, first=1)
     return Problem(mesh_data, u, internal, pressure + forces, np.asarray(load_scale, dtype=float),
                    tuple(clamp_and_symmetry(V, ft)), np.asarray(probe_points, dtype=float).reshape(-1, 3),
-                   valley_contact(V, ft, present, mesh_data.geometry, contact_penalty),
+                   valley_contact(V, ft, present, mesh_data.geometry,
+                                  contact_penalty_for(contact_penalty, material)),
                    lagged=(cap,), averages={"cap_rotation": cap.average})
 
 
@@ -479,8 +490,8 @@ def mixed_joint_problem(mesh_data: MeshData, ref_point, probe_points, load_scale
                                  present, 0)
     forces, cap = end_loads(F, fields.u, fields.v, dx(TAGS["distal_cap"]), ref_point, first=1,
                             unknown=fields.w, test=fields.test)
-    contact = valley_contact(fields.U, ft, present, mesh_data.geometry, contact_penalty,
-                             parent=(W, fields.to_parent))
+    contact = valley_contact(fields.U, ft, present, mesh_data.geometry,
+                             contact_penalty_for(contact_penalty, material), parent=(W, fields.to_parent))
     return Problem(mesh_data, fields.w, internal, pressure + forces,
                    np.asarray(load_scale, dtype=float), tuple(mixed_clamp_and_symmetry(W, ft)),
                    np.asarray(probe_points, dtype=float).reshape(-1, 3), contact,

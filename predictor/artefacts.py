@@ -135,3 +135,27 @@ CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change
     "gestures[].group": str, "gestures[].object": str | None, "gestures[].pressures_MPa": list,
     **each("gestures[]", str, "state_before", "state_after"), "gestures[].tip_shift_mm": MAYBE,
     "gestures[].plane_overlap_mm": MAYBE})
+
+#: results/calibration/calibration.json (make calibrate-demo; predictor.calibrate fem): the
+#: predictor calibrated on four whole-finger FEM gestures of a deliberately different finger
+#: and its fingertip errors on the held-out ones, uncalibrated and calibrated; the recovery
+#: study's figures copied beside them.
+CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
+    "joint_model": str, "truth_finger.name": str, "model_finger.name": str,
+    "fem.mesh": str, "fem.nodes": int, "fem.cases[].sha256": str, "fem.cases[].role": str,
+    "fit.parameters": list, "fit.why": str, **each("parameters{}", NUM, "value", "std", "nominal", "true"),
+    "observations_used": int, "heldout_observations": int, "calibrate_on_MPa": list, "heldout_MPa": list,
+    **each("heldout_tip_error_uncalibrated_mm", NUM, "mean", "max"),
+    **each("heldout_tip_error_calibrated_mm", NUM, "mean", "max"), "improvement": NUM,
+    "heldout[].pressures_MPa": list, **each("heldout[]", NUM, "uncalibrated_error_mm", "calibrated_error_mm"),
+    "time_s": NUM, **each("targets", NUM, "improvement_at_least", "calibrated_tip_error_mm_at_most"),
+    **each("recovery.parameters{}", NUM, "true", "fitted"), "recovery.parameters{}.interval_95": list,
+    "recovery.coverage_95": NUM, "recovery.all_identifiable_within_2pct": bool,
+    "recovery.time_s_8_observations": NUM, "figure?": str})
+
+#: results/bench/calibrate.json (make bench-calibrate; predictor.calibrate bench): wall times
+#: of the 8-observation calibration, with the machine's load and what ran beside it.
+CALIBRATION_BENCH = Format("predictor-calibration-bench", 1, "predictor.calibrate", {
+    "observations": int, "parameters": list, "starts": int, "repeats": int, "joint": str,
+    **each("", NUM, "fit_median_s", "fit_cpu_median_s", "with_loo_median_s", "with_loo_cpu_median_s", "target_s"),
+    "fit_s": list, "with_loo_s": list, "load_average_before": list, "load_average_after": list, "beside": str})

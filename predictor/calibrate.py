@@ -5,6 +5,10 @@
         [--prior NAME=MEAN,STD ...] [--starts N] [--no-loo] --out CALIBRATED.toml [--json]
     python -m predictor.calibrate recovery --out results/calibration/recovery.json
         [--model PATH|analytic] [--seeds N] [--starts N] [--json]
+    python -m predictor.calibrate fem --fem results/calibration/fem --out results/calibration/calibration.json
+        [--truth FILE] [--pressures "P1,P2;..."] [--calibrate-on "P1,P2;..."] [--fit NAME,...]
+        [--recovery results/calibration/recovery.json] [--figure PNG] [--calibrated TOML] [--json]
+    python -m predictor.calibrate bench --out results/bench/calibrate.json [--repeats N] [--beside TEXT]
 
 The first fits the switchable parameters (names or groups of predictor.calibration:
 gain, offset, stiffness, weight, mount, frame; default gain,offset,stiffness) to the
@@ -16,7 +20,15 @@ and the API read. JSON: ``parameters`` (name -> value, std, identifiable),
 with a tip; also its max and each), ``unidentifiable``, ``correlated``, ``time_s``, ``out``.
 
 ``recovery`` runs the known-truth study (predictor.calibration_recovery) and writes its
-JSON.
+JSON. ``fem`` calibrates the paper's predictor on four whole-finger FEM gestures of a
+deliberately different finger and predicts the held-out ones (predictor.calibration_fem,
+``make calibrate-demo``): the JSON (``heldout_tip_error_uncalibrated_mm``,
+``heldout_tip_error_calibrated_mm``, ``observations_used``, ``time_s``, ``recovery``, ...),
+the before/after figure (predictor.calibration_plot; default ``heldout.png`` beside the
+JSON) and the calibrated finger file (default ``calibrated.toml`` beside it); it refuses
+(exit 2, one line, nothing written) FEM cases that are missing, did not converge, or were
+solved for another finger. ``bench`` times the 8-observation calibration
+(predictor.calibration_bench, ``make bench-calibrate``).
 
 Exit codes: 0 done; 1 the fit did not converge (nothing written); 2 bad input (a
 measurement file that fails its schema, an unknown --fit name, a bad finger file, model,
@@ -25,15 +37,18 @@ prior or output) with a one-line reason on stderr, checked before the fit.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import logging
 import math
 import sys
+from pathlib import Path
 
 import torch
 
 from contract import cli
 from contract.finger import DEFAULT_FINGER, finger_arg
 from predictor.artefacts import RECOVERY
+from predictor.defaults import results_dir
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS
 from predictor.joint import load_joint
 
@@ -75,7 +90,8 @@ def main_fit(argv) -> int:
     from predictor.observations import load_observations
 
     ap = cli.Parser(prog="python -m predictor.calibrate", description=__doc__.split("\n\n")[0],
-                    epilog="python -m predictor.calibrate recovery --help: the known-truth recovery study")
+                    epilog="subcommands (each with --help): recovery (the known-truth study), fem (calibrate on "
+                           "whole-finger FEM gestures), bench (time the 8-observation calibration)")
     ap.add_argument("--observations", required=True, help="measurement file (JSON, docs/calibration.md)")
     ap.add_argument("--fit", default=",".join(DEFAULT_FIT), help="parameters or groups to fit, comma separated")
     ap.add_argument("--prior", type=prior_arg, action="append", default=[], help="NAME=MEAN,STD (repeatable)")
@@ -139,11 +155,123 @@ def main_recovery(argv) -> int:
     return 0
 
 
+def _pairs(text: str):
+    from predictor.calibration_fem import pairs_arg
+
+    try:
+        return pairs_arg(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def main_fem(argv) -> int:
+    from predictor.artefacts import CALIBRATION
+    from predictor.calibration import resolve_fit
+    from predictor.calibration_fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, fem_study, load_cases,
+                                           recovery_summary)
+    from predictor.calibration_file import write_calibrated
+    from predictor.calibration_fit import FitFailed
+    from predictor.calibration_plot import heldout_figure
+
+    ap = cli.Parser(prog="python -m predictor.calibrate fem",
+                    description="calibrate on whole-finger FEM gestures of another finger, predict the others")
+    ap.add_argument("--fem", default=str(results_dir() / "calibration" / "fem"),
+                    help="folder of fem.finger_cases JSON of --truth (default: results/calibration/fem)")
+    ap.add_argument("--truth", type=finger_arg, default=str(TRUTH_FINGER),
+                    help="the finger file the FEM solved (default: results/calibration/truth/finger.toml)")
+    ap.add_argument("--pressures", type=_pairs, default=PRESSURES, metavar="P1,P2;...",
+                    help="the FEM cases' pressure pairs, MPa (default: the 8 of predictor.calibration_fem)")
+    ap.add_argument("--calibrate-on", type=_pairs, default=CALIBRATE_ON, metavar="P1,P2;...",
+                    help="the pairs calibrated on (default: 4 spread over the box); the others are held out")
+    ap.add_argument("--fit", default=",".join(FIT), help="parameters or groups to fit, comma separated")
+    ap.add_argument("--recovery", default=str(results_dir() / "calibration" / "recovery.json"),
+                    help="the recovery study's JSON (make calibrate-recovery; default results/calibration/recovery.json)")
+    ap.add_output("--out", required=True, suffix=".json", help="calibration.json to write")
+    ap.add_output("--figure", suffix=".png", help="before/after figure (default: heldout.png beside --out)")
+    ap.add_output("--calibrated", suffix=".toml", help="calibrated finger file (default: calibrated.toml beside --out)")
+    _model_args(ap)
+    args = ap.parse_args(argv)
+    cli.setup_logging(args.quiet)
+    out = Path(args.out)
+    figure = Path(args.figure) if args.figure else out.with_name("heldout.png")
+    calibrated = Path(args.calibrated) if args.calibrated else out.with_name("calibrated.toml")
+    with ap.errors():
+        cases = load_cases(args.fem, args.truth, args.pressures)
+        if not Path(args.recovery).is_file():
+            raise ValueError(f"{args.recovery}: no recovery study (run `make calibrate-recovery`)")
+        recovery = recovery_summary(RECOVERY.load(args.recovery))
+        model = _model(args)
+        names = [n.strip() for n in args.fit.split(",") if n.strip()]
+        resolve_fit(names, model.table)
+        LOG.info("calibrating on %d of %d FEM gestures", len(args.calibrate_on), len(cases))
+        try:
+            study = fem_study(model, cases, args.truth, args.calibrate_on, names, starts=args.starts)
+        except FitFailed as exc:
+            print(f"python -m predictor.calibrate fem: {exc}", file=sys.stderr)
+            return 1
+        held = {tuple(c["pressures_MPa"]) for c in study.record["heldout"]}
+        # the finger file first: it is checked before it is written, the JSON (make's target) last
+        write_calibrated(calibrated, model, study.result, _cases_digest(cases), str(args.fem))
+        heldout_figure(figure, study, [c for c in cases if c.pressures in held])
+        record = {**study.record, "fem_folder": str(args.fem), "recovery": {"source": str(args.recovery), **recovery},
+                  "figure": str(figure), "calibrated_finger": str(calibrated)}
+        CALIBRATION.write(out, record)
+    s = {k: record[k] for k in ("heldout_tip_error_uncalibrated_mm", "heldout_tip_error_calibrated_mm",
+                                "improvement", "observations_used", "time_s")}
+    if args.json:
+        cli.print_json({**s, "parameters": record["parameters"], "out": str(out)})
+    else:
+        u, c = s["heldout_tip_error_uncalibrated_mm"], s["heldout_tip_error_calibrated_mm"]
+        for n, p in record["parameters"].items():
+            print(f"{n:14s} {p['value']:+.6g} ± {p['std']:.3g} (true {p['true']:+.6g})")
+        print(f"held-out fingertip error mean {u['mean']:.3f} -> {c['mean']:.3f} mm (max {u['max']:.3f} -> "
+              f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} in "
+              f"{s['time_s']:.1f} s; wrote {out}, {figure}, {calibrated}")
+    return 0
+
+
+def _cases_digest(cases) -> str:
+    """One sha256 over the FEM cases' file digests (the calibrated file's observations)."""
+    return hashlib.sha256("".join(c.sha256 for c in cases).encode()).hexdigest()
+
+
+def main_bench(argv) -> int:
+    from predictor.artefacts import CALIBRATION_BENCH
+    from predictor.calibration_bench import OBSERVATIONS, REPEATS, bench_calibration
+    from predictor.observations import load_observations
+
+    ap = cli.Parser(prog="python -m predictor.calibrate bench", description="time the 8-observation calibration")
+    ap.add_argument("--observations", default=str(OBSERVATIONS),
+                    help="measurement file (default docs/examples/observations.json)")
+    ap.add_argument("--repeats", type=cli.number(1, 50, integer=True), default=REPEATS, help="timed runs")
+    ap.add_argument("--beside", default="", help="what else ran on the machine (recorded)")
+    ap.add_output("--out", required=True, suffix=".json", help="the benchmark's JSON")
+    _model_args(ap)
+    args = ap.parse_args(argv)
+    cli.setup_logging(args.quiet)
+    with ap.errors():
+        obs = load_observations(args.observations, args.finger)
+        model = _model(args)
+        doc = bench_calibration(model, obs, args.repeats, args.beside, progress=LOG.info)
+        CALIBRATION_BENCH.write(args.out, doc)
+    if args.json:
+        cli.print_json(doc)
+    else:
+        print(f"{doc['observations']} observations, {len(doc['parameters'])} parameters, {doc['repeats']} runs: fit "
+              f"median {doc['fit_median_s']:.2f} s ({doc['fit_cpu_median_s']:.2f} CPU s), with leave-one-out "
+              f"{doc['with_loo_median_s']:.2f} s ({doc['with_loo_cpu_median_s']:.2f} CPU s); load average "
+              f"{doc['load_average_before'][0]:.2f}; wrote {args.out}")
+    return 0
+
+
+SUBCOMMANDS = {"recovery": main_recovery, "fem": main_fem, "bench": main_bench}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     torch.set_num_threads(1)
-    if argv[:1] == ["recovery"]:
-        return main_recovery(argv[1:])
+    if argv[:1] and argv[0] in SUBCOMMANDS:
+        return SUBCOMMANDS[argv[0]](argv[1:])
     return main_fit(argv)
 
 

@@ -143,11 +143,15 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "")
     plt.close(fig)
 
 
+def wall_mesh_size(case: dict) -> float | None:
+    """The chamber-wall tetrahedron size (mm) of a fem.finger_cases record (None: its size)."""
+    return case.get("settings", {}).get("geometry", {}).get("joint", {}).get("wall_mesh_size")
+
+
 def case_mesh(case: dict) -> str:
     """The joints' mesh of a fem.finger_cases record in words: its ``mesh.mesh``, or, in a
     record written before hexahedra, mesh_text of its size and chamber-wall size (mm)."""
-    wall = case.get("settings", {}).get("geometry", {}).get("joint", {}).get("wall_mesh_size")
-    return case["mesh"].get("mesh") or mesh_text(case["mesh"]["mesh_size"], wall)
+    return case["mesh"].get("mesh") or mesh_text(case["mesh"]["mesh_size"], wall_mesh_size(case))
 
 
 def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:
@@ -160,9 +164,8 @@ def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:
         c = base.get(o["case"])
         if c is None or not o["converged"]:
             continue
-        wall = o.get("settings", {}).get("geometry", {}).get("joint", {}).get("wall_mesh_size")
         out.append({"case": o["case"], "mesh": case_mesh(o), "production_mesh": case_mesh(c),
-                    "mesh_size": o["mesh"].get("mesh_size"), "wall_mesh_size": wall,
+                    "mesh_size": o["mesh"].get("mesh_size"), "wall_mesh_size": wall_mesh_size(o),
                     "nodes": o["mesh"]["nodes"],
                     "production_mesh_size": c["mesh"]["mesh_size"], "production_nodes": c["mesh"]["nodes"],
                     "tip_change_mm": math.dist(o["tip"], c["tip"]),

@@ -13,15 +13,17 @@ one continuation walk, and must not straddle train and validation), 7:2:1 exactl
 group of 10 blocks, from the dataset seed, so it never changes when the campaign adds
 shards.
 
-Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors mm, Jacobian d anchors.reshape(20) /
-d inputs (NaN rows where the campaign stored none), cap_rotation rad (the distal cap's own
-rotation, measured on the cap by the FEM; docs/physics.md).
+Units: inputs [P MPa, F1 N, F2 N, M N·mm], anchors (n, k, 2) mm (k the joint's anchor
+count, workflow.shards.anchor_count), Jacobian d anchors.reshape(2k) / d inputs (NaN rows
+where the campaign stored none), cap_rotation rad (the distal cap's own rotation, measured
+on the cap by the FEM; docs/physics.md).
 
 Mirror (docs/physics.md, y -> -y): (x, R, J, cap) -> (B x, R S, S J B, -cap); the cap
 rotation is odd, like phi_end.
 
-Normalisation (stored inside the model): z = x / INPUT_BOX (contract.spec), so the training box is
-[-1, 1]^4; anchors = output_mean + output_scale * network(z), with the per-coordinate
+Normalisation (stored inside the model): z = x / box, the joint's input box (the paper's:
+contract.spec.INPUT_BOX), so the training box is [-1, 1]^4; anchors = output_mean +
+output_scale * network(z), with the per-coordinate
 mean and standard deviation of the (mirror-augmented) training anchors. A model with a
 cap-rotation head also stores cap_scale (rad): the root mean square of its target, the
 cap rotation itself or its offset wrap(cap_rotation - phi_end(R)) (surrogate.model); the
@@ -36,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from contract.spec import INPUT_BOX, N_ANCHORS, mirror, phi_end
+from contract.spec import INPUT_BOX, mirror, phi_end
 from surrogate.model import wrap
 from workflow.shards import Manifest, ShardError, load_dataset, split_of
 
@@ -47,8 +49,8 @@ SPLITS = ("train", "val", "test")
 class Samples:
     """A set of samples as float64 tensors.
 
-    inputs (n, 4) [MPa, N, N, N·mm]; anchors (n, 10, 2) mm; jacobian (n, 20, 4), NaN where
-    absent; sample_id (n,) int64; cap_rotation (n,) rad.
+    inputs (n, 4) [MPa, N, N, N·mm]; anchors (n, k, 2) mm (k the joint's anchor count);
+    jacobian (n, 2k, 4), NaN where absent; sample_id (n,) int64; cap_rotation (n,) rad.
     """
 
     inputs: torch.Tensor
@@ -59,6 +61,11 @@ class Samples:
 
     def __len__(self) -> int:
         return len(self.inputs)
+
+    @property
+    def n_anchors(self) -> int:
+        """The anchor count k of the samples (their joint's)."""
+        return self.anchors.shape[1]
 
     def subset(self, index) -> "Samples":
         return Samples(self.inputs[index], self.anchors[index], self.jacobian[index],
@@ -114,17 +121,18 @@ def cap_offset(samples: Samples) -> torch.Tensor:
     return wrap(samples.cap_rotation - phi_end(samples.anchors))
 
 
-def normalisation(train: Samples, cap_target: str | None = None) -> dict[str, list[float]]:
+def normalisation(train: Samples, cap_target: str | None = None, box=INPUT_BOX) -> dict[str, list[float]]:
     """Normalisation constants from the training samples (mirror-augmented inside).
 
-    Returns input_scale (4,) = INPUT_BOX, output_mean (20,) mm, output_scale (20,) mm; the
+    Returns input_scale (4,) = ``box`` (the joint's input box half-widths, P MPa, F1 N,
+    F2 N, M N·mm; default the paper's), output_mean (2k,) mm, output_scale (2k,) mm; the
     y means are zero because the statistics include the mirror images. With cap_target
     "absolute" or "offset" (a model with a cap-rotation head) also cap_scale (1,) rad, the
     RMS of cap_rotation or of cap_offset (module docstring).
     """
     augmented = augment_mirror(train)
-    anchors = augmented.anchors.reshape(-1, 2 * N_ANCHORS)
-    out = {"input_scale": INPUT_BOX.tolist(),
+    anchors = augmented.anchors.reshape(len(augmented), -1)
+    out = {"input_scale": [float(b) for b in box],
            "output_mean": anchors.mean(0).tolist(),
            "output_scale": anchors.std(0).clamp_min(1e-6).tolist()}
     if cap_target is not None:

@@ -1,12 +1,15 @@
 """Accuracy, Jacobian and speed of surrogates on a dataset; the paper/improved/KNN report.
 
-Metrics on n samples with true anchors R (n, 10, 2) mm and predictions R̂:
+Metrics on n samples with true anchors R (n, k, 2) mm (k the joint's anchor count) and
+predictions R̂:
 
-    e_ik = |R̂_ik - R_ik|                                 anchor error, mm
-    mean_anchor_error_mm = mean_ik e_ik;  p95_anchor_error_mm = 95th percentile of all e_ik
-    tip_error_mm         = mean_i e_i,10
-    phi_end_error_deg    = mean_i |wrap(phî_i - phi_i)|,  phi = atan2(y10 - y9, x10 - x9)
-    jacobian_rel_error   = mean_i ||(Ĵ_i - J_i) D||_F / ||J_i D||_F,  D = diag(INPUT_BOX)
+    e_ij = |R̂_ij - R_ij|                                 anchor error, mm
+    mean_anchor_error_mm = mean_ij e_ij;  p95_anchor_error_mm = 95th percentile of all e_ij
+    tip_error_mm         = mean_i e_i,k
+    phi_end_error_deg    = mean_i |wrap(phî_i - phi_i)|,  phi = atan2(y_k - y_k-1, x_k - x_k-1)
+    jacobian_rel_error   = mean_i ||(Ĵ_i - J_i) D||_F / ||J_i D||_F,  D = diag(box), the
+                           model's joint's input box (ModelConfig.input_box; the paper's
+                           contract.spec.INPUT_BOX for a module without one)
                            (the columns in mm per half-range of each input, so P, F1, F2
                            and M weigh alike; samples without an FEM Jacobian are skipped,
                            null when none has one)
@@ -17,7 +20,8 @@ Metrics on n samples with true anchors R (n, 10, 2) mm and predictions R̂:
 with p95_ versions of the angle errors (95th percentile over samples).
 
 Inference time: the median wall time of one no-grad call on a single sample on one
-thread, and the throughput of no-grad calls on batches of 4,096 samples (over 1 s) on one
+thread, and the throughput of no-grad calls on batches of 4,096 samples drawn in the
+model's input box (over 1 s) on one
 thread and on every core, in float64 (the dtype of load_surrogate) and in float32.
 
 One checkpoint on any dataset directory:
@@ -45,8 +49,14 @@ from surrogate.data import Samples, load_samples, load_splits
 from surrogate.knn import choose_knn
 from surrogate.model import load_checkpoint, load_surrogate, wrap
 
+def input_box(model) -> tuple[float, ...]:
+    """The input box half-widths (P MPa, F1 N, F2 N, M N·mm) of a module's joint: its
+    ``input_box`` (JointSurrogate, KNN, the multi-fidelity models), else the paper's."""
+    return tuple(getattr(model, "input_box", INPUT_BOX))
+
+
 def jacobian(model, x: torch.Tensor) -> torch.Tensor:
-    """d model(x).reshape(20) / dx for independent rows: x (n, 4) -> (n, 20, 4)."""
+    """d model(x).reshape(2k) / dx for independent rows: x (n, 4) -> (n, 2k, 4)."""
     x = x.detach().clone()
     jac = torch.autograd.functional.jacobian(lambda a: model(a).reshape(len(a), -1).sum(0), x,
                                              vectorize=True)
@@ -65,9 +75,10 @@ def _angle_errors(name: str, pred: torch.Tensor | None, true: torch.Tensor | Non
 
 def metrics(pred: torch.Tensor, true: torch.Tensor, pred_jac: torch.Tensor | None = None,
             true_jac: torch.Tensor | None = None, pred_cap: torch.Tensor | None = None,
-            true_cap: torch.Tensor | None = None) -> dict:
-    """The metric dict (module docstring) from anchors (n, 10, 2) mm, Jacobians (n, 20, 4)
-    and cap rotations (n,) rad."""
+            true_cap: torch.Tensor | None = None, box=INPUT_BOX) -> dict:
+    """The metric dict (module docstring) from anchors (n, k, 2) mm, Jacobians (n, 2k, 4)
+    weighted by the input box ``box`` (4,) (P MPa, F1 N, F2 N, M N·mm) and cap rotations
+    (n,) rad."""
     e = (pred - true).norm(dim=-1)
     dphi = wrap(phi_end(pred) - phi_end(true)).abs()
     out = {
@@ -85,15 +96,16 @@ def metrics(pred: torch.Tensor, true: torch.Tensor, pred_jac: torch.Tensor | Non
     if pred_jac is not None and true_jac is not None:
         ok = torch.isfinite(true_jac).all(dim=(1, 2))
         if ok.any():
-            d = torch.as_tensor(INPUT_BOX)
+            d = torch.as_tensor(box, dtype=true_jac.dtype)
             num = ((pred_jac[ok] - true_jac[ok]) * d).flatten(1).norm(dim=1)
             out["jacobian_rel_error"] = (num / (true_jac[ok] * d).flatten(1).norm(dim=1)).mean().item()
     return out
 
 
 def evaluate(model, samples: Samples) -> dict:
-    """Metrics of a module (inputs (n, 4) -> anchors (n, 10, 2)) on samples; the cap
-    rotation's from ``model.with_cap`` where the model has the head."""
+    """Metrics of a module (inputs (n, 4) -> anchors (n, k, 2)) on samples; the cap
+    rotation's from ``model.with_cap`` where the model has the head; the Jacobian's weighted
+    by the model's input box (input_box)."""
     x = samples.inputs.to(torch.float64)
     with torch.no_grad():
         if getattr(model, "has_cap_rotation", False):
@@ -101,7 +113,7 @@ def evaluate(model, samples: Samples) -> dict:
         else:
             pred, cap = model(x), None
     return metrics(pred, samples.anchors, jacobian(model, x), samples.jacobian, cap,
-                   samples.cap_rotation)
+                   samples.cap_rotation, input_box(model))
 
 
 def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0,
@@ -113,11 +125,12 @@ def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0,
     threads = threads or tuple(sorted({1, os.cpu_count() or 1}))
     saved = torch.get_num_threads()
     out = {"threads": list(threads), "batch": batch}
+    box = input_box(model)
     for dtype, tag in ((torch.float64, "float64"), (torch.float32, "float32")):
         m = model.to(dtype)
-        x1 = torch.tensor([[0.1, 1.0, 0.5, 10.0]], dtype=dtype)
+        x1 = torch.tensor([box], dtype=dtype) * torch.tensor([1 / 3, 1 / 3, 1 / 6, 1 / 10], dtype=dtype)
         xb = (torch.rand(batch, N_INPUTS, generator=torch.Generator().manual_seed(0), dtype=dtype)
-              * 2 - 1) * torch.as_tensor(INPUT_BOX, dtype=dtype)
+              * 2 - 1) * torch.as_tensor(box, dtype=dtype)
         with torch.no_grad():
             torch.set_num_threads(1)
             for _ in range(50):
@@ -146,7 +159,7 @@ def timing(model, repeats: int = 2000, batch: int = 4096, seconds: float = 1.0,
 def comparison_figure(path: Path, samples: Samples, models: dict, source: str,
                       n_cases: int = 8, seed: int = 0) -> None:
     """Left: data against surrogate centre lines for random cases (like the paper's Fig. 2C).
-    Right: mean error of each anchor r_1..r_10 over all samples, per model."""
+    Right: mean error of each anchor r_1..r_k over all samples, per model."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -167,11 +180,11 @@ def comparison_figure(path: Path, samples: Samples, models: dict, source: str,
         for i, line in enumerate(pred):
             a.plot(line[:, 0], line[:, 1], color=color, ls=ls, lw=1.2,
                    label=name if i == 0 else None)
-        b.semilogy(range(1, 11), err, color=color, ls=ls, marker="o", label=name)
+        b.semilogy(range(1, samples.n_anchors + 1), err, color=color, ls=ls, marker="o", label=name)
     a.set_aspect("equal")
     a.set_xlabel("x (mm)")
     a.set_ylabel("y (mm)")
-    a.set_title(f"{n_cases} random held-out cases: centre lines (anchors r_0..r_10)")
+    a.set_title(f"{n_cases} random held-out cases: centre lines (anchors r_0..r_{samples.n_anchors})")
     a.grid(alpha=0.3)
     a.legend(fontsize=8)
     b.set_xlabel("anchor i")
@@ -229,7 +242,7 @@ def report(train_root: Path, heldout_root: Path, out_dir: Path) -> dict:
                         "heldout": evaluate(models[name], heldout),
                         "train_time_s": ckpt["metrics"].get("train_time_s"),
                         "timing": timing(models[name])}
-    knn, choice = choose_knn(splits["train"], splits["val"])
+    knn, choice = choose_knn(splits["train"], splits["val"], box=input_box(models["improved"]))
     models["knn"] = knn
     result["knn"] = {"test": evaluate(knn, splits["test"]), "heldout": evaluate(knn, heldout),
                      "train_time_s": choice["fit_time_s"], "choice": choice,

@@ -5,7 +5,8 @@
         [--modes with,without] [--seed 0] [--repeat SAMPLES:SEED ...] [--min-steps 22400]
         [--max-hours H] [--out results/surrogate/learning_curve.json] [--plot PNG] [--json]
 
-Data flow: DIR (verified, split 7:2:1 by the dataset seed, surrogate.data.load_splits) ->
+Data flow: DIR (verified, split 7:2:1 by the dataset seed, surrogate.data.load_splits; its
+joint, the manifest's, sets the model's anchor count and input box, ModelConfig.for_joint) ->
 the train split's nested subsets (below) -> for each (samples, Jacobian loss on/off, seed)
 point: surrogate.train.train on that subset, with the whole validation split choosing the
 kept epoch -> surrogate.evaluate.evaluate on the separate held-out set -> one record in
@@ -36,10 +37,11 @@ count and decay are applied with surrogate.train.apply_overrides and recorded in
 point's ``train_config``.
 
 A point: samples, jacobian_loss, seed (the subset draw and the training seed),
-heldout_mean_anchor_error_mm, heldout_tip_error_mm (anchor 10), heldout_cap_rotation_error_deg,
+heldout_mean_anchor_error_mm, heldout_tip_error_mm (the last anchor), heldout_cap_rotation_error_deg,
 heldout_phi_end_error_deg, heldout_jacobian_rel_error, val_mean_anchor_error_mm,
 train_anchor_error_mm (the mean training anchor error at the kept epoch, mm), best_epoch,
-steps, train_time_s (one thread), min_steps, model_config, train_config and the sha256
+steps, train_time_s (one thread), min_steps, model_config (surrogate.model.config_record),
+train_config and the sha256
 digests of the train and held-out datasets (workflow.shards.dataset_digest).
 """
 
@@ -60,8 +62,10 @@ from contract.files import atomic_path, json_safe
 from surrogate.artefacts import LEARNING_CURVE
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate
+from surrogate.model import config_record
 from surrogate.train import CONFIGS, apply_overrides, check_configs, train
 from workflow.shards import ShardError, dataset_digest
+from workflow.store import recorded_joint
 
 SIZES = (100, 200, 400, 800, 1600, "all")
 MODES = {"with": True, "without": False}
@@ -87,9 +91,10 @@ def nested_subsets(n: int, sizes, seed: int) -> dict[int, torch.Tensor]:
 
 
 def point_configs(config: str, overrides: list[str], samples: int, jacobian_loss: bool, seed: int,
-                  min_steps: int):
+                  min_steps: int, joint=None):
     """(ModelConfig, TrainConfig) of one point: ``config`` with ``overrides``, w_jac = 0
-    without the Jacobian loss, the seed, and the epoch budget of the module docstring."""
+    without the Jacobian loss, the seed, and the epoch budget of the module docstring, for
+    ``joint`` (a contract.joint.JointSpec: its anchor count and input box; None: the paper's)."""
     model_cfg, base = apply_overrides(*CONFIGS[config], overrides)
     batches = math.ceil(samples / base.batch_size)
     epochs = max(base.epochs, math.ceil(min_steps / batches))
@@ -99,6 +104,7 @@ def point_configs(config: str, overrides: list[str], samples: int, jacobian_loss
         extra.append("w_jac=0")
     # the overrides again after ours would be refused as repeats: apply ours to the result
     model_cfg, cfg = apply_overrides(model_cfg, base, extra)
+    model_cfg = model_cfg if joint is None else model_cfg.for_joint(joint)
     check_configs(model_cfg, cfg)
     if jacobian_loss and cfg.w_jac <= 0:
         raise ValueError(f"config {config} with {overrides} has w_jac = 0: no 'with' Jacobian-loss point")
@@ -135,16 +141,17 @@ def identity(samples: int, jacobian_loss: bool, seed: int, min_steps: int, model
              data_sha: str, heldout_sha: str) -> dict:
     """The keys that decide whether a stored point is still valid (as stored in JSON)."""
     return json_safe({"samples": samples, "jacobian_loss": jacobian_loss, "seed": seed, "min_steps": min_steps,
-                      "model_config": asdict(model_cfg), "train_config": asdict(cfg),
+                      "model_config": config_record(model_cfg), "train_config": asdict(cfg),
                       "data_sha256": data_sha, "heldout_sha256": heldout_sha})
 
 
-def is_current(point: dict, config: str, overrides: list[str], data_sha: str, heldout_sha: str) -> bool:
+def is_current(point: dict, config: str, overrides: list[str], data_sha: str, heldout_sha: str,
+               joint=None) -> bool:
     """A stored point is kept if its configs are what this code and ``config`` with
-    ``overrides`` give for its samples, mode, seed and min_steps, on the same data."""
+    ``overrides`` give for its samples, mode, seed and min_steps, on the same data (of ``joint``)."""
     try:
         model_cfg, cfg = point_configs(config, overrides, point["samples"], point["jacobian_loss"],
-                                       point["seed"], point["min_steps"])
+                                       point["seed"], point["min_steps"], joint)
     except (KeyError, TypeError, ValueError):
         return False
     want = identity(point["samples"], point["jacobian_loss"], point["seed"], point["min_steps"],
@@ -250,19 +257,20 @@ def main(argv=None) -> int:
         apply_overrides(*CONFIGS[args.config], args.set)
         data_sha, heldout_sha = dataset_digest(args.data), dataset_digest(args.heldout)
         try:
-            splits, _ = load_splits(args.data)
+            splits, manifest = load_splits(args.data)
             heldout, _ = load_samples(args.heldout)
+            joint = recorded_joint(manifest.config)
         except ShardError as exc:
             raise ValueError(str(exc)) from None
         n_train = len(splits["train"])
         jobs = plan(n_train, args.sizes, args.modes, args.seed, args.repeat)
         subsets = {seed: nested_subsets(n_train, sorted({s for s, _, r in jobs if r == seed}), seed)
                    for seed in {r for _, _, r in jobs}}
-        configs = {job: point_configs(args.config, args.set, *job, args.min_steps) for job in jobs}
+        configs = {job: point_configs(args.config, args.set, *job, args.min_steps, joint) for job in jobs}
         old = load_points(out)
     # one file is one curve: points of another config, min_steps or data are redone
     points = [p for p in old if p.get("min_steps") == args.min_steps
-              and is_current(p, args.config, args.set, data_sha, heldout_sha)]
+              and is_current(p, args.config, args.set, data_sha, heldout_sha, joint)]
     done = {(p["samples"], p["jacobian_loss"], p["seed"]) for p in points}
     todo = [job for job in jobs if job not in done]
     say(f"learning curve: {len(jobs) - len(todo)} of {len(jobs)} points done, {len(todo)} to train "

@@ -1,16 +1,16 @@
 """The joint surrogate R = sur(P, F1, F2, M): a configurable MLP and its checkpoint.
 
     x = [P MPa, F1 N, F2 N, M N·mm]            (..., 4)
-    z = x / INPUT_BOX   (+ |z_P| if abs_pressure) the training box is [-1, 1]^4
+    z = x / box         (+ |z_P| if abs_pressure) the training box is [-1, 1]^4
     h = act(W_0 z + b_0);  h <- act(W_l h + b_l)  or, with residual and equal widths,
         h <- h + act(W_l h + b_l)
-    g(x) = output_mean + output_scale * (W_out h + b_out)         (20,) mm
+    g(x) = output_mean + output_scale * (W_out h + b_out)         (2k,) mm
     R = g(x)                                                        (paper)
     R = (g(x) + S g(B x)) / 2                                       (symmetric)
 
     equivariant (one pass, exactly symmetric):
     o = (z_P, z_F2, z_M) (odd under B), q = (z_F1, o_i o_j for i <= j [, |z_P|]) (invariant)
-    h = MLP(q);  [a, c] = W_out h + b_out,  a (10,), c (3, 10)
+    h = MLP(q);  [a, c] = W_out h + b_out,  a (k,), c (3, k)
     x_k = mean_k + scale_k a_k          (even anchor coordinates)
     y_k = scale_k sum_j o_j c_jk        (odd: every odd function is sum_j o_j c_j(invariants))
 
@@ -37,6 +37,14 @@ so the identity holds to the last bit when x and Bx are evaluated in the same la
 The equivariant form needs one pass instead of two (half the cost): q is bitwise invariant
 (o_i o_j = (-o_i)(-o_j)) and negating o negates each y_k exactly.
 
+The joint (ModelConfig.n_anchors, ModelConfig.input_box): k anchors r_1..r_k (mm, the
+joint's ``[anchors] count``) and the box half-widths (P MPa, F1 N, F2 N, M N·mm, the
+joint's ``[input_box]``) that scale the inputs (normalisation ``input_scale`` holds the same
+numbers). ModelConfig.for_joint sets both from a contract.joint.JointSpec; their defaults
+are the paper's joint (10 anchors, contract.spec.INPUT_BOX), and config_record leaves them
+out of a record when they are the paper's, so a paper model writes the same model_config as
+before they existed, and a checkpoint without them loads as the paper's joint.
+
 |P| as a feature: P > 0 inflates one chamber and P < 0 the other, so the FEM response has a
 kink at P = 0 (the axial elongation grows like |P|). |P| is mirror-invariant, so the
 symmetry is kept.
@@ -48,7 +56,8 @@ model_state (float64), train_config, metrics, dataset and joint: the joint descr
 was trained on ({"sha256": contract.joint.joint_digest, "description":
 contract.joint.joint_to_dict}; a checkpoint written before joint files existed has none and
 is the paper's joint, contract/joints/paper.toml). The loaded module carries it as
-``module.joint`` (a contract.joint.JointSpec). Loading needs only the file;
+``module.joint`` (a contract.joint.JointSpec), whose anchor count and input box must be the
+model config's (ModelError otherwise). Loading needs only the file;
 a file with any flipped, missing or added byte, a foreign file or another kind of
 checkpoint is refused with one line (ModelError). A checkpoint written before the cap head
 existed has no cap_rotation in its model_config: it loads as a model without the head
@@ -58,14 +67,14 @@ existed has no cap_rotation in its model_config: it loads as a model without the
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import torch
 from torch import nn
 
 from contract.joint import JointSpec, joint_digest, joint_from_dict, joint_to_dict, load_joint
-from contract.spec import ANCHOR_MIRROR, INPUT_MIRROR, N_ANCHORS, N_INPUTS, phi_end
+from contract.spec import ANCHOR_MIRROR, INPUT_BOX, INPUT_MIRROR, N_ANCHORS, N_INPUTS, phi_end
 from surrogate import checkpoint
 from surrogate.checkpoint import CheckpointError
 
@@ -120,9 +129,16 @@ class ModelConfig:
     equivariant: bool = False    # one-pass symmetric form on mirror invariants (docstring)
     cap_rotation: bool = False   # a head for the distal cap's rotation (docstring)
     cap_target: str = "absolute" # what that head learns: one of CAP_TARGETS
+    n_anchors: int = N_ANCHORS   # the joint's anchor count k (docstring)
+    input_box: tuple[float, ...] = tuple(float(b) for b in INPUT_BOX)  # (P MPa, F1 N, F2 N, M N·mm)
 
     def __post_init__(self):
         object.__setattr__(self, "hidden", tuple(int(w) for w in self.hidden))
+        object.__setattr__(self, "input_box", tuple(float(b) for b in self.input_box))
+        if isinstance(self.n_anchors, bool) or not isinstance(self.n_anchors, int) or self.n_anchors < 2:
+            raise ValueError(f"n_anchors {self.n_anchors!r} is not a whole number >= 2")
+        if len(self.input_box) != N_INPUTS or not all(math.isfinite(b) and b > 0 for b in self.input_box):
+            raise ValueError(f"input_box {self.input_box!r} is not {N_INPUTS} positive half-widths")
         if self.symmetric and self.equivariant:
             raise ValueError("symmetric and equivariant are two ways to the same symmetry: "
                              "choose one")
@@ -133,21 +149,39 @@ class ModelConfig:
         if not self.hidden:
             raise ValueError("the MLP needs at least one hidden layer")
 
+    def for_joint(self, joint) -> "ModelConfig":
+        """This config for ``joint`` (a contract.joint.JointSpec): its anchor count and input box."""
+        return replace(self, n_anchors=joint.anchors, input_box=tuple(float(b) for b in joint.input_box))
+
+
+#: ModelConfig fields that describe the joint, not the network (docstring).
+JOINT_FIELDS = ("n_anchors", "input_box")
+_PAPER_JOINT = {f.name: f.default for f in fields(ModelConfig) if f.name in JOINT_FIELDS}
+
+
+def config_record(config: ModelConfig) -> dict:
+    """The config as a plain dict (a checkpoint's model_config, the records of sweeps and
+    learning curves), without the joint fields where they are the paper's (docstring)."""
+    return {k: v for k, v in asdict(config).items() if k not in _PAPER_JOINT or v != _PAPER_JOINT[k]}
+
 
 class JointSurrogate(nn.Module):
-    """Inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] -> anchors (..., 10, 2) mm, joint frame;
-    with a cap-rotation head, ``with_cap`` also gives the distal cap's rotation (...) rad."""
+    """Inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] -> anchors (..., k, 2) mm, joint frame
+    (k = config.n_anchors); with a cap-rotation head, ``with_cap`` also gives the distal
+    cap's rotation (...) rad. ValueError (one line) for a normalisation of another size or
+    input box than the config's."""
 
     def __init__(self, config: ModelConfig, normalisation: dict):
         super().__init__()
         self.config = config
         keys = ("input_scale", "output_mean", "output_scale") + ("cap_scale",) * config.cap_rotation
         self.normalisation = {k: [float(v) for v in normalisation[k]] for k in keys}
+        _check_normalisation(config, self.normalisation)
+        k = config.n_anchors
         for name, value in self.normalisation.items():
             self.register_buffer(name, torch.tensor(value), persistent=False)
         self.register_buffer("input_mirror", torch.tensor(INPUT_MIRROR), persistent=False)
-        self.register_buffer("output_mirror", torch.tensor(ANCHOR_MIRROR).repeat(N_ANCHORS),
-                             persistent=False)
+        self.register_buffer("output_mirror", torch.tensor(ANCHOR_MIRROR).repeat(k), persistent=False)
         odd = [i for i, b in enumerate(INPUT_MIRROR) if b < 0]
         self.register_buffer("odd_inputs", torch.tensor(odd), persistent=False)
         self.register_buffer("even_inputs", torch.tensor([i for i, b in enumerate(INPUT_MIRROR)
@@ -157,7 +191,7 @@ class JointSurrogate(nn.Module):
         n_in = N_INPUTS - len(odd) + pairs.shape[1] if config.equivariant else N_INPUTS
         widths = (n_in + config.abs_pressure,) + config.hidden
         self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(widths[:-1], widths[1:]))
-        n_out = N_ANCHORS * (1 + len(odd)) if config.equivariant else 2 * N_ANCHORS
+        n_out = k * (1 + len(odd)) if config.equivariant else 2 * k
         self.head = nn.Linear(widths[-1], n_out)
         if config.cap_rotation:  # built after the anchor head: the same seed draws the same trunk
             self.cap_head = nn.Linear(widths[-1], len(odd) if config.equivariant else 1)
@@ -168,9 +202,19 @@ class JointSurrogate(nn.Module):
         """The model predicts the distal cap's rotation (``with_cap``)."""
         return self.config.cap_rotation
 
+    @property
+    def n_anchors(self) -> int:
+        """The joint's anchor count k: the model gives anchors (..., k, 2)."""
+        return self.config.n_anchors
+
+    @property
+    def input_box(self) -> tuple[float, ...]:
+        """The joint's input box half-widths (P MPa, F1 N, F2 N, M N·mm)."""
+        return self.config.input_box
+
     def g(self, x: torch.Tensor, dx: torch.Tensor | None = None, cap: bool = False):
-        """The plain network on inputs x (n, 4) in physical units -> (anchors (n, 20) mm,
-        tangents (n, 4, 20) or None, raw cap output c (n,) rad or None).
+        """The plain network on inputs x (n, 4) in physical units -> (anchors (n, 2k) mm,
+        tangents (n, 4, 2k) or None, raw cap output c (n,) rad or None).
 
         With input tangents dx (n, 4, 4) (row t: d x / d input_t), the output tangents are
         propagated layer by layer (forward-mode AD): for h' = act(W h + b),
@@ -231,18 +275,18 @@ class JointSurrogate(nn.Module):
         return o, q, dq
 
     def _equivariant_head(self, o, h, dz, dh):
-        """(anchors (n, 20) mm, tangents (n, 4, 20) if dz else None) from the trunk output
+        """(anchors (n, 2k) mm, tangents (n, 4, 2k) if dz else None) from the trunk output
         h (n, w): even coordinates from a, odd ones as sum_j o_j c_j (module docstring).
         The anchors interleave (x_k, y_k), so a stack, not a masked scatter, assembles
         them (~10 % faster batched at width 64)."""
-        n, k = h.shape[0], N_ANCHORS
+        n, k = h.shape[0], self.config.n_anchors
         out = self.head(h)
         c = out[:, k:].reshape(n, -1, k)
         y = torch.stack([out[:, :k], (o[:, :, None] * c).sum(1)], dim=-1).reshape(n, 2 * k)
         y = self.output_mean * (self.output_mirror > 0) + self.output_scale * y
         if dz is None:
             return y, None
-        dout = dh @ self.head.weight.T                                       # (n, 4, 40)
+        dout = dh @ self.head.weight.T                                       # (n, 4, 4k)
         dc = dout[:, :, k:].reshape(n, -1, o.shape[1], k)
         do = dz[:, :, self.odd_inputs]
         dodd = (do[:, :, :, None] * c[:, None] + o[:, None, :, None] * dc).sum(2)
@@ -250,8 +294,8 @@ class JointSurrogate(nn.Module):
         return y, dy * self.output_scale
 
     def outputs(self, x: torch.Tensor, jacobian: bool = False, cap: bool = False):
-        """One pass: inputs (n, 4) -> (anchors (n, 10, 2) mm, d anchors.reshape(20) / d inputs
-        (n, 20, 4) if jacobian else None, cap rotation (n,) rad if cap else None).
+        """One pass: inputs (n, 4) -> (anchors (n, k, 2) mm, d anchors.reshape(2k) / d inputs
+        (n, 2k, 4) if jacobian else None, cap rotation (n,) rad if cap else None).
 
         Symmetric form: R = (g(x) + S g(Bx)) / 2, c = (c(x) - c(Bx)) / 2 and
         J(x) = (J_g(x) + S J_g(Bx) B) / 2, from the tangents of g at x (seeded with I) and
@@ -273,26 +317,26 @@ class JointSurrogate(nn.Module):
             y = 0.5 * (y[:n] + y[n:] * self.output_mirror)
             dy = None if dy is None else 0.5 * (dy[:n] + dy[n:] * self.output_mirror)
             c = None if c is None else 0.5 * (c[:n] - c[n:])
-        y = y.reshape(n, N_ANCHORS, 2)
+        y = y.reshape(n, self.config.n_anchors, 2)
         if c is not None and self.config.cap_target == "offset":
             c = phi_end(y) + c
         return y, None if dy is None else dy.transpose(1, 2), c
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Inputs (..., 4) -> anchors (..., 10, 2) mm."""
+        """Inputs (..., 4) -> anchors (..., k, 2) mm."""
         batch = x.shape[:-1]
-        return self.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, N_ANCHORS, 2)
+        return self.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, self.config.n_anchors, 2)
 
     def with_cap(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Inputs (..., 4) -> (anchors (..., 10, 2) mm, distal cap rotation (...) rad), from
+        """Inputs (..., 4) -> (anchors (..., k, 2) mm, distal cap rotation (...) rad), from
         one pass, differentiable in x; the anchors equal forward(x) bit for bit. Raises
         ModelError (one line) if the model has no cap-rotation head."""
         batch = x.shape[:-1]
         y, _, c = self.outputs(x.reshape(-1, N_INPUTS), cap=True)
-        return y.reshape(*batch, N_ANCHORS, 2), c.reshape(batch)
+        return y.reshape(*batch, self.config.n_anchors, 2), c.reshape(batch)
 
     def with_jacobian(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Inputs (n, 4) -> (anchors (n, 10, 2) mm, d anchors.reshape(20) / d inputs (n, 20, 4)),
+        """Inputs (n, 4) -> (anchors (n, k, 2) mm, d anchors.reshape(2k) / d inputs (n, 2k, 4)),
         by forward-mode tangents (``outputs``)."""
         y, dy, _ = self.outputs(x, jacobian=True)
         return y, dy
@@ -301,10 +345,13 @@ class JointSurrogate(nn.Module):
 def save_checkpoint(path: str | Path, model: JointSurrogate, train_config: dict,
                     metrics: dict, dataset: dict, joint: JointSpec | None = None) -> None:
     """Write a self-contained checkpoint of kind FORMAT, atomically (surrogate.checkpoint),
-    for the joint description ``joint`` it was trained on (None: the paper's joint)."""
+    for the joint description ``joint`` it was trained on (None: the paper's joint).
+    ValueError (one line) if the joint's anchor count or input box is not the model's."""
     joint = joint or load_joint()
+    if why := joint_mismatch(model.config, joint):
+        raise ValueError(f"{path}: {why}")
     checkpoint.save(path, FORMAT, {
-        "model_config": asdict(model.config),
+        "model_config": config_record(model.config),
         "normalisation": model.normalisation,
         "model_state": {k: v.detach().to(torch.float64).clone()
                         for k, v in model.state_dict().items()},
@@ -330,6 +377,27 @@ def checkpoint_joint(ckpt: dict, where: str = "checkpoint") -> JointSpec:
     if joint_digest(joint) != sha:
         raise ModelError(f"{where}: the checkpoint's joint description does not match its sha256")
     return joint
+
+
+def joint_mismatch(config: ModelConfig, joint: JointSpec) -> str | None:
+    """Why a model of ``config`` is not one of ``joint`` (anchor count, input box), or None."""
+    box = tuple(float(b) for b in joint.input_box)
+    if config.n_anchors != joint.anchors:
+        return f"the model has {config.n_anchors} anchors, joint {joint.name!r} has {joint.anchors}"
+    if config.input_box != box:
+        return (f"the model's input box {list(config.input_box)} is not joint {joint.name!r}'s "
+                f"{list(box)} (P MPa, F1 N, F2 N, M N*mm)")
+    return None
+
+
+def _check_normalisation(config: ModelConfig, norm: dict) -> None:
+    """ValueError (one line) unless the normalisation has the config's box and 2k outputs."""
+    if tuple(norm["input_scale"]) != config.input_box:
+        raise ValueError(f"normalisation input_scale {norm['input_scale']} is not the model's input box "
+                         f"{list(config.input_box)}")
+    for key in ("output_mean", "output_scale"):
+        if len(norm[key]) != 2 * config.n_anchors:
+            raise ValueError(f"normalisation {key} has {len(norm[key])} values, not 2 x {config.n_anchors} anchors")
 
 
 def _one_line(exc: BaseException) -> str:
@@ -367,13 +435,16 @@ def build_model(ckpt: dict, where: str = "checkpoint") -> JointSurrogate:
 def load_surrogate(path: str | Path) -> JointSurrogate:
     """Load a checkpoint as a frozen float64 module in eval mode.
 
-    The module maps inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] to anchors (..., 10, 2) mm
-    in the joint frame; it is batched and differentiable in its inputs (the weights do not
-    require grad); ``module.joint`` is the joint it was trained on (checkpoint_joint).
-    Raises ModelError with a one-line message if the file is missing or bad.
+    The module maps inputs (..., 4) [P MPa, F1 N, F2 N, M N·mm] to anchors (..., k, 2) mm
+    in the joint frame (k its joint's anchor count); it is batched and differentiable in its
+    inputs (the weights do not require grad); ``module.joint`` is the joint it was trained on
+    (checkpoint_joint). Raises ModelError with a one-line message if the file is missing or
+    bad, or its joint's anchor count or input box is not its model's.
     """
     ckpt = load_checkpoint(path)
     model = build_model(ckpt, str(path))
     model.joint = checkpoint_joint(ckpt, str(path))
+    if why := joint_mismatch(model.config, model.joint):
+        raise ModelError(f"{path}: inconsistent surrogate checkpoint ({why})")
     model.eval().requires_grad_(False)
     return model

@@ -10,17 +10,18 @@ Model. A coarse surrogate C, trained on the coarse set (the improved config; or
 squares scales of the coarse displacement u_C = R_C(x) - R_C(0) (the coarse mesh is
 stiffer: its error grows with the deflection), then a small network D on what is left:
 
-    R(x)     = R_C(x) + rho u_C(x) + R_D(x)          anchors (10, 2) mm, x = [P MPa, F1 N, F2 N, M N·mm]
+    R(x)     = R_C(x) + rho u_C(x) + R_D(x)          anchors (k, 2) mm, x = [P MPa, F1 N, F2 N, M N·mm]
     theta(x) = theta_C(x) (1 + rho_theta) + theta_D(x)          distal cap rotation, rad
-    J(x)     = (1 + rho) J_C(x) + J_D(x)             d R.reshape(20) / d x, (20, 4)
+    J(x)     = (1 + rho) J_C(x) + J_D(x)             d R.reshape(2k) / d x, (2k, 4)
 
-    rho (20,), one per anchor coordinate, and rho_theta: least squares over the n samples
+    rho (2k,), one per anchor coordinate, and rho_theta: least squares over the n samples
     (fit_scale); the targets of D at a fine sample (x, R_f, theta_f, J_f), with
     B = R_C + rho u_C:  R_f - B(x),  wrap(theta_f - theta_B(x)),  J_f - J_B(x)
 
 with J_C the coarse surrogate's exact (forward-mode) Jacobian. D is a JointSurrogate of
 the improved config with CORRECTION overrides (two hidden layers of 32; w_phi = 0, since
-phi_end of a difference of anchors is no angle of the joint), fitted by
+phi_end of a difference of anchors is no angle of the joint), for the fine set's joint (its
+anchor count k and input box, ModelConfig.for_joint), fitted by
 surrogate.train.train. Its anchor loss |R_D - (R_f - B)| is |R - R_f|, the
 multi-fidelity model's own error. u_C,y and theta_C are odd under the mirror y -> -y and
 D is mirror-equivariant like C, so R keeps the joint's mirror symmetry exactly. Each
@@ -76,15 +77,17 @@ from torch import nn
 
 from contract import cli
 from contract.files import atomic_path, json_safe, sha256_file
-from contract.spec import N_ANCHORS, N_INPUTS
+from contract.spec import N_INPUTS
 from surrogate.artefacts import LEARNING_CURVE, MULTIFIDELITY
 from surrogate.data import Samples, load_samples, load_splits
 from surrogate.evaluate import evaluate
 from surrogate.learning_curve import (MIN_STEPS, load_points, nested_subsets, point_configs, progress,
                                       run_point, say, sizes_arg)
-from surrogate.model import JointSurrogate, ModelError, build_model, load_checkpoint, save_checkpoint, wrap
+from surrogate.model import (JointSurrogate, ModelError, build_model, config_record, load_checkpoint,
+                             save_checkpoint, wrap)
 from surrogate.train import CONFIGS, parse_override, train
 from workflow.shards import Manifest, ShardError, dataset_digest, split_of
+from workflow.store import recorded_joint
 
 SIZES = (50, 100, 200, 400, "all")
 KINDS = ("multifidelity", "fine_only")
@@ -104,7 +107,7 @@ POINT_KEYS = ("kind", "samples", "seed", "min_steps", "model_config", "train_con
 FORM = "rho (R_C - R_C(0)) + network"
 #: Config keys coarse and fine must share (the same joint, loads and material), and the
 #: held-out set must share with the fine set (the same discretisation).
-SAME_JOINT = ("source", "input_box", "material")
+SAME_JOINT = ("source", "input_box", "material", "joint_sha256")
 SAME_DISCRETISATION = ("source", "input_box", "material", "geometry", "solver", "formulation")
 MESH_KEYS = ("mesh_size", "wall_mesh_size")
 EXIT_STOPPED = 3
@@ -113,16 +116,16 @@ EXIT_STOPPED = 3
 class ScaledCoarse(nn.Module):
     """The coarse surrogate with its displacement scaled (module docstring):
     R_C + rho (R_C - R_C(0)), theta_C (1 + rho_theta), J_C (1 + rho). Inputs (..., 4)
-    [MPa, N, N, N·mm] -> anchors (..., 10, 2) mm; ``with_cap`` adds the cap rotation rad.
+    [MPa, N, N, N·mm] -> anchors (..., k, 2) mm; ``with_cap`` adds the cap rotation rad.
     Frozen; rho = 0 gives the coarse surrogate itself."""
 
     def __init__(self, coarse: JointSurrogate, rho: torch.Tensor, rho_theta: float):
         super().__init__()
         self.coarse = coarse.requires_grad_(False)
         with torch.no_grad():
-            origin = coarse.outputs(torch.zeros(1, N_INPUTS, dtype=torch.float64))[0].reshape(2 * N_ANCHORS)
+            origin = coarse.outputs(torch.zeros(1, N_INPUTS, dtype=torch.float64))[0].reshape(-1)
         self.register_buffer("origin", origin, persistent=False)
-        self.register_buffer("rho", torch.as_tensor(rho, dtype=torch.float64).reshape(2 * N_ANCHORS),
+        self.register_buffer("rho", torch.as_tensor(rho, dtype=torch.float64).reshape(len(origin)),
                              persistent=False)
         self.rho_theta = float(rho_theta)
 
@@ -130,8 +133,16 @@ class ScaledCoarse(nn.Module):
     def has_cap_rotation(self) -> bool:
         return self.coarse.has_cap_rotation
 
+    @property
+    def n_anchors(self) -> int:
+        return self.coarse.n_anchors
+
+    @property
+    def input_box(self) -> tuple[float, ...]:
+        return self.coarse.input_box
+
     def outputs(self, x: torch.Tensor, jacobian: bool = False, cap: bool = False):
-        """(anchors (n, 10, 2) mm, Jacobian (n, 20, 4) or None, cap (n,) rad or None)."""
+        """(anchors (n, k, 2) mm, Jacobian (n, 2k, 4) or None, cap (n,) rad or None)."""
         r, j, c = self.coarse.outputs(x, jacobian, cap)
         u = r.reshape(len(x), -1) - self.origin
         r = r + (self.rho * u).reshape(r.shape)
@@ -147,7 +158,7 @@ class ScaledCoarse(nn.Module):
 
 class MultiFidelitySurrogate(nn.Module):
     """R = base + correction (module docstring), base a ScaledCoarse: inputs (..., 4)
-    [MPa, N, N, N·mm] -> anchors (..., 10, 2) mm; ``with_cap`` adds the cap rotation (...)
+    [MPa, N, N, N·mm] -> anchors (..., k, 2) mm; ``with_cap`` adds the cap rotation (...)
     rad where both parts have the head."""
 
     def __init__(self, base: ScaledCoarse, correction: JointSurrogate):
@@ -159,8 +170,16 @@ class MultiFidelitySurrogate(nn.Module):
     def has_cap_rotation(self) -> bool:
         return self.base.has_cap_rotation and self.correction.has_cap_rotation
 
+    @property
+    def n_anchors(self) -> int:
+        return self.base.n_anchors
+
+    @property
+    def input_box(self) -> tuple[float, ...]:
+        return self.base.input_box
+
     def outputs(self, x: torch.Tensor, jacobian: bool = False, cap: bool = False):
-        """(anchors (n, 10, 2) mm, Jacobian (n, 20, 4) or None, cap (n,) rad or None)."""
+        """(anchors (n, k, 2) mm, Jacobian (n, 2k, 4) or None, cap (n,) rad or None)."""
         a, ja, ca = self.base.outputs(x, jacobian, cap)
         b, jb, cb = self.correction.outputs(x, jacobian, cap)
         return a + b, None if ja is None else ja + jb, None if ca is None else ca + cb
@@ -174,25 +193,25 @@ class MultiFidelitySurrogate(nn.Module):
 
 def _anchors(model, x: torch.Tensor) -> torch.Tensor:
     batch = x.shape[:-1]
-    return model.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, N_ANCHORS, 2)
+    return model.outputs(x.reshape(-1, N_INPUTS))[0].reshape(*batch, model.n_anchors, 2)
 
 
 def _anchors_and_cap(model, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     batch = x.shape[:-1]
     y, _, c = model.outputs(x.reshape(-1, N_INPUTS), cap=True)
-    return y.reshape(*batch, N_ANCHORS, 2), c.reshape(batch)
+    return y.reshape(*batch, model.n_anchors, 2), c.reshape(batch)
 
 
 def fit_scale(coarse: JointSurrogate, fine: Samples) -> ScaledCoarse:
     """The least-squares scales of the coarse displacement u = R_C(x) - R_C(0) against
     the fine data, per anchor coordinate c and for the cap rotation:
 
-        rho_c = sum_i u_ic d_ic / sum_i u_ic^2,       d = R_f - R_C(x)          (20,)
+        rho_c = sum_i u_ic d_ic / sum_i u_ic^2,       d = R_f - R_C(x)          (2k,)
         rho_theta = sum_i theta_C,i e_i / sum_i theta_C,i^2,  e = wrap(theta_f - theta_C)
 
     (0 where the coarse displacement vanishes). Both are mirror-consistent: u_y and
     theta_C are odd, so R_C + rho u keeps the symmetry."""
-    base = ScaledCoarse(coarse, torch.zeros(2 * N_ANCHORS), 0.0)
+    base = ScaledCoarse(coarse, torch.zeros(2 * coarse.n_anchors), 0.0)
     with torch.no_grad():
         r, _, c = coarse.outputs(fine.inputs, cap=coarse.has_cap_rotation)
     u = r.reshape(len(fine), -1) - base.origin
@@ -228,18 +247,19 @@ def cpu_s_per_sample(manifest: Manifest, root) -> float:
     return 3600.0 * manifest.cpu_hours / manifest.n
 
 
-def correction_configs(samples: int, seed: int, min_steps: int, overrides: list[str], cap: bool):
+def correction_configs(samples: int, seed: int, min_steps: int, overrides: list[str], cap: bool, joint=None):
     """(ModelConfig, TrainConfig) of a correction trained on ``samples``: the improved
     config with CORRECTION and then ``overrides`` (a key given in both: the override), the
-    learning-curve epoch budget, and no cap head when the coarse model has none."""
+    learning-curve epoch budget, and no cap head when the coarse model has none; for
+    ``joint`` (a contract.joint.JointSpec; None: the paper's)."""
     pairs = {parse_override(p)[0]: p for p in (*CORRECTION, *(() if cap else ("cap_rotation=false", "w_cap=0")),
                                                 *overrides)}
-    return point_configs("improved", list(pairs.values()), samples, True, seed, min_steps)
+    return point_configs("improved", list(pairs.values()), samples, True, seed, min_steps, joint)
 
 
-def fine_only_configs(samples: int, seed: int, min_steps: int):
+def fine_only_configs(samples: int, seed: int, min_steps: int, joint=None):
     """(ModelConfig, TrainConfig) of the fine-only baseline: surrogate.learning_curve's rule."""
-    return point_configs("improved", [], samples, True, seed, min_steps)
+    return point_configs("improved", [], samples, True, seed, min_steps, joint)
 
 
 # ---------------------------------------------------------------------------- data
@@ -312,14 +332,22 @@ def check_coarse_model(ckpt: dict, manifest: Manifest, path, root) -> None:
                          f"than --coarse {root} (seed {manifest.seed})")
 
 
-def cached_coarse(path: Path, data_sha: str):
+def coarse_configs(manifest: Manifest):
+    """(ModelConfig, TrainConfig) of the coarse surrogate: the improved config for the coarse
+    set's joint; ShardError (one line) for a manifest whose joint record is not valid."""
+    model_cfg, cfg = CONFIGS["improved"]
+    return model_cfg.for_joint(recorded_joint(manifest.config)), cfg
+
+
+def cached_coarse(path: Path, data_sha: str, manifest: Manifest):
     """The coarse surrogate trained here before on the same coarse data, or None."""
     try:
         ckpt = load_checkpoint(path)
         if ckpt["dataset"].get("data_sha256") != data_sha:
             return None
         cfg = {k: v for k, v in ckpt["train_config"].items() if k != "name"}
-        if ckpt["model_config"] != asdict(CONFIGS["improved"][0]) or cfg != asdict(CONFIGS["improved"][1]):
+        model_cfg, train_cfg = coarse_configs(manifest)
+        if ckpt["model_config"] != config_record(model_cfg) or cfg != asdict(train_cfg):
             return None
         return build_model(ckpt, str(path)).eval().requires_grad_(False)
     except (ModelError, KeyError, AttributeError):
@@ -330,12 +358,13 @@ def train_coarse(root: str, manifest: Manifest, path: Path, data_sha: str, log) 
     """Train the improved config on the coarse set (its train split; val chooses the
     epoch), save it at ``path`` and return it frozen."""
     splits, _ = load_splits(root)
-    model_cfg, cfg = CONFIGS["improved"]
+    model_cfg, cfg = coarse_configs(manifest)
     model, history = train(model_cfg, cfg, splits, log)
     dataset = {"root": str(root), "seed": manifest.seed, "config": manifest.config, "data_sha256": data_sha,
                "n": {k: len(v) for k, v in splits.items()}}
     metrics = {"train_time_s": history["train_time_s"], "best_epoch": history["best_epoch"], "threads": 1}
-    save_checkpoint(path, model, {"name": "improved", **asdict(cfg)}, metrics, dataset)
+    save_checkpoint(path, model, {"name": "improved", **asdict(cfg)}, metrics, dataset,
+                    recorded_joint(manifest.config))
     return model.requires_grad_(False)
 
 
@@ -379,7 +408,7 @@ def identity(kind: str, samples: int, seed: int, min_steps: int, configs, ids: d
     model_cfg, cfg = configs
     multi = kind == "multifidelity"
     return json_safe({"kind": kind, "samples": samples, "seed": seed, "min_steps": min_steps,
-                      "model_config": asdict(model_cfg), "train_config": asdict(cfg),
+                      "model_config": config_record(model_cfg), "train_config": asdict(cfg),
                       "correction_form": FORM if multi else None,
                       "coarse_model_sha256": ids["coarse_model_sha256"] if multi else None, "fine_sha256": ids["fine_sha256"],
                       "heldout_sha256": ids["heldout_sha256"], "split": ids["split"]})
@@ -562,8 +591,9 @@ def prepare(args) -> dict:
         ckpt = load_checkpoint(args.coarse_model)
         check_coarse_model(ckpt, manifests["coarse"], args.coarse_model, args.coarse)
         cap = bool(ckpt["model_config"].get("cap_rotation"))
-    configs = {(k, n): (correction_configs(n, args.seed, args.min_steps, args.set, cap) if k == "multifidelity"
-                        else fine_only_configs(n, args.seed, args.min_steps)) for k, n in jobs}
+    joint = recorded_joint(manifests["fine"].config)
+    configs = {(k, n): (correction_configs(n, args.seed, args.min_steps, args.set, cap, joint) if k == "multifidelity"
+                        else fine_only_configs(n, args.seed, args.min_steps, joint)) for k, n in jobs}
     explicit = args.reference_curve is not None
     path = Path(args.reference_curve) if explicit else REFERENCE_CURVE
     curve = LEARNING_CURVE.load(path) if explicit or path.is_file() else None
@@ -604,7 +634,7 @@ def coarse_model(args, s: dict, out: Path) -> tuple[JointSurrogate | None, Path]
         ckpt = load_checkpoint(args.coarse_model)
         return build_model(ckpt, args.coarse_model).eval().requires_grad_(False), Path(args.coarse_model)
     path = out.with_name(out.stem + "_coarse.pt")
-    return cached_coarse(path, s["coarse_sha"]), path
+    return cached_coarse(path, s["coarse_sha"], s["manifests"]["coarse"]), path
 
 
 def main(argv=None) -> int:

@@ -3,18 +3,19 @@
     python -m surrogate.predict --model results/surrogate/improved.pt \\
         --p 0.1 --f1 1 --f2 0 --m 10 [--allow-extrapolation] [--json]
 
-prints the anchors r_1..r_10 (mm, joint frame, relative to the proximal centre),
-phi_end = atan2(y10 - y9, x10 - x9) (rad and deg) and, for a model with the cap-rotation
-head, the distal cap's rotation (rad and deg; null otherwise). A value that is not a finite number is
-always refused; inputs outside the training box |P| <= 0.3 MPa, |F1|, |F2| <= 3 N,
-|M| <= 100 N·mm (contract.spec) are refused unless --allow-extrapolation is given, which the
-output records ("extrapolation": true). Either refusal is one line, exit 2, before the
-model is loaded.
-JSON keys: model, inputs {P_MPa, F1_N, F2_N, M_Nmm}, extrapolation, anchors_mm (10 x 2),
+prints the anchors r_1..r_k (mm, joint frame, relative to the proximal centre; k the
+model's joint's anchor count), phi_end = atan2(y_k - y_k-1, x_k - x_k-1) (rad and deg) and,
+for a model with the cap-rotation head, the distal cap's rotation (rad and deg; null
+otherwise). A value that is not a finite number is always refused, before the model is
+loaded; inputs outside the model's training box (its joint's [input_box]; the paper's
+|P| <= 0.3 MPa, |F1|, |F2| <= 3 N, |M| <= 100 N·mm, contract.spec) are refused unless
+--allow-extrapolation is given, which the output records ("extrapolation": true). Either
+refusal is one line, exit 2.
+JSON keys: model, inputs {P_MPa, F1_N, F2_N, M_Nmm}, extrapolation, anchors_mm (k x 2),
 phi_end_rad, phi_end_deg, cap_rotation_rad, cap_rotation_deg.
 
 The batched, differentiable torch API is ``surrogate.load_surrogate(path)`` (a frozen
-float64 module, (..., 4) -> (..., 10, 2) mm; ``with_cap`` adds the cap rotation), with
+float64 module, (..., 4) -> (..., k, 2) mm; ``with_cap`` adds the cap rotation), with
 ``surrogate.check_box(x)`` for the box check and ``surrogate.phi_end(anchors)``.
 """
 
@@ -46,8 +47,9 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     x = [args.p, args.f1, args.f2, args.m]
     with ap.errors():
-        outside = check_box([x], args.allow_extrapolation)
+        check_box([x], allow_extrapolation=True)      # not finite: refused before loading
         model = load_surrogate(args.model)
+        outside = check_box([x], args.allow_extrapolation, box=model.input_box)
     with torch.no_grad():
         if model.has_cap_rotation:
             anchors, cap = model.with_cap(torch.tensor(x, dtype=torch.float64))

@@ -5,7 +5,8 @@
                               [--dir results/surrogate/sweep] [--json]
 
 Data flow: for each variant in VARIANTS, the improved config with that variant's
-``--set`` overrides (surrogate.train), trained ``--epochs`` epochs on the train split ->
+``--set`` overrides (surrogate.train) for the dataset's joint (its anchor count and input
+box, ModelConfig.for_joint), trained ``--epochs`` epochs on the train split ->
 metrics on the validation split (which chooses the configuration), on the held-out set
 (reported, never used to choose) and inference speed (surrogate.evaluate.timing) ->
 DIR/NAME.json, one file per variant written atomically, so a killed sweep resumes and
@@ -34,8 +35,10 @@ from contract.files import write_text
 from surrogate.artefacts import SWEEP
 from surrogate.data import load_samples, load_splits
 from surrogate.evaluate import evaluate, timing
+from surrogate.model import config_record
 from surrogate.train import CONFIGS, apply_overrides, train
-from workflow.shards import dataset_digest
+from workflow.shards import Manifest, dataset_digest
+from workflow.store import recorded_joint
 
 # name -> overrides of the improved config (surrogate.train --set syntax)
 VARIANTS = {
@@ -66,23 +69,24 @@ COLUMNS = [("val", "mean_anchor_error_mm", 4), ("val", "p95_anchor_error_mm", 4)
            ("heldout", "cap_rotation_error_deg", 3)]
 
 
-def variant_configs(name: str, epochs: int | None) -> tuple:
+def variant_configs(name: str, epochs: int | None, joint=None) -> tuple:
     """(ModelConfig, TrainConfig) of a variant: the improved config with its overrides
-    (and ``epochs`` unless None)."""
+    (and ``epochs`` unless None), for ``joint`` (a contract.joint.JointSpec; None: the paper's)."""
     extra = [] if epochs is None else [f"epochs={epochs}"]
-    return apply_overrides(*CONFIGS["improved"], [*VARIANTS[name], *extra])
+    model_cfg, cfg = apply_overrides(*CONFIGS["improved"], [*VARIANTS[name], *extra])
+    return (model_cfg if joint is None else model_cfg.for_joint(joint)), cfg
 
 
 def run_variant(name: str, data: str, data_sha256: str, heldout: str, epochs: int | None,
                 out: str) -> str:
     """Train and evaluate one variant on one thread; write out (JSON). Returns name."""
     torch.set_num_threads(1)
-    model_cfg, cfg = variant_configs(name, epochs)
-    splits, _ = load_splits(data)
+    splits, manifest = load_splits(data)
+    model_cfg, cfg = variant_configs(name, epochs, recorded_joint(manifest.config))
     model, history = train(model_cfg, cfg, splits, log=lambda s: None)
     result = {"name": name, "overrides": VARIANTS[name], "epochs": cfg.epochs,
               "data_sha256": data_sha256,
-              "model_config": asdict(model_cfg),
+              "model_config": config_record(model_cfg),
               "train_config": asdict(cfg), "n": {k: len(v) for k, v in splits.items()},
               "best_epoch": history["best_epoch"], "train_time_s": history["train_time_s"],
               "val": evaluate(model, splits["val"]),
@@ -125,11 +129,11 @@ def stored(path: Path) -> dict | None:
     return r
 
 
-def staleness(r: dict, name: str, epochs: int | None, data_sha256: str) -> str | None:
-    """Why result ``r`` is not this run's variant ``name`` (None: it is): which config
-    fields differ (an older format of the code lacks the new ones), or the dataset."""
-    model_cfg, cfg = variant_configs(name, epochs)
-    want = json.loads(json.dumps({"model_config": asdict(model_cfg), "train_config": asdict(cfg)}))
+def staleness(r: dict, name: str, epochs: int | None, data_sha256: str, joint=None) -> str | None:
+    """Why result ``r`` is not this run's variant ``name`` for ``joint`` (None: it is): which
+    config fields differ (an older format of the code lacks the new ones), or the dataset."""
+    model_cfg, cfg = variant_configs(name, epochs, joint)
+    want = json.loads(json.dumps({"model_config": config_record(model_cfg), "train_config": asdict(cfg)}))
     fields = sorted(k for part in want for k in set(want[part]) | set(r[part])
                     if want[part].get(k, "missing") != r[part].get(k, "missing"))
     if fields:
@@ -162,10 +166,11 @@ def main(argv=None) -> int:
         (lambda s: print(s, flush=True))
     with ap.errors():
         data_sha256 = dataset_digest(args.data)
+        joint = recorded_joint(Manifest.load(args.data).config)
         load_samples(args.heldout)  # a bad held-out set fails now, not after the training
         have = {n: stored(out / f"{n}.json") for n in VARIANTS}
     stale = {n: why for n, r in have.items() if r is not None
-             and (why := staleness(r, n, args.epochs, data_sha256)) is not None}
+             and (why := staleness(r, n, args.epochs, data_sha256, joint)) is not None}
     todo = [n for n in names if have[n] is None or (n in stale and args.replace_stale)]
     kept = [n for n in names if n in stale and not args.replace_stale]
     say(f"surrogate.sweep: {len(names) - len(todo) - len(kept)} of {len(names)} variants current, "

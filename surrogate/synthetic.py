@@ -21,8 +21,14 @@ and bends the joint towards -y). The pressure terms use |P|, so the response has
 at P = 0 like the two-chamber FEM. The model is exactly mirror-symmetric (docs/physics.md).
 
 The N equations G(theta; u) = 0 are solved by Newton with load stepping, batched over
-samples. The anchors are r_{iN/10}, i = 1..10, and their exact sensitivities follow from
-the implicit function theorem: d theta/du = -G_theta^{-1} G_u.
+samples. The anchors are r_{iN/k}, i = 1..k (k = 10, or a joint's anchor count), and their
+exact sensitivities follow from the implicit function theorem: d theta/du = -G_theta^{-1} G_u.
+
+A dataset for another joint (``write_dataset(..., joint=spec)``): the rod takes the joint's
+length, its anchor count (N rounded up to a multiple of k) and its input box (the inputs are
+drawn in it), and the manifest records the joint as a campaign's does
+(workflow.store.joint_record, with its [mesh] as the geometry), so the surrogate reads its
+anchor count and box from it. The rod's stiffnesses stay the paper-sized defaults.
 
 Usage: ``python -m surrogate.synthetic --out DIR --n 2560 --seed 1 [--json]`` (the shards
 and manifest are written atomically by workflow.shards).
@@ -30,9 +36,10 @@ and manifest are written atomically by workflow.shards).
 
 from __future__ import annotations
 
+import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +48,7 @@ import torch
 from contract import cli
 from contract.spec import INPUT_BOX, JOINT_LENGTH, N_ANCHORS, N_INPUTS, phi_end
 from workflow import shards
+from workflow.store import joint_record
 
 
 @dataclass(frozen=True)
@@ -82,18 +90,21 @@ def _residual(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tenso
     return ei * ((th[1:] - th[:-1]) / h - kappa_p) - (m + arm[:, 0] * f2 - arm[:, 1] * f1)
 
 
-def _anchors(theta: torch.Tensor, u: torch.Tensor, c: RodConfig) -> torch.Tensor:
-    """Anchor points r_1..r_10 (10, 2) mm for one sample."""
-    step = c.segments // N_ANCHORS
+def _anchors(theta: torch.Tensor, u: torch.Tensor, c: RodConfig, count: int) -> torch.Tensor:
+    """Anchor points r_1..r_count (count, 2) mm for one sample."""
+    step = c.segments // count
     return _nodes(theta, u, c)[step - 1::step]
 
 
-def solve(inputs: np.ndarray, cfg: RodConfig = RodConfig(), tol: float = 1e-11):
+def solve(inputs: np.ndarray, cfg: RodConfig = RodConfig(), tol: float = 1e-11, anchors: int = N_ANCHORS):
     """Solve the rod for a batch of inputs (n, 4) [P MPa, F1 N, F2 N, M N·mm].
 
-    Returns (anchors (n, 10, 2) mm, jacobian (n, 20, 4) d anchors / d inputs,
-    end rotation theta_N (n,) rad, Newton iterations (n,)).
+    Returns (anchors (n, k, 2) mm, jacobian (n, 2k, 4) d anchors / d inputs,
+    end rotation theta_N (n,) rad, Newton iterations (n,)), k = ``anchors``, which must
+    divide cfg.segments (ValueError).
     """
+    if cfg.segments % anchors:
+        raise ValueError(f"{anchors} anchors do not divide the rod's {cfg.segments} segments")
     u_all = torch.as_tensor(inputs, dtype=torch.float64)
     n = len(u_all)
     res = torch.vmap(lambda t, u: _residual(t, u, cfg))
@@ -113,28 +124,40 @@ def solve(inputs: np.ndarray, cfg: RodConfig = RodConfig(), tol: float = 1e-11):
     jac_g = torch.vmap(torch.func.jacrev(lambda t, u: _residual(t, u, cfg), argnums=(0, 1)))
     g_t, g_u = jac_g(theta, u_all)
     dtheta_du = -torch.linalg.solve(g_t, g_u)                                    # (n, N, 4)
-    jac_r = torch.vmap(torch.func.jacrev(lambda t, u: _anchors(t, u, cfg).reshape(-1), argnums=(0, 1)))
+    jac_r = torch.vmap(torch.func.jacrev(lambda t, u: _anchors(t, u, cfg, anchors).reshape(-1), argnums=(0, 1)))
     r_t, r_u = jac_r(theta, u_all)
     jacobian = r_t @ dtheta_du + r_u
-    anchors = torch.vmap(lambda t, u: _anchors(t, u, cfg))(theta, u_all)
-    return (anchors.numpy(), jacobian.numpy(), theta[:, -1].numpy(),
+    points = torch.vmap(lambda t, u: _anchors(t, u, cfg, anchors))(theta, u_all)
+    return (points.numpy(), jacobian.numpy(), theta[:, -1].numpy(),
             np.full(n, iterations, np.int64))
 
 
+def for_joint(cfg: RodConfig, joint) -> RodConfig:
+    """The rod of ``joint`` (module docstring): its length (mm) and segments rounded up to a
+    multiple of its anchor count."""
+    return replace(cfg, length_mm=joint.length, segments=math.ceil(cfg.segments / joint.anchors) * joint.anchors)
+
+
 def write_dataset(root: str | Path, n: int, seed: int, shard_size: int = 256,
-                  cfg: RodConfig = RodConfig()) -> Path:
-    """Sample n inputs uniformly in the box (seeded), solve, write shards + manifest to root."""
+                  cfg: RodConfig = RodConfig(), joint=None) -> Path:
+    """Sample n inputs uniformly in the box (seeded), solve, write shards + manifest to root.
+    ``joint`` (a contract.joint.JointSpec, None: the paper's rod): the rod, box and anchors
+    of that joint, recorded in the manifest (module docstring)."""
     root = Path(root)
     rng = np.random.default_rng(seed)
-    inputs = rng.uniform(-1, 1, (n, N_INPUTS)) * INPUT_BOX
+    box, count = (INPUT_BOX, N_ANCHORS) if joint is None else (joint.input_box, joint.anchors)
+    cfg = cfg if joint is None else for_joint(cfg, joint)
+    inputs = rng.uniform(-1, 1, (n, N_INPUTS)) * box
     config = {"source": "synthetic-rod", "rod": asdict(cfg)}
+    if joint is not None:
+        config |= {**joint_record(joint), "geometry": joint.geometry_kwargs(), "formulation": joint.formulation}
     entries = []
     for unit, start in enumerate(range(0, n, shard_size)):
         x = inputs[start:start + shard_size]
         t0 = time.perf_counter()
-        anchors, jac, end_rot, its = solve(x, cfg)
+        anchors, jac, end_rot, its = solve(x, cfg, anchors=count)
         wall = (time.perf_counter() - t0) / len(x)
-        arrays = shards.empty_arrays() | {
+        arrays = shards.empty_arrays(count) | {
             "sample_id": np.arange(start, start + len(x), dtype=np.int64), "inputs": x,
             "anchors": anchors, "jacobian": jac, "phi_end": phi_end(anchors),
             "cap_rotation": end_rot, "newton_iterations": its,

@@ -3,21 +3,23 @@
     python -m surrogate.train --config paper|improved [--data DIR] [--out PATH.pt]
                               [--set key=value ...] [--threads N] [--quiet] [--json]
 
-Data flow: DIR (shards, verified) -> split 7:2:1 by the dataset seed -> [mirror-augment the
-train split] -> normalisation from train -> Adam on mini-batches -> the epoch with the
+Data flow: DIR (shards, verified) -> its joint (the manifest's, workflow.store.recorded_joint:
+anchor count k and input box, ModelConfig.for_joint) -> split 7:2:1 by the dataset seed ->
+[mirror-augment the train split] -> normalisation from train -> Adam on mini-batches -> the epoch with the
 lowest validation loss -> checkpoint (config, normalisation, training config, metrics on
 the validation and test splits, learning history) + learning-curve PNG, both written
 atomically. Every argument, ``--set`` override and the output path are checked before the
 data are read (bad ones exit 2 with one line).
 
-Loss per batch, every term in mm (R anchors (n, 10, 2) mm, phi_end rad, J (n, 20, 4),
+Loss per batch, every term in mm (R anchors (n, k, 2) mm, phi_end rad, J (n, 2k, 4),
 theta the distal cap's rotation (n,) rad):
 
     L = mean_ik |R̂_ik - R_ik|                          mean Euclidean anchor error (paper)
       + w_phi · mean_i |wrap(phî_i - phi_i)|            end orientation; w_phi in mm/rad
       + w_cap · mean_i |wrap(θ̂_i - θ_i)|               cap rotation (models with the cap
                                                         head, and only those); w_cap in mm/rad
-      + w_jac · mean_i ||(Ĵ_i - J_i) D||_F              Sobolev; D = diag(INPUT_BOX), so each
+      + w_jac · mean_i ||(Ĵ_i - J_i) D||_F              Sobolev; D = diag(box), the joint's input
+                                                        box (ModelConfig.input_box), so each
                                                         column is mm per input half-range
 
 The paper config (docs/decisions.md §0): MLP 4-96-192-96-20, Adam lr 0.0016 decayed ×0.99 per
@@ -57,11 +59,11 @@ import torch
 
 from contract import cli
 from contract.files import atomic_path
-from contract.spec import INPUT_BOX, phi_end
+from contract.spec import phi_end
 from surrogate.data import Samples, augment_mirror, load_splits, normalisation
 from surrogate.evaluate import evaluate
-from surrogate.model import (ACTIVATIONS, CAP_TARGETS, JointSurrogate, ModelConfig, save_checkpoint,
-                             wrap)
+from surrogate.model import (ACTIVATIONS, CAP_TARGETS, JOINT_FIELDS, JointSurrogate, ModelConfig,
+                             save_checkpoint, wrap)
 from workflow.shards import ShardError
 from workflow.store import recorded_joint
 
@@ -99,6 +101,14 @@ def check_configs(model_cfg: ModelConfig, cfg: TrainConfig) -> None:
         raise ValueError(f"w_cap={cfg.w_cap:g} needs cap_rotation=true (the model has no cap head)")
 
 
+def check_data(model_cfg: ModelConfig, splits: dict[str, Samples]) -> None:
+    """Raise ValueError (one line) unless every split has the model's anchor count (its joint's)."""
+    for name, part in splits.items():
+        if part.n_anchors != model_cfg.n_anchors:
+            raise ValueError(f"the {name} split has {part.n_anchors} anchors per sample, the model "
+                             f"{model_cfg.n_anchors}: configure it for the dataset's joint (ModelConfig.for_joint)")
+
+
 def loss_terms(model: JointSurrogate, batch: Samples, cfg: TrainConfig) -> dict[str, torch.Tensor]:
     """Loss terms in mm (module docstring) of one batch; 'total' is their weighted sum.
     Terms of zero weight are not computed (and the cap term needs check_configs)."""
@@ -113,7 +123,7 @@ def loss_terms(model: JointSurrogate, batch: Samples, cfg: TrainConfig) -> dict[
         total = total + cfg.w_cap * terms["cap"]
     if jac is not None:
         ok = batch.has_jacobian
-        d = torch.as_tensor(INPUT_BOX, dtype=jac.dtype)
+        d = torch.as_tensor(model.config.input_box, dtype=jac.dtype)
         diff = ((jac[ok] - batch.jacobian[ok]) * d).flatten(1).norm(dim=1)
         terms["jac"] = diff.mean() if ok.any() else jac.sum() * 0
         total = total + cfg.w_jac * terms["jac"]
@@ -127,14 +137,17 @@ def train(model_cfg: ModelConfig, cfg: TrainConfig, splits: dict[str, Samples],
 
     history: lists per epoch of train_loss, train_anchor_mm, val_loss, val_anchor_mm,
     val_phi_deg, lr (and val_cap_deg for a model with the cap head); plus best_epoch and
-    train_time_s. Raises ValueError if the configs disagree (check_configs).
+    train_time_s. Raises ValueError if the configs disagree (check_configs) or the data are
+    of another anchor count than model_cfg (check_data); the inputs are scaled by
+    model_cfg.input_box.
     """
     check_configs(model_cfg, cfg)
+    check_data(model_cfg, splits)
     torch.manual_seed(cfg.seed)
     data = augment_mirror(splits["train"]) if cfg.mirror_augment else splits["train"]
     val = splits["val"]
     cap_target = model_cfg.cap_target if model_cfg.cap_rotation else None
-    model = JointSurrogate(model_cfg, normalisation(splits["train"], cap_target)).to(torch.float64)
+    model = JointSurrogate(model_cfg, normalisation(splits["train"], cap_target, model_cfg.input_box)).to(torch.float64)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=cfg.lr_decay)
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -237,7 +250,10 @@ def parse_override(pair: str) -> tuple[str, object]:
     key, sep, value = pair.partition("=")
     if not sep:
         raise ValueError(f"--set {pair}: expected key=value")
-    names = {f.name: f for cfg in (ModelConfig, TrainConfig) for f in fields(cfg)}
+    names = {f.name: f for cfg in (ModelConfig, TrainConfig) for f in fields(cfg) if f.name not in JOINT_FIELDS}
+    if key in JOINT_FIELDS:
+        raise ValueError(f"--set {pair}: {key} is the dataset's joint's (its [anchors] count and "
+                         f"[input_box]), not a training option")
     if key not in names:
         raise ValueError(f"--set {pair}: unknown field {key!r} (known: {', '.join(names)})")
     default = names[key].default
@@ -313,6 +329,8 @@ def main(argv=None) -> int:
         except ShardError as exc:
             raise ShardError(f"{exc}; the campaign writes datasets: make dataset") from None
         joint = recorded_joint(manifest.config)      # the checkpoint carries it (surrogate.model)
+        model_cfg = model_cfg.for_joint(joint)
+        check_data(model_cfg, splits)
     log = (lambda s: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     log(f"{args.config}: {model_cfg}\n{cfg}\n"
         f"data {args.data}: " + ", ".join(f"{k} {len(v)}" for k, v in splits.items()))

@@ -36,10 +36,17 @@ def _committed() -> list[str]:
 COMMITTED = _committed()
 
 
+#: Catalogued artefacts of long runs the lead has not made yet: the calibration's FEM cases
+#: (make calibration-fem, hours) and what is made from them (make calibrate-demo); their
+#: format is checked by tests/test_calibration_fem.py on stand-in cases.
+PENDING = {"calibration/fem/*.json", "calibration/calibration.json"}
+
+
 def test_every_committed_json_is_a_known_artefact():
     assert len(COMMITTED) >= 60, COMMITTED           # 67 at the time of writing
-    # every catalogue entry has a committed file, so every format is checked below
-    assert {find(rel).pattern for rel in COMMITTED} == {a.pattern for a in ARTEFACTS}
+    # every catalogue entry has a committed file (or is pending), so every format is checked below
+    committed = {find(rel).pattern for rel in COMMITTED}
+    assert committed | PENDING == {a.pattern for a in ARTEFACTS}
     with pytest.raises(ValueError, match="not an artefact the project writes"):
         find("fem/unknown.json")
 

@@ -241,7 +241,7 @@ def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys
             return _finger_result(False)
 
         def mesh_info(self):
-            return {"nodes": 1, "vertices": 1, "cells": 1, "dofs": 3}
+            return {"nodes": 1, "vertices": 1, "cells": 1, "dofs": 3, "mesh": "1.8"}
 
     monkeypatch.setattr(finger_cli, "FingerSolver", Unconverged)
     assert finger_cli.main(["--pressures", "-0.1,0.1", "--json", "--quiet"]) == 1

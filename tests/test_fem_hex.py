@@ -30,7 +30,7 @@ from fem.discretisation import Discretisation, discretisation  # noqa: E402
 from fem.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
 from fem.joint_cases import difference  # noqa: E402
 from fem.mesh import create_mesh  # noqa: E402
-from fem.mesh_hex import hexahedra  # noqa: E402
+from fem.mesh_hex import hexahedra, q2_nodes  # noqa: E402
 from fem.solver import JointSolver, Load  # noqa: E402
 
 pytestmark = pytest.mark.fem
@@ -76,19 +76,20 @@ def test_hex_meshes_are_mirrored_node_by_node_and_nested():
 
 
 def test_graded_hex_mesh_lies_between_hex2_and_hex4():
-    """hex2:2.5 (JointGeometry.hex_size = 2.5 mm): an x or y interval of length d is cut
-    into 2 ceil(d / 2.5) elements, z into 2. So it holds every hex2 vertex and is held by
-    hex4 (nested between them); its node set is its own y-mirror; the joint's volume and
-    tag areas are hex2's to 1e-9 relative; its x-y element lengths are at most 1.25 mm,
-    through-wall ones 0.6 mm, and the z intervals are hex2's (2.9 and 0.6 mm)."""
-    graded = JointGeometry(divisions=2, hex_size=2.5)
-    assert graded.mesh == "hex2:2.5" and discretisation("hex2:2.5").key == "hex2s2.5_displacement_q4_k100"
+    """hex2:3 (JointGeometry.hex_size = 3 mm): an interval of length d is cut into
+    2 ceil(d / 3) elements. So it holds every hex2 vertex and is held by hex4 (nested between
+    them); its node set is its own y-mirror; the joint's volume and tag areas are hex2's to
+    1e-9 relative; its elements are at most 1.5 mm long (the 3 mm caps: 1.5 mm; the
+    chambers' 5.8 mm along z: 1.45 mm), through-wall ones 0.6 mm; 42,105 Q2 nodes."""
+    graded = JointGeometry(divisions=2, hex_size=3.0)
+    assert graded.mesh == "hex2:3" and discretisation("hex2:3").key == "hex2s3_displacement_q4_k100"
     (p2, _), (pg, cg), (p4, _) = hexahedra(GEO, 2), hexahedra(graded, 2), hexahedra(GEO, 4)
     assert cKDTree(pg).query(p2)[0].max() < 1e-12 and cKDTree(p4).query(pg)[0].max() < 1e-12
     assert cKDTree(pg).query(pg * [1.0, -1.0, 1.0])[0].max() == 0.0
-    for axis, longest in ((0, 1.25), (1, 1.25), (2, 2.9)):
+    for axis, longest in ((0, 1.5), (1, 1.2), (2, 1.45)):
         steps = np.diff(np.unique(pg[:, axis]))
-        assert steps.max() <= longest + 1e-9 and steps.min() == pytest.approx(0.6, abs=1e-9)
+        assert steps.max() == pytest.approx(longest, abs=1e-9) and steps.min() == pytest.approx(0.6, abs=1e-9)
+    assert q2_nodes(graded) == 42_105
     meshes = {g: measures(create_mesh(g, MPI.COMM_SELF)) for g in (graded, JointGeometry(divisions=2))}
     for name in TAGS:
         assert meshes[graded][name] == pytest.approx(meshes[JointGeometry(divisions=2)][name], rel=1e-9), name

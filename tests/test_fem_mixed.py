@@ -130,3 +130,56 @@ def test_mixed_sensitivities_match_central_differences(mixed_joint):
         assert plus.converged and minus.converged
         fd = (plus.anchors - minus.anchors).reshape(-1) / (2 * h)
         np.testing.assert_allclose(J[:, j], fd, atol=1e-3 * np.abs(J[:, j]).max())
+
+
+def test_probes_of_a_mixed_unknown_read_its_current_u_block(mixed_joint):
+    """The probes of w = (u, p) evaluate w's u block exactly as dolfinx's own collapse
+    gives it, and follow w's values from call to call (the collapsed space and its dof
+    map are built once and kept)."""
+    probes = mixed_joint.solver.probes
+    w = fem.Function(mixed_joint.V)
+    mine = probes.cells >= 0
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        w.x.array[:] = rng.standard_normal(w.x.array.size)
+        exact = w.sub(0).collapse().eval(probes.points[mine], probes.cells[mine])
+        np.testing.assert_array_equal(probes.values(w)[mine], exact)
+
+
+def test_residual_is_lifted_exactly_when_a_dirichlet_value_is_off(mixed_joint):
+    """R(u) is dolfinx's lifted residual bit for bit: the lifting -K(u) (g - u) on the
+    constrained columns is skipped only while u meets every (homogeneous) condition, where
+    it adds exact zeros; a u that is off a condition by 1e-3 mm gets it, and it changes R.
+    Newton's corrections keep a solved u exactly on its conditions (u = 0 there), so a
+    solve never pays for the lifting."""
+    from dolfinx.fem.petsc import apply_lifting, assemble_vector, set_bc
+    from petsc4py import PETSc
+
+    path = mixed_joint.solver
+    constrained = np.unique(np.concatenate([bc.dof_indices()[0] for bc in path.bcs]))
+
+    def lifted(lift: bool) -> np.ndarray:
+        b = assemble_vector(path._R)
+        if lift:
+            apply_lifting(b, [path._J], bcs=[path.bcs], x0=[path.u.vector], scale=-1.0)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        path.contact.add_residual(b, path.u)
+        set_bc(b, path.bcs, path.u.vector, -1.0)
+        return b.array.copy()
+
+    try:
+        assert mixed_joint.solve(Load(0.1, 1.0, -1.0, 30.0)).converged
+        assert np.all(path.u.x.array[constrained] == 0.0)
+        path._residual()
+        np.testing.assert_array_equal(path._b.array, lifted(True))
+        u = 0.05 * np.random.default_rng(4).standard_normal(path.u.x.array.size)
+        u[constrained] = 0.0
+        path.u.x.array[:] = u
+        path._residual()
+        np.testing.assert_array_equal(path._b.array, lifted(True))
+        path.u.x.array[constrained[0]] = 1e-3
+        path._residual()
+        np.testing.assert_array_equal(path._b.array, lifted(True))
+        assert np.abs(lifted(True) - lifted(False)).max() > 1e-3
+    finally:
+        mixed_joint.reset()

@@ -148,6 +148,33 @@ def test_bellow_of_every_law_converges_and_keeps_mirror_symmetry(law):
     assert solver.mesh_info()["nodes"] > 1000
 
 
+@pytest.mark.fem
+def test_contact_penalty_scales_with_the_modulus():
+    """Neo-Hookean statics are homogeneous in E at fixed nu: a joint of E / 2 under half the
+    loads takes the same deformation, provided its valley contact scales with E as well
+    (fem.problem.contact_penalty_for). At a box corner, where valleys close (4 mm mesh), the
+    anchors agree to 1e-8 mm; keeping the paper's 100 MPa/mm on the soft joint
+    instead moves them by more than 1e-3 mm."""
+    from fem.load_path import SolverConfig
+
+    stiff = parse_joint(joint_text(size=repr(COARSE)))
+    soft = parse_joint(joint_text(name="soft", size=repr(COARSE)).replace("\nE = 12.2", "\nE = 6.1", 1))
+    assert soft.material.youngs_modulus == 6.1
+    load = np.array([0.3, 3.0, -3.0, -100.0])                # a box corner, bent ~70 deg
+
+    def solve(joint, a, **kw):
+        solver = JointSolver.for_joint(joint, MPI.COMM_SELF, **kw)
+        result = solver.solve(Load.from_array(a))
+        assert result.converged
+        return result.anchors, min(g.min() for g in solver.contact.gaps(solver.u).values())
+
+    (ref, gap), (scaled, _) = solve(stiff, load), solve(soft, load / 2)
+    fixed, _ = solve(soft, load / 2, config=SolverConfig(contact_penalty=200.0))   # 100 MPa/mm on E = 6.1
+    assert gap < 0                                         # valleys closed: the penalty acts
+    assert np.abs(scaled - ref).max() <= 1e-8
+    assert np.abs(fixed - ref).max() > 1e-3
+
+
 # ---------------------------------------------------------------------- manifest
 from workflow.campaign import campaign_config, check_compatible, unit_walk  # noqa: E402
 from workflow.shards import Manifest, ShardError  # noqa: E402

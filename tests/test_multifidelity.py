@@ -104,8 +104,8 @@ def _args(sets, out, extra=()):
 @pytest.fixture
 def cheap_baseline(monkeypatch):
     """The fine-only baseline at a tiny budget (its rule is learning_curve's, tested there)."""
-    monkeypatch.setattr(mf, "fine_only_configs",
-                        lambda n, seed, steps: lc.point_configs("improved", ["hidden=8", "epochs=2"], n, True, seed, 2))
+    monkeypatch.setattr(mf, "fine_only_configs", lambda n, seed, steps, joint=None: lc.point_configs(
+        "improved", ["hidden=8", "epochs=2"], n, True, seed, 2, joint))
 
 
 def test_equal_cost_arithmetic():

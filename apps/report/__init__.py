@@ -30,13 +30,16 @@ Modules, one per concern: common (loading, target rows, pictures), joint_fem (th
 the dataset campaign), learning (the surrogate and its learning curve), gestures (the
 predictor bench and gesture cases), finger (the whole-finger validation and its error
 budget), planning (atlases and inverse pressures), contact (the finger's outline and the
-plane X = 0 where the fingers meet, issue 36); ``python -m apps.report`` is __main__.
+plane X = 0 where the fingers meet, issue 36), calibration (the recovery of a known truth,
+its timing, and the calibration against a different finger's FEM); ``python -m
+apps.report`` is __main__.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from apps.report.calibration import CALIBRATION_TITLE, calibration_section
 from apps.report.common import NOT_JUDGED, Check, Malformed, Target, cells, judge
 from apps.report.contact import CONTACT_TITLE, contact_section
 from apps.report.finger import FINGER_TITLE, finger_section
@@ -53,7 +56,8 @@ __all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGA
 #: (title, section) in the report's order; a section returns (lines, target checks).
 SECTIONS = ((FEM_TITLE, fem_section), (CAMPAIGN_TITLE, campaign_section), (SURROGATE_TITLE, surrogate_section),
             (CURVE_TITLE, learning_curve_section), (PREDICTOR_TITLE, predictor_section),
-            (FINGER_TITLE, finger_section), (PLANNING_TITLE, planning_section), (CONTACT_TITLE, contact_section))
+            (FINGER_TITLE, finger_section), (PLANNING_TITLE, planning_section), (CONTACT_TITLE, contact_section),
+            (CALIBRATION_TITLE, calibration_section))
 
 
 def _section(title: str, section, root: Path) -> tuple[list[str], list[Check]]:

@@ -77,7 +77,7 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                    if largest != "discretisation" else
                    "Decision: the datasets are to be regenerated on the discretisation the joint mesh study "
                    "chooses (its section: swept Q2 hexahedra with the mixed formulation are the candidates; "
-                   "`make dataset-hex2` runs the walks on one), then the surrogate retrained and what depends "
+                   "`make dataset-new` runs the walks on its candidate), then the surrogate retrained and what depends "
                    "on it re-run. Not done yet: the committed datasets, and every figure in this report, are on "
                    "the 1.8 mm mesh")
                 + (". The joint study at the box corners has no extrapolation in the asymptotic range (its figure "
