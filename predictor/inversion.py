@@ -74,10 +74,10 @@ from predictor.graphs import graph_cache, touch, traced
 from predictor.jacobians import jacobian_fn
 from predictor.lm import levenberg_marquardt
 from predictor.options import SolverOptions
-from predictor.ramp import advance
+from predictor.ramp import PLANE_HOMOTOPY, STIFF_TRY, advance, homotopy, softened
 from predictor.result import GestureResult
 from predictor.solve import solve
-from predictor.statics import GripperProblem, box_scale
+from predictor.statics import GripperProblem, box_scale, meets
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
 HOLD_MARGIN = 0.2  # friction margin 1 - u required by --least-pressure
@@ -207,8 +207,22 @@ class _Branch:
         self.loose = dataclasses.replace(opts, tol_force=100 * opts.tol_force, tol_moment=100 * opts.tol_moment)
         self.tol = self.loose
 
+        def lm(problem, tries=None):
+            jac_fn = self.jac_fn if problem is prob else jacobian_fn(problem)
+
+            def step(x, p, p_prev=None, jac=None):
+                tol = self.tol if tries is None else dataclasses.replace(self.tol, max_iter=min(self.tol.max_iter, tries))
+                return levenberg_marquardt(jac_fn, x, p, tol, cap, p_prev, jac)
+
+            return step
+
+        # Where the fingers meet at X = 0, a continuation step pressed on the plane goes
+        # through softer planes when the stiff one stalls (as the solver's ramp does).
+        solver = lm(prob) if not meets(prob) else homotopy(
+            lm(prob, STIFF_TRY), [lm(softened(prob, f)) for f in PLANE_HOMOTOPY] + [lm(prob)])
+
         def run(x, p, p_prev=None, jac=None):
-            x, ok, its, jac = levenberg_marquardt(self.jac_fn, x, p, self.tol, cap, p_prev, jac)
+            x, ok, its, jac = solver(x, p, p_prev, jac)
             if prob.obstacle is not None:  # the solver's tunnelling guard
                 ok = ok & (touch(prob, x, p)[1] <= opts.max_penetration)
             return x, ok, its, jac

@@ -45,8 +45,51 @@ def ramp_method(options: SolverOptions) -> str:
     return "lbfgs" if options.method == "lbfgs" else "lm"
 
 
-#: The plane stiffness factors of the homotopy a failed ramp step retries through (runner).
-PLANE_HOMOTOPY = (0.01, 0.1)
+#: The plane stiffness factors of the homotopy a failed step retries through (``homotopy``):
+#: from 1/1000 of k_p, whose equilibria lie ~10x deeper across X = 0 (the penalty grows
+#: with the cube of a vertex's overlap inside the smoothing width), the basin of each stage
+#: holds the next one's root (a 0.15 MPa step pressed on the plane converges through it in
+#: 20-50 LM iterations; the stiff plane alone stalls or needs cut-backs).
+PLANE_HOMOTOPY = (0.001, 0.01, 0.1)
+#: LM iterations of the stiff plane's first try before ``homotopy`` takes over: a step that
+#: converges does so in ~5-10; one that has not by then stalls in the penalty's narrow valley.
+STIFF_TRY = 10
+
+
+def softened(problem: GripperProblem, factor: float) -> GripperProblem:
+    """``problem`` with the plane X = 0's stiffness k_p times ``factor``."""
+    return dataclasses.replace(problem, contact=dataclasses.replace(
+        problem.contact, plane_stiffness=problem.contact.plane_stiffness * factor))
+
+
+def homotopy(first, stages):
+    """The step solver run(x, p, p_prev=None, jac=None) -> (x, converged (B,), iterations
+    (B,), Jacobians or None) of ``first`` (the stiff plane's try), whose failed samples
+    start again from x through ``stages`` (softer planes, then the stiff one), each from
+    the previous stage's equilibrium (a homotopy in the plane's stiffness): the stiff
+    penalty makes the LM's merit |r|² a narrow valley, where from a predictor across
+    X = 0 (the fingers met within the step) it can stall short of the root."""
+
+    def run(x, p, p_prev=None, jac=None):
+        x_new, conv, its, jac_new = first(x, p, p_prev, jac)
+        bad = ~conv
+        if not bool(bad.any()):
+            return x_new, conv, its, jac_new
+        xb, pb = x[bad], p[bad]
+        prev = None if p_prev is None else p_prev[bad]
+        sub = None if jac is None else tuple(a[bad] for a in jac)
+        total = torch.zeros(int(bad.sum()), dtype=torch.long)
+        for stage in stages:
+            xb, cb, ib, jb = stage(xb, pb, prev, sub)
+            prev, sub, total = None, None, total + ib
+        x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
+        x_new[bad], conv[bad], its[bad] = xb, cb, its[bad] + total
+        if jac_new is not None and jb is not None:
+            for a, b in zip(jac_new, jb):
+                a[bad] = b
+        return x_new, conv, its, jac_new
+
+    return run
 
 
 def ramped(problem: GripperProblem) -> bool:
@@ -118,13 +161,13 @@ def advance(run, x, pa, pb, cutbacks, jac=None):
     return x_new, conv, its, jac_new
 
 
-def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = None, homotopy: bool = True):
+def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = None, soften: bool = True):
     """The solver of one ramp step: run(x (B, n), p (B, J), p_prev=None, jac=None) ->
     (x, converged (B,), iterations (B,), Jacobians at x or None), by opts.method. On a
     ``history`` (default: with an object) it has the ramp's tangent predictor, the step
     cap, and an equilibrium deeper than opts.max_penetration into the object or across
-    X = 0 counts as failed, and a step that fails is retried through softer planes
-    (``homotopy``)."""
+    X = 0 counts as failed, and where the fingers meet (``soften``) a step is tried with
+    the stiff plane for STIFF_TRY iterations, then through softer planes (``homotopy``)."""
     history = prob.obstacle is not None if history is None else history
     if opts.method in ("newton", "lm"):
         jac_fn = jacobian_fn(prob, history, opts.jacobian)  # dr/dP: the ramp's predictor
@@ -142,35 +185,11 @@ def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = Non
         x, conv, its, jac = method(x, p, p_prev, jac)
         return x, conv & (contact_depth(prob, x, p)[1] <= opts.max_penetration), its, jac
 
-    if not (homotopy and meets(prob)):
+    if not (soften and meets(prob)):
         return with_depth_check
-    softer = [runner(dataclasses.replace(prob, contact=dataclasses.replace(
-        prob.contact, plane_stiffness=prob.contact.plane_stiffness * f)), opts, True, False) for f in PLANE_HOMOTOPY]
-
-    def with_homotopy(x, p, p_prev=None, jac=None):
-        # The stiff plane's penalty makes the LM's merit |r|² a narrow valley: from a
-        # predictor across X = 0 (the fingers met within the step) it can stall short of
-        # the root. The samples that fail start again from softer planes, each stage from
-        # the previous one's equilibrium (a homotopy in the stiffness).
-        x_new, conv, its, jac_new = with_depth_check(x, p, p_prev, jac)
-        bad = ~conv
-        if not bool(bad.any()):
-            return x_new, conv, its, jac_new
-        xb, pb = x[bad], p[bad]
-        prev = None if p_prev is None else p_prev[bad]
-        sub = None if jac is None else tuple(a[bad] for a in jac)
-        total = torch.zeros(int(bad.sum()), dtype=torch.long)
-        for stage in softer + [with_depth_check]:
-            xb, cb, ib, jb = stage(xb, pb, prev, sub)
-            prev, sub, total = None, None, total + ib
-        x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
-        x_new[bad], conv[bad], its[bad] = xb, cb, its[bad] + total
-        if jac_new is not None and jb is not None:
-            for a, b in zip(jac_new, jb):
-                a[bad] = b
-        return x_new, conv, its, jac_new
-
-    return with_homotopy
+    stiff_try = runner(prob, dataclasses.replace(opts, max_iter=min(opts.max_iter, STIFF_TRY)), True, False)
+    return homotopy(stiff_try, [runner(softened(prob, f), opts, True, False) for f in PLANE_HOMOTOPY]
+                    + [with_depth_check])
 
 
 def ramp(problem: GripperProblem, x: torch.Tensor, p0: torch.Tensor, pressures: torch.Tensor,

@@ -158,6 +158,19 @@ def test_unreachable_target_is_infeasible_with_the_closest_value(free):
     assert ans.tip_error_mm > 100.0  # the finger is ~215 mm long
 
 
+def test_closest_tip_pressed_on_the_plane_is_the_stiff_continuations(free):
+    """tip:9.04,-214.93,-88.37 (the tip and its angle behind the other finger): the
+    closest gesture presses on the plane X = 0; the search's continuation steps there go
+    through softer planes (ramp.homotopy) and land where the stiff plane's cut-back
+    continuation did (frozen: (0.0785113123, -0.0681637947) MPa, 2.02159224 mm,
+    results/predictor/inverse.json before the homotopy) within 1e-6 MPa and 1e-5 mm."""
+    ans = inverse_pressures(free, goal="tip:9.04,-214.93,-88.37")
+    assert ans.status == "infeasible" and ans.verified
+    assert ans.pressures == pytest.approx((0.07851131233192438, -0.06816379473653308), abs=1e-6)
+    assert ans.tip_error_mm == pytest.approx(2.0215922370790325, abs=1e-5)
+    assert where_it_touches(ans)["plane_force_N"] > 0
+
+
 def test_inverse_hold_beats_the_atlas(circle, atlas):
     ans = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
     assert ans.status == "feasible" and ans.state == "holds" and ans.verified

@@ -296,3 +296,32 @@ def test_former_failing_reference_ramp_point_converges(steps):
     assert bool(res.converged[0]) and res.summary(0)["state"] in ("holds", "slips")
     ref = solve(problem, t([[0.2, -0.1]]), SolverOptions(ramp_steps=24))
     assert float((res.pose.tip_end - ref.pose.tip_end).norm()) < 0.05
+
+
+def test_plane_homotopy_step_lands_on_the_cut_back_root():
+    """A continuation step pressed on the plane X = 0 (analytic joint, (0.2, 0.2) ->
+    (0.1, 0.3) MPa, no object): the stiff plane's LM alone does not converge within
+    STIFF_TRY iterations; the ramp's runner (stiff try, then the planes of PLANE_HOMOTOPY)
+    converges in one step, to the root that the stiff LM reaches by halving the step
+    (ramp.advance's cut-backs): unknowns within 1e-6 (N, N·mm), tip within 1e-6 mm."""
+    from predictor.jacobians import jacobian_fn
+    from predictor.lm import levenberg_marquardt
+    from predictor.ramp import STIFF_TRY, advance, runner
+
+    problem, opts = GripperProblem(J), SolverOptions()
+    pa, pb = t([[0.2, 0.2]]), t([[0.1, 0.3]])
+    start = solve(problem, pa)
+    assert bool(start.converged[0]) and float(start.plane_overlap_mm[0]) > 0
+    x = start.tau.reshape(1, 6)
+    jac = jacobian_fn(problem, True)
+
+    def stiff(x, p, p_prev=None, j=None, o=opts):
+        return levenberg_marquardt(jac, x, p, o, None, p_prev, j)
+
+    assert not bool(stiff(x, pb, pa, None, dataclasses.replace(opts, max_iter=STIFF_TRY))[1][0])
+    ref, ok_ref, _, _ = advance(stiff, x, pa, pb, opts.cutbacks)
+    new, ok_new, _, _ = runner(problem, opts, history=True)(x, pb, pa)
+    assert bool(ok_ref[0]) and bool(ok_new[0])
+    assert float((new - ref).abs().max()) < 1e-6
+    tip = lambda y: problem.pose(pb, y.reshape(1, 2, 3)).tip_end[0]  # noqa: E731
+    assert float((tip(new) - tip(ref)).norm()) < 1e-6
