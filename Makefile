@@ -38,9 +38,18 @@ $(TIMES):
 	  touch -d @$$t $@
 endif
 
+# The discretisations (fem/discretisation.py). Every tool defaults to the production one,
+# the paper joint file's [mesh]: swept Q2 hexahedra hex2:3 in the mixed u-p formulation
+# (docs/decisions.md §9). The committed datasets results/data/{train,heldout} (and the
+# 1.697:0.849 held-out walk), the surrogate trained on them and the finger cases are on the
+# paper-fidelity PAPER, 1.8 mm P2 tetrahedra in displacement, until `make dataset-new` and
+# what follows regenerate them: every target that resumes, extends, checks or redraws one of
+# them passes PAPER_MESH, so that it keeps doing what it did.
+PAPER_MESH := --mesh-size 1.8 --formulation displacement
+
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -66,7 +75,9 @@ $(SETUP): pyproject.toml constraints.txt
 # ---------------------------------------------------------------- main commands
 # One joint FEM against the surrogate, the paper's gravity and grasp gestures, one coarse
 # whole-finger FEM against the predictor: PNGs + summary.{json,md} + a table (apps/demo.py).
-demo: $(SETUP) ## the main job (~2 min): joint FEM vs surrogate, gestures, finger FEM vs predictor -> results/demo/
+# Its FEM runs on the committed data's meshes (the joint on PAPER's 1.8 mm, the finger on
+# 4 mm tetrahedra, both displacement), never on the production hexahedra.
+demo: $(SETUP) ## the main job (~2 min): joint FEM (1.8 mm) vs surrogate, gestures, coarse finger FEM vs predictor -> results/demo/
 	$(PY) -m apps.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
@@ -77,13 +88,14 @@ test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~7 min with set
 	$(PY) -m pytest -q -ra -n 2 --dist loadfile --durations=15
 
 # ---------------------------------------------------------------- fem (issue 2)
-bench-fem: results/bench/fem.json ## FEM timings at the production mesh -> results/bench/fem.json
+bench-fem: results/bench/fem.json ## FEM timings of the production discretisation (hex2:3 mixed) and of PAPER (1.8 mm) -> results/bench/fem.json
 results/bench/fem.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.bench_joint --out $@
 
-bench-finger: results/bench/finger.json ## whole-finger FEM timings, 4 gestures on one core (idle machine, ~18 min) -> results/bench/finger.json
+# Checked against the committed finger cases, so on their discretisation (PAPER_MESH).
+bench-finger: results/bench/finger.json ## whole-finger FEM timings on the committed cases' 1.8 mm mesh, 4 gestures on one core (idle machine, ~18 min) -> results/bench/finger.json
 results/bench/finger.json: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.bench_finger --out $@
+	$(PY) -m fem.bench_finger $(PAPER_MESH) --out $@
 
 # The families are solved in the mixed u-p formulation: volumetric locking of displacement P2
 # at nu = 0.49 is the largest single effect (make mesh-causes). The swept hexahedra hex2,
@@ -97,8 +109,10 @@ mesh-study: | $(SETUP) ## 8 loads x (mixed hexahedra hex2, hex3, hex4 + producti
 	  --production-formulation mixed --seed-from hex2 --out results/fem/mesh_study.json --work results/fem/joint_cases \
 	  --max-hours $(MESH_STUDY_HOURS)
 
-mesh-study-tet: | $(SETUP) ## the same on the mixed sqrt-2 tetrahedral family 3.394:1.697 .. 1.2:0.6 (2 ranks, many hours; resumes) -> results/fem/mesh_study_tet.json
-	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --formulation mixed --out results/fem/mesh_study_tet.json --work results/fem/joint_cases --max-hours $(MESH_STUDY_HOURS)
+# Its committed study judged the 1.8 mm displacement mesh, the production one then.
+mesh-study-tet: | $(SETUP) ## the same on the mixed sqrt-2 tetrahedral family 3.394:1.697 .. 1.2:0.6, judging PAPER's 1.8 mm (2 ranks, many hours; resumes) -> results/fem/mesh_study_tet.json
+	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --formulation mixed --production 1.8 --production-formulation displacement \
+	  --out results/fem/mesh_study_tet.json --work results/fem/joint_cases --max-hours $(MESH_STUDY_HOURS)
 
 MESH_CAUSES_HOURS ?= 3
 mesh-causes: | $(SETUP) ## what limits the joint's mesh convergence: formulation, quadrature, penalty, wall elements at 8 loads, one factor at a time (one core, hours; resumes) -> results/fem/mesh_causes.{json,md}
@@ -108,52 +122,54 @@ materials: results/fem/materials.json ## each hyperelastic law's FEM against its
 results/fem/materials.json: $(TIMES) fem/materials.py fem/materials_check.py contract/joint.py | $(SETUP)
 	$(PY) -m fem.materials_check --out $@
 
-self-contact: results/fem/self_contact.json ## min wall gap over the box corners
+self-contact: results/fem/self_contact.json ## min wall gap over the box corners, on the committed data's 1.8 mm mesh
 results/fem/self_contact.json: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.self_contact --out $@
+	$(PY) -m fem.self_contact $(PAPER_MESH) --out $@
 
 validation: results/fem/validation.json ## FEM vs exact elastica: cantilever alpha<=10, roll-up to 2 pi
 results/fem/validation.json: $(TIMES) fem/*.py | $(SETUP)
 	$(PY) -m fem.validation table --out $@
 
-joint-render: results/fem/joint.png ## pyvista render of the joint, undeformed + deformed
+joint-render: results/fem/joint.png ## pyvista render of the joint, undeformed + deformed, on the committed data's 1.8 mm mesh
 results/fem/joint.png: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.render --out $@
+	$(PY) -m fem.render $(PAPER_MESH) --out $@
 
 # ---------------------------------------------------------------- campaign (issue 3)
 # (section owned by workflow/)
 # The datasets are resumable: each campaign stops cleanly after DATASET_HOURS (exit 3,
 # which stops make) and `make dataset` again resumes from the shards. Train and held-out
 # sets use different seeds; the held-out set uses 16-sample units (more independent walks
-# for its 256 samples); ranks = DATASET_RANKS groups of one rank.
+# for its 256 samples); ranks = DATASET_RANKS groups of one rank. They are on PAPER_MESH
+# (the committed sets'; the production discretisation's are dataset-new's).
 DATASET_RANKS ?= 2
 DATASET_HOURS ?= 2
 CAMPAIGN      := nice $(MPIRUN) -n $(DATASET_RANKS) $(PY) -m workflow.campaign
 SMOKE_DIR     := build/dataset-smoke
 
-dataset: | $(SETUP) ## FEM datasets: results/data/train (2560, seed 1) + heldout (256, seed 2); re-run resumes
-	$(CAMPAIGN) --samples 2560 --seed 1 --out results/data/train --max-hours $(DATASET_HOURS)
-	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 --out results/data/heldout --max-hours $(DATASET_HOURS)
+dataset: | $(SETUP) ## FEM datasets on PAPER's 1.8 mm displacement: results/data/train (2560, seed 1) + heldout (256, seed 2); re-run resumes
+	$(CAMPAIGN) --samples 2560 --seed 1 $(PAPER_MESH) --out results/data/train --max-hours $(DATASET_HOURS)
+	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(PAPER_MESH) --out results/data/heldout --max-hours $(DATASET_HOURS)
 	$(PY) -m workflow.dataset verify results/data/train --require-complete --mirror 2
 	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
 
-# The datasets on the study's production candidate (docs/decisions.md §9; NEW_MESH, default
-# hex2:3 mixed u-p; NEW_TAG names their folders), the held-out walk first. They stay in their
+# The datasets on the production discretisation (docs/decisions.md §9; NEW_MESH, default
+# hex2:3 mixed u-p, spelled out; NEW_TAG names their folders), the held-out walk first. They stay in their
 # own folders until everything downstream is retrained on them; then they become
 # results/data/{train,heldout} and the 1.8 mm sets results/data/{train,heldout}_h1.8.
 NEW_MESH ?= --divisions 2 --hex-size 3 --formulation mixed
 NEW_TAG  ?= hex2s3
 NEW_DATA := results/data
-dataset-new: | $(SETUP) ## FEM datasets on the new discretisation (NEW_MESH, default hex2:3 mixed): results/data/heldout_hex2s3 (256, seed 2) then train_hex2s3 (2560, seed 1); DATASET_HOURS per run; re-run resumes
+dataset-new: | $(SETUP) ## FEM datasets on the production discretisation (NEW_MESH, default hex2:3 mixed): results/data/heldout_hex2s3 (256, seed 2) then train_hex2s3 (2560, seed 1); DATASET_HOURS per run; re-run resumes
 	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(NEW_MESH) --out $(NEW_DATA)/heldout_$(NEW_TAG) --max-hours $(DATASET_HOURS)
 	$(CAMPAIGN) --samples 2560 --seed 1 $(NEW_MESH) --out $(NEW_DATA)/train_$(NEW_TAG) --max-hours $(DATASET_HOURS)
 	$(PY) -m workflow.dataset verify $(NEW_DATA)/heldout_$(NEW_TAG) --require-complete
 	$(PY) -m workflow.dataset verify $(NEW_DATA)/train_$(NEW_TAG) --require-complete --mirror 2
 
 # The held-out walk again on the finer joint mesh H:W = 1.697:0.849 (two P2 elements through
-# the wall, 3x the nodes): the production datasets' discretisation change over the load
-# distribution the surrogate is judged on, and the surrogate against it. Resumes.
-FINE_MESH    := --mesh-size 1.697 --wall-mesh-size 0.849
+# the wall, 3x the nodes, displacement as the committed sets): the committed datasets'
+# discretisation change over the load distribution the surrogate is judged on, and the
+# surrogate against it. Resumes.
+FINE_MESH    := --mesh-size 1.697 --wall-mesh-size 0.849 --formulation displacement
 FINE_HELDOUT := results/data/heldout_h1.697w0.849
 dataset-fine: | $(SETUP) ## held-out walk on the finer mesh 1.697:0.849 (~1.7 h on 2 cores; resumes) + its comparison -> results/fem/heldout_mesh.json
 	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(FINE_MESH) --out $(FINE_HELDOUT) --max-hours $(DATASET_HOURS)
@@ -164,16 +180,25 @@ fine-compare: | $(SETUP) ## compare what the finer-mesh held-out walk holds so f
 	$(PY) -m workflow.dataset compare results/data/heldout $(FINE_HELDOUT) --out results/fem/heldout_mesh.json
 	$(PY) -m surrogate.evaluate --model results/surrogate/improved.pt --data $(FINE_HELDOUT) --out results/surrogate/heldout_fine.json
 
-dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse mesh into build/dataset-smoke, verified
+# The held-out walk on the production discretisation (make dataset-new) against the committed
+# 1.8 mm walk: the committed data's own discretisation error over the loads the surrogate is
+# judged on, and the committed surrogate against it.
+NEW_HELDOUT := $(NEW_DATA)/heldout_$(NEW_TAG)
+production-compare: | $(SETUP) ## compare the committed held-out walk with the production discretisation's (needs it complete) -> results/fem/heldout_production.json, results/surrogate/heldout_production.json
+	$(PY) -m workflow.dataset verify $(NEW_HELDOUT) --require-complete
+	$(PY) -m workflow.dataset compare results/data/heldout $(NEW_HELDOUT) --out results/fem/heldout_production.json
+	$(PY) -m surrogate.evaluate --model results/surrogate/improved.pt --data $(NEW_HELDOUT) --out results/surrogate/heldout_production.json
+
+dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse 4 mm mesh (mixed) into build/dataset-smoke, verified
 	rm -rf $(SMOKE_DIR) && mkdir -p build
 	$(MPIRUN) -n 2 $(PY) -m workflow.campaign --samples 8 --seed 3 --unit-size 4 --mesh-size 4 \
 	  --out $(SMOKE_DIR) --progress-every 10
 	$(PY) -m workflow.dataset verify $(SMOKE_DIR) --require-complete --mirror 1
 	$(PY) -m workflow.dataset info $(SMOKE_DIR)
 
-bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh -> results/bench/campaign.json
+bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh, on the committed data's 1.8 mm mesh -> results/bench/campaign.json
 results/bench/campaign.json: $(TIMES) workflow/campaign.py workflow/bench_campaign.py fem/solver.py | $(SETUP)
-	nice $(PY) -m workflow.bench_campaign --mpirun "$(MPIRUN)" --out $@
+	nice $(PY) -m workflow.bench_campaign $(PAPER_MESH) --mpirun "$(MPIRUN)" --out $@
 
 # ---------------------------------------------------------------- surrogate (issue 4)
 # (section owned by surrogate/)
@@ -274,9 +299,10 @@ results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.
 
 # Issue 38 §3(b): the whole-finger FEM of a deliberately different finger (CAL_TRUTH: joints
 # E x 1.15, the tip 20 % heavier, the mount turned 2 deg) at CAL_PRESSURES with gravity, all
-# inside |P| <= 0.2 MPa where the finger FEM converges; predictor.calibration_fem.PRESSURES is
-# the same list (tests/test_calibration_fem.py checks). One core, niced, hours at the
-# production mesh; a converged case is skipped, so a killed run resumes.
+# inside |P| <= 0.2 MPa; predictor.calibration_fem.PRESSURES is the same list
+# (tests/test_calibration_fem.py checks). One core, niced, on the truth joint file's 1.8 mm
+# mesh (the surrogate's): 15 min for the committed run; a converged case is skipped, so a
+# killed run resumes.
 CAL_TRUTH     := results/calibration/truth/finger.toml
 CAL_FEM       := results/calibration/fem
 CAL_PRESSURES := 0.2,0.2;-0.2,0.15;0.15,-0.2;-0.15,-0.15;0,0;0.1,0.05;-0.1,0.2;0.05,-0.1
@@ -284,7 +310,7 @@ CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py
                  predictor/calibration_file.py predictor/calibration_fem.py predictor/calibration_plot.py \
                  predictor/calibrate.py
 
-calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, hours; resumes) -> results/calibration/fem/
+calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, ~15 min; resumes) -> results/calibration/fem/
 	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --out $(CAL_FEM)
 
 calibrate-demo: results/calibration/calibration.json ## calibrate the paper's predictor on 4 FEM gestures of the true finger, predict the other 4 (~1 min; needs make calibration-fem) -> results/calibration/{calibration.json,heldout.png,calibrated.toml}
@@ -299,16 +325,21 @@ results/bench/calibrate.json: $(TIMES) $(CAL_CODE) predictor/calibration_recover
 	$(PY) -m predictor.calibrate bench --observations docs/examples/observations.json --model $(PRED_JOINT) --out $@
 
 # ---------------------------------------------------------------- finger validation (issue 14)
+# The committed cases are on PAPER_MESH, as the surrogate the predictor runs on.
 FINGER_FEM := results/validation/finger_fem
-FINGER_CASES := $(PY) -m fem.finger_cases --out $(FINGER_FEM)
+FINGER_CASES := $(PY) -m fem.finger_cases $(PAPER_MESH) --out $(FINGER_FEM)
 
-finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases at the production mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
+finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases on the committed 1.8 mm displacement mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
+
+finger-grid: | $(SETUP) ## whole-finger FEM at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, hours; resumes) -> results/fem/finger_grid.json
+	nice $(PY) -m fem.finger_grid --out results/fem/finger_grid.json
 
 validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
 results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)
 	$(MAKE) --no-print-directory finger-fem
-	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --model $(PRED_JOINT) --out $@ --figures results/validation
+	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement --model $(PRED_JOINT) \
+	  --out $@ --figures results/validation
 
 # ---------------------------------------------------------------- one joint file to a predictor (issue 37)
 # (section owned by apps/pipeline.py) Render, the two campaigns, training, held-out errors and

@@ -5,18 +5,26 @@
 What runs, one subprocess at a time (``sys.executable -m ...``, so at most one FEM runs):
 
 1. ``fem.render --json``: the joint FEM of (P, F1, F2, M) = (0.2 MPa, 1 N, -1 N, 20 N·mm)
-   on the production mesh, rendered -> ``joint.png`` (its JSON is ``fem.solve --json``'s);
+   on the committed data's discretisation, rendered -> ``joint.png`` (its JSON is
+   ``fem.solve --json``'s);
 2. ``surrogate.predict --json``: the same case on the committed surrogate;
 3. and 4. ``predictor.gesture --json --plot``: the paper's gravity gestures (-0.1, 0.1)
    and (0.1, -0.1) MPa -> ``gesture_<P1>_<P2>.png``, against the committed whole-finger
-   FEM of the same gestures on the production mesh (results/validation/finger_fem, made
-   by ``make finger-fem``; not solved now);
+   FEM of the same gestures (results/validation/finger_fem, made by ``make finger-fem``;
+   not solved now);
 5. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
    a grasp: normal force, friction use |f|/N and hold/slip are shown instead);
 6. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
    on a coarse joint mesh -> ``finger_fem/<case>.json`` and its render;
 7. ``predictor.validate_finger --mesh-size H``: the predictor against it ->
    ``finger.json`` and the overlay ``finger_<case>.png``.
+
+Discretisation: the committed artefacts compared with (the surrogate's training data, the
+finger cases) are on the paper-fidelity 1.8 mm P2 displacement mesh
+(fem.discretisation.PAPER, COMMITTED_MESH_SIZE and COMMITTED_FORMULATION here), not on the
+production hex2:3 mixed; so the joint FEM of step 1 runs on that mesh (as the surrogate's
+data), and the live finger FEM of step 6 on the coarse H mm (default 4) tetrahedra in the
+same displacement formulation. The demo runs no production-mesh FEM.
 
 Data flow: each step's JSON (its stdout, or the file it writes) -> ``table_rows`` (pure:
 the errors, times and labels of every row) -> ``summary.json``, ``summary.md`` (the same
@@ -50,7 +58,7 @@ from contract import cli
 from contract.files import write_text
 from contract.records import Format, each
 from fem import artefacts as fem_artefacts
-from fem.geometry import JointGeometry
+from fem.geometry import PAPER_MESH_SIZE
 from predictor import artefacts as predictor_artefacts
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,6 +69,9 @@ GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the pap
 GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
 FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.finger_cases name
 HEARTBEAT_S = 30.0
+#: The discretisation of the committed artefacts the demo compares with (module docstring):
+#: fem.discretisation.PAPER, named without its dolfinx (tests/test_demo.py checks the two).
+COMMITTED_MESH_SIZE, COMMITTED_FORMULATION = PAPER_MESH_SIZE, "displacement"
 
 #: results/demo/summary.json: the run's steps and its table rows (docs/formats.md §6.12).
 SUMMARY = Format("demo-summary", 1, "apps.demo", {
@@ -107,9 +118,11 @@ def gesture_name(p1: float, p2: float) -> str:
 def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
     """The demo's steps, in order; ``out`` is the output folder relative to the repository."""
     case = [a for k, v in JOINT_CASE.items() for a in (f"--{k}", _g(v))]
+    committed = ["--mesh-size", _g(COMMITTED_MESH_SIZE), "--formulation", COMMITTED_FORMULATION]
     steps = [
-        Step("joint_fem", "joint FEM, production mesh, and its render (fem.render)", "fem.render",
-             [*case, "--out", f"{out}/joint.png", "--json"]),
+        Step("joint_fem", f"joint FEM, the surrogate's data mesh h={_g(COMMITTED_MESH_SIZE)} mm "
+             f"{COMMITTED_FORMULATION}, and its render (fem.render)", "fem.render",
+             [*case, *committed, "--out", f"{out}/joint.png", "--json"]),
         Step("surrogate", "joint surrogate, same case (surrogate.predict)", "surrogate.predict",
              ["--model", SURROGATE, *case, "--json"]),
     ]
@@ -124,10 +137,12 @@ def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
                                             "--plot", f"{out}/grasp.png"]))
     h = _g(finger_mesh_size)
     steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.finger_cases)",
-                      "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h],
+                      "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h,
+                                           "--formulation", COMMITTED_FORMULATION],
                       reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
     steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
                       "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h,
+                                                    "--formulation", COMMITTED_FORMULATION,
                                                     "--out", f"{out}/finger.json", "--figures", out, "--json"],
                       reads=f"{out}/finger.json", format=predictor_artefacts.VALIDATION))
     return steps
@@ -182,7 +197,8 @@ def gravity_row(fem: dict, gesture: dict, fem_file: str) -> dict:
     """A gravity gesture (predictor.gesture JSON) against the committed finger FEM."""
     p1, p2 = gesture["pressures_MPa"]
     errors = finger_errors(fem, gesture["tip"], gesture["tip_angle_deg"])
-    return {"case": f"gravity ({_g(p1)}, {_g(p2)}) MPa", "fem": "FEM (committed, production mesh)",
+    return {"case": f"gravity ({_g(p1)}, {_g(p2)}) MPa",
+            "fem": f"FEM (committed, h={fem_artefacts.finger_case_mesh(fem)})",
             "model": _predictor_label(gesture), "errors": errors, "error": _tip_text(errors),
             "fem_s": fem["fem_s"], "model_s": gesture["time_ms"] / 1000.0,
             "produced_by": {"fem": f"{fem_file}: tip, tip_angle_deg (make finger-fem)",
@@ -214,7 +230,7 @@ def grasp_row(g: dict) -> dict:
 def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: str) -> list[dict]:
     """The finger FEM solved now (fem.finger_cases JSON) against the predictor
     (predictor.validate_finger JSON, its judged variant), and the same FEM against the
-    committed production-mesh FEM of the case: the coarse mesh's own error."""
+    committed FEM of the case (on the committed data's mesh): the coarse mesh's own error."""
     h, h0 = _g(fem["mesh"]["mesh_size"]), _g(committed["mesh"]["mesh_size"])
     judged = validation["judged_variant"]
     entry = next((e for e in validation["cases"] if e["case"] == fem["case"] and e["variant"] == judged), None)
@@ -358,7 +374,8 @@ def run_step(step: Step, k: int, n: int, t0: float, env: dict, log=sys.stdout) -
 
 
 def load_committed(name: str) -> tuple[dict, str]:
-    """A committed whole-finger FEM case at the production mesh: (JSON, its path)."""
+    """A committed whole-finger FEM case on the committed data's discretisation
+    (COMMITTED_MESH_SIZE, COMMITTED_FORMULATION): (JSON, its path)."""
     rel = f"{COMMITTED_FINGER_FEM}/{name}.json"
     try:
         case = fem_artefacts.FINGER_CASE.load(Path(ROOT, rel))
@@ -366,10 +383,12 @@ def load_committed(name: str) -> tuple[dict, str]:
         raise StepFailed(f"committed finger FEM {rel} missing or unreadable: run `make finger-fem`") from None
     except ValueError as exc:
         raise StepFailed(f"{exc}: run `make finger-fem`") from None
-    production = JointGeometry().mesh_size
-    if not case["converged"] or case["mesh"]["mesh_size"] != production:
-        raise StepFailed(f"committed finger FEM {rel} is not a converged case on the production mesh "
-                         f"h={_g(production)}: run `make finger-fem`")
+    wanted = (_g(COMMITTED_MESH_SIZE), COMMITTED_FORMULATION)
+    found = (fem_artefacts.finger_case_mesh(case), fem_artefacts.finger_case_formulation(case))
+    if not case["converged"] or found != wanted:
+        raise StepFailed(f"committed finger FEM {rel} is not a converged case on the mesh h={wanted[0]} mm "
+                         f"({wanted[1]}), the surrogate's data (it is on {found[0]}, {found[1]}): run "
+                         "`make finger-fem`")
     return case, rel
 
 

@@ -253,9 +253,12 @@ class JointSpec:
         return self.shape.length
 
     def geometry_kwargs(self) -> dict:
-        """Keyword arguments of fem.geometry.JointGeometry for this joint (mm)."""
+        """Keyword arguments of fem.geometry.JointGeometry for this joint (mm): every mesh
+        field of its kind, and ``divisions=0, hex_size=None`` on tetrahedra (JointGeometry's
+        defaults are hexahedra); hexahedra leave the unused tetrahedron size at its default."""
         mesh = ({"divisions": self.divisions, "hex_size": self.hex_size} if self.divisions else
-                {"mesh_size": self.mesh_size, "wall_mesh_size": self.wall_mesh_size})
+                {"mesh_size": self.mesh_size, "wall_mesh_size": self.wall_mesh_size, "divisions": 0,
+                 "hex_size": None})
         return {**{k: getattr(self.shape, k) for k in GEOMETRY_KEYS}, **mesh}
 
     def anchor_points(self) -> np.ndarray:

@@ -8,6 +8,7 @@ MPa, deg; ``*_over_L`` are fractions of the beam length.
 
 from __future__ import annotations
 
+from contract.joint import mesh_text
 from contract.records import Format, each
 
 NUM, MAYBE = float, float | None
@@ -66,6 +67,30 @@ FINGER_CASE = Format("fem-finger-case", 1, "fem.finger_cases", {
     "case": str, "pressures_MPa": list, "gravity": bool, "converged": bool, "tip": list | None,
     "tip_angle_deg": MAYBE, "fem_s": NUM, "mesh.mesh?": str, "mesh.mesh_size?": NUM, "mesh.divisions?": int,
     "mesh.nodes": int})
+
+#: results/fem/finger_grid.json (make finger-grid; fem.finger_grid): the finger FEM over an
+#: N x N grid of gravity pressure pairs, each case's convergence, time and Newton figures.
+FINGER_GRID = Format("fem-finger-grid", 1, "fem.finger_grid", {
+    "settings.points": int, **each("", int, "pairs", "solved", "converged"), "complete": bool,
+    "max_wall_s": MAYBE, "mesh.nodes": int, "cases[].p1": NUM, "cases[].p2": NUM, "cases[].converged": bool,
+    "cases[].wall_s": NUM, **each("cases[]", int, "newton_iterations", "load_steps", "cutbacks"),
+    "cases[].reason": str})
+
+
+def finger_case_wall(case: dict) -> float | None:
+    """The chamber-wall tetrahedron size (mm) of a FINGER_CASE record (None: its size)."""
+    return case.get("settings", {}).get("geometry", {}).get("joint", {}).get("wall_mesh_size")
+
+
+def finger_case_mesh(case: dict) -> str:
+    """The joints' mesh of a FINGER_CASE record in words: its ``mesh.mesh``, or, in a record
+    written before hexahedra, mesh_text of its size and chamber-wall size (mm)."""
+    return case["mesh"].get("mesh") or mesh_text(case["mesh"]["mesh_size"], finger_case_wall(case))
+
+
+def finger_case_formulation(case: dict) -> str:
+    """The formulation of a FINGER_CASE record (absent: "displacement", which it predates)."""
+    return case.get("formulation") or "displacement"
 
 #: results/fem/joint_cases/<discretisation>_<load>.json (make mesh-study, make mesh-causes;
 #: fem.joint_cases): one joint solve of one load under one discretisation (mesh H:W,

@@ -79,7 +79,7 @@ def time_discretisation(disc: Discretisation, n_walk: int = 6, step: float = 0.1
         walk.append((time.perf_counter() - t, r.iterations, r.factorisations, time.process_time() - cpu))
     return {
         **solver.mesh_info(), "formulation": disc.formulation, "mesh": disc.mesh,
-        "wall_mesh_size_mm": geo.wall_mesh_size or geo.mesh_size, "wall_thickness_mm": geo.wall,
+        "wall_mesh_size_mm": None if geo.divisions else geo.wall_mesh_size or geo.mesh_size, "wall_thickness_mm": geo.wall,
         "setup_s": setup,
         "solve_from_zero_s": statistics.median(r.wall_time for r in zero),
         "solve_from_zero_cases": [{"load": r.load.as_array().tolist(), "wall_time_s": r.wall_time,

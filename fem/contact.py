@@ -26,6 +26,9 @@ The pairs are gathered on every rank (a few hundred nodes) and rank 0 adds the
 contributions with global PETSc indices; PETSc moves off-process entries. Every pair's
 4 x 4 block is always inserted (zeros when open), so the sparsity pattern, and with it
 MUMPS' symbolic factorisation, is fixed after the first assembly.
+
+:class:`ContactTerms` sums several contact terms (a finger's joints, an object:
+fem.object_contact) behind the one interface fem.load_path calls.
 """
 
 from __future__ import annotations
@@ -149,3 +152,37 @@ class ValleyContact:
                 A.setValuesIJV(np.arange(0, blocks.size + 1, 4, dtype=PETSc.IntType),
                                np.repeat(dofs, 4, axis=0).reshape(-1), blocks.reshape(-1),
                                addv=PETSc.InsertMode.ADD, rowmap=dofs.reshape(-1))
+
+
+class ContactTerms:
+    """Several contact terms behind the one interface fem.load_path calls (add_residual,
+    add_tangent, coupled_dofs, and the optional refuses and low_rank: fem.object_contact);
+    None terms dropped. A problem with one term keeps that term itself, so its answers are
+    unchanged."""
+
+    def __init__(self, *terms):
+        self.terms = [t for t in terms if t is not None]
+
+    def __bool__(self) -> bool:
+        return bool(self.terms)
+
+    def coupled_dofs(self) -> list[np.ndarray]:
+        """Every term's rows of coupled global dofs (each row: one dense block)."""
+        return [row for t in self.terms for row in t.coupled_dofs()]
+
+    def add_residual(self, b: PETSc.Vec, u: fem.Function) -> None:
+        for t in self.terms:
+            t.add_residual(b, u)
+
+    def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
+        for t in self.terms:
+            t.add_tangent(A, u)
+
+    def refuses(self, u: fem.Function) -> str:
+        """The first term's reason to refuse a converged state (``refuses``), or ""."""
+        reasons = (t.refuses(u) for t in self.terms if hasattr(t, "refuses"))
+        return next((why for why in reasons if why), "")
+
+    def low_rank(self, u: fem.Function) -> list:
+        """Every term's low-rank tangent pairs (a, b), dR += a bᵀ (a term without them: none)."""
+        return [pair for t in self.terms if hasattr(t, "low_rank") for pair in t.low_rank(u)]

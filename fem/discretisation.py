@@ -9,10 +9,14 @@ fem.mesh_hex: n elements through every wall; written "hexN"), optionally graded 
 fem.problem), the quadrature degree q (at least fem.mesh_hex.QUADRATURE on hexahedra) and
 the valley-contact penalty kappa (MPa/mm).
 
-* PAPER: the discretisation of the paper-fidelity datasets (1.8 mm P2 displacement), kept
-  as the reference that REPORT compares against;
-* PRODUCTION: what new data is generated on (chosen by ``make mesh-study``, issue 35);
-  JointGeometry's default sizes and FORMULATION are PRODUCTION's.
+* PAPER: the paper-fidelity 1.8 mm P2 displacement discretisation (H = PAPER_MESH_SIZE),
+  which the committed artefacts are on (results/data/{train,heldout}, the surrogate trained
+  on them, results/validation/finger_fem) until they are regenerated; the tools that resume
+  or check them pass it explicitly (the Makefile's PAPER_MESH);
+* PRODUCTION: what new data is generated on, "hex2:3" mixed with quadrature 4 (key
+  ``hex2s3_mixed_q4_k100``; chosen by ``make mesh-study``, issue 35, docs/decisions.md §9):
+  Discretisation's defaults, JointGeometry's default mesh, FORMULATION and the paper joint
+  file's [mesh] are PRODUCTION's.
 
 A dataset's manifest records its geometry and solver settings, and its formulation only
 when it is not "displacement" (so manifests written before the mixed formulation existed
@@ -23,24 +27,25 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
-from fem.geometry import MAX_DIVISIONS, JointGeometry
+from fem.geometry import MAX_DIVISIONS, PAPER_MESH_SIZE, JointGeometry
 from fem.load_path import SolverConfig
 from fem.mesh_hex import QUADRATURE as HEX_QUADRATURE
 from fem.problem import FORMULATIONS
 
 #: the formulation new data is generated on (PRODUCTION's)
-FORMULATION = "displacement"
+FORMULATION = "mixed"
 
 
 @dataclass(frozen=True)
 class Discretisation:
     """One discretisation of the joint: sizes in mm (None on hexahedra), penalty in MPa/mm.
-    Build one from its mesh text with :func:`discretisation`."""
+    The defaults are PRODUCTION (JointGeometry's default hexahedra, FORMULATION, the
+    hexahedra's quadrature). Build one from its mesh text with :func:`discretisation`."""
 
-    H: float | None = JointGeometry.mesh_size
-    W: float | None = JointGeometry.wall_mesh_size
+    H: float | None = None
+    W: float | None = None
     formulation: str = FORMULATION
-    quadrature: int = SolverConfig.quadrature_degree
+    quadrature: int = HEX_QUADRATURE
     penalty: float = SolverConfig.contact_penalty
     divisions: int = JointGeometry.divisions
     hex_size: float | None = JointGeometry.hex_size
@@ -112,7 +117,8 @@ class Discretisation:
         return replace(base, quadrature_degree=self.quadrature, contact_penalty=self.penalty)
 
 
-PAPER = Discretisation(H=1.8, W=None, formulation="displacement", quadrature=2, penalty=100.0)
+PAPER = Discretisation(H=PAPER_MESH_SIZE, W=None, formulation="displacement", quadrature=2, penalty=100.0,
+                       divisions=0, hex_size=None)
 PRODUCTION = Discretisation()
 
 

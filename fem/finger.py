@@ -3,6 +3,7 @@
     python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H | --divisions N]
                          [--finger FILE] [--formulation mixed] --json
     python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
+    python -m fem.finger --p1 0.2 --p2 0.2 --plane     # the fingers meet at X = 0
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
 Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one half-model
@@ -17,13 +18,18 @@ and default mesh ([mesh]: sizes and formulation, of the first joint, unless give
 P2 elements and the valley self-contact of fem.contact. ``--divisions`` N (or a first
 joint file whose [mesh] gives divisions) meshes the whole finger with swept Q2 hexahedra
 instead (fem.mesh_hex: N elements through every joint wall, the same grid as the joint
-alone), integrated with the hexahedra's quadrature (fem.solver.config_for). The record's
-``mesh.mesh`` names the joints' mesh in words (``1.8``, ``1.697:0.849``, ``hex2``;
-contract.joint.mesh_text). fem.geometry.build_finger (and fem.mesh_hex) mesh one joint
-shape, so the joints of one finger may differ in law, box and anchors but must share their
-shape (a finger whose joints differ in shape is refused with one line). Every
-rigid part is a neo-Hookean PLA-like solid (E = 3.5 GPa, nu = 0.35), bonded to its
-neighbours (one conforming mesh). The base face x = 0 is clamped.
+alone when the joints share their section), integrated with the hexahedra's quadrature
+(fem.solver.config_for). The record's ``mesh.mesh`` names the joints' mesh in words (``1.8``, ``1.697:0.849``, ``hex2``;
+contract.joint.mesh_text). Each joint is meshed in its own shape (its joint description's
+[geometry]: length, cells, walls, section; fem.geometry.FingerGeometry.joint_at) with the
+finger's one set of mesh settings, so the joints of one finger may differ in shape, law,
+box and anchor count (results/joints/soft4/finger_mixed.toml: the paper's joint at the
+base, soft4 at the tip); on hexahedra the finger's one swept (y, z) grid holds every
+joint's section lines (fem.mesh_hex). Every rigid part is a neo-Hookean PLA-like solid
+(E = 3.5 GPa, nu = 0.35), bonded to its neighbours' end faces (one conforming mesh). The
+base face x = 0 is clamped. Each joint's probes (proximal centre and anchors), valley
+contact pairs (fem.contact, on its own cells) and contact penalty
+(fem.problem.contact_penalty_for of its law) are its own.
 
 Formulation (the joint's discretisation, fem.discretisation; default the first joint's
 [mesh] formulation, for the paper's joint the production FORMULATION): "displacement", P2
@@ -51,7 +57,8 @@ fem.problem that the joint uses) and handed to the joint's load-path solver
 
 Outputs, in the predictor's global frame (docs/gripper.md; the right finger, base mount at
 (base_gap/2, 0), finger frame rotated by base_angle): x_global = B + Rot(base_angle)·(x + u)
-for the centre line points (z = 0, y = 0). Per joint: its 10 anchors, proximal centre,
+for the centre line points (z = 0, y = 0). Per joint: its n_j anchors (its joint
+description's count: 10 for the paper's, 8 for soft4), proximal centre,
 proximal orientation theta (the rotation of the part it is bonded to), its distal cap's
 orientation (``end_angle``, the direction the next part leaves along) and its chord angle
 from the last two anchors (the paper's tangent connection), plus the joint-frame anchors,
@@ -59,10 +66,19 @@ phi_end and cap rotation comparable with the single-joint FEM. A solve that does
 converge reports no figures (null in the JSON) and exits 1 with its reason on stderr. The fingertip is the centre
 of the last part's distal face, ``tip_angle`` the orientation of the last part. Rotations
 of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
+
+Where the fingers meet (``--plane``, FingerSolver(plane=True)): the mirror finger's
+contact at X = 0, the predictor's frictionless penalty k_p s(max(0, -X)) on the inner and
+end faces (fem.plane_contact); without it the right finger passes through X = 0 as in the
+paper. With it the record gains ``plane_force_N`` (N, the plane's push along +X on the
+full finger), ``plane_overlap_mm`` (how far its surface crosses X = 0) and
+``base_force_N`` (the clamp's reaction, global, N: it balances the weights and the plane's
+push), and ``"plane": true``.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import math
 import sys
@@ -74,16 +90,20 @@ from typing import Callable
 import numpy as np
 import ufl
 from dolfinx import fem
+from dolfinx.fem.petsc import assemble_vector
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from contract import cli
-from contract.finger import FingerSpec, finger_arg, load_finger
-from contract.joint import GEOMETRY_KEYS, JointSpec, MaterialLaw, joint_digest
+from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
+from contract.grasp import APPROACH_P1, FRICTION, OBJECT_WEIGHT, ObjectSpec, approach_for, parse_object
+from contract.joint import JointSpec, MaterialLaw, joint_digest
+from fem.contact import ContactTerms
 from fem.discretisation import FORMULATION
-from fem.geometry import FingerGeometry, JointGeometry, finger_tags
+from fem.geometry import FingerGeometry, finger_tags
 from fem.load_path import LoadPathSolver, SolverConfig
 from fem.mesh import MeshData, create_mesh
+from fem.plane_contact import PlaneContact
 from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
                          joint_geometry)
 from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
@@ -103,21 +123,6 @@ def finger_joints(finger: FingerSpec) -> list[JointSpec]:
     """The joint description of every joint part, base to tip (contract.finger: a part's
     own joint file, or the paper's joint)."""
     return [finger.parts[k].spec for k in finger.joints]
-
-
-def shape_mismatch(finger: FingerSpec, joint: JointGeometry) -> str | None:
-    """Why the finger's joints cannot all be meshed as ``joint`` (their shapes and anchor
-    counts must be one, fem.geometry.build_finger meshes one joint shape), or None."""
-    shape = {k: getattr(joint, k) for k in GEOMETRY_KEYS}
-    joints = finger_joints(finger)
-    for j, spec in enumerate(joints):
-        own = {k: getattr(spec.shape, k) for k in GEOMETRY_KEYS}
-        if own != shape or spec.anchors != joints[0].anchors:
-            key = next((k for k in GEOMETRY_KEYS if own[k] != shape[k]), "anchors.count")
-            return (f"finger {finger.name!r}: joint {j + 1} ({spec.name!r}) differs in {key} from the finger "
-                    f"mesh's joint shape: fem.geometry.build_finger meshes one joint shape, so the joints of "
-                    f"a finger may differ in material and box, not in shape or anchors")
-    return None
 
 
 def joint_laws(finger: FingerSpec, material: MaterialLaw | Material | None = None) -> dict:
@@ -160,12 +165,12 @@ class FingerResult:
     converged: bool
     tip: np.ndarray                 # (2,)
     tip_angle: float
-    anchors: np.ndarray             # (n_joints, 10, 2) global
+    anchors: np.ndarray | tuple     # (n_joints, n, 2) global; per joint (n_j, 2): per_joint
     proximal: np.ndarray            # (n_joints, 2) global proximal centres
     theta: np.ndarray               # (n_joints,) proximal orientation
     end_angle: np.ndarray           # (n_joints,) orientation of the distal cap
-    chord_angle: np.ndarray         # (n_joints,) atan2 of r_10 - r_9
-    local_anchors: np.ndarray       # (n_joints, 10, 2) in each joint's frame
+    chord_angle: np.ndarray         # (n_joints,) atan2 of r_n - r_(n-1)
+    local_anchors: np.ndarray | tuple   # as anchors, in each joint's frame
     newton_iterations: list[int] = field(default_factory=list)
     load_steps: int = 0
     cutbacks: int = 0
@@ -173,19 +178,27 @@ class FingerResult:
     wall_time: float = 0.0
     cpu_time: float = 0.0           # this process's CPU time: one core's share under load
     reason: str = ""
+    plane: dict | None = None       # with the plane X = 0: PlaneContact.state and base_force_N
+
+    def plane_figures(self) -> dict:
+        """plane_force_N (N), plane_overlap_mm (mm) and base_force_N (N, global) of a
+        converged solve with the plane X = 0 (fem.plane_contact); each null otherwise."""
+        plane = self.plane if self.converged and self.plane is not None else {}
+        return {k: plane.get(k) for k in ("plane_force_N", "plane_overlap_mm", "base_force_N")}
 
     def summary(self) -> dict:
         """JSON-ready figures (degrees for angles); ``tip`` and ``tip_angle_deg`` mean
         what they mean in ``predictor.gesture --json``. A solve that did not converge has
         no figures: tip, angles and joints are null (the state it stopped in is not an
-        answer), ``reason`` says why."""
+        answer), ``reason`` says why. ``plane_force_N``, ``plane_overlap_mm`` and
+        ``base_force_N``: the plane X = 0's figures (plane_figures), null without it."""
         out = {"pressures_MPa": list(self.load.pressures), "gravity": self.load.gravity,
                "converged": self.converged, "tip": None, "tip_angle_deg": None,
                "joint_end_angle_deg": None, "joints": None}
         if self.converged:
             out.update(tip=self.tip.tolist(), tip_angle_deg=math.degrees(self.tip_angle),
                        joint_end_angle_deg=np.degrees(self.end_angle).tolist(), joints=self._joints())
-        return {**out, "newton_iterations": self.newton_iterations,
+        return {**out, **self.plane_figures(), "newton_iterations": self.newton_iterations,
                 "iterations": int(sum(self.newton_iterations)), "load_steps": self.load_steps,
                 "cutbacks": self.cutbacks, "factorisations": self.factorisations,
                 "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
@@ -276,13 +289,10 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData,
     body force. Load vector a = (P_1 .. P_n, g) in MPa and [0, 1]; probes: each joint's
     proximal centre and anchors, then the fingertip; averages ``rotation{k}`` (rad): part
     k's rigid body (a rigid part, or a joint's cap). ``formulation``: "displacement" or
-    "mixed" (module docstring). ValueError for joints of another shape than the mesh's
-    (shape_mismatch). Collective."""
+    "mixed" (module docstring). Every per-joint quantity (probes, valley contact pairs and
+    their penalty) is that joint's own (FingerGeometry.joint_at, its law). Collective."""
     if formulation not in FORMULATIONS:
         raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
-    why = shape_mismatch(geometry.finger, geometry.joint)
-    if why:
-        raise ValueError(why)
     build = mixed_unknown if formulation == "mixed" else displacement_unknown
     unknown = build(mesh_data, rigid, degree, quadrature_degree)
     finger, comm = geometry.finger, mesh_data.mesh.comm
@@ -311,9 +321,8 @@ def finger_problem(geometry: FingerGeometry, mesh_data: MeshData,
     loads = pressures
     if weights:
         loads += (LoadTerm(fem.Constant(mesh, PETSc.ScalarType(0)), sum(weights[1:], weights[0]), n),)
-    contact = valley_contact(unknown.U, ft, present, geometry.joint,
+    contact = joints_contact(unknown.U, ft, present, geometry,
                              tuple(contact_penalty_for(contact_penalty, laws[k]) for k in finger.joints),
-                             offsets=tuple(finger.rest_start(k) for k in finger.joints),
                              parent=unknown.parent)
     return Problem(mesh_data, unknown.w, internal, loads, np.append(pressure_limits(finger), 1.0),
                    unknown.bcs, finger_probes(geometry), contact, averages=averages,
@@ -333,14 +342,69 @@ def gravity_work(v, finger: FingerSpec, weight: float, region, volume: float):
 
 
 def finger_probes(geometry: FingerGeometry) -> np.ndarray:
-    """Every joint's proximal centre and its anchors (the joints' count, 10 for the
-    paper's), then the fingertip: (n, 3) mm."""
-    finger, L = geometry.finger, geometry.joint.length
-    n = finger_joints(finger)[0].anchors
-    points = [[finger.rest_start(k) + i * L / n, 0.0, 0.0]
-              for k in finger.joints for i in range(n + 1)]
+    """Every joint's proximal centre and its own anchors (n_j of them at i L_j / n_j, its
+    joint description's count and length: 10 at 4.545 mm for the paper's), then the
+    fingertip: (sum_j (n_j + 1) + 1, 3) mm, finger frame."""
+    finger = geometry.finger
+    points = [[finger.rest_start(k) + i * geometry.joint_at(k).length / n, 0.0, 0.0]
+              for k, n in zip(finger.joints, anchor_counts(finger)) for i in range(n + 1)]
     points.append([finger.length, 0.0, 0.0])
     return np.array(points)
+
+
+def anchor_counts(finger: FingerSpec) -> list[int]:
+    """Every joint's anchor count n_j (its joint description's), base to tip."""
+    return [spec.anchors for spec in finger_joints(finger)]
+
+
+def per_joint(arrays: list[np.ndarray]):
+    """Per-joint arrays as one (n_joints, ...) array when their shapes agree (joints of
+    one anchor count, every finger before joint files could differ), else a tuple."""
+    return np.stack(arrays) if len({a.shape for a in arrays}) == 1 else tuple(arrays)
+
+
+class JointsContact(ContactTerms):
+    """The valley self-contact of a finger whose joints differ in shape: one
+    fem.contact.ValleyContact per joint (its own cells, valley size and penalty) summed as
+    ContactTerms. ``first[i]``: the number of valleys before the i-th term's joint, so that
+    :meth:`gaps` numbers valleys along x across the joints, as one ValleyContact does."""
+
+    def __init__(self, parts: list, first: list[int]):
+        super().__init__(*parts)
+        self.first, self.comm = first, parts[0].comm
+
+    def gaps(self, u: fem.Function) -> dict:
+        """Signed gap g (mm) of every pair, per (valley, side), valleys along x."""
+        return {(first + k, side): g for part, first in zip(self.terms, self.first)
+                for (k, side), g in part.gaps(u).items()}
+
+
+def joints_contact(V, facet_tags, present: set, geometry: FingerGeometry, penalties: tuple[float, ...],
+                   parent=None):
+    """The finger's valley contact (fem.problem.valley_contact; ``penalties`` MPa/mm, one
+    per joint): one ValleyContact over every joint when they share one shape, else a
+    :class:`JointsContact` of one per joint of its own geometry; None without valleys or
+    with every penalty 0."""
+    finger = geometry.finger
+    offsets = tuple(finger.rest_start(k) for k in finger.joints)
+    if geometry.same_shape:
+        return valley_contact(V, facet_tags, present, geometry.joint, penalties, offsets=offsets, parent=parent)
+    parts, first, valleys = [], [], 0
+    for jg, kappa, x0 in zip(geometry.joints, penalties, offsets):
+        part = valley_contact(V, facet_tags, present, jg, kappa, offsets=(x0,), parent=parent)
+        if part is not None:
+            parts.append(part)
+            first.append(valleys)
+        valleys += jg.n_cells - 1
+    return JointsContact(parts, first) if parts else None
+
+
+def closed_tags(finger: FingerSpec) -> list[int]:
+    """Facet tags of the finger's surfaces that touch nothing outside it: every joint's
+    chamber walls, the half-model's plane z = 0 and the clamped base face."""
+    tags = finger_tags(finger)
+    return [tags[f"{side}{k}"] for k in finger.joints for side in ("top", "bottom")] + [
+        tags["symmetry"], tags["proximal"]]
 
 
 class FingerSolver:
@@ -348,20 +412,32 @@ class FingerSolver:
     :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`; every joint
     of its own law unless ``material`` is given. ``formulation`` defaults to the
     production one (fem.discretisation.FORMULATION); ``config`` is raised to the
-    hexahedra's quadrature on hexahedral joints (fem.solver.config_for)."""
+    hexahedra's quadrature on hexahedral joints (fem.solver.config_for). ``plane``: the
+    mirror finger's contact at X = 0 (fem.plane_contact, ``plane_term``), beside the
+    valley contact and ``extra_contact``'s term (e.g. fem.grasp's object)."""
 
     def __init__(self, geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD,
                  material: MaterialLaw | Material | None = None, rigid: RigidMaterial = RigidMaterial(),
-                 config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION):
+                 config: SolverConfig = FINGER_CONFIG, formulation: str = FORMULATION,
+                 extra_contact: Callable[[Problem], object] | None = None, plane: bool = False):
         config = config_for(geometry, config)
         self.finger, self.geometry, self.config = geometry.finger, geometry, config
         self.formulation = formulation
         self.mesh_data = create_mesh(geometry, comm)
         self.problem = finger_problem(geometry, self.mesh_data, material, rigid,
                                       formulation=formulation, **config.discretisation())
+        extra = [] if extra_contact is None else [extra_contact(self.problem)]
+        self.plane_term = None
+        if plane:
+            self.plane_term = PlaneContact(self.problem.u, self.mesh_data, self.finger, geometry.joint.width,
+                                           closed_tags(self.finger))
+            extra.append(self.plane_term)
+        if extra:
+            self.problem = dataclasses.replace(self.problem, contact=ContactTerms(self.problem.contact, *extra))
         self.solver = LoadPathSolver(self.problem, config)
         self.u, self.V, self.comm = self.problem.u, self.problem.V, self.problem.comm
         self.contact, self.probe_points = self.problem.contact, self.problem.probe_points
+        self._reaction = None       # (residual form, clamped dofs): base_force, built on first use
 
     # The solver's running totals and state, read through (diagnostics).
     factorisations = property(lambda self: self.solver.factorisations)
@@ -380,6 +456,34 @@ class FingerSolver:
     def displacement(self) -> fem.Function:
         """The displacement u (mm) in its own vector space (a copy, for the mixed form)."""
         return self.problem.displacement()
+
+    def _clamped_dofs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Owned local (x, y) dofs of the clamped base face."""
+        problem = self.problem
+        W = problem.u.function_space
+        U = W.sub(0) if problem.displacement_space is not None else W
+        ft, fdim = problem.mesh_data.facet_tags, W.mesh.topology.dim - 1
+        owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
+        out = []
+        for c in (0, 1):
+            dofs = fem.locate_dofs_topological(U.sub(c), fdim, ft.find(finger_tags(self.finger)["proximal"]))
+            out.append(dofs[dofs < owned])
+        return tuple(out)
+
+    def base_force(self) -> list[float]:
+        """The clamp's reaction (N, global, full finger) at the current state: the residual
+        of the finger's internal forces, weights and pressures summed over the clamped
+        dofs (x 2: the half-model). The contact terms (valleys, object, plane) act away from
+        the clamp, so at equilibrium it balances the weights and the contact forces."""
+        if self._reaction is None:
+            self._reaction = (fem.form(self.problem.residual()), self._clamped_dofs())
+        form, clamped = self._reaction
+        b = assemble_vector(form)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        local = np.array([b.array_r[d].sum() for d in clamped])
+        b.destroy()
+        total = 2.0 * self.comm.allreduce(local, op=MPI.SUM)
+        return (rotation_matrix(self.finger.base_angle) @ total).tolist()
 
     def rotation(self, k: int) -> float:
         """Rotation (rad) about +z of part k's rigid body: a rigid part, or a joint's cap."""
@@ -409,6 +513,18 @@ class FingerSolver:
                      path.load_steps, result.wall_time)
         return result
 
+    def follow(self, load: FingerLoad) -> FingerResult:
+        """Continue from the current converged state to ``load`` along a straight load path
+        (a history: fem.grasp's approach, then its pressure ramp); OutOfBoxError before any
+        work for a pressure beyond its joint's box."""
+        check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(self.finger.joints))],
+                  box=pressure_limits(self.finger), units=["MPa"] * len(self.finger.joints))
+        solver = self.solver
+        t0, c0, lu0 = time.perf_counter(), time.process_time(), solver.factorisations
+        path = solver.follow(solver.state.copy(), load.as_array())
+        return self._result(load, path, solver.factorisations - lu0, time.perf_counter() - t0,
+                            time.process_time() - c0)
+
     def _result(self, load: FingerLoad, path, factorisations: int, wall: float,
                 cpu: float) -> FingerResult:
         """Global-frame figures of the current state (module docstring)."""
@@ -416,29 +532,63 @@ class FingerSolver:
         base, turn = np.array([0.5 * finger.base_gap, 0.0]), rotation_matrix(finger.base_angle)
         x = (self.probe_points + self.solver.probe_displacements())[:, :2]
         x = base + x @ turn.T
-        n = finger_joints(finger)[0].anchors + 1
-        polylines = x[:-1].reshape(-1, n, 2)
+        # each joint's polyline: its proximal centre, then its own anchors
+        polylines = np.split(x[:-1], np.cumsum([n + 1 for n in anchor_counts(finger)])[:-1])
         rot = {k: self.rotation(k) for k in range(len(finger.parts))}
         theta, end = [], []
         for k in finger.joints:
             theta.append(finger.base_angle + (rot[k - 1] if k > 0 else 0.0))
             end.append(finger.base_angle + rot[k])
         theta, end = np.array(theta), np.array(end)
-        d = polylines[:, -1] - polylines[:, -2]
+        d = np.array([line[-1] - line[-2] for line in polylines])
         chord = np.arctan2(d[:, 1], d[:, 0])
         # joint frame: x_local = Rot(-theta)·(x - proximal centre)
-        local = np.stack([(polylines[j, 1:] - polylines[j, 0]) @ rotation_matrix(theta[j]) for j in range(len(theta))])
+        local = [(line[1:] - line[0]) @ rotation_matrix(t) for line, t in zip(polylines, theta)]
         last = len(finger.parts) - 1
         return FingerResult(
             load=load, converged=path.converged, tip=x[-1], tip_angle=finger.base_angle + rot[last],
-            anchors=polylines[:, 1:], proximal=polylines[:, 0], theta=theta, end_angle=end,
-            chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi, local_anchors=local,
+            anchors=per_joint([line[1:] for line in polylines]), proximal=np.array([line[0] for line in polylines]),
+            theta=theta, end_angle=end, chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi,
+            local_anchors=per_joint(local),
             newton_iterations=path.newton_iterations, load_steps=path.load_steps,
             cutbacks=path.cutbacks, factorisations=factorisations, wall_time=wall, cpu_time=cpu,
-            reason=path.reason)
+            reason=path.reason, plane=self._plane_state() if path.converged else None)
+
+    def _plane_state(self) -> dict | None:
+        """The plane's figures and the clamp's reaction at the current state (None without
+        the plane). Collective."""
+        if self.plane_term is None:
+            return None
+        return {**self.plane_term.state(self.u), "base_force_N": self.base_force()}
 
 
 # ---------------------------------------------------------------------- command line
+def same_settings(recorded: dict | None, settings: dict, finger: FingerSpec) -> bool:
+    """Whether a case's recorded ``settings`` are ``settings`` (JSON-safe) of ``finger``: the
+    same mesh, formulation and joints, and the same finger by its values
+    (contract.finger.same_finger), so a finger file whose comments changed, and with them
+    its sha256, keeps its solved cases."""
+    if not isinstance(recorded, dict) or not isinstance(recorded.get("geometry"), dict):
+        return False
+    strip = lambda d: {**{k: v for k, v in d.items() if k != "finger_sha256"},   # noqa: E731
+                       "geometry": {k: v for k, v in d["geometry"].items() if k != "finger"}}
+    return (strip(recorded) == strip(settings) and isinstance(recorded["geometry"].get("finger"), dict)
+            and same_finger(recorded["geometry"]["finger"], finger))
+
+
+def add_finger_mesh(ap: cli.Parser) -> None:
+    """The finger's discretisation options, read by :func:`finger_discretisation`: the
+    joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'
+    element size and the formulation; each absent one is the first joint file's [mesh]."""
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
+                         "--divisions N their hexahedra are at most this / N long)")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+
+
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
     pressure = cli.number(unit="MPa")     # each joint's box is checked once the finger is read
@@ -448,17 +598,15 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--pressures", type=cli.number_list(unit="MPa"), metavar="P1,P2,...",
                     help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
+    ap.add_argument("--plane", action="store_true",
+                    help="the mirror finger's contact at X = 0 (frictionless penalty, the predictor's): the "
+                         "fingers meet instead of passing through each other")
     ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: contract/fingers/paper.toml); its joint parts "
                          "name their joint files (default: the paper's joint)")
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
-                         "--divisions N their hexahedra are at most this / N long)")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+    add_finger_mesh(ap)
     ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
+    add_grasp_arguments(ap)
     cli.add_quiet(ap)
     ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
     return ap
@@ -491,17 +639,14 @@ def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
                           finger: FingerSpec) -> tuple[FingerGeometry, str]:
     """(FingerGeometry, formulation) of the options on the finger's joints: the first
     joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size,
-    --divisions (a parser without it: none) or --formulation are given; --divisions with a
-    tetrahedron size, or joints of several shapes, are usage errors (shape_mismatch)."""
+    --divisions (a parser without it: none) or --formulation are given, every other joint
+    of its own shape with the same mesh settings (FingerGeometry); --divisions with a
+    tetrahedron size is a usage error."""
     first = finger_joints(finger)[0]
     try:
-        joint = joint_geometry(args, first)
+        geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
     except ValueError as exc:
         ap.error(exc)
-    geometry = FingerGeometry(finger, joint, args.rigid_mesh_size)
-    why = shape_mismatch(finger, geometry.joint)
-    if why:
-        ap.error(why)
     return geometry, args.formulation or first.formulation
 
 
@@ -515,11 +660,54 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
         for j, s in enumerate(out["joints"]):
             print(f"  joint {j + 1}: end angle {s['end_angle_deg']:.3f} deg, chord {s['chord_angle_deg']:.3f} deg, "
                   f"cap rotation {s['cap_rotation_deg']:.3f} deg")
+        if out["plane_force_N"] is not None:
+            bx, by = out["base_force_N"]
+            print(f"  plane X = 0: force {out['plane_force_N']:.4f} N, overlap {out['plane_overlap_mm']:.4f} mm, "
+                  f"base force ({bx:.4f}, {by:.4f}) N")
     else:
         print("  tip = none (did not converge)")
     print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
           f"{result.wall_time:.1f} s, mesh {out['mesh']['mesh']}: {out['mesh']['nodes']} nodes ({out['formulation']}), "
           f"{ranks} rank(s)")
+
+
+def add_grasp_arguments(ap: cli.Parser) -> None:
+    """--object, --approach, --mu, --object-weight: a grasp (fem.grasp)."""
+    ap.add_argument("--object", type=object_arg, default=None,
+                    help="hold a rigid object, kind[:key=value,...] as predictor.gesture --object "
+                         "(circle, ellipse, rectangle; mm, deg): the approach, the object, the pressure ramp")
+    ap.add_argument("--approach", type=cli.number_list(unit="MPa"), metavar="P1,P2", default=None,
+                    help="with --object: the approach pressures, one per joint (default joint 1 at "
+                         f"{APPROACH_P1:g} MPa, the others 0)")
+    ap.add_argument("--mu", type=cli.number(0.0, 10.0), default=FRICTION,
+                    help=f"with --object: friction coefficient (default {FRICTION:g})")
+    ap.add_argument("--object-weight", type=cli.number(0.0, 100.0, unit="N"), default=OBJECT_WEIGHT,
+                    help=f"with --object: its weight, N (default {OBJECT_WEIGHT:g})")
+
+
+def object_arg(text: str) -> ObjectSpec:
+    """argparse type of --object (contract.grasp.parse_object)."""
+    try:
+        return parse_object(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def parsed_approach(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpec) -> tuple[float, ...]:
+    """The approach pressures (MPa) of a grasp: one per joint, each within its box."""
+    if args.object is None:
+        if args.approach is not None:
+            ap.error("--approach needs --object")
+        return ()
+    if args.no_gravity:
+        ap.error("--object: a grasp lifts the object's weight; drop --no-gravity")
+    approach = approach_for(finger.n_joints) if args.approach is None else tuple(args.approach)
+    if len(approach) != finger.n_joints:
+        ap.error(f"--approach: {len(approach)} values for finger {finger.name!r} of {finger.n_joints} joint(s)")
+    for j, (p, limit) in enumerate(zip(approach, pressure_limits(finger))):
+        if abs(p) > limit:
+            ap.error(f"argument --approach: P{j + 1} = {p:g} is outside [{-limit:g}, {limit:g}] MPa")
+    return approach
 
 
 def main(argv=None) -> int:
@@ -528,14 +716,18 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     finger = args.finger or load_finger()
     load = FingerLoad(parsed_pressures(ap, args, finger), not args.no_gravity)
+    approach = parsed_approach(ap, args, finger)
     cli.setup_logging(args.quiet, args.verbose)
     geometry, formulation = finger_discretisation(ap, args, finger)
+    if args.object is not None:
+        from fem.grasp import grasp_main     # fem.grasp builds on this module's solver
+        return grasp_main(ap, args, geometry, formulation, load, approach)
     comm = MPI.COMM_WORLD
     with ap.errors(), cli.heartbeat(f"finger {finger.name!r}", enabled=comm.rank == 0):
         if comm.rank == 0:
             log.info("finger %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
                      finger.name)
-        solver = FingerSolver(geometry, comm, formulation=formulation)
+        solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
         if comm.rank == 0:
             log.info("mesh ready (%d nodes); solving P = %s MPa, gravity %s", solver.mesh_info()["nodes"],
                      list(load.pressures), load.gravity)
@@ -547,7 +739,7 @@ def main(argv=None) -> int:
                                                   u=solver.displacement()))
     if comm.rank == 0:
         out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
-               "geometry": geometry.as_dict(), "formulation": formulation,
+               "geometry": geometry.as_dict(), "formulation": formulation, "plane": args.plane,
                "joint_files": [{"name": j.name, "sha256": joint_digest(j)} for j in finger_joints(finger)],
                "ranks": comm.size}
         if args.json:

@@ -1,7 +1,7 @@
 """The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
 
     python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8 | --divisions N]
-                               [--part 1/2] [--formulation mixed]
+                               [--part 1/2] [--formulation displacement] [--plane]
     python -m fem.finger_cases --finger FILE --pressures "0.2,0.2;-0.1,0.05" --out DIR
 
 Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
@@ -18,24 +18,36 @@ joints' boxes, named ``gravity_P1_P2`` as above; ``pressure_cases``): the calibr
 FEM observations of a deliberately different finger (``make calibration-fem``).
 
 Each case is one ``FingerSolver.solve`` (every joint of its own joint file, fem.finger;
-``--formulation`` and the mesh sizes default to the first joint file's [mesh], for the
-paper's joint the production discretisation; ``--divisions`` N: the finger on swept Q2
-hexahedra, fem.mesh_hex, its records' ``mesh.mesh`` "hexN") on one mesh built once (the
-mesh build and the form compilation are reported apart from each case's solve time,
-``fem_s``). It writes ``<case><suffix>.json`` (FingerResult.summary plus the run's
-settings; suffix ``--suffix``, by default ``_hexN`` for hexahedra and none for
-tetrahedra) and ``<case><suffix>.png``: the
+``--formulation`` and the mesh default to the first joint file's [mesh], for the paper's
+joint the production discretisation, hex2:3 mixed; ``--divisions`` N: the finger on swept
+Q2 hexahedra, fem.mesh_hex, its records' ``mesh.mesh`` "hexN" or "hexN:S") on one mesh
+built once (the mesh build and the form compilation are reported apart from each case's
+solve time, ``fem_s``). The committed cases (results/validation/finger_fem) are on the
+paper-fidelity 1.8 mm displacement: ``make finger-fem`` passes ``--mesh-size 1.8
+--formulation displacement`` to resume them. It writes ``<case><suffix>.json``
+(FingerResult.summary plus the run's settings; suffix ``--suffix``, by default ``_hexN``
+or ``_hexNsS`` for hexahedra, no colon in a file name, ``_mixed`` for tetrahedra in the
+mixed formulation, none for tetrahedra in displacement: a default never names another
+kind's file, so a run on another discretisation leaves the committed cases alone) and
+``<case><suffix>.png``: the
 deformed finger (the full model, mirrored about z = 0), seen along -z in the global plane
 with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista with no
 colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
 lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
 and the |u| colour range. Files are written atomically; a case whose JSON exists for
-the same finger file, mesh and formulation is skipped, so a killed run resumes (the
+the same finger (by its values: contract.finger.same_finger), mesh and formulation is
+skipped, so a killed run resumes (the
 settings record the formulation only when it is not "displacement", and the joints'
 digests, ``joints``, only when some joint is not the paper's, so the cases solved before
 the mixed formulation and joint files existed stand). A solve that does not
 converge is recorded as such (``converged: false``, no figures) with the solver controls
 it ran with (``solver``), and is tried again when they change.
+
+``--plane``: every case with the mirror finger's contact at X = 0 (fem.plane_contact; the
+fingers meet instead of passing through each other). Its records carry ``plane_force_N``,
+``plane_overlap_mm`` and ``base_force_N``, their settings ``"plane": true`` (absent
+without it, so the cases solved before the plane stand) and their default suffix ends in
+``_plane``: a plane case never resumes from, nor replaces, a case without it.
 """
 from __future__ import annotations
 
@@ -55,13 +67,13 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
-from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, finger_discretisation, finger_joints,
-                        pressure_limits, rotation_matrix)
+from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
+                        finger_joints, pressure_limits, rotation_matrix, same_settings)
 from fem.solver import config_for
 from contract.finger import finger_arg, load_finger
 from contract.joint import is_paper_joint, joint_digest
-from fem.geometry import FingerGeometry
-from fem.options import MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, one_rank
+from fem.geometry import JointGeometry
+from fem.options import one_rank
 
 #: (name, P1, P2, gravity)
 CASES = [
@@ -97,6 +109,34 @@ def pressure_cases(text: str) -> list[tuple[str, float, float, bool]]:
     if twice:
         raise argparse.ArgumentTypeError(f"{text!r}: {', '.join(twice)} given twice")
     return cases
+
+
+def default_suffix(joint: JointGeometry, formulation: str, plane: bool = False) -> str:
+    """The default file-name suffix of a finger whose joints are ``joint`` (module
+    docstring): ``_hexN`` or ``_hexNsS`` on hexahedra (fem.discretisation.Discretisation.key's
+    spelling; a colon is no file name), ``_mixed`` on tetrahedra in the mixed formulation,
+    else none; then ``_plane`` with the plane X = 0."""
+    if joint.divisions:
+        kind = f"_hex{joint.divisions}" + (f"s{joint.hex_size:g}" if joint.hex_size else "")
+    else:
+        kind = "" if formulation == "displacement" else f"_{formulation}"
+    return kind + ("_plane" if plane else "")
+
+
+def case_settings(finger, geometry, formulation: str, plane: bool = False) -> dict:
+    """The settings a case records, by which a later run resumes it (fem.finger.same_settings;
+    module docstring): the finger's digest and geometry, and only where they differ from
+    the first cases' the formulation (not "displacement"), the plane X = 0 (on) and the
+    joints' digests (some joint not the paper's)."""
+    settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
+    if formulation != "displacement":
+        settings["formulation"] = formulation
+    if plane:
+        settings["plane"] = True
+    joints = finger_joints(finger)
+    if not all(is_paper_joint(j) for j in joints):
+        settings["joints"] = [joint_digest(j) for j in joints]
+    return settings
 
 
 def render(solver: FingerSolver, path: Path) -> dict:
@@ -143,18 +183,16 @@ def main(argv=None) -> int:
     ap.add_output("--out", folder=True, default="results/validation/finger_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
     ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help="rigid-part element size, mm")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+    add_finger_mesh(ap)
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--pressures", type=pressure_cases, metavar="P1,P2;...",
                     help="solve these gravity pressure pairs (MPa, ';' between pairs) instead of the validation cases")
+    ap.add_argument("--plane", action="store_true",
+                    help="the mirror finger's contact at X = 0 (the fingers meet; file names end in _plane)")
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default=None, help="appended to each file name (e.g. _h1.2 for a finer mesh; "
-                    "default: _hexN with --divisions N, so hexahedra never replace the tetrahedral cases, else none)")
+                    "default: _hexN or _hexNsS on hexahedra, _mixed on mixed tetrahedra, so that they never replace "
+                    "the displacement tetrahedral cases, else none)")
     cli.add_quiet(ap)
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
@@ -182,14 +220,9 @@ def main(argv=None) -> int:
                 ap.error(f"case {name}: P{j} = {p:g} is outside [{-limit:g}, {limit:g}] MPa (its joint's input box)")
     cli.setup_logging(args.quiet)
     geometry, formulation = finger_discretisation(ap, args, finger)
-    settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
-    if formulation != "displacement":
-        settings["formulation"] = formulation
-    joints = finger_joints(finger)
-    if not all(is_paper_joint(j) for j in joints):
-        settings["joints"] = [joint_digest(j) for j in joints]
+    settings = case_settings(finger, geometry, formulation, args.plane)
     solver_settings = json_safe(asdict(config_for(geometry, FINGER_CONFIG)))     # FingerSolver's own
-    suffix = f"_{geometry.mesh}" if args.suffix is None and geometry.divisions else (args.suffix or "")
+    suffix = default_suffix(geometry.joint, formulation, args.plane) if args.suffix is None else args.suffix
     out = Path(args.out)
     todo = []
     for name, p1, p2, gravity in cases:
@@ -201,7 +234,7 @@ def main(argv=None) -> int:
                 done = {}       # a foreign or damaged file: solve again and replace it
             # A converged case stands while the finger and mesh are the same; a failed one
             # is tried again once the solver's controls change.
-            if done.get("settings") == json_safe(settings) and (
+            if same_settings(done.get("settings"), json_safe(settings), finger) and (
                     done.get("converged") or done.get("solver") == solver_settings):
                 continue
         todo.append((name, p1, p2, gravity, path))
@@ -210,7 +243,7 @@ def main(argv=None) -> int:
         return 0
     with ap.errors(), cli.heartbeat("finger cases"):
         t0 = time.perf_counter()
-        solver = FingerSolver(geometry, comm, formulation=formulation)
+        solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
         setup_s = time.perf_counter() - t0
         for name, p1, p2, gravity, path in todo:
             res = solver.solve(FingerLoad((p1, p2), gravity))

@@ -38,12 +38,12 @@ name               dim   what
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from contract.finger import FingerSpec
-from contract.joint import MAX_DIVISIONS, mesh_text
+from contract.joint import GEOMETRY_KEYS, MAX_DIVISIONS, mesh_text
 from contract.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.problem.
@@ -52,21 +52,32 @@ TAGS = {
     "proximal": 11, "distal": 12, "symmetry": 13,
     "top_chamber": 14, "bottom_chamber": 15, "valley_faces": 16,
 }
+#: JointGeometry's mesh settings: a finger's joints share them (FingerGeometry)
+MESH_KEYS = ("mesh_size", "wall_mesh_size", "divisions", "hex_size")
 _EPS = 1e-6
 _GMSH_READY = False
+
+
+#: The paper-fidelity tetrahedron size (mm): fem.discretisation.PAPER's (1.8 mm P2
+#: displacement, the discretisation of the committed datasets, surrogate and finger cases)
+#: and JointGeometry's tetrahedral size; named here so that code without dolfinx can use it.
+PAPER_MESH_SIZE = 1.8
 
 
 @dataclass(frozen=True)
 class JointGeometry:
     """Dimensions of the bellow joint half-model (mm). Defaults: docs/physics.md.
 
-    ``mesh_size`` is the target tetrahedron edge length; ``wall_mesh_size`` (default:
-    ``mesh_size``) is used on the chamber walls. ``divisions`` n >= 1 meshes the joint with
-    hexahedra instead (fem.mesh_hex: every interval between the profile's breakpoints cut
-    into n, so n elements through every wall; the two sizes are then unused); 0: tetrahedra.
-    ``hex_size`` S (mm, hexahedra only) grades them: an interval of length d is cut into
-    n ceil(d / S) elements (None: n), so walls keep n elements through their thickness and
-    long spans get elements of at most S / n.
+    The default mesh is the production one (fem.discretisation.PRODUCTION, "hex2:3"):
+    ``divisions`` n >= 1 meshes the joint with swept Q2 hexahedra (fem.mesh_hex: every
+    interval between the profile's breakpoints cut into n, so n elements through every
+    wall), and ``hex_size`` S (mm, hexahedra only) grades them: an interval of length d is
+    cut into n ceil(d / S) elements (None: n), so walls keep n elements through their
+    thickness and long spans get elements of at most S / n. ``divisions=0, hex_size=None``
+    meshes tetrahedra instead: ``mesh_size`` is their target edge length (default the
+    paper-fidelity PAPER_MESH_SIZE) and ``wall_mesh_size`` (default: ``mesh_size``) the one
+    on the chamber walls; on hexahedra the two sizes are unused (but recorded by as_dict,
+    as every manifest since hexahedra records them).
     """
 
     length: float = JOINT_LENGTH
@@ -78,10 +89,10 @@ class JointGeometry:
     cap: float = 3.0
     valley_height: float = 8.8     # outer height in a valley (y in [-4.4, 4.4])
     valley_width: float = 2.5      # outer gap between two neighbouring cells along x
-    mesh_size: float = 1.8         # production mesh: 17,359 P2 nodes (make mesh-study)
+    mesh_size: float = PAPER_MESH_SIZE   # tetrahedra only: 17,359 P2 nodes at 1.8 mm
     wall_mesh_size: float | None = None
-    divisions: int = 0
-    hex_size: float | None = None  # mm, hexahedra only
+    divisions: int = 2                   # production: hex2:3, 42,105 Q2 nodes (make mesh-study)
+    hex_size: float | None = 3.0         # mm, hexahedra only
 
     def __post_init__(self):
         if not (isinstance(self.divisions, int) and 0 <= self.divisions <= MAX_DIVISIONS):
@@ -112,13 +123,19 @@ class JointGeometry:
 
     def as_dict(self) -> dict:
         """The fields; ``divisions`` only for a hexahedral mesh and ``hex_size`` only when
-        set, so records written before them read as what they are."""
+        set, so records written before them read as what they are (from_record)."""
         out = asdict(self)
         if not self.divisions:
             del out["divisions"]
         if self.hex_size is None:
             del out["hex_size"]
         return out
+
+    @classmethod
+    def from_record(cls, record: dict) -> JointGeometry:
+        """The geometry an as_dict record describes: an absent ``divisions`` is tetrahedra
+        (0) and an absent ``hex_size`` ungraded (None), not the production defaults."""
+        return cls(**{"divisions": 0, "hex_size": None, **record})
 
 
 @dataclass(frozen=True)
@@ -146,17 +163,44 @@ class FingerGeometry:
 
     The finger frame is the joint frame of the first joint, extended: x runs along the
     straight rest finger from the base mount (x = 0) to the fingertip (x = finger.length),
-    y in the bending plane, z >= 0 the half-model. Every joint is the bellow joint of
-    ``joint`` (its mesh size and wall refinement, or its hexahedral divisions, included:
-    ``divisions`` > 0 meshes the whole finger with fem.mesh_hex) with its proximal face at
-    finger.rest_start(k); every rigid part is a solid box of its cross-section
-    (y in [-height/2, height/2], z in [0, width/2]), bonded to its neighbours' end faces
-    (one conforming mesh), meshed at ``rigid_mesh_size`` (mm).
+    y in the bending plane, z >= 0 the half-model. Joint part k is the bellow joint of its
+    own joint description's shape (contract.joint.JointSpec.shape, GEOMETRY_KEYS) meshed
+    with the finger's common mesh settings, those of ``joint`` (its mesh size and wall
+    refinement, or its hexahedral divisions and hex_size: ``divisions`` > 0 meshes the
+    whole finger with fem.mesh_hex), with its proximal face at finger.rest_start(k):
+    :meth:`joint_at`. ``joint`` has the first joint's shape (ValueError otherwise, one
+    line: a shape given here would be ignored), so in a finger of one joint shape it is
+    every joint. Every rigid part is a solid box of its
+    cross-section (y in [-height/2, height/2], z in [0, width/2]), bonded to its
+    neighbours' end faces (one conforming mesh), meshed at ``rigid_mesh_size`` (mm).
     """
 
     finger: FingerSpec
     joint: JointGeometry = JointGeometry()
     rigid_mesh_size: float = 6.0
+    #: one JointGeometry per joint part, base to tip (derived: joint_at)
+    joints: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        first, mesh = shape_of(self.joint), {k: getattr(self.joint, k) for k in MESH_KEYS}
+        shapes = [shape_of(self.finger.parts[k].spec.shape) for k in self.finger.joints]
+        joints = tuple(self.joint if shape == first else JointGeometry(**shape, **mesh) for shape in shapes)
+        if first != shape_of(joints[0]):
+            key = next(k for k in GEOMETRY_KEYS if first[k] != getattr(joints[0], k))
+            raise ValueError(f"FingerGeometry: joint.{key} = {first[key]!r} is not the finger's first joint's "
+                             f"({getattr(joints[0], key)!r}): every joint takes its own description's shape, "
+                             f"joint gives the mesh settings on the first joint's shape")
+        object.__setattr__(self, "joints", joints)
+
+    def joint_at(self, k: int) -> JointGeometry:
+        """The geometry of joint part k (a part index, finger.joints): its own shape, the
+        finger's mesh settings."""
+        return self.joints[self.finger.joints.index(k)]
+
+    @property
+    def same_shape(self) -> bool:
+        """Whether every joint has the first joint's shape (one shape meshed for all)."""
+        return all(shape_of(j) == shape_of(self.joint) for j in self.joints)
 
     @property
     def mesh_size(self) -> float:
@@ -174,8 +218,20 @@ class FingerGeometry:
         return self.joint.mesh
 
     def as_dict(self) -> dict:
-        return {"finger": self.finger.summary(), "joint": self.joint.as_dict(),
-                "rigid_mesh_size": self.rigid_mesh_size}
+        """``finger``, ``joint`` (the first joint's shape and the mesh settings:
+        JointGeometry.as_dict) and ``rigid_mesh_size``; and, only when the joints differ in
+        shape, ``joints``: every joint's shape (GEOMETRY_KEYS, mm), base to tip, so a
+        finger of one joint shape records what it always did."""
+        out = {"finger": self.finger.summary(), "joint": self.joint.as_dict(),
+               "rigid_mesh_size": self.rigid_mesh_size}
+        if not self.same_shape:
+            out["joints"] = [shape_of(j) for j in self.joints]
+        return out
+
+
+def shape_of(joint) -> dict:
+    """{GEOMETRY_KEYS: value} of a JointGeometry or a contract.joint.BellowShape (mm)."""
+    return {k: getattr(joint, k) for k in GEOMETRY_KEYS}
 
 
 def finger_tags(finger: FingerSpec) -> dict[str, int]:
@@ -382,19 +438,22 @@ def build_beam(geo: BeamGeometry = BeamGeometry()):
 def build_finger(geo: FingerGeometry):
     """Build and mesh the finger half-model (FingerGeometry); return the global ``gmsh.model``.
 
-    As in :func:`build_joint`, only y >= 0 is meshed and then mirrored node by node, so
-    the finger keeps the exact y-mirror symmetry. Call on rank 0 only.
+    Every joint part is its own shape (FingerGeometry.joint_at) at its rest start, with its
+    distal cap split off as in :func:`build_joint`; one OCC fragment of every part and cap
+    cutter bonds neighbouring parts through shared, conforming faces whatever their
+    cross-sections. As in :func:`build_joint`, only y >= 0 is meshed and then mirrored
+    node by node, so the finger keeps the exact y-mirror symmetry. Call on rank 0 only.
     """
     gmsh = _init_gmsh("finger")
     occ = gmsh.model.occ
-    finger, jg = geo.finger, geo.joint
-    H, Z = jg.height / 2, jg.width / 2
+    finger = geo.finger
     spans = [(finger.rest_start(k), finger.rest_start(k) + p.length) for k, p in enumerate(finger.parts)]
     solids, cutters = [], []
-    for part, (x0, x1) in zip(finger.parts, spans):
+    for k, (part, (x0, x1)) in enumerate(zip(finger.parts, spans)):
         if part.kind == "joint":
+            jg = geo.joint_at(k)
             solids += _joint_quarter(occ, jg, x0)
-            cutters.append((3, occ.addBox(x1 - jg.cap, 0, 0, jg.cap, H, Z)))
+            cutters.append((3, occ.addBox(x1 - jg.cap, 0, 0, jg.cap, jg.height / 2, jg.width / 2)))
         else:
             solids.append((3, occ.addBox(x0, 0, 0, part.length, part.height / 2, part.width / 2)))
     # One fragment of every part and cap cutter: bonded parts share conforming faces.
@@ -407,10 +466,11 @@ def build_finger(geo: FingerGeometry):
     sym = _surfaces_in_box(gmsh, -1, -1, 0, finger.length + 1, ymax + 1, 0)
     groups = {"proximal": (2, _surfaces_in_box(gmsh, 0, 0, 0, 0, ymax, ymax)),
               "symmetry": (2, sym), "valley_faces": (2, [])}
-    swap, walls, regions = {}, [], []
+    swap, walls, regions = {}, {}, []
     for k, (part, (x0, x1)) in enumerate(zip(finger.parts, spans)):
         inside = [v for v, b in vols.items() if b[0] > x0 - _EPS and b[3] < x1 + _EPS]
         if part.kind == "joint":
+            jg = geo.joint_at(k)
             cap = [v for v in inside if vols[v][0] > x1 - jg.cap - _EPS]
             groups[f"part{k}"] = (3, [v for v in inside if v not in cap])
             groups[f"cap{k}"] = (3, cap)
@@ -418,26 +478,20 @@ def build_finger(geo: FingerGeometry):
             groups[f"top{k}"] = (2, top)
             groups["valley_faces"][1].extend(valley)
             swap[f"top{k}"] = f"bottom{k}"
-            walls += top
+            walls.setdefault(jg.wall, []).extend(top)
             regions.append((x0, x1))
         else:
             groups[f"part{k}"] = (3, inside)
     _check_groups(groups)
-    _mesh(gmsh, jg.mesh_size, jg.wall_mesh_size, walls, jg.wall,
-          regions=regions, outside_size=geo.rigid_mesh_size)
+    _mesh_regions(gmsh, geo.joint.mesh_size, geo.joint.wall_mesh_size, walls, regions, geo.rigid_mesh_size)
     _mirror_mesh_y(gmsh, groups, swap, tags)
     return gmsh.model
 
 
 def _mesh(gmsh, size: float, wall_size: float | None = None, wall_surfaces: list[int] = (),
-          wall_thickness: float = 0.0, regions: list[tuple[float, float]] = (),
-          outside_size: float | None = None) -> None:
+          wall_thickness: float = 0.0) -> None:
     """Mesh the model at edge length ``size`` (mm); ``wall_size`` within one wall
-    thickness of ``wall_surfaces``; with ``regions`` ((x0, x1) slabs), ``size`` only inside
-    them and ``outside_size`` elsewhere (the finger's rigid parts)."""
-    if regions:
-        _mesh_regions(gmsh, size, wall_size, wall_surfaces, wall_thickness, regions, outside_size)
-        return
+    thickness of ``wall_surfaces``."""
     gmsh.option.setNumber("Mesh.MeshSizeMax", size)
     gmsh.option.setNumber("Mesh.MeshSizeMin", 0.25 * size)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
@@ -469,10 +523,13 @@ def _wall_field(gmsh, surfaces: list[int], wall_size: float, wall_thickness: flo
     return ramp
 
 
-def _mesh_regions(gmsh, size, wall_size, wall_surfaces, wall_thickness, regions, outside_size) -> None:
-    """Background size field: Min over a Box per region (size inside, outside_size
-    beyond) and, with wall_size, the wall Threshold of :func:`_mesh` (growing to
-    outside_size)."""
+def _mesh_regions(gmsh, size: float, wall_size: float | None, walls: dict[float, list[int]],
+                  regions: list[tuple[float, float]], outside_size: float) -> None:
+    """Mesh the finger: background size field the Min over a Box per region ((x0, x1)
+    slabs, the joints: ``size`` inside, ``outside_size`` (mm) beyond, the rigid parts)
+    and, with wall_size, one wall Threshold of :func:`_mesh` per wall thickness (``walls``:
+    {thickness mm: its chamber-wall surfaces}; joints of one wall share it), growing to
+    outside_size."""
     f = gmsh.model.mesh.field
     fields = []
     for x0, x1 in regions:
@@ -484,8 +541,9 @@ def _mesh_regions(gmsh, size, wall_size, wall_surfaces, wall_thickness, regions,
             f.setNumber(box, key, value)
         fields.append(box)
     smallest = size
-    if wall_size is not None and wall_surfaces:
-        fields.append(_wall_field(gmsh, wall_surfaces, wall_size, wall_thickness, size, outside_size))
+    if wall_size is not None and walls:
+        fields += [_wall_field(gmsh, surfaces, wall_size, thickness, size, outside_size)
+                   for thickness, surfaces in walls.items()]
         smallest = min(size, wall_size)
     both = f.add("Min")
     f.setNumbers(both, "FieldsList", fields)

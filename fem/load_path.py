@@ -5,10 +5,14 @@ Units: mm, N, MPa (= N/mm²), N·mm; angles in rad.
 :class:`LoadPathSolver` solves R(u; v; a) = 0 (the problem's residual, :mod:`fem.problem`)
 along the linear load path a(s) = a_0 + s (a_1 - a_0), s from 0 to 1:
 
-* steps in s with automatic cut-back: a step whose Newton iteration fails is undone and
-  halved, and the path stops at its last converged state below ``min_step``;
+* steps in s with automatic cut-back: a step whose Newton iteration fails (or whose
+  converged state the contact refuses, its optional ``refuses``) is undone and halved, and
+  the path stops at its last converged state below ``min_step``;
 * Newton with the exact tangent K = dR/du (contact blocks included), each correction by
-  GMRES preconditioned with the MUMPS LU of a recent tangent, plus cheap chord steps;
+  GMRES preconditioned with the MUMPS LU of a recent tangent, plus cheap chord steps; a
+  contact term may keep a low-rank part a bᵀ of K out of the matrix (``low_rank``, e.g. the
+  object's friction, dense over all its dofs): GMRES then applies K = A + a bᵀ
+  (:class:`LowRankTangent`) and the LU factorises A;
 * after each converged step the problem's lagged constants take their new values;
 * sensitivities at a converged state: du/da = -K^{-1} dR/da, one back-substitution per
   load entry (dR/da_j = sum_i dc_i/da_j G_i over the problem's load terms), evaluated at
@@ -134,6 +138,30 @@ class Probes:
         return block
 
 
+class LowRankTangent:
+    """The operator x -> A x + sum_k a_k (b_k · x) as a PETSc Python shell matrix (``mat``):
+    the assembled tangent A plus a contact's low-rank part (module docstring). The pairs are
+    zero on the Dirichlet dofs, whose rows and columns stay A's (the identity)."""
+
+    def __init__(self, A: PETSc.Mat):
+        self.A, self.pairs = A, []
+        self.mat = PETSc.Mat().createPython(A.getSizes(), self, comm=A.getComm())
+        self.mat.setUp()
+
+    def set(self, pairs: list, bcs: list) -> None:
+        """Take the pairs (a, b) of the current tangent (and destroy the previous ones)."""
+        for vec in (v for pair in self.pairs for v in pair):
+            vec.destroy()
+        for vec in (v for pair in pairs for v in pair):
+            set_bc(vec, bcs, scale=0.0)
+        self.pairs = list(pairs)
+
+    def mult(self, mat: PETSc.Mat, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        self.A.mult(x, y)
+        for a, b in self.pairs:
+            y.axpy(b.dot(x), a)
+
+
 class LoadPathSolver:
     """Load stepping with cut-back and Newton (GMRES on the exact tangent, preconditioned
     by a recent MUMPS LU) of one :class:`fem.problem.Problem` (module docstring); keeps
@@ -151,6 +179,9 @@ class LoadPathSolver:
         self._J = fem.form(ufl.derivative(R, self.u, ufl.TrialFunction(self.V)))
         self._load_forms = [fem.form(term.form) for term in problem.loads]
         self._A = self._tangent_matrix()       # the tangent at the current iterate
+        # GMRES's operator: _A, or _A plus the contact's low-rank part (LowRankTangent)
+        self._low_rank = LowRankTangent(self._A) if hasattr(self.contact, "low_rank") else None
+        self._op = self._A if self._low_rank is None else self._low_rank.mat
         self._b = create_vector(self._R)
         self._bc_gap = create_vector(self._R)   # g - u on the Dirichlet dofs (_lifting_needed)
         self._tangent()                          # fixes the sparsity pattern
@@ -167,12 +198,13 @@ class LoadPathSolver:
         self._factor_fresh = False                 # last factorisation near current state?
 
     def _create_ksp(self) -> PETSc.KSP:
-        """GMRES on the current tangent _A, preconditioned by the MUMPS LU of _P (a recent
-        tangent). PETSc refactorises only when _P changes, and keeps MUMPS' symbolic
-        factorisation throughout because the sparsity pattern never changes."""
+        """GMRES on the current tangent _op (_A, with the contact's low-rank part if any),
+        preconditioned by the MUMPS LU of _P (a recent tangent's _A). PETSc refactorises
+        only when _P changes, and keeps MUMPS' symbolic factorisation throughout because
+        the sparsity pattern never changes."""
         config = self.config
         ksp = PETSc.KSP().create(self.comm)
-        ksp.setOperators(self._A, self._P)
+        ksp.setOperators(self._op, self._P)
         ksp.setOptionsPrefix(f"softjoint_{id(self)}_")
         opts = PETSc.Options()
         prefix = ksp.getOptionsPrefix()
@@ -184,7 +216,7 @@ class LoadPathSolver:
         opts[f"{prefix}pc_factor_mat_solver_type"] = "mumps"
         opts[f"{prefix}mat_mumps_icntl_14"] = MUMPS_WORKSPACE_PERCENT
         if config.mumps_blr:
-            # Block low-rank LU: ~40 % faster factorisations at the production mesh; the
+            # Block low-rank LU: ~40 % faster factorisations at the 1.8 mm P2 mesh; the
             # tangent is then exact to ~1e-8, which Newton (exact residual) absorbs.
             opts[f"{prefix}mat_mumps_icntl_35"] = 1
             opts[f"{prefix}mat_mumps_cntl_7"] = config.mumps_blr
@@ -300,12 +332,15 @@ class LoadPathSolver:
         return dolfinx.cpp.la.petsc.create_matrix(self.comm, pattern)
 
     def _tangent(self) -> None:
-        """Assemble the tangent K(u) at the current iterate into _A."""
+        """Assemble the tangent K(u) at the current iterate into _A (and its low-rank part,
+        if any, into _op)."""
         self._A.zeroEntries()
         assemble_matrix(self._A, self._J, bcs=self.bcs)
         if self.contact:
             self.contact.add_tangent(self._A, self.u)
         self._A.assemble()
+        if self._low_rank is not None:
+            self._low_rank.set(self.contact.low_rank(self.u), self.bcs)
 
     def _mumps_status(self) -> str:
         """MUMPS' own error figures after a failed factorisation (INFOG(1) < 0: -9/-8
@@ -321,7 +356,7 @@ class LoadPathSolver:
         if assemble:
             self._tangent()
         self._A.copy(self._P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        self.ksp.setOperators(self._A, self._P)
+        self.ksp.setOperators(self._op, self._P)
         self.ksp.setUp()
         self._refactor = False
         self.factorisations += 1
@@ -465,12 +500,15 @@ class LoadPathSolver:
 
     def _guarded_newton(self, reuse_factor: bool) -> tuple[int, bool, str]:
         """newton(), with a non-finite iterate or a MUMPS failure (a singular or NaN
-        tangent) as a failed solve: (iterations, converged, reason or "")."""
+        tangent) as a failed solve, and a converged state that the contact refuses (its
+        optional ``refuses(u)``: a one-line reason, e.g. the finger tunnelled into an
+        object) too: (iterations, converged, reason or "")."""
         try:
             n, ok = self.newton(reuse_factor=reuse_factor)
-            return n, ok and bool(np.isfinite(self.u.x.array).all()), ""
         except PETSc.Error as exc:
             return self.config.max_it, False, f"{str(exc).splitlines()[0]}, {self._mumps_status()}"
+        why = self.contact.refuses(self.u) if ok and hasattr(self.contact, "refuses") else ""
+        return n, ok and not why and bool(np.isfinite(self.u.x.array).all()), why
 
     def converge(self) -> PathOutcome:
         """Newton at the load ``state`` from the current iterate u, which is a guess

@@ -13,7 +13,8 @@ resumes where it stopped.
 Each record: anchors r_1..r_10 (10, 2) mm, phi_end and cap rotation (deg), the solve's
 wall time (s), Newton figures, and the contact state (closed pairs, smallest gap, mm).
 
-Effects. BASE is the production discretisation (1.8 mm, displacement, q = 2, kappa = 100).
+Effects. BASE is the paper-fidelity discretisation of the committed data (fem.discretisation.PAPER:
+1.8 mm, displacement, q = 2, kappa = 100).
 A factor's effect at a load is the change of the answer when only that factor changes
 (COMPARISONS: each variant against BASE, or against the variant that differs from it in
 that factor alone, e.g. the wall refinement of the mixed form)::

@@ -14,10 +14,14 @@ s spine, H = height/2, Hv = valley_height/2, Z = width/2, cells [c0_i, c1_i], po
 every box between neighbouring breakpoints is wholly solid, wholly chamber or wholly
 outside (a valley gap y > Hv between two cells). The finger of
 :func:`fem.geometry.build_finger` is the same kind of union: its parts lie along x from
-x0_k = finger.rest_start(k), every joint the joint above shifted by x0_k, every rigid part
-the box [x0_k, x0_k + l_k] x [-h_k/2, h_k/2] x [0, w_k/2]. Its breakpoints are every
-joint's x breakpoints + x0_k and every rigid part's ends along x, and along y and z the
-union of the joint's and every rigid part's (+-h_k/2; 0, w_k/2).
+x0_k = finger.rest_start(k), every joint the joint above of its own shape
+(FingerGeometry.joint_at) shifted by x0_k, every rigid part the box [x0_k, x0_k + l_k] x
+[-h_k/2, h_k/2] x [0, w_k/2]. Its breakpoints are every joint's own x breakpoints + x0_k
+and every rigid part's ends along x, and along y and z the union of every joint's and
+every rigid part's (+-h_k/2; 0, w_k/2): a swept mesh has one (y, z) grid, so joints of
+different sections each carry the other's y and z lines too (the paper's joint and
+soft4: y breakpoints 3.0 and 3.2 mm, a 0.2 mm layer through the whole finger), and the
+bonds between parts of different sections stay conforming.
 
 One tensor grid over those breakpoints (a :class:`Layout`): the mesh of ``divisions`` n
 cuts every interval of length d into n * max(1, ceil(d / S0)) equal elements, S0 =
@@ -29,9 +33,9 @@ when its midpoint lies in the solid (a joint's outer box less its chambers and v
 gaps, or a rigid box). So every joint wall is n elements thick, element sizes scale
 exactly as 1/n, and the meshes of n = 1, 2, 3, ... (one S) are nested (the Richardson
 family of fem.mesh_study). A joint whose intervals are all shorter than S0 (the paper's:
-at most 5.8 mm, the chambers' z extent Z - t; 4.69 mm along x) and whose section the
-rigid parts share (their y, z breakpoints are the joint's) is meshed in the finger exactly
-as alone. The profile is polygonal, so straight-sided hexahedra represent the solid
+at most 5.8 mm, the chambers' z extent Z - t; 4.69 mm along x) and whose y, z breakpoints
+hold every other part's (rigid parts of its section, the other joints of its shape) is
+meshed in the finger exactly as alone. The profile is polygonal, so straight-sided hexahedra represent the solid
 exactly (volumes and areas to round-off).
 
 The y breakpoints are symmetric (every box is centred on y = 0) and the grid is
@@ -53,7 +57,7 @@ Q2 on hexahedra needs quadrature degree 4 (3 x 3 x 3 Gauss points): degree 2 or 
 2 x 2 x 2, which under-integrates the Q2 stiffness (hourglass modes); QUADRATURE is that
 degree, and fem.discretisation uses it for every hexahedral discretisation.
 
-Data flow: JointGeometry(divisions=n) or FingerGeometry(joint=JointGeometry(divisions=n))
+Data flow: JointGeometry(divisions=n) or FingerGeometry(finger, JointGeometry(divisions=n))
 -> fem.mesh.create_mesh -> create_hex_mesh / create_hex_finger_mesh -> layout -> hexahedra
 -> fem.mesh.MeshData -> fem.problem / fem.solver / fem.finger, exactly as the gmsh
 tetrahedra.
@@ -251,26 +255,37 @@ def part_spans(geo: FingerGeometry) -> list[tuple[float, float]]:
     return [(finger.rest_start(k), finger.rest_start(k) + p.length) for k, p in enumerate(finger.parts)]
 
 
+def joint_parts(geo: FingerGeometry) -> list[tuple[int, JointGeometry, float, float]]:
+    """(part index k, its JointGeometry, x0, x1) of every joint part (mm, finger frame)."""
+    spans = part_spans(geo)
+    return [(k, geo.joint_at(k), *spans[k]) for k in geo.finger.joints]
+
+
 def finger_breakpoints(geo: FingerGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(x, y, z) breakpoints of the finger (mm, finger frame; module docstring)."""
-    bx, by, bz = breakpoints(geo.joint)
-    x, y, z = [], list(by), list(bz)
-    for part, (x0, x1) in zip(geo.finger.parts, part_spans(geo)):
+    """(x, y, z) breakpoints of the finger (mm, finger frame; module docstring): along x
+    every joint's own + its x0 and every rigid part's ends, along y and z the union of
+    every part's."""
+    x, y, z = [], [], []
+    for k, (part, (x0, x1)) in enumerate(zip(geo.finger.parts, part_spans(geo))):
         if part.kind == "joint":
+            bx, by, bz = breakpoints(geo.joint_at(k))
             x += list(bx + x0)
+            y += list(by)
+            z += list(bz)
         else:
             x += [x0, x1]
             y += [part.height / 2, -part.height / 2]
-            z += [part.width / 2]
+            z += [0.0, part.width / 2]
     return _unique(x), _unique(y), _unique(z)
 
 
 def in_finger(geo: FingerGeometry, x, y, z) -> np.ndarray:
-    """Points (mm, finger frame) strictly inside a part: a joint's solid or a rigid box."""
+    """Points (mm, finger frame) strictly inside a part: a joint's solid (its own shape)
+    or a rigid box."""
     solid = np.zeros(np.shape(x), dtype=bool)
-    for part, (x0, _) in zip(geo.finger.parts, part_spans(geo)):
+    for k, (part, (x0, _)) in enumerate(zip(geo.finger.parts, part_spans(geo))):
         if part.kind == "joint":
-            solid |= in_joint(geo.joint, x - x0, y, z)
+            solid |= in_joint(geo.joint_at(k), x - x0, y, z)
         else:
             solid |= in_box(x - x0, y, z, part.length, part.height, part.width)
     return solid
@@ -278,36 +293,33 @@ def in_finger(geo: FingerGeometry, x, y, z) -> np.ndarray:
 
 def finger_layout(geo: FingerGeometry) -> Layout:
     """The finger: every part on one grid, fem.geometry.finger_tags (module docstring)."""
-    tags, jg = finger_tags(geo.finger), geo.joint
-    parts = list(enumerate(zip(geo.finger.parts, part_spans(geo))))
+    tags, joints = finger_tags(geo.finger), joint_parts(geo)
 
     def cell_tags(m):
         x = m[:, 0]
         tag = np.zeros(len(m), dtype=np.int32)
-        for k, (part, (x0, x1)) in parts:
-            span = (x > x0) & (x < x1)
-            tag[span] = tags[f"part{k}"]
-            if part.kind == "joint":
-                tag[span & (x > x1 - jg.cap)] = tags[f"cap{k}"]
+        for k, (x0, x1) in enumerate(part_spans(geo)):
+            tag[(x > x0) & (x < x1)] = tags[f"part{k}"]
+        for k, jg, x0, x1 in joints:
+            tag[(x > x1 - jg.cap) & (x < x1)] = tags[f"cap{k}"]
         return tag
 
     def facet_tags(m):
         x, y, z = m.T
         tag = np.zeros(len(m), dtype=np.int32)
-        for k, (part, (x0, _)) in parts:
-            if part.kind == "joint":
-                top, bottom, valley = joint_facets(jg, x - x0, y, z)
-                tag[top], tag[bottom], tag[valley] = tags[f"top{k}"], tags[f"bottom{k}"], tags["valley_faces"]
+        for k, jg, x0, _ in joints:
+            top, bottom, valley = joint_facets(jg, x - x0, y, z)
+            tag[top], tag[bottom], tag[valley] = tags[f"top{k}"], tags[f"bottom{k}"], tags["valley_faces"]
         tag[np.abs(z) < _TOL] = tags["symmetry"]
         tag[np.abs(x) < _TOL] = tags["proximal"]
         return tag
 
     bx, by, bz = breaks = finger_breakpoints(geo)
-    rigid, joint = geo.rigid_mesh_size, min(geo.rigid_mesh_size, jg.hex_size or math.inf)
+    rigid, joint = geo.rigid_mesh_size, min(geo.rigid_mesh_size, geo.joint.hex_size or math.inf)
     mid = (bx[:-1] + bx[1:]) / 2
     in_a_joint = np.zeros(len(mid), dtype=bool)
-    for _, (part, (x0, x1)) in parts:
-        in_a_joint |= (part.kind == "joint") & (mid > x0) & (mid < x1)
+    for _, _, x0, x1 in joints:
+        in_a_joint |= (mid > x0) & (mid < x1)
     return Layout(breaks, lambda x, y, z: in_finger(geo, x, y, z), cell_tags, facet_tags,
                   (np.where(in_a_joint, joint, rigid), joint, joint))
 
@@ -355,7 +367,7 @@ def create_hex_mesh(geometry: JointGeometry, comm: MPI.Comm = MPI.COMM_WORLD):
 
 
 def create_hex_finger_mesh(geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD):
-    """The finger half-model as straight-sided hexahedra, its joints of
-    ``geometry.joint.divisions`` (>= 1) divisions (module docstring), distributed over
+    """The finger half-model as straight-sided hexahedra, every joint of its own shape and
+    of ``geometry.joint.divisions`` (>= 1) divisions (module docstring), distributed over
     ``comm`` (collective): a fem.mesh.MeshData tagged by fem.geometry.finger_tags."""
     return _distributed(geometry, geometry.joint.divisions, comm)

@@ -1,7 +1,7 @@
 """Command-line pieces shared by the fem tools, on top of :mod:`contract.cli` (no dolfinx).
 
 * ``--mesh-size`` h (mm) in MESH_SIZE_RANGE = [0.3, 10]: finer meshes than 0.3 mm do not
-  fit in memory (the production 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser
+  fit in memory (the paper-fidelity 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser
   ones than 10 mm no longer resolve the 2.5 mm valleys of the joint or the 2 mm beam.
 * the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the joint's box
   (the paper's: |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100) is checked by
@@ -17,7 +17,7 @@
   (fem.mesh_hex) instead of tetrahedra;
 * :func:`joint_geometry`: the joint of ``--mesh-size`` and ``--wall-mesh-size`` (tetrahedra)
   or ``--divisions`` (hexahedra): the joint file's shape and its [mesh] when none is given
-  (without a joint file, the production mesh, JointGeometry's defaults);
+  (without a joint file, the production mesh, JointGeometry's defaults: hexahedra "hex2:3");
   :func:`formulation_of` likewise;
 * :func:`mesh_text`: an argparse type for a discretisation's mesh text ("H", "H:W", "hexN");
 * :func:`on_root`: a writer that runs on rank 0 while every rank learns its error, so that
@@ -112,9 +112,9 @@ def joint_geometry(args, joint: JointSpec | None = None) -> JointGeometry:
     add_mesh_size with default None, add_wall_mesh_size) and ``getattr(args, "divisions")``
     (add_divisions) on the shape of ``joint``: the joint file's [mesh] when none is given;
     hexahedra of N divisions with --divisions; otherwise tetrahedra of H (default the
-    joint's H, or JointGeometry's when the joint is hexahedral) and W (default H, i.e.
-    None). Without ``joint``: JointGeometry's production shape and mesh. Both kinds at
-    once: ValueError."""
+    joint's H, or JointGeometry's PAPER_MESH_SIZE when the joint is hexahedral) and W
+    (default H, i.e. None). Without ``joint``: JointGeometry's production shape and mesh.
+    Both kinds at once: ValueError."""
     base = JointGeometry(**joint.geometry_kwargs()) if joint is not None else JointGeometry()
     wall, divisions = getattr(args, "wall_mesh_size", None), getattr(args, "divisions", None)
     hex_size = getattr(args, "hex_size", None)
@@ -126,7 +126,7 @@ def joint_geometry(args, joint: JointSpec | None = None) -> JointGeometry:
         return replace(base, divisions=int(divisions), hex_size=hex_size)
     if args.mesh_size is None and wall is None:
         return base
-    return replace(base, mesh_size=args.mesh_size or base.mesh_size, wall_mesh_size=wall, divisions=0)
+    return replace(base, mesh_size=args.mesh_size or base.mesh_size, wall_mesh_size=wall, divisions=0, hex_size=None)
 
 
 def formulation_of(args, joint: JointSpec) -> str:

@@ -6,8 +6,11 @@ The half-model is mirrored about z = 0 so the full joint is shown. Left: the und
 joint, cut open at z = 0 to show the two chambers and bellow cells. Right: the deformed
 joint coloured by displacement magnitude |u| (mm), with the 10 anchor points (like the
 paper's Figure 2C). The joint is ``--joint FILE`` (contract.joint; default the paper's,
-contract/joints/paper.toml), meshed and solved with its [mesh] defaults unless
-``--mesh-size`` is given; its box bounds the load. A bad joint file exits 2 with one line.
+contract/joints/paper.toml), meshed and solved with its [mesh] defaults (the paper's:
+the production hex2:3 mixed) unless ``--mesh-size`` / ``--wall-mesh-size`` (tetrahedra),
+``--divisions`` (hexahedra) or ``--formulation`` is given (``make joint-render`` passes
+the committed render's paper-fidelity 1.8 mm displacement); the mesh and formulation are
+written in the picture. Its box bounds the load. A bad joint file exits 2 with one line.
 Runs on one rank; needs no display (Plotter(off_screen=True)).
 The PNG is written atomically (screenshot and caption go to a temporary name beside it);
 ``--json`` prints the file and the solve's figures, as ``fem.solve --json`` does.
@@ -26,8 +29,8 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path
 from contract.joint import joint_digest
-from fem.options import (add_divisions, add_joint, add_load, add_mesh_size, formulation_of, joint_geometry, joint_of,
-                         one_rank, parsed_load)
+from fem.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, add_wall_mesh_size,
+                         formulation_of, joint_geometry, joint_of, one_rank, parsed_load)
 from fem.solver import JointSolver, Load
 
 
@@ -74,7 +77,7 @@ def _render(solver, result, out: str) -> None:
     p.screenshot(out)
     p.close()
     _caption(out, [
-        "undeformed (half-model, cut open at z = 0)",
+        f"undeformed (half-model, cut open at z = 0); mesh {solver.mesh_data.geometry.mesh}, {solver.formulation}",
         f"P = {L.P:g} MPa, F1 = {L.F1:g} N, F2 = {L.F2:g} N, M = {L.M:g} N·mm;  "
         f"phi_end = {np.degrees(result.phi_end):.1f}°, cap {np.degrees(result.cap_rotation):.1f}°"])
 
@@ -105,7 +108,9 @@ def main(argv=None) -> int:
     add_joint(ap)
     add_load(ap, default=(0.2, 0.0, -1.0, 20.0))
     add_mesh_size(ap, None, shown="the joint file's [mesh] size")
+    add_wall_mesh_size(ap)
     add_divisions(ap)
+    add_formulation(ap, "the joint file's [mesh] formulation (the paper's: the production one)")
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
     args = ap.parse_args(argv)

@@ -1,6 +1,7 @@
 """Self-contact check: the outer bellow walls facing each other across each valley.
 
-    python -m fem.self_contact --out results/fem/self_contact.json [--penalty 0] [--formulation mixed]
+    python -m fem.self_contact --out results/fem/self_contact.json [--penalty 0]
+        [--mesh-size H [--wall-mesh-size W] | --divisions N [--hex-size S]] [--formulation F]
 
 When one chamber is pressurised (or M, F2 bend the joint) the other side's bellows close
 up: the two outer cell walls across a valley (gap ``valley_width`` = 2.5 mm undeformed)
@@ -12,9 +13,12 @@ the joint and reports, for every valley on each side, the smallest signed gap
 over the node pairs of the two periodic faces (:mod:`fem.contact`; n the best-fit
 normal of the valley). g < 0 is overlap. The production solver carries penalty contact
 (SolverConfig.contact_penalty), so g stays near 0; ``--penalty 0`` switches it off and
-shows how far the walls would interpenetrate without it. ``--formulation`` (default the
-production one) chooses the joint's elements; the JSON records it ("formulation"). Units:
-mm. One rank.
+shows how far the walls would interpenetrate without it. The mesh options
+(fem.options.joint_geometry) and ``--formulation`` default to the production
+discretisation (fem.discretisation.PRODUCTION, hex2:3 mixed); ``make self-contact`` passes
+the committed result's paper-fidelity 1.8 mm displacement. The JSON records the mesh
+(``mesh``, contract.joint.mesh_text; ``mesh_size`` on tetrahedra) and the formulation.
+Units: mm. One rank.
 ``--json`` prints the minimum gap and the figures of every case.
 """
 
@@ -22,7 +26,6 @@ from __future__ import annotations
 
 import logging
 import sys
-from dataclasses import replace
 
 import numpy as np
 from mpi4py import MPI
@@ -33,7 +36,8 @@ from fem.artefacts import SELF_CONTACT
 from fem.discretisation import FORMULATION
 from fem.geometry import JointGeometry
 from fem.mesh_study import CORNERS
-from fem.options import add_extrapolation, add_formulation, add_mesh_size, checked_loads, one_rank
+from fem.options import (add_divisions, add_extrapolation, add_formulation, add_mesh_size, add_wall_mesh_size,
+                         checked_loads, joint_geometry, one_rank)
 from fem.solver import JointSolver, Load, SolverConfig
 from contract.spec import INPUT_MIRROR
 
@@ -50,12 +54,12 @@ def valley_gaps(solver: JointSolver, geo: JointGeometry) -> dict:
     return ValleyContact(u.function_space, solver.mesh_data.facet_tags, geo, 0.0).gaps(u)
 
 
-def run(mesh_size: float | None = None, loads: list[Load] | None = None,
+def run(geo: JointGeometry = JointGeometry(), loads: list[Load] | None = None,
         penalty: float | None = None, allow_extrapolation: bool = False,
         formulation: str = FORMULATION) -> dict:
-    """Gaps (mm) for ``loads`` (default: CORNERS and their mirrors) on the given mesh (mm)
-    and formulation, with the contact penalty (MPa/mm; None: the solver's)."""
-    geo = JointGeometry() if mesh_size is None else replace(JointGeometry(), mesh_size=mesh_size)
+    """Gaps (mm) for ``loads`` (default: CORNERS and their mirrors) on the joint ``geo``
+    (default the production mesh) and formulation, with the contact penalty (MPa/mm; None:
+    the solver's)."""
     config = SolverConfig() if penalty is None else SolverConfig(contact_penalty=penalty)
     solver = JointSolver(geo, MPI.COMM_SELF, config=config, formulation=formulation)
     cases = []
@@ -72,8 +76,8 @@ def run(mesh_size: float | None = None, loads: list[Load] | None = None,
         cases.append(entry)
     solved = [c for c in cases if c["converged"]]
     min_gap = min(c["min_gap_mm"] for c in solved) if solved else None
-    return {"undeformed_gap_mm": geo.valley_width, "mesh_size": geo.mesh_size,
-            "formulation": formulation,
+    return {"undeformed_gap_mm": geo.valley_width, "mesh": geo.mesh,
+            **({} if geo.divisions else {"mesh_size": geo.mesh_size}), "formulation": formulation,
             "contact_penalty_MPa_per_mm": config.contact_penalty, "cases": cases,
             "min_gap_mm": min_gap, "unsolved_cases": len(cases) - len(solved)}
 
@@ -83,6 +87,8 @@ def main(argv=None) -> int:
     ap.add_output("--out", suffix=".json", default="results/fem/self_contact.json",
                   help="result file (default results/fem/self_contact.json)")
     add_mesh_size(ap, None)
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
     ap.add_argument("--penalty", type=cli.number(0, PENALTY_MAX, "MPa/mm"), default=None,
                     help=f"contact penalty, MPa/mm in [0, {PENALTY_MAX:g}] (default: the "
                          "solver's; 0 = no contact)")
@@ -95,8 +101,10 @@ def main(argv=None) -> int:
     loads = None
     if args.loads:
         loads = [Load.from_array(x) for x in checked_loads(ap, args.loads, args.allow_extrapolation)]
+    with ap.errors():
+        geo = joint_geometry(args)
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
-    out = run(args.mesh_size, loads, args.penalty, args.allow_extrapolation,
+    out = run(geo, loads, args.penalty, args.allow_extrapolation,
               args.formulation or FORMULATION)
     with ap.errors():
         SELF_CONTACT.write(args.out, out)

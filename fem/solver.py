@@ -17,8 +17,10 @@ solid, whose small-strain limit is exactly (E, nu) = (12.2 MPa, 0.49), and
 contract.spec.INPUT_BOX. P2 displacements avoid the volumetric locking of P1 at nu = 0.49
 (mesh convergence: ``make mesh-study``); ``formulation="mixed"`` solves the same energy in
 Taylor-Hood u-p form (fem.problem), which does not lock. JointSolver's default
-formulation is the production one, fem.discretisation.FORMULATION (with JointGeometry's
-default sizes, the PRODUCTION discretisation). The paper used ANSYS linear elasticity with
+formulation is the production one, fem.discretisation.FORMULATION ("mixed"; with
+JointGeometry's default mesh, hex2:3, and config_for's quadrature 4 it is the PRODUCTION
+discretisation; the paper-fidelity PAPER is JointGeometry(divisions=0, hex_size=None) and
+"displacement"). The paper used ANSYS linear elasticity with
 large deflection (St Venant-Kirchhoff-like); neo-Hookean agrees with it at small strain
 and stays stable in compression.
 

@@ -102,6 +102,7 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
     **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "speedup", "fem_s", "fem_cases"),
     "summary{}.cases": int, **each("summary{}", NUM, *_SUMMARY), "judged_variant": str,
     "joint": str, "repeats": int, "finger.name": str, "finger.base_angle_deg?": NUM, "figures?": list,
+    "discretisation?.mesh": str, "discretisation?.formulation": str,
     "fem[].case": str, "fem[].converged": bool, "fem[].gravity": bool, "fem[].pressures_MPa": list,
     "fem[].fem_s": NUM, "fem[].tip": list | None, "fem[].tip_angle_deg": MAYBE,
     "fem[].load_average?": NUM, "fem[].reason?": str, "fem[].mesh.nodes": int, "fem[].mesh.mesh_size?": NUM,
@@ -109,9 +110,10 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
     **each("cases[]", str, "case", "variant", "method", "kinematics"), "cases[].joint_weight": str | None,
     **each("cases[]", MAYBE, "tip_error_mm", "tip_angle_error_deg", "predictor_s", "tip_angle_deg"),
     "cases[].tip_mm": list | None,
-    "mesh_check?[].case": str, **each("mesh_check?[]", NUM, "production_mesh_size", "tip_change_mm",
-                                       "tip_angle_change_deg"), "mesh_check?[].mesh_size": MAYBE,
+    "mesh_check?[].case": str, **each("mesh_check?[]", NUM, "tip_change_mm", "tip_angle_change_deg"),
+    "mesh_check?[].production_mesh_size?": NUM, "mesh_check?[].mesh_size": MAYBE,
     "mesh_check?[].mesh?": str, "mesh_check?[].production_mesh?": str,
+    "mesh_check?[].formulation?": str, "mesh_check?[].production_formulation?": str,
     **each("mesh_check?[]", int, "production_nodes", "nodes"), "mesh_check?[].wall_mesh_size?": NUM})
 
 #: results/calibration/recovery.json (make calibrate-recovery; predictor.calibrate recovery):

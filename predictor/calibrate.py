@@ -83,11 +83,18 @@ def _model(args):
     return CalibrationModel(load_joint(args.model, args.finger), args.finger, args.kinematics, args.joint_weight)
 
 
+def _observations_and_model(args):
+    """The measurement file (``--observations``, checked against ``--finger``) and the
+    calibration model of the options of _model_args."""
+    from predictor.observations import load_observations
+
+    return load_observations(args.observations, args.finger), _model(args)
+
+
 def main_fit(argv) -> int:
     from predictor.calibration import DEFAULT_FIT, resolve_fit
     from predictor.calibration_file import write_calibrated
     from predictor.calibration_fit import FitFailed, Prior, calibrate
-    from predictor.observations import load_observations
 
     ap = cli.Parser(prog="python -m predictor.calibrate", description=__doc__.split("\n\n")[0],
                     epilog="subcommands (each with --help): recovery (the known-truth study), fem (calibrate on "
@@ -101,8 +108,7 @@ def main_fit(argv) -> int:
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
     with ap.errors():
-        obs = load_observations(args.observations, args.finger)
-        model = _model(args)
+        obs, model = _observations_and_model(args)
         names = [n.strip() for n in args.fit.split(",") if n.strip()]
         resolve_fit(names, model.table)
         priors = {}
@@ -238,7 +244,6 @@ def _cases_digest(cases) -> str:
 def main_bench(argv) -> int:
     from predictor.artefacts import CALIBRATION_BENCH
     from predictor.calibration_bench import OBSERVATIONS, REPEATS, bench_calibration
-    from predictor.observations import load_observations
 
     ap = cli.Parser(prog="python -m predictor.calibrate bench", description="time the 8-observation calibration")
     ap.add_argument("--observations", default=str(OBSERVATIONS),
@@ -250,8 +255,7 @@ def main_bench(argv) -> int:
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
     with ap.errors():
-        obs = load_observations(args.observations, args.finger)
-        model = _model(args)
+        obs, model = _observations_and_model(args)
         doc = bench_calibration(model, obs, args.repeats, args.beside, progress=LOG.info)
         CALIBRATION_BENCH.write(args.out, doc)
     if args.json:

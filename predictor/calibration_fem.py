@@ -52,8 +52,8 @@ from predictor.defaults import ROOT
 from predictor.observations import Marker, Observation, Observations
 
 TRUTH_FINGER = ROOT / "results" / "calibration" / "truth" / "finger.toml"
-#: Gravity pressure pairs (P1, P2) MPa of the FEM cases, inside |P| <= 0.2 MPa where the
-#: finger FEM converges (three validation cases at 0.25-0.3 MPa do not); the Makefile's
+#: Gravity pressure pairs (P1, P2) MPa of the FEM cases, inside |P| <= 0.2 MPa (chosen when
+#: three validation cases at 0.25-0.3 MPa did not converge; docs/decisions.md §6); the Makefile's
 #: CAL_PRESSURES spells the same list for fem.finger_cases (tests check they agree).
 PRESSURES = ((0.2, 0.2), (-0.2, 0.15), (0.15, -0.2), (-0.15, -0.15),
              (0.0, 0.0), (0.1, 0.05), (-0.1, 0.2), (0.05, -0.1))

@@ -21,14 +21,18 @@ predictor minus the FEM cap's orientation), ``fem_s`` (the FEM solve, from its J
 ``predictor_s`` (median of REPEATS single-query solves in this run) and their ratio.
 Targets (issue 14): cap kinematics within 2 mm and 1 deg of the FEM in every gravity and
 free case; speed-up >= 1000x; the FEM <= 10 min per gesture (600 s, one core).
-``--mesh-size H`` validates the cases solved at joint mesh size H instead of the production
-mesh (``make demo`` checks one case it solves live on a coarse mesh). A case's mesh is its
-record's ``mesh.mesh`` in words (contract.joint.mesh_text: "1.8", "1.697:0.849", "hex2"; older
-records: their size and wall size), so a case on another mesh, hexahedra included, only
-enters the mesh check.
+The cases validated are those on one discretisation: ``--mesh`` (default the committed
+cases', fem.discretisation.PAPER's "1.8" mm; ``--mesh-size H`` is ``--mesh H``: ``make
+demo`` checks one case it solves live on a coarse mesh) and ``--formulation`` (default
+PAPER's "displacement"; the surrogate is trained on PAPER data). A case's mesh is its
+record's ``mesh.mesh`` in words (contract.joint.mesh_text: "1.8", "1.697:0.849", "hex2",
+"hex2:3"; older records: their size and wall size), its formulation the record's (absent:
+displacement), so a case on another discretisation, hexahedra included, only enters the
+mesh check.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import statistics
@@ -41,8 +45,9 @@ import torch
 from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
-from contract.joint import mesh_text
-from fem.geometry import JointGeometry
+from contract.joint import FORMULATIONS, MAX_DIVISIONS, mesh_text
+from fem.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
+from fem.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
@@ -51,6 +56,9 @@ from predictor.solve import SolverOptions, solve
 from predictor.statics import GripperProblem
 
 REPEATS = 5
+#: The discretisation of the committed finger cases, results/validation/finger_fem
+#: (fem.discretisation.PAPER; named here without its dolfinx).
+COMMITTED_MESH, COMMITTED_FORMULATION = mesh_text(PAPER_MESH_SIZE), "displacement"
 VARIANTS = [("predictor", "tangent", "lumped"), ("predictor", "tangent", "split"),
             ("predictor", "cap", "lumped"), ("predictor", "cap", "split"),
             ("chain", "tangent", "lumped"), ("chain", "cap", "lumped")]
@@ -143,31 +151,44 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "")
     plt.close(fig)
 
 
-def wall_mesh_size(case: dict) -> float | None:
-    """The chamber-wall tetrahedron size (mm) of a fem.finger_cases record (None: its size)."""
-    return case.get("settings", {}).get("geometry", {}).get("joint", {}).get("wall_mesh_size")
+def mesh_arg(text: str) -> str:
+    """argparse type of ``--mesh``: "H" or "H:W" (tetrahedra, mm), "hexN" or "hexN:S"
+    (hexahedra), returned in contract.joint.mesh_text's spelling (the records')."""
+    size, count = cli.number(0.05, 50, "mm", open_lo=True), cli.number(1, MAX_DIVISIONS, integer=True)
+    text = text.strip()
+    a, _, b = text[3:].partition(":") if text.startswith("hex") else text.partition(":")
+    try:
+        if text.startswith("hex"):
+            return mesh_text(None, None, count(a), size(b) if b else None)
+        return mesh_text(size(a), size(b) if b else None)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc} (a mesh is H or H:W in mm, or hexN or hexN:S)") from None
 
 
-def case_mesh(case: dict) -> str:
-    """The joints' mesh of a fem.finger_cases record in words: its ``mesh.mesh``, or, in a
-    record written before hexahedra, mesh_text of its size and chamber-wall size (mm)."""
-    return case["mesh"].get("mesh") or mesh_text(case["mesh"]["mesh_size"], wall_mesh_size(case))
+def split_cases(cases: list[dict], validated: tuple[str, str]) -> tuple[list[dict], list[dict]]:
+    """(the fem.finger_cases records on the discretisation ``validated``, (mesh text,
+    formulation); the others, for the mesh check)."""
+    on = [(finger_case_mesh(c), finger_case_formulation(c)) == tuple(validated) for c in cases]
+    return [c for c, o in zip(cases, on) if o], [c for c, o in zip(cases, on) if not o]
 
 
 def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:
-    """The FEM's fingertip change between the production mesh and another mesh, per case
-    solved on both: the discretisation term of the fingertip error budget (wall_mesh_size:
-    the other mesh's chamber-wall size, mm, None where it has none of its own)."""
+    """The FEM's fingertip change between the validated discretisation and another one,
+    per case solved on both: the discretisation term of the fingertip error budget
+    (mesh_size, wall_mesh_size: the other mesh's tetrahedron sizes, mm, None where it has
+    none of its own; production_mesh_size only when the validated mesh is tetrahedral)."""
     base = {c["case"]: c for c in cases if c["converged"]}
     out = []
     for o in others:
         c = base.get(o["case"])
         if c is None or not o["converged"]:
             continue
-        out.append({"case": o["case"], "mesh": case_mesh(o), "production_mesh": case_mesh(c),
-                    "mesh_size": o["mesh"].get("mesh_size"), "wall_mesh_size": wall_mesh_size(o),
+        size = c["mesh"].get("mesh_size")
+        out.append({"case": o["case"], "mesh": finger_case_mesh(o), "production_mesh": finger_case_mesh(c),
+                    "formulation": finger_case_formulation(o), "production_formulation": finger_case_formulation(c),
+                    "mesh_size": o["mesh"].get("mesh_size"), "wall_mesh_size": finger_case_wall(o),
                     "nodes": o["mesh"]["nodes"],
-                    "production_mesh_size": c["mesh"]["mesh_size"], "production_nodes": c["mesh"]["nodes"],
+                    **({} if size is None else {"production_mesh_size": size}), "production_nodes": c["mesh"]["nodes"],
                     "tip_change_mm": math.dist(o["tip"], c["tip"]),
                     "tip_angle_change_deg": o["tip_angle_deg"] - c["tip_angle_deg"],
                     "joint_end_angle_change_deg": [a - b for a, b in zip(o["joint_end_angle_deg"],
@@ -205,10 +226,16 @@ def main(argv=None) -> int:
     ap.add_output("--out", suffix=".json", default="results/validation/finger.json", help="output JSON")
     ap.add_output("--figures", folder=True, default="results/validation", help="folder for the overlay PNGs")
     # make demo validates one case it solved on a coarse mesh just now; the default judges
-    # the production mesh, and a case on any other mesh goes to the mesh check.
-    ap.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"), default=JointGeometry().mesh_size,
-                    help="validate the cases solved at this joint mesh size, mm (default: the production "
-                         "mesh, %(default)g)")
+    # the committed cases' discretisation, and a case on any other goes to the mesh check.
+    mesh = ap.add_mutually_exclusive_group()
+    mesh.add_argument("--mesh", type=mesh_arg, default=COMMITTED_MESH, metavar="MESH",
+                      help="validate the cases solved on this joint mesh: H or H:W (mm) or hexN or hexN:S "
+                           f"(default {COMMITTED_MESH}, the committed cases')")
+    mesh.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"), default=None,
+                      help="the same as --mesh H for a tetrahedron size H, mm")
+    ap.add_argument("--formulation", choices=FORMULATIONS, default=COMMITTED_FORMULATION,
+                    help=f"validate the cases solved in this formulation (default {COMMITTED_FORMULATION}, "
+                         "the committed cases')")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
     set_quiet(args.quiet)
@@ -226,13 +253,12 @@ def main(argv=None) -> int:
             if not same_finger(case.get("settings", {}).get("geometry", {}).get("finger", {}), finger):
                 raise ValueError(f"{f} was solved for another finger file than {finger.name!r}")
             cases.append(case)
-        # The validation runs at the production joint mesh; a case solved on another mesh
-        # too (fem.finger_cases --suffix) gives the FEM's own discretisation change.
-        production = mesh_text(args.mesh_size)
-        meshes = [c for c in cases if case_mesh(c) != production]
-        cases = [c for c in cases if case_mesh(c) == production]
+        # The validation runs on one discretisation; a case solved on another one too
+        # (fem.finger_cases --suffix) gives the FEM's own discretisation change.
+        validated = (mesh_text(args.mesh_size) if args.mesh_size is not None else args.mesh, args.formulation)
+        cases, meshes = split_cases(cases, validated)
         if not cases:
-            raise ValueError(f"no FEM cases at mesh size {production} mm in {args.fem}: "
+            raise ValueError(f"no FEM cases on mesh {validated[0]} ({validated[1]}) in {args.fem}: "
                              "run `make finger-fem` (python -m fem.finger_cases)")
         entries, figures = [], []
         for case in cases:
@@ -255,6 +281,7 @@ def main(argv=None) -> int:
                 for e in entries[-len(VARIANTS):] if e["method"] == "predictor"), flush=True)
         report = {
             "finger": finger.summary(), "joint": joint.name, "fem_folder": args.fem,
+            "discretisation": {"mesh": validated[0], "formulation": validated[1]},
             "fem": [{k: c.get(k) for k in ("case", "pressures_MPa", "gravity", "converged", "reason", "tip",
                                            "tip_angle_deg", "joint_end_angle_deg", "fem_s", "fem_cpu_s",
                                            "load_average", "mesh")} for c in cases],

@@ -58,6 +58,14 @@ CASES_FEM = [
     ("fem.mesh_study", ["--meshes", "hex9", "--out", "{tmp}/x.json"], "hexN needs N in [1, 6]"),
     ("fem.mesh_study", ["--meshes", "hex2", "2.4", "--out", "{tmp}/x.json"], "give one kind of mesh"),
     ("fem.solve", ["--bogus"], "unrecognized arguments: --bogus"),
+    # fem.finger --object (a grasp): the object spec, the approach, the friction, gravity
+    ("fem.finger", ["--object", "bogus"], "unknown object 'bogus' in 'bogus': use circle, ellipse or rectangle"),
+    ("fem.finger", ["--object", "circle:r=-3"], "r=-3 in object 'circle:r=-3': sizes must be positive (mm)"),
+    ("fem.finger", ["--object", "circle", "--approach", "0.5,0"], "--approach: P1 = 0.5 is outside [-0.3, 0.3] MPa"),
+    ("fem.finger", ["--object", "circle", "--approach", "0.1"], "--approach: 1 values for finger 'paper' of 2 joint(s)"),
+    ("fem.finger", ["--approach", "0.1,0"], "--approach needs --object"),
+    ("fem.finger", ["--object", "circle", "--no-gravity"], "a grasp lifts the object's weight; drop --no-gravity"),
+    ("fem.finger", ["--object", "circle", "--mu", "nan"], "--mu: 'nan' is not a finite number (allowed [0, 10])"),
     ("fem.solve", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
     ("fem.self_contact", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("fem.self_contact", ["--loads", "0.1,0,0", "--out", "{tmp}/x.json"], "expected 4 comma-separated"),
@@ -152,16 +160,24 @@ CASES_WORKFLOW = [
     ("workflow.campaign", ["--samples", "4", "--seed", "1", "--out", "{tmp}/a/b"],
      "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
     ("workflow.campaign", ["--samples", "4", "--seed", "1", "--out", "/proc/d"], "cannot write /proc/d: /proc:"),
-    # issue 33: a refusal names the option and both values; a campaign never shrinks
+    # issue 33: a refusal names the option and both values; a campaign never shrinks (the
+    # committed held-out set is on the paper-fidelity mesh, `make dataset`'s --mesh-size 1.8
+    # --formulation displacement; the production defaults are another config)
     ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--mesh-size", "3",
-                           "--out", "results/data/heldout"],
+                           "--formulation", "displacement", "--out", "results/data/heldout"],
      "results/data/heldout holds a campaign made with --mesh-size 1.8 mm (this run: 3 mm)"),
-    ("workflow.campaign", ["--samples", "256", "--unit-size", "8", "--seed", "2", "--out", "results/data/heldout"],
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "8", "--seed", "2", "--mesh-size", "1.8",
+                           "--formulation", "displacement", "--out", "results/data/heldout"],
      "made with --unit-size 16 (this run: 8)"),
-    ("workflow.campaign", ["--samples", "128", "--unit-size", "16", "--seed", "2", "--out", "results/data/heldout"],
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--out", "results/data/heldout"],
+     "results/data/heldout holds a campaign made with --formulation displacement (this run: mixed); --divisions "
+     "tetrahedra (this run: 2)"),
+    ("workflow.campaign", ["--samples", "128", "--unit-size", "16", "--seed", "2", "--mesh-size", "1.8",
+                           "--formulation", "displacement", "--out", "results/data/heldout"],
      "results/data/heldout holds a campaign of --samples 256; --samples 128 would drop its other shards"),
     # another seed than the committed held-out set's: refused before the lock is taken
-    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "3", "--out", "results/data/heldout"],
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "3", "--mesh-size", "1.8",
+                           "--formulation", "displacement", "--out", "results/data/heldout"],
      "results/data/heldout holds a campaign of --seed 2, not --seed 3"),
     # workflow.dataset: a folder that is not a dataset, bad --mirror, merge of a non-dataset
     ("workflow.dataset", ["info", "/etc"], "/etc: no manifest.json (not a softjoint dataset)"),
@@ -176,11 +192,28 @@ CASES_WORKFLOW = [
     ("apps.report", ["--out", "/etc/passwd/x.md"], "cannot create /etc/passwd/x.md"),
     ("apps.report", ["--out", "{tmp}/x.txt"], "expected a .md file"),
     ("apps.report", ["--results", "/nonexistent", "--out", "{tmp}/x.md"], "--results /nonexistent: not a folder"),
+    # apps.material_fit: the test file's columns and numbers, the law, the strain range
+    ("apps.material_fit", ["--csv", "/nonexistent.csv"], "/nonexistent.csv"),
+    ("apps.material_fit", ["--csv", "README.md"], "no header row with columns 'Engineering Strain'"),
+    ("apps.material_fit", ["--csv", "results/joints/soft4/dragon_skin_30.csv", "--law", "ogden"], "invalid choice: 'ogden'"),
+    ("apps.material_fit", ["--csv", "results/joints/soft4/dragon_skin_30.csv", "--max-strain", "0.05"],
+     "1 samples with 0 < strain < 0.05: yeoh needs at least 4"),
+    ("apps.material_fit", ["--csv", "results/joints/soft4/dragon_skin_30.csv", "--nu", "nan"], "--nu: 'nan' is not a finite number"),
     ("workflow.bench_campaign", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     ("workflow.bench_campaign", ["--fresh", "nan", "--out", "{tmp}/x.json"], "--fresh: 'nan' is not an integer"),
     ("workflow.bench_campaign", ["--unit-size", "1", "--out", "{tmp}/x.json"], "--unit-size: 1 is outside [2, inf]"),
     ("workflow.profile_walk", ["--samples", "1"], "--samples: 1 is outside [2, inf]"),
     ("workflow.profile_walk", ["--mesh-size", "nan"], "--mesh-size: 'nan' is not a finite number"),
+    # the discretisation options of the tools that took them with the production switch to
+    # hexahedra: both kinds at once is one line before any solve or campaign
+    ("workflow.profile_walk", ["--mesh-size", "1.8", "--divisions", "2"], "--divisions (hexahedra) excludes --mesh-size"),
+    ("workflow.bench_campaign", ["--divisions", "2", "--mesh-size", "1.8", "--out", "{tmp}/x.json"],
+     "--divisions (hexahedra) excludes --mesh-size"),
+    ("workflow.bench_campaign", ["--formulation", "hybrid", "--out", "{tmp}/x.json"], "invalid choice: 'hybrid'"),
+    ("fem.self_contact", ["--hex-size", "3", "--out", "{tmp}/x.json"], "--hex-size grades hexahedra: give --divisions too"),
+    ("fem.bench_finger", ["--divisions", "2", "--wall-mesh-size", "0.6", "--out", "{tmp}/x.json"],
+     "--divisions (hexahedra) excludes"),
+    ("fem.render", ["--formulation", "hybrid", "--out", "{tmp}/x.png"], "invalid choice: 'hybrid'"),
     # --- workflow cases (end)
 ]
 CASES_SURROGATE = [
@@ -269,7 +302,11 @@ CASES_PREDICTOR = [
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
     # predictor.validate_finger (issue 14): an empty FEM folder, an unwritable output
     ("predictor.validate_finger", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
-     "no FEM cases at mesh size 1.8 mm in {tmp}/none"),
+     "no FEM cases on mesh 1.8 (displacement) in {tmp}/none"),
+    ("predictor.validate_finger", ["--mesh", "hex9", "--out", "{tmp}/x.json"], "--mesh: 'hex9': 9 is outside [1, 6]"),
+    ("predictor.validate_finger", ["--mesh", "1.8:nan", "--out", "{tmp}/x.json"], "--mesh: '1.8:nan'"),
+    ("predictor.validate_finger", ["--mesh", "1.8", "--mesh-size", "2", "--out", "{tmp}/x.json"],
+     "not allowed with argument --mesh"),
     ("predictor.validate_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
     # predictor.gesture --finger (issue 14): the finger file is read and checked while
     # parsing (tests/data/fingers/ holds the bad files), the pressures against its joints

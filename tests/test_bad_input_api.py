@@ -211,7 +211,8 @@ def test_fem_solve_progress_on_stderr_json_alone_on_stdout():
 
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
            "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
-    base = [sys.executable, "-m", "fem.solve", "--p", "0.1", "--m", "50", "--mesh-size", "4", "--json"]
+    base = [sys.executable, "-m", "fem.solve", "--p", "0.1", "--m", "50", "--mesh-size", "4", "--formulation",
+            "displacement", "--json"]
     loud, quiet = (subprocess.run(base + extra, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
                    for extra in ([], ["--quiet"]))
     for r in (loud, quiet):

@@ -29,7 +29,9 @@ PY = sys.executable
 ROOT = Path(__file__).resolve().parents[1]
 COARSE = 4.0
 ARGS = ["--samples", "4", "--seed", "11", "--unit-size", "2", "--mesh-size", str(COARSE),
-        "--fresh-check-every", "2", "--quiet", "--json"]
+        "--formulation", "displacement", "--fresh-check-every", "2", "--quiet", "--json"]
+#: the committed datasets' discretisation (fem.discretisation.PAPER; `make dataset` passes it)
+PAPER_MESH = ["--mesh-size", "1.8", "--formulation", "displacement"]
 ENV = {**os.environ, "OMP_NUM_THREADS": "1", "OMPI_ALLOW_RUN_AS_ROOT": "1",
        "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
 
@@ -65,7 +67,8 @@ def solver():
 
     from fem.geometry import JointGeometry
     from fem.solver import JointSolver
-    return JointSolver(JointGeometry(mesh_size=COARSE), MPI.COMM_SELF)
+    return JointSolver(JointGeometry(mesh_size=COARSE, divisions=0, hex_size=None), MPI.COMM_SELF,
+                       formulation="displacement")
 
 
 def test_walk_is_seeded_in_box_and_rank_free():
@@ -124,7 +127,9 @@ def _snapshot(root: Path) -> dict[str, bytes]:
 
 def test_refused_run_leaves_the_dataset_untouched(tmp_path):
     """A campaign refused by the compatibility check (another --seed, another config: here
-    the mesh, named with both values; or fewer --samples: a campaign never shrinks) exits 2 with one line and leaves an existing dataset folder byte for
+    the mesh, named with both values, or the production discretisation of the defaults
+    against the committed set's paper-fidelity one; or fewer --samples: a campaign never
+    shrinks) exits 2 with one line and leaves an existing dataset folder byte for
     byte as it was (the mesh, or the wall mesh alone): no .campaign.lock, no shards/ folder, no manifest rewrite; pointed at a
     folder that does not exist yet, a refused run (--units beyond the unit count) creates
     nothing either."""
@@ -133,13 +138,15 @@ def test_refused_run_leaves_the_dataset_untouched(tmp_path):
     shutil.copytree(held, partial)
     (partial / "shards" / "unit-00003.npz").unlink()      # an unfinished campaign to resume
     args = ["--unit-size", "16", "--quiet", "--out"]
-    for out, extra, needle in ((held, ["--seed", "3"], "--seed 2, not --seed 3"),
-                               (partial, ["--seed", "3"], "--seed 2, not --seed 3"),
-                               (partial, ["--seed", "2", "--mesh-size", "4"],
+    for out, extra, needle in ((held, ["--seed", "3", *PAPER_MESH], "--seed 2, not --seed 3"),
+                               (partial, ["--seed", "3", *PAPER_MESH], "--seed 2, not --seed 3"),
+                               (partial, ["--seed", "2", "--mesh-size", "4", "--formulation", "displacement"],
                                 "made with --mesh-size 1.8 mm (this run: 4 mm)"),
-                               (partial, ["--seed", "2", "--wall-mesh-size", "0.9"],
+                               (partial, ["--seed", "2", "--wall-mesh-size", "0.9", "--formulation", "displacement"],
                                 "made with --wall-mesh-size unset (this run: 0.9 mm)"),
-                               (partial, ["--seed", "2", "--samples", "128"],
+                               (partial, ["--seed", "2"], "made with --formulation displacement (this run: mixed); "
+                                "--divisions tetrahedra (this run: 2); --hex-size uniform (this run: 3 mm)"),
+                               (partial, ["--seed", "2", "--samples", "128", *PAPER_MESH],
                                 "holds a campaign of --samples 256; --samples 128 would drop")):
         extra = extra if "--samples" in extra else [*extra, "--samples", "256"]
         before = _snapshot(out)
@@ -259,3 +266,64 @@ def test_two_ranks_give_identical_samples(reference, tmp_path):
     code, summary = run_campaign(tmp_path / "mpi", mpirun=["mpirun", "--oversubscribe", "-n", "2"])
     assert code == 0 and summary["ranks"] == 2 and summary["complete"]
     assert_same_samples(tmp_path / "mpi", reference)
+
+
+#: The config of the production held-out campaign (`make dataset-new`: --samples 256 --seed 2
+#: --unit-size 16 --divisions 2 --hex-size 3 --formulation mixed), frozen from its manifest
+#: (results/data/heldout_hex2s3, written by the running campaign): the default campaign of
+#: the paper's joint file must keep producing it, or that campaign could not resume.
+HEX2S3_CONFIG = {
+    "formulation": "mixed", "fresh_check_every": 8,
+    "geometry": {"cap": 3.0, "divisions": 2, "height": 20.0, "hex_size": 3.0, "length": 45.45, "mesh_size": 1.8,
+                 "n_cells": 5, "spine": 2.4, "valley_height": 8.8, "valley_width": 2.5, "wall": 1.2,
+                 "wall_mesh_size": None, "width": 14.0},
+    "input_box": [0.3, 3.0, 3.0, 100.0], "material": {"E": 12.2, "cap_nu": 0.3, "cap_stiffness": 100.0, "nu": 0.49},
+    "solver": {"atol": 1e-08, "box_step": 0.25, "chord_steps": 3, "contact_penalty": 100.0, "degree": 2,
+               "first_step": None, "grow": 1.5, "krylov_max_it": 30, "krylov_rtol": 1e-09, "max_it": 12,
+               "max_step": 1.0, "min_step": 0.00390625, "mumps_blr": 1e-08, "quadrature_degree": 4,
+               "sensitivity_rtol": 1e-10, "stol": 1e-09},
+    "source": "fem-campaign", "unit_size": 16, "walk_step": 0.1, "walk_turn": 0.2}
+
+
+def _cli_config(tmp_path, *flags) -> dict:
+    """The manifest config workflow.campaign would record for these command-line flags."""
+    args = campaign.parse_args(["--samples", "256", "--seed", "2", "--out", str(tmp_path / "new"), *flags])
+    return campaign.campaign_config(args.geometry, args.unit_size, args.step, args.fresh_check_every,
+                                    args.formulation or args.joint.formulation, args.joint)
+
+
+def test_production_is_hex2s3_mixed_and_the_default_campaign_is_its_manifest(tmp_path):
+    """fem.discretisation.PRODUCTION is hex2:3 mixed with quadrature 4 (key
+    hex2s3_mixed_q4_k100), and it is every default: JointGeometry's mesh, JointSolver's
+    formulation and (config_for) quadrature, the paper joint file's [mesh], fem.bench_joint's
+    --mesh/--formulation. The campaign of the paper's joint without mesh options, and the
+    one `make dataset-new` spells out, both record HEX2S3_CONFIG key for key; the PAPER
+    options of `make dataset` record the committed sets' configs."""
+    import inspect
+
+    from contract.joint import load_joint
+    from fem.discretisation import FORMULATION, PAPER, PRODUCTION, discretisation
+    from fem.geometry import JointGeometry
+    from fem.solver import JointSolver, config_for
+
+    assert (PRODUCTION.mesh, PRODUCTION.formulation, PRODUCTION.quadrature, PRODUCTION.key) == \
+        ("hex2:3", "mixed", 4, "hex2s3_mixed_q4_k100")
+    assert (PRODUCTION.H, PRODUCTION.W, PRODUCTION.divisions, PRODUCTION.hex_size) == (None, None, 2, 3.0)
+    assert PRODUCTION.geometry() == JointGeometry() and FORMULATION == PRODUCTION.formulation
+    assert discretisation(PRODUCTION.mesh, formulation=PRODUCTION.formulation) == PRODUCTION   # bench_joint's defaults
+    defaults = {k: p.default for k, p in inspect.signature(JointSolver.__init__).parameters.items()}
+    assert defaults["geometry"] == JointGeometry() and defaults["formulation"] == "mixed"
+    assert config_for(JointGeometry()).quadrature_degree == PRODUCTION.quadrature
+    paper = load_joint()
+    assert JointGeometry(**paper.geometry_kwargs()) == JointGeometry() and paper.formulation == "mixed"
+    assert (PAPER.key, PAPER.mesh) == ("h1.8_wnone_displacement_q2_k100", "1.8")
+    assert _cli_config(tmp_path, "--unit-size", "16") == HEX2S3_CONFIG
+    assert _cli_config(tmp_path, "--unit-size", "16", "--divisions", "2", "--hex-size", "3", "--formulation",
+                       "mixed") == HEX2S3_CONFIG
+    assert campaign.campaign_config(JointGeometry(divisions=2, hex_size=3.0), 16, campaign.DEFAULT_STEP, 8,
+                                    "mixed") == HEX2S3_CONFIG
+    for name, flags in (("heldout", ["--unit-size", "16"]), ("train", ["--unit-size", "64"])):
+        committed = Manifest.load(ROOT / "results/data" / name).config
+        assert _cli_config(tmp_path, *flags, *PAPER_MESH) == committed, name
+        assert _cli_config(tmp_path, *flags) != committed
+    assert not (tmp_path / "new").exists()

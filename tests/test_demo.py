@@ -86,7 +86,7 @@ def test_rows_errors_and_times():
     assert "process wall" in joint["model"]
     assert g1["errors"]["tip_mm"] == pytest.approx(0.5) and g1["errors"]["tip_angle_deg"] == pytest.approx(1.0)
     assert g2["errors"]["tip_mm"] == pytest.approx(2.0) and g2["errors"]["tip_angle_deg"] == pytest.approx(-0.25)
-    assert g1["fem"] == g2["fem"] == "FEM (committed, production mesh)"
+    assert g1["fem"] == g2["fem"] == "FEM (committed, h=1.8)"
     assert (g1["fem_s"], g1["model_s"]) == (500.0, 0.04)
     assert grasp["fem"] == "n/a" and grasp["errors"] is None and grasp["fem_s"] is None
     assert grasp["grasp"] == {"normal_force_N": 0.227, "friction_use": 0.9, "state": "holds"}
@@ -164,3 +164,44 @@ def test_a_step_file_is_read_through_its_format(tmp_path):
         demo.run_step(step(), 1, 1, 0.0, dict(os.environ), log=io.StringIO())
     assert "\n" not in str(err.value)
     assert f"{out}: tip_angle_deg: missing (format fem-finger-case/1, fem.finger_cases)" in str(err.value)
+
+
+def test_demo_fem_runs_on_the_committed_discretisation_not_the_production_one():
+    """The committed surrogate and finger cases are on fem.discretisation.PAPER (1.8 mm P2
+    displacement): the demo's joint FEM is solved there, its live finger FEM on the coarse
+    mesh in the same formulation and validated in it, so no step runs the production
+    hexahedra (the tools' default); each committed case the demo compares with is on PAPER,
+    and a case on another discretisation is refused in one line."""
+    pytest.importorskip("dolfinx")
+    from fem.discretisation import PAPER
+
+    assert (demo.COMMITTED_MESH_SIZE, demo.COMMITTED_FORMULATION) == (PAPER.H, PAPER.formulation)
+    assert (PAPER.W, PAPER.divisions) == (None, 0)
+    steps = {s.key: s.args for s in demo.build_steps("out", 4.0)}
+    paper = ["--mesh-size", "1.8", "--formulation", "displacement"]
+    assert any(steps["joint_fem"][i:i + 4] == paper for i in range(len(steps["joint_fem"])))
+    for key in ("finger_fem", "validate"):
+        args = steps[key]
+        assert args[args.index("--mesh-size") + 1] == "4" and args[args.index("--formulation") + 1] == "displacement"
+    for name in ("gravity_-0.1_0.1", "gravity_0.1_-0.1"):
+        case, _ = demo.load_committed(name)
+        assert case["mesh"]["mesh_size"] == 1.8 and case.get("formulation", "displacement") == "displacement"
+
+
+def test_a_committed_case_on_another_discretisation_is_refused(monkeypatch, tmp_path):
+    """load_committed reads the case's own mesh and formulation: a mixed case at 1.8 mm, or
+    a hexahedral one, is not the committed data's discretisation (one line, make finger-fem)."""
+    committed = json.loads(Path(demo.ROOT, demo.COMMITTED_FINGER_FEM, f"{demo.FINGER_CASE}.json").read_text())
+    folder = tmp_path / "finger_fem"
+    folder.mkdir()
+    monkeypatch.setattr(demo, "ROOT", tmp_path)
+    monkeypatch.setattr(demo, "COMMITTED_FINGER_FEM", "finger_fem")
+    for change, found in (({"formulation": "mixed"}, "1.8, mixed"),
+                          ({"mesh": {**committed["mesh"], "mesh": "hex2:3", "divisions": 2}}, "hex2:3, displacement")):
+        (folder / "x.json").write_text(json.dumps({**committed, **change}))
+        with pytest.raises(demo.StepFailed) as err:
+            demo.load_committed("x")
+        assert "\n" not in str(err.value) and f"(it is on {found})" in str(err.value)
+        assert "make finger-fem" in str(err.value)
+    (folder / "x.json").write_text(json.dumps(committed))
+    assert demo.load_committed("x")[0] == committed

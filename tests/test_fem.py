@@ -27,13 +27,14 @@ from fem.solver import JointSolver, Load, SolverConfig  # noqa: E402
 from contract.spec import INPUT_BOX, OutOfBoxError, mirror  # noqa: E402
 
 pytestmark = pytest.mark.fem
-COARSE = JointGeometry(mesh_size=4.0)
+#: a coarse tetrahedral joint in P2 displacement (JointGeometry's default mesh is the production hexahedra)
+COARSE = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.fixture(scope="module")
 def joint():
-    return JointSolver(COARSE, MPI.COMM_SELF)
+    return JointSolver(COARSE, MPI.COMM_SELF, formulation="displacement")
 
 
 @pytest.mark.parametrize("alpha, u, w, theta", [(0.5, 0.01592, 0.16214, 0.2445),
@@ -93,7 +94,7 @@ def test_contact_keeps_valley_walls_apart(joint):
     0.3 mm on this mesh; with the penalty (100 MPa/mm) the overlap is the contact pressure
     over the penalty, < 0.02 mm, the walls touch (gap < 0.05 mm), and the contact
     stiffens the joint (smaller end rotation)."""
-    free = JointSolver(COARSE, MPI.COMM_SELF, config=SolverConfig(contact_penalty=0.0))
+    free = JointSolver(COARSE, MPI.COMM_SELF, config=SolverConfig(contact_penalty=0.0), formulation="displacement")
     gaps = ValleyContact(free.V, free.mesh_data.facet_tags, COARSE, 0.0).gaps
     r_free = free.solve(Load(M=100.0))
     r = joint.solve(Load(M=100.0))
@@ -172,7 +173,8 @@ def test_two_ranks_match_serial():
     the serial Jacobian to the sensitivity tolerance (so the distributed tangent, contact
     blocks included, is the serial one); the valley contact is active (its pairs straddle
     the two ranks' partitions)."""
-    args = ["--p", "0.1", "--f2", "2", "--m", "100", "--mesh-size", "4", "--json", "--jacobian"]
+    args = ["--p", "0.1", "--f2", "2", "--m", "100", "--mesh-size", "4", "--formulation", "displacement", "--json",
+            "--jacobian"]
     serial, parallel = _cli(args), _cli(args, ranks=2)
     assert serial.returncode == 0, serial.stderr
     assert parallel.returncode == 0, parallel.stderr
@@ -201,7 +203,7 @@ def test_wall_refinement_puts_two_elements_through_the_wall():
         edges = [np.linalg.norm(x[:, i] - x[:, j], axis=1) for i in range(4) for j in range(i)]
         return np.max(edges, axis=0)
 
-    coarse, refined = wall_edges(COARSE), wall_edges(JointGeometry(mesh_size=4.0, wall_mesh_size=0.6))
+    coarse, refined = wall_edges(COARSE), wall_edges(JointGeometry(mesh_size=4.0, wall_mesh_size=0.6, divisions=0, hex_size=None))
     assert np.median(coarse) > 2.0
     assert np.median(refined) <= 0.9 and np.percentile(refined, 95) <= 1.35
 

@@ -35,7 +35,9 @@ from fem.solver import JointSolver, Load  # noqa: E402
 
 pytestmark = pytest.mark.fem
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-GEO = JointGeometry()
+#: the paper joint on uniform hexahedra (JointGeometry's default mesh is the graded hex2:3)
+GEO = JointGeometry(hex_size=None)
+HEX2 = JointGeometry(divisions=2, hex_size=None)
 HEX1 = discretisation("hex1", formulation="mixed")
 FINE_TET = os.path.join(ROOT, "results/fem/joint_cases/h1.2_w0.6_mixed_q2_k100_0.15_1_-1_30.json")
 
@@ -52,8 +54,8 @@ def measures(mesh_data) -> dict:
 
 def test_hex_mesh_has_the_tet_meshs_volumes_and_tag_areas():
     """Every tag's volume or area: hex2 = the gmsh tetrahedra (4 mm) to 1e-6 relative."""
-    hexes = measures(create_mesh(JointGeometry(divisions=2), MPI.COMM_SELF))
-    tets = measures(create_mesh(JointGeometry(mesh_size=4.0), MPI.COMM_SELF))
+    hexes = measures(create_mesh(HEX2, MPI.COMM_SELF))
+    tets = measures(create_mesh(JointGeometry(mesh_size=4.0, divisions=0, hex_size=None), MPI.COMM_SELF))
     for name in TAGS:
         assert hexes[name] == pytest.approx(tets[name], rel=1e-6), name
     assert hexes["top_chamber"] > 0 and hexes["valley_faces"] > 0
@@ -63,7 +65,7 @@ def test_hex_meshes_are_mirrored_node_by_node_and_nested():
     """Every vertex (x, y, z) of hex2 has the vertex (x, -y, z) exactly; the top chamber's
     facets are the bottom one's mirror images; every vertex of hex1 is a vertex of hex2
     (nested refinement) and hex2 has 8 times hex1's cells."""
-    data = create_mesh(JointGeometry(divisions=2), MPI.COMM_SELF)
+    data = create_mesh(HEX2, MPI.COMM_SELF)
     x = data.mesh.geometry.x
     assert cKDTree(x).query(x * [1.0, -1.0, 1.0])[0].max() == 0.0
     ft = data.facet_tags
@@ -82,7 +84,8 @@ def test_graded_hex_mesh_lies_between_hex2_and_hex4():
     1e-9 relative; its elements are at most 1.5 mm long (the 3 mm caps: 1.5 mm; the
     chambers' 5.8 mm along z: 1.45 mm), through-wall ones 0.6 mm; 42,105 Q2 nodes."""
     graded = JointGeometry(divisions=2, hex_size=3.0)
-    assert graded.mesh == "hex2:3" and discretisation("hex2:3").key == "hex2s3_displacement_q4_k100"
+    assert graded.mesh == "hex2:3" and discretisation("hex2:3").key == "hex2s3_mixed_q4_k100"
+    assert discretisation("hex2:3", formulation="displacement").key == "hex2s3_displacement_q4_k100"
     (p2, _), (pg, cg), (p4, _) = hexahedra(GEO, 2), hexahedra(graded, 2), hexahedra(GEO, 4)
     assert cKDTree(pg).query(p2)[0].max() < 1e-12 and cKDTree(p4).query(pg)[0].max() < 1e-12
     assert cKDTree(pg).query(pg * [1.0, -1.0, 1.0])[0].max() == 0.0
@@ -90,11 +93,13 @@ def test_graded_hex_mesh_lies_between_hex2_and_hex4():
         steps = np.diff(np.unique(pg[:, axis]))
         assert steps.max() == pytest.approx(longest, abs=1e-9) and steps.min() == pytest.approx(0.6, abs=1e-9)
     assert q2_nodes(graded) == 42_105
-    meshes = {g: measures(create_mesh(g, MPI.COMM_SELF)) for g in (graded, JointGeometry(divisions=2))}
+    meshes = {g: measures(create_mesh(g, MPI.COMM_SELF)) for g in (graded, HEX2)}
     for name in TAGS:
-        assert meshes[graded][name] == pytest.approx(meshes[JointGeometry(divisions=2)][name], rel=1e-9), name
+        assert meshes[graded][name] == pytest.approx(meshes[HEX2][name], rel=1e-9), name
     with pytest.raises(ValueError, match="hexahedra"):
-        JointGeometry(hex_size=2.5)
+        JointGeometry(divisions=0, hex_size=2.5)
+    with pytest.raises(ValueError, match="hexahedra"):
+        JointGeometry(mesh_size=4.0, divisions=0)      # the default hex_size is the production mesh's
 
 
 def test_a_hexahedral_discretisation_needs_its_quadrature_and_no_sizes():

@@ -35,8 +35,9 @@ from fem.mesh_hex import QUADRATURE, hexahedra  # noqa: E402
 
 pytestmark = pytest.mark.fem
 PAPER = load_finger()
-HEX1 = FingerGeometry(PAPER, JointGeometry(divisions=1))
-TET = FingerGeometry(PAPER, JointGeometry(mesh_size=4.0))
+#: uniform hexahedra and coarse tetrahedra (JointGeometry's default mesh is the graded hex2:3)
+HEX1 = FingerGeometry(PAPER, JointGeometry(divisions=1, hex_size=None))
+TET = FingerGeometry(PAPER, JointGeometry(mesh_size=4.0, divisions=0, hex_size=None))
 FREE = (0.05, 0.05)        # MPa: both joints, no gravity
 #: FingerSolver(TET, formulation="mixed").solve(FingerLoad(FREE, False)): the coarse
 #: tetrahedral finger's answer (mm, deg), frozen
@@ -69,10 +70,10 @@ def test_hex_finger_is_mirrored_node_by_node_and_holds_the_joint_mesh():
     vertices within each joint's span are the joint's own hex2 mesh shifted to its
     proximal face (up to round-off of the shift), and the finger has the joints' cells plus
     the rigid parts' (their intervals cut into 2 ceil(l / 6 mm))."""
-    geometry = FingerGeometry(PAPER, JointGeometry(divisions=2))
+    geometry = FingerGeometry(PAPER, JointGeometry(divisions=2, hex_size=None))
     x, cells = hexahedra(geometry, 2)
     assert cKDTree(x).query(x * [1.0, -1.0, 1.0])[0].max() == 0.0
-    joint, joint_cells = hexahedra(JointGeometry(), 2)
+    joint, joint_cells = hexahedra(JointGeometry(hex_size=None), 2)
     for k in PAPER.joints:
         x0 = PAPER.rest_start(k)
         mine = x[(x[:, 0] > x0 - 1e-9) & (x[:, 0] < x0 + PAPER.parts[k].length + 1e-9)] - [x0, 0.0, 0.0]

@@ -89,7 +89,7 @@ def test_pressure_is_the_volumetric_stress_in_uniform_tension():
 
 @pytest.fixture(scope="module")
 def mixed_joint():
-    return JointSolver(JointGeometry(mesh_size=4.0), MPI.COMM_SELF, formulation="mixed")
+    return JointSolver(JointGeometry(mesh_size=4.0, divisions=0, hex_size=None), MPI.COMM_SELF, formulation="mixed")
 
 
 def test_mixed_joint_keeps_mirror_symmetry_and_contact(mixed_joint):

@@ -39,7 +39,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CASES = os.path.join(ROOT, "results/fem/joint_cases")
 HEX1 = discretisation("hex1", formulation="mixed")
 HEX2 = discretisation("hex2", formulation="mixed")
-TET = JointGeometry(mesh_size=4.0)
+TET = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)      # coarse tetrahedra
 T = 0.2                                        # rad: the test field's in-plane rotation
 LOAD = np.array([0.15, 1.0, -1.0, 30.0])
 #: an interior load with every valley open, and one that closes 23 pairs on hex2

@@ -25,7 +25,8 @@ from fem.solver import JointSolver, Load  # noqa: E402
 from contract.spec import JOINT_LENGTH  # noqa: E402
 
 pytestmark = pytest.mark.fem
-COARSE = JointGeometry(mesh_size=4.0)
+#: a coarse tetrahedral joint, solved in P2 displacement (the defaults are the production hex2:3 mixed)
+COARSE = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)
 W, TIP = 0.5, 65.0          # N, mm: the rigid part's weight and length
 ONE_JOINT = f"""
 format = "softjoint-finger/1"
@@ -43,7 +44,7 @@ weight = {W}
 
 @pytest.fixture(scope="module")
 def finger():
-    return FingerSolver(FingerGeometry(parse_finger(ONE_JOINT), COARSE, 6.0), MPI.COMM_SELF)
+    return FingerSolver(FingerGeometry(parse_finger(ONE_JOINT), COARSE, 6.0), MPI.COMM_SELF, formulation="displacement")
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +71,7 @@ def test_finger_of_one_joint_is_the_joint_under_the_weight_of_its_tip(bent):
     of the joint differ (the finger's is graded into its rigid part), which at h = 4 mm
     moves the anchors by up to ~0.1 mm and the cap by ~0.1 deg."""
     plus, _ = bent
-    joint = JointSolver(COARSE, MPI.COMM_SELF)
+    joint = JointSolver(COARSE, MPI.COMM_SELF, formulation="displacement")
     M = 0.0
     for _ in range(4):              # fixed point on the couple of the tip weight
         res = joint.solve(Load(0.15, W, 0.0, M))
@@ -118,3 +119,31 @@ def test_finger_sensitivities_match_finite_differences(finger):
         scale = np.abs(S[:, :, j]).max()
         assert scale > 1.0                             # the tip moves by mm per MPa or per g
         np.testing.assert_allclose(S[:, :, j], fd, atol=1e-3 * scale)
+
+
+def test_committed_finger_cases_are_recognised_by_their_finger_values():
+    """fem.finger_cases skips a case solved for the same finger, mesh and formulation. The
+    committed cases (1.8 mm, displacement) were written when the paper's finger file had
+    other comments, so another sha256: they are still its cases (by values), while a finger
+    of another tip weight, or another joint mesh, is not."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from contract.finger import load_finger
+    from contract.files import json_safe
+    from fem.finger import same_settings
+
+    case = json.loads((Path(__file__).resolve().parents[1] / "results/validation/finger_fem/"
+                       "gravity_0.2_0.2.json").read_text())
+    finger = load_finger()
+    assert case["settings"]["finger_sha256"] != finger.digest
+
+    def settings(f, joint=JointGeometry(mesh_size=1.8, divisions=0, hex_size=None)):
+        return json_safe({"finger_sha256": f.digest, "geometry": FingerGeometry(f, joint).as_dict()})
+
+    heavier = dataclasses.replace(finger, parts=finger.parts[:-1] + (
+        dataclasses.replace(finger.parts[-1], weight=finger.parts[-1].weight * 1.2),))
+    assert same_settings(case["settings"], settings(finger), finger)
+    assert not same_settings(case["settings"], settings(heavier), heavier)
+    assert not same_settings(case["settings"], settings(finger, COARSE), finger)

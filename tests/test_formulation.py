@@ -46,7 +46,7 @@ PY = sys.executable
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "OMP_NUM_THREADS": "1", "OMPI_ALLOW_RUN_AS_ROOT": "1",
        "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-COARSE = JointGeometry(mesh_size=4.0)
+COARSE = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)      # coarse tetrahedra
 CAMPAIGN = ["--samples", "2", "--seed", "5", "--unit-size", "2", "--mesh-size", "4",
             "--fresh-check-every", "0", "--quiet", "--json"]
 
@@ -75,7 +75,7 @@ def test_displacement_config_is_the_committed_one():
     "formulation": "mixed" and nothing else."""
     m = Manifest.load(ROOT / "results/data/heldout")
     cfg = m.config
-    args = (JointGeometry(**cfg["geometry"]), cfg["unit_size"], cfg["walk_step"],
+    args = (JointGeometry.from_record(cfg["geometry"]), cfg["unit_size"], cfg["walk_step"],
             cfg["fresh_check_every"])
     assert "formulation" not in cfg
     assert campaign.campaign_config(*args, formulation="displacement") == cfg

@@ -221,3 +221,39 @@ def test_multifidelity_verdict_compares_equal_cost_figures(tmp_path):
         (tmp_path / "surrogate/multifidelity.json").write_text(json.dumps(m))
         text = "\n".join(report_app.learning.multifidelity_lines(tmp_path))
         assert words in text and f"n = {best['samples']}" in text
+
+
+def test_each_figure_is_labelled_with_the_discretisation_that_made_it(tmp_path):
+    """A hexahedral production run beside the committed 1.8 mm artefacts: bench/fem.json of
+    hex2:3 mixed reads "Q2 nodes ... hex2:3 mixed"; a finger.json validating hex2:3 mixed
+    names it, its mesh-check row against 1.8 mm displacement names both and the command
+    that reproduces the other (--mesh-size 1.8 --formulation displacement, now that the
+    default is mixed); bench/finger.json of hex2:3 mixed names its mesh; a committed dataset
+    manifest names its own (1.8 mm displacement)."""
+    for folder in ("bench", "validation", "data/heldout"):
+        (tmp_path / folder).mkdir(parents=True)
+    bench = json.loads((RESULTS / "bench/fem.json").read_text())
+    bench = {k: v for k, v in bench.items() if not k.endswith("_1.8") and k != "mesh_size"} | {
+        "mesh": "hex2:3", "divisions": 2, "hex_size": 3.0, "formulation": "mixed"}
+    (tmp_path / "bench/fem.json").write_text(json.dumps(bench))
+    v = json.loads((RESULTS / "validation/finger.json").read_text())
+    base = v["mesh_check"][0]
+    v["discretisation"] = {"mesh": "hex2:3", "formulation": "mixed"}
+    v["mesh_check"] = [{k: x for k, x in base.items() if k not in ("production_mesh_size", "wall_mesh_size")}
+                       | {"production_mesh": "hex2:3", "production_formulation": "mixed", "mesh": "1.8",
+                          "mesh_size": 1.8, "formulation": "displacement"}]
+    (tmp_path / "validation/finger.json").write_text(json.dumps(v))
+    (tmp_path / "bench/finger.json").write_text(json.dumps(
+        {"cases": [{"case": "free_0.1_0.1", "wall_time_s": 500.0, "load_average_before": 0.1}],
+         "finger_fem_median_s": 500.0, "finger_fem_max_s": 500.0, "target_s": 600.0, "mesh": "hex2:3",
+         "formulation": "mixed"}))
+    shutil.copy(RESULTS / "data/heldout/manifest.json", tmp_path / "data/heldout/manifest.json")
+    text, _, checks = report_app.build(tmp_path)
+    assert f"| mesh | {bench['nodes']} Q2 nodes, {bench['dofs']} dofs, hex2:3 mixed |" in text
+    assert "joint mesh hex2:3 mixed, one rank) against the predictor" in text
+    assert (f"| discretisation: finger FEM, joint mesh hex2:3 mixed -> 1.8 mm displacement "
+            f"({base['production_nodes']:,} -> {base['nodes']:,} nodes), {base['case']} |") in text
+    assert "`python -m fem.finger_cases --mesh-size 1.8 --formulation displacement` |" in text
+    assert any("finger FEM per gesture, joint mesh hex2:3 mixed, one core (`make bench-finger`" in c.figure
+               for c in checks)
+    assert "| heldout | 1.8 mm displacement | 2 |" in text

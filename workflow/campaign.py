@@ -52,8 +52,12 @@ production one, fem.discretisation.FORMULATION) chooses the joint's elements
 it only when it is not "displacement", so that every manifest written before the mixed
 formulation existed reads as what it is (fem.discretisation.recorded_formulation);
 resuming with another formulation is refused like any other config change. Without
-``--mesh-size`` and ``--wall-mesh-size`` the mesh is the joint file's (the paper's: the
-production one, JointGeometry's default sizes).
+``--mesh-size``, ``--wall-mesh-size`` or ``--divisions`` the mesh is the joint file's (the
+paper's: the production hex2:3, JointGeometry's default mesh, in the mixed formulation).
+The committed datasets results/data/{train,heldout} are on the paper-fidelity 1.8 mm
+displacement (fem.discretisation.PAPER): ``make dataset`` resumes them with
+``--mesh-size 1.8 --formulation displacement``, and the production defaults are refused
+there (another config).
 
 Path check. Every ``--fresh-check-every``-th unit also re-solves its last sample from zero
 and records the largest anchor difference in the shard's meta (``fresh_checks``). If the
@@ -107,7 +111,7 @@ EXIT_INCOMPLETE = 3
 #: A harvested sample farther than this (mm) from the from-zero solve is another branch.
 FRESH_TOL_MM = 1e-5
 DEFAULT_UNIT_SIZE = 64
-#: Walk step (box-normalised). At the production mesh, with 2 ranks busy, a 16-sample unit
+#: Walk step (box-normalised). At the 1.8 mm P2 mesh, with 2 ranks busy, a 16-sample unit
 #: took a mean 13.4 s per harvested sample at 0.1 against 27.2 s at 0.2: the longer step
 #: leaves contact and rotation far enough from the predictor to need cut-backs. Coverage
 #: comes from the walk's persistence instead (WALK_TURN).

@@ -23,18 +23,24 @@ from workflow.shards import Manifest
 from workflow.store import recorded_joint
 
 
-def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
-    """Solve the y-mirror of ``n`` stored samples with the FEM (fresh from zero) and compare
-    with the mirrored stored anchors and Jacobian (docs/physics.md). The mesh is mirror
-    symmetric, so the relation holds to solver tolerance. Runs on one rank."""
-    cfg = manifest.config
+def recorded_solver(cfg: dict, comm=MPI.COMM_SELF) -> JointSolver:
+    """The joint solver a campaign manifest's ``config`` was made with: its joint, geometry
+    (JointGeometry.from_record: a geometry recorded without ``divisions`` is tetrahedra,
+    whatever JointGeometry's defaults are), solver settings and formulation."""
     joint = recorded_joint(cfg)
     # A manifest without a joint has the (E, nu) record of the paper's Material; with one,
     # the law is the joint's.
     material = joint.material if "joint" in cfg else Material(**cfg["material"])
-    solver = JointSolver(JointGeometry(**cfg["geometry"]), MPI.COMM_SELF, material,
-                         SolverConfig(**cfg["solver"]), formulation=recorded_formulation(cfg),
-                         anchors=joint.anchors, input_box=joint.input_box)
+    return JointSolver(JointGeometry.from_record(cfg["geometry"]), comm, material,
+                       SolverConfig(**cfg["solver"]), formulation=recorded_formulation(cfg),
+                       anchors=joint.anchors, input_box=joint.input_box)
+
+
+def mirror_check(arrays: dict, manifest: Manifest, n: int) -> dict:
+    """Solve the y-mirror of ``n`` stored samples with the FEM (fresh from zero) and compare
+    with the mirrored stored anchors and Jacobian (docs/physics.md). The mesh is mirror
+    symmetric, so the relation holds to solver tolerance. Runs on one rank."""
+    solver = recorded_solver(manifest.config)
     rng = np.random.default_rng([manifest.seed, 7])
     pick = np.sort(rng.choice(len(arrays["sample_id"]), size=min(n, len(arrays["sample_id"])),
                               replace=False))

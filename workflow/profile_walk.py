@@ -1,10 +1,13 @@
 """Where a campaign walk spends its time: per-sample Newton, LU and GMRES counts + cProfile.
 
-    python -m workflow.profile_walk [--seed 1] [--unit 39] [--samples 8] [--mesh-size H] [--json]
+    python -m workflow.profile_walk [--seed 1] [--unit 39] [--samples 8] [--json]
+        [--mesh-size H | --divisions N [--hex-size S]] [--formulation F]
 
 Data flow: the walk of campaign unit ``--unit`` (workflow.campaign.unit_walk, the
-campaign's default step), solved on one rank as the campaign does: its first sample from
-zero, then continuation; each sample followed by its sensitivities. For every sample after
+campaign's default step), solved on one rank as the campaign does, on the campaign's
+discretisation for the same options (the paper joint file's [mesh] by default: the
+production hex2:3 mixed; the committed datasets' units need ``--mesh-size 1.8
+--formulation displacement``): its first sample from zero, then continuation; each sample followed by its sensitivities. For every sample after
 the first it reports the wall time (s), the Newton iterations, and the LU factorisations
 and GMRES iterations of the solve and of its sensitivities; then the top functions of a
 cProfile over the continuation samples (by own time, s). Nothing is written.
@@ -17,7 +20,8 @@ import pstats
 import time
 
 from contract import cli
-from fem.options import add_mesh_size
+from contract.joint import load_joint
+from fem.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
 
 
 def parse_args(argv=None):
@@ -28,21 +32,28 @@ def parse_args(argv=None):
                     help="campaign unit whose walk is solved (default 39)")
     ap.add_argument("--samples", type=cli.number(2, None, integer=True), default=8,
                     help="walk samples, the first from zero (default 8)")
-    add_mesh_size(ap, None, "tetrahedron size (default: the FEM's production mesh)")
+    add_mesh_size(ap, None, "tetrahedron size", shown="the joint file's [mesh], the production one")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
+    add_formulation(ap, "the joint file's [mesh] formulation (the production one)")
     ap.add_argument("--top", type=cli.number(1, None, integer=True), default=12,
                     help="cProfile lines to report (default 12)")
-    return ap.parse_args(argv)
+    args = ap.parse_args(argv)
+    with ap.errors():
+        args.geometry = joint_geometry(args, load_joint())
+    return args
 
 
-def profile_walk(seed: int, unit: int, samples: int, mesh_size: float | None, top: int) -> dict:
-    """Solve the walk as the campaign does; return its figures (times s, counts)."""
+def profile_walk(seed: int, unit: int, samples: int, geometry, top: int, formulation: str | None = None) -> dict:
+    """Solve the walk as the campaign does, on the paper joint of ``geometry`` (a
+    fem.geometry.JointGeometry) and ``formulation`` (None: the joint file's); return its
+    figures (times s, counts)."""
     from mpi4py import MPI
 
-    from fem.geometry import JointGeometry
     from fem.solver import JointSolver, Load
     from workflow.campaign import DEFAULT_STEP, unit_walk
 
-    solver = JointSolver(JointGeometry(mesh_size=mesh_size or JointGeometry().mesh_size), MPI.COMM_SELF)
+    solver = JointSolver.for_joint(load_joint(), MPI.COMM_SELF, geometry, formulation=formulation)
     walk = unit_walk(seed, unit, samples, DEFAULT_STEP)
     first = solver.solve(Load.from_array(walk[0]))
     solver.sensitivities()
@@ -66,7 +77,7 @@ def profile_walk(seed: int, unit: int, samples: int, mesh_size: float | None, to
     hot = [{"function": f"{path}:{line}({name})", "calls": calls, "tottime_s": own, "cumtime_s": cum}
            for (path, line, name), (_, calls, own, cum, _) in
            sorted(stats.items(), key=lambda kv: -kv[1][2])[:top]]
-    return {"seed": seed, "unit": unit, "mesh": solver.mesh_info(),
+    return {"seed": seed, "unit": unit, "mesh": solver.mesh_info(), "formulation": solver.formulation,
             "from_zero": {"wall_s": first.wall_time, "converged": first.converged,
                           "newton_iterations": first.newton_iterations,
                           "factorisations": first.factorisations},
@@ -75,7 +86,7 @@ def profile_walk(seed: int, unit: int, samples: int, mesh_size: float | None, to
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    d = profile_walk(args.seed, args.unit, args.samples, args.mesh_size, args.top)
+    d = profile_walk(args.seed, args.unit, args.samples, args.geometry, args.top, args.formulation)
     if args.json:
         cli.print_json(d)
         return 0

@@ -13,11 +13,54 @@ from apps.report.common import (MESH_REFERENCE, NOT_JUDGED, PAPER, Check, Target
 FINGER_TITLE = "Whole-finger validation (issue 14)"
 
 
+
+#: (held-out comparison in results/fem, the committed surrogate on that walk in
+#: results/surrogate, the make target that writes both): the committed 1.8 mm walk
+#: against the same walk on a finer mesh and on the production discretisation.
+HELDOUT_COMPARISONS = (("heldout_mesh", "heldout_fine", "make dataset-fine"),
+                       ("heldout_production", "heldout_production", "make production-compare"))
+
+
+def _walk_row(c: dict, mesh, target: str) -> str:
+    """The error-budget row of one held-out comparison (workflow.dataset compare)."""
+    other = _words(mesh(c["other_mesh"]), c["other_mesh"].get("formulation", "displacement"))
+    return (f"| discretisation: one joint over the held-out walk, the committed set (mesh {mesh(c['ref_mesh'])}) -> "
+            f"mesh {other}, {c['samples']} of {c['ref_samples']} samples"
+            f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
+            f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
+            f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
+            f"| `{target}` |")
+
 def _variant_label(e: dict) -> str:
     """A finger.json variant in words, from its entry's own fields."""
     if e["method"] == "chain":
         return f"surrogate chain (tau = 0), {e['kinematics']} kinematics"
     return f"{e['kinematics']} kinematics, {e['joint_weight']} joint weights"
+
+def _words(mesh: str, formulation: str) -> str:
+    """A discretisation in the report's words: "1.8 mm displacement", "hex2:3 mixed"."""
+    return f"{mesh}{'' if mesh.startswith('hex') else ' mm'} {formulation}"
+
+
+def _options(mesh: str, formulation: str) -> str:
+    """The fem.finger_cases options of a mesh text ("H", "H:W", "hexN", "hexN:S") and formulation."""
+    a, _, b = mesh[3:].partition(":") if mesh.startswith("hex") else mesh.partition(":")
+    names = ("--divisions", "--hex-size") if mesh.startswith("hex") else ("--mesh-size", "--wall-mesh-size")
+    return " ".join([f"{names[0]} {a}"] + ([f"{names[1]} {b}"] if b else []) + [f"--formulation {formulation}"])
+
+
+def _recorded(mesh: dict, formulation: str) -> str:
+    """A recorded mesh (``mesh``, or a tetrahedral ``mesh_size``) in words, "" if it has neither."""
+    text = mesh.get("mesh") or (mesh_label(mesh["mesh_size"], None) if mesh.get("mesh_size") else None)
+    return _words(text, formulation) if text else ""
+
+
+def _validated(v: dict) -> str:
+    """The discretisation finger.json validates on, in words: its record, or (written before
+    it recorded one) its first case's mesh in displacement ("" if it records no mesh)."""
+    d = v.get("discretisation")
+    return _words(d["mesh"], d["formulation"]) if d else _recorded(v["fem"][0]["mesh"], "displacement")
+
 
 def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
     """The fingertip error budget: discretisation (the finger FEM on a finer mesh, and
@@ -25,14 +68,13 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
     out = ["", "Fingertip error budget (how far each stage can move the fingertip):", "",
            "| term | figure | source |", "|---|---|---|"]
     for m in v.get("mesh_check", []):
-        wall = m.get("wall_mesh_size")
-        other = m.get("mesh") or mesh_label(m["mesh_size"], wall)
-        option = (f"--divisions {other[3:]}" if other.startswith("hex") else
-                  f"--mesh-size {m['mesh_size']}" + (f" --wall-mesh-size {wall}" if wall else ""))
-        out.append(f"| discretisation: finger FEM, joint mesh {m.get('production_mesh', m['production_mesh_size'])} -> "
-                   f"{other}{'' if other.startswith('hex') else ' mm'} ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
+        other = m.get("mesh") or mesh_label(m["mesh_size"], m.get("wall_mesh_size"))
+        base = m.get("production_mesh") or mesh_label(m["production_mesh_size"], None)
+        formulation = m.get("formulation", "displacement")
+        out.append(f"| discretisation: finger FEM, joint mesh {_words(base, m.get('production_formulation', 'displacement'))}"
+                   f" -> {_words(other, formulation)} ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
                    f"{m['case']} | {m['tip_change_mm']:.2f} mm, {m['tip_angle_change_deg']:+.2f}° | "
-                   f"`python -m fem.finger_cases {option}` |")
+                   f"`python -m fem.finger_cases {_options(other, formulation)}` |")
     study = load(root, "fem/mesh_study.json")
     if study:
         label = {m["key"]: f"mesh {m['mesh']} {m['formulation']}" for m in study["meshes"]}
@@ -43,21 +85,19 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                            f"{MESH_REFERENCE[study['reference']]} | anchors {e['anchor_mm']:.3f} mm, tip {e['tip_mm']:.3f} mm, "
                            f"phi_end {e['phi_end_deg']:.2f}°, cap rotation {e['cap_rotation_deg']:.2f}° (worst load; the "
                            "corners load a joint far more than the finger's cases do) | `make mesh-study` |")
-    c, fine = load(root, "fem/heldout_mesh.json"), load(root, "surrogate/heldout_fine.json")
     mesh = lambda m: m.get("mesh") or mesh_label(m["mesh_size"], m["wall_mesh_size"])
-    if c:
-        out.append(f"| discretisation: one joint over the held-out walk, the committed set (mesh {mesh(c['ref_mesh'])}) -> "
-                   f"mesh {mesh(c['other_mesh'])}, {c['samples']} of {c['ref_samples']} samples"
-                   f"{' so far' if c['samples'] < c['ref_samples'] else ''} | tip {c['tip_mm']['mean']:.3f} mm "
-                   f"mean ({c['tip_mm']['p95']:.3f} p95, {c['tip_mm']['max']:.3f} max), phi_end {c['phi_end_deg']['mean']:.2f}° "
-                   f"mean, cap rotation {c['cap_rotation_deg']['mean']:.2f}° mean ({c['cap_rotation_deg']['p95']:.2f}° p95) "
-                   "| `make dataset-fine` (results/fem/heldout_mesh.json) |")
-    if c and fine:
-        out.append(f"| surrogate improved.pt (trained on mesh {mesh(c['ref_mesh'])}) against the {fine['n']} held-out samples "
-                   f"on mesh {mesh(c['other_mesh'])} | tip "
-                   f"{fine['tip_error_mm']:.3f} mm, cap rotation {fine['cap_rotation_error_deg']:.3f}° mean "
-                   f"({fine['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
-                   "| results/surrogate/heldout_fine.json (`make dataset-fine`) |")
+    comparisons = [(load(root, f"fem/{a}.json"), load(root, f"surrogate/{b}.json"), target)
+                   for a, b, target in HELDOUT_COMPARISONS]
+    for cmp, fem_eval, target in comparisons:
+        if cmp:
+            out.append(_walk_row(cmp, mesh, target))
+        if cmp and fem_eval:
+            out.append(f"| surrogate improved.pt (trained on mesh {mesh(cmp['ref_mesh'])}) against the {fem_eval['n']} "
+                       f"held-out samples on mesh {_words(mesh(cmp['other_mesh']), cmp['other_mesh'].get('formulation', 'displacement'))} | tip "
+                       f"{fem_eval['tip_error_mm']:.3f} mm, cap rotation {fem_eval['cap_rotation_error_deg']:.3f}° mean "
+                       f"({fem_eval['p95_cap_rotation_error_deg']:.3f}° p95): the surrogate's own error plus the mesh's "
+                       f"| `{target}` |")
+    c = comparisons[0][0]
     surrogate = load(root, "surrogate/metrics.json")
     held = (surrogate or {}).get("improved", {}).get("heldout", {})
     if held.get("cap_rotation_error_deg") is not None:
@@ -97,6 +137,12 @@ def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
                         f"{train['samples']:,}-sample train set on it would take at most about {hours:.0f} CPU hours "
                         f"({hours / 2:.0f} h on this 2-core machine, about {hours / 64:.1f} h on the 2 x 32 tasks of "
                         "`workflow/slurm/campaign.sbatch`; its units of 64 solve fewer samples from zero).")
+    prod = comparisons[1][0]
+    if prod and held.get("tip_error_mm"):
+        out[-1] += (f" On the production discretisation (mesh {mesh(prod['other_mesh'])}, its complete held-out walk) "
+                    f"the committed set's tip moves {prod['tip_mm']['mean'] / held['tip_error_mm']:.1f}x as far "
+                    f"({prod['tip_mm']['mean']:.3f} mm mean, {prod['tip_mm']['max']:.3f} max; "
+                    f"{prod['cpu_s_per_sample']['other']:.1f} CPU s per sample over its pieces, most beside other jobs).")
     return out
 
 
@@ -137,7 +183,11 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
     return out
 
 
-def _finger_fem_time(root: Path, validation_max: float, target_s: float) -> list[tuple]:
+def _joint_mesh(words: str) -> str:
+    return f", joint mesh {words}" if words else ""
+
+
+def _finger_fem_time(root: Path, validation_max: float, target_s: float, validated: str) -> list[tuple]:
     """The finger FEM's time per gesture: judged on `make bench-finger` (one rank, the
     cases it names, with the load average it recorded), the validation run's slowest case
     shown beside it (that run shares the machine with other jobs); judged on the
@@ -145,12 +195,13 @@ def _finger_fem_time(root: Path, validation_max: float, target_s: float) -> list
     b = load(root, "bench/finger.json")
     where = "(max over the validation's cases; timed while the machine ran other jobs)"
     if not b:
-        return [(f"finger FEM per gesture, production mesh, one core {where}", f"{validation_max:.0f} s",
+        return [(f"finger FEM per gesture{_joint_mesh(validated)}, one core {where}", f"{validation_max:.0f} s",
                  Target("<=", target_s, "s"), validation_max, PAPER["finger_fem"])]
     shown = (f"finger FEM per gesture in the validation run {where}", f"{validation_max:.0f} s")
     cases = ", ".join(c["case"] for c in b["cases"])
     peak = max(c["load_average_before"] for c in b["cases"])
-    return [(f"finger FEM per gesture, production mesh, one core (`make bench-finger`, max over {cases}; "
+    timed = _recorded(b, b.get("formulation", "displacement"))   # a bench without one ran displacement
+    return [(f"finger FEM per gesture{_joint_mesh(timed)}, one core (`make bench-finger`, max over {cases}; "
              f"load average up to {peak:.1f} at the start of a case)",
              f"{b['finger_fem_max_s']:.0f} s (median {b['finger_fem_median_s']:.0f} s)",
              Target("<=", b["target_s"], "s"), b["finger_fem_max_s"], PAPER["finger_fem"]),
@@ -182,7 +233,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
     name = f"{label.get(judged, judged)} (`{judged}`)"
     out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validate_finger`): the "
             f"finger FEM (`python -m fem.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
-            f"joint mesh {mesh['mesh_size']} mm, one rank) against the predictor on the same finger file and the "
+            f"joint mesh {_validated(v) or 'unrecorded'}, one rank) against the predictor on the same finger file and the "
             f"joint model {joint_model(root, v['joint'], 'make validate-finger')}; every predictor figure is a "
             f"single-query Newton solve (median of {v['repeats']}), timed in this validation run. Angle errors are "
             f"predictor minus FEM. The variant finger.json judges is **{name}**; the others are shown beside it"
@@ -218,7 +269,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
             (f"speed-up of {judged} over the finger FEM (min; both timed in finger.json)",
              f"{j['speedup_min']:,.0f}x", Target(">=", t["speedup"], "x"), j["speedup_min"],
              PAPER["predictor_speedup"]),
-            *_finger_fem_time(root, fem_max, t["fem_s"]),
+            *_finger_fem_time(root, fem_max, t["fem_s"], _validated(v)),
             (f"validation cases the FEM solved ({n_free} free, {len(solved) - n_free} with gravity)",
              f"{len(solved)} of {len(fem)} run", Target(">=", t["fem_cases"], "cases"), len(solved), "")]
     out += ["", "| figure | measured | paper | target | met |", "|---|---|---|---|---|"]

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from contract.joint import mesh_text
 from apps.report.common import (MESH_REFERENCE, NOT_JUDGED, PAPER, Check, Target, cells, figure, judge, load,
                                 missing, num)
 from workflow.artefacts import CAMPAIGN_TARGETS
@@ -22,13 +23,28 @@ CAMPAIGN_TITLE = "FEM dataset campaign (issue 3)"
 FEM_TARGETS = (Target("<=", 120, "s"), Target("<=", 15, "s"))
 
 
+def _mesh_words(m: dict) -> str:
+    """A recorded mesh (mesh_info or a geometry record: ``mesh``, or its sizes or divisions)
+    in words: "1.8 mm", "1.697:0.849 mm", "hex2:3"."""
+    text = m.get("mesh") or mesh_text(m.get("mesh_size"), m.get("wall_mesh_size"), m.get("divisions", 0),
+                                     m.get("hex_size"))
+    return text if text.startswith("hex") else f"{text} mm"
+
+
+def _config_words(config: dict) -> str:
+    """A campaign manifest's discretisation in words: its geometry's mesh and its
+    formulation (absent: displacement, fem.discretisation.recorded_formulation)."""
+    return f"{_mesh_words(config['geometry'])} {config.get('formulation', 'displacement')}"
+
+
 def fem_section(root: Path) -> tuple[list[str], list[Check]]:
     title = FEM_TITLE
     out, checks = [f"## {title}", ""], []
     out += ["### The joint (`make joint-render`)", ""]
     out += figure(root, "fem/joint.png", "joint render",
-                   "`make joint-render` (`python -m fem.render --out results/fem/joint.png`, the production mesh, "
-                   "its default load case, written in the picture): left the undeformed half-model cut open at "
+                   "`make joint-render` (`python -m fem.render --mesh-size 1.8 --formulation displacement --out "
+                   "results/fem/joint.png`: the committed data's paper-fidelity 1.8 mm P2 displacement mesh, its "
+                   "default load case, written in the picture): left the undeformed half-model cut open at "
                    "z = 0; right the deformed joint coloured by |u| (mm), red dots the anchor points.",
                    "make joint-render")
     val = load(root, "fem/validation.json")
@@ -89,8 +105,8 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
         checks += [mesh, zero, cont]
         paper_s = f"~{b['paper_seconds_per_sample']:g} s"
         out += ["| figure | ours | paper (ANSYS) | target | met |", "|---|---|---|---|---|",
-                f"| mesh | {b['nodes']} P2 nodes, {b['dofs']} dofs, {b.get('mesh', b['mesh_size'])} mm, "
-                f"{b.get('formulation', 'displacement')} | "
+                f"| mesh | {b['nodes']} {'Q2' if b.get('divisions') else 'P2'} nodes, {b['dofs']} dofs, "
+                f"{_mesh_words(b)} {b.get('formulation', 'displacement')} | "
                 f"{b['paper_nodes']:,} nodes, {PAPER['fem_mesh_mm']} mm |" + cells(mesh),
                 f"| solve from zero (median of {len(b['solve_from_zero_cases'])}) | "
                 f"{b['solve_from_zero_s']:.1f} s, {b['newton_iterations']:.0f} Newton iterations | {paper_s} |"
@@ -118,7 +134,7 @@ def _mesh_causes(mc: dict | None) -> list[str]:
         return out + missing("the causes of the mesh error", "make mesh-causes")
     base = mc["base"]
     out += [f"results/fem/mesh_causes.json (`python -m fem.mesh_causes`{'' if mc['complete'] else ', not complete yet'}):"
-            f" each factor changed alone from the production discretisation ({base['H']:g} mm, "
+            f" each factor changed alone from the paper-fidelity discretisation of the committed data ({base['H']:g} mm, "
             f"{base['formulation']} P2), at the mesh study's four corners and four interior loads; effect = the "
             "largest anchor change in % of the largest anchor displacement, worst over the loads solved; "
             f"reference: {mc['reference']}; solve s: one core, from zero, measured beside other jobs. "
@@ -203,8 +219,9 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     shown = (f"{ms['production_mesh']} {prod['formulation']}" if prod else
              f"{ms['production']} (not solved at every load yet)")
     paper = next((f"{m['mesh']} {m['formulation']}" for m in ms["meshes"] if m["key"] == ms["paper"]), ms["paper"])
-    out += ["", f"Production discretisation (the study's `--production`: what the datasets are to be generated on; "
-            f"the committed ones are on the paper-fidelity {paper} until then): "
+    out += ["", f"Production discretisation (the study's `--production`, fem.discretisation.PRODUCTION: what new "
+            f"data is generated on; the committed datasets, surrogate and finger cases are on the paper-fidelity "
+            f"{paper} until `make dataset-new` and what follows regenerate them): "
             f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
             f"{PAPER['mesh_change_percent']} %) and the paper's resolution. The others are shown, not judged.", ""]
     return out
@@ -218,19 +235,22 @@ def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
         m = load(root, f"data/{name}/manifest.json")
         if m:
             done = m["samples"] + m["failures"]
-            rows.append(f"| {name} | {m['seed']} | {m['samples']} of {m['samples_requested']} | "
+            rows.append(f"| {name} | {_config_words(m['config'])} | {m['seed']} | {m['samples']} of {m['samples_requested']} | "
                         f"{m['units_done']} of {m['units_total']} | {m['failures']} "
                         f"({100 * m['failures'] / max(done, 1):.2f} %) | {m['cpu_hours']:.2f} | "
                         f"{'yes' if m['complete'] else 'no (resumes)'} |")
     if rows:
         out += ["From the committed manifests (`make dataset`; `python -m workflow.dataset info DIR`).",
-                "", "| set | seed | converged samples | units | failures | CPU hours | complete |",
-                "|---|---|---|---|---|---|---|", *rows, ""]
+                "", "| set | discretisation | seed | converged samples | units | failures | CPU hours | complete |",
+                "|---|---|---|---|---|---|---|---|", *rows, ""]
     else:
         out += missing("FEM datasets", "make dataset")
     b = load(root, "bench/campaign.json")
     out += ["### Campaign throughput (`make bench-campaign`)", ""]
     if b:
+        setup = b.get("setup", {})
+        out += [f"Two campaigns of the same units on {_mesh_words(setup.get('mesh', {}))} "
+                f"{setup.get('formulation', 'displacement')}.", ""]
         rate, eff = (judge(title, f, [(t, b[t.key])]) for f, t in
                      zip(("campaign samples per hour, 2 ranks", "campaign parallel efficiency"),
                          CAMPAIGN_TARGETS))

@@ -1,0 +1,72 @@
+"""The report's section on the finger FEM over the pressure box (issue 36 §1): the gravity
+grid of results/fem/finger_grid.json (fem.finger_grid) drawn as a table, one cell per
+pressure pair with its solve time or its failure, and the targets (every pair converged,
+<= 10 min per gesture on one core)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from apps.report.common import Check, Target, cells, judge, load
+
+FINGER_GRID_TITLE = "Finger FEM over the pressure box (issue 36)"
+GESTURE_TARGET_S = 600.0     # issue 36: <= 10 min per gesture on one core
+
+
+def grid_table(cases: list[dict]) -> list[str]:
+    """Markdown table: columns P1, rows P2 (largest on top), each cell the solve time (s) of
+    a converged pair, "**failed**" for one that did not converge, "pending" if unsolved."""
+    p1s = sorted({c["p1"] for c in cases})
+    p2s = sorted({c["p2"] for c in cases}, reverse=True)
+    by = {(c["p1"], c["p2"]): c for c in cases}
+
+    def cell(p1, p2):
+        c = by.get((p1, p2))
+        if c is None:
+            return "pending"
+        return f"{c['wall_s']:.0f} s" if c["converged"] else "**failed**"
+
+    out = ["| P2 \\ P1 (MPa) | " + " | ".join(f"{p:g}" for p in p1s) + " |",
+           "|---" * (len(p1s) + 1) + "|"]
+    out += [f"| **{p2:g}** | " + " | ".join(cell(p1, p2) for p1 in p1s) + " |" for p2 in p2s]
+    return out
+
+
+def _checks(grid: dict) -> list[Check]:
+    """Every pair converged, and the slowest solve within the gesture target (judged only
+    on a complete grid)."""
+    if not grid["complete"]:
+        return []
+    title = FINGER_GRID_TITLE
+    return [judge(title, "finger FEM grid: pairs converged", [(Target(">=", grid["pairs"], "pairs"),
+                                                                grid["converged"])]),
+            judge(title, "finger FEM grid: slowest gesture", [(Target("<=", GESTURE_TARGET_S, "s"),
+                                                               grid["max_wall_s"])])]
+
+
+def finger_grid_section(root: Path) -> tuple[list[str], list[Check]]:
+    title = FINGER_GRID_TITLE
+    out = [f"## {title}", ""]
+    grid = load(root, "fem/finger_grid.json")
+    if not grid:
+        return out + ["_Pending: `make finger-grid` has not run (the finger FEM with gravity at every pressure "
+                      "pair of a 7 x 7 grid over the box)._", ""], []
+    mesh, s = grid["mesh"], grid["settings"]
+    n = s["points"]
+    failed = [c for c in grid["cases"] if not c["converged"]]
+    out += [f"`make finger-grid` (results/fem/finger_grid.json, `python -m fem.finger_grid`): the whole-finger FEM "
+            f"with gravity at every pressure pair of a {n} x {n} grid over the joints' box, each solved from the "
+            f"unloaded state on one rank ({mesh['nodes']:,} P2 nodes, joint mesh {mesh.get('mesh', 'unrecorded')}, "
+            f"{s['formulation']} formulation). {grid['converged']} of {grid['solved']} solved pairs converged"
+            + ("" if grid["complete"] else f" ({grid['pairs'] - grid['solved']} of {grid['pairs']} still to solve)")
+            + "; each cell is the pair's wall time (timed while the machine ran other jobs).", ""]
+    out += grid_table(grid["cases"]) + [""]
+    if failed:
+        out += ["Failed pairs: " + "; ".join(f"({c['p1']:g}, {c['p2']:g}) MPa: {c['reason'] or 'no reason'}"
+                                             for c in failed) + ".", ""]
+    checks = _checks(grid)
+    if checks:
+        out += ["| figure | value | target | met |", "|---|---|---|---|",
+                f"| pairs converged | {grid['converged']} of {grid['pairs']} |" + cells(checks[0]),
+                f"| slowest gesture (one rank) | {grid['max_wall_s']:.0f} s |" + cells(checks[1]), ""]
+    return out, checks

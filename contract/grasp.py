@@ -1,0 +1,191 @@
+"""The grasp contract: the rigid objects and the contact law that the predictor and the
+finger FEM share (docs/gripper.md §7-9, docs/fem-grasps.md).
+
+Plain numpy (never torch or dolfinx), so both layers read the law from one owner.
+
+Objects (``parse_object``, the spec ``kind[:key=value,...]`` of ``--object``; lengths mm,
+``deg`` degrees): a circle (r), an ellipse (semi-axes a, b) or a rectangle (full w, h,
+corner radius rc) centred at (x, y) in the gripper's global plane (X horizontal, Y up,
+base on Y = 0), turned by deg. The model mirrors the right finger, so an object is centred
+on X = 0 and mirror-symmetric about it (``object_error``).
+
+Contact law, per length of the finger's planar outline (the predictor) or per area of the
+finger's surface (the FEM, whose finger is ``width`` deep: k_area = k_c / width):
+
+    N = k_c · s(max(0, -d)) along +n,    s(q) = q²/(2 delta) (q < delta), q - delta/2
+    lambda = (W/2 + Σ N n_y) / Σ N t_y,  friction -clip(lambda, -mu, mu) N t
+
+with d, n the object's signed distance (negative inside) and outward normal, t the
+object's tangent turned upwards, W the object's weight (each of the two mirror fingers
+lifts W/2); the grasp slips when |lambda| > mu or nothing touches. friction_use = |lambda|/mu.
+
+Where the fingers meet: the two mirror fingers touch at X = 0, and each pushes the other
+along X only (frictionless by symmetry). The right finger's faces towards the plane (its
+inner and end faces) carry the same ramp against it, with its own stiffness:
+
+    N = k_p · s(max(0, -X))  along +X      (per mm of outline; the FEM: per mm², k_p / width)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: k_c: penalty stiffness, N per mm of penetration per mm of finger outline (N/mm²).
+CONTACT_STIFFNESS = 2.0
+#: k_p: penalty stiffness of the plane X = 0 where the fingers meet (N per mm of overlap per
+#: mm of finger outline, N/mm²): 100 times k_c, so that where the fingers meet at a corner of
+#: the outline (a force ~ k_p q²) the overlap stays within 0.1 mm (docs/gripper.md §7).
+PLANE_STIFFNESS = 200.0
+#: delta: width (mm) of the penalty's C1 ramp s(q).
+CONTACT_SMOOTHING = 0.05
+#: mu: Coulomb friction coefficient of the finger on the object.
+FRICTION = 0.3
+#: W: the object's weight (N).
+OBJECT_WEIGHT = 0.2
+#: A rectangle's default corner radius (mm): its signed distance is C1 to that depth.
+RECTANGLE_CORNER = 1.0
+#: Default approach gesture of a grasp (MPa, joint 1 then the others at 0): the fingers
+#: open there before the object is brought in.
+APPROACH_P1 = -0.15
+
+SIZE_RANGE = (0.1, 500.0)      # mm, half sizes
+Y_RANGE = (-1000.0, 1000.0)    # mm, the centre's height
+
+_DEFAULTS = {
+    "circle": dict(a=30.0, b=30.0, y=-195.0),
+    "ellipse": dict(a=35.0, b=25.0, y=-195.0),
+    "rectangle": dict(a=30.0, b=25.0, y=-195.0),
+}
+_KEYS = {
+    "circle": {"r": ("a", "b"), "x": ("x",), "y": ("y",), "deg": ("angle",)},
+    "ellipse": {"a": ("a",), "b": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",)},
+    "rectangle": {"w": ("a",), "h": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",), "rc": ("corner",)},
+}
+
+
+def approach_for(n_joints: int) -> tuple[float, ...]:
+    """The default approach gesture (MPa) of an n-joint finger: joint 1 at APPROACH_P1."""
+    return (APPROACH_P1,) + (0.0,) * (n_joints - 1)
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """A rigid object in the global plane: kind circle | ellipse | rectangle; a, b the
+    radius (circle), semi-axes (ellipse) or half width and half height (rectangle), mm;
+    centre (x, y) mm; angle rad (counter-clockwise); corner: a rectangle's corner radius
+    (mm). Refused with a one-line ValueError: ``object_error``."""
+
+    kind: str = "circle"
+    a: float = 30.0
+    b: float = 30.0
+    x: float = 0.0
+    y: float = -195.0
+    angle: float = 0.0
+    corner: float = RECTANGLE_CORNER
+
+    def __post_init__(self):
+        why = object_error(self)
+        if why:
+            raise ValueError(why)
+
+    def local(self, points: np.ndarray) -> np.ndarray:
+        """Global points (..., 2) mm in the object's frame (centre, axes)."""
+        q = np.asarray(points, dtype=float) - (self.x, self.y)
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return q @ np.array([[c, -s], [s, c]])
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """d (...) mm of global points (..., 2), negative inside: exact for the circle and
+        the rounded rectangle, first order (g/|grad g|) for the ellipse."""
+        q = self.local(points)
+        if self.kind == "circle":
+            return np.linalg.norm(q, axis=-1) - self.a
+        if self.kind == "ellipse":
+            ab2 = np.array([self.a ** 2, self.b ** 2])
+            return ((q * q / ab2).sum(-1) - 1.0) / np.linalg.norm(2.0 * q / ab2, axis=-1).clip(1e-12)
+        e = np.abs(q) - (self.a, self.b) + self.corner
+        return np.linalg.norm(e.clip(0.0), axis=-1) + e.max(-1).clip(max=0.0) - self.corner
+
+
+def object_error(ob: ObjectSpec) -> str | None:
+    """Why the mirrored model cannot represent ``ob`` (one line), or None: an unknown kind,
+    a value that is not finite, a half size outside SIZE_RANGE, a corner radius beyond half
+    the shorter side, a centre off X = 0 or beyond Y_RANGE, a turn that breaks the mirror
+    symmetry (an ellipse or rectangle by other than a multiple of 90 degrees)."""
+    if ob.kind not in _KEYS:
+        return f"unknown object kind {ob.kind!r} (use circle, ellipse or rectangle)"
+    for name, v in dict(size=ob.a, size_b=ob.b, x=ob.x, y=ob.y, angle=ob.angle, corner=ob.corner).items():
+        if not math.isfinite(v):
+            return f"object {name} = {v}: not a finite number"
+    lo, hi = SIZE_RANGE
+    for v in (ob.a, ob.b):
+        if not lo <= v <= hi:
+            return (f"object size {2 * v:g} mm ({ob.kind} half size {v:g} mm) is outside the model's "
+                    f"[{lo:g}, {hi:g}] mm half-size range")
+    if ob.kind == "rectangle" and not 0.0 <= ob.corner <= min(ob.a, ob.b):
+        return (f"rectangle corner radius rc = {ob.corner:g} mm is outside [0, {min(ob.a, ob.b):g}] mm "
+                "(0 to half the shorter side)")
+    if ob.x != 0.0:
+        return (f"object centre x = {ob.x:g} mm: the model mirrors the right finger, so it represents objects "
+                "on the gripper's axis only (x = 0)")
+    if not Y_RANGE[0] <= ob.y <= Y_RANGE[1]:
+        return f"object centre y = {ob.y:g} mm is outside [{Y_RANGE[0]:g}, {Y_RANGE[1]:g}] mm"
+    if ob.kind != "circle" and abs(math.sin(2.0 * ob.angle)) > 1e-12:
+        return (f"object turned by {math.degrees(ob.angle):g} deg: the model mirrors the right finger, so an "
+                f"{ob.kind} must stay symmetric about X = 0 (deg a multiple of 90)")
+    return None
+
+
+def _field(spec: str, kind: str, item: str, seen: set) -> tuple[str, float]:
+    """(key, value in model units) of one ``key=value`` item of an object spec."""
+    key, eq, text = (part.strip() for part in item.partition("="))
+    if not eq or key not in _KEYS[kind]:
+        raise ValueError(f"bad object field {item!r} in {spec!r}: {kind} takes {', '.join(_KEYS[kind])}")
+    if key in seen:
+        raise ValueError(f"object key {key!r} given twice in {spec!r}: give each key once")
+    seen.add(key)
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise ValueError(f"{key}={text} in object {spec!r} is not a finite number")
+    if key == "rc" and value < 0:
+        raise ValueError(f"rc={text} in object {spec!r}: a corner radius is >= 0 (mm)")
+    if _KEYS[kind][key][0] in ("a", "b") and value <= 0:
+        raise ValueError(f"{key}={text} in object {spec!r}: sizes must be positive (mm)")
+    if key == "deg":
+        return key, math.radians(value)
+    return key, 0.5 * value if key in ("w", "h") else value
+
+
+def parse_object(spec: str) -> ObjectSpec:
+    """Parse ``kind[:key=value,...]`` (module docstring), e.g. ``circle:r=30,y=-230``,
+    ``rectangle:w=60,h=50,y=-245,rc=1``; ValueError with a one-line reason naming the
+    offending item (unknown kind or key, a key twice, not a finite number, a size <= 0,
+    an object the model cannot represent)."""
+    kind, _, rest = spec.strip().partition(":")
+    kind = kind.strip().lower()
+    if kind not in _KEYS:
+        raise ValueError(f"unknown object {kind!r} in {spec!r}: use circle, ellipse or rectangle")
+    fields, seen = dict(kind=kind, **_DEFAULTS[kind]), set()
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        key, value = _field(spec, kind, item, seen)
+        for name in _KEYS[kind][key]:
+            fields[name] = value
+    try:
+        return ObjectSpec(**fields)
+    except ValueError as exc:
+        raise ValueError(f"object {spec!r}: {exc}") from None
+
+
+def friction_ratio(weight: float, normal_y: float, normal_t: float) -> float:
+    """lambda = (W/2 + Σ N n_y) / Σ N t_y (module docstring) from W (N) and the sums
+    Σ N n_y, Σ N t_y (N) over one finger; ±1e3 (the sign of the numerator) when nothing
+    carries tangentially (Σ N t_y <= 1e-9 N), as the predictor's."""
+    num = 0.5 * weight + normal_y
+    if normal_t > 1e-9:
+        return num / normal_t
+    return math.copysign(1e3, num)
