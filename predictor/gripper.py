@@ -67,6 +67,7 @@ from dataclasses import dataclass, field, fields
 import torch
 
 from contract.finger import DEFAULT_FINGER, FingerSpec, load_finger
+from contract.grasp import OBJECT_WEIGHT
 from contract.spec import PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
@@ -362,7 +363,7 @@ class GripperParams:
     """
 
     finger: FingerSpec = field(default_factory=default_finger)
-    object_weight: float = 0.2
+    object_weight: float = OBJECT_WEIGHT
     kinematics: str = DEFAULT_KINEMATICS
     joint_weight: str = DEFAULT_JOINT_WEIGHT
     surface: str = DEFAULT_SURFACE

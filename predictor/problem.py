@@ -5,7 +5,7 @@ its flag (``Check.arg``: "--mu: 'nan' is not a finite number (allowed (0, 5])") 
 the API (``Check.value``: "mu: ..."), so a value refused by one is refused by the other
 with the same reason. ``load_problem`` builds the GripperProblem of predictor.gesture's
 defaults (joint from predictor.defaults, object from a spec, approach gesture APPROACH)
-and refuses an object the model cannot represent (statics.object_error) or that cuts
+and refuses an object the model cannot represent (contract.grasp.object_error) or that cuts
 through the fingers where it is brought in (``placement_error``): the gripper settles
 at the approach gesture without the object, so an object overlapping that gesture
 would start the grasp inside the fingers.
@@ -92,7 +92,7 @@ def box_arg(text: str) -> tuple[float, float, float, float]:
 
 
 def object_arg(text: str) -> str:
-    """--object: the spec, checked while parsing (statics.parse_object), so a bad one is
+    """--object: the spec, checked while parsing (contract.grasp.parse_object), so a bad one is
     refused before any model is loaded."""
     try:
         parse_object(text)

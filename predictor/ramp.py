@@ -19,6 +19,7 @@ import dataclasses
 
 import torch
 
+from contract.grasp import APPROACH_P1
 from predictor.graphs import graph_cache, residual_fn, traced
 from predictor.gripper import outline_vertices
 from predictor.jacobians import jacobian_fn
@@ -29,7 +30,7 @@ from predictor.statics import GripperProblem, contact_loads, meets, plane_overla
 
 
 # Default grasp approach gesture (MPa): open joint 1, bring the object in (statics.Obstacle).
-APPROACH = (-0.15, 0.0)
+APPROACH = (APPROACH_P1, 0.0)
 
 
 def approach_for(n_joints: int) -> tuple[float, ...]:

@@ -46,7 +46,7 @@ Contact (object fixed in the plane, signed distance d < 0 inside, outward normal
   the object's vertical balance gives λ = (W/2 + Σ N_k n_ky) / Σ N_k t_ky. The finger
   feels N_k n_k - λ_c N_k t_k with λ_c = clip(λ, -mu, mu) (the cone |f| <= mu·N always
   holds); ``slip`` is set when |λ| > mu or nothing touches the object. The split W/2
-  assumes the object is symmetric about X = 0 (other objects are refused: ``object_error``);
+  assumes the object is symmetric about X = 0 (other objects are refused: grasp.object_error);
 - the two mirror fingers meet at X = 0: the same penalty, frictionless, pushes the
   outline's inner and end edges back along +X where they cross it (``plane_contact``,
   stiffness ContactParams.plane_stiffness; 0 lets the fingers cross, as in the paper).
@@ -68,6 +68,8 @@ from dataclasses import dataclass
 
 import torch
 
+from contract import grasp
+from contract.grasp import ObjectSpec
 from contract.spec import INPUT_BOX
 from predictor.gripper import (EDGE_GAUSS, PLANE_GAUSS, FingerPose, GripperParams, check_pressures, edge_ends,
                                edge_points, finger_pose, gauss_rule, outline_vertices, rot)
@@ -77,12 +79,6 @@ MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
 PENALTY_WEIGHT = 10.0  # weight of the out-of-box residuals relative to the equilibrium ones
 
 
-#: A rectangle's corner radius (mm): the rounded rectangle is the set within ``corner`` of
-#: the rectangle shrunk by it. A sharp corner has no normal: inside it the nearest face, and
-#: with it the contact force's direction, jumps by 90 degrees across the diagonal, which
-#: stalled the reference ramp where a corner pressed on the finger (issue 36 §4). Rounded,
-#: the signed distance is C1 to a depth of ``corner``, the solver's max_penetration.
-RECTANGLE_CORNER = 1.0
 _EMPTY = 1e9   # an empty interval's start (its end is -_EMPTY): ignored by min/max unions
 
 
@@ -114,12 +110,13 @@ def clip_interval(lo: torch.Tensor, hi: torch.Tensor) -> tuple[torch.Tensor, tor
 
 
 @dataclass(frozen=True)
-class Obstacle:
-    """A rigid object in the global plane. kind: circle | ellipse | rectangle.
+class Obstacle(ObjectSpec):
+    """A rigid object in the global plane: contract.grasp.ObjectSpec (kind circle | ellipse
+    | rectangle; a, b the radius, semi-axes or half width and height, mm; centre x, y mm;
+    angle rad, counter-clockwise; a rectangle's corner radius, mm), checked by
+    contract.grasp.object_error, with the predictor's torch geometry (distance and normal,
+    a segment's part inside).
 
-    a, b: radius/radius (circle), semi-axes (ellipse) or half width/half height
-    (rectangle), mm. x, y: centre, mm. angle: orientation, rad (counter-clockwise).
-    corner: a rectangle's corner radius, mm (RECTANGLE_CORNER; ignored by the others).
     Default placement (a documented departure from "230 mm below the base"): centre at
     Y = -195 mm, between the fingers' distal parts. The objects are wider (60-70 mm)
     than the free opening (30 mm between the fingers' inner faces), so an object that
@@ -130,26 +127,14 @@ class Obstacle:
     object in, and ramps to the target.
     """
 
-    kind: str = "circle"
-    a: float = 30.0
-    b: float = 30.0
-    x: float = 0.0
-    y: float = -195.0
-    angle: float = 0.0
-    corner: float = RECTANGLE_CORNER
-
-    def __post_init__(self):
-        why = object_error(self)
-        if why:
-            raise ValueError(why)
-
     @property
     def radius(self) -> float:
         """Radius (mm) of the smallest circle about the centre that holds the object."""
         return math.hypot(self.a, self.b) if self.kind == "rectangle" else max(self.a, self.b)
 
-    def signed_distance(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """points (..., 2) mm -> (d (...) mm, negative inside; n (..., 2) outward unit normal).
+    def distance_normal(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """points (..., 2) mm -> (d (...) mm, negative inside; n (..., 2) outward unit normal):
+        in torch, the d of contract.grasp.ObjectSpec.signed_distance with its normal.
 
         Circle and rectangle are exact. The ellipse uses the first-order (Taubin) distance
         g/|grad g| with g = (x/a)² + (y/b)² - 1, exact on the boundary and accurate to
@@ -187,7 +172,7 @@ class Obstacle:
 
     def segment_interval(self, start: torch.Tensor, end: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The part of each segment start + u·(end - start), u in [0, 1], inside the object
-        (where ``signed_distance`` < 0), as (u0, u1) (...) with u0 <= u1 (equal when it
+        (where ``distance_normal``'s d < 0), as (u0, u1) (...) with u0 <= u1 (equal when it
         misses): exact, from the line's intersection with the circle, the ellipse, or the
         rounded rectangle's two boxes and four corner discs (the object is convex, so the
         inside is one interval). start, end (..., 2) mm."""
@@ -214,103 +199,11 @@ class Obstacle:
         return clip_interval(lo, hi)
 
 
-#: Object bounds (mm): half sizes (radius, semi-axes, half width/height) and the centre's
-#: height; the model mirrors the right finger, so the object must be mirror-symmetric
-#: about X = 0 (centred, and an ellipse or rectangle turned by a multiple of 90 degrees).
-SIZE_RANGE = (0.1, 500.0)
-Y_RANGE = (-1000.0, 1000.0)
-
-
-def object_error(ob: "Obstacle") -> str | None:
-    """Why the model cannot represent object ``ob`` (one line), or None: an unknown kind,
-    a value that is not finite, a size outside SIZE_RANGE, a centre off the axis X = 0
-    or beyond Y_RANGE, a rotation that breaks the mirror symmetry."""
-    if ob.kind not in _KEYS:
-        return f"unknown object kind {ob.kind!r} (use circle, ellipse or rectangle)"
-    values = dict(size=ob.a, size_b=ob.b, x=ob.x, y=ob.y, angle=ob.angle, corner=ob.corner)
-    for name, v in values.items():
-        if not math.isfinite(v):
-            return f"object {name} = {v}: not a finite number"
-    lo, hi = SIZE_RANGE
-    for v in (ob.a, ob.b):
-        if not lo <= v <= hi:
-            return (f"object size {2 * v:g} mm ({ob.kind} half size {v:g} mm) is outside the model's "
-                    f"[{lo:g}, {hi:g}] mm half-size range")
-    if ob.kind == "rectangle" and not 0.0 <= ob.corner <= min(ob.a, ob.b):
-        return (f"rectangle corner radius rc = {ob.corner:g} mm is outside [0, {min(ob.a, ob.b):g}] mm "
-                "(0 to half the shorter side)")
-    if ob.x != 0.0:
-        return (f"object centre x = {ob.x:g} mm: the model mirrors the right finger, so it represents objects "
-                "on the gripper's axis only (x = 0)")
-    if not Y_RANGE[0] <= ob.y <= Y_RANGE[1]:
-        return f"object centre y = {ob.y:g} mm is outside [{Y_RANGE[0]:g}, {Y_RANGE[1]:g}] mm"
-    if ob.kind != "circle" and abs(math.sin(2.0 * ob.angle)) > 1e-12:
-        return (f"object turned by {math.degrees(ob.angle):g} deg: the model mirrors the right finger, so an "
-                f"{ob.kind} must stay symmetric about X = 0 (deg a multiple of 90)")
-    return None
-
-
-_DEFAULTS = {
-    "circle": dict(a=30.0, b=30.0, y=-195.0),
-    "ellipse": dict(a=35.0, b=25.0, y=-195.0),
-    "rectangle": dict(a=30.0, b=25.0, y=-195.0),
-}
-_KEYS = {
-    "circle": {"r": ("a", "b"), "x": ("x",), "y": ("y",), "deg": ("angle",)},
-    "ellipse": {"a": ("a",), "b": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",)},
-    "rectangle": {"w": ("a",), "h": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",), "rc": ("corner",)},
-}
-
-
 def parse_object(spec: str) -> Obstacle:
-    """Parse ``kind[:key=value,...]``, e.g. ``circle:r=30,y=-230``, ``ellipse:a=35,b=25,
-    deg=20``, ``rectangle:w=60,h=50,x=0,y=-245,rc=1``. Lengths mm, ``deg`` in degrees;
-    a rectangle's ``rc`` is its corner radius (default RECTANGLE_CORNER, 0: sharp).
-
-    Raises ValueError with a one-line reason naming the offending item for an unknown kind
-    or key, a key given twice, a value that is not a finite number, a size <= 0, or an
-    object the model cannot represent (``object_error``: bounds, off the axis).
-    """
-    kind, _, rest = spec.strip().partition(":")
-    kind = kind.strip().lower()
-    if kind not in _KEYS:
-        raise ValueError(f"unknown object {kind!r} in {spec!r}: use circle, ellipse or rectangle")
-    fields = dict(kind=kind, **_DEFAULTS[kind])
-    seen = set()
-    for item in filter(None, (s.strip() for s in rest.split(","))):
-        key, eq, text = (part.strip() for part in item.partition("="))
-        if not eq or key not in _KEYS[kind]:
-            raise ValueError(f"bad object field {item!r} in {spec!r}: {kind} takes {', '.join(_KEYS[kind])}")
-        if key in seen:
-            raise ValueError(f"object key {key!r} given twice in {spec!r}: give each key once")
-        seen.add(key)
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not math.isfinite(value):
-            raise ValueError(f"{key}={text} in object {spec!r} is not a finite number")
-        size = _KEYS[kind][key][0] in ("a", "b")
-        if key == "rc" and value < 0:
-            raise ValueError(f"rc={text} in object {spec!r}: a corner radius is >= 0 (mm)")
-        if size and value <= 0:
-            raise ValueError(f"{key}={text} in object {spec!r}: sizes must be positive (mm)")
-        if key == "deg":
-            value = math.radians(value)
-        elif key in ("w", "h"):
-            value *= 0.5  # full width/height -> half
-        for name in _KEYS[kind][key]:
-            fields[name] = value
-    try:
-        return Obstacle(**fields)
-    except ValueError as exc:
-        raise ValueError(f"object {spec!r}: {exc}") from None
-
-
-#: Penalty stiffness of the symmetry plane X = 0 (N per mm of overlap per mm of finger
-#: outline): 100 times the object's, so that where the fingers meet at an outline corner
-#: (a force ~k q²) the overlap stays within 0.1 mm (measured: docs/gripper.md §7).
-PLANE_STIFFNESS = 200.0
+    """The object of spec ``kind[:key=value,...]`` (contract.grasp.parse_object: lengths mm,
+    ``deg`` degrees, a rectangle's corner radius ``rc``), as an Obstacle; ValueError with
+    contract.grasp's one-line reason."""
+    return Obstacle(**dataclasses.asdict(grasp.parse_object(spec)))
 
 
 @dataclass(frozen=True)
@@ -320,10 +213,10 @@ class ContactParams:
     of the frictionless contact with the symmetry plane X = 0 where the two fingers meet
     (same units; 0: the fingers pass through each other, as in the paper)."""
 
-    stiffness: float = 2.0
-    smoothing: float = 0.05
-    mu: float = 0.3
-    plane_stiffness: float = PLANE_STIFFNESS
+    stiffness: float = grasp.CONTACT_STIFFNESS
+    smoothing: float = grasp.CONTACT_SMOOTHING
+    mu: float = grasp.FRICTION
+    plane_stiffness: float = grasp.PLANE_STIFFNESS
 
 
 #: Grasp states of an equilibrium with an object, and their codes (predictor.atlas adds
@@ -456,7 +349,7 @@ def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, c
     """
     part = params.layout.contact_part
     points, seg = object_samples(pose, params, obstacle, vertices)
-    d, n = obstacle.signed_distance(points)
+    d, n = obstacle.distance_normal(points)
     normal = contact.stiffness * smooth_penetration(-d, contact.smoothing) * seg  # (B, K) N
     t = torch.stack((-n[..., 1], n[..., 0]), -1)
     t = t * torch.where(t[..., 1:] < 0, -1.0, 1.0)  # upward tangent

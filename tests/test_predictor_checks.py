@@ -176,7 +176,7 @@ def test_state_and_friction_use_follow_the_contact_law():
     s = res.summary(0)
     assert s["state"] == "holds" and s["slip"] is False and 0 < s["friction_use"] <= 1
     st = hold.residual(res.pressures, res.tau)
-    d, n = hold.obstacle.signed_distance(st.contact.points)
+    d, n = hold.obstacle.distance_normal(st.contact.points)
     f = st.contact.forces[0]
     normal = (f * n[0]).sum(-1)                       # N_k >= 0 along the outward normal
     tangent = f - normal[:, None] * n[0]

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 
+from contract import grasp
 from contract.spec import OutOfBoxError
 from predictor.gripper import EDGE_GAUSS, FingerPose, GripperParams, finger_pose
 from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
@@ -30,14 +31,35 @@ def test_signed_distances():
     rectangle 60x50 rotated 90°: (0,-195+40) -> 10 mm (its half width 30 now lies along
     Y); ellipse 35x25 boundary point (35, -195) -> 0 with normal (1, 0)."""
     c = Obstacle()
-    d, n = c.signed_distance(t([[40.0, -195.0]]))
+    d, n = c.distance_normal(t([[40.0, -195.0]]))
     assert abs(float(d[0]) - 10) < 1e-12 and np.allclose(n[0].numpy(), [1, 0])
     r = parse_object("rectangle:w=60,h=50,deg=90")
-    d, _ = r.signed_distance(t([[0.0, -155.0], [0.0, -195.0]]))
+    d, _ = r.distance_normal(t([[0.0, -155.0], [0.0, -195.0]]))
     assert abs(float(d[0]) - 10) < 1e-9 and abs(float(d[1]) + 25) < 1e-9
     e = parse_object("ellipse")
-    d, n = e.signed_distance(t([[35.0, -195.0], [0.0, -170.0]]))
+    d, n = e.distance_normal(t([[35.0, -195.0], [0.0, -170.0]]))
     assert float(d.abs().max()) < 1e-12 and np.allclose(n.numpy(), [[1, 0], [0, 1]], atol=1e-12)
+
+
+def test_torch_distance_is_contracts():
+    """The predictor's torch distance (Obstacle.distance_normal) is contract.grasp's numpy
+    signed distance, the FEM's (one law for both layers), at points inside, on and outside
+    a circle, an ellipse turned by 90 degrees and rounded and sharp rectangles (1e-12 mm);
+    where the distance is exact (circle, rounded rectangle) the normal is its gradient
+    (central differences, 1e-6); parse_object gives contract.grasp's fields."""
+    rng = np.random.default_rng(7)
+    pts = np.column_stack((rng.uniform(-60, 60, 400), rng.uniform(-260, -130, 400)))
+    for spec in ("circle:r=30", "ellipse:a=35,b=25,deg=90", "rectangle:w=60,h=50,rc=4", "rectangle:rc=0"):
+        ob = parse_object(spec)
+        assert dataclasses.asdict(ob) == dataclasses.asdict(grasp.parse_object(spec))
+        d, n = ob.distance_normal(t(pts))
+        np.testing.assert_allclose(d.numpy(), grasp.parse_object(spec).signed_distance(pts), rtol=0, atol=1e-12)
+        if spec.startswith(("ellipse", "rectangle:rc=0")):
+            continue
+        h = 1e-6
+        grad = np.stack([(ob.distance_normal(t(pts + h * e))[0] - ob.distance_normal(t(pts - h * e))[0]).numpy()
+                         / (2 * h) for e in np.eye(2)], -1)
+        np.testing.assert_allclose(n.numpy(), grad, atol=1e-6)
 
 
 def test_object_spec_errors():
@@ -94,7 +116,7 @@ def test_grasp_friction_cone_and_hold():
     assert not bool(res.slip[0]) and abs(float(res.friction_ratio[0])) < 0.3
     assert float(res.residual_force_mN.max()) <= 1e-4
     st = GRASP.residual(res.pressures, res.tau).contact
-    _, n = Obstacle().signed_distance(st.points)
+    _, n = Obstacle().distance_normal(st.points)
     fn = (st.forces * n).sum(-1)
     ft = (st.forces - fn[..., None] * n).norm(dim=-1)
     assert bool((ft <= 0.3 * fn + 1e-12).all()) and float(fn.min()) >= 0.0

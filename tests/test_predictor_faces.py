@@ -157,13 +157,13 @@ def test_rounded_rectangle_distance_and_interval():
     assert r.corner == 1.0
     c = torch.tensor([29.0, -171.0], dtype=torch.float64)          # the top-right arc's centre
     diag = torch.tensor([1.0, 1.0], dtype=torch.float64) / math.sqrt(2.0)
-    d, n = r.signed_distance((c + 3.0 * diag)[None])
+    d, n = r.distance_normal((c + 3.0 * diag)[None])
     assert abs(float(d[0]) - 2.0) < 1e-12 and torch.allclose(n[0], diag, atol=1e-12)
     eps = torch.tensor([1e-7, -1e-7], dtype=torch.float64)
-    _, n2 = r.signed_distance(torch.stack((c + 0.5 * diag + eps, c + 0.5 * diag - eps)))
+    _, n2 = r.distance_normal(torch.stack((c + 0.5 * diag + eps, c + 0.5 * diag - eps)))
     assert float((n2[0] - n2[1]).norm()) < 1e-6
     sharp = parse_object("rectangle:rc=0")
-    d, _ = sharp.signed_distance(t([[31.0, -169.0], [29.0, -171.0]]))
+    d, _ = sharp.distance_normal(t([[31.0, -169.0], [29.0, -171.0]]))
     np.testing.assert_allclose(d.numpy(), [math.sqrt(2.0), -1.0], atol=1e-12)
     u0, u1 = r.segment_interval(t([[-40.0, -170.5]]), t([[40.0, -170.5]]))
     half = 29.0 + math.sqrt(1.0 - 0.25)
