@@ -28,13 +28,11 @@ COSTS = (
     "phase (docs/gripper.md §10: the penalty's graph runs only for the rows whose outline crosses X = 0) leaves the "
     "solve at about the model before's cost, so a median over pressures of which most stay apart meets its target "
     "while a gesture where the fingers meet takes a ramp (tenths of a second).",
-    "The gravity networks' raw residual: a network's tau that misses the equilibrium by a fraction of a "
-    "millimetre where the fingers meet has a residual of hundreds of mN there, and the network trained across "
-    "the plane's kink is less accurate where the fingers stay apart too (docs/gripper.md §11 splits it); the raw "
-    "answer is refused where it is over the NN bound, and the fastest path's one Newton step from it misses "
-    "its check (where they stay apart its moment residual, ~0.06 N·mm, is over the one-step gate of 0.03 N·mm: "
-    "a second step; where they meet the plane's path), so further steps or the LM finish it{lm}; retraining the "
-    "network with samples where the fingers meet is what is left.",
+    "The gravity networks learn one finger alone, whose gestures may cross X = 0, and their raw residual is "
+    "judged there (Gesture predictor section); the gripper's answers add the plane: the raw answer stands only "
+    "where the fingers stay apart (there the two residuals are the same), and where they meet the fastest path's "
+    "Newton step from the network's tau misses its check and the LM finishes it on the gripper's equilibrium{lm} "
+    "(docs/gripper.md §11).",
     "Contact gestures, the atlases and the inverse: every solve with an object integrates the penalty over the "
     "outline's edges instead of summing it at fixed centre-line points; the inverse's tip goals start from a "
     "coarse grid of object-free gestures (plane solves), and every answer is verified and checked at the "
