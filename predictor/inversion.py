@@ -74,7 +74,7 @@ from predictor.graphs import graph_cache, touch, traced
 from predictor.jacobians import jacobian_fn
 from predictor.lm import levenberg_marquardt
 from predictor.options import SolverOptions
-from predictor.ramp import PLANE_HOMOTOPY, STIFF_TRY, advance, homotopy, softened
+from predictor.ramp import advance, attempts, homotopy, in_turn
 from predictor.result import GestureResult
 from predictor.solve import solve
 from predictor.statics import GripperProblem, box_scale, meets
@@ -200,37 +200,43 @@ class _Branch:
     def __init__(self, ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
         prob, opts = ip.problem, ip.options
         self.problem, self.opts = prob, opts
-        self.jac_fn = jacobian_fn(prob)
-        cap = None if prob.obstacle is None else opts.contact_max_step
         # The search iterates need only stay on the branch (solve's intermediate ramp steps
         # use the same 100x looser tolerance); refine() converges the answer fully.
         self.loose = dataclasses.replace(opts, tol_force=100 * opts.tol_force, tol_moment=100 * opts.tol_moment)
         self.tol = self.loose
+        # Each continuation step tries the solver's Jacobians in turn (ramp.attempts: with an
+        # object, differences of the recorded residual, then the exact one for a step they fail)
+        kinds = attempts(prob, opts) if prob.obstacle is not None else (opts.jacobian,)
+        self.run = in_turn([self._step_solver(kind) for kind in kinds])
+        self.p, self.x = p.reshape(1, 2).double(), x.reshape(1, 6).double()
+        J, _, Jp = jacobian_fn(prob, kind=kinds[0])(self.x, self.p)
+        self.jac = (J[:, :6], Jp)
 
-        def lm(problem, tries=None):
-            jac_fn = self.jac_fn if problem is prob else jacobian_fn(problem)
+    def _step_solver(self, kind: str):
+        """run(x, p, p_prev=None, jac=None) of one continuation step by the LM with Jacobian
+        ``kind`` (predictor.jacobians.jacobian_fn); where the fingers meet at X = 0, a step
+        pressed on the plane goes through softer planes when the stiff one stalls (as the
+        solver's ramp does); with an object, the solver's tunnelling guard."""
+        prob, opts = self.problem, self.opts
+        cap = None if prob.obstacle is None else opts.contact_max_step
+
+        def lm(problem, hand_over=None):
+            jac_fn = jacobian_fn(problem, kind=kind)
 
             def step(x, p, p_prev=None, jac=None):
-                tol = self.tol if tries is None else dataclasses.replace(self.tol, max_iter=min(self.tol.max_iter, tries))
-                return levenberg_marquardt(jac_fn, x, p, tol, cap, p_prev, jac)
+                return levenberg_marquardt(jac_fn, x, p, self.tol, cap, p_prev, jac, hand_over)
 
             return step
 
-        # Where the fingers meet at X = 0, a continuation step pressed on the plane goes
-        # through softer planes when the stiff one stalls (as the solver's ramp does).
-        solver = lm(prob) if not meets(prob) else homotopy(
-            lm(prob, STIFF_TRY), [lm(softened(prob, f)) for f in PLANE_HOMOTOPY] + [lm(prob)])
+        solver = lm(prob) if not meets(prob) else homotopy(prob, lm)
 
         def run(x, p, p_prev=None, jac=None):
             x, ok, its, jac = solver(x, p, p_prev, jac)
-            if prob.obstacle is not None:  # the solver's tunnelling guard
+            if prob.obstacle is not None:
                 ok = ok & (touch(prob, x, p)[1] <= opts.max_penetration)
             return x, ok, its, jac
 
-        self.run = run
-        self.p, self.x = p.reshape(1, 2).double(), x.reshape(1, 6).double()
-        J, _, Jp = self.jac_fn(self.x, self.p)
-        self.jac = (J[:, :6], Jp)
+        return run
 
     def move(self, p: torch.Tensor) -> bool:
         """Continue the equilibrium to p (1, 2); False (and unchanged) if it fails."""

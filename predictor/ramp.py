@@ -52,8 +52,10 @@ def ramp_method(options: SolverOptions) -> str:
 #: holds the next one's root (a 0.15 MPa step pressed on the plane converges through it in
 #: 20-50 LM iterations; the stiff plane alone stalls or needs cut-backs).
 PLANE_HOMOTOPY = (0.001, 0.01, 0.1)
-#: LM iterations of the stiff plane's first try before ``homotopy`` takes over: a step that
-#: converges does so in ~5-10; one that has not by then stalls in the penalty's narrow valley.
+#: LM iterations of the stiff plane's first try before ``homotopy`` takes over the samples
+#: whose finger then crosses X = 0: a step pressed on the plane that converges does so in
+#: ~5-10; one that has not by then stalls in the penalty's narrow valley. A sample apart
+#: from the plane goes on (the plane adds nothing there).
 STIFF_TRY = 10
 
 
@@ -63,17 +65,28 @@ def softened(problem: GripperProblem, factor: float) -> GripperProblem:
         problem.contact, plane_stiffness=problem.contact.plane_stiffness * factor))
 
 
-def homotopy(first, stages):
+def homotopy(prob: GripperProblem, step_of):
     """The step solver run(x, p, p_prev=None, jac=None) -> (x, converged (B,), iterations
-    (B,), Jacobians or None) of ``first`` (the stiff plane's try), whose failed samples
-    start again from x through ``stages`` (softer planes, then the stiff one), each from
-    the previous stage's equilibrium (a homotopy in the plane's stiffness): the stiff
-    penalty makes the LM's merit |r|² a narrow valley, where from a predictor across
-    X = 0 (the fingers met within the step) it can stall short of the root."""
+    (B,), Jacobians or None) of ``prob`` where the fingers meet at X = 0, from
+    step_of(problem, hand_over) -> that problem's step solver (the LM's hand_over,
+    predictor.lm.levenberg_marquardt). The stiff plane's LM runs first; after STIFF_TRY
+    iterations its unfinished samples that touch the plane (their start, at p_prev, or
+    their iterate crosses X = 0) stop there, and they and the samples that fail touching
+    it start again from x through softer planes (PLANE_HOMOTOPY, then the stiff one), each
+    from the previous one's equilibrium: the stiff penalty makes the LM's merit |r|² a
+    narrow valley, where from a predictor across X = 0 (the fingers met within the step)
+    it can stall short of the root. A sample apart from the plane at its start, after
+    STIFF_TRY iterations and at its end solves and fails as without the plane (the ramp
+    cuts a failed step back)."""
+    stages = [step_of(softened(prob, f), None) for f in PLANE_HOMOTOPY] + [step_of(prob, None)]
 
     def run(x, p, p_prev=None, jac=None):
-        x_new, conv, its, jac_new = first(x, p, p_prev, jac)
+        pressed = crosses_plane(prob, x, p if p_prev is None else p_prev)
+        test = lambda rows, xi, pi: pressed[rows] | crosses_plane(prob, xi, pi)  # noqa: E731
+        x_new, conv, its, jac_new = step_of(prob, (STIFF_TRY, test))(x, p, p_prev, jac)
         bad = ~conv
+        if bool(bad.any()):
+            bad[bad.clone()] = pressed[bad] | crosses_plane(prob, x_new[bad], p[bad])
         if not bool(bad.any()):
             return x_new, conv, its, jac_new
         xb, pb = x[bad], p[bad]
@@ -88,6 +101,29 @@ def homotopy(first, stages):
         if jac_new is not None and jb is not None:
             for a, b in zip(jac_new, jb):
                 a[bad] = b
+        return x_new, conv, its, jac_new
+
+    return run
+
+
+def in_turn(runs):
+    """The step solver (``homotopy``'s signature) that runs ``runs`` in turn, each from the
+    step's start on the samples that the ones before did not converge (``attempts``' kinds
+    of Jacobian)."""
+
+    def run(x, p, p_prev=None, jac=None):
+        x_new, conv, its, jac_new = runs[0](x, p, p_prev, jac)
+        for nxt in runs[1:]:
+            bad = ~conv
+            if not bool(bad.any()):
+                break
+            sub = None if jac is None else tuple(a[bad] for a in jac)
+            xb, cb, ib, jb = nxt(x[bad], p[bad], None if p_prev is None else p_prev[bad], sub)
+            x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
+            x_new[bad], conv[bad], its[bad] = xb, cb, its[bad] + ib
+            if jac_new is not None and jb is not None:
+                for a, b in zip(jac_new, jb):
+                    a[bad] = b
         return x_new, conv, its, jac_new
 
     return run
@@ -162,19 +198,27 @@ def advance(run, x, pa, pb, cutbacks, jac=None):
     return x_new, conv, its, jac_new
 
 
-def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = None, soften: bool = True):
+def crosses_plane(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+    """(B,) bool: the outline at unknowns x (B, 3J), pressures p (B, J) lies across X = 0
+    (any vertex at X < 0)."""
+    return contact_depth(dataclasses.replace(problem, obstacle=None), x, p)[1] > 0
+
+
+def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = None, soften: bool = True,
+           hand_over=None):
     """The solver of one ramp step: run(x (B, n), p (B, J), p_prev=None, jac=None) ->
     (x, converged (B,), iterations (B,), Jacobians at x or None), by opts.method. On a
     ``history`` (default: with an object) it has the ramp's tangent predictor, the step
     cap, and an equilibrium deeper than opts.max_penetration into the object or across
-    X = 0 counts as failed, and where the fingers meet (``soften``) a step is tried with
-    the stiff plane for STIFF_TRY iterations, then through softer planes (``homotopy``)."""
+    X = 0 counts as failed, and where the fingers meet (``soften``) a step that touches
+    the plane and stalls goes through softer planes (``homotopy``). hand_over: the LM's
+    (levenberg_marquardt)."""
     history = prob.obstacle is not None if history is None else history
     if opts.method in ("newton", "lm"):
         jac_fn = jacobian_fn(prob, history, opts.jacobian)  # dr/dP: the ramp's predictor
         cap = opts.contact_max_step if history else None
         method = lambda x, p, p_prev=None, jac=None: levenberg_marquardt(  # noqa: E731
-            jac_fn, x, p, opts, cap, p_prev, jac)
+            jac_fn, x, p, opts, cap, p_prev, jac, hand_over)
     else:
         method = lambda x, p, p_prev=None, jac=None: lbfgs(residual_fn(prob), x, p, opts)  # noqa: E731
     if not history:
@@ -188,9 +232,7 @@ def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = Non
 
     if not (soften and meets(prob)):
         return with_depth_check
-    stiff_try = runner(prob, dataclasses.replace(opts, max_iter=min(opts.max_iter, STIFF_TRY)), True, False)
-    return homotopy(stiff_try, [runner(softened(prob, f), opts, True, False) for f in PLANE_HOMOTOPY]
-                    + [with_depth_check])
+    return homotopy(prob, lambda problem, hand_over: runner(problem, opts, True, False, hand_over))
 
 
 def ramp(problem: GripperProblem, x: torch.Tensor, p0: torch.Tensor, pressures: torch.Tensor,

@@ -189,6 +189,20 @@ def test_inverse_hold_beats_the_atlas(circle, atlas):
     assert set(where_it_touches(dataclasses.replace(ans, gesture=None)).values()) == {None}
 
 
+def test_hold_search_with_jacobians_in_turn_is_the_exact_ones(circle, atlas, monkeypatch):
+    """With an object the search's continuation steps try the difference Jacobian first
+    and the exact one where it fails (ramp.attempts, in_turn); the hold answer is the one
+    of the exact Jacobian alone (pressures within 1e-9 MPa, friction use within 1e-9)."""
+    import predictor.inversion as inversion
+
+    fast = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
+    monkeypatch.setattr(inversion, "attempts", lambda problem, options: ("exact",))
+    exact = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
+    assert fast.status == exact.status == "feasible"
+    assert fast.pressures == pytest.approx(exact.pressures, abs=1e-9)
+    assert fast.friction_use == pytest.approx(exact.friction_use, abs=1e-9)
+
+
 def test_bad_placement_and_cli_exit_codes(tmp_path):
     with pytest.raises(ValueError, match="intersects the fingers"):
         load_gripper(MODEL, "rectangle:w=1000,h=2,y=-195")

@@ -325,3 +325,31 @@ def test_plane_homotopy_step_lands_on_the_cut_back_root():
     assert float((new - ref).abs().max()) < 1e-6
     tip = lambda y: problem.pose(pb, y.reshape(1, 2, 3)).tip_end[0]  # noqa: E731
     assert float((tip(new) - tip(ref)).norm()) < 1e-6
+
+
+def test_plane_homotopy_only_where_the_finger_meets_the_plane():
+    """Grasps whose finger never reaches X = 0 (analytic joint, circle at (0.15, 0.15) and
+    rectangle at (0.05, 0.05) and (0.15, 0.15) MPa from the approach) cost with the plane
+    what they cost without it: the same equilibria bit for bit in the same LM iterations
+    (the rectangle's (0.15, 0.15) has a step that fails apart from the plane and is cut
+    back as without it, 60 iterations, not sent through the softer planes: 180). The LM's
+    hand_over stops after k iterations exactly the unfinished samples its test names."""
+    from predictor.jacobians import jacobian_fn
+    from predictor.lm import levenberg_marquardt
+    from predictor.solve import APPROACH
+    from predictor.statics import apart
+
+    for ob, p in ((Obstacle(), (0.15, 0.15)), (Obstacle(kind="rectangle", a=30, b=25), (0.05, 0.05)),
+                  (Obstacle(kind="rectangle", a=30, b=25), (0.15, 0.15))):
+        problem = GripperProblem(J, obstacle=ob, approach=APPROACH)
+        met, alone = solve(problem, t([p])), solve(apart(problem), t([p]))
+        assert bool(met.converged[0]) and float(met.plane_overlap_mm[0]) == 0.0
+        assert torch.equal(met.tau, alone.tau) and torch.equal(met.iterations, alone.iterations), (ob.kind, p)
+    jac, opts = jacobian_fn(apart(GripperProblem(J)), False), SolverOptions()
+    x0, p = torch.zeros(3, 6, dtype=torch.float64), t([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.1]])
+    free = levenberg_marquardt(jac, x0, p, opts)
+    assert bool(free[1].all()) and int(free[2].min()) > 1
+    stop = lambda rows, x, q: q[:, 0] > 0  # noqa: E731   the first sample only
+    handed = levenberg_marquardt(jac, x0, p, opts, hand_over=(1, stop))
+    assert handed[1].tolist() == [False, True, True] and handed[2].tolist() == [1, *free[2][1:].tolist()]
+    assert float((handed[0][1:] - free[0][1:]).abs().max()) <= 1e-12   # other batches: rounding only
