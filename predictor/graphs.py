@@ -176,10 +176,19 @@ def traced(fn, n: int, J: int):
     return chosen
 
 
+#: torch.compile's graphs per code object (torch._dynamo.config.recompile_limit, 8 by
+#: default). Every problem's residual is a closure of the same function, so each problem
+#: (a grasp: without and with the plane, and the plane homotopy's three softer planes)
+#: is a recompile of it, two with the size-one batch that ``traced`` checks first; past the
+#: limit dynamo runs the function eagerly, several times slower than the trace.
+RECOMPILE_LIMIT = 64
+
+
 def _compiled(fn):
     """torch.compile of fn(x, p) with a dynamic batch size, its inputs passed as inference
     tensors: a compiled graph is specialised to its inputs' dispatch keys, and callers
     pass both kinds (a clone of a few rows is cheaper than a second compile)."""
+    torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, RECOMPILE_LIMIT)
     record = torch.compile(fn, dynamic=True, options={"cpp_wrapper": True, "cpp.dynamic_threads": True})
 
     def run(x: torch.Tensor, p: torch.Tensor):
