@@ -130,8 +130,9 @@ def _traced_contact_fn(problem: GripperProblem):
     n_joints, weight = problem.n_joints, problem.params.object_weight if problem.gravity else 0.0
 
     def c(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
-        st = contact_loads(problem.pose(p, x.reshape(-1, n_joints, 3)), problem.params, problem.obstacle,
-                           problem.contact, weight)
+        pose = problem.pose(p, x.reshape(-1, n_joints, 3), face_points=False)   # the outline once, here
+        V = outline_vertices(pose, problem.params.layout) if problem.params.surface == "faces" else None
+        st = contact_loads(pose, problem.params, problem.obstacle, problem.contact, weight, V)
         return torch.stack((st.normal, st.penetration), -1)
 
     return traced(c, 3 * n_joints, n_joints)

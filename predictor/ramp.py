@@ -144,7 +144,7 @@ def _traced_depth_fn(problem: GripperProblem):
     layout = problem.params.layout
 
     def c(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
-        pose = problem.pose(p, x.reshape(-1, n_joints, 3))
+        pose = problem.pose(p, x.reshape(-1, n_joints, 3), face_points=False)   # the outline is built here
         V = outline_vertices(pose, layout)
         zero = torch.zeros_like(x[:, 0])
         normal, depth = zero, zero

@@ -432,9 +432,11 @@ class GripperProblem:
         batched throughput; the solvers work in float64)."""
         return dataclasses.replace(self, joint=self.joint.astype(dtype))
 
-    def pose(self, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
-        """Forward kinematics of the right finger: pressures (B, J) MPa, tau (B, J, 3)."""
-        return finger_pose(self.joint, self.params, pressures, tau)
+    def pose(self, pressures: torch.Tensor, tau: torch.Tensor, face_points: bool = True) -> FingerPose:
+        """Forward kinematics of the right finger: pressures (B, J) MPa, tau (B, J, 3)
+        (finger_pose; ``face_points`` False: without the outline's sample points, for a
+        caller that builds the outline itself)."""
+        return finger_pose(self.joint, self.params, pressures, tau, face_points)
 
     def residual(self, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
         """Equation-1 residual of the right finger.
