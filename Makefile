@@ -243,7 +243,7 @@ PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predi
               predictor/defaults.py predictor/problem.py predictor/progress.py predictor/result.py \
               predictor/options.py predictor/graphs.py predictor/jacobians.py predictor/lm.py predictor/newton.py \
               predictor/ramp.py predictor/networks.py predictor/nn_train.py predictor/nn_answer.py \
-              predictor/nn_eval.py predictor/nn_checkpoint.py \
+              predictor/nn_eval.py predictor/nn_checkpoint.py contract/grasp.py \
               $(filter-out analytic,$(PRED_JOINT))
 
 gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/

@@ -68,6 +68,8 @@ ARTEFACTS = (
     Artefact("predictor/ramp/atlas_*.json", "make atlas-reference", predictor.ATLAS),
     Artefact("predictor/ramp_fine/atlas_*.json", "make atlas-reference-fine", predictor.ATLAS),
     Artefact("predictor/inverse.json", "make inverse", predictor.INVERSE),
+    Artefact("predictor/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
+             "--out results/predictor/contact_change.json", predictor.CONTACT_CHANGE),
     Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),
     Artefact("calibration/calibration.json", "make calibrate-demo", predictor.CALIBRATION),
     Artefact("calibration/fem/*.json", "make calibration-fem", fem.FINGER_CASE),

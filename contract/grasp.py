@@ -44,7 +44,11 @@ CONTACT_SMOOTHING = 0.05
 FRICTION = 0.3
 #: W: the object's weight (N).
 OBJECT_WEIGHT = 0.2
-#: A rectangle's default corner radius (mm): its signed distance is C1 to that depth.
+#: A rectangle's default corner radius (mm): the rounded rectangle is the set within it of
+#: the rectangle shrunk by it, so its signed distance is C1 to that depth. A sharp corner has
+#: no normal: inside it the nearest face, and with it the contact force's direction, jumps
+#: by 90 degrees across the diagonal, which stalls a ramp where a corner presses on the
+#: finger (issue 36 §4).
 RECTANGLE_CORNER = 1.0
 #: Default approach gesture of a grasp (MPa, joint 1 then the others at 0): the fingers
 #: open there before the object is brought in.

@@ -55,12 +55,18 @@ BENCH = Format("predictor-bench", 1, "predictor.bench", {
            "tip_shift_mm_min_elsewhere"),
     "details.contact_nn_vs_solver.newton_from_raw?.branch_tip_mm": NUM})
 
+#: Where a converged gesture touches (GestureResult.where_it_touches; null unless converged;
+#: absent in files from before the face contact): the part and face carrying the most
+#: normal force, its mean contact point, and the fingers' meeting at X = 0.
+_WHERE = {"contact_part?": str | None, "contact_face?": str | None, "contact_point_mm?": list | None,
+          "plane_force_N?": MAYBE, "plane_overlap_mm?": MAYBE}
+
 #: One gesture summary (predictor.gesture --json, and each case of gestures.json): the
 #: fingertip and angles are null unless converged; files from before the gesture said its
 #: state carry ``slip`` and a signed ``friction_ratio`` instead of ``state``, ``friction_use``.
 _GESTURE = {"pressures_MPa": list, "converged": bool, "tip": list | None, "tip_angle_deg": MAYBE,
             "contact_force_N": NUM, "state?": str, "friction_use?": MAYBE, "slip?": bool,
-            "friction_ratio?": MAYBE}
+            "friction_ratio?": MAYBE, **_WHERE}
 
 #: results/predictor/gestures.json (make gestures): the paper's gesture cases and grasps.
 GESTURES = Format("predictor-gestures", 1, "predictor.figures", {
@@ -74,7 +80,8 @@ ATLAS = Format("predictor-atlas", 1, "predictor.atlas", {
     **each("counts", int, "no_contact", "holds", "slips", "not_converged"),
     "best_hold?.pressures_MPa": list, "best_hold?.friction_use": MAYBE,
     "targets.atlas_s_per_object": NUM, "measured.atlas_s_per_object": NUM, "measured.grid_points": int,
-    "solved_by?{}": int, "ramp_steps?": int})
+    "solved_by?{}": int, "ramp_steps?": int, "max_plane_overlap_mm?": MAYBE, "plane_overlap_mm?[]": list,
+    "object?.corner_mm?": NUM})
 
 #: results/predictor/inverse.json (make inverse): each goal's pressures, verified forward.
 INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
@@ -83,7 +90,8 @@ INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
     "tolerances.regulator_MPa": NUM,
     **each("cases[]", str, "goal", "status"), "cases[].object": str | None, "cases[].pressures": list,
     "cases[].friction_use": MAYBE, "cases[].tip_error_mm?": MAYBE, "cases[].verified": bool | None,
-    "cases[].robust": bool | None, "cases[].time_ms_median": NUM})
+    "cases[].robust": bool | None, "cases[].time_ms_median": NUM,
+    **{f"cases[].{k}": kind for k, kind in _WHERE.items()}})
 
 _SUMMARY = ("tip_error_mm_max", "tip_error_mm_mean", "tip_angle_error_deg_max",
             "joint_end_angle_error_deg_max", "speedup_min")
@@ -118,6 +126,17 @@ RECOVERY = Format("predictor-calibration-recovery", 1, "predictor.calibrate", {
     **each("noise_free", NUM, "rms_before_mm", "rms_after_mm", "time_s"),
     "noisy.coverage_95": NUM, "noisy.coverage_95_per_parameter{}": MAYBE,
     "noisy.runs[].seed": int, "noisy.runs[].rms_after_mm": NUM, "noisy.runs[].parameters": dict})
+
+#: results/predictor/contact_change.json (python -m predictor.contact_change): what the
+#: contact on the finger's outline and the plane X = 0 changed, before against after.
+CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change", {
+    "before": str,
+    **each("atlas{}", int, "points", "changed"), "atlas{}.transitions{}": int,
+    **{f"{key}{{}}.{k}": int for key in ("reference", "reference_fine")
+       for k in ("points", "ramp_steps_before", "ramp_steps_after", "not_converged_before", "not_converged_after")},
+    "gestures[].group": str, "gestures[].object": str | None, "gestures[].pressures_MPa": list,
+    **each("gestures[]", str, "state_before", "state_after"), "gestures[].tip_shift_mm": MAYBE,
+    "gestures[].plane_overlap_mm": MAYBE})
 
 #: results/calibration/calibration.json (make calibrate-demo; predictor.calibrate fem): the
 #: predictor calibrated on four whole-finger FEM gestures of a deliberately different finger

@@ -27,8 +27,12 @@ object there is no history and the grid is one batched solve. Each point is clas
     slips          converged, N > 0, friction use u = |f|/(mu N) > 1 (statics: u = |λ|/mu);
     holds          converged, N > 0, u <= 1;
 
-and records N (N), u, the fingertip (X, Y) mm of the right finger and the first-contact
-pressures along the ramp (GestureResult.first_contact, MPa, NaN when never). The friction
+and records N (N), u, the fingertip (X, Y) mm of the right finger, the first-contact
+pressures along the ramp (GestureResult.first_contact, MPa, NaN when never), where it
+touches (the part and face carrying the most normal force and the mean point of that
+contact, GestureResult.where_it_touches) and how far the finger's outline crosses the
+symmetry plane X = 0 where the two fingers meet (plane_overlap_mm; the summary's
+max_plane_overlap_mm). The friction
 margin is 1 - u (> 0 where the grasp holds). The summary and JSON name what was solved:
 joint, mu, object_weight_N, gravity, approach_MPa; ``atlas_from_json`` reads an atlas
 back for the same problem and refuses (one line) one of another object, joint or settings.
@@ -64,7 +68,7 @@ from predictor.progress import Heartbeat, set_quiet
 from predictor.jacobians import jacobian_fn
 from predictor.options import SolverOptions
 from predictor.ramp import advance, attempts, ramp_method, runner
-from predictor.result import GestureResult, result_labels
+from predictor.result import GestureResult, contact_fields, result_labels
 from predictor.solve import gesture_result, solve
 from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
                                out_of_reach)
@@ -140,9 +144,32 @@ class Atlas:
             "normal_force_N": float(self.normal_N.ravel()[best])}
         how = np.full(self.state.shape, RAMPED) if self.how is None else self.how
         how = {name: int((how == k).sum()) for k, name in enumerate(HOW)}
+        overlap = self.plane_overlap()
         return {"grid": len(self.p1), "counts": self.counts(), "best_hold": point, "time_s": self.time_s,
                 "path": self.path, "solved_by": how, "joint": self.joint, "mu": self.mu,
-                "object_weight_N": self.object_weight_N, "gravity": self.gravity}
+                "object_weight_N": self.object_weight_N, "gravity": self.gravity,
+                "max_plane_overlap_mm": float(np.nanmax(overlap)) if np.isfinite(overlap).any() else None}
+
+    def plane_overlap(self) -> np.ndarray:
+        """(N, N) mm: how far the right finger crosses X = 0 at each converged point (NaN
+        elsewhere, or when the result does not carry it)."""
+        r = self.result
+        if r.plane_overlap_mm is None:
+            return np.full(self.state.shape, np.nan)
+        return np.where(r.converged.numpy(), r.plane_overlap_mm.numpy(), np.nan).reshape(self.state.shape)
+
+    def contact_places(self) -> dict:
+        """Where the finger touches the object at each grid point (GestureResult.
+        where_it_touches of the place carrying the most normal force): contact_part,
+        contact_face (N, N) names or None, contact_point_mm (N, N, 2) (None where nothing
+        touches), and plane_force_N (N, N) (None unless converged)."""
+        n = len(self.p1), len(self.p2)
+        places = [self.result.where_it_touches(i) for i in range(self.state.size)]
+        grid = lambda key: np.array([p[key] for p in places], dtype=object).reshape(n).tolist()  # noqa: E731
+        points = [p["contact_point_mm"] for p in places]
+        return {"contact_part": grid("contact_part"), "contact_face": grid("contact_face"),
+                "contact_point_mm": [points[i * n[1]:(i + 1) * n[1]] for i in range(n[0])],
+                "plane_force_N": grid("plane_force_N")}
 
     def to_json(self) -> dict:
         """Everything (grid arrays as nested lists, NaN -> null by the JSON writer)."""
@@ -150,13 +177,15 @@ class Atlas:
         tau = self.result.tau.reshape(len(self.p1), len(self.p2), 2, 3)
         return {**self.summary(),
                 "object": None if ob is None else {"kind": ob.kind, "a_mm": ob.a, "b_mm": ob.b, "x_mm": ob.x,
-                                                   "y_mm": ob.y, "angle_rad": ob.angle},
+                                                   "y_mm": ob.y, "angle_rad": ob.angle,
+                                                   **({"corner_mm": ob.corner} if ob.kind == "rectangle" else {})},
                 "approach_MPa": self.approach,
                 "states": list(STATES), "p1_MPa": self.p1.tolist(), "p2_MPa": self.p2.tolist(),
                 "state": self.state.tolist(), "how": None if self.how is None else self.how.tolist(),
                 "normal_force_N": self.normal_N.tolist(),
                 "friction_use": self.friction_use.tolist(), "tip_mm": self.tip.tolist(),
                 "first_contact_MPa": self.first_contact.tolist(), "tau": tau.tolist(),
+                **self.contact_places(), "plane_overlap_mm": self.plane_overlap().tolist(),
                 "targets": {"atlas_s_per_object": TARGET_S_PER_OBJECT},
                 "measured": {"atlas_s_per_object": self.time_s, "grid_points": int(self.state.size)}}
 
@@ -309,9 +338,12 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"{path}: not a predictor.atlas JSON ({type(exc).__name__})") from None
     ob = problem.obstacle
+    keys = ("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad")
     want = None if ob is None else [ob.kind, ob.a, ob.b, ob.x, ob.y, ob.angle]
-    got = None if doc.get("object") is None else [doc["object"][k] for k in
-                                                 ("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad")]
+    got = None if doc.get("object") is None else [doc["object"][k] for k in keys]
+    if ob is not None and ob.kind == "rectangle":   # atlases before the rounded corner were sharp
+        want.append(ob.corner)
+        got = None if got is None else got + [doc["object"].get("corner_mm", 0.0)]
     if want != got or doc.get("joint") != problem.joint.name:
         raise ValueError(f"{path}: an atlas of another object or joint ({doc.get('object')}, {doc.get('joint')})")
     _same_settings(path, doc, problem)
@@ -324,7 +356,8 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
     res = GestureResult(pressures=pressures, tau=tau, converged=ok, residual_force_mN=nan, residual_moment_Nmm=nan,
                         normal_force_N=st.contact.normal, friction_N=st.contact.friction,
                         friction_ratio=st.contact.ratio, slip=st.contact.slip, iterations=torch.zeros_like(ok).long(),
-                        time_ms=0.0, pose=st.pose.masked(ok), method="atlas-json", **result_labels(problem))
+                        time_ms=0.0, pose=st.pose.masked(ok), method="atlas-json", **result_labels(problem),
+                        **contact_fields(problem, st))
     state, use = classify(res, problem.contact.mu)
     n = len(p1), len(p2)
     return Atlas(p1, p2, state.reshape(n), res.normal_force_N.numpy().reshape(n), use.reshape(n),

@@ -29,7 +29,10 @@ on one thread in float64. ``gravity_newton_median_ms`` is the default solve from
 over the same pressures in the same run.
 
 NN residuals are means over fresh random validation pressures of the worst joint per
-sample (p95 and max are recorded beside them). ``contact_nn_residual_*`` is the delivered
+sample (p95 and max are recorded beside them). A raw gravity network is judged on the
+problem it learns, one finger alone without the plane X = 0 (NNConfig.training_problem;
+``details.gravity_nn_problem`` = "finger_alone"); its delivered paths (the fast path, the
+single query, the throughputs) answer the gripper, with the plane. ``contact_nn_residual_*`` is the delivered
 contact predictor, the NN's tau finished by Newton steps or the capped LM (ramp fallback
 for the few neither converges: ``contact_nn_polished_fallback_rate``; share the Newton
 steps answered: ``contact_nn_newton_rate``); the raw network, no solver, is
@@ -69,7 +72,7 @@ from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder
 from predictor.nn_eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished
 from predictor.progress import set_quiet
 from predictor.solve import APPROACH, GRAPHS, SolverOptions, solve, use_graphs
-from predictor.statics import GripperProblem, Obstacle
+from predictor.statics import GripperProblem, Obstacle, meets
 
 
 #: samples per figure: the committed bench, and ``--quick`` (tests: every key, no timing)
@@ -211,8 +214,10 @@ def _nn_figures(joint, grav_pred, paper_pred, cont_pred, s: SimpleNamespace, n: 
     their fast paths' timings and the grasp ramp's batch, on the bench's pressures."""
     grav_nn_problem, cont_problem = grav_pred.config.problem(joint), cont_pred.config.problem(joint)
     p_val = sample_pressures(n["nn_validation"], grav_pred.config, torch.Generator().manual_seed(77))
-    grav_nn = evaluate(grav_pred.net, grav_nn_problem, p_val)
-    paper_nn = evaluate(paper_pred.net, paper_pred.config.problem(joint), p_val)
+    # a raw network is judged on the problem it learns (one finger alone for gravity);
+    # its delivered answers below, on the gripper's
+    grav_nn = evaluate(grav_pred.net, grav_pred.config.training_problem(joint), p_val)
+    paper_nn = evaluate(paper_pred.net, paper_pred.config.training_problem(joint), p_val)
     pc_val = sample_pressures(n["contact_validation"], cont_pred.config, torch.Generator().manual_seed(78))
     cont_vs_solver = evaluate_contact(cont_pred, joint, pc_val)
     cont_pol = evaluate_polished(cont_pred, joint, pc_val)
@@ -300,6 +305,7 @@ def _record(args, n: dict, joint, load, preds: tuple, s: SimpleNamespace, m: Sim
             "gravity_newton_batched_1000_ms": s.batched_ms,
             "gravity_newton_batched_converged": int(s.batch.converged.sum()),
             "gravity_nn_improved": m.grav_nn, "gravity_nn_paper_mlp": m.paper_nn,
+            "gravity_nn_problem": "finger_alone" if not meets(grav_pred.config.training_problem(joint)) else "gripper",
             "contact_nn_polished": m.cont_pol, "contact_nn_vs_solver": m.cont_vs_solver,
             "contact_nn_validation_contact_fraction": m.in_contact,
             # the pressures each network was trained on and is validated over here

@@ -38,10 +38,11 @@ from predictor.statics import STATES, GripperProblem, parse_object  # noqa: E402
 GRAVITY_CASES = [(-0.1, 0.1), (0.1, -0.1)]
 FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
 #: Two grasps per object at its default placement. With the FEM-trained joint (stiffer
-#: than the analytic stand-in: 12 against 29 deg at 0.1 MPa), the fingers close too little
-#: at (0.1, 0.2) and (0.2, 0.1) MPa: every object slips (|f|/N = 0.32-0.54 > mu = 0.3);
-#: at (0.2, 0.3) and (0.3, 0.2) all three hold (|f|/N <= 0.28; gestures.json records it).
-#: Check a case with ``python -m predictor.gesture --p1 0.1 --p2 0.2 --object circle --json``.
+#: than the analytic stand-in: 12 against 29 deg at 0.1 MPa) and contact on the finger's
+#: faces, at (0.1, 0.2) MPa the circle and the ellipse hold at the limit (friction use
+#: 0.97, 0.99) and the rectangle slips (1.46); at (0.2, 0.3) and (0.3, 0.2) all three hold
+#: (friction use <= 0.80; gestures.json records it). Check a case with
+#: ``python -m predictor.gesture --p1 0.1 --p2 0.2 --object circle --json``.
 GRASPS = {kind: [(0.2, 0.3), (0.3, 0.2)] for kind in ("circle", "ellipse", "rectangle")}
 #: The NN checkpoints drawn in nn_training.png: file, label, contact kind.
 NN_CURVES = (("gravity_nn_paper.pt", "gravity, paper MLP", False), ("gravity_nn.pt", "gravity, improved", False),

@@ -37,7 +37,7 @@ one Newton step from the network's tau) or the full ramp's (fallback; gravity: t
 LM's); with an object raw_state, the network's own grasp state.
 
 Objects: the model mirrors the right finger, so an object is centred (x = 0) and
-mirror-symmetric; its sizes and height are bounded (statics.object_error); one cutting
+mirror-symmetric; its sizes and height are bounded (contract.grasp.object_error); one cutting
 through the fingers at the approach gesture is refused; one beyond the fingers' reach
 answers no_contact at once (statics.out_of_reach).
 

@@ -2,7 +2,9 @@
 tensor operations whose Python dispatch costs more than their arithmetic, so the solvers
 call them through a graph recorded once per problem (``traced``): the residual r(x; P)
 (``traced_residual_fn``), the contact figures (``touch``) and the answer's statics
-(``statics_at``).
+(``statics_at``). Where the two fingers meet at X = 0, the residual's and the statics'
+graphs are two, without and with the plane's penalty, and the first decides per row
+whether the second is needed (``gated``: the plane's broad phase).
 
 How graphs are recorded is a process-wide choice, visible as ``graph_mode()`` and set by
 ``use_graphs`` (which empties every ``graph_cache``, so that the next call records anew):
@@ -20,8 +22,9 @@ import warnings
 import torch
 
 from contract.spec import INPUT_BOX
-from predictor.gripper import FingerPose
-from predictor.statics import ContactState, GripperProblem, Statics, box_scale, contact_loads, range_penalty, scaled
+from predictor.gripper import FingerPose, outline_vertices
+from predictor.statics import (ContactState, GripperProblem, PlaneContact, Statics, apart, box_scale, contact_loads,
+                              meets, plane_overlap, range_penalty, scaled)
 
 
 #: How ``traced`` records a graph (``use_graphs``): "trace", torch.jit.trace (the default:
@@ -59,22 +62,63 @@ def graph_mode() -> str:
     return _graphs
 
 
-def residual_fn(problem: GripperProblem):
-    """Batched r(x; P): x (B, 3J), P (B, J) -> (B, 6J) [scaled equilibrium, penalties]."""
+def residual_fn(problem: GripperProblem, overlap: bool = False):
+    """Batched r(x; P): x (B, 3J), P (B, J) -> (B, 6J) [scaled equilibrium, penalties];
+    with ``overlap`` the pair (r, how far (B,) mm the outline crosses X = 0)."""
     n_joints = problem.n_joints
 
-    def r(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+    def r(x: torch.Tensor, p: torch.Tensor):
         tau = x.reshape(-1, n_joints, 3)
-        return torch.cat((scaled(problem.residual(p, tau).residual), range_penalty(tau)), -1)
+        st = problem.residual(p, tau)
+        out = torch.cat((scaled(st.residual), range_penalty(tau)), -1)
+        return (out, _overlap(problem, st)) if overlap else out
 
     return r
+
+
+def _overlap(problem: GripperProblem, st: Statics) -> torch.Tensor:
+    """How far (B,) mm the outline of st's pose crosses X = 0 (its plane contact's, when on)."""
+    if st.plane is not None:
+        return st.plane.overlap
+    return plane_overlap(outline_vertices(st.pose, problem.params.layout) if st.vertices is None else st.vertices)
 
 
 @graph_cache
 def traced_residual_fn(problem: GripperProblem):
     """``residual_fn(problem)`` recorded by ``traced``: one per problem (0.3 s), valid
-    for any batch size."""
-    return traced(residual_fn(problem), 3 * problem.n_joints, problem.n_joints)
+    for any batch size; where the fingers meet, ``gated`` by the plane's overlap."""
+    n, J = 3 * problem.n_joints, problem.n_joints
+    if not meets(problem):
+        return traced(residual_fn(problem), n, J)
+    return gated(traced(residual_fn(apart(problem), overlap=True), n, J),
+                 traced(residual_fn(problem, overlap=True), n, J))
+
+
+def gated(apart_fn, full_fn):
+    """The broad phase of the symmetry plane X = 0: f(x, p) = full_fn(x, p) without its
+    last output, full_fn a graph with the plane's penalty and apart_fn the same without it,
+    each with the outline's overlap across X = 0 (B,) mm last. Where no vertex of the
+    outline lies at X < 0 the plane's penalty is exactly zero (its Gauss points lie on the
+    edges' parts at X < 0), so there the two agree to the order of a sum (~1e-16) and the
+    plane's terms cost one min over the vertices: f calls apart_fn and full_fn only for
+    the rows that cross. A call where most rows crossed makes the next ones call full_fn
+    alone (a ramp where the fingers meet stays on it), until one where most do not."""
+    mostly = [False]   # most rows of the last call crossed X = 0
+
+    def f(x: torch.Tensor, p: torch.Tensor):
+        if mostly[0]:
+            *out, overlap = full_fn(x, p)
+            mostly[0] = 2 * int((overlap > 0).sum()) > len(overlap)
+        else:
+            *out, overlap = apart_fn(x, p)
+            cross = (overlap > 0).nonzero().flatten()
+            mostly[0] = 2 * len(cross) > len(overlap)
+            if len(cross):
+                sub = full_fn(x.index_select(0, cross), p.index_select(0, cross))
+                out = [o.index_copy(0, cross, s) for o, s in zip(out, sub)]
+        return out[0] if len(out) == 1 else tuple(out)
+
+    return f
 
 
 @graph_cache
@@ -86,8 +130,9 @@ def _traced_contact_fn(problem: GripperProblem):
     n_joints, weight = problem.n_joints, problem.params.object_weight if problem.gravity else 0.0
 
     def c(x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
-        st = contact_loads(problem.pose(p, x.reshape(-1, n_joints, 3)), problem.params, problem.obstacle,
-                           problem.contact, weight)
+        pose = problem.pose(p, x.reshape(-1, n_joints, 3), face_points=False)   # the outline once, here
+        V = outline_vertices(pose, problem.params.layout) if problem.params.surface == "faces" else None
+        st = contact_loads(pose, problem.params, problem.obstacle, problem.contact, weight, V)
         return torch.stack((st.normal, st.penetration), -1)
 
     return traced(c, 3 * n_joints, n_joints)
@@ -132,10 +177,19 @@ def traced(fn, n: int, J: int):
     return chosen
 
 
+#: torch.compile's graphs per code object (torch._dynamo.config.recompile_limit, 8 by
+#: default). Every problem's residual is a closure of the same function, so each problem
+#: (a grasp: without and with the plane, and the plane homotopy's three softer planes)
+#: is a recompile of it, two with the size-one batch that ``traced`` checks first; past the
+#: limit dynamo runs the function eagerly, several times slower than the trace.
+RECOMPILE_LIMIT = 64
+
+
 def _compiled(fn):
     """torch.compile of fn(x, p) with a dynamic batch size, its inputs passed as inference
     tensors: a compiled graph is specialised to its inputs' dispatch keys, and callers
     pass both kinds (a clone of a few rows is cheaper than a second compile)."""
+    torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, RECOMPILE_LIMIT)
     record = torch.compile(fn, dynamic=True, options={"cpp_wrapper": True, "cpp.dynamic_threads": True})
 
     def run(x: torch.Tensor, p: torch.Tensor):
@@ -161,14 +215,17 @@ def _tensors(out) -> tuple:
 def statics_fn(problem: GripperProblem):
     """s(x (B, 3J), p (B, J)) -> (residual (B, J, 3), then the FingerPose's tensor fields
     joints, segments, theta, phi, points, then with an object the ContactState's forces,
-    normal, friction, ratio, slip, penetration)."""
+    normal, friction, ratio, slip, penetration, then the plane X = 0's force (B,) N (0 when
+    its penalty is off) and the outline's overlap across it (B,) mm)."""
     n_joints, contact = problem.n_joints, problem.obstacle is not None
 
     def s(x: torch.Tensor, p: torch.Tensor):
         st = problem.residual(p, x.reshape(-1, n_joints, 3))
         q, c = st.pose, st.contact
         out = (st.residual, q.joints, q.segments, q.theta, q.phi, q.points)
-        return out + (c.forces, c.normal, c.friction, c.ratio, c.slip, c.penetration) if contact else out
+        out = out + (c.forces, c.normal, c.friction, c.ratio, c.slip, c.penetration) if contact else out
+        overlap = _overlap(problem, st)
+        return out + (torch.zeros_like(overlap) if st.plane is None else st.plane.force, overlap)
 
     return s
 
@@ -177,18 +234,33 @@ def statics_fn(problem: GripperProblem):
 def _traced_statics_fn(problem: GripperProblem):
     """``statics_fn`` recorded by ``traced``: the answer's statics (``gesture_result``) in a
     third of the eager time (0.43 against 1.21 ms for one query on this machine), bit for
-    bit the same."""
-    return traced(statics_fn(problem), 3 * problem.n_joints, problem.n_joints)
+    bit the same; where the fingers meet, ``gated`` by the plane's overlap."""
+    n, J = 3 * problem.n_joints, problem.n_joints
+    if not meets(problem):
+        return traced(statics_fn(problem), n, J)
+    return gated(traced(_keyed(statics_fn(apart(problem))), n, J), traced(_keyed(statics_fn(problem)), n, J))
+
+
+def _keyed(s):
+    """``statics_fn``'s s with its last output (the overlap across X = 0) once more: ``gated``'s key."""
+
+    def keyed(x: torch.Tensor, p: torch.Tensor):
+        out = s(x, p)
+        return out + (out[-1],)
+
+    return keyed
 
 
 def as_statics(problem: GripperProblem, out) -> Statics:
     """The Statics of ``statics_fn``'s tuple (cloned: out of inference mode)."""
-    res, joints, segments, theta, phi, points, *contact = (v.clone() for v in out)
+    res, joints, segments, theta, phi, points, *contact, force, overlap = (v.clone() for v in out)
     pose = FingerPose(joints=joints, segments=segments, theta=theta, phi=phi, points=points,
                       finger=problem.params.finger)
+    plane = PlaneContact(None, None, force, overlap)   # the figures only (its loads are in res)
     if not contact:
-        return Statics(res, pose, ContactState.none(len(res), res.dtype))
-    return Statics(res, pose, ContactState(points, contact[0], problem.params.layout.contact_part, *contact[1:]))
+        return Statics(res, pose, ContactState.none(len(res), res.dtype), plane)
+    return Statics(res, pose, ContactState(points, contact[0], problem.params.layout.contact_part, *contact[1:]),
+                   plane)
 
 
 def statics_at(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:

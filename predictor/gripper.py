@@ -30,11 +30,29 @@ gain g_i, offset o_i (MPa) and stiffness scale s_i: the joint model is evaluated
 Weights (N): a rigid part's at its midpoint; a joint's, with ``joint_weight``
 ``lumped`` (the paper's), at the mean of its 10 anchors, or ``split`` (the default): half at
 its proximal centre O_i, half at its distal end r_10,i (predictor.statics says which joint
-balances each enters). Contact sample points, in chain order: each rigid part's
-``contact_points`` segment midpoints (each carrying l/n of length) and the n anchors of each
-joint with ``contact = true`` (each carrying L/n, L and n its own joint description's: 45.45 mm
-and 10 for the paper's joint); the paper's finger gives link (12),
-joint 2 (10), tip (65).
+balances each enters).
+
+The finger's outline (``outline_vertices``, the surfaces that touch, ``surface = faces``):
+with the cross-section normal nu = Rot(a + pi/2)·e_x of a part's direction a (global +X
+for the hanging right finger, so its -nu side faces the gripper's axis X = 0),
+
+    rigid part of height h from S to E:  corners S -/+ (h/2) nu, E -/+ (h/2) nu
+    joint (outer height H, joint_height):  P_m -/+ (H/2) nu_m, m = 0..n,
+
+with P_0 = O_i, P_1..P_n its n anchors (its joint description's, 10 for the paper's
+joint) and nu_m the normal of theta_i at m = 0, of the exit angle phi_i at m = n and of
+the bisector of the two anchor chords meeting at P_m between (so each joint's band meets
+its neighbours' faces). The outline's straight edges are each part's ``inner`` (-nu) and
+``outer`` (+nu) faces (a joint's: its n chords) and the last part's distal ``end`` face.
+The joint's band is its outer envelope over the cells and caps (height H = 20 mm); its
+2.5 mm valleys, 5.6 mm deeper, are bridged: a convex object of least radius of curvature
+rho sinks g²/(8 rho) into a valley of width g (0.03 mm for the circle, 0.04 mm for the
+ellipse's 17.9 mm ends at the rest gap), which the band neglects, as it neglects the
+cells' ballooning (the joint model gives the centre line only). ``surface = centre_line`` keeps the paper's sample points on the parts'
+centre lines instead: each rigid part's ``contact_points`` segment midpoints (each
+carrying l/n of length) and the n anchors of each joint with ``contact = true`` (each
+carrying L/n, L and n its own joint description's: 45.45 mm and 10 for the paper's
+joint); the paper's finger gives link (12), joint 2 (10), tip (65).
 
 All lengths mm, forces N, angles rad. Batched: pressures (B, J), tau (B, J, 3). The joint
 model is evaluated once per call for all J joints, inputs (B, J, 4). Layouts that depend on
@@ -49,11 +67,26 @@ from dataclasses import dataclass, field, fields
 import torch
 
 from contract.finger import DEFAULT_FINGER, FingerSpec, load_finger
+from contract.grasp import OBJECT_WEIGHT
 from contract.spec import PRESSURE_LIMIT, check_box, phi_end
 from predictor.joint import JointModel
 
 KINEMATICS = ("tangent", "cap")
 JOINT_WEIGHTS = ("lumped", "split")
+#: Where the object touches the finger: its outline's faces, or the paper's sample points on
+#: the parts' centre lines (module docstring).
+SURFACES = ("faces", "centre_line")
+DEFAULT_SURFACE = "faces"
+#: Outline edge faces (ChainLayout.edge_face codes): -nu side, +nu side, the fingertip's end.
+FACES = ("inner", "outer", "end")
+#: Gauss-Legendre points per outline edge: a contact's penalty is integrated over each
+#: edge's penetrated interval by this rule (predictor.statics), exact for the polynomial
+#: penetration profiles of a straight edge against a line or a circle.
+EDGE_GAUSS = 6
+#: Gauss points per edge of the symmetry-plane contact: X is linear along an edge, so its
+#: penalty profile is piecewise quadratic (exact where it lies within the C1 ramp, or
+#: beyond it).
+PLANE_GAUSS = 3
 #: The defaults: the chain that matches the whole-finger FEM (results/validation/finger.json:
 #: fingertip within 0.5 mm, against 5 mm for the paper's tangent kinematics).
 DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT = "cap", "split"
@@ -84,6 +117,57 @@ def with_rows(v: torch.Tensor, rows: torch.Tensor, new: torch.Tensor) -> torch.T
     return v
 
 
+@functools.lru_cache(maxsize=1)
+def joint_height() -> float:
+    """Outer height H (mm) of the bellow joint at its cells and caps: the default joint
+    file's ``geometry.height`` (contract/joints/paper.toml, the surrogate's joint; 20 mm).
+    Its outline is the band of half-height H/2 about its centre line."""
+    from contract.joint import load_joint as load_joint_file   # numpy only: no FEM imports
+
+    return float(load_joint_file().shape.height)
+
+
+def _legendre(m: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gauss-Legendre nodes xi (m,) in [0, 1] and weights (m,) summing to 1."""
+    import numpy as np
+
+    x, w = np.polynomial.legendre.leggauss(m)
+    with torch.inference_mode(False):   # kept: never an inference tensor, autograd may use it
+        return torch.tensor(0.5 * (x + 1.0), dtype=torch.float64), torch.tensor(0.5 * w, dtype=torch.float64)
+
+
+# The rules the outline uses, built at import: a recorded graph (torch.compile) reads them
+# as constants; building one inside it would trace numpy and fail the compiled graph's guards.
+_GAUSS_RULES = {m: _legendre(m) for m in (EDGE_GAUSS, PLANE_GAUSS)}
+
+
+def gauss_rule(m: int = EDGE_GAUSS) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gauss-Legendre nodes xi (m,) in [0, 1] and weights (m,) summing to 1 (read only;
+    EDGE_GAUSS and PLANE_GAUSS are built at import, another m on first use)."""
+    if m not in _GAUSS_RULES:
+        _GAUSS_RULES[m] = _legendre(m)
+    return _GAUSS_RULES[m]
+
+
+def part_names(finger: FingerSpec) -> tuple[str, ...]:
+    """One name per part, in chain order: joints ``joint1``..``jointJ``; the last part, if
+    rigid, ``tip``; the other rigid parts ``link`` (one) or ``link1``, ``link2``, ...
+    (the paper's finger: joint1, link, joint2, tip)."""
+    last_rigid = finger.parts[-1].kind == "rigid"
+    links = sum(p.kind == "rigid" for p in finger.parts) - int(last_rigid)
+    names, j, r = [], 0, 0
+    for k, part in enumerate(finger.parts):
+        if part.kind == "joint":
+            j += 1
+            names.append(f"joint{j}")
+        elif k == len(finger.parts) - 1:
+            names.append("tip")
+        else:
+            r += 1
+            names.append("link" if links == 1 else f"link{r}")
+    return tuple(names)
+
+
 @functools.lru_cache(maxsize=4)
 def default_finger() -> FingerSpec:
     """The paper's finger (contract/fingers/paper.toml), read once."""
@@ -103,6 +187,19 @@ class ChainLayout:
     the part each lies on; ``contact_length`` (Kc,) mm; ``contact_mask`` (J, Kc).
     full_mask (J, Kw + Kc): weights then contact points, the order in which
     GripperProblem.residual stacks the loads.
+
+    The outline (module docstring; ``outline_vertices`` stacks its V vertices: per joint
+    its n + 1 inner then n + 1 outer band vertices (band_size), then per rigid part its
+    corners S-, E-, S+, E+): ``edge_start``, ``edge_end`` (E,) vertex indices of each straight edge,
+    ``edge_part`` (E,) its part, ``edge_face`` (E,) its face (FACES), ``object_edges``
+    (Eo,) the edges the object can touch (parts with ``contact``). With ``surface`` faces
+    the contact points are EDGE_GAUSS Gauss points per object edge, so ``contact_part``,
+    ``contact_face`` and ``contact_mask`` are per Gauss point (``contact_length`` is
+    unused: each point's length comes with its interval). ``plane_edges`` (Ep,): the
+    inner and end edges, which meet the mirror finger at X = 0 (the outer faces face
+    away from it), and ``plane_mask`` (J, Ep·PLANE_GAUSS) that of their Gauss points.
+    ``joint_half_height`` H/2 (mm, ``joint_height``) and ``rigid_half_height`` (R,) mm:
+    the outline's half heights, read once here so that a recorded graph sees constants.
     """
 
     joint_parts: tuple[int, ...]
@@ -114,16 +211,79 @@ class ChainLayout:
     contact_length: torch.Tensor
     contact_mask: torch.Tensor
     full_mask: torch.Tensor
+    surface: str = DEFAULT_SURFACE
+    edge_start: torch.Tensor = None
+    edge_end: torch.Tensor = None
+    edge_part: torch.Tensor = None
+    edge_face: torch.Tensor = None
+    object_edges: torch.Tensor = None
+    contact_face: torch.Tensor = None
+    plane_edges: torch.Tensor = None
+    plane_mask: torch.Tensor = None
+    rigid_half_height: torch.Tensor = None
+    joint_half_height: float = None
+
+
+def band_size(finger: FingerSpec) -> int:
+    """Vertices of each joint's band in ``outline_vertices``: its n + 1 inner then n + 1
+    outer points, n the joints' anchor count (their description's; 10 for the paper's
+    joint). One joint model poses every joint of a finger, so its joints share one count;
+    ValueError (one line) for a finger whose joints differ."""
+    counts = sorted({part.spec.anchors for part in finger.parts if part.kind == "joint"})
+    if len(counts) != 1:
+        raise ValueError(f"finger {finger.name!r}: its joints have {counts} anchors; the outline needs one count")
+    return 2 * (counts[0] + 1)
+
+
+def outline_edges(finger: FingerSpec) -> list[tuple[int, int, int, int, bool]]:
+    """The outline's straight edges of ``finger`` in chain order: (start vertex, end
+    vertex, part, face code, the object can touch it) (ChainLayout's vertex order)."""
+    J, size = finger.n_joints, band_size(finger)
+    n = size // 2 - 1
+    edges, j, r = [], 0, 0
+    for k, part in enumerate(finger.parts):
+        last = k == len(finger.parts) - 1
+        if part.kind == "joint":
+            inner, outer = size * j, size * j + n + 1
+            touch = bool(part.contact)
+            edges += [(inner + m, inner + m + 1, k, 0, touch) for m in range(n)]
+            edges += [(outer + m, outer + m + 1, k, 1, touch) for m in range(n)]
+            if last:
+                edges.append((inner + n, outer + n, k, 2, touch))
+            j += 1
+        else:
+            base = size * J + 4 * r
+            touch = part.contact_points > 0
+            edges += [(base, base + 1, k, 0, touch), (base + 2, base + 3, k, 1, touch)]
+            if last:
+                edges.append((base + 1, base + 3, k, 2, touch))
+            r += 1
+    return edges
+
+
+def _part_mask(parts, joint_parts) -> torch.Tensor:
+    """(J, K) 1.0 where a load on part parts[k] enters joint i's balance (part after it)."""
+    return torch.tensor([[float(k > jp) for k in parts] for jp in joint_parts], dtype=torch.float64).reshape(
+        len(joint_parts), len(parts))
 
 
 @functools.lru_cache(maxsize=16)
-def chain_layout(finger: FingerSpec, joint_weight: str = "lumped") -> ChainLayout:
+def chain_layout(finger: FingerSpec, joint_weight: str = "lumped", surface: str = DEFAULT_SURFACE) -> ChainLayout:
     """The ChainLayout of ``finger`` (module docstring: where weights act and which joint
     balances each load enters; a load on part k enters joint i's balance when k is distal
     to joint i, i.e. k > part index of joint i; a split joint's distal half also enters
-    its own joint's balance, with zero moment arm)."""
+    its own joint's balance, with zero moment arm; where the object can touch, by
+    ``surface``)."""
+    with torch.inference_mode(False):   # cached: never inference tensors, autograd may use them
+        return _chain_layout(finger, joint_weight, surface)
+
+
+def _chain_layout(finger: FingerSpec, joint_weight: str, surface: str) -> ChainLayout:
+    """chain_layout, built (outside inference mode)."""
     if joint_weight not in JOINT_WEIGHTS:
         raise ValueError(f"joint weight {joint_weight!r}: use {' or '.join(JOINT_WEIGHTS)}")
+    if surface not in SURFACES:
+        raise ValueError(f"contact surface {surface!r}: use {' or '.join(SURFACES)}")
     jp = finger.joints
     J = len(jp)
     R = len(finger.parts) - J
@@ -143,26 +303,46 @@ def chain_layout(finger: FingerSpec, joint_weight: str = "lumped") -> ChainLayou
             j += 1
     # A load distal to no joint (on or before joint 1) is carried by the base mount only.
     loads = [ld for ld in loads if any(ld[2])]
-    c_part, c_len = [], []
-    for k, part in enumerate(finger.parts):
-        # A joint's anchors are its own description's (count and length: contract.finger).
-        n = part.spec.anchors if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
-        if n:
-            c_part += [k] * n
-            c_len += [part.length / n] * n
+    c_part, c_len, c_face = [], [], []
+    edges = outline_edges(finger)
+    object_edges = [e for e, edge in enumerate(edges) if edge[4]]
+    if surface == "faces":
+        c_part = [edges[e][2] for e in object_edges for _ in range(EDGE_GAUSS)]
+        c_face = [edges[e][3] for e in object_edges for _ in range(EDGE_GAUSS)]
+    else:
+        for k, part in enumerate(finger.parts):
+            # A joint's anchors are its own description's (count and length: contract.finger).
+            n = part.spec.anchors if part.kind == "joint" and part.contact else getattr(part, "contact_points", 0)
+            if n:
+                c_part += [k] * n
+                c_len += [part.length / n] * n
+                c_face += [-1] * n
     mask = lambda rows: torch.tensor(rows, dtype=torch.float64).reshape(J, -1)  # noqa: E731
     w_mask = mask([[float(ld[2][i]) for ld in loads] for i in range(J)])
-    c_mask = mask([[float(k > jp[i]) for k in c_part] for i in range(J)])
+    c_mask = _part_mask(c_part, jp)
+    long = lambda v: torch.tensor(v, dtype=torch.long)  # noqa: E731
     return ChainLayout(
         joint_parts=jp,
         joint_weight=joint_weight,
-        weight_source=torch.tensor([ld[0] for ld in loads], dtype=torch.long),
+        weight_source=long([ld[0] for ld in loads]),
         weights=torch.tensor([ld[1] for ld in loads], dtype=torch.float64),
         weight_mask=w_mask,
-        contact_part=torch.tensor(c_part, dtype=torch.long),
+        contact_part=long(c_part),
         contact_length=torch.tensor(c_len, dtype=torch.float64),
         contact_mask=c_mask,
-        full_mask=torch.cat((w_mask, c_mask), 1))
+        full_mask=torch.cat((w_mask, c_mask), 1),
+        surface=surface,
+        edge_start=long([e[0] for e in edges]),
+        edge_end=long([e[1] for e in edges]),
+        edge_part=long([e[2] for e in edges]),
+        edge_face=long([e[3] for e in edges]),
+        object_edges=long(object_edges),
+        contact_face=long(c_face),
+        plane_edges=long([e for e, edge in enumerate(edges) if edge[3] != 1]),
+        plane_mask=_part_mask([e[2] for e in edges if e[3] != 1 for _ in range(PLANE_GAUSS)], jp),
+        joint_half_height=0.5 * joint_height(),
+        rigid_half_height=torch.tensor([0.5 * p.height for p in finger.parts if p.kind == "rigid"],
+                                       dtype=torch.float64))
 
 
 @dataclass(frozen=True)
@@ -172,7 +352,9 @@ class GripperParams:
 
     kinematics: ``tangent`` (the paper's, a part leaves joint i along the chord of its last
     two anchors) or ``cap`` (along the distal cap face, the joint model's cap rotation);
-    joint_weight: ``lumped`` (at the mean of the anchors) or ``split`` (half at each end).
+    joint_weight: ``lumped`` (at the mean of the anchors) or ``split`` (half at each end);
+    surface: where the object touches, ``faces`` (the outline, the default) or
+    ``centre_line`` (the paper's sample points on the parts' centre lines).
 
     Paper defaults (docs/gripper.md, contract/fingers/paper.toml; Figure S4 is unavailable): link
     60 mm, tip 65 mm, base mounts 50 mm apart, which give the paper's 50 mm free tip
@@ -181,9 +363,10 @@ class GripperParams:
     """
 
     finger: FingerSpec = field(default_factory=default_finger)
-    object_weight: float = 0.2
+    object_weight: float = OBJECT_WEIGHT
     kinematics: str = DEFAULT_KINEMATICS
     joint_weight: str = DEFAULT_JOINT_WEIGHT
+    surface: str = DEFAULT_SURFACE
 
     def __post_init__(self):
         if self.kinematics not in KINEMATICS:
@@ -192,7 +375,7 @@ class GripperParams:
             raise ValueError(f"joint weight {self.joint_weight!r}: use {' or '.join(JOINT_WEIGHTS)}")
         # Built once per params (not a field: eq, hash and repr ignore it); the residual reads
         # it on every evaluation.
-        object.__setattr__(self, "_layout", chain_layout(self.finger, self.joint_weight))
+        object.__setattr__(self, "_layout", chain_layout(self.finger, self.joint_weight, self.surface))
         object.__setattr__(self, "_calibration", joint_calibration(self.finger))
 
     @property
@@ -220,7 +403,8 @@ class GripperParams:
 
     def describe(self) -> str:
         """One line: finger name and the two options (for messages)."""
-        return f"finger {self.finger.name!r}, {self.kinematics} kinematics, {self.joint_weight} joint weights"
+        surface = "" if self.surface == DEFAULT_SURFACE else f", contact on the {self.surface.replace('_', ' ')}"
+        return f"finger {self.finger.name!r}, {self.kinematics} kinematics, {self.joint_weight} joint weights{surface}"
 
 
 def rot(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -254,7 +438,10 @@ class FingerPose:
     segments: (B, R, 2, 2) start and end point of each rigid part, base to tip.
     theta: (B, J) proximal orientation of each joint; phi: (B, J) its exit angle (the
     direction the next part leaves at). points: (B, K, 2) contact sample points in chain
-    order (ChainLayout.contact_part says which part each lies on). finger: the FingerSpec
+    order (ChainLayout.contact_part says which part each lies on): on the centre lines
+    (surface centre_line), or the Gauss points of the object edges of the outline
+    (surface faces: over whole edges from ``finger_pose``, over each edge's part inside
+    the object in the pose of a GripperProblem.residual). finger: the FingerSpec
     (static). The methods below act on every tensor field (``dataclasses.fields``); angle
     fields carry the ANGLE metadata. The paper layout's names (joint1, joint2, link, tip,
     link_points, tip_points) are properties of a joint-rigid-joint-rigid chain.
@@ -326,7 +513,11 @@ class FingerPose:
                              f"{self.finger.name!r} is another chain: use joints, segments, points")
 
     def _points_of(self, part: int) -> torch.Tensor:
-        sel = (chain_layout(self.finger).contact_part == part).nonzero().flatten()
+        # the layout whose sample count this pose has (the pose does not carry its surface)
+        K = self.points.shape[1]
+        layout = next(lay for lay in (chain_layout(self.finger, surface=s) for s in SURFACES[::-1])
+                      if len(lay.contact_part) == K)
+        sel = (layout.contact_part == part).nonzero().flatten()
         return self.points[:, sel]
 
     @property
@@ -370,11 +561,14 @@ def joint_calibration(finger: FingerSpec) -> tuple[tuple[float, ...], ...] | Non
     return tuple(tuple(getattr(p, k) for p in joints) for k in ("pressure_gain", "pressure_offset", "stiffness_scale"))
 
 
-def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
+def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tensor, tau: torch.Tensor,
+                face_points: bool = True) -> FingerPose:
     """Forward kinematics of the right finger (module docstring).
 
     pressures: (B, J) MPa [P1 .. PJ]; tau: (B, J, 3) joint loads [F1 N, F2 N, M N·mm] in
-    each joint's undeformed frame. Returns the FingerPose (global mm, rad).
+    each joint's undeformed frame. Returns the FingerPose (global mm, rad). With surface
+    ``faces`` its points are ``edge_points`` (not without ``face_points``: the residual
+    sets them from the outline it builds anyway).
     """
     finger = params.finger
     B = pressures.shape[0]
@@ -410,7 +604,7 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
             if part.contact_points:
                 points.append(_segment_midpoints(pos, direction, part.length, part.contact_points))
             pos = end
-    return FingerPose(
+    pose = FingerPose(
         joints=torch.stack(joints, 1),
         segments=torch.stack(segments, 1) if segments else torch.zeros(B, 0, 2, 2, dtype=tau.dtype),
         theta=torch.stack(theta, -1),
@@ -418,3 +612,42 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
         points=torch.cat(points, 1) if points else torch.zeros(B, 0, 2, dtype=tau.dtype),
         finger=finger,
     )
+    if params.surface == "faces" and face_points:
+        pose.points = edge_points(outline_vertices(pose, params.layout), params.layout)
+    return pose
+
+
+def edge_points(vertices: torch.Tensor, layout: ChainLayout) -> torch.Tensor:
+    """The object edges' Gauss points (B, Eo·EDGE_GAUSS, 2) mm over whole edges of the
+    outline ``vertices`` (B, V, 2): a pose's points with surface ``faces``."""
+    start, end = edge_ends(vertices, layout, layout.object_edges)
+    xi = gauss_rule()[0].to(vertices.dtype)
+    return (start[:, :, None] + xi[:, None] * (end - start)[:, :, None]).flatten(1, 2)
+
+
+def outline_vertices(pose: FingerPose, layout: ChainLayout) -> torch.Tensor:
+    """The outline's vertices (B, V, 2) mm of a pose (module docstring; ChainLayout's
+    order: per joint its n + 1 inner then n + 1 outer band vertices (band_size), then per
+    rigid part its corners S-, E-, S+, E+, where - is the inner (-nu) side)."""
+    P = pose.joints                                     # (B, J, n + 1, 2) O_i and the anchors
+    chord = P[:, :, 1:] - P[:, :, :-1]
+    chord = chord / chord.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    bisector = chord[:, :, :-1] + chord[:, :, 1:]
+    bisector = bisector / bisector.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    d = torch.cat((_unit(pose.theta)[:, :, None], bisector, _unit(pose.phi)[:, :, None]), 2)
+    nu = layout.joint_half_height * torch.stack((-d[..., 1], d[..., 0]), -1)
+    joints = torch.cat((P - nu, P + nu), 2).flatten(1, 2)
+    S, E = pose.segments[:, :, 0], pose.segments[:, :, 1]        # (B, R, 2)
+    u = (E - S) / (E - S).norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    nr = layout.rigid_half_height.to(S.dtype)[:, None] * torch.stack((-u[..., 1], u[..., 0]), -1)
+    rigid = torch.stack((S - nr, E - nr, S + nr, E + nr), 2).flatten(1, 2)
+    return torch.cat((joints, rigid), 1)
+
+
+def edge_ends(vertices: torch.Tensor, layout: ChainLayout, edges: torch.Tensor | None = None):
+    """(start, end) (B, E, 2) mm of the outline edges ``edges`` (indices, default all) of
+    ``outline_vertices``."""
+    i0, i1 = layout.edge_start, layout.edge_end
+    if edges is not None:
+        i0, i1 = i0.index_select(0, edges), i1.index_select(0, edges)
+    return vertices.index_select(1, i0), vertices.index_select(1, i1)

@@ -13,7 +13,8 @@ Goals, gradients, search and answers: predictor.inversion. Exit 0: the goal is m
 it); 2: bad input, one line on stderr, before any work. ``--plot`` draws the answer's
 gesture (its verifying ramp solve); ``--cases`` (``make inverse``) answers the hold goal
 for the paper's three objects (starting from their committed atlases, and cold) and the
-tip targets CASE_TIPS, with median timings of REPEATS identical queries.
+tip targets CASE_TIPS, with median timings of REPEATS identical queries; each case also
+records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``).
 """
 from __future__ import annotations
 
@@ -73,6 +74,16 @@ def atlas_check(res: InverseResult, atlas: Atlas) -> dict:
             "answer_friction_use": res.friction_use, "at_least_as_good": bool(good and res.status == "feasible")}
 
 
+def where_it_touches(res: InverseResult) -> dict:
+    """Where the answer's verifying gesture touches the object (contact_part, contact_face,
+    contact_point_mm, contacts) and the fingers' meeting at X = 0 (plane_force_N N,
+    plane_overlap_mm mm): GestureResult.where_it_touches; nulls without a gesture."""
+    if res.gesture is None:
+        return {k: None for k in ("contacts", "contact_part", "contact_face", "contact_point_mm", "plane_force_N",
+                                  "plane_overlap_mm")}
+    return res.gesture.where_it_touches(0)
+
+
 def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
     """``make inverse``: every case REPEATS times (median time); hold goals start from the
     object's committed atlas ``atlas_dir/atlas_KIND.json`` when present (the planned use),
@@ -88,7 +99,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
         runs = [inverse_pressures(ip, atlas) for _ in range(REPEATS)]
         cold = inverse_pressures(ip, None)
         res = runs[0]
-        cases.append({"goal": "hold", "object": kind, **res.summary(),
+        cases.append({"goal": "hold", "object": kind, **res.summary(), **where_it_touches(res),
                       "time_ms_median": float(np.median([r.time_ms for r in runs])),
                       "starts_from": str(path) if atlas is not None else f"coarse {COARSE}x{COARSE}",
                       "cold_time_ms": cold.time_ms, "cold_status": cold.status, "cold_pressures": cold.pressures,
@@ -100,7 +111,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
         ip = InverseProblem(free, parse_goal(text))
         runs = [inverse_pressures(ip) for _ in range(REPEATS)]
         res = runs[0]
-        cases.append({"goal": text, "object": None, **res.summary(),
+        cases.append({"goal": text, "object": None, **res.summary(), **where_it_touches(res),
                       "time_ms_median": float(np.median([r.time_ms for r in runs]))})
         figs.append((text, res, free))
     med = lambda sel: float(np.median([c["time_ms_median"] for c in cases if sel(c)]))  # noqa: E731

@@ -74,10 +74,10 @@ from predictor.graphs import graph_cache, touch, traced
 from predictor.jacobians import jacobian_fn
 from predictor.lm import levenberg_marquardt
 from predictor.options import SolverOptions
-from predictor.ramp import advance
+from predictor.ramp import advance, attempts, homotopy, in_turn
 from predictor.result import GestureResult
 from predictor.solve import solve
-from predictor.statics import GripperProblem, box_scale
+from predictor.statics import GripperProblem, box_scale, meets
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
 HOLD_MARGIN = 0.2  # friction margin 1 - u required by --least-pressure
@@ -200,23 +200,43 @@ class _Branch:
     def __init__(self, ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
         prob, opts = ip.problem, ip.options
         self.problem, self.opts = prob, opts
-        self.jac_fn = jacobian_fn(prob)
-        cap = None if prob.obstacle is None else opts.contact_max_step
         # The search iterates need only stay on the branch (solve's intermediate ramp steps
         # use the same 100x looser tolerance); refine() converges the answer fully.
         self.loose = dataclasses.replace(opts, tol_force=100 * opts.tol_force, tol_moment=100 * opts.tol_moment)
         self.tol = self.loose
+        # Each continuation step tries the solver's Jacobians in turn (ramp.attempts: with an
+        # object, differences of the recorded residual, then the exact one for a step they fail)
+        kinds = attempts(prob, opts) if prob.obstacle is not None else (opts.jacobian,)
+        self.run = in_turn([self._step_solver(kind) for kind in kinds])
+        self.p, self.x = p.reshape(1, 2).double(), x.reshape(1, 6).double()
+        J, _, Jp = jacobian_fn(prob, kind=kinds[0])(self.x, self.p)
+        self.jac = (J[:, :6], Jp)
+
+    def _step_solver(self, kind: str):
+        """run(x, p, p_prev=None, jac=None) of one continuation step by the LM with Jacobian
+        ``kind`` (predictor.jacobians.jacobian_fn); where the fingers meet at X = 0, a step
+        pressed on the plane goes through softer planes when the stiff one stalls (as the
+        solver's ramp does); with an object, the solver's tunnelling guard."""
+        prob, opts = self.problem, self.opts
+        cap = None if prob.obstacle is None else opts.contact_max_step
+
+        def lm(problem, hand_over=None):
+            jac_fn = jacobian_fn(problem, kind=kind)
+
+            def step(x, p, p_prev=None, jac=None):
+                return levenberg_marquardt(jac_fn, x, p, self.tol, cap, p_prev, jac, hand_over)
+
+            return step
+
+        solver = lm(prob) if not meets(prob) else homotopy(prob, lm)
 
         def run(x, p, p_prev=None, jac=None):
-            x, ok, its, jac = levenberg_marquardt(self.jac_fn, x, p, self.tol, cap, p_prev, jac)
-            if prob.obstacle is not None:  # the solver's tunnelling guard
+            x, ok, its, jac = solver(x, p, p_prev, jac)
+            if prob.obstacle is not None:
                 ok = ok & (touch(prob, x, p)[1] <= opts.max_penetration)
             return x, ok, its, jac
 
-        self.run = run
-        self.p, self.x = p.reshape(1, 2).double(), x.reshape(1, 6).double()
-        J, _, Jp = self.jac_fn(self.x, self.p)
-        self.jac = (J[:, :6], Jp)
+        return run
 
     def move(self, p: torch.Tensor) -> bool:
         """Continue the equilibrium to p (1, 2); False (and unchanged) if it fails."""

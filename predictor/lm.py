@@ -28,13 +28,16 @@ def within(force: torch.Tensor, moment: torch.Tensor, in_box: torch.Tensor, opts
 
 def lm_step(J: torch.Tensor, r: torch.Tensor, mu) -> torch.Tensor:
     """The damped Gauss-Newton step -(JᵀJ + mu·I)⁻¹ Jᵀ r (B, n) of J (B, m, n), r (B, m),
-    mu (B,) or a number."""
+    mu (B,) or a number; zero for a sample whose system is singular."""
     JT = J.transpose(1, 2)
     mu = torch.as_tensor(mu, dtype=J.dtype).reshape(-1, 1, 1)
-    return -torch.linalg.solve(JT @ J + mu * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])[..., 0]
+    step, info = torch.linalg.solve_ex(JT @ J + mu * torch.eye(J.shape[2], dtype=J.dtype), JT @ r[..., None])
+    # A singular system (a pose far across a stiff penalty, where the forces swamp mu)
+    # takes no step: the LM then raises mu, as for a step that fails.
+    return torch.where((info == 0)[:, None] & step[..., 0].isfinite().all(-1, keepdim=True), -step[..., 0], 0.0)
 
 
-def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None):
+def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None, hand_over=None):
     """Batched LM from x (B, n = 3J) at pressures p (B, J).
 
     Returns (x, converged, iterations, (dr/dx (B, n, n), dr/dP (B, n, J)) at the final x);
@@ -47,7 +50,12 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
 
     max_step caps each step's largest scaled component (N, N·mm/100): with contact it
     keeps the iterates on the branch of the previous ramp step, since a long step can jump
-    the finger through the object to a contact-free root."""
+    the finger through the object to a contact-free root.
+
+    hand_over (k, test): after k iterations the unfinished samples for which test(rows (b,),
+    x (b, n), p (b, J)) -> (b,) bool holds (rows: their indices in the batch) stop there,
+    not converged, for another solver to take over (predictor.ramp's plane homotopy); the
+    others go on as without it."""
     n = x.shape[1]
     eye = torch.eye(n, dtype=x.dtype)
     step_scale = box_scale(n)[1]
@@ -61,8 +69,13 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
     iters = torch.zeros(x.shape[0], dtype=torch.long)
     done = _done(r, opts)
     stuck = torch.zeros_like(done)
-    for _ in range(opts.max_iter):
-        act = torch.nonzero(~(done | stuck)).flatten()  # work on unfinished samples only
+    handed = torch.zeros_like(done)
+    for k in range(opts.max_iter):
+        if hand_over is not None and k == hand_over[0]:
+            open_ = torch.nonzero(~(done | stuck)).flatten()
+            if open_.numel():
+                handed[open_] = hand_over[1](open_, x[open_], p[open_])
+        act = torch.nonzero(~(done | stuck | handed)).flatten()  # work on unfinished samples only
         if act.numel() == 0:
             break
         Ja, ra, ma = J[act], r[act], mu[act]

@@ -13,6 +13,9 @@ Variants (VARIANTS, ``python -m predictor.nn --variant ...``):
   go to zero instead of stalling on ReLU's kinks), supervised by the Newton solver's
   equilibria at 20,000 pressures, Adam (batch 200, lr 3e-3 decayed ×0.95, 60 epochs), then
   500 iterations of full-batch L-BFGS.
+  Both gravity variants learn one finger alone (``NNConfig.training_problem``: without the
+  plane X = 0 where the gripper's fingers meet, whose stiff penalty puts a kink in the map
+  and turns a pose error of 0.1 mm into a residual of tens of mN).
 - ``contact``: the grasp of the default circle (statics.Obstacle: r = 30 mm, 0.2 N, centre
   Y = -195 mm; approach P = APPROACH) for (P1, P2) in [-0.15, 0.2] x [-0.05, 0.25], a domain
   with gestures that touch nothing, hold and slip. A ContactNet: a grasp-state classifier
@@ -47,7 +50,7 @@ from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
 from predictor.joint import JointModel
 from predictor.ramp import APPROACH
-from predictor.statics import HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle
+from predictor.statics import HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, apart
 
 
 TAU_SCALE = (1.0, 1.0, 30.0, 1.0, 1.0, 30.0)
@@ -99,10 +102,21 @@ class NNConfig:
         return GripperParams(finger, kinematics=self.kinematics, joint_weight=self.joint_weight)
 
     def problem(self, joint: JointModel) -> GripperProblem:
-        """The gesture problem this predictor is trained for, on ``joint`` (its finger and
-        options; default contact law and gravity)."""
+        """The gesture problem this predictor answers, on ``joint``: the gripper (its finger
+        and options; default contact law, the plane X = 0 included, and gravity). The
+        delivered answers are checked, and polished, on it (predictor.nn_answer)."""
         return GripperProblem(joint, self.params(), obstacle=Obstacle(**self.obstacle) if self.obstacle else None,
                               approach=self.approach)
+
+    def training_problem(self, joint: JointModel) -> GripperProblem:
+        """The problem the network learns and its raw residual is judged on: a gravity
+        network's (no object) is one finger alone, without the plane X = 0
+        (statics.apart): a smooth map of the pressures, whose gestures may cross X = 0 as
+        the paper's do; where the gripper's fingers meet, the solver takes the network's
+        tau as its start and adds the plane. A contact network's is ``problem`` itself,
+        the grasp with the plane."""
+        problem = self.problem(joint)
+        return problem if self.obstacle else apart(problem)
 
     def for_params(self, params: GripperParams) -> "NNConfig":
         """This config for another finger or options: the finger recorded, the network's

@@ -41,7 +41,7 @@ from predictor.statics import NO_CONTACT, GripperProblem, grasp_state, loss
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, ...]:
     """Iterative-solver labels for pressures (n, J): (pressures, tau (n, J, 3), grasp
     state (n,) codes of statics.STATES), restricted to the converged samples."""
-    res = solve(cfg.problem(joint), pressures)
+    res = solve(cfg.training_problem(joint), pressures)
     ok = res.converged
     print(f"[nn] labels: {int(ok.sum())}/{len(ok)} converged in {res.time_ms / 1e3:.1f} s", file=sys.stderr,
           flush=True)
@@ -134,7 +134,7 @@ def train(cfg: NNConfig, joint: JointModel) -> Predictor:
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     p_train, p_val = sample_pressures(cfg.n_train, cfg, gen), sample_pressures(cfg.n_val, cfg, gen)
-    problem = cfg.problem(joint)
+    problem = cfg.training_problem(joint)
     t_start = time.perf_counter()
     label_time = 0.0
     if cfg.supervised:

@@ -5,7 +5,7 @@ right finger, each with
 
     pressures   [P1, .., PJ] MPa, |P| <= 0.3, one per joint of the finger
     gravity     true | false (default true)
-    object      an object spec (predictor.statics.parse_object) or null (default)
+    object      an object spec (contract.grasp.parse_object) or null (default)
     tip         {"x": mm, "y": mm, "sigma_mm": mm}            the fingertip (end of last part)
     tip_angle   {"deg": deg, "sigma_deg": deg}                the last part's direction
     markers     [{"part": k, "s": mm, "x": mm, "y": mm, "sigma_mm": mm}, ...]
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from contract.finger import FingerSpec
+from contract.grasp import parse_object
 from contract.spec import PRESSURE_LIMIT
 
 FORMAT = "softjoint-observations/1"
@@ -136,8 +137,6 @@ def _observation(where: str, d, finger: FingerSpec) -> Observation:
         raise ObservationError(f"{where}.gravity = {gravity!r}: must be true or false")
     obj = d.get("object")
     if obj is not None:
-        from predictor.statics import parse_object  # torch: only when an object is given
-
         if not isinstance(obj, str):
             raise ObservationError(f"{where}.object = {obj!r}: must be an object spec such as 'circle:r=30' or null")
         try:

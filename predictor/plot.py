@@ -2,10 +2,14 @@
 
 Rigid parts red, joints blue, object green, the unloaded (tau = 0) shape dashed, each
 named in the panel's legend; the title names the pressures, the grasp state and the joint
-model. Both fingers are drawn: the right one solved, the left one its mirror. Any finger
-chain (FingerPose.part_polylines: every joint's centre line through its anchors, every
-rigid part's segment, in chain order). A gesture that did not converge is not drawn
-(only its unloaded shape), and its title says NOT CONVERGED without figures. Units mm.
+model. Both fingers are drawn: the right one solved, the left one its mirror. Each part is
+drawn as its outline (predictor.gripper.outline_vertices: a rigid part's rectangle of its
+height, a joint's band of the joint's outer height about its centre line), the surfaces
+that touch, over its centre line (FingerPose.part_polylines); where the object presses
+on the finger a black dot marks each part face's contact point (GestureResult.sites), and
+the symmetry plane X = 0 where the fingers meet is a dotted line. Any finger chain. A
+gesture that did not converge is not drawn (only its unloaded shape), and its title says
+NOT CONVERGED without figures. Units mm.
 """
 from __future__ import annotations
 
@@ -19,32 +23,75 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from contract.files import atomic_path  # noqa: E402
-from predictor.gripper import FingerPose  # noqa: E402
+from predictor.gripper import FingerPose, band_size, chain_layout, outline_vertices  # noqa: E402
 from predictor.statics import STATES, GripperProblem, Obstacle  # noqa: E402
 
 
 def object_outline(obstacle: Obstacle, n: int = 200) -> np.ndarray:
     """Closed outline (n+1, 2) mm of the object in the global plane."""
     t = np.linspace(0.0, 2.0 * math.pi, n + 1)
-    if obstacle.kind == "rectangle":
-        a, b = obstacle.a, obstacle.b
-        pts = np.array([[a, b], [-a, b], [-a, -b], [a, -b], [a, b]])
+    if obstacle.kind == "rectangle":   # rounded corners of radius rho (statics.Obstacle.corner)
+        a, b, rho = obstacle.a, obstacle.b, obstacle.corner
+        arc = np.linspace(0.0, 0.5 * math.pi, max(2, n // 4))
+        pts = np.concatenate([np.stack((sx * (a - rho) + rho * np.cos(arc + q),
+                                        sy * (b - rho) + rho * np.sin(arc + q)), -1)
+                              for q, sx, sy in ((0, 1, 1), (0.5 * math.pi, -1, 1), (math.pi, -1, -1),
+                                                (1.5 * math.pi, 1, -1))])
+        pts = np.concatenate((pts, pts[:1]))
     else:
         pts = np.stack((obstacle.a * np.cos(t), obstacle.b * np.sin(t)), -1)
     c, s = math.cos(obstacle.angle), math.sin(obstacle.angle)
     return pts @ np.array([[c, s], [-s, c]]) + np.array([obstacle.x, obstacle.y])
 
 
+COLOURS = {"joint": "tab:blue", "rigid": "tab:red"}
+
+
+def part_outlines(pose: FingerPose, index: int) -> list[tuple[str, np.ndarray]]:
+    """[(kind, closed polygon (n, 2) mm)] of every part of sample ``index``, chain order:
+    a joint's band (inner vertices base to tip, then the outer ones back), a rigid part's
+    rectangle (predictor.gripper.outline_vertices' order)."""
+    V = outline_vertices(pose.rows(slice(index, index + 1)), chain_layout(pose.finger))[0].detach().numpy()
+    out, j, r, J, size = [], 0, 0, pose.finger.n_joints, band_size(pose.finger)
+    for part in pose.finger.parts:
+        if part.kind == "joint":
+            band = V[size * j:size * (j + 1)]
+            ring = np.concatenate((band[:size // 2], band[size // 2:][::-1]))
+            j += 1
+        else:
+            base = size * J + 4 * r
+            ring = V[[base, base + 1, base + 3, base + 2]]
+            r += 1
+        out.append((part.kind, np.concatenate((ring, ring[:1]))))
+    return out
+
+
 def draw_finger(ax, pose: FingerPose, index: int, dashed: bool = False) -> None:
-    """Draw sample ``index`` of a FingerPose and its mirror on axes ``ax``."""
-    ls, lw = ("--", 1.2) if dashed else ("-", 3.0)
-    colours = {"joint": "tab:blue", "rigid": "tab:red"}
-    for p in (pose, pose.mirrored()):
-        for kind, part in p.part_polylines():
-            colour = colours[kind]
-            xy = part[index].detach().numpy()
-            ax.plot(xy[:, 0], xy[:, 1], ls, color=colour, lw=lw, alpha=0.6 if dashed else 1.0,
-                    solid_capstyle="round")
+    """Draw sample ``index`` of a FingerPose and its mirror on axes ``ax``: the outline of
+    every part (filled, unless ``dashed``: the unloaded shape) over its centre line."""
+    ls, lw = ("--", 1.0) if dashed else ("-", 1.2)
+    flip = np.array([-1.0, 1.0])
+    for kind, ring in part_outlines(pose, index):
+        for xy in (ring, ring * flip):
+            if not dashed:
+                ax.fill(xy[:, 0], xy[:, 1], color=COLOURS[kind], alpha=0.25, lw=0)
+            ax.plot(xy[:, 0], xy[:, 1], ls, color=COLOURS[kind], lw=lw, alpha=0.6 if dashed else 1.0)
+    if not dashed:
+        for p in (pose, pose.mirrored()):
+            for kind, part in p.part_polylines():
+                xy = part[index].detach().numpy()
+                ax.plot(xy[:, 0], xy[:, 1], "-", color=COLOURS[kind], lw=0.6, alpha=0.8)
+
+
+def draw_contacts(ax, result, index: int) -> None:
+    """Mark the contact points of gesture ``index`` (GestureResult.sites, both fingers)."""
+    sites = getattr(result, "sites", None)
+    if sites is None:
+        return
+    site = sites[index].reshape(-1, 3).numpy()
+    xy = site[site[:, 0] > 0, 1:]
+    for pts in (xy, xy * np.array([-1.0, 1.0])):
+        ax.plot(pts[:, 0], pts[:, 1], "o", color="k", ms=3.5, zorder=5)
 
 
 def legend_handles(obstacle: bool) -> list:
@@ -52,10 +99,12 @@ def legend_handles(obstacle: bool) -> list:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    out = [Line2D([], [], color="tab:blue", lw=3, label="joints"),
-           Line2D([], [], color="tab:red", lw=3, label="rigid parts"),
-           Line2D([], [], color="0.4", ls="--", lw=1.2, label="unloaded (tau = 0)")]
-    return out + ([Patch(color="tab:green", alpha=0.35, label="object")] if obstacle else [])
+    out = [Patch(facecolor="tab:blue", edgecolor="tab:blue", alpha=0.5, label="joints (outer band)"),
+           Patch(facecolor="tab:red", edgecolor="tab:red", alpha=0.5, label="rigid parts"),
+           Line2D([], [], color="0.4", ls="--", lw=1.0, label="unloaded (tau = 0)"),
+           Line2D([], [], color="0.3", ls=":", lw=0.8, label="X = 0 (fingers meet)")]
+    return out + ([Patch(color="tab:green", alpha=0.35, label="object"),
+                   Line2D([], [], color="k", marker="o", ls="", ms=3.5, label="contact")] if obstacle else [])
 
 
 def gesture_title(result, index: int, problem: GripperProblem) -> str:
@@ -67,6 +116,9 @@ def gesture_title(result, index: int, problem: GripperProblem) -> str:
         state = f"  N={result.normal_force_N[index]:.2f} N  {STATES[int(result.states()[index])]}"
     else:
         state = ""
+    plane = getattr(result, "plane_force_N", None)
+    if plane is not None and bool(result.converged[index]) and float(plane[index]) > 0:
+        state += f"  fingers meet ({float(plane[index]):.2f} N)"
     return f"{pressures} MPa{state}\n{problem.joint.name}"
 
 
@@ -78,13 +130,15 @@ def draw_gesture(ax, result, index: int, problem: GripperProblem, title: str | N
     with torch.no_grad():
         draw_finger(ax, problem.pose(p, torch.zeros(*p.shape, 3, dtype=p.dtype)), 0, dashed=True)
     obstacle = problem.obstacle
-    if bool(result.converged[index]):
-        draw_finger(ax, result.pose, index)
     if obstacle is not None:
         xy = object_outline(obstacle)
         ax.fill(xy[:, 0], xy[:, 1], color="tab:green", alpha=0.35)
         ax.plot(xy[:, 0], xy[:, 1], color="tab:green")
+    if bool(result.converged[index]):
+        draw_finger(ax, result.pose, index)
+        draw_contacts(ax, result, index)
     ax.axhline(0.0, color="k", lw=0.8)
+    ax.axvline(0.0, color="0.3", ls=":", lw=0.8)
     ax.set_aspect("equal")
     ax.set_xlabel("X (mm)")
     ax.set_ylabel("Y (mm)")

@@ -5,7 +5,7 @@ its flag (``Check.arg``: "--mu: 'nan' is not a finite number (allowed (0, 5])") 
 the API (``Check.value``: "mu: ..."), so a value refused by one is refused by the other
 with the same reason. ``load_problem`` builds the GripperProblem of predictor.gesture's
 defaults (joint from predictor.defaults, object from a spec, approach gesture APPROACH)
-and refuses an object the model cannot represent (statics.object_error) or that cuts
+and refuses an object the model cannot represent (contract.grasp.object_error) or that cuts
 through the fingers where it is brought in (``placement_error``): the gripper settles
 at the approach gesture without the object, so an object overlapping that gesture
 would start the grasp inside the fingers.
@@ -15,6 +15,7 @@ Data flow: model, object spec, options -> load_problem -> GripperProblem (checke
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -91,7 +92,7 @@ def box_arg(text: str) -> tuple[float, float, float, float]:
 
 
 def object_arg(text: str) -> str:
-    """--object: the spec, checked while parsing (statics.parse_object), so a bad one is
+    """--object: the spec, checked while parsing (contract.grasp.parse_object), so a bad one is
     refused before any model is loaded."""
     try:
         parse_object(text)
@@ -150,8 +151,7 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
     (``placement_error``)."""
     params = params or GripperParams()
     if object_weight is not None:
-        params = GripperParams(params.finger, OBJECT_WEIGHT.value("object_weight", object_weight),
-                               params.kinematics, params.joint_weight)
+        params = dataclasses.replace(params, object_weight=OBJECT_WEIGHT.value("object_weight", object_weight))
     contact = ContactParams() if mu is None else ContactParams(mu=MU.value("mu", mu))
     obstacle = parse_object(spec) if spec else None
     if approach == DEFAULT:

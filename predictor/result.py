@@ -9,8 +9,11 @@ from dataclasses import dataclass, field, fields
 
 import torch
 
-from predictor.gripper import FingerPose, with_rows
-from predictor.statics import NOT_CONVERGED, STATES, GripperProblem, grasp_state
+from predictor.gripper import FACES, FingerPose, part_names, with_rows
+from predictor.statics import NOT_CONVERGED, STATES, GripperProblem, Statics, grasp_state, plane_contact
+
+#: The faces a contact site names (gripper.FACES, then the paper's centre-line points).
+SITE_FACES = FACES + ("centre_line",)
 
 
 #: GestureResult field metadata: fixed by the question (the pressures), not by the solve.
@@ -41,6 +44,13 @@ class GestureResult:
     friction_ratio is the signed lambda of the contact law (statics.contact_loads; ±1e3
     where nothing touches): internal. The figure reported everywhere is the friction use
     u = |f|/(mu N) = |lambda|/mu (``friction_use``), null where nothing touches.
+
+    Where it touches (``contact_fields``; None in results that do not carry them, e.g. a
+    network's raw answer): sites (B, P, 4, 3) per part (chain order) and face
+    (SITE_FACES) the object's normal force N on it and the force-weighted mean point
+    [X, Y] mm of its contact (on that face; NaN where it carries none); plane_force_N (B,)
+    the symmetry plane's push on the finger where the fingers meet; plane_overlap_mm (B,)
+    how far the right finger's outline crosses X = 0.
     """
 
     pressures: torch.Tensor = field(metadata=GIVEN)
@@ -60,6 +70,9 @@ class GestureResult:
     joint: str = ""
     mu: float | None = None
     object_weight_N: float | None = None
+    sites: torch.Tensor | None = None
+    plane_force_N: torch.Tensor | None = None
+    plane_overlap_mm: torch.Tensor | None = None
 
     def friction_use(self) -> torch.Tensor:
         """u = |f|/(mu N) = |lambda|/mu (B,), NaN where nothing touches, without an object
@@ -97,7 +110,35 @@ class GestureResult:
                 "friction_N": float(self.friction_N[i]) if ok else None,
                 "friction_use": use if touching else None,
                 "slip": bool(self.slip[i]) if touching else None, "iterations": int(self.iterations[i]),
-                "joint": self.joint, "mu": self.mu, "object_weight_N": self.object_weight_N}
+                "joint": self.joint, "mu": self.mu, "object_weight_N": self.object_weight_N,
+                **self.where_it_touches(i)}
+
+    def where_it_touches(self, i: int = 0) -> dict:
+        """Sample i's contact places as plain JSON types: contacts, a list of {part, face,
+        normal_force_N, point_mm} (part names of gripper.part_names, faces SITE_FACES),
+        most force first; contact_part, contact_face, contact_point_mm of the first (null
+        where nothing touches); plane_force_N, plane_overlap_mm (X = 0). Every figure is
+        null unless converged or when the result does not carry them."""
+        ok = bool(self.converged[i])
+        out = {"contacts": None, "contact_part": None, "contact_face": None, "contact_point_mm": None,
+               "plane_force_N": None, "plane_overlap_mm": None}
+        if not ok:
+            return out
+        if self.plane_force_N is not None:
+            out["plane_force_N"] = float(self.plane_force_N[i])
+            out["plane_overlap_mm"] = float(self.plane_overlap_mm[i])
+        if self.sites is None or self.mu is None:
+            return out
+        names = part_names(self.pose.finger)
+        site = self.sites[i]                                   # (P, 4, 3)
+        order = torch.argsort(site[..., 0].flatten(), descending=True).tolist()
+        contacts = [{"part": names[k // 4], "face": SITE_FACES[k % 4], "normal_force_N": float(site[k // 4, k % 4, 0]),
+                     "point_mm": site[k // 4, k % 4, 1:].tolist()} for k in order if site[k // 4, k % 4, 0] > 0]
+        out["contacts"] = contacts
+        if contacts:
+            out.update(contact_part=contacts[0]["part"], contact_face=contacts[0]["face"],
+                       contact_point_mm=contacts[0]["point_mm"])
+        return out
 
     def with_rows(self, rows: torch.Tensor, other: "GestureResult") -> "GestureResult":
         """A copy whose solved rows ``rows`` (B,) bool come from ``other`` (a result for the
@@ -107,7 +148,10 @@ class GestureResult:
             v = getattr(self, f.name)
             if not f.metadata.get("given") and isinstance(v, (torch.Tensor, FingerPose)):
                 mine = getattr(other, f.name)
-                v = v.with_rows(rows, mine) if isinstance(v, FingerPose) else with_rows(v, rows, mine)
+                if mine is None:                  # figures the other result does not carry
+                    v = None
+                else:
+                    v = v.with_rows(rows, mine) if isinstance(v, FingerPose) else with_rows(v, rows, mine)
             new[f.name] = v
         return dataclasses.replace(self, **new)
 
@@ -118,3 +162,34 @@ def result_labels(problem: GripperProblem) -> dict:
     weight = problem.params.object_weight if problem.gravity else 0.0
     return {"joint": problem.joint.name, "mu": problem.contact.mu if has else None,
             "object_weight_N": weight if has else None}
+
+
+def contact_fields(problem: GripperProblem, st: Statics) -> dict:
+    """The GestureResult fields of where the finger touches, from the statics ``st`` of a
+    batch (B): sites (the object's normal force and mean point per part and face) and the
+    symmetry plane's force and overlap (GestureResult docstring)."""
+    params = problem.params
+    plane = st.plane if st.plane is not None else plane_contact(st.pose, params, problem.contact)
+    force = plane.force if problem.contact.plane_stiffness > 0 else torch.zeros_like(plane.force)
+    return {"sites": contact_sites(st, params.layout, len(params.finger.parts)),
+            "plane_force_N": force, "plane_overlap_mm": plane.overlap}
+
+
+def contact_sites(st: Statics, layout, n_parts: int) -> torch.Tensor:
+    """(B, P, 4, 3): per part and face (SITE_FACES) the object's normal force N on the
+    finger and the force-weighted mean point [X, Y] mm of those loads (NaN where none).
+    Each point's normal force is |f_k| / sqrt(1 + lambda_c²), since f_k = N_k (n_k -
+    lambda_c t_k) (statics.contact_loads)."""
+    c = st.contact
+    B = len(c.normal)
+    out = torch.zeros(B, n_parts * 4, 3, dtype=c.normal.dtype)
+    if c.forces.shape[1]:
+        used = torch.where(c.normal > 0, c.friction / c.normal.clamp_min(1e-300), 0.0)
+        n = c.forces.norm(dim=-1) / torch.sqrt(1.0 + used * used)[:, None]          # (B, K)
+        face = torch.where(layout.contact_face < 0, 3, layout.contact_face)
+        site = (c.part * 4 + face).expand(B, -1)
+        out[..., 0].scatter_add_(1, site, n)
+        out[..., 1].scatter_add_(1, site, n * c.points[..., 0])
+        out[..., 2].scatter_add_(1, site, n * c.points[..., 1])
+    out[..., 1:] = out[..., 1:] / out[..., :1]          # NaN where no force (0 / 0)
+    return out.reshape(B, n_parts, 4, 3)

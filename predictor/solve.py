@@ -14,7 +14,13 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
   land within the tolerances across the box); the answer's own residual is the check,
   and where it fails more Newton steps, then the LM below, go on (``_newton_then_lm``).
   From a given x0 (a network's tau) one Newton step and its statics, also one graph
-  (``newton_polish``).
+  (``newton_polish``). Where the two fingers meet at X = 0 (statics.plane_contact) the
+  problem without the plane is solved first (``_apart_first``: its answer is this one's
+  where no vertex of the outline lies at X < 0, the plane's penalty being exactly zero
+  there), and only its rows that fail or cross X = 0 go on with the plane; the answer
+  then depends on how the fingers closed: rows whose load-free pose already lies across
+  the plane, and rows that fail or end across it deeper than max_penetration, are ramped
+  from zero pressure instead (predictor.ramp.plane_ramp).
   With an object: the LM below (predictor.nn_answer starts the same Newton steps,
   ``newton_iterate``, from the contact network's tau and checks their branch itself).
 - ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
@@ -52,7 +58,8 @@ and chooses the path.
 
 Data flow: ``solve(problem, pressures, options)`` with a statics.GripperProblem (joint,
 finger, object, contact law, gravity, approach) -> GestureResult (tau, residuals, contact
-figures, pose); ``result.summary(i)`` is sample i as a JSON-ready dict.
+figures, where it touches, the fingers' meeting, pose); ``result.summary(i)`` is sample i
+as a JSON-ready dict.
 """
 from __future__ import annotations
 
@@ -67,9 +74,10 @@ from predictor.lm import within
 from predictor.newton import (COLD_STEPS, NEWTON_STEPS, bounds, newton_iterate, newton_step, traced_cold_fn,
                               traced_warm_fn)
 from predictor.options import SolverOptions
-from predictor.ramp import APPROACH, approach_for, attempts, ramp_method, solve_path
-from predictor.result import GestureResult, result_labels
-from predictor.statics import GripperProblem, Statics, box_scale, out_of_reach, residual_norms
+from predictor.ramp import (APPROACH, approach_for, attempts, plane_first, plane_ramp, plane_rows, ramp_method,
+                            solve_path)
+from predictor.result import GestureResult, contact_fields, result_labels
+from predictor.statics import GripperProblem, Statics, apart, box_scale, meets, out_of_reach, residual_norms
 
 __all__ = ["APPROACH", "GRAPHS", "GestureResult", "SolverOptions", "approach_for", "gesture_result", "graph_mode",
            "meets_tolerances", "newton_iterate", "newton_polish", "newton_step", "result_labels", "solve",
@@ -102,10 +110,9 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
                                    **result_labels(problem))
     t0 = time.perf_counter()
     if options.method == "newton" and problem.obstacle is None and options.jacobian != "exact":
-        if x0 is None and options.max_iter >= COLD_STEPS:
-            return _cold_newton(problem, pressures, options, t0)
-        start = torch.zeros(len(pressures), n_joints, 3, dtype=torch.float64) if x0 is None else x0
-        return newton_polish(problem, pressures, start, options, t0)[0]
+        if meets(problem):
+            return _apart_first(problem, pressures, options, x0, t0)
+        return _free_newton(problem, pressures, options, x0, t0)
     if options.method == "lbfgs":
         options = dataclasses.replace(options, tol_force=options.lbfgs_tol_force,
                                       tol_moment=options.lbfgs_tol_moment, cutbacks=0)
@@ -120,6 +127,73 @@ def solve(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptio
         iterations[bad] += its
     return gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options),
                           None if problem.obstacle is None else first_contact)
+
+
+def _free_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, x0: torch.Tensor | None,
+                 t0: float) -> GestureResult:
+    """The object-free Newton solve: from tau = 0 the cold graph (``_cold_newton``; the
+    rows that start across X = 0 by the ramp, ``_plane_then_newton``), from x0 a step
+    (``newton_polish``), then ``_fingers_meet``."""
+    if x0 is None and options.max_iter >= COLD_STEPS:
+        deep = plane_first(problem, pressures, options)
+        if bool(deep.any()):
+            return _plane_then_newton(problem, pressures, options, deep, t0)
+        return _fingers_meet(problem, pressures, options, _cold_newton(problem, pressures, options, t0), t0)
+    start = torch.zeros(len(pressures), problem.n_joints, 3, dtype=torch.float64) if x0 is None else x0
+    return _fingers_meet(problem, pressures, options, newton_polish(problem, pressures, start, options, t0)[0], t0)
+
+
+def _apart_first(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, x0: torch.Tensor | None,
+                 t0: float) -> GestureResult:
+    """The object-free Newton solve where the fingers meet at X = 0, broad phase first:
+    ``_free_newton`` of the problem without the plane's penalty (statics.apart), whose
+    answer is this problem's wherever it converged with no vertex of the outline at X < 0
+    (the plane's penalty is exactly zero there: same residual, same check); the rows that
+    failed or cross X = 0 are solved again by ``_free_newton`` of ``problem`` (the plane's
+    ramp where they need it), as if alone: their iterations and method are that solve's
+    (the broad phase's try is in ``time_ms`` only), so a result is the one the plane's
+    path gives."""
+    res = _free_newton(apart(problem), pressures, options, x0, t0)
+    again = ~res.converged | (res.plane_overlap_mm > 0)
+    if not bool(again.any()):
+        return res
+    more = _free_newton(problem, pressures[again], options, None if x0 is None else x0[again], t0)
+    return dataclasses.replace(res.with_rows(again, more), method=joined(res.method, more.method),
+                               time_ms=1e3 * (time.perf_counter() - t0))
+
+
+def _plane_then_newton(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, deep: torch.Tensor,
+                       t0: float) -> GestureResult:
+    """The cold solve where the rows ``deep`` (B,) bool start across X = 0 (ramp.plane_first):
+    those by the ramp from zero pressure, the others by the cold Newton solve (and
+    ``_fingers_meet``), in one result."""
+    B, n = len(pressures), 3 * problem.n_joints
+    x = torch.full((B, n), float("nan"), dtype=torch.float64)
+    ok, iterations = torch.zeros(B, dtype=torch.bool), torch.zeros(B, dtype=torch.long)
+    x[deep], ok[deep], iterations[deep] = plane_ramp(problem, pressures[deep], options)
+    method = "lm"
+    if not bool(deep.all()):
+        rest = _fingers_meet(problem, pressures[~deep], options,
+                             _cold_newton(problem, pressures[~deep], options, t0), t0)
+        x[~deep], ok[~deep], iterations[~deep] = rest.tau.reshape(-1, n), rest.converged, rest.iterations
+        method = joined(rest.method, "lm")
+    return gesture_result(problem, pressures, x, ok, iterations, t0, method, None)
+
+
+def _fingers_meet(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions, res: GestureResult,
+                  t0: float) -> GestureResult:
+    """An object-free result whose rows failed, or ended with the finger across X = 0
+    deeper than max_penetration (Newton from tau = 0, whose load-free pose can lie far
+    across), solved again by the ramp from zero pressure (predictor.ramp.plane_ramp); the
+    other rows as they are."""
+    B = len(pressures)
+    again = plane_rows(problem, res.tau.reshape(B, -1), pressures, res.converged, options)
+    if not bool(again.any()):
+        return res
+    x, ok, its = plane_ramp(problem, pressures[again], options)
+    more = gesture_result(problem, pressures[again], x, ok, its + res.iterations[again], t0, "lm", None)
+    return dataclasses.replace(res.with_rows(again, more), method=joined(res.method, "lm"),
+                               time_ms=1e3 * (time.perf_counter() - t0))
 
 
 def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Tensor, ok: torch.Tensor,
@@ -139,7 +213,7 @@ def gesture_result(problem: GripperProblem, pressures: torch.Tensor, x: torch.Te
         pressures=pressures, tau=tau, converged=ok, residual_force_mN=force, residual_moment_Nmm=moment,
         normal_force_N=st.contact.normal, friction_N=st.contact.friction, friction_ratio=st.contact.ratio,
         slip=st.contact.slip, iterations=iterations, time_ms=1e3 * (time.perf_counter() - t0), pose=pose,
-        method=method, first_contact=first_contact, **result_labels(problem),
+        method=method, first_contact=first_contact, **result_labels(problem), **contact_fields(problem, st),
     )
 
 

@@ -31,23 +31,33 @@ The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with alpha = beta
 1 N⁻², gamma = 1e-4 (N·mm)⁻² (moments scaled by a 100 mm lever, the finger's size).
 
 Contact (object fixed in the plane, signed distance d < 0 inside, outward normal n):
-- sample points, in chain order: each rigid part's ``contact_points`` midpoints and the 10
-  anchors of each joint with ``contact = true`` (the paper's finger: 12 link midpoints,
-  the 10 joint-2 anchors, 65 tip midpoints); each carries its length w_k (mm), l/n or L/10;
-- normal penalty on the finger: N_k = k_c · max(0, -d_k) · w_k along +n_k (k_c in N/mm²);
+- where: the finger's outline (predictor.gripper.outline_vertices: each rigid part's
+  rectangle of its height, each joint's band of the joint's outer height about its
+  centre line, the last part's end face; GripperParams.surface ``faces``), edge by edge:
+  the interval of the edge inside the object is exact (Obstacle.segment_interval) and
+  EDGE_GAUSS Gauss points q_k with lengths w_k (mm) integrate the penalty over it
+  (``edge_quadrature``), so the force is smooth in the pose. ``centre_line`` keeps the
+  paper's fixed points: each rigid part's ``contact_points`` midpoints and the 10 anchors
+  of each joint with ``contact = true``, each carrying l/n or L/10;
+- normal penalty on the finger: N_k = k_c · s(max(0, -d_k)) · w_k along +n_k (k_c in N/mm²,
+  s the C1 ramp ``smooth_penetration``);
 - friction: the object (weight W) hangs in two mirror fingers, so each side lifts W/2.
   With t_k the object's tangent turned upwards (t_y >= 0) and a common ratio f_k = λ N_k,
   the object's vertical balance gives λ = (W/2 + Σ N_k n_ky) / Σ N_k t_ky. The finger
   feels N_k n_k - λ_c N_k t_k with λ_c = clip(λ, -mu, mu) (the cone |f| <= mu·N always
   holds); ``slip`` is set when |λ| > mu or nothing touches the object. The split W/2
-  assumes the object is symmetric about X = 0 (other objects are refused: ``object_error``).
+  assumes the object is symmetric about X = 0 (other objects are refused: grasp.object_error);
+- the two mirror fingers meet at X = 0: the same penalty, frictionless, pushes the
+  outline's inner and end edges back along +X where they cross it (``plane_contact``,
+  stiffness ContactParams.plane_stiffness; 0 lets the fingers cross, as in the paper).
 
 Out-of-range guard (paper): penalty residuals max(0, |F1|-3), max(0, |F2|-3) N and
 max(0, |M|-100)/100 per joint, the surrogate's training box (contract.spec.INPUT_BOX).
 
 Data flow: a GripperProblem (joint model, GripperParams = finger + kinematics + joint
 weights, object, contact law, gravity, approach pressures) -> ``problem.residual(pressures,
-tau)`` with pressures (B, J), tau (B, J, 3) -> Statics (residual (B, J, 3), pose, ContactState).
+tau)`` with pressures (B, J), tau (B, J, 3) -> Statics (residual (B, J, 3), pose, ContactState,
+PlaneContact).
 """
 from __future__ import annotations
 
@@ -58,48 +68,73 @@ from dataclasses import dataclass
 
 import torch
 
+from contract import grasp
+from contract.grasp import ObjectSpec
 from contract.spec import INPUT_BOX
-from predictor.gripper import FingerPose, GripperParams, check_pressures, finger_pose, rot
+from predictor.gripper import (EDGE_GAUSS, PLANE_GAUSS, FingerPose, GripperParams, check_pressures, edge_ends,
+                               edge_points, finger_pose, gauss_rule, outline_vertices, rot)
 from predictor.joint import JointModel, no_cap_message
 
 MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
 PENALTY_WEIGHT = 10.0  # weight of the out-of-box residuals relative to the equilibrium ones
 
 
-@dataclass(frozen=True)
-class Obstacle:
-    """A rigid object in the global plane. kind: circle | ellipse | rectangle.
+_EMPTY = 1e9   # an empty interval's start (its end is -_EMPTY): ignored by min/max unions
 
-    a, b: radius/radius (circle), semi-axes (ellipse) or half width/half height
-    (rectangle), mm. x, y: centre, mm. angle: orientation, rad (counter-clockwise).
+
+def _disc_interval(p: torch.Tensor, D: torch.Tensor, r) -> tuple[torch.Tensor, torch.Tensor]:
+    """Parameters (lo, hi) (...) where the line p + u·D (..., 2) lies inside the disc of
+    radius r about the origin: the roots of |p + u D|² = r² (lo = _EMPTY, hi = -_EMPTY
+    when it misses)."""
+    a = (D * D).sum(-1).clamp_min(1e-24)
+    b = (p * D).sum(-1)
+    disc = b * b - a * ((p * p).sum(-1) - r * r)
+    root = disc.clamp_min(1e-30).sqrt()
+    hit = disc > 0
+    return torch.where(hit, (-b - root) / a, _EMPTY), torch.where(hit, (-b + root) / a, -_EMPTY)
+
+
+def _box_interval(p: torch.Tensor, D: torch.Tensor, half: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(lo, hi) (...) where p + u·D lies inside the box |x| < half (2,) (slab clipping)."""
+    Ds = torch.where(D >= 0, D.clamp_min(1e-12), D.clamp_max(-1e-12))
+    t1, t2 = (-half - p) / Ds, (half - p) / Ds
+    lo, hi = torch.minimum(t1, t2).amax(-1), torch.maximum(t1, t2).amin(-1)
+    hit = hi > lo
+    return torch.where(hit, lo, _EMPTY), torch.where(hit, hi, -_EMPTY)
+
+
+def clip_interval(lo: torch.Tensor, hi: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(u0, u1) = the interval [lo, hi] within [0, 1], u0 <= u1 (u0 = u1 when empty)."""
+    u0 = lo.clamp(0.0, 1.0)
+    return u0, torch.maximum(hi.clamp(0.0, 1.0), u0)
+
+
+@dataclass(frozen=True)
+class Obstacle(ObjectSpec):
+    """A rigid object in the global plane: contract.grasp.ObjectSpec (kind circle | ellipse
+    | rectangle; a, b the radius, semi-axes or half width and height, mm; centre x, y mm;
+    angle rad, counter-clockwise; a rectangle's corner radius, mm), checked by
+    contract.grasp.object_error, with the predictor's torch geometry (distance and normal,
+    a segment's part inside).
+
     Default placement (a documented departure from "230 mm below the base"): centre at
     Y = -195 mm, between the fingers' distal parts. The objects are wider (60-70 mm)
-    than the 50 mm free opening, so an object that clears the zero-pressure gesture has
-    to lie below the fingertips (Y_centre < -233 mm for the circle); there only its upper
-    shoulder can be reached, and mu = 0.3 cannot hold it (the solver reports slip, see
-    the tests). The grasp therefore starts from an open approach gesture (P = (-0.15, 0)
-    MPa, contact-free for these defaults), brings the object in, and ramps to the target.
+    than the free opening (30 mm between the fingers' inner faces), so an object that
+    clears the zero-pressure gesture has to lie below the fingertips (Y_centre < -242 mm
+    for the circle); there the closing fingers meet at X = 0 above it or reach only its
+    upper shoulder, and mu = 0.3 cannot hold it. The grasp therefore starts from an open
+    approach gesture (P = (-0.15, 0) MPa, contact-free for these defaults), brings the
+    object in, and ramps to the target.
     """
-
-    kind: str = "circle"
-    a: float = 30.0
-    b: float = 30.0
-    x: float = 0.0
-    y: float = -195.0
-    angle: float = 0.0
-
-    def __post_init__(self):
-        why = object_error(self)
-        if why:
-            raise ValueError(why)
 
     @property
     def radius(self) -> float:
         """Radius (mm) of the smallest circle about the centre that holds the object."""
         return math.hypot(self.a, self.b) if self.kind == "rectangle" else max(self.a, self.b)
 
-    def signed_distance(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """points (..., 2) mm -> (d (...) mm, negative inside; n (..., 2) outward unit normal).
+    def distance_normal(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """points (..., 2) mm -> (d (...) mm, negative inside; n (..., 2) outward unit normal):
+        in torch, the d of contract.grasp.ObjectSpec.signed_distance with its normal.
 
         Circle and rectangle are exact. The ellipse uses the first-order (Taubin) distance
         g/|grad g| with g = (x/a)² + (y/b)² - 1, exact on the boundary and accurate to
@@ -119,117 +154,69 @@ class Obstacle:
             gn = grad.norm(dim=-1).clamp_min(1e-12)
             d, n = g / gn, grad / gn[..., None]
         elif self.kind == "rectangle":
+            # the rounded rectangle: e = |q| - half + rho; d = |max(e, 0)| + min(max_i e_i, 0) - rho
             half = torch.tensor([self.a, self.b], dtype=points.dtype)
-            e = q.abs() - half
+            e = q.abs() - half + self.corner
             out = e.clamp_min(0.0)
             out_len = out.norm(dim=-1)
-            inside = out_len <= 0.0
-            d = torch.where(inside, e.max(-1).values, out_len)
-            # outside: direction to the nearest boundary point; inside: the nearest face.
+            d = out_len + e.max(-1).values.clamp_max(0.0) - self.corner
+            # where both e_i > 0 (about a corner's arc): radial; elsewhere the nearest face,
+            # which inside switches on the diagonal, deeper than the corner radius.
             face = (e[..., 0] >= e[..., 1]).to(points.dtype)
-            n_in = torch.stack((face, 1.0 - face), -1)
-            n_out = out / out_len.clamp_min(1e-12)[..., None]
-            n = torch.where(inside[..., None], n_in, n_out) * torch.sign(q + (q == 0).to(q.dtype))
+            n_face = torch.stack((face, 1.0 - face), -1)
+            n_arc = out / out_len.clamp_min(1e-12)[..., None]
+            n = torch.where((e > 0).all(-1)[..., None], n_arc, n_face) * torch.sign(q + (q == 0).to(q.dtype))
         else:
             raise ValueError(f"unknown object kind {self.kind!r} (use circle, ellipse or rectangle)")
         return d, (rot(torch.tensor(self.angle, dtype=points.dtype), n) if self.angle else n)
 
-
-#: Object bounds (mm): half sizes (radius, semi-axes, half width/height) and the centre's
-#: height; the model mirrors the right finger, so the object must be mirror-symmetric
-#: about X = 0 (centred, and an ellipse or rectangle turned by a multiple of 90 degrees).
-SIZE_RANGE = (0.1, 500.0)
-Y_RANGE = (-1000.0, 1000.0)
-
-
-def object_error(ob: "Obstacle") -> str | None:
-    """Why the model cannot represent object ``ob`` (one line), or None: an unknown kind,
-    a value that is not finite, a size outside SIZE_RANGE, a centre off the axis X = 0
-    or beyond Y_RANGE, a rotation that breaks the mirror symmetry."""
-    if ob.kind not in _KEYS:
-        return f"unknown object kind {ob.kind!r} (use circle, ellipse or rectangle)"
-    values = dict(size=ob.a, size_b=ob.b, x=ob.x, y=ob.y, angle=ob.angle)
-    for name, v in values.items():
-        if not math.isfinite(v):
-            return f"object {name} = {v}: not a finite number"
-    lo, hi = SIZE_RANGE
-    for v in (ob.a, ob.b):
-        if not lo <= v <= hi:
-            return (f"object size {2 * v:g} mm ({ob.kind} half size {v:g} mm) is outside the model's "
-                    f"[{lo:g}, {hi:g}] mm half-size range")
-    if ob.x != 0.0:
-        return (f"object centre x = {ob.x:g} mm: the model mirrors the right finger, so it represents objects "
-                "on the gripper's axis only (x = 0)")
-    if not Y_RANGE[0] <= ob.y <= Y_RANGE[1]:
-        return f"object centre y = {ob.y:g} mm is outside [{Y_RANGE[0]:g}, {Y_RANGE[1]:g}] mm"
-    if ob.kind != "circle" and abs(math.sin(2.0 * ob.angle)) > 1e-12:
-        return (f"object turned by {math.degrees(ob.angle):g} deg: the model mirrors the right finger, so an "
-                f"{ob.kind} must stay symmetric about X = 0 (deg a multiple of 90)")
-    return None
-
-
-_DEFAULTS = {
-    "circle": dict(a=30.0, b=30.0, y=-195.0),
-    "ellipse": dict(a=35.0, b=25.0, y=-195.0),
-    "rectangle": dict(a=30.0, b=25.0, y=-195.0),
-}
-_KEYS = {
-    "circle": {"r": ("a", "b"), "x": ("x",), "y": ("y",), "deg": ("angle",)},
-    "ellipse": {"a": ("a",), "b": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",)},
-    "rectangle": {"w": ("a",), "h": ("b",), "x": ("x",), "y": ("y",), "deg": ("angle",)},
-}
+    def segment_interval(self, start: torch.Tensor, end: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The part of each segment start + u·(end - start), u in [0, 1], inside the object
+        (where ``distance_normal``'s d < 0), as (u0, u1) (...) with u0 <= u1 (equal when it
+        misses): exact, from the line's intersection with the circle, the ellipse, or the
+        rounded rectangle's two boxes and four corner discs (the object is convex, so the
+        inside is one interval). start, end (..., 2) mm."""
+        centre = torch.tensor([self.x, self.y], dtype=start.dtype)
+        p, D = start - centre, end - start
+        if self.angle:
+            turn = torch.tensor(-self.angle, dtype=start.dtype)
+            p, D = rot(turn, p), rot(turn, D)
+        if self.kind == "circle":
+            return clip_interval(*_disc_interval(p, D, self.a))
+        if self.kind == "ellipse":
+            scale = torch.tensor([1.0 / self.a, 1.0 / self.b], dtype=start.dtype)
+            return clip_interval(*_disc_interval(p * scale, D * scale, 1.0))
+        rho = self.corner
+        pieces = [_box_interval(p, D, torch.tensor([self.a, self.b - rho], dtype=start.dtype)),
+                  _box_interval(p, D, torch.tensor([self.a - rho, self.b], dtype=start.dtype))]
+        if rho > 0:
+            for sx in (-1.0, 1.0):
+                for sy in (-1.0, 1.0):
+                    c = torch.tensor([sx * (self.a - rho), sy * (self.b - rho)], dtype=start.dtype)
+                    pieces.append(_disc_interval(p - c, D, rho))
+        lo = torch.stack([piece[0] for piece in pieces]).amin(0)
+        hi = torch.stack([piece[1] for piece in pieces]).amax(0)
+        return clip_interval(lo, hi)
 
 
 def parse_object(spec: str) -> Obstacle:
-    """Parse ``kind[:key=value,...]``, e.g. ``circle:r=30,y=-230``, ``ellipse:a=35,b=25,
-    deg=20``, ``rectangle:w=60,h=50,x=0,y=-245``. Lengths mm, ``deg`` in degrees.
-
-    Raises ValueError with a one-line reason naming the offending item for an unknown kind
-    or key, a key given twice, a value that is not a finite number, a size <= 0, or an
-    object the model cannot represent (``object_error``: bounds, off the axis).
-    """
-    kind, _, rest = spec.strip().partition(":")
-    kind = kind.strip().lower()
-    if kind not in _KEYS:
-        raise ValueError(f"unknown object {kind!r} in {spec!r}: use circle, ellipse or rectangle")
-    fields = dict(kind=kind, **_DEFAULTS[kind])
-    seen = set()
-    for item in filter(None, (s.strip() for s in rest.split(","))):
-        key, eq, text = (part.strip() for part in item.partition("="))
-        if not eq or key not in _KEYS[kind]:
-            raise ValueError(f"bad object field {item!r} in {spec!r}: {kind} takes {', '.join(_KEYS[kind])}")
-        if key in seen:
-            raise ValueError(f"object key {key!r} given twice in {spec!r}: give each key once")
-        seen.add(key)
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not math.isfinite(value):
-            raise ValueError(f"{key}={text} in object {spec!r} is not a finite number")
-        size = _KEYS[kind][key][0] in ("a", "b")
-        if size and value <= 0:
-            raise ValueError(f"{key}={text} in object {spec!r}: sizes must be positive (mm)")
-        if key == "deg":
-            value = math.radians(value)
-        elif key in ("w", "h"):
-            value *= 0.5  # full width/height -> half
-        for name in _KEYS[kind][key]:
-            fields[name] = value
-    try:
-        return Obstacle(**fields)
-    except ValueError as exc:
-        raise ValueError(f"object {spec!r}: {exc}") from None
+    """The object of spec ``kind[:key=value,...]`` (contract.grasp.parse_object: lengths mm,
+    ``deg`` degrees, a rectangle's corner radius ``rc``), as an Obstacle; ValueError with
+    contract.grasp's one-line reason."""
+    return Obstacle(**dataclasses.asdict(grasp.parse_object(spec)))
 
 
 @dataclass(frozen=True)
 class ContactParams:
     """Penalty stiffness k_c (N per mm of penetration per mm of finger length), the
-    penalty's C1 smoothing width (mm) and the friction coefficient mu."""
+    penalty's C1 smoothing width (mm), the friction coefficient mu, and the stiffness k_p
+    of the frictionless contact with the symmetry plane X = 0 where the two fingers meet
+    (same units; 0: the fingers pass through each other, as in the paper)."""
 
-    stiffness: float = 2.0
-    smoothing: float = 0.05
-    mu: float = 0.3
+    stiffness: float = grasp.CONTACT_STIFFNESS
+    smoothing: float = grasp.CONTACT_SMOOTHING
+    mu: float = grasp.FRICTION
+    plane_stiffness: float = grasp.PLANE_STIFFNESS
 
 
 #: Grasp states of an equilibrium with an object, and their codes (predictor.atlas adds
@@ -272,14 +259,44 @@ class ContactState:
                    torch.zeros(B, dtype=torch.bool), zeros)
 
 
+def meets(problem: "GripperProblem") -> bool:
+    """Whether the fingers meet at the symmetry plane X = 0 (its penalty is on)."""
+    return problem.contact.plane_stiffness > 0
+
+
+def apart(problem: "GripperProblem") -> "GripperProblem":
+    """``problem`` without the plane X = 0's penalty: the same residual wherever no vertex
+    of the outline lies at X < 0 (the broad phase of predictor.graphs.gated)."""
+    return dataclasses.replace(problem, contact=dataclasses.replace(problem.contact, plane_stiffness=0.0))
+
+
+@dataclass
+class PlaneContact:
+    """The right finger's contact with the symmetry plane X = 0 (the left finger's mirror
+    face): points, forces (B, Kp, 2) mm, N, the Gauss points of every outline edge's part
+    at X < 0 and the force on the finger there (+X); force (B,) N their sum; overlap (B,)
+    mm, how far the outline crosses X = 0 (max(0, -min X of its vertices)). A Statics
+    rebuilt from a recorded graph (predictor.graphs.as_statics) has the figures force and
+    overlap only (points and forces None)."""
+
+    points: torch.Tensor
+    forces: torch.Tensor
+    force: torch.Tensor
+    overlap: torch.Tensor
+
+
 @dataclass
 class Statics:
     """Residual (B, J, 3) [R_Fx N, R_Fy N, R_M N·mm] per joint (global frame), the pose it
-    was evaluated at and the contact state."""
+    was evaluated at, the contact state with the object and the symmetry-plane contact
+    (None when it is off; a Statics rebuilt from a recorded graph has its figures only),
+    and the pose's ``outline_vertices`` (B, V, 2) mm where the residual built them."""
 
     residual: torch.Tensor
     pose: FingerPose
     contact: ContactState
+    plane: PlaneContact | None = None
+    vertices: torch.Tensor | None = None
 
 
 def _cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -294,15 +311,45 @@ def smooth_penetration(pen: torch.Tensor, delta: float) -> torch.Tensor:
     return torch.where(pen < delta, pen * pen / (2.0 * delta), pen - 0.5 * delta)
 
 
+def edge_quadrature(start: torch.Tensor, end: torch.Tensor, u0: torch.Tensor,
+                    u1: torch.Tensor, m: int = EDGE_GAUSS) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gauss-Legendre points (B, E·m, 2) mm and weights (B, E·m) mm of the intervals
+    [u0, u1] (B, E) of the segments start + u·(end - start) (B, E, 2): the points move with
+    the interval, so an integral over a contact's extent is smooth in the pose (fixed
+    sample points make it bumpy: a contact narrower than their spacing is seen by one or
+    two of them)."""
+    xi, w = (v.to(start.dtype) for v in gauss_rule(m))
+    u = u0[..., None] + (u1 - u0)[..., None] * xi                       # (B, E, G)
+    D = end - start
+    points = start[:, :, None] + u[..., None] * D[:, :, None]
+    weights = ((u1 - u0) * D.norm(dim=-1))[..., None] * w
+    return points.flatten(1, 2), weights.flatten(1, 2)
+
+
+def object_samples(pose: FingerPose, params: GripperParams, obstacle: Obstacle,
+                   vertices: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The finger's contact sample points (B, K, 2) mm and the length (mm) each carries:
+    with surface ``faces`` the Gauss points of each object edge's part inside the object
+    (``Obstacle.segment_interval``, ``edge_quadrature``), with ``centre_line`` the pose's
+    fixed points. vertices: the pose's ``outline_vertices``, when the caller has them."""
+    layout = params.layout
+    if layout.surface == "centre_line":
+        return pose.points, layout.contact_length.to(pose.points.dtype) * torch.ones_like(pose.points[..., 0])
+    V = outline_vertices(pose, layout) if vertices is None else vertices
+    start, end = edge_ends(V, layout, layout.object_edges)
+    return edge_quadrature(start, end, *obstacle.segment_interval(start, end))
+
+
 def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, contact: ContactParams,
-                  weight: float) -> ContactState:
+                  weight: float, vertices: torch.Tensor | None = None) -> ContactState:
     """Penalty + friction forces on the finger's sample points (module docstring).
 
-    weight: object weight W (N). Returns the ContactState (forces on the finger).
+    weight: object weight W (N); vertices: the pose's ``outline_vertices`` (optional).
+    Returns the ContactState (forces on the finger).
     """
-    layout = params.layout  # cached: part label and length of each sample point
-    part, seg, points = layout.contact_part, layout.contact_length.to(pose.points.dtype), pose.points
-    d, n = obstacle.signed_distance(points)
+    part = params.layout.contact_part
+    points, seg = object_samples(pose, params, obstacle, vertices)
+    d, n = obstacle.distance_normal(points)
     normal = contact.stiffness * smooth_penetration(-d, contact.smoothing) * seg  # (B, K) N
     t = torch.stack((-n[..., 1], n[..., 0]), -1)
     t = t * torch.where(t[..., 1:] < 0, -1.0, 1.0)  # upward tangent
@@ -314,8 +361,34 @@ def contact_loads(pose: FingerPose, params: GripperParams, obstacle: Obstacle, c
     forces = normal[..., None] * (n - used[:, None, None] * t)
     slip = (ratio.abs() > contact.mu) | ~holds
     total = normal.sum(-1)
-    return ContactState(points, forces, part, total, used.abs() * total, ratio, slip,
-                        (-d.min(-1).values).clamp_min(0.0))
+    depth = (-d.min(-1).values).clamp_min(0.0) if d.shape[-1] else torch.zeros_like(total)
+    return ContactState(points, forces, part, total, used.abs() * total, ratio, slip, depth)
+
+
+def plane_overlap(vertices: torch.Tensor) -> torch.Tensor:
+    """How far (B,) mm the outline of ``outline_vertices`` crosses X = 0: its edges are
+    straight, so the deepest point is a vertex."""
+    return (-vertices[..., 0].amin(-1)).clamp_min(0.0)
+
+
+def plane_contact(pose: FingerPose, params: GripperParams, contact: ContactParams,
+                  vertices: torch.Tensor | None = None) -> PlaneContact:
+    """The frictionless penalty of the symmetry plane X = 0 on the right finger's outline
+    (module docstring): on every inner and end edge (ChainLayout.plane_edges) the interval
+    at X < 0 (X is linear along it), its PLANE_GAUSS Gauss points q_k with lengths w_k,
+    force k_p·s(-X_k)·w_k along +X. The overlap is over every vertex."""
+    layout = params.layout
+    V = outline_vertices(pose, layout) if vertices is None else vertices
+    start, end = edge_ends(V, layout, layout.plane_edges)
+    xa, xb = start[..., 0], end[..., 0]
+    den = xa - xb
+    cross = xa / torch.where(den == 0, 1.0, den)       # where X = 0 along the edge (when it changes sign)
+    lo = torch.where(xa < 0, 0.0, torch.where(xb < 0, cross, _EMPTY))
+    hi = torch.where(xb < 0, 1.0, torch.where(xa < 0, cross, -_EMPTY))
+    points, w = edge_quadrature(start, end, *clip_interval(lo, hi), PLANE_GAUSS)
+    normal = contact.plane_stiffness * smooth_penetration(-points[..., 0], contact.smoothing) * w
+    forces = torch.stack((normal, torch.zeros_like(normal)), -1)
+    return PlaneContact(points, forces, normal.sum(-1), plane_overlap(V))
 
 
 @dataclass(frozen=True)
@@ -359,9 +432,11 @@ class GripperProblem:
         batched throughput; the solvers work in float64)."""
         return dataclasses.replace(self, joint=self.joint.astype(dtype))
 
-    def pose(self, pressures: torch.Tensor, tau: torch.Tensor) -> FingerPose:
-        """Forward kinematics of the right finger: pressures (B, J) MPa, tau (B, J, 3)."""
-        return finger_pose(self.joint, self.params, pressures, tau)
+    def pose(self, pressures: torch.Tensor, tau: torch.Tensor, face_points: bool = True) -> FingerPose:
+        """Forward kinematics of the right finger: pressures (B, J) MPa, tau (B, J, 3)
+        (finger_pose; ``face_points`` False: without the outline's sample points, for a
+        caller that builds the outline itself)."""
+        return finger_pose(self.joint, self.params, pressures, tau, face_points)
 
     def residual(self, pressures: torch.Tensor, tau: torch.Tensor) -> Statics:
         """Equation-1 residual of the right finger.
@@ -369,7 +444,7 @@ class GripperProblem:
         pressures: (B, J) MPa; tau: (B, J, 3) [F1 N, F2 N, M N·mm] per joint (joint frames).
         Returns Statics with residual (B, J, 3) in N, N, N·mm.
         """
-        pose = self.pose(pressures, tau)
+        pose = finger_pose(self.joint, self.params, pressures, tau, face_points=False)
         B, dt, params = tau.shape[0], tau.dtype, self.params
         layout = params.layout
         g = 1.0 if self.gravity else 0.0
@@ -381,23 +456,32 @@ class GripperProblem:
                      (joints[:, :, 0], joints[:, :, -1]))
         w_pts = torch.cat((pose.segments.mean(2),) + at_joints, 1).index_select(1, layout.weight_source)
         w_frc = (g * layout.weights.to(dt)[:, None] * down).expand(B, -1, 2)
+        pts, frc, distal = [w_pts], [w_frc], [layout.weight_mask]
+        meet = self.contact.plane_stiffness > 0
+        V = outline_vertices(pose, layout) if meet or layout.surface == "faces" else None
         if self.obstacle is None:
             contact = ContactState.none(B, dt)
-            pts, frc, distal = w_pts, w_frc, layout.weight_mask
+            if layout.surface == "faces":
+                pose.points = edge_points(V, layout)   # finger_pose's, from the outline built here
         else:
-            contact = contact_loads(pose, params, self.obstacle, self.contact, g * params.object_weight)
-            pts, frc = torch.cat((w_pts, contact.points), 1), torch.cat((w_frc, contact.forces), 1)
-            distal = layout.full_mask
+            contact = contact_loads(pose, params, self.obstacle, self.contact, g * params.object_weight, V)
+            pts, frc, distal = pts + [contact.points], frc + [contact.forces], distal + [layout.contact_mask]
+            pose = dataclasses.replace(pose, points=contact.points)   # where the object's loads act
+        plane = plane_contact(pose, params, self.contact, V) if meet else None
+        if plane is not None:
+            pts, frc, distal = pts + [plane.points], frc + [plane.forces], distal + [layout.plane_mask]
+        pts, frc, distal = torch.cat(pts, 1), torch.cat(frc, 1), torch.cat(distal, 1).to(dt)
         ends = joints[:, :, -1]  # (B, J, 2) distal ends r_10
-        distal = distal.to(dt)
         # Sums over the K load points distal to each joint: F_i = sum_k d_ik f_k and
         # M_i = sum_k d_ik (p_k - e_i) x f_k = sum_k d_ik (p_k x f_k) - e_i x F_i: no
-        # (B, J, K, 2) moment arms are formed (the same sums to ~1e-15 N·mm).
-        f_sum = (distal[:, :, None] * frc[:, None]).sum(2)
-        m_sum = (distal * _cross(pts, frc)[:, None]).sum(-1) - _cross(ends, f_sum)
+        # (B, J, K, 2) moment arms are formed (the same sums to ~1e-15 N·mm), and the
+        # sums over the K loads are one (J, K) x (K, 3B) product.
+        sums = torch.einsum("jk,bkc->bjc", distal, torch.cat((frc, _cross(pts, frc)[..., None]), -1))
+        f_sum = sums[..., :2]
+        m_sum = sums[..., 2] - _cross(ends, f_sum)
         g_force = rot(pose.theta, tau[..., :2])
         res = torch.cat((g_force - f_sum, (tau[..., 2] - m_sum)[..., None]), -1)
-        return Statics(res, pose, contact)
+        return Statics(res, pose, contact, plane, V)
 
 
 #: A joint's reach (its chord, mm) is bounded by this multiple of its length: an

@@ -6,7 +6,8 @@
 Data flow: the FEM cases of fem.finger_cases (one JSON and one render per case: tip,
 tip angle, every joint's end and chord angle, global mm/deg; the FEM's solve time) ->
 for each case and each predictor variant, one single-query equilibrium solve
-(predictor.solve, Newton) of the same finger file, pressures and gravity -> errors
+(predictor.solve, Newton) of the same finger file, pressures, gravity and plane X = 0
+(the mirror finger's; only for a case solved with it, fem.finger_cases --plane) -> errors
 against the FEM and wall times -> ``finger.json`` and one overlay figure per case
 (the FEM render coloured by |u|, the predictors' centre lines drawn over it).
 
@@ -53,7 +54,7 @@ from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperP
 from predictor.joint import load_joint
 from predictor.progress import set_quiet
 from predictor.solve import SolverOptions, solve
-from predictor.statics import GripperProblem
+from predictor.statics import GripperProblem, apart
 
 REPEATS = 5
 #: The discretisation of the committed finger cases, results/validation/finger_fem
@@ -81,11 +82,21 @@ def variant_key(method: str, kinematics: str, joint_weight: str) -> str:
     return f"{method}_{kinematics}" + (f"_{joint_weight}" if method == "predictor" else "")
 
 
+def case_plane(case: dict) -> bool:
+    """Whether a fem.finger_cases record was solved with the plane X = 0 where the mirror
+    fingers meet (its settings' ``plane``; absent: a single finger without it)."""
+    return bool(case.get("settings", {}).get("plane", False))
+
+
 def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_weight: str):
-    """One predictor variant on one FEM case: (entry dict, pose)."""
+    """One predictor variant on one FEM case: (entry dict, pose). The predictor meets the
+    plane X = 0 only where the FEM case did (``case_plane``): the committed cases are one
+    finger alone, and at (0.2, 0.2) MPa with gravity it crosses X = 0."""
     params = GripperParams(finger=finger, kinematics=kinematics, joint_weight=joint_weight)
     gravity = bool(case["gravity"]) and method == "predictor"
     problem = GripperProblem(joint, params, gravity=gravity)
+    if not case_plane(case):
+        problem = apart(problem)
     pressures = torch.tensor([case["pressures_MPa"]], dtype=torch.float64)
     times = []
     for _ in range(REPEATS):

@@ -27,12 +27,15 @@ from predictor.gripper import GripperParams, default_finger, rot
 from predictor.joint import AnalyticJoint
 from predictor.observations import ObservationError, observations_to_json, parse_observations
 from predictor.solve import solve
-from predictor.statics import GripperProblem, scaled
+from predictor.statics import ContactParams, GripperProblem, scaled
 
 from test_predictor_common import ROOT
 
 torch.set_num_threads(1)
 JOINT = AnalyticJoint()
+#: The calibration models one finger's gravity gestures (docs/calibration.md §8): the finger
+#: alone, without the symmetry plane X = 0 where the gripper's two fingers meet.
+ALONE = ContactParams(plane_stiffness=0.0)
 PAPER = default_finger()
 P = ((0.0, 0.0), (0.1, 0.0), (0.0, 0.1), (-0.1, 0.05), (0.05, -0.1), (0.12, 0.12))
 TRUTH = {"gain_J1": 1.08, "gain_J2": 0.93, "offset_J1": 0.008, "offset_J2": -0.006, "stiffness_J1": 1.12,
@@ -53,17 +56,17 @@ def _theta(model, B, **values):
 
 def test_residual_is_the_statics_and_a_turned_mount_turns_gravity(model):
     """At the nominal parameters the calibration's residual equals GripperProblem's scaled
-    residual at random tau (<= 1e-15); with the mount turned by 3 deg it equals the
+    residual of the finger alone (ALONE) at random tau (<= 1e-15); with the mount turned by 3 deg it equals the
     residual of a finger file with base_angle + 3 deg turned back by 3 deg (moments
     unchanged), to 1e-12."""
     g = torch.Generator().manual_seed(0)
     p = torch.tensor(P, dtype=torch.float64)
     x = 0.3 * torch.randn(len(P), 6, generator=g, dtype=torch.float64)
     ones = torch.ones(len(P), dtype=torch.float64)
-    ref = scaled(GripperProblem(JOINT, GripperParams(PAPER)).residual(p, x.reshape(-1, 2, 3)).residual)
+    ref = scaled(GripperProblem(JOINT, GripperParams(PAPER), contact=ALONE).residual(p, x.reshape(-1, 2, 3)).residual)
     assert float((model.residual(x, _theta(model, len(P)), p, ones) - ref).abs().max()) <= 1e-15
     turned = dataclasses.replace(PAPER, base_angle=PAPER.base_angle + math.radians(3.0))
-    ref = scaled(GripperProblem(JOINT, GripperParams(turned)).residual(p, x.reshape(-1, 2, 3)).residual)
+    ref = scaled(GripperProblem(JOINT, GripperParams(turned), contact=ALONE).residual(p, x.reshape(-1, 2, 3)).residual)
     ours = model.residual(x, _theta(model, len(P), mount_deg=3.0), p, ones).reshape(-1, 2, 3)
     back = torch.cat((rot(torch.tensor(math.radians(3.0), dtype=torch.float64), ours[..., :2]), ours[..., 2:]), -1)
     assert float((back.reshape(len(P), -1) - ref).abs().max()) <= 1e-12
@@ -84,17 +87,17 @@ def test_scaled_joint_is_a_stiffer_beam():
 
 
 def test_equilibrium_is_the_solvers(model):
-    """Newton on the calibration's residual lands on predictor.solve's gravity gesture
-    (tau within 1e-6 N, N·mm: the solver stops at 1e-7 N, 1e-5 N·mm), with and without gravity."""
+    """Newton on the calibration's residual lands on predictor.solve's gravity gesture of
+    the finger alone (tau within 1e-6 N, N·mm: the solver stops at 1e-7 N, 1e-5 N·mm), with and without gravity."""
     obs = synthetic_observations(model, {}, P)
     d = design(obs, PAPER)
     x, ok = equilibrium(model, d, _theta(model, len(P)))
     assert bool(ok.all())
-    ref = solve(GripperProblem(JOINT, GripperParams(PAPER)), d.pressures)
+    ref = solve(GripperProblem(JOINT, GripperParams(PAPER), contact=ALONE), d.pressures)
     assert float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6
     d.gravity = torch.zeros(len(P), dtype=torch.float64)
     x, ok = equilibrium(model, d, _theta(model, len(P)))
-    ref = solve(GripperProblem(JOINT, GripperParams(PAPER), gravity=False), d.pressures)
+    ref = solve(GripperProblem(JOINT, GripperParams(PAPER), contact=ALONE, gravity=False), d.pressures)
     assert bool(ok.all()) and float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6
 
 
@@ -186,7 +189,8 @@ def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
     """The CLI (a subprocess, --json) fits a heavier tip and a turned, shifted mount to
     observations of that truth (frame untouched), exits 0 with the issue's keys, and
     writes a finger file: predictor.gesture --finger reads it and its tip at a new
-    pressure pair equals the truth's prediction (1e-6 mm); the file records the
+    pressure pair, where the fingers do not meet at X = 0 (the calibration models the
+    finger alone), equals the truth's prediction (1e-6 mm); the file records the
     measurements' sha256. A bad --fit name exits 2 with one line."""
     truth = {"weight_4": 0.075, "mount_deg": 2.0, "mount_x": 1.5}
     obs = synthetic_observations(model, truth, P)
@@ -202,11 +206,13 @@ def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
     finger = load_finger(out)
     assert finger.calibration["observations_sha256"] == parse_observations(path.read_text(), PAPER).sha256
     g = subprocess.run([sys.executable, "-m", "predictor.gesture", "--finger", str(out), "--model", "analytic",
-                        "--p1", "0.07", "--p2", "-0.03", "--json"], cwd=ROOT, capture_output=True, text=True,
+                        "--p1", "-0.03", "--p2", "0.07", "--json"], cwd=ROOT, capture_output=True, text=True,
                        timeout=120)
     assert g.returncode == 0, g.stderr
-    one = synthetic_observations(model, truth, ((0.07, -0.03),))
-    assert np.allclose(json.loads(g.stdout)["tip"], one.items[0].tip[:2], atol=1e-6, rtol=0)
+    one = synthetic_observations(model, truth, ((-0.03, 0.07),))
+    gesture = json.loads(g.stdout)
+    assert gesture["plane_force_N"] == 0.0
+    assert np.allclose(gesture["tip"], one.items[0].tip[:2], atol=1e-6, rtol=0)
     bad = subprocess.run(run + ["--fit", "gain,elasticity", "--out", str(tmp_path / "b.toml")], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "elasticity" in bad.stderr
@@ -233,12 +239,13 @@ def test_api_calibrate_with_a_prior(tmp_path, model):
 
 def test_tools_apply_the_joint_calibration_keys(model):
     """A finger file with a joint's pressure_gain = 1.2 gives GripperProblem the gesture of
-    the calibration's model at gain 1.2 (tau within 1e-6 N, N·mm: the solver's tolerances)."""
+    the calibration's model at gain 1.2 (tau within 1e-6 N, N·mm: the solver's tolerances),
+    the finger alone (at (0.1, 0.05) MPa the analytic fingers meet at X = 0)."""
     text = (ROOT / "contract/fingers/paper.toml").read_text().replace(
         'weight = 0.09\ncontact = false', 'weight = 0.09\ncontact = false\npressure_gain = 1.2', 1)
     finger = parse_finger(text, "gain.toml")
     p = torch.tensor([[0.1, 0.05]], dtype=torch.float64)
-    ref = solve(GripperProblem(JOINT, GripperParams(finger)), p)
+    ref = solve(GripperProblem(JOINT, GripperParams(finger), contact=ALONE), p)
     obs = synthetic_observations(model, {}, ((0.1, 0.05),))
     x, _ = equilibrium(model, design(obs, PAPER), _theta(model, 1, gain_J1=1.2))
     assert float((x - ref.tau.reshape(1, -1)).abs().max()) <= 1e-6

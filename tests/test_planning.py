@@ -5,6 +5,7 @@ Fast: the committed surrogate, small grids over the holding corner of the pressu
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -19,6 +20,7 @@ import torch
 from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify
+from predictor.inverse import where_it_touches
 from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
 from predictor.solve import solve
 
@@ -156,6 +158,19 @@ def test_unreachable_target_is_infeasible_with_the_closest_value(free):
     assert ans.tip_error_mm > 100.0  # the finger is ~215 mm long
 
 
+def test_closest_tip_pressed_on_the_plane_is_the_stiff_continuations(free):
+    """tip:9.04,-214.93,-88.37 (the tip and its angle behind the other finger): the
+    closest gesture presses on the plane X = 0; the search's continuation steps there go
+    through softer planes (ramp.homotopy) and land where the stiff plane's cut-back
+    continuation did (frozen: (0.0785113123, -0.0681637947) MPa, 2.02159224 mm,
+    results/predictor/inverse.json before the homotopy) within 1e-6 MPa and 1e-5 mm."""
+    ans = inverse_pressures(free, goal="tip:9.04,-214.93,-88.37")
+    assert ans.status == "infeasible" and ans.verified
+    assert ans.pressures == pytest.approx((0.07851131233192438, -0.06816379473653308), abs=1e-6)
+    assert ans.tip_error_mm == pytest.approx(2.0215922370790325, abs=1e-5)
+    assert where_it_touches(ans)["plane_force_N"] > 0
+
+
 def test_inverse_hold_beats_the_atlas(circle, atlas):
     ans = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
     assert ans.status == "feasible" and ans.state == "holds" and ans.verified
@@ -165,6 +180,27 @@ def test_inverse_hold_beats_the_atlas(circle, atlas):
     assert classify(check, circle.problem.contact.mu)[0][0] == HOLDS
     assert len(ans.stencil_states) == 9
     json.loads(dumps(ans.summary()))
+    # Where the answer touches (make inverse's cases): its verifying gesture's places, the
+    # ramp solve at the answer's pressures; a hold touches, the finger within 0.1 mm of X = 0.
+    where = where_it_touches(ans)
+    assert where == check.where_it_touches(0)
+    assert where["contact_part"] is not None and where["plane_overlap_mm"] <= 0.1
+    assert sum(c["normal_force_N"] for c in where["contacts"]) == pytest.approx(ans.normal_N, rel=1e-9)
+    assert set(where_it_touches(dataclasses.replace(ans, gesture=None)).values()) == {None}
+
+
+def test_hold_search_with_jacobians_in_turn_is_the_exact_ones(circle, atlas, monkeypatch):
+    """With an object the search's continuation steps try the difference Jacobian first
+    and the exact one where it fails (ramp.attempts, in_turn); the hold answer is the one
+    of the exact Jacobian alone (pressures within 1e-9 MPa, friction use within 1e-9)."""
+    import predictor.inversion as inversion
+
+    fast = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
+    monkeypatch.setattr(inversion, "attempts", lambda problem, options: ("exact",))
+    exact = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
+    assert fast.status == exact.status == "feasible"
+    assert fast.pressures == pytest.approx(exact.pressures, abs=1e-9)
+    assert fast.friction_use == pytest.approx(exact.friction_use, abs=1e-9)
 
 
 def test_bad_placement_and_cli_exit_codes(tmp_path):

@@ -29,7 +29,7 @@ from predictor.inversion import parse_goal
 from predictor.joint import AnalyticJoint, load_joint
 from predictor.problem import load_problem
 from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import GripperProblem, Obstacle, finger_reach, out_of_reach
+from predictor.statics import ContactParams, GripperProblem, Obstacle, finger_reach, out_of_reach
 
 ROOT = Path(__file__).resolve().parents[1]
 SURROGATE = ROOT / "results/surrogate/improved.pt"
@@ -116,8 +116,11 @@ def test_api_refuses_what_the_cli_refuses(kwargs, needle):
 
 def test_finger_reach_bounds_every_point():
     """finger_reach is an upper bound: over the pressure box under gravity no pose point
-    (joints' anchors, parts, contact samples, tip) lies farther from the base mount."""
-    problem = GripperProblem(AnalyticJoint())
+    (joints' anchors, parts, contact samples, tip) lies farther from the base mount. The
+    fingers pass through each other (plane_stiffness = 0), so that the most curled poses
+    are in the box too: with the plane X = 0, the analytic joint's joint 1 reaches 99.8 of
+    the input box's 100 N·mm at (0.3, 0.29) MPa, and at (0.3, 0.3) no equilibrium is found."""
+    problem = GripperProblem(AnalyticJoint(), contact=ContactParams(plane_stiffness=0.0))
     p = torch.cartesian_prod(t([-0.3, -0.1, 0.1, 0.3]), t([-0.3, 0.0, 0.3]))
     res = solve(problem, p)
     assert bool(res.converged.all())
@@ -163,17 +166,17 @@ def test_not_converged_result_has_null_figures():
 def test_state_and_friction_use_follow_the_contact_law():
     """friction_use = |f|/(mu N) = |lambda|/mu, recomputed from the forces on the finger:
     the tangential share of the contact forces over mu times their normal share; a grasp
-    that holds at mu = 0.3 slips at mu = 0.1 (its use then > 1: 0.85 and 2.76 at (0.1, 0.3) MPa on
-    the analytic joint), and mu and the object's
+    that holds at mu = 0.3 slips at mu = 0.1 (its use then > 1: 0.55 and 1.66 at (0.1, 0.15) MPa
+    on the analytic joint, the tip's inner face on the circle), and mu and the object's
     weight are the ones asked for (API kwargs), the weight scaled out without gravity."""
     joint = AnalyticJoint()
     hold = load_problem("analytic", "circle", joint=joint)
-    p = t([[0.1, 0.3]])
+    p = t([[0.1, 0.15]])
     res = solve(hold, p)
     s = res.summary(0)
     assert s["state"] == "holds" and s["slip"] is False and 0 < s["friction_use"] <= 1
     st = hold.residual(res.pressures, res.tau)
-    d, n = hold.obstacle.signed_distance(st.contact.points)
+    d, n = hold.obstacle.distance_normal(st.contact.points)
     f = st.contact.forces[0]
     normal = (f * n[0]).sum(-1)                       # N_k >= 0 along the outward normal
     tangent = f - normal[:, None] * n[0]
@@ -187,9 +190,11 @@ def test_state_and_friction_use_follow_the_contact_law():
 
 
 def test_no_contact_gesture_has_no_friction_sentinel():
-    """predictor.gesture --p1 -0.02 --p2 0 --object circle: nothing touches, so state
-    no_contact with friction_use and slip null (it printed slip true and 1000.0)."""
-    g = solve_gesture(load_gripper("analytic", "circle"), -0.02, 0.0)
+    """predictor.gesture --p1 -0.02 --p2 -0.02 --object circle: nothing touches, so state
+    no_contact with friction_use and slip null (it printed slip true and 1000.0). (At
+    (-0.02, 0) MPa the tip's inner face, 10 mm nearer the circle than its centre line,
+    touches it.)"""
+    g = solve_gesture(load_gripper("analytic", "circle"), -0.02, -0.02)
     s = g.summary()
     assert g.state == "no_contact" and s["state"] == "no_contact" and s["contact_force_N"] == 0.0
     assert s["friction_use"] is None and s["slip"] is None and s["first_contact_MPa"] is None
@@ -223,9 +228,10 @@ def test_tip_angle_goal_is_wrapped():
 
 
 def test_hold_of_an_object_nothing_touches_says_so():
-    """A 1 mm circle between the fingers: every start converged and nothing touches it,
-    which is what the answer says."""
-    g = load_gripper("analytic", "circle:r=1")
+    """A 1 mm circle 24 mm below the straight finger's reach (about 216 mm): every start
+    converged and nothing touches it, which is what the answer says. (Between the fingers,
+    at the default Y = -195 mm, the inner faces meet at X = 0 and squeeze it: it holds.)"""
+    g = load_gripper("analytic", "circle:r=1,y=-240")
     with pytest.raises(ValueError, match="nothing touches the object at any pressure of the box"):
         inverse_pressures(g, goal="hold")
 
@@ -275,8 +281,9 @@ def test_heartbeat_on_stderr_and_quiet(capsys, monkeypatch):
 
 
 def test_gesture_figure_has_legend_and_joint_title():
-    """A gesture panel has a legend naming joints, rigid parts, the unloaded shape and the
-    object, and its title names the joint model and the state; a non-converged panel
+    """A gesture panel has a legend naming the joints' outer bands, rigid parts, the
+    unloaded shape, the plane X = 0 where the fingers meet, the object and its contact
+    points, and its title names the joint model and the state; a non-converged panel
     says so without figures."""
     import matplotlib.pyplot as plt
 
@@ -289,7 +296,8 @@ def test_gesture_figure_has_legend_and_joint_title():
     draw_gesture(axes[0], res, 0, problem)
     draw_gesture(axes[1], bad, 0, problem)
     labels = [x.get_text() for x in axes[0].get_legend().get_texts()]
-    assert labels == ["joints", "rigid parts", "unloaded (tau = 0)", "object"]
+    assert labels == ["joints (outer band)", "rigid parts", "unloaded (tau = 0)", "X = 0 (fingers meet)", "object",
+                      "contact"]
     title = axes[0].get_title()
     assert "analytic" in title and "holds" in title and "N=" in title
     assert "NOT CONVERGED" in axes[1].get_title() and "N=" not in axes[1].get_title()

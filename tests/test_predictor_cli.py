@@ -214,7 +214,7 @@ def test_finger_of_a_30mm_joint_has_its_own_chain(tmp_path):
     np.testing.assert_allclose(hanging.tau[0, :, 0].numpy(), loads, rtol=0, atol=1e-9)
     stretch = sum(30.0 * f / 300.0 for f in loads)
     np.testing.assert_allclose(hanging.pose.tip_end[0].numpy(), [25.0, -275.0 - stretch], rtol=0, atol=1e-6)
-    layout = chain_layout(finger, "split")
+    layout = chain_layout(finger, "split", "centre_line")   # the anchors of the paper's centre-line contact
     for k in finger.joints:
         np.testing.assert_array_equal(layout.contact_length[layout.contact_part == k].numpy(), [3.0] * 10)
     with pytest.raises(ValueError) as err:

@@ -16,25 +16,35 @@ import pytest
 import torch
 
 from contract.spec import INPUT_BOX, phi_end
-from predictor.gripper import GripperParams, default_finger, finger_pose
+from predictor.gripper import EDGE_GAUSS, GripperParams, default_finger, finger_pose
 from predictor.joint import JointModel, load_joint
 from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import GripperProblem, Obstacle, parse_object
+from predictor.statics import ContactParams, GripperProblem, Obstacle, parse_object
 
 from test_predictor_common import DT, PAPER_CHAIN, REFERENCE, ROOT, SURROGATE, THREE_FINGER, THREE_P, J, t
 
 torch.set_num_threads(1)
+#: The chain tests run the paper's model, in which the two fingers pass through each
+#: other (the analytic stand-in meets the symmetry plane X = 0 from 0.02 MPa, and the
+#: plane breaks the finger's mirror symmetry about its own axis); test_predictor_faces.py
+#: tests the plane.
+NO_PLANE = ContactParams(plane_stiffness=0.0)
+#: The predictor before issue 36: contact sampled on the parts' centre lines, no plane.
+CENTRE_LINE = dataclasses.replace(PAPER_CHAIN, surface="centre_line")
 
 
 def _reference_problem(joint, case: str) -> GripperProblem:
-    return {"gravity": GripperProblem(joint, PAPER_CHAIN), "free": GripperProblem(joint, PAPER_CHAIN, gravity=False),
-            "circle": GripperProblem(joint, PAPER_CHAIN, obstacle=Obstacle(), approach=APPROACH)}[case]
+    return {"gravity": GripperProblem(joint, CENTRE_LINE, contact=NO_PLANE),
+            "free": GripperProblem(joint, CENTRE_LINE, gravity=False, contact=NO_PLANE),
+            "circle": GripperProblem(joint, CENTRE_LINE, obstacle=Obstacle(), approach=APPROACH,
+                                     contact=NO_PLANE)}[case]
 
 
 @pytest.mark.parametrize("model", ["analytic", "results/surrogate/paper.pt"])
 def test_paper_finger_reproduces_the_frozen_predictor(model):
     """The paper's finger (contract/fingers/paper.toml) through the generic chain, with tangent
-    kinematics and lumped weights, reproduces the predictor as it was before issue 14 (its
+    kinematics, lumped weights, contact on the centre lines and no symmetry plane (the
+    paper's model, kept as options), reproduces the predictor as it was before issue 14 (its
     hard-wired joint-link-joint-tip chain, frozen at commit bbc0df4 into
     tests/data/predictor_reference.json by tests/data/freeze_predictor_reference.py), on
     the analytic joint and on the committed paper surrogate: gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1) and one
@@ -76,10 +86,14 @@ def test_committed_gestures_unchanged():
     """Every case of the committed results/predictor/gestures.json (make gestures: gravity,
     free and the six grasps), recomputed by today's predictor on the joint it names, has
     the same convergence, iterations and slip flag, and tau, tip (mm) and tip angle (deg)
-    within 1e-9 of the committed figures."""
+    within 1e-9 of the committed figures (skipped for a file from before issue 36's
+    contact model, which lacks its plane_overlap_mm)."""
     from predictor.figures import GRASPS
 
     doc = json.loads(GESTURES.read_text())
+    if "plane_overlap_mm" not in doc["gravity"][0]:
+        pytest.skip("gestures.json predates the contact on the faces and the symmetry plane (issue 36): "
+                    "regenerate it (make gestures)")
     joint = load_joint(str(SURROGATE))
     if joint.name != doc["joint"]:
         pytest.skip(f"gestures.json is of joint {doc['joint']}, the committed surrogate is {joint.name}")
@@ -138,7 +152,7 @@ def test_three_joint_finger_free_matches_closed_form_chain(kinematics):
     1e-9 mm / 1e-12 rad, for tangent and cap kinematics; the per-joint exit angles are
     theta_i + the closed-form joint turn."""
     params = GripperParams(THREE_FINGER, kinematics=kinematics)
-    res = solve(GripperProblem(J, params, gravity=False), THREE_P)
+    res = solve(GripperProblem(J, params, gravity=False, contact=NO_PLANE), THREE_P)
     assert bool(res.converged.all()) and res.tau.shape == (3, 3, 3)
     assert float(res.tau.abs().max()) == 0.0 and int(res.iterations.max()) == 0
     for i, p in enumerate(THREE_P.tolist()):
@@ -148,32 +162,36 @@ def test_three_joint_finger_free_matches_closed_form_chain(kinematics):
         turn = -333.0 * np.array(p) / 3000.0 * 45.45 * (1.0 if kinematics == "cap" else 0.95)
         np.testing.assert_allclose((res.pose.phi[i] - res.pose.theta[i]).numpy(), turn, rtol=0, atol=1e-12)
     assert res.pose.joints.shape == (3, 3, 11, 2) and res.pose.segments.shape == (3, 3, 2, 2)
-    assert res.pose.points.shape == (3, 8 + 10 + 7 + 10 + 45, 2)
+    assert res.pose.points.shape == (3, (2 + 20 + 2 + 20 + 3) * EDGE_GAUSS, 2)   # the object edges' Gauss points
     with pytest.raises(ValueError, match="another chain"):
         res.pose.link  # noqa: B018 (the paper's names do not apply to this chain)
 
 
 def _three_joint_checks(joint, kinematics="tangent"):
     params = GripperParams(THREE_FINGER, kinematics=kinematics)
-    grav = solve(GripperProblem(joint, params), THREE_P)
+    grav = solve(GripperProblem(joint, params, contact=NO_PLANE), THREE_P)
     assert bool(grav.converged.all())
     assert float(grav.residual_force_mN.max()) <= 1e-4 and float(grav.residual_moment_Nmm.max()) <= 1e-5
     assert float(grav.tau[..., :2].abs().max()) <= 3 and float(grav.tau[..., 2].abs().max()) <= 100
-    r = GripperProblem(joint, params).residual(THREE_P, grav.tau).residual  # recomputed, not the solver's figure
+    # recomputed, not the solver's figure
+    r = GripperProblem(joint, params, contact=NO_PLANE).residual(THREE_P, grav.tau).residual
     assert float(r[..., :2].norm(dim=-1).max()) * 1e3 <= 1e-4 and float(r[..., 2].abs().max()) <= 1e-5
     # mirror: P -> -P mirrors the finger about its own axis X = base_gap/2 (angles a -> -pi - a)
     axis = 0.5 * THREE_FINGER.base_gap
     for gravity, tol in ((False, 1e-9), (True, 1e-6)):
-        prob = GripperProblem(joint, params, gravity=gravity)
+        prob = GripperProblem(joint, params, gravity=gravity, contact=NO_PLANE)
         a, b = solve(prob, THREE_P), solve(prob, -THREE_P)
         assert bool(a.converged.all()) and bool(b.converged.all())
         if not gravity:
             assert float(a.tau.abs().max()) == 0.0
         np.testing.assert_allclose(b.tau.numpy(), (a.tau * t([1.0, -1.0, -1.0])).numpy(), rtol=0, atol=tol)
-        for name in ("joints", "segments", "points"):
+        for name in ("joints", "segments"):
             va, vb = getattr(a.pose, name), getattr(b.pose, name)
             np.testing.assert_allclose(vb[..., 0].numpy(), (2 * axis - va[..., 0]).numpy(), rtol=0, atol=tol)
             np.testing.assert_allclose(vb[..., 1].numpy(), va[..., 1].numpy(), rtol=0, atol=tol)
+        # the faces' sample points: the mirror swaps each part's inner and outer faces
+        mirrored = b.pose.points * t([-1.0, 1.0]) + t([2 * axis, 0.0])
+        assert float((mirrored[:, :, None] - a.pose.points[:, None]).norm(dim=-1).amin(-1).max()) <= tol
         for name in ("theta", "phi"):
             np.testing.assert_allclose(getattr(b.pose, name).numpy(), (-math.pi - getattr(a.pose, name)).numpy(),
                                        rtol=0, atol=tol)
@@ -257,10 +275,10 @@ def test_cap_kinematics_tip_gradient_matches_finite_differences():
 
         assert torch.autograd.gradcheck(tip, (tau.clone().requires_grad_(True), p.clone().requires_grad_(True)),
                                         eps=1e-6, atol=1e-5, rtol=1e-4)
-        problem = GripperProblem(J, params)
+        problem = GripperProblem(J, params, contact=NO_PLANE)
         assert torch.autograd.gradcheck(lambda x: problem.residual(p, x).residual, (tau.clone().requires_grad_(True),),
                                         eps=1e-6, atol=1e-5, rtol=1e-4)
-    res = solve(GripperProblem(J, GripperParams(kinematics="cap")), t([[-0.1, 0.1], [0.1, -0.1]]))
+    res = solve(GripperProblem(J, GripperParams(kinematics="cap"), contact=NO_PLANE), t([[-0.1, 0.1], [0.1, -0.1]]))
     assert bool(res.converged.all()) and float(res.residual_force_mN.max()) <= 1e-4
 
 
@@ -314,7 +332,7 @@ def test_split_joint_weight_moves_exactly_half(finger):
     zero = t([[0.0] * finger.n_joints])
     taus = {}
     for jw in ("lumped", "split"):
-        res = solve(GripperProblem(J, GripperParams(finger, joint_weight=jw)), zero)
+        res = solve(GripperProblem(J, GripperParams(finger, joint_weight=jw), contact=NO_PLANE), zero)
         assert bool(res.converged[0])
         taus[jw] = res.tau[0].numpy()
         np.testing.assert_allclose(taus[jw][:, 1:], 0.0, rtol=0, atol=1e-10)
@@ -336,8 +354,8 @@ def test_split_joint_weight_moment_arms():
     force balance only (zero arm)."""
     p = t([[0.15, -0.1]])
     tau = t([[[0.2, 0.05, -10.0], [0.06, -0.02, 2.0]]])
-    lumped = GripperProblem(J, GripperParams(joint_weight="lumped")).residual(p, tau)
-    split = GripperProblem(J, GripperParams(joint_weight="split")).residual(p, tau)
+    lumped = GripperProblem(J, GripperParams(joint_weight="lumped"), contact=NO_PLANE).residual(p, tau)
+    split = GripperProblem(J, GripperParams(joint_weight="split"), contact=NO_PLANE).residual(p, tau)
     pose = lumped.pose
     ends = pose.joints[0, :, -1].numpy()
     expect = np.zeros((2, 3))
@@ -358,12 +376,14 @@ def test_split_joint_weight_moment_arms():
 
 
 def test_gripper_options_are_checked():
-    """Unknown kinematics or joint-weight options are one-line ValueErrors, as are an
+    """Unknown kinematics, joint-weight or contact-surface options are one-line ValueErrors, as are an
     approach of the wrong length and a pressure count other than the finger's joints."""
     with pytest.raises(ValueError, match="kinematics 'chord': use tangent or cap"):
         GripperParams(kinematics="chord")
     with pytest.raises(ValueError, match="joint weight 'half': use lumped or split"):
         GripperParams(joint_weight="half")
+    with pytest.raises(ValueError, match="contact surface 'skin': use faces or centre_line"):
+        GripperParams(surface="skin")
     with pytest.raises(ValueError, match=r"approach \(-0.15, 0.0\) MPa: give 3 pressures"):
         GripperProblem(J, GripperParams(THREE_FINGER), obstacle=Obstacle(), approach=(-0.15, 0.0))
     with pytest.raises(ValueError, match="2 pressures given for finger 'three' of 3 joints"):

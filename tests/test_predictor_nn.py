@@ -157,12 +157,57 @@ def test_nn_predictor_cli_matches_solver():
 
 
 @pytest.mark.skipif(not (SURROGATE.is_file() and GRAVITY_NN.is_file()), reason="no committed surrogate and NN")
+def test_gravity_nn_learns_one_finger_and_the_gripper_adds_the_plane():
+    """A gravity network learns one finger alone (NNConfig.training_problem: the plane
+    X = 0 off), a contact network the grasp with the plane. The committed gravity NN on
+    400 pressures of its domain: raw residual on one finger within the NN bound (mean 2 mN,
+    1.2 N·mm); on the gripper the residual is the same (1e-12) where its outline stays at
+    X >= 0, and exactly there the raw delivered path answers; where it crosses, the polish
+    (Newton steps, the LM where the check fails) finishes on the gripper's equilibrium, the
+    solver's (tau within 1e-5 N, N·mm), the outline within 0.1 mm of X = 0."""
+    from predictor.gripper import outline_vertices
+    from predictor.networks import VARIANTS, sample_pressures
+    from predictor.nn_answer import predict_gesture
+    from predictor.nn_checkpoint import load_predictor
+    from predictor.nn_eval import evaluate
+    from predictor.statics import meets
+
+    assert not meets(VARIANTS["gravity-improved"].training_problem(J)) and meets(VARIANTS["gravity-improved"].problem(J))
+    assert not meets(VARIANTS["gravity-paper"].training_problem(J))
+    assert VARIANTS["contact"].training_problem(J) == VARIANTS["contact"].problem(J)
+    joint = load_joint(SURROGATE)
+    pred = load_predictor(GRAVITY_NN, joint)
+    alone, gripper = pred.config.training_problem(joint), pred.config.problem(joint)
+    p = sample_pressures(400, pred.config, torch.Generator().manual_seed(5))
+    own = evaluate(pred.net, alone, p)
+    assert own["force_mN_mean"] <= 2.0 and own["moment_Nmm_mean"] <= 1.2
+    with torch.no_grad():
+        tau = pred.net(p)
+        a, g = alone.residual(p, tau), gripper.residual(p, tau)
+    apart_rows = outline_vertices(a.pose, alone.params.layout)[..., 0].amin(-1) >= 0
+    assert 100 <= int(apart_rows.sum()) <= 300     # the fingers meet over about half the box
+    assert float((a.residual - g.residual)[apart_rows].abs().max()) <= 1e-12
+    raw = predict_gesture(pred, gripper, p)
+    assert torch.equal(raw.converged, apart_rows & raw.converged) and int(raw.converged.sum()) >= 0.9 * int(apart_rows.sum())
+    cross = p[~apart_rows][:8]
+    pol = predict_gesture(pred, gripper, cross, polish=True)
+    ref = solve(gripper, cross)
+    assert bool(pol.converged.all()) and bool(ref.converged.all())
+    assert float((pol.tau - ref.tau).abs().max()) <= 1e-5
+    assert float(outline_vertices(pol.pose, gripper.params.layout)[..., 0].amin()) >= -0.1
+
+
+@pytest.mark.skipif(not (SURROGATE.is_file() and GRAVITY_NN.is_file()), reason="no committed surrogate and NN")
 def test_float32_batched_gravity_nn_agrees_with_float64():
     """The float32 throughput mode (Predictor.astype, GripperProblem.astype) on 2,000
     pressures of the committed gravity NN's domain: computed in float32 throughout, and
-    against float64 the same samples pass the NN bound, tau agrees to 1e-4 N / N·mm, the
-    fingertip to 1e-3 mm and the residuals to 1e-3 mN / N·mm (float32's 6e-8 relative
-    rounding on ~200 mm and ~1 N is 1e-5 of those)."""
+    against float64 the same samples pass the NN bound, and on those tau agrees to 1e-4
+    N / N·mm, the fingertip to 1e-3 mm and the residuals to 1e-3 mN / N·mm (float32's 6e-8
+    relative rounding on ~200 mm and ~1 N is 1e-5 of those). The network, which learns one
+    finger alone, answers the gripper only where the fingers stay apart (1,052 of the
+    2,000; where its finger crosses X = 0 the plane's penalty puts the residual far over
+    the bound, docs/gripper.md §11), so the refused samples' residuals are compared only
+    through the verdict."""
     from predictor.networks import sample_pressures
     from predictor.nn_answer import predict_gesture
     from predictor.nn_checkpoint import load_predictor
@@ -175,12 +220,12 @@ def test_float32_batched_gravity_nn_agrees_with_float64():
     a = predict_gesture(pred, problem, p)
     b = predict_gesture(pred.astype(torch.float32), problem.astype(torch.float32), p.float())
     assert b.tau.dtype == b.pose.tip_end.dtype == b.residual_force_mN.dtype == torch.float32
-    assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 1990
+    assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 1000
     ok = a.converged
     assert float((a.tau[ok] - b.tau[ok].double()).abs().max()) <= 1e-4
     assert float((a.pose.tip_end[ok] - b.pose.tip_end[ok].double()).abs().max()) <= 1e-3
-    assert float((a.residual_force_mN - b.residual_force_mN.double()).abs().max()) <= 1e-3
-    assert float((a.residual_moment_Nmm - b.residual_moment_Nmm.double()).abs().max()) <= 1e-3
+    assert float((a.residual_force_mN[ok] - b.residual_force_mN[ok].double()).abs().max()) <= 1e-3
+    assert float((a.residual_moment_Nmm[ok] - b.residual_moment_Nmm[ok].double()).abs().max()) <= 1e-3
     # the analytic joint follows its inputs' dtype: its float32 anchors are float64's to 1e-4 mm
     inputs = t([[0.2, 1.0, -2.0, 50.0], [-0.3, -3.0, 3.0, -100.0]])
     a32 = AnalyticJoint().astype(torch.float32)(inputs.float())

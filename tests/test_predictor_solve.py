@@ -22,12 +22,19 @@ from predictor.gripper import GripperParams, default_finger
 from predictor.joint import AnalyticJoint, load_joint
 from predictor.graphs import residual_fn
 from predictor.jacobians import jacobian_fn
-from predictor.solve import SolverOptions, solve
-from predictor.statics import GripperProblem, range_penalty
+from predictor.solve import APPROACH, SolverOptions, solve
+from predictor.statics import ContactParams, GripperProblem, Obstacle, range_penalty
 
-from test_predictor_common import DT, GRASP, GRAVITY, PAPER_CHAIN, ROOT, THREE_FINGER, J, LeftJoint, t
+from test_predictor_common import DT, PAPER_CHAIN, ROOT, THREE_FINGER, J, LeftJoint, t
 
 torch.set_num_threads(1)
+#: These tests check the chain and the solvers on the smooth residual, the paper's model
+#: in which the two fingers pass through each other: the analytic stand-in (2.5x softer
+#: than the surrogate) meets the symmetry plane X = 0 from 0.02 MPa. The plane contact is
+#: tested in test_predictor_faces.py.
+NO_PLANE = ContactParams(plane_stiffness=0.0)
+GRAVITY = GripperProblem(J, contact=NO_PLANE)
+GRASP = GripperProblem(J, obstacle=Obstacle(), approach=APPROACH, contact=NO_PLANE)
 
 
 # ---------------------------------------------------------------- joint
@@ -69,7 +76,7 @@ def test_straight_hanging_finger_closed_form():
     """P = (0, 0) under gravity, the paper's chain: the finger hangs straight, so tau_1 = (0.19, 0, 0) and
     tau_2 = (0.06, 0, 0) (distal weights along each joint's +x = down) exactly, and the
     tip is at (25, -(45.45(1 + 0.19/300) + 60 + 45.45(1 + 0.06/300) + 65)) mm."""
-    res = solve(GripperProblem(J, PAPER_CHAIN), t([0.0, 0.0]))
+    res = solve(GripperProblem(J, PAPER_CHAIN, contact=NO_PLANE), t([0.0, 0.0]))
     assert bool(res.converged[0])
     np.testing.assert_allclose(res.tau[0].numpy(), [[0.19, 0, 0], [0.06, 0, 0]], atol=1e-9)
     tip_y = -(45.45 * (1 + 0.19 / 300) + 60 + 45.45 * (1 + 0.06 / 300) + 65)
@@ -132,7 +139,8 @@ def test_newton_steps_reach_the_lm_equilibria():
     tolerances 1e6x tighter (1e-10 mN, 1e-11 N·mm) the check refuses the two-step answer
     and the fallback finishes every sample to them."""
     gen = torch.Generator().manual_seed(21)
-    for problem, n, most in ((GRAVITY, 64, 3), (GripperProblem(J, GripperParams(THREE_FINGER)), 16, 4)):
+    three = GripperProblem(J, GripperParams(THREE_FINGER), contact=NO_PLANE)
+    for problem, n, most in ((GRAVITY, 64, 3), (three, 16, 4)):
         p = torch.rand(n, problem.n_joints, generator=gen, dtype=DT) * 0.6 - 0.3
         new, lm = solve(problem, p), solve(problem, p, SolverOptions(method="lm"))
         assert bool(new.converged.all()) and bool(lm.converged.all()) and new.method == "newton"
@@ -300,7 +308,8 @@ def test_matches_independent_scipy_solution(p1, p2, chain):
     scipy.optimize.fsolve equal the torch Newton solution to 1e-7 (N, N·mm) and 1e-6 mm,
     for the paper's chain and for the default one (cap kinematics, split joint weights)."""
     tau, tip = _numpy_equilibrium(p1, p2, *chain)
-    res = solve(GripperProblem(J, GripperParams(kinematics=chain[0], joint_weight=chain[1])), t([p1, p2]))
+    res = solve(GripperProblem(J, GripperParams(kinematics=chain[0], joint_weight=chain[1]), contact=NO_PLANE),
+                t([p1, p2]))
     np.testing.assert_allclose(res.tau[0].numpy(), tau, atol=1e-7)
     np.testing.assert_allclose(res.pose.tip_end[0].numpy(), tip, atol=1e-6)
 
@@ -311,7 +320,7 @@ def test_two_finger_mirror_symmetry():
     p = t([[-0.1, 0.1], [0.2, 0.05]])
     right = solve(GRAVITY, p)
     left_finger = dataclasses.replace(default_finger(), base_gap=-50.0)
-    left = solve(GripperProblem(LeftJoint(), params=GripperParams(left_finger)), p)
+    left = solve(GripperProblem(LeftJoint(), params=GripperParams(left_finger), contact=NO_PLANE), p)
     np.testing.assert_allclose(left.tau.numpy(), (right.tau * t([1.0, -1.0, -1.0])).numpy(), atol=1e-8)
     mirror = right.pose.mirrored()
     for name in ("joint1", "link", "joint2", "tip"):

@@ -31,6 +31,16 @@ def _domain(b: dict, name: str) -> str:
     return f", over P1 in [{d['p1'][0]:g}, {d['p1'][1]:g}], P2 in [{d['p2'][0]:g}, {d['p2'][1]:g}] MPa" if d else ""
 
 
+def _nn_problem(b: dict) -> str:
+    """ " on ..." : the problem a raw gravity network's residual was measured on (bench
+    details.gravity_nn_problem): one finger alone, the problem it learns; a bench without
+    the key measured it on the gripper with the plane X = 0."""
+    if b["details"].get("gravity_nn_problem") == "finger_alone":
+        return " on one finger alone (the problem it learns: no plane X = 0)"
+    return (" on the gripper with the plane X = 0 (a bench that did not judge it on one finger alone, "
+            "the problem it learns: re-run `make bench-predictor`)")
+
+
 def _p95_max(r: dict | None) -> str:
     """ "; p95 F mN, M N·mm; max F, M" of a residual record (predictor.nn.evaluate)."""
     if not r:
@@ -109,12 +119,13 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                 target("contact_fast_ms", "<=", "ms"), [b["contact_fast_median_ms"]]),
                *_contact_batched_rows(b, fast["method"], target)]
               if (fast := b["details"].get("contact_fast")) else []),
-            ("gravity NN residual, gravity_nn.pt (\"improved\"), raw network, mean" + _domain(b, "gravity_nn"),
+            ("gravity NN residual, gravity_nn.pt (\"improved\"), raw network" + _nn_problem(b) + ", mean"
+             + _domain(b, "gravity_nn"),
              f"{b['gravity_nn_residual_force_mN']:.3g} mN, {b['gravity_nn_residual_moment_Nmm']:.3g} N·mm"
              + _p95_max(b["details"].get("gravity_nn_improved")),
              f"< {was('gravity_nn_residual_mN', 'mN')}, {was('gravity_nn_residual_Nmm', 'N·mm')}",
              nn, [b["gravity_nn_residual_force_mN"], b["gravity_nn_residual_moment_Nmm"]]),
-            *([("gravity NN residual, gravity_nn_paper.pt (the paper's MLP), raw network, mean"
+            *([("gravity NN residual, gravity_nn_paper.pt (the paper's MLP), raw network" + _nn_problem(b) + ", mean"
                 + _domain(b, "gravity_nn_paper"),
                 f"{paper_mlp['force_mN_mean']:.3g} mN, {paper_mlp['moment_Nmm_mean']:.3g} N·mm" + _p95_max(paper_mlp),
                 "", [], [])] if (paper_mlp := b["details"].get("gravity_nn_paper_mlp")) else []),
@@ -189,6 +200,11 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                 + (f"Newton steps / LM from tau = 0 = {b['gravity_newton_median_ms'] / b['gravity_lm_median_ms']:.2f}; "
                    if "gravity_lm_median_ms" in b else "")
                 + f"contact fastest path / ramp = {b['contact_fast_median_ms'] / b['contact_median_ms']:.2f}."]
+    out += ["", "The gravity networks learn one finger alone (predictor.networks.NNConfig.training_problem): a "
+            "smooth map of the pressures whose gestures may cross X = 0, as the paper's do; their raw residual "
+            "is judged there. The gripper's answers add the plane X = 0 where the fingers meet: the fastest "
+            "path, the single query and the throughputs above check the network's tau on the gripper's "
+            "equilibrium, and the fastest path finishes it there by Newton steps (the LM where the check fails)."]
     imp, mlp = b["details"].get("gravity_nn_improved"), b["details"].get("gravity_nn_paper_mlp")
     if imp and mlp:
         worse = [k for k in ("force_mN_mean", "moment_Nmm_mean") if imp[k] > mlp[k]]
