@@ -13,8 +13,6 @@ NOT CONVERGED without figures. Units mm.
 """
 from __future__ import annotations
 
-import math
-
 import matplotlib
 
 matplotlib.use("Agg")
@@ -24,24 +22,7 @@ import torch  # noqa: E402
 
 from contract.files import atomic_path  # noqa: E402
 from predictor.gripper import FingerPose, band_size, chain_layout, outline_vertices  # noqa: E402
-from predictor.statics import STATES, GripperProblem, Obstacle  # noqa: E402
-
-
-def object_outline(obstacle: Obstacle, n: int = 200) -> np.ndarray:
-    """Closed outline (n+1, 2) mm of the object in the global plane."""
-    t = np.linspace(0.0, 2.0 * math.pi, n + 1)
-    if obstacle.kind == "rectangle":   # rounded corners of radius rho (statics.Obstacle.corner)
-        a, b, rho = obstacle.a, obstacle.b, obstacle.corner
-        arc = np.linspace(0.0, 0.5 * math.pi, max(2, n // 4))
-        pts = np.concatenate([np.stack((sx * (a - rho) + rho * np.cos(arc + q),
-                                        sy * (b - rho) + rho * np.sin(arc + q)), -1)
-                              for q, sx, sy in ((0, 1, 1), (0.5 * math.pi, -1, 1), (math.pi, -1, -1),
-                                                (1.5 * math.pi, 1, -1))])
-        pts = np.concatenate((pts, pts[:1]))
-    else:
-        pts = np.stack((obstacle.a * np.cos(t), obstacle.b * np.sin(t)), -1)
-    c, s = math.cos(obstacle.angle), math.sin(obstacle.angle)
-    return pts @ np.array([[c, s], [-s, c]]) + np.array([obstacle.x, obstacle.y])
+from predictor.statics import STATES, GripperProblem  # noqa: E402
 
 
 COLOURS = {"joint": "tab:blue", "rigid": "tab:red"}
@@ -131,7 +112,8 @@ def draw_gesture(ax, result, index: int, problem: GripperProblem, title: str | N
         draw_finger(ax, problem.pose(p, torch.zeros(*p.shape, 3, dtype=p.dtype)), 0, dashed=True)
     obstacle = problem.obstacle
     if obstacle is not None:
-        xy = object_outline(obstacle)
+        xy = obstacle.outline(200)
+        xy = np.vstack([xy, xy[:1]])            # closed
         ax.fill(xy[:, 0], xy[:, 1], color="tab:green", alpha=0.35)
         ax.plot(xy[:, 0], xy[:, 1], color="tab:green")
     if bool(result.converged[index]):
