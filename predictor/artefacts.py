@@ -2,8 +2,8 @@
 
 Each names the key paths the report and the demo read with their JSON types; the writer
 in ``owner`` checks its document before writing it (predictor.bench, atlas, inverse,
-validate_finger; predictor.figures checks gestures.json, which it writes without a final
-newline) and readers load the file through it (docs/formats.md §6). Units as in the key names: MPa, mm, N, mN, N·mm, deg, ms, s.
+validate_finger, validate_grasps; predictor.figures checks gestures.json, which it writes
+without a final newline) and readers load the file through it (docs/formats.md §6). Units as in the key names: MPa, mm, N, mN, N·mm, deg, ms, s.
 Optional paths (``?``) are figures a writer records only in some runs (a path it did not
 bench, a file from before a figure was added).
 """
@@ -115,6 +115,33 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
     "mesh_check?[].mesh?": str, "mesh_check?[].production_mesh?": str,
     "mesh_check?[].formulation?": str, "mesh_check?[].production_formulation?": str,
     **each("mesh_check?[]", int, "production_nodes", "nodes"), "mesh_check?[].wall_mesh_size?": NUM})
+
+_GRASP_MET = ("tip", "tip_angle", "normal_force", "contact_location", "state", "fem_time", "speedup")
+
+#: results/validation/grasps.json (make validate-grasps; predictor.validate_grasps): the
+#: predictor against the FEM grasps of fem.grasp_cases on one discretisation, per case (the
+#: issue's keys; figures null where a side did not solve) and summarised; ``met`` per target:
+#: true, false, or null where not judged (the state where the FEM's friction use is near 1).
+GRASP_VALIDATION = Format("predictor-grasp-validation", 1, "predictor.validate_grasps", {
+    "joint": str, "finger.name": str, "fem_folder": str, "repeats": int, "figures": list, "judged": list,
+    **each("discretisation", str, "mesh", "formulation"),
+    **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "normal_force_rel", "normal_force_N",
+           "contact_location_error_mm", "friction_use_band", "fem_s", "speedup"),
+    **each("cases[]", str, "case", "region", "object", "fem_state", "predictor_state", "mesh", "formulation"),
+    **each("cases[]", NUM, "p1", "p2", "fem_s", "predictor_s", "speedup"), "cases[].nodes": int,
+    **each("cases[]", bool, "plane", "fem_converged", "predictor_converged"),
+    **each("cases[]", MAYBE, "fem_friction_use", "predictor_friction_use", "tip_error_mm", "tip_angle_error_deg",
+           "normal_force_fem_N", "normal_force_predictor_N", "normal_force_error_N", "normal_force_error_rel",
+           "contact_location_error_mm", "tip_angle_fem_deg", "tip_angle_predictor_deg", "plane_force_fem_N",
+           "plane_force_predictor_N"),
+    **each("cases[]", list | None, "tip_fem_mm", "tip_predictor_mm", "contact_point_fem_mm",
+           "contact_point_predictor_mm", "object_force_fem_N", "object_force_predictor_N"),
+    "cases[].figure": str | None, **each("cases[].met", bool | None, *_GRASP_MET),
+    **each("summary", int, "cases", "fem_converged", "predictor_converged", "compared", "state_agreement"),
+    **each("summary", MAYBE, "tip_error_mm_max", "tip_angle_error_deg_max", "normal_force_error_N_max",
+           "normal_force_error_rel_max", "contact_location_error_mm_max", "fem_s_max", "speedup_min",
+           "predictor_s_median"),
+    **{f"summary.met.{k}.{f}": int for k in _GRASP_MET for f in ("met", "judged")}, "summary.all_met": bool})
 
 #: results/calibration/recovery.json (make calibrate-recovery; predictor.calibrate recovery):
 #: the calibration fit on observations made from a known truth, noise-free and noisy seeds.
