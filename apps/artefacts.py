@@ -77,6 +77,8 @@ ARTEFACTS = (
     Artefact("validation/finger.json", "make validate-finger", predictor.VALIDATION),
     Artefact("validation/finger_fem/*.json", "make finger-fem", fem.FINGER_CASE),
     Artefact("fem/finger_grid.json", "make finger-grid", fem.FINGER_GRID),
+    Artefact("validation/grasps_fem/*.json", "make grasp-fem", fem.GRASP_CASE),
+    Artefact("validation/grasps.json", "make validate-grasps", predictor.GRASP_VALIDATION),
     Artefact("demo/finger.json", "make demo", predictor.VALIDATION),
     Artefact("demo/finger_fem/*.json", "make demo", fem.FINGER_CASE),
     Artefact("demo/summary.json", "make demo", demo.SUMMARY),

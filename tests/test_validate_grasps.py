@@ -199,3 +199,36 @@ def test_records_of_another_discretisation_are_refused(tmp_path, capsys):
     assert not any(tmp_path.iterdir())
     assert vg.production_discretisation() == ("hex2:3", "mixed")   # fem.grasp_cases' default, suffix _hex2s3
 
+
+def test_the_report_states_the_validations_targets():
+    from apps.report.grasps import ISSUE_BOUNDS
+
+    assert ISSUE_BOUNDS == vg.TARGETS
+
+
+def test_the_report_section_shows_each_case_and_judges_every_target(coarse, tmp_path):
+    from apps.report.grasps import grasps_section
+
+    (tmp_path / "validation").mkdir()
+    v = copy.deepcopy(coarse)
+    v["cases"][1]["met"]["tip"] = False                 # a miss the summary counts
+    v["summary"]["met"]["tip"]["met"] -= 1
+    (tmp_path / "validation/grasps.json").write_text(json.dumps(v))
+    lines, checks = grasps_section(tmp_path)
+    for e in v["cases"]:
+        (row,) = [ln for ln in lines if ln.startswith(f"| {e['case']} |")]
+        assert f"| {e['tip_error_mm']:.3f} |" in row and f"| {e['speedup']:,.0f}x |" in row
+    verdict = {c.figure.split(" ")[0]: c.met for c in checks}
+    assert verdict["fingertip"] is False and verdict["FEM"] is True
+    met = v["summary"]["met"]
+    assert [c.met for c in checks[1:]] == [met[k]["met"] == met[k]["judged"] for k in vg.JUDGED]
+
+
+def test_the_report_section_says_not_run_without_the_validation(tmp_path):
+    from apps.report.grasps import grasps_section
+
+    lines, checks = grasps_section(tmp_path)
+    rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| target")]
+    assert checks == [] and len(rows) == len(vg.JUDGED) + 1
+    assert all(ln.endswith("| not run |") for ln in rows)
+    assert "make grasp-fem" in lines[2]

@@ -29,10 +29,11 @@ atomically (contract.files).
 Modules, one per concern: common (loading, target rows, pictures), joint_fem (the FEM and
 the dataset campaign), learning (the surrogate and its learning curve), gestures (the
 predictor bench and gesture cases), finger (the whole-finger validation and its error
-budget), finger_grid (the finger FEM over the pressure box), planning (atlases and inverse
-pressures), contact (the finger's outline and the plane X = 0 where the fingers meet, issue
-36), calibration (the recovery of a known truth, its timing, and the calibration against a
-different finger's FEM); ``python -m apps.report`` is __main__.
+budget), finger_grid (the finger FEM over the pressure box), grasps (the predictor against
+the FEM grasps, issue 36 §3), planning (atlases and inverse pressures), contact (the finger's
+outline and the plane X = 0 where the fingers meet, issue 36), calibration (the recovery of
+a known truth, its timing, and the calibration against a different finger's FEM); ``python
+-m apps.report`` is __main__.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from apps.report.contact import CONTACT_TITLE, contact_section
 from apps.report.finger import FINGER_TITLE, finger_section
 from apps.report.finger_grid import FINGER_GRID_TITLE, finger_grid_section
 from apps.report.gestures import PREDICTOR_TITLE, predictor_section
+from apps.report.grasps import GRASPS_TITLE, grasps_section
 from apps.report.joint_fem import (CAMPAIGN_TARGETS, CAMPAIGN_TITLE, FEM_TARGETS, FEM_TITLE, campaign_section,
                                    fem_section)
 from apps.report.learning import (CURVE_TITLE, SURROGATE_TARGETS, SURROGATE_TITLE, learning_curve_section,
@@ -58,7 +60,7 @@ __all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGA
 SECTIONS = ((FEM_TITLE, fem_section), (CAMPAIGN_TITLE, campaign_section), (SURROGATE_TITLE, surrogate_section),
             (CURVE_TITLE, learning_curve_section), (PREDICTOR_TITLE, predictor_section),
             (FINGER_TITLE, finger_section), (FINGER_GRID_TITLE, finger_grid_section),
-            (PLANNING_TITLE, planning_section), (CONTACT_TITLE, contact_section),
+            (GRASPS_TITLE, grasps_section), (PLANNING_TITLE, planning_section), (CONTACT_TITLE, contact_section),
             (CALIBRATION_TITLE, calibration_section))
 
 
