@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -342,6 +342,17 @@ finger-grid: | $(SETUP) ## whole-finger FEM at the 49 gravity pressure pairs of 
 GRASP_FEM := results/validation/grasps_fem
 grasp-fem: | $(SETUP) ## whole-finger FEM grasps: the paper's six + ten atlas cases on the production mesh, plane X = 0 (one process, niced, hours; resumes) -> results/validation/grasps_fem/
 	nice $(PY) -m fem.grasp_cases --out $(GRASP_FEM)
+
+# The predictor side (issue 36 §3, predictor/validate_grasps.py): each FEM grasp of
+# grasp-fem on the production discretisation (files <case>_hex2s3.json) against the
+# predictor with the same finger, object, history, mu, W and plane; it never runs the FEM
+# itself (hours): run `make grasp-fem` first.
+GRASP_FIGURES := results/validation/grasps
+validate-grasps: results/validation/grasps.json ## predictor against the FEM grasps of make grasp-fem (production mesh, ~1 min) -> results/validation/grasps.json + overlays in results/validation/grasps/
+results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) predictor/validate_grasps.py \
+    predictor/plot.py $(PRED_CORE) | $(SETUP)
+	$(PY) -m predictor.validate_grasps --fem $(GRASP_FEM) --mesh hex2:3 --formulation mixed --model $(PRED_JOINT) \
+	  --out $@ --figures $(GRASP_FIGURES)
 
 validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
 results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)

@@ -322,6 +322,19 @@ CASES_PREDICTOR = [
     ("predictor.validate_finger", ["--mesh", "1.8", "--mesh-size", "2", "--out", "{tmp}/x.json"],
      "not allowed with argument --mesh"),
     ("predictor.validate_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    # predictor.validate_grasps (issue 36 §3): no folder, a file that is not a grasp record,
+    # records of another discretisation, unwritable outputs; all before the model is loaded
+    ("predictor.validate_grasps", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
+     "--fem {tmp}/none: no such folder"),
+    ("predictor.validate_grasps", ["--fem", "results/validation/finger_fem", "--out", "{tmp}/x.json", "--figures",
+                                   "{tmp}/f"], "region: missing (format fem-grasp-case/1, fem.grasp_cases)"),
+    ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
+     "no FEM grasp records on mesh hex2:3 (mixed) in tests/data/grasps (it holds 4 mixed"),
+    ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "/etc/passwd/x.json"],
+     "cannot create /etc/passwd/x.json"),
+    ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "/proc/g"],
+     "cannot write /proc/g: /proc:"),
+    ("predictor.validate_grasps", ["--mesh", "hex9", "--out", "{tmp}/x.json"], "--mesh: 'hex9': 9 is outside [1, 6]"),
     # predictor.gesture --finger (issue 14): the finger file is read and checked while
     # parsing (tests/data/fingers/ holds the bad files), the pressures against its joints
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "{tmp}/none.toml"],
