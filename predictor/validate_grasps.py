@@ -25,7 +25,10 @@ Per case (the issue's keys, then more): ``object`` (the spec), ``p1``, ``p2`` (M
 
 c is the normal-force-weighted mean contact point over everything that touches: the FEM's
 ``contact_point_mm`` (its surface nodes), the predictor's over every part face that carries
-force (GestureResult.where_it_touches' contacts); null where nothing touches. ``fem_s``:
+force (GestureResult.where_it_touches' contacts); null where nothing touches. Beside them
+both sides' tip, tip angle, contact point, friction use, ``object_force_*_N`` (the object's
+resultant on the finger, [X, Y] N: Y = -W/2 wherever it holds) and ``plane_force_*_N``
+(the plane X = 0's push, N). ``fem_s``:
 the FEM's whole history (its record), ``predictor_s``: the predictor's (approach, object
 brought in, ramp), ``speedup`` = fem_s / predictor_s.
 
