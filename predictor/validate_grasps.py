@@ -47,7 +47,6 @@ another finger file, no record on the chosen discretisation, an unwritable ``--o
 """
 from __future__ import annotations
 
-import argparse
 import math
 import statistics
 import sys
@@ -298,7 +297,8 @@ def _contact(ax, point, force, colour: str, marker: str, who: str) -> None:
     if point is None:
         return
     ls = "-" if marker == "x" else "--"
-    ax.plot(*point, marker, color=colour, mfc="none", mec=colour, mew=2, ms=9, label=f"{who}: contact point (force-weighted)")
+    ax.plot(*point, marker, color=colour, mfc="none", mec=colour, mew=2, ms=9,
+            label=f"{who}: contact point (force-weighted)")
     if force is not None:
         ax.annotate("", xy=(point[0] + FORCE_SCALE * force[0], point[1] + FORCE_SCALE * force[1]), xytext=point,
                     arrowprops=dict(arrowstyle="->", color=colour, lw=1.8, ls=ls))

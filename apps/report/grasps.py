@@ -34,9 +34,9 @@ HEAD = ["| target | worst case | cases met | target | met |", "|---|---|---|---|
 def _not_run(root: Path) -> list[str]:
     """The section before grasps.json exists: what is missing, and every target "not run"."""
     records = sorted((root / "validation/grasps_fem").glob("*.json"))
-    where = (f"results/validation/grasps_fem holds {len(records)} FEM grasp record(s); run `{MAKE}`"
-             if records else "results/validation/grasps_fem holds no FEM grasp record yet: run `make grasp-fem` (the FEM grasps on the "
-             f"production mesh, hours on one core), then `{MAKE}`")
+    where = (f"results/validation/grasps_fem holds {len(records)} FEM grasp record(s); run `{MAKE}`" if records else
+             "results/validation/grasps_fem holds no FEM grasp record yet: run `make grasp-fem` (the FEM grasps on "
+             f"the production mesh, hours on one core), then `{MAKE}`")
     out = [f"_Not run: {where} (the predictor against each FEM grasp, results/validation/grasps.json)._", ""]
     words = [CONVERGED] + [w.format(**ISSUE_BOUNDS) for _, w, _, _ in ROWS]
     out += HEAD + [f"| {w} | not run | not run | all cases | not run |" for w in words]
@@ -55,8 +55,9 @@ def case_table(cases: list[dict]) -> list[str]:
     for e in cases:
         fem = _state(e["fem_state"], e["fem_friction_use"]) if e["fem_converged"] else "**not converged**"
         forces = f"{num(e['normal_force_fem_N'], '.4f')} / {num(e['normal_force_predictor_N'], '.4f')}"
-        out.append(f"| {e['case']} | {e['region']} | {fem} | {_state(e['predictor_state'], e['predictor_friction_use'])}"
-                   f" | {num(e['tip_error_mm'], '.3f')} | {num(e['tip_angle_error_deg'], '+.3f')} | {forces} | "
+        pred = _state(e["predictor_state"], e["predictor_friction_use"])
+        out.append(f"| {e['case']} | {e['region']} | {fem} | {pred} | {num(e['tip_error_mm'], '.3f')} | "
+                   f"{num(e['tip_angle_error_deg'], '+.3f')} | {forces} | "
                    f"{num(e['contact_location_error_mm'], '.2f')} | {e['fem_s']:.0f} | {1e3 * e['predictor_s']:.0f} | "
                    f"{e['speedup']:,.0f}x |")
     return out
@@ -66,7 +67,8 @@ def _checks(v: dict) -> list[tuple[str, str, str, Check]]:
     """(words, worst, cases met, Check) per target: met by every case it judges."""
     s, title = v["summary"], GRASPS_TITLE
     failed = s["cases"] - s["fem_converged"]
-    rows = [(CONVERGED, f"{failed} not converged" if failed else "all converged", f"{s['fem_converged']} of {s['cases']}",
+    rows = [(CONVERGED, f"{failed} not converged" if failed else "all converged",
+             f"{s['fem_converged']} of {s['cases']}",
              judge(title, CONVERGED, [(Target(">=", s["cases"], "cases"), s["fem_converged"])]))]
     for key, words, worst, spec in ROWS:
         m = s["met"][key]
