@@ -28,6 +28,21 @@ from predictor.statics import STATES, GripperProblem  # noqa: E402
 COLOURS = {"joint": "tab:blue", "rigid": "tab:red"}
 
 
+def draw_fem_render(fig, ax, render: dict, png, label: str) -> None:
+    """The whole-finger FEM's off-screen render (fem.finger_cases.render: coloured by |u|;
+    ``render["extent_mm"]`` its global extent [X0, X1, Y0, Y1] mm) as the background of
+    ``ax`` in equal global axes (mm), with its colour bar labelled ``label``."""
+    x0, x1, y0, y1 = render["extent_mm"]
+    ax.imshow(plt.imread(png), extent=(x0, x1, y0, y1), zorder=0)
+    sm = plt.cm.ScalarMappable(cmap=render["cmap"], norm=plt.Normalize(0.0, render["u_max_mm"]))
+    fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, label=label)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("X (mm)")
+    ax.set_ylabel("Y (mm)")
+
+
 def part_outlines(pose: FingerPose, index: int) -> list[tuple[str, np.ndarray]]:
     """[(kind, closed polygon (n, 2) mm)] of every part of sample ``index``, chain order:
     a joint's band (inner vertices base to tip, then the outer ones back), a rigid part's

@@ -127,16 +127,11 @@ def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_w
 
 def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "") -> None:
     """The FEM render (|u|) with the predictors' centre lines over it (matplotlib, atomic)."""
-    import matplotlib
-    matplotlib.use("Agg")
+    from predictor.plot import draw_fem_render     # first: it puts matplotlib on Agg
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=110)
-    render = case["render"]
-    x0, x1, y0, y1 = render["extent_mm"]
-    ax.imshow(plt.imread(fem_png), extent=(x0, x1, y0, y1), zorder=0)
-    sm = plt.cm.ScalarMappable(cmap=render["cmap"], norm=plt.Normalize(0.0, render["u_max_mm"]))
-    fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, label="FEM |u| (mm)")
+    draw_fem_render(fig, ax, case["render"], fem_png, "FEM |u| (mm)")
     styles = dict(zip(OVERLAID.values(), (dict(color="black", ls="-"), dict(color="tab:red", ls="--"))))
     for label, pose in poses.items():
         style = styles[label]
@@ -146,11 +141,6 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "")
         ax.plot([], [], lw=1.6, **style, label=f"predictor, {label}")
     fem_tip = case["tip"]
     ax.plot(*fem_tip, "o", mfc="none", mec="tab:orange", mew=2, ms=10, label="FEM fingertip")
-    ax.set_xlim(x0, x1)
-    ax.set_ylim(y0, y1)
-    ax.set_aspect("equal")
-    ax.set_xlabel("X (mm)")
-    ax.set_ylabel("Y (mm)")
     p1, p2 = case["pressures_MPa"]
     ax.set_title(f"finger FEM vs predictor: P = ({p1:g}, {p2:g}) MPa, "
                  f"{'gravity' if case['gravity'] else 'no gravity'}" + (f"\njoint model {joint}" if joint else ""),

@@ -257,18 +257,11 @@ def overlay(path: Path, record: dict, fem_png: Path, pose, pred: dict, fem_label
     """The FEM render (|u|, the object's outline in black) with the predictor's part
     outlines, its contact point and the object's force on the finger, and the FEM's
     contact point and force (matplotlib, atomic)."""
-    import matplotlib
-    matplotlib.use("Agg")
+    from predictor.plot import draw_fem_render, part_outlines     # first: it puts matplotlib on Agg
     import matplotlib.pyplot as plt
 
-    from predictor.plot import part_outlines
-
     fig, ax = plt.subplots(figsize=(6.4, 7.2), dpi=110)
-    render = record["render"]
-    x0, x1, y0, y1 = render["extent_mm"]
-    ax.imshow(plt.imread(fem_png), extent=(x0, x1, y0, y1), zorder=0)
-    sm = plt.cm.ScalarMappable(cmap=render["cmap"], norm=plt.Normalize(0.0, render["u_max_mm"]))
-    fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, label=f"FEM |u| (mm), {fem_label}")
+    draw_fem_render(fig, ax, record["render"], fem_png, f"FEM |u| (mm), {fem_label}")
     if pose is not None:
         for kind, ring in part_outlines(pose, 0):
             ax.plot(ring[:, 0], ring[:, 1], "-", color=OUTLINE_COLOURS[kind], lw=1.3)
@@ -277,11 +270,6 @@ def overlay(path: Path, record: dict, fem_png: Path, pose, pred: dict, fem_label
     fem_ok = record["converged"]
     _contact(ax, record["contact_point_mm"] if fem_ok else None, record["object_force_N"], "tab:orange", "o", "FEM")
     _contact(ax, pred["contact_point_mm"], pred["object_force_N"], "tab:red", "x", "predictor")
-    ax.set_xlim(x0, x1)
-    ax.set_ylim(y0, y1)
-    ax.set_aspect("equal")
-    ax.set_xlabel("X (mm)")
-    ax.set_ylabel("Y (mm)")
     ax.set_title(f"grasp {record['case']}: FEM {record['state']} ({fem_label}) vs predictor {pred['state']}\n"
                  f"joint model {joint}; arrows: the object's force on the finger, {FORCE_SCALE:g} mm per N",
                  fontsize=8)
