@@ -32,7 +32,8 @@ when a step fails), which keeps the grasp on its branch.
 
 Search: multi-start from the best points of a coarse atlas (predictor.atlas; the
 object's committed atlas with ``--atlas``, else a COARSE x COARSE grid solved on the
-spot), the pressure box as bounds, a projected Gauss-Newton on the goal residual e
+spot and kept for the process's later questions of the same problem, box and options,
+``coarse_atlas``: it does not depend on the goal), the pressure box as bounds, a projected Gauss-Newton on the goal residual e
 (Levenberg-damped, steps capped at 0.1 MPa, 0.05 with an object, backtracking); the
 starts stop early once one meets the goal exactly (``_exact``). Candidates are verified,
 best first, by a forward solve along the ramp from the approach gesture (predictor.solve,
@@ -59,6 +60,7 @@ InverseResult (status, pressures, achieved values, verification, robustness, tim
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -493,6 +495,17 @@ def _stencil(ip: InverseProblem, ver: GestureResult, cand: dict) -> dict:
             "stencil_states": (cand["state"],) + tuple(states)}
 
 
+@functools.lru_cache(maxsize=8)
+def coarse_atlas(problem: GripperProblem, box: tuple[float, float, float, float],
+                 options: SolverOptions) -> Atlas:
+    """The COARSE x COARSE start grid (predictor.atlas.grasp_atlas) of ``problem`` over
+    box (P1lo, P1hi, P2lo, P2hi) MPa, solved once per process for each problem, box and
+    options (the grid does not depend on the goal): later questions of a planner (tip
+    targets of one gripper, cold holds of one object) start at once.
+    ``coarse_atlas.cache_clear()`` forgets them (make inverse times cold queries so)."""
+    return grasp_atlas(problem, COARSE, box, options)
+
+
 def _verifications(ip: InverseProblem, ordered: list):
     """(candidate, its verifying ramp solve (one row)) of the candidates ``ordered`` ((f,
     P (2,), branch), best first), lazily: one at a time while the best may meet the goal
@@ -515,7 +528,7 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
     t0 = time.perf_counter()
     if atlas is not None:
         _atlas_matches(atlas, ip.problem)
-    atlas = atlas if atlas is not None else grasp_atlas(ip.problem, COARSE, ip.box, ip.options)
+    atlas = atlas if atlas is not None else coarse_atlas(ip.problem, ip.box, ip.options)
     if ip.goal.kind == "hold":
         _check_touch(atlas)
     starts = _starts(ip, atlas)

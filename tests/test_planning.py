@@ -21,7 +21,7 @@ from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify, grasp_atlas as atlas_of
 from predictor.inverse import where_it_touches
-from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
+from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, coarse_atlas, gradient
 from predictor.solve import solve
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,6 +119,19 @@ def test_inverse_tip_answers_are_frozen(free):
     assert far.status == "infeasible" and far.verified and far.candidates == 3
     assert far.pressures == pytest.approx((0.3, 0.15624999999999997), abs=1e-7)
     assert far.tip_error_mm == pytest.approx(183.7372893499654, abs=1e-7)
+
+
+def test_coarse_grid_kept_for_later_questions(free):
+    """A tip question solves the 5 x 5 start grid once (coarse_atlas); a later one of the
+    same gripper, box and options starts from the kept grid and answers exactly the same."""
+    coarse_atlas.cache_clear()
+    first = inverse_pressures(free, goal="tip:40,-212")
+    assert coarse_atlas.cache_info().misses == 1 and coarse_atlas.cache_info().hits == 0
+    again = inverse_pressures(free, goal="tip:40,-212")
+    assert coarse_atlas.cache_info().misses == 1 and coarse_atlas.cache_info().hits == 1
+    assert again.pressures == first.pressures and again.stencil_states == first.stencil_states
+    inverse_pressures(free, goal="tip:40,-212", box=(0.0, 0.3, -0.3, 0.0))   # another box: its own grid
+    assert coarse_atlas.cache_info().misses == 2
 
 
 def test_first_contact_lies_on_the_path(atlas):
