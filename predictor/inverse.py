@@ -13,9 +13,10 @@ Goals, gradients, search and answers: predictor.inversion. Exit 0: the goal is m
 it); 2: bad input, one line on stderr, before any work. ``--plot`` draws the answer's
 gesture (its verifying ramp solve); ``--cases`` (``make inverse``) answers the hold goal
 for the paper's three objects (starting from their committed atlases, and cold) and the
-tip targets CASE_TIPS, with median timings of REPEATS identical queries, each as a
-process's first (its coarse start grid solved anew; the tip targets also ``warm``: the
-grid kept from the query before, predictor.inversion.coarse_atlas); each case also
+tip targets CASE_TIPS, with median timings of REPEATS identical queries (a tip target
+and a cold hold each as a process's first question, its coarse start grid solved anew;
+the tip targets also ``warm``: the grid kept from the question before,
+predictor.inversion.coarse_atlas); each case also
 records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``).
 """
 from __future__ import annotations
