@@ -35,8 +35,8 @@ object's committed atlas with ``--atlas``, else a COARSE x COARSE grid solved on
 spot and kept for the process's later questions of the same problem, box and options,
 ``coarse_atlas``: it does not depend on the goal), the pressure box as bounds, a
 projected Gauss-Newton on the goal residual e (Levenberg-damped, steps capped at 0.1 MPa,
-0.05 with an object, backtracking); the starts stop early once one meets the goal exactly (``_exact``). Candidates are verified,
-best first, by a forward solve along the ramp from the approach gesture (predictor.solve,
+0.05 with an object, backtracking); the starts stop early once one meets the goal
+exactly (``_exact``). Candidates are verified, best first, by a forward solve along the ramp from the approach gesture (predictor.solve,
 the history of ``predictor.gesture``) and refused if that solve disagrees (state, or tip
 farther than VERIFY_TOL_MM); the first robust one is the answer. A tip goal that no
 candidate can meet verifies them all in one batched solve (``_verifications``). Robustness: the 8
