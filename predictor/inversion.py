@@ -34,16 +34,16 @@ Search: multi-start from the best points of a coarse atlas (predictor.atlas; the
 object's committed atlas with ``--atlas``, else a COARSE x COARSE grid solved on the
 spot and kept for the process's later questions of the same problem, box and options,
 ``coarse_atlas``: it does not depend on the goal), the pressure box as bounds, a
-projected Gauss-Newton on the goal residual e (Levenberg-damped, steps capped at 0.1 MPa,
-0.05 with an object, backtracking); the starts stop early once one meets the goal
-exactly (``_exact``). Candidates are verified, best first, by a forward solve along the ramp from the approach gesture (predictor.solve,
-the history of ``predictor.gesture``) and refused if that solve disagrees (state, or tip
-farther than VERIFY_TOL_MM); the first robust one is the answer. A tip goal that no
-candidate can meet verifies them all in one batched solve (``_verifications``). Robustness: the 8
-neighbours at ±REGULATOR MPa (the regulators' resolution) are solved by continuation
-from the verified gesture (the pressure error of a regulator acts on the settled grasp)
-and the answer is robust when all 9 points keep the goal's state; robust candidates are
-preferred.
+projected Gauss-Newton on the goal residual e (Levenberg-damped, steps capped at 0.1
+MPa, 0.05 with an object, backtracking); the starts stop early once one meets the goal
+exactly (``_exact``). Candidates are verified, best first, by a forward solve along the
+ramp from the approach gesture (predictor.solve, the history of ``predictor.gesture``)
+and refused if that solve disagrees (state, or tip farther than VERIFY_TOL_MM); the
+first robust one is the answer. A tip goal that no candidate can meet verifies them all
+in one batched solve (``_verifications``). Robustness: the 8 neighbours at ±REGULATOR
+MPa (the regulators' resolution) are solved by continuation from the verified gesture
+(the pressure error of a regulator acts on the settled grasp) and the answer is robust
+when all 9 points keep the goal's state; robust candidates are preferred.
 
 Answers: ``feasible`` (exit 0, goal_met true), or ``infeasible`` (exit 1, goal_met
 false) with the closest achievable value and a reason naming the limit (the nearest tip
