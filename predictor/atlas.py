@@ -20,7 +20,11 @@ Where the equilibrium along the ray is unique both give the same gesture; they c
 differ where the path decides the branch (near the boundaries between states), as two
 ramps of different step counts do. ``make atlas-reference`` writes the reference atlases
 (results/predictor/ramp) and REPORT counts the points where the two agree. Without an
-object there is no history and the grid is one batched solve. Each point is classified
+object the equilibrium is unique: where the fingers meet at X = 0 the ``sweep`` solves
+the points that ``solve`` would ramp from zero pressure (their load-free pose lies across
+the plane) by continuation from a converged grid neighbour (``free_sweep_solve``), the
+others in one batched solve; without the plane the grid is one batched solve. Each point
+is classified
 
     not_converged  the ramp solve failed (no gesture is reported);
     no_contact     converged, total normal force N = 0;
@@ -67,14 +71,15 @@ from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box
 from predictor.progress import Heartbeat, set_quiet
 from predictor.jacobians import jacobian_fn
 from predictor.options import SolverOptions
-from predictor.ramp import advance, attempts, ramp_method, runner
+from predictor.ramp import advance, attempts, plane_first, plane_ramp, ramp_method, runner
+from predictor.ramp import ramp as ramp_between
 from predictor.result import GestureResult, contact_fields, result_labels
 from predictor.solve import gesture_result, solve
 from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
-                               out_of_reach)
+                               meets, out_of_reach)
 
-__all__ = ["FULL_BOX", "Atlas", "box_arg", "classify", "grasp_atlas", "load_problem", "object_arg",
-           "placement_error", "sweep_solve"]
+__all__ = ["FULL_BOX", "Atlas", "box_arg", "classify", "free_sweep_solve", "grasp_atlas", "load_problem",
+           "object_arg", "placement_error", "sweep_solve"]
 #: How an atlas point was solved (Atlas.how): continued from its ray's previous grid
 #: point, ramped from the approach (no predecessor, or the ``ramp`` path), or ramped after
 #: its continuation failed.
@@ -207,10 +212,13 @@ def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
     p2 = np.linspace(box[2], box[3], grid)
     pressures = torch.cartesian_prod(torch.from_numpy(p1), torch.from_numpy(p2)).reshape(-1, 2)
     t0 = time.perf_counter()
-    if problem.obstacle is None or out_of_reach(problem):
+    spacing = np.array([p1[1] - p1[0], p2[1] - p2[0]])
+    free = problem.obstacle is None
+    if (free and not meets(problem)) or out_of_reach(problem):
         path = "ramp"            # no history (or nothing to touch): one batched solve
     if path == "sweep":
-        res, how = sweep_solve(problem, pressures, np.array([p1[1] - p1[0], p2[1] - p2[0]]), options)
+        sweep = free_sweep_solve if free else sweep_solve
+        res, how = sweep(problem, pressures, spacing, options)
     else:
         res, how = solve(problem, pressures, options), np.full(grid * grid, RAMPED)
     elapsed = time.perf_counter() - t0
@@ -298,6 +306,85 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
     res = gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options), None)
     first = _first_contacts(first, Q, ring, pred, res.normal_force_N.numpy() > 0)
     return dataclasses.replace(res, first_contact=torch.from_numpy(first)), how
+
+
+def free_sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.ndarray,
+                     options: SolverOptions = SolverOptions()) -> tuple[GestureResult, np.ndarray]:
+    """Every grid point of pressures (M, 2) MPa (grid spacing (2,) MPa) of an object-free
+    problem whose fingers meet at X = 0: the points whose load-free pose lies clear of
+    the plane (not ``predictor.ramp.plane_first``) by one batched ``solve`` (the
+    reference's rows); the others, which ``solve`` ramps from zero pressure
+    (``plane_ramp``, 12 sub-steps each), by continuation from a converged grid
+    neighbour instead (a ramp of FREE_SUB_STEPS sub-steps, ``_continue``), wave by wave:
+    each wave continues the waiting points that have a converged point within one grid
+    step (the nearest one, in grid steps). A point that fails, or has no such neighbour,
+    is ramped from zero pressure as in ``solve``. The two paths end at the same
+    equilibria within the solver's tolerance (the inverse's 5 x 5 grid: 3e-9 N and N·mm;
+    tests/test_planning.py freezes it).
+
+    Returns (GestureResult of the M points, how (M,) int: SWEPT, RAMPED or RETRIED).
+    """
+    t0 = time.perf_counter()
+    M, J = pressures.shape
+    n = 3 * J
+    deep = plane_first(problem, pressures, options).numpy()
+    how = np.where(deep, SWEPT, RAMPED)
+    x = torch.full((M, n), float("nan"), dtype=torch.float64)
+    ok = torch.zeros(M, dtype=torch.bool)
+    iterations = torch.zeros(M, dtype=torch.long)
+    clear = np.nonzero(~deep)[0]
+    if len(clear):
+        r = solve(problem, pressures[clear], options)
+        x[clear], ok[clear], iterations[clear] = r.tau.reshape(len(clear), n), r.converged, r.iterations
+    grid = pressures.numpy() / spacing                      # points in grid steps
+    waiting = np.nonzero(deep)[0]
+    while len(waiting):
+        done = np.nonzero(ok.numpy())[0]
+        if not len(done):
+            break
+        dist = np.abs(grid[waiting, None] - grid[None, done]).max(-1)      # (waiting, done)
+        near = dist.argmin(1)
+        go = dist[np.arange(len(waiting)), near] <= 1.0 + 1e-9
+        if not go.any():
+            break
+        rows, pred = waiting[go], done[near[go]]
+        xs, conv, its = _continue(problem, x[pred], pressures[pred], pressures[rows], options)
+        x[rows], ok[rows], iterations[rows] = xs, conv, its
+        failed = rows[~conv.numpy()]
+        how[failed] = RETRIED
+        waiting = waiting[~go]
+    again = np.nonzero(deep & ~ok.numpy())[0]
+    if len(again):
+        how[again] = np.where(how[again] == SWEPT, RAMPED, how[again])
+        xr, okr, itr = plane_ramp(problem, pressures[again], options)
+        x[again], ok[again], iterations[again] = xr, okr, iterations[again] + itr
+    return gesture_result(problem, pressures, x, ok, iterations, t0, ramp_method(options), None), how
+
+
+#: Ramp sub-steps of a continuation between grid neighbours of ``free_sweep_solve``: a
+#: 0.15 MPa step pressed on the plane X = 0 (the inverse's coarse 5 x 5 grid) converges
+#: fastest in 2 (its 12 points: 0.62, 0.36, 0.45, 0.61 s for 1 to 4 sub-steps, against
+#: 0.77 s for the ramps from zero pressure; the same equilibria to 4e-9 N·mm).
+FREE_SUB_STEPS = 2
+
+
+def _continue(problem: GripperProblem, x: torch.Tensor, pa: torch.Tensor, pb: torch.Tensor,
+              options: SolverOptions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The object-free equilibria x (B, 3J) at pa (B, J) MPa continued to pb by a ramp of
+    FREE_SUB_STEPS sub-steps (predictor.ramp.ramp: the plane's homotopy, depth check,
+    cut-backs), each Jacobian of predictor.ramp.attempts in turn for the samples the
+    previous one failed. Returns (x, converged (B,), iterations (B,))."""
+    B = len(x)
+    out, ok, its = x.clone(), torch.zeros(B, dtype=torch.bool), torch.zeros(B, dtype=torch.long)
+    rows = torch.arange(B)
+    for kind in attempts(problem, options):
+        opts = dataclasses.replace(options, jacobian=kind, ramp_steps=FREE_SUB_STEPS)
+        xr, okr, itr = ramp_between(problem, x[rows], pa[rows], pb[rows], opts)
+        out[rows], ok[rows], its[rows] = xr, okr, its[rows] + itr
+        rows = rows[~okr]
+        if not len(rows):
+            break
+    return out, ok, its
 
 
 def _predecessors(Q: np.ndarray, rows: np.ndarray, s: int, p0: np.ndarray, spacing: np.ndarray, ring: np.ndarray,

@@ -32,16 +32,18 @@ when a step fails), which keeps the grasp on its branch.
 
 Search: multi-start from the best points of a coarse atlas (predictor.atlas; the
 object's committed atlas with ``--atlas``, else a COARSE x COARSE grid solved on the
-spot), the pressure box as bounds, a projected Gauss-Newton on the goal residual e
-(Levenberg-damped, steps capped at 0.1 MPa, 0.05 with an object, backtracking); the
-starts stop early once one meets the goal exactly (``_exact``). Candidates are verified,
-best first, by a forward solve along the ramp from the approach gesture (predictor.solve,
-the history of ``predictor.gesture``) and refused if that solve disagrees (state, or tip
-farther than VERIFY_TOL_MM); the first robust one is the answer. Robustness: the 8
-neighbours at ±REGULATOR MPa (the regulators' resolution) are solved by continuation
-from the verified gesture (the pressure error of a regulator acts on the settled grasp)
-and the answer is robust when all 9 points keep the goal's state; robust candidates are
-preferred.
+spot and kept for the process's later questions of the same problem, box and options,
+``coarse_atlas``: it does not depend on the goal), the pressure box as bounds, a
+projected Gauss-Newton on the goal residual e (Levenberg-damped, steps capped at 0.1
+MPa, 0.05 with an object, backtracking); the starts stop early once one meets the goal
+exactly (``_exact``). Candidates are verified, best first, by a forward solve along the
+ramp from the approach gesture (predictor.solve, the history of ``predictor.gesture``)
+and refused if that solve disagrees (state, or tip farther than VERIFY_TOL_MM); the
+first robust one is the answer. A tip goal that no candidate can meet verifies them all
+in one batched solve (``_verifications``). Robustness: the 8 neighbours at ±REGULATOR
+MPa (the regulators' resolution) are solved by continuation from the verified gesture
+(the pressure error of a regulator acts on the settled grasp) and the answer is robust
+when all 9 points keep the goal's state; robust candidates are preferred.
 
 Answers: ``feasible`` (exit 0, goal_met true), or ``infeasible`` (exit 1, goal_met
 false) with the closest achievable value and a reason naming the limit (the nearest tip
@@ -58,6 +60,7 @@ InverseResult (status, pressures, achieved values, verification, robustness, tim
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -492,13 +495,40 @@ def _stencil(ip: InverseProblem, ver: GestureResult, cand: dict) -> dict:
             "stencil_states": (cand["state"],) + tuple(states)}
 
 
+@functools.lru_cache(maxsize=8)
+def coarse_atlas(problem: GripperProblem, box: tuple[float, float, float, float],
+                 options: SolverOptions) -> Atlas:
+    """The COARSE x COARSE start grid (predictor.atlas.grasp_atlas) of ``problem`` over
+    box (P1lo, P1hi, P2lo, P2hi) MPa, solved once per process for each problem, box and
+    options (the grid does not depend on the goal): later questions of a planner (tip
+    targets of one gripper, cold holds of one object) start at once.
+    ``coarse_atlas.cache_clear()`` forgets them (make inverse times cold queries so)."""
+    return grasp_atlas(problem, COARSE, box, options)
+
+
+def _verifications(ip: InverseProblem, ordered: list):
+    """(candidate, its verifying ramp solve (one row)) of the candidates ``ordered`` ((f,
+    P (2,), branch), best first), lazily: one at a time while the best may meet the goal
+    (a robust one stops the verification), or every one in one batched solve when none
+    can: a tip goal whose best continuation lies farther than TIP_TOL_MM + VERIFY_TOL_MM
+    from the target (every candidate is then verified; a row of a batched solve is the
+    row's own solve)."""
+    batch = ip.goal.kind == "tip" and bool(ordered) and math.sqrt(ordered[0][0]) > TIP_TOL_MM + VERIFY_TOL_MM
+    if batch:
+        vers = solve(ip.problem, torch.stack([p for _, p, _ in ordered]), ip.options)
+        yield from ((c, vers.rows([i])) for i, c in enumerate(ordered))
+        return
+    for c in ordered:
+        yield c, solve(ip.problem, c[1][None], ip.options)
+
+
 def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> InverseResult:
     """Answer ``ip`` (module docstring); ``atlas``: the object's atlas for the starts (its
     problem must be ip.problem), else a coarse one is solved. Returns an InverseResult."""
     t0 = time.perf_counter()
     if atlas is not None:
         _atlas_matches(atlas, ip.problem)
-    atlas = atlas if atlas is not None else grasp_atlas(ip.problem, COARSE, ip.box, ip.options)
+    atlas = atlas if atlas is not None else coarse_atlas(ip.problem, ip.box, ip.options)
     if ip.goal.kind == "hold":
         _check_touch(atlas)
     starts = _starts(ip, atlas)
@@ -522,8 +552,7 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
         with torch.no_grad():
             scored.append((float(_goal_terms(ip, branch.p, branch.x)[0][0]), p, branch))
     checked = []
-    for f, p, branch in sorted(scored, key=lambda t: t[0]):
-        ver = solve(ip.problem, p[None], ip.options)
+    for (f, p, branch), ver in _verifications(ip, sorted(scored, key=lambda t: t[0])):
         cand = _verified(ip, ver, branch, f)
         cand.update(_stencil(ip, ver, cand) if cand["meets"] else
                     {"robust": False, "stencil_states": (cand["state"],)})

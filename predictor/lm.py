@@ -78,26 +78,40 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
         act = torch.nonzero(~(done | stuck | handed)).flatten()  # work on unfinished samples only
         if act.numel() == 0:
             break
-        Ja, ra, ma = J[act], r[act], mu[act]
-        step = lm_step(Ja, ra, ma)
-        if max_step is not None:
-            big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
-            step = step / big.clamp_min(1.0)
-        x_try = x[act] + step
-        J_try, r_try, Jp_try = jac_fn(x_try, p[act], dp=False)
-        better = r_try.pow(2).sum(-1) < ra.pow(2).sum(-1)
-        x[act] = torch.where(better[:, None], x_try, x[act])
-        r[act] = torch.where(better[:, None], r_try, ra)
-        J[act] = torch.where(better[:, None, None], J_try, Ja)
-        if Jp is not None:
-            Jp[act] = torch.where(better[:, None, None], Jp_try, Jp[act])
-        mu[act] = torch.where(better, (ma * 0.1).clamp_min(1e-12), ma * 10.0)
-        iters[act] += 1
-        done[act] = _done(r[act], opts)
+        if act.numel() == len(x):   # every sample (a single query's usual case): no gathers
+            x, r, J, Jp, mu, done = _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale)
+            iters += 1
+        else:
+            x[act], r[act], J[act], Jp_act, mu[act], done[act] = _lm_iteration(
+                jac_fn, x[act], p[act], r[act], J[act], None if Jp is None else Jp[act], mu[act], opts, max_step,
+                step_scale)
+            if Jp is not None:
+                Jp[act] = Jp_act
+            iters[act] += 1
         stuck = mu > 1e8
     if Jp is None and getattr(jac_fn, "dp", None) is not None:
         Jp = jac_fn.dp(x, p)
     return x, done, iters, (J[:, :n], Jp)
+
+
+def _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale):
+    """One LM iteration of the samples x (b, n) at p (b, J) with residuals r, Jacobians J
+    (and dr/dP Jp, or None) and damping mu: the step, capped by max_step (scaled units),
+    kept where it lowers |r|², mu ×0.1 on success and ×10 on failure. Returns the new
+    (x, r, J, Jp, mu, done)."""
+    step = lm_step(J, r, mu)
+    if max_step is not None:
+        big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
+        step = step / big.clamp_min(1.0)
+    x_try = x + step
+    J_try, r_try, Jp_try = jac_fn(x_try, p, dp=False)
+    better = r_try.pow(2).sum(-1) < r.pow(2).sum(-1)
+    x_new = torch.where(better[:, None], x_try, x)
+    r_new = torch.where(better[:, None], r_try, r)
+    J_new = torch.where(better[:, None, None], J_try, J)
+    Jp_new = None if Jp is None else torch.where(better[:, None, None], Jp_try, Jp)
+    mu_new = torch.where(better, (mu * 0.1).clamp_min(1e-12), mu * 10.0)
+    return x_new, r_new, J_new, Jp_new, mu_new, _done(r_new, opts)
 
 
 def lbfgs(loss_fn, x, p, opts):

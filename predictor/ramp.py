@@ -136,10 +136,10 @@ def ramped(problem: GripperProblem) -> bool:
 
 @graph_cache
 def _traced_depth_fn(problem: GripperProblem):
-    """c(x (B, 3J), p (B, J)) -> (B, 2) [normal force of the object on the finger N, the
-    deepest overlap mm: the object's penetration or the outline's crossing of X = 0],
-    recorded by ``traced``: the ramp asks for it after every step (depth check, first
-    contact)."""
+    """c(x (B, 3J), p (B, J)) -> (B, 3) [normal force of the object on the finger N, the
+    deepest overlap mm: the object's penetration or the outline's crossing of X = 0, that
+    crossing alone mm (0 where the fingers do not meet)], recorded by ``traced``: the ramp
+    asks for it after every step (depth check, first contact, the plane's homotopy)."""
     n_joints, weight = problem.n_joints, problem.params.object_weight if problem.gravity else 0.0
     layout = problem.params.layout
 
@@ -147,13 +147,14 @@ def _traced_depth_fn(problem: GripperProblem):
         pose = problem.pose(p, x.reshape(-1, n_joints, 3), face_points=False)   # the outline is built here
         V = outline_vertices(pose, layout)
         zero = torch.zeros_like(x[:, 0])
-        normal, depth = zero, zero
+        normal, depth, across = zero, zero, zero
         if problem.obstacle is not None:
             st = contact_loads(pose, problem.params, problem.obstacle, problem.contact, weight, V)
             normal, depth = st.normal, st.penetration
         if meets(problem):
-            depth = torch.maximum(depth, plane_overlap(V))
-        return torch.stack((normal, depth), -1)
+            across = plane_overlap(V)
+            depth = torch.maximum(depth, across)
+        return torch.stack((normal, depth, across), -1)
 
     return traced(c, 3 * n_joints, n_joints)
 
@@ -161,9 +162,27 @@ def _traced_depth_fn(problem: GripperProblem):
 def contact_depth(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(normal force N (B,) of the object on the finger, the deepest overlap mm (B,) of the
     object or of the plane X = 0 with the finger) at unknowns x (B, 3J), pressures p (B, J)."""
+    c = _depth_columns(problem, x, p)
+    return c[:, 0].clone(), c[:, 1].clone()
+
+
+def _depth_columns(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+    """``_traced_depth_fn``'s (B, 3) at x, p. The last call's answer is kept: a ramp step's
+    depth check, its first-contact record (``solve_path``) and the next step's plane test
+    (``homotopy``) ask for the same point."""
+    last = _LAST_DEPTH[0]
+    if (last is not None and last[0] is problem and last[1].shape == x.shape and last[2].shape == p.shape
+            and torch.equal(last[1], x) and torch.equal(last[2], p)):
+        return last[3]
     with torch.inference_mode():
         c = _traced_depth_fn(problem)(x, p)
-    return c[:, 0].clone(), c[:, 1].clone()
+    c = c.clone()
+    _LAST_DEPTH[0] = (problem, x.detach().clone(), p.detach().clone(), c)
+    return c
+
+
+#: _depth_columns' last (problem, x, p, columns).
+_LAST_DEPTH: list = [None]
 
 
 def attempts(problem: GripperProblem, options: SolverOptions) -> tuple[str, ...]:
@@ -200,8 +219,8 @@ def advance(run, x, pa, pb, cutbacks, jac=None):
 
 def crosses_plane(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
     """(B,) bool: the outline at unknowns x (B, 3J), pressures p (B, J) lies across X = 0
-    (any vertex at X < 0)."""
-    return contact_depth(dataclasses.replace(problem, obstacle=None), x, p)[1] > 0
+    (any vertex at X < 0); False everywhere where the fingers do not meet."""
+    return _depth_columns(problem, x, p)[:, 2] > 0
 
 
 def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = None, soften: bool = True,

@@ -140,6 +140,19 @@ class GestureResult:
                        contact_point_mm=contacts[0]["point_mm"])
         return out
 
+    def rows(self, index) -> "GestureResult":
+        """The result of samples ``index`` (a bool mask or indices over B); the time and
+        method stay this result's."""
+        new = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, FingerPose):
+                v = v.rows(index)
+            elif isinstance(v, torch.Tensor):
+                v = v[index]
+            new[f.name] = v
+        return dataclasses.replace(self, **new)
+
     def with_rows(self, rows: torch.Tensor, other: "GestureResult") -> "GestureResult":
         """A copy whose solved rows ``rows`` (B,) bool come from ``other`` (a result for the
         pressures[rows]); the given fields, time and method stay this result's."""

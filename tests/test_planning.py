@@ -19,9 +19,9 @@ import torch
 
 from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
-from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify
+from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify, grasp_atlas as atlas_of
 from predictor.inverse import where_it_touches
-from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, gradient
+from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, coarse_atlas, gradient
 from predictor.solve import solve
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,6 +76,62 @@ def test_sweep_equals_the_reference_ramp(circle):
     assert all(swept.counts()[k] > 0 for k in ("no_contact", "holds", "slips"))
     assert (swept.state == ramped.state).all()
     assert torch.allclose(swept.result.tau, ramped.result.tau, rtol=0, atol=1e-5)
+
+
+def test_free_sweep_equals_the_plane_ramps(free):
+    """Without an object, the inverse's coarse 5 x 5 grid: the 12 points whose load-free
+    pose lies across X = 0 are continued from converged neighbours (free_sweep_solve), the
+    13 others solved as by ``solve``; the reference (``path="ramp"``: every point's own
+    solve, the 12 ramped from zero pressure) has the same equilibria to 1e-7 (N, N·mm:
+    the solver's tolerance) and fingertips to 1e-7 mm; the grid's fingers meet at X = 0."""
+    swept, ramped = atlas_of(free.problem, 5), atlas_of(free.problem, 5, path="ramp")
+    assert swept.path == "sweep" and ramped.path == "ramp"
+    assert swept.summary()["solved_by"] == {"swept": 12, "ramped": 13, "retried": 0}
+    assert bool(swept.result.converged.all()) and bool(ramped.result.converged.all())
+    assert torch.allclose(swept.result.tau, ramped.result.tau, rtol=0, atol=1e-7)
+    assert torch.allclose(swept.result.pose.tip_end, ramped.result.pose.tip_end, rtol=0, atol=1e-7)
+    assert float(swept.result.plane_force_N.max()) > 0
+
+
+def test_batched_solve_rows_are_single_solves(free):
+    """The inverse verifies an unreachable tip goal's candidates in one batched solve
+    (inversion._verifications): each row (GestureResult.rows) is its own solve's, tau and
+    fingertip to 1e-11, the same iterations (one pressed on the plane, one apart)."""
+    P = torch.tensor([[0.3, 0.15625], [-0.1, -0.1], [0.0785, -0.0682]], dtype=torch.float64)
+    batch = solve(free.problem, P)
+    for i in range(len(P)):
+        one, row = solve(free.problem, P[i:i + 1]), batch.rows([i])
+        assert torch.allclose(one.tau, row.tau, rtol=0, atol=1e-11)
+        assert torch.allclose(one.pose.tip_end, row.pose.tip_end, rtol=0, atol=1e-11)
+        assert int(one.iterations[0]) == int(row.iterations[0])
+    assert float(batch.plane_force_N[0]) > 0 and float(batch.plane_force_N[1]) == 0
+
+
+def test_inverse_tip_answers_are_frozen(free):
+    """The coarse start grid by continuation and the batched verification leave the
+    answers of make inverse's tip cases (results/predictor/inverse.json of main 08f5ad7,
+    before them) within 1e-7 MPa and 1e-7 mm: tip:40,-212 feasible and robust,
+    tip:0,-400 infeasible at (0.3, 0.15625) MPa, 183.73728935 mm away."""
+    near = inverse_pressures(free, goal="tip:40,-212")
+    assert near.status == "feasible" and near.robust and near.candidates == 1
+    assert near.pressures == pytest.approx((0.05950930220452424, -0.18234565921720022), abs=1e-7)
+    far = inverse_pressures(free, goal="tip:0,-400")
+    assert far.status == "infeasible" and far.verified and far.candidates == 3
+    assert far.pressures == pytest.approx((0.3, 0.15624999999999997), abs=1e-7)
+    assert far.tip_error_mm == pytest.approx(183.7372893499654, abs=1e-7)
+
+
+def test_coarse_grid_kept_for_later_questions(free):
+    """A tip question solves the 5 x 5 start grid once (coarse_atlas); a later one of the
+    same gripper, box and options starts from the kept grid and answers exactly the same."""
+    coarse_atlas.cache_clear()
+    first = inverse_pressures(free, goal="tip:40,-212")
+    assert coarse_atlas.cache_info().misses == 1 and coarse_atlas.cache_info().hits == 0
+    again = inverse_pressures(free, goal="tip:40,-212")
+    assert coarse_atlas.cache_info().misses == 1 and coarse_atlas.cache_info().hits == 1
+    assert again.pressures == first.pressures and again.stencil_states == first.stencil_states
+    inverse_pressures(free, goal="tip:40,-212", box=(0.0, 0.3, -0.3, 0.0))   # another box: its own grid
+    assert coarse_atlas.cache_info().misses == 2
 
 
 def test_first_contact_lies_on_the_path(atlas):

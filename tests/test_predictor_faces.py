@@ -353,3 +353,36 @@ def test_plane_homotopy_only_where_the_finger_meets_the_plane():
     handed = levenberg_marquardt(jac, x0, p, opts, hand_over=(1, stop))
     assert handed[1].tolist() == [False, True, True] and handed[2].tolist() == [1, *free[2][1:].tolist()]
     assert float((handed[0][1:] - free[0][1:]).abs().max()) <= 1e-12   # other batches: rounding only
+
+
+def test_plane_test_and_kept_depth_are_the_definitions():
+    """ramp.crosses_plane reads the object problem's depth graph (its third column, the
+    outline's crossing of X = 0): the same verdicts as the definition, the object-free
+    problem's overlap > 0, on poses across and clear of the plane (analytic joint, circle,
+    tau = 0 at four pressures: two across, two clear); contact_depth answers a repeated
+    question from the kept last answer, equal to a fresh evaluation, and a changed x or
+    another problem evaluates anew; without the plane nothing crosses."""
+    import predictor.ramp as ramp
+
+    problem = GripperProblem(J, obstacle=Obstacle(), approach=(-0.15, 0.0))
+    free = dataclasses.replace(problem, obstacle=None)
+    p = t([[0.3, 0.3], [0.2, 0.0], [-0.2, 0.0], [-0.1, -0.2]])
+    x = torch.zeros(4, 6, dtype=torch.float64)
+    with torch.inference_mode():
+        overlap = ramp._traced_depth_fn(free)(x, p)[:, 1]
+        fresh = ramp._traced_depth_fn(problem)(x, p)
+    assert (overlap > 0).tolist() == [True, True, False, False]
+    assert ramp.crosses_plane(problem, x, p).tolist() == (overlap > 0).tolist()
+    assert torch.equal(fresh[:, 2], overlap)
+    first = ramp.contact_depth(problem, x, p)
+    kept = ramp._LAST_DEPTH[0]
+    again = ramp.contact_depth(problem, x.clone(), p.clone())
+    assert ramp._LAST_DEPTH[0] is kept                              # answered from the kept one
+    assert torch.equal(again[0], fresh[:, 0]) and torch.equal(again[1], fresh[:, 1])
+    assert torch.equal(first[1], again[1])
+    moved = x.clone()
+    moved[0, 0] = 1.0
+    ramp.contact_depth(problem, moved, p)
+    assert ramp._LAST_DEPTH[0] is not kept
+    no_plane = dataclasses.replace(problem, contact=ContactParams(plane_stiffness=0.0))
+    assert not bool(ramp.crosses_plane(no_plane, x, p).any())
