@@ -96,14 +96,23 @@ def homotopy(prob: GripperProblem, step_of):
         for stage in stages:
             xb, cb, ib, jb = stage(xb, pb, prev, sub)
             prev, sub, total = None, None, total + ib
-        x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
-        x_new[bad], conv[bad], its[bad] = xb, cb, its[bad] + total
-        if jac_new is not None and jb is not None:
-            for a, b in zip(jac_new, jb):
-                a[bad] = b
-        return x_new, conv, its, jac_new
+        return _take_rows((x_new, conv, its, jac_new), bad, (xb, cb, total, jb))
 
     return run
+
+
+def _take_rows(step, rows, retried):
+    """A step solver's answer (x, converged, iterations, Jacobians) with ``rows`` (bool mask)
+    replaced by the retried rows' answer, whose iterations are added to theirs (the
+    Jacobians, where both have them, in place)."""
+    x_new, conv, its, jac_new = step
+    xb, cb, ib, jb = retried
+    x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
+    x_new[rows], conv[rows], its[rows] = xb, cb, its[rows] + ib
+    if jac_new is not None and jb is not None:
+        for a, b in zip(jac_new, jb):
+            a[rows] = b
+    return x_new, conv, its, jac_new
 
 
 def in_turn(runs):
@@ -119,11 +128,7 @@ def in_turn(runs):
                 break
             sub = None if jac is None else tuple(a[bad] for a in jac)
             xb, cb, ib, jb = nxt(x[bad], p[bad], None if p_prev is None else p_prev[bad], sub)
-            x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
-            x_new[bad], conv[bad], its[bad] = xb, cb, its[bad] + ib
-            if jac_new is not None and jb is not None:
-                for a, b in zip(jac_new, jb):
-                    a[bad] = b
+            x_new, conv, its, jac_new = _take_rows((x_new, conv, its, jac_new), bad, (xb, cb, ib, jb))
         return x_new, conv, its, jac_new
 
     return run
