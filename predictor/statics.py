@@ -274,7 +274,8 @@ def apart(problem: "GripperProblem") -> "GripperProblem":
 class PlaneContact:
     """The right finger's contact with the symmetry plane X = 0 (the left finger's mirror
     face): points, forces (B, Kp, 2) mm, N, the Gauss points of every outline edge's part
-    at X < 0 and the force on the finger there (+X); force (B,) N their sum; overlap (B,)
+    at X < 0 and the force on the finger there (+X), both zero on a row whose outline does
+    not cross X = 0; force (B,) N their sum; overlap (B,)
     mm, how far the outline crosses X = 0 (max(0, -min X of its vertices)). A Statics
     rebuilt from a recorded graph (predictor.graphs.as_statics) has the figures force and
     overlap only (points and forces None)."""
@@ -379,16 +380,35 @@ def plane_contact(pose: FingerPose, params: GripperParams, contact: ContactParam
     force k_p·s(-X_k)·w_k along +X. The overlap is over every vertex."""
     layout = params.layout
     V = outline_vertices(pose, layout) if vertices is None else vertices
+    overlap = plane_overlap(V)
     start, end = edge_ends(V, layout, layout.plane_edges)
+    # Broad phase, eager only (a recorded graph keeps one branch; predictor.graphs.gated
+    # gates its calls instead): a row with no vertex at X < 0 has no interval and zero
+    # force, so the quadrature runs on the rows that cross, and the others get zero forces
+    # at zero points, which add exactly nothing to the residual's sums.
+    recording = torch.jit.is_tracing() or torch.compiler.is_compiling()
+    rows = None if recording else (overlap > 0).nonzero().flatten()
+    if rows is not None and len(rows) < len(V):
+        points, normal = _plane_penalty(start[rows], end[rows], contact)
+        points = torch.zeros(len(V), *points.shape[1:], dtype=V.dtype).index_copy(0, rows, points)
+        normal = torch.zeros(len(V), normal.shape[1], dtype=V.dtype).index_copy(0, rows, normal)
+    else:
+        points, normal = _plane_penalty(start, end, contact)
+    forces = torch.stack((normal, torch.zeros_like(normal)), -1)
+    return PlaneContact(points, forces, normal.sum(-1), overlap)
+
+
+def _plane_penalty(start: torch.Tensor, end: torch.Tensor, contact: ContactParams):
+    """The plane's Gauss points (B, E·PLANE_GAUSS, 2) mm and normal forces (B, E·PLANE_GAUSS)
+    N on the edges start -> end (B, E, 2): on each edge the interval at X < 0 (X is
+    linear along it)."""
     xa, xb = start[..., 0], end[..., 0]
     den = xa - xb
     cross = xa / torch.where(den == 0, 1.0, den)       # where X = 0 along the edge (when it changes sign)
     lo = torch.where(xa < 0, 0.0, torch.where(xb < 0, cross, _EMPTY))
     hi = torch.where(xb < 0, 1.0, torch.where(xa < 0, cross, -_EMPTY))
     points, w = edge_quadrature(start, end, *clip_interval(lo, hi), PLANE_GAUSS)
-    normal = contact.plane_stiffness * smooth_penetration(-points[..., 0], contact.smoothing) * w
-    forces = torch.stack((normal, torch.zeros_like(normal)), -1)
-    return PlaneContact(points, forces, normal.sum(-1), plane_overlap(V))
+    return points, contact.plane_stiffness * smooth_penetration(-points[..., 0], contact.smoothing) * w
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from predictor.jacobians import autograd_jacobian
 from predictor.problem import load_problem
 from predictor.solve import SolverOptions, solve
 from predictor.statics import (ContactParams, GripperProblem, Obstacle, contact_loads, parse_object, plane_contact,
-                               smooth_penetration)
+                               scaled, smooth_penetration)
 
 from test_predictor_common import ROOT, SURROGATE, J, t
 
@@ -209,6 +209,26 @@ def test_plane_force_and_moment_at_a_known_overlap():
     moment = k * s * 170.45**2 / 2 + k * S * 170.45
     assert abs(float(on[0, 0, 2] - off[0, 0, 2]) + moment) < 1e-8 * moment      # R_M = M - Σ moments
     assert abs(float(on[0, 0, 0] - off[0, 0, 0]) + k * (s * 170.45 + S)) < 1e-9   # R_F = ... - ΣF
+
+
+@pytest.mark.filterwarnings("ignore::torch.jit.TracerWarning")
+def test_plane_broad_phase_is_the_full_quadrature():
+    """The eager plane term skips the rows with no vertex at X < 0 (statics.plane_contact);
+    a recorded graph evaluates the plane's quadrature on every row. On one batch of load-free
+    poses of which some cross X = 0 (P up to 0.3 MPa: the finger bends 130 mm across) and
+    some do not, the two give the same residual bit for bit, and the plane pushes (+X, so
+    R_F,x drops) exactly on the rows that cross."""
+    problem = GripperProblem(J, GripperParams(), gravity=False)
+    p = t([[0.3, 0.3], [-0.3, -0.3], [0.25, 0.0], [0.0, -0.2], [0.1, 0.3]])
+    x = torch.zeros(len(p), 6, dtype=torch.float64)
+    eager = problem.residual(p, x.reshape(-1, 2, 3))
+    cross = eager.plane.overlap > 0
+    assert 0 < int(cross.sum()) < len(p)
+    recorded = torch.jit.trace(residual_fn(problem), (x, p), check_trace=False)(x, p)
+    assert torch.equal(recorded[:, :6], scaled(eager.residual))
+    alone = GripperProblem(J, GripperParams(), contact=ContactParams(plane_stiffness=0.0), gravity=False)
+    pushed = (eager.residual - alone.residual(p, x.reshape(-1, 2, 3)).residual)[:, 0, 0] < 0
+    assert torch.equal(pushed, cross)
 
 
 @needs_surrogate
