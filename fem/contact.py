@@ -157,7 +157,8 @@ class ValleyContact:
 class ContactTerms:
     """Several contact terms behind the one interface fem.load_path calls (add_residual,
     add_tangent, coupled_dofs, and the optional refuses and low_rank: fem.object_contact);
-    None terms dropped. A problem with one term keeps that term itself, so its answers are
+    None terms dropped. fem.load_path.TangentAction reads ``terms`` itself, to apply the
+    ones with a facet-form tangent (``action_form``) without a matrix. A problem with one term keeps that term itself, so its answers are
     unchanged."""
 
     def __init__(self, *terms):
@@ -165,11 +166,6 @@ class ContactTerms:
 
     def __bool__(self) -> bool:
         return bool(self.terms)
-
-    @property
-    def tangent_in_cells(self) -> bool:
-        """Whether a term's tangent is a facet form (fem.load_path.TangentAction)."""
-        return any(getattr(t, "tangent_in_cells", False) for t in self.terms)
 
     def coupled_dofs(self) -> list[np.ndarray]:
         """Every term's rows of coupled global dofs (each row: one dense block)."""

@@ -206,9 +206,6 @@ class ObjectContact:
     False makes the term add nothing (the approach gesture before the object is brought
     in). Collective."""
 
-    #: its tangent is a facet form, in the tangent's own pattern (fem.load_path.TangentAction)
-    tangent_in_cells = True
-
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float, obstacle: ObjectSpec,
                  excluded_tags: list[int], *, stiffness: float = CONTACT_STIFFNESS,
                  smoothing: float = CONTACT_SMOOTHING, mu: float = FRICTION, weight: float = OBJECT_WEIGHT):
@@ -233,6 +230,7 @@ class ObjectContact:
         trial = ufl.TrialFunction(W)
         residual = over(lambda N: -N * ufl.dot(n, vg) + self.lam * N * ufl.dot(t, vg))
         num, den = over(lambda N: N * n[1]), over(lambda N: N * t[1])
+        self._residual = residual
         self._R = fem.form(residual)
         self._K = fem.form(ufl.derivative(residual, w, trial))
         self._G = fem.form(over(lambda N: N * ufl.dot(t, vg)))
@@ -297,6 +295,16 @@ class ObjectContact:
         assemble_matrix(A, self._K)
         A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
         A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+
+    def action_form(self, x: fem.Function) -> fem.FormMetaClass:
+        """The linear form (dR_o/du at fixed lambda_c) x, for a tangent applied matrix-free
+        (fem.load_path.TangentAction): the form add_tangent assembles, along x."""
+        return fem.form(ufl.derivative(self._residual, self.w, x))
+
+    def linearise(self, u: fem.Function) -> None:
+        """Fix lambda_c at the current state, as add_tangent does (nothing when inactive)."""
+        if self.active:
+            self._update()
 
     def low_rank(self, u: fem.Function) -> list[tuple[PETSc.Vec, PETSc.Vec]]:
         """The tangent's part that add_tangent leaves out: [(G, dlambda)], dR_o += G dlambdaᵀ

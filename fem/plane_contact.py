@@ -81,9 +81,6 @@ class PlaneContact:
     (mm): contract.grasp's. ``active`` False makes the term add nothing (the finger then
     passes through X = 0). Collective."""
 
-    #: its tangent is a facet form, in the tangent's own pattern (fem.load_path.TangentAction)
-    tangent_in_cells = True
-
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float,
                  excluded_tags: list[int], *, stiffness: float = PLANE_STIFFNESS,
                  smoothing: float = CONTACT_SMOOTHING):
@@ -100,6 +97,7 @@ class PlaneContact:
                      for k in range(len(finger.parts)))
         residual = sum(-(stiffness / part_width(finger, k, joint_width)) * s * vg[0] * ds(k + 1)
                        for k in range(len(finger.parts)))
+        self._residual = residual
         self._R = fem.form(residual)
         self._K = fem.form(ufl.derivative(residual, w, ufl.TrialFunction(w.function_space)))
         self._normal = fem.form(normal)
@@ -137,6 +135,14 @@ class PlaneContact:
         assemble_matrix(A, self._K)
         A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
         A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+
+    def action_form(self, x: fem.Function) -> fem.FormMetaClass:
+        """The linear form (dR_p/du) x, for a tangent applied matrix-free
+        (fem.load_path.TangentAction): the form add_tangent assembles, along x."""
+        return fem.form(ufl.derivative(self._residual, self.w, x))
+
+    def linearise(self, u: fem.Function) -> None:
+        """Nothing: the plane's law has no lagged value."""
 
     def surface_x(self, u: fem.Function) -> np.ndarray:
         """Global X (n,) mm of the surface nodes this rank owns at the state u."""

@@ -18,6 +18,8 @@ shared by the tests:
   (low_rank), against central differences of its residual (step 1e-6 mm): measured
   3.9e-9 of the largest entry with the rank-one part and 0.12 without it, asserted at
   1e-6 and, for the rank-one part's own size, 1e-2;
+* GMRES's matrix-free operator is the assembled tangent plus the rank-one part, to
+  round-off (1e-10 of the largest entry);
 * a state with the finger 3 mm deep in the object is refused (the solver then cuts the
   step back: a penalty would hold it there), the held grasp is not.
 """
@@ -115,6 +117,22 @@ def test_object_tangent_matches_differences(grasp):
     assert scale > 1e-4
     assert np.abs(Adu.array + rank_one - fd).max() < 1e-6 * scale
     assert np.abs(rank_one).max() > 1e-2 * scale               # without it the test fails
+
+
+def test_matrix_free_grasp_tangent_is_the_assembled_one(grasp):
+    """GMRES's operator (fem.load_path.TangentAction: the object's facet form along x, the
+    valleys' blocks, the friction's rank-one part, the clamp's unit rows) times a random x
+    is the assembled tangent's product plus the rank-one part, to round-off."""
+    solver, _ = grasp
+    ls = solver.fem.solver
+    G, dlam = solver.object.low_rank(solver.fem.u)[0]
+    for vec in (G, dlam):
+        vec.array[ls.constrained_dofs()] = 0.0            # the pair is zero on the clamp's rows and columns
+    xv = G.duplicate()
+    xv.array[:] = np.random.default_rng(11).standard_normal(xv.getLocalSize())
+    assembled, free = ls.tangent_products(xv.array)
+    expected = assembled + G.array * dlam.dot(xv)
+    assert np.abs(free - expected).max() < 1e-10 * np.abs(expected).max()
 
 
 def test_finger_deep_in_the_object_is_refused(grasp):

@@ -15,6 +15,8 @@ nice 10 on a loaded two-core machine, 37 s of it the plane's gesture):
   own tip is also frozen (to 1e-4 mm);
 * the plane term's tangent (UFL's derivative) against central differences of its
   residual at that contact (measured 1.0e-9 of the largest entry, asserted 1e-6);
+* GMRES's matrix-free operator there is the assembled tangent, to round-off (1e-10 of the
+  largest entry);
 * free (0.05, -0.05) MPa, where the finger stays 3.0 mm clear of X = 0: the answer with the
   plane is bit-for-bit the answer without it, and there the term adds exact zeros to the
   residual and the tangent;
@@ -140,6 +142,17 @@ def test_plane_tangent_matches_differences(meeting):
     scale = np.abs(fd).max()
     assert scale > 1e-3
     assert np.abs(Adu.array - fd).max() < 1e-6 * scale
+
+
+def test_matrix_free_plane_tangent_is_the_assembled_one(meeting):
+    """GMRES's operator (fem.load_path.TangentAction: the plane's facet form along x, the
+    valleys' blocks, the clamp's unit rows) times a random x is the assembled tangent's
+    product, to round-off, where the finger presses on the plane."""
+    solver, _, state = meeting
+    solver.u.x.array[:] = state
+    x = np.random.default_rng(13).standard_normal(solver.u.vector.getLocalSize())
+    assembled, free = solver.solver.tangent_products(x)
+    assert np.abs(free - assembled).max() < 1e-10 * np.abs(assembled).max()
 
 
 def test_apart_the_plane_changes_nothing(plain, meeting):
