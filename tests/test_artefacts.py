@@ -36,11 +36,11 @@ def _committed() -> list[str]:
 COMMITTED = _committed()
 
 
-#: Catalogued artefacts of long runs the lead has not made yet: the finger FEM over the
-#: pressure box (make finger-grid) and the FEM grasps (make grasp-fem), hours each on the
-#: production mesh, and the grasp validation that reads them (make validate-grasps). Their
-#: formats are checked by tests/test_finger_grid.py, test_grasp_cases.py and
-#: test_validate_grasps.py on hand-made or coarse records.
+#: Catalogued artefacts of long runs not finished yet: the finger FEM over the pressure box
+#: (make finger-grid) and the FEM grasps (make grasp-fem; the first of 16 cases committed),
+#: hours each on the production mesh, and the grasp validation that reads them (make
+#: validate-grasps). Their formats are checked by tests/test_finger_grid.py,
+#: test_grasp_cases.py and test_validate_grasps.py on hand-made or coarse records.
 PENDING = {"fem/finger_grid.json", "validation/grasps_fem/*.json", "validation/grasps.json"}
 
 
