@@ -175,6 +175,9 @@ class FingerResult:
     load_steps: int = 0
     cutbacks: int = 0
     factorisations: int = 0
+    factorisation_s: float = 0.0    # wall seconds in them (tangent assembly included)
+    krylov_iterations: int = 0
+    krylov_s: float = 0.0           # wall seconds in GMRES
     wall_time: float = 0.0
     cpu_time: float = 0.0           # this process's CPU time: one core's share under load
     reason: str = ""
@@ -201,7 +204,8 @@ class FingerResult:
         return {**out, **self.plane_figures(), "newton_iterations": self.newton_iterations,
                 "iterations": int(sum(self.newton_iterations)), "load_steps": self.load_steps,
                 "cutbacks": self.cutbacks, "factorisations": self.factorisations,
-                "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
+                "factorisation_s": self.factorisation_s, "krylov_iterations": self.krylov_iterations,
+                "krylov_s": self.krylov_s, "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
 
     def _joints(self) -> list[dict]:
         """Per joint: anchors, proximal centre and the angles of the module docstring."""
@@ -407,6 +411,11 @@ def closed_tags(finger: FingerSpec) -> list[int]:
         tags["symmetry"], tags["proximal"]]
 
 
+def _spent(solver, before: dict) -> dict:
+    """The linear algebra's work (LoadPathSolver.work) since ``before``."""
+    return {k: v - before[k] for k, v in solver.work().items()}
+
+
 class FingerSolver:
     """Static large-deflection solve of one whole finger (module docstring):
     :func:`finger_problem` handed to a :class:`fem.load_path.LoadPathSolver`; every joint
@@ -503,11 +512,10 @@ class FingerSolver:
         check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(joints))],
                   box=pressure_limits(self.finger), units=["MPa"] * len(joints))
         solver = self.solver
-        t0, c0, lu0 = time.perf_counter(), time.process_time(), solver.factorisations
+        t0, c0, w0 = time.perf_counter(), time.process_time(), solver.work()
         solver.reset()
         path = solver.follow(solver.state.copy(), load.as_array())
-        result = self._result(load, path, solver.factorisations - lu0, time.perf_counter() - t0,
-                              time.process_time() - c0)
+        result = self._result(load, path, _spent(solver, w0), time.perf_counter() - t0, time.process_time() - c0)
         if self.comm.rank == 0:
             log.info("finger %s: converged=%s, %d steps, %.1f s", load.pressures, path.converged,
                      path.load_steps, result.wall_time)
@@ -520,14 +528,13 @@ class FingerSolver:
         check_box(np.asarray(load.pressures), names=[f"P{j + 1}" for j in range(len(self.finger.joints))],
                   box=pressure_limits(self.finger), units=["MPa"] * len(self.finger.joints))
         solver = self.solver
-        t0, c0, lu0 = time.perf_counter(), time.process_time(), solver.factorisations
+        t0, c0, w0 = time.perf_counter(), time.process_time(), solver.work()
         path = solver.follow(solver.state.copy(), load.as_array())
-        return self._result(load, path, solver.factorisations - lu0, time.perf_counter() - t0,
-                            time.process_time() - c0)
+        return self._result(load, path, _spent(solver, w0), time.perf_counter() - t0, time.process_time() - c0)
 
-    def _result(self, load: FingerLoad, path, factorisations: int, wall: float,
-                cpu: float) -> FingerResult:
-        """Global-frame figures of the current state (module docstring)."""
+    def _result(self, load: FingerLoad, path, spent: dict, wall: float, cpu: float) -> FingerResult:
+        """Global-frame figures of the current state (module docstring); spent: the linear
+        algebra's work since the solve began (LoadPathSolver.work)."""
         finger = self.finger
         base, turn = np.array([0.5 * finger.base_gap, 0.0]), rotation_matrix(finger.base_angle)
         x = (self.probe_points + self.solver.probe_displacements())[:, :2]
@@ -551,7 +558,7 @@ class FingerSolver:
             theta=theta, end_angle=end, chord_angle=end + np.remainder(chord - end + math.pi, 2 * math.pi) - math.pi,
             local_anchors=per_joint(local),
             newton_iterations=path.newton_iterations, load_steps=path.load_steps,
-            cutbacks=path.cutbacks, factorisations=factorisations, wall_time=wall, cpu_time=cpu,
+            cutbacks=path.cutbacks, **spent, wall_time=wall, cpu_time=cpu,
             reason=path.reason, plane=self._plane_state() if path.converged else None)
 
     def _plane_state(self) -> dict | None:

@@ -36,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -308,6 +309,8 @@ class LoadPathSolver:
         self.state = np.zeros(len(problem.load_scale))  # load vector of the converged state
         self.factorisations = 0                    # factorisations so far (diagnostics)
         self.krylov_iterations = 0                 # GMRES iterations so far (diagnostics)
+        self.factorisation_seconds = 0.0           # wall time in the factorisations (diagnostics)
+        self.krylov_seconds = 0.0                  # wall time in GMRES (diagnostics)
         self._refactor = True                      # factorise before the next tangent solve?
         self._rates: Rates | None = None           # the last sensitivities, for a predictor
 
@@ -472,6 +475,7 @@ class LoadPathSolver:
         production joint) and as good a preconditioner; the first tangent that is not
         (the follower pressure on tetrahedra, ~6e-6 of its norm: an LDL^T of its upper
         triangle then costs GMRES ~4 more iterations a solve) switches to LU for good."""
+        t0 = time.perf_counter()
         self._assemble_tangent()
         if self._factor_type == "cholesky" and not self._symmetric():
             self._factor_type = "lu"
@@ -482,6 +486,7 @@ class LoadPathSolver:
         self._refactor = False
         self._factor_load = self._held
         self.factorisations += 1
+        self.factorisation_seconds += time.perf_counter() - t0
 
     def _symmetric(self) -> bool:
         """Whether _P is symmetric to round-off: |(P^T - P) x| <= 1e-12 |P x| along a fixed
@@ -518,15 +523,26 @@ class LoadPathSolver:
         if self._factor_stale():
             self._factorise()
         self.ksp.setTolerances(rtol=rtol or self.config.krylov_rtol)
-        self.ksp.solve(b, x)
-        self.krylov_iterations += self.ksp.getIterationNumber()
+        self._krylov(b, x)
         if self.ksp.getConvergedReason() <= 0:
             self._factorise()
-            self.ksp.solve(b, x)
-            self.krylov_iterations += self.ksp.getIterationNumber()
+            self._krylov(b, x)
             if self.ksp.getConvergedReason() <= 0:
                 raise PETSc.Error(76)   # the caller cuts the step back
         self._refactor = self.ksp.getIterationNumber() > self.config.krylov_max_it // 2
+
+    def _krylov(self, b: PETSc.Vec, x: PETSc.Vec) -> None:
+        """One GMRES run, counted (krylov_iterations, krylov_seconds)."""
+        t0 = time.perf_counter()
+        self.ksp.solve(b, x)
+        self.krylov_iterations += self.ksp.getIterationNumber()
+        self.krylov_seconds += time.perf_counter() - t0
+
+    def work(self) -> dict:
+        """The running totals of the linear algebra (diagnostics): factorisations and their
+        wall seconds (assembly of the tangent included), GMRES iterations and seconds."""
+        return {"factorisations": self.factorisations, "factorisation_s": self.factorisation_seconds,
+                "krylov_iterations": self.krylov_iterations, "krylov_s": self.krylov_seconds}
 
     def newton(self, tangent_load: np.ndarray | None = None) -> tuple[int, bool]:
         """Newton iterations at the current load from the current u: (iterations, converged).

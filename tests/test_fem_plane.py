@@ -90,6 +90,17 @@ def test_plane_holds_the_finger_and_the_clamp_balances_it(meeting):
     assert by == pytest.approx(FINGER_WEIGHT, abs=NEWTON_ATOL)
 
 
+def test_the_solve_accounts_for_its_linear_algebra(meeting):
+    """The gesture's record splits its wall time: factorisations (tangent assembly
+    included) and GMRES within the whole solve, every Newton correction at least one GMRES
+    iteration, at least one factorisation per load step."""
+    _, out, _ = meeting
+    assert 0 < out["factorisation_s"] and 0 < out["krylov_s"]
+    assert out["factorisation_s"] + out["krylov_s"] < out["wall_time_s"]
+    assert out["krylov_iterations"] >= out["iterations"]
+    assert out["factorisations"] >= out["load_steps"]
+
+
 def test_without_the_plane_the_finger_crosses(plain):
     result = plain.solve(FingerLoad(MEET, True))
     assert result.converged, result.reason
