@@ -238,8 +238,10 @@ def _nn_figures(joint, grav_pred, paper_pred, cont_pred, s: SimpleNamespace, n: 
 def _gravity_throughputs(grav_pred, joint, n: dict) -> SimpleNamespace:
     """Batched throughputs of the gravity NN path on one thread and on every core, and its
     single queries. main measures them first, before any solver graph is recorded: once
-    torch.compile's graphs have run in a process, the same eager float32 batch runs about
-    17 % slower in it (a batch job of the network needs no solver graph)."""
+    torch.compile's graphs have run in a process, the same eager float32 batch runs slower
+    in it (the delivered path 8.6e4 gestures/s measured after the solver figures, 1.13e5
+    before them, two quiet runs of this bench on the same code); a batch job of the
+    network needs no solver graph."""
     # NN throughput: pressures -> tau -> full gesture (forward kinematics), no autograd, on
     # one thread and on every core (best of 3 each: the machine is shared, and the best
     # run is the one least disturbed). The delivered path (predictor.nn_answer.predict_gesture)
@@ -253,12 +255,6 @@ def _gravity_throughputs(grav_pred, joint, n: dict) -> SimpleNamespace:
     predict_gesture(grav_pred, problem, p_big[:1])   # records the answer's statics graph
     single = [predict_gesture(grav_pred, problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
     return SimpleNamespace(one=one, every64=every64, every=every, single=single)
-
-
-def _contact_throughput_figures(cont_pred, m: SimpleNamespace, n: dict) -> dict:
-    """The delivered contact path's batched throughput on every core (``_contact_throughput``)."""
-    p_cbig = sample_pressures(n["contact_throughput"], cont_pred.config, torch.Generator().manual_seed(79))
-    return _contact_throughput(cont_pred, m.cont_problem, p_cbig, os.cpu_count() or 1)
 
 
 def _record(args, n: dict, joint, load, preds: tuple, s: SimpleNamespace, m: SimpleNamespace,
@@ -368,7 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     h = _gravity_throughputs(grav_pred, joint, n)
     s = _solver_figures(joint, n)
     m = _nn_figures(joint, grav_pred, paper_pred, cont_pred, s, n)
-    h.cthrough = _contact_throughput_figures(cont_pred, m, n)
+    p_contact = sample_pressures(n["contact_throughput"], cont_pred.config, torch.Generator().manual_seed(79))
+    h.cthrough = _contact_throughput(cont_pred, m.cont_problem, p_contact, os.cpu_count() or 1)
     out = _record(args, n, joint, load, (grav_pred, paper_pred, cont_pred), s, m, h)
     BENCH.write(args.out, out)
     top = {k: v for k, v in out.items() if not isinstance(v, dict)}
