@@ -205,7 +205,8 @@ class FingerResult:
                 "iterations": int(sum(self.newton_iterations)), "load_steps": self.load_steps,
                 "cutbacks": self.cutbacks, "factorisations": self.factorisations,
                 "factorisation_s": self.factorisation_s, "krylov_iterations": self.krylov_iterations,
-                "krylov_s": self.krylov_s, "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time, "reason": self.reason}
+                "krylov_s": self.krylov_s, "wall_time_s": self.wall_time, "cpu_time_s": self.cpu_time,
+                "reason": self.reason}
 
     def _joints(self) -> list[dict]:
         """Per joint: anchors, proximal centre and the angles of the module docstring."""
