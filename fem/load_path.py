@@ -18,8 +18,9 @@ along the linear load path a(s) = a_0 + s (a_1 - a_0), s from 0 to 1:
   them and the contact added after them, as on the assembled K. It equals the assembled
   K x to round-off; on the production joint it costs 0.035 s against 0.046 s for the
   product with the assembled K (~180 entries a row) and 1.75 s for assembling K, half of
-  which is PETSc's insertion of the element matrices. So K is assembled only to be factorised: once a load step, as LDL^T
-  while the tangents are symmetric (the Hessian of a potential), LU otherwise;
+  which is PETSc's insertion of the element matrices. So K is assembled only to be
+  factorised: once a load step, as LDL^T while the tangents are symmetric (the Hessian of
+  a potential), LU otherwise;
 * after each converged step the problem's lagged constants take their new values;
 * sensitivities at a converged state: du/da = -K^{-1} dR/da (dR/da_j = sum_i dc_i/da_j G_i
   over the problem's load terms), all load entries at once by block GMRES
