@@ -211,7 +211,7 @@ def test_plane_force_and_moment_at_a_known_overlap():
     assert abs(float(on[0, 0, 0] - off[0, 0, 0]) + k * (s * 170.45 + S)) < 1e-9   # R_F = ... - ΣF
 
 
-@pytest.mark.filterwarnings("ignore::torch.jit.TracerWarning")
+@pytest.mark.filterwarnings("ignore::torch.jit.TracerWarning", "ignore:`torch.jit.trace` is deprecated:DeprecationWarning")
 def test_plane_broad_phase_is_the_full_quadrature():
     """The eager plane term skips the rows with no vertex at X < 0 (statics.plane_contact);
     a recorded graph evaluates the plane's quadrature on every row. On one batch of load-free
