@@ -158,8 +158,8 @@ class ContactTerms:
     """Several contact terms behind the one interface fem.load_path calls (add_residual,
     add_tangent, coupled_dofs, and the optional refuses and low_rank: fem.object_contact);
     None terms dropped. fem.load_path.TangentAction reads ``terms`` itself, to apply the
-    ones with a facet-form tangent (``action_form``) without a matrix. A problem with one term keeps that term itself, so its answers are
-    unchanged."""
+    ones with a facet-form tangent (``action_form``) without a matrix. A problem with one
+    term keeps that term itself, so its answers are unchanged."""
 
     def __init__(self, *terms):
         self.terms = [t for t in terms if t is not None]
