@@ -1,8 +1,10 @@
 """The pressure ramp of a solve with contact: the pressures go from 0 (or the approach
 gesture) to the target in ``ramp_steps`` sub-steps (``solve_path``, ``ramp``), each
 solved by the method's ``runner`` from the tangent predictor and halved on failure
-(``advance``), since the grasp depends on the pressure history. ``attempts``: the
-Jacobians tried in turn.
+(``advance``), since the grasp depends on the pressure history. Where the shortest
+step still fails the finger's contact branch has ended (a fold: a fingertip pressing on
+the object slides off it), and the finger snaps off the object (``snap_off``).
+``attempts``: the Jacobians tried in turn.
 
 Two contacts make a history: the object (every solve with one ramps), and the symmetry
 plane X = 0 where the two fingers meet (statics.plane_contact). Without an object the
@@ -202,24 +204,27 @@ def attempts(problem: GripperProblem, options: SolverOptions) -> tuple[str, ...]
     return (options.jacobian,)
 
 
-def advance(run, x, pa, pb, cutbacks, jac=None):
+def advance(run, x, pa, pb, cutbacks, jac=None, snap=None):
     """One ramp step pa -> pb (B, J) from the equilibrium x at pa (with its Jacobians
     ``jac``, or None); samples that fail are retried as two half steps, recursively up to
-    ``cutbacks`` times (as the FEM does). Returns (x, converged, iterations, jac at x)."""
+    ``cutbacks`` times (as the FEM does), and those that fail the shortest step go to
+    ``snap`` (``snap_off``) when given. Returns (x, converged, iterations, jac at x; None
+    after a snap)."""
     x_new, conv, its, jac_new = run(x, pb, pa, jac)
-    if bool(conv.all()) or cutbacks == 0:
+    if bool(conv.all()) or (cutbacks == 0 and snap is None):
         return x_new, conv, its, jac_new
     bad = ~conv
-    pm = 0.5 * (pa[bad] + pb[bad])
-    sub = None if jac is None else tuple(a[bad] for a in jac)
-    x1, c1, i1, j1 = advance(run, x[bad], pa[bad], pm, cutbacks - 1, sub)
-    x2, c2, i2, j2 = advance(run, x1, pm, pb[bad], cutbacks - 1, j1)
-    x_new, conv, its = x_new.clone(), conv.clone(), its.clone()
-    x_new[bad], conv[bad], its[bad] = x2, c1 & c2, its[bad] + i1 + i2
-    if jac_new is not None:
-        for a, b in zip(jac_new, j2):
-            a[bad] = b
-    return x_new, conv, its, jac_new
+    if cutbacks == 0:
+        retried = snap(x[bad], pb[bad])
+    else:
+        pm = 0.5 * (pa[bad] + pb[bad])
+        sub = None if jac is None else tuple(a[bad] for a in jac)
+        x1, c1, i1, j1 = advance(run, x[bad], pa[bad], pm, cutbacks - 1, sub, snap)
+        x2, c2, i2, j2 = advance(run, x1, pm, pb[bad], cutbacks - 1, j1, snap)
+        retried = (x2, c1 & c2, i1 + i2, j2)
+    if retried[3] is None:
+        jac_new = None
+    return _take_rows((x_new, conv, its, jac_new), bad, retried)
 
 
 def crosses_plane(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
@@ -259,6 +264,24 @@ def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = Non
     return homotopy(prob, lambda problem, hand_over: runner(problem, opts, True, False, hand_over))
 
 
+def snap_off(problem: GripperProblem, options: SolverOptions):
+    """The snap of a finger off the object where its contact branch ends (a fold in the
+    pressure: the ramp's shortest step fails, as when a fingertip pressing on the top of
+    a circle slides off it): snap(x (b, n), p (b, J)) -> (x, converged (b,), iterations
+    (b,), None), the gesture without the object solved from x, converged only where it
+    does not touch the object (an equilibrium of the grasp then too: zero contact force)
+    nor cross X = 0 deeper than options.max_penetration. None without an object."""
+    if problem.obstacle is None:
+        return None
+    run = runner(dataclasses.replace(problem, obstacle=None), options, history=False)
+
+    def snap(x, p):
+        x, conv, its, _ = run(x, p)
+        normal, depth = contact_depth(problem, torch.nan_to_num(x), p)
+        return x, conv & (normal <= 0) & (depth <= options.max_penetration), its, None
+    return snap
+
+
 def ramp(problem: GripperProblem, x: torch.Tensor, p0: torch.Tensor, pressures: torch.Tensor,
          options: SolverOptions, on_step=None):
     """Ramp the equilibrium x (B, 3J) at p0 (B, J) to ``pressures`` in options.ramp_steps
@@ -269,6 +292,7 @@ def ramp(problem: GripperProblem, x: torch.Tensor, p0: torch.Tensor, pressures: 
     # saves the last (quadratic) Newton iteration of each; the final step uses the full one.
     loose = dataclasses.replace(options, tol_force=100 * options.tol_force, tol_moment=100 * options.tol_moment)
     run_loose = runner(problem, loose, history=True)
+    snap = snap_off(problem, options)
     x = x.clone()
     ok = torch.ones(len(x), dtype=torch.bool)
     iterations = torch.zeros(len(x), dtype=torch.long)
@@ -284,9 +308,11 @@ def ramp(problem: GripperProblem, x: torch.Tensor, p0: torch.Tensor, pressures: 
         every = len(on) == len(x)
         sub = jac if jac is None or every else tuple(a[on] for a in jac)
         xs, conv, its, jac_on = advance(run if k == options.ramp_steps else run_loose, x[on], pa[on], pb[on],
-                                        options.cutbacks, sub)
+                                        options.cutbacks, sub, snap)
         x[on], ok[on], iterations[on] = xs, conv, iterations[on] + its
-        if jac_on is not None:
+        if jac_on is None:
+            jac = None
+        else:
             if jac is None:
                 jac = tuple(torch.zeros(len(x), *a.shape[1:], dtype=a.dtype) for a in jac_on)
             for a, b in zip(jac, jac_on):

@@ -40,6 +40,11 @@ def _reference_problem(joint, case: str) -> GripperProblem:
                                      contact=NO_PLANE)}[case]
 
 
+#: Frozen iteration counts that changed since: the LM retries a failed step shortened
+#: (predictor.lm.SHORTENINGS), (model, case) -> (frozen, now); the same equilibria.
+SHORTENED = {("results/surrogate/paper.pt", "circle"): (110, 66)}
+
+
 @pytest.mark.parametrize("model", ["analytic", "results/surrogate/paper.pt"])
 def test_paper_finger_reproduces_the_frozen_predictor(model):
     """The paper's finger (contract/fingers/paper.toml) through the generic chain, with tangent
@@ -53,8 +58,9 @@ def test_paper_finger_reproduces_the_frozen_predictor(model):
     1e-10 rad (the last Newton iterate moves by ~1e-12 with the solver's Jacobian, which
     is now central differences), the same iteration count of the LM (the solver it was
     frozen with; without an object ``newton`` is now Newton steps, checked against the LM
-    in test_newton_steps_reach_the_lm_equilibria), and at a fixed off-equilibrium tau the
-    Equation-1 residual and the contact forces to 1e-9 N / N·mm."""
+    in test_newton_steps_reach_the_lm_equilibria; SHORTENED: changed since), and at a
+    fixed off-equilibrium tau the Equation-1 residual and the contact forces to 1e-9 N /
+    N·mm."""
     ref = json.loads(REFERENCE.read_text())["models"][model]
     if model != "analytic" and not (ROOT / model).is_file():
         pytest.skip("no committed surrogate checkpoint")
@@ -63,7 +69,9 @@ def test_paper_finger_reproduces_the_frozen_predictor(model):
     for case in ref["cases"]:
         problem = _reference_problem(joint, case["case"])
         res = solve(problem, t([case["pressures_MPa"]]), SolverOptions(method="lm"))
-        assert bool(res.converged[0]) and int(res.iterations[0]) == case["iterations"], case["case"]
+        frozen, now = SHORTENED.get((model, case["case"]), (case["iterations"],) * 2)
+        assert frozen == case["iterations"], case["case"]
+        assert bool(res.converged[0]) and int(res.iterations[0]) == now, case["case"]
         np.testing.assert_allclose(res.tau[0].numpy(), case["tau"], rtol=0, atol=1e-9)
         np.testing.assert_allclose(res.pose.tip_end[0].numpy(), case["tip"], rtol=0, atol=1e-9)
         assert abs(float(res.pose.tip_angle[0]) - case["tip_angle_rad"]) <= 1e-10
