@@ -75,7 +75,7 @@ from predictor.problem import FULL_BOX, MIN_NORMAL, check_box
 from predictor.progress import Heartbeat
 from predictor.graphs import graph_cache, touch, traced
 from predictor.jacobians import jacobian_fn
-from predictor.lm import levenberg_marquardt
+from predictor.lm import SHORTENINGS, levenberg_marquardt
 from predictor.options import SolverOptions
 from predictor.ramp import advance, attempts, homotopy, in_turn
 from predictor.result import GestureResult
@@ -221,13 +221,13 @@ class _Branch:
         pressed on the plane goes through softer planes when the stiff one stalls (as the
         solver's ramp does); with an object, the solver's tunnelling guard."""
         prob, opts = self.problem, self.opts
-        cap = None if prob.obstacle is None else opts.contact_max_step
+        cap, shorten = (None, 0) if prob.obstacle is None else (opts.contact_max_step, SHORTENINGS)
 
         def lm(problem, hand_over=None):
             jac_fn = jacobian_fn(problem, kind=kind)
 
             def step(x, p, p_prev=None, jac=None):
-                return levenberg_marquardt(jac_fn, x, p, self.tol, cap, p_prev, jac, hand_over)
+                return levenberg_marquardt(jac_fn, x, p, self.tol, cap, p_prev, jac, hand_over, shorten)
 
             return step
 

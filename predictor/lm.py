@@ -2,8 +2,8 @@
 equilibrium of n = 3J unknowns and the out-of-box penalties, predictor.graphs.residual_fn),
 batched over samples, and the convergence rule they share (``within``).
 
-LM step (JᵀJ + mu·I) δ = -Jᵀr, kept where it lowers |r|² (else retried shortened along
-δ: SHORTENINGS); mu shrinks ×0.1 on success and grows ×10 on failure, per sample; near
+LM step (JᵀJ + mu·I) δ = -Jᵀr, kept where it lowers |r|² (else, with an object, first
+retried shortened along δ: SHORTENINGS); mu shrinks ×0.1 on success and grows ×10 on failure, per sample; near
 the root mu -> 1e-12 and the step is Newton's (quadratic convergence).
 """
 from __future__ import annotations
@@ -38,7 +38,8 @@ def lm_step(J: torch.Tensor, r: torch.Tensor, mu) -> torch.Tensor:
     return torch.where((info == 0)[:, None] & step[..., 0].isfinite().all(-1, keepdim=True), -step[..., 0], 0.0)
 
 
-def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None, hand_over=None):
+def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac=None, hand_over=None,
+                        shortenings=0):
     """Batched LM from x (B, n = 3J) at pressures p (B, J).
 
     Returns (x, converged, iterations, (dr/dx (B, n, n), dr/dP (B, n, J)) at the final x);
@@ -56,7 +57,10 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
     hand_over (k, test): after k iterations the unfinished samples for which test(rows (b,),
     x (b, n), p (b, J)) -> (b,) bool holds (rows: their indices in the batch) stop there,
     not converged, for another solver to take over (predictor.ramp's plane homotopy); the
-    others go on as without it."""
+    others go on as without it.
+
+    shortenings: how many times a failed step is tried shortened (SHORTENINGS with an
+    object, else 0)."""
     n = x.shape[1]
     eye = torch.eye(n, dtype=x.dtype)
     step_scale = box_scale(n)[1]
@@ -80,12 +84,13 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
         if act.numel() == 0:
             break
         if act.numel() == len(x):   # every sample (a single query's usual case): no gathers
-            x, r, J, Jp, mu, done = _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale)
+            x, r, J, Jp, mu, done = _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale,
+                                                  shortenings)
             iters += 1
         else:
             x[act], r[act], J[act], Jp_act, mu[act], done[act] = _lm_iteration(
                 jac_fn, x[act], p[act], r[act], J[act], None if Jp is None else Jp[act], mu[act], opts, max_step,
-                step_scale)
+                step_scale, shortenings)
             if Jp is not None:
                 Jp[act] = Jp_act
             iters[act] += 1
@@ -95,20 +100,22 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
     return x, done, iters, (J[:, :n], Jp)
 
 
-#: A step that does not lower |r|² is tried again SHORTENINGS times, each SHORTEN times
-#: the last, before mu grows. From a pose clear of the object (a ramp step's tangent
-#: predictor can leave contact) the Gauss-Newton step aims at the contact-free root
-#: beyond the object and overshoots into its penalty; a shorter step along it lands on
-#: the object, where growing mu instead turns the step toward the gradient and creeps
+#: With an object, a step that does not lower |r|² is tried again SHORTENINGS times, each
+#: SHORTEN times the last, before mu grows. From a pose clear of the object (a ramp step's
+#: tangent predictor can leave contact) the Gauss-Newton step aims at the contact-free
+#: root beyond the object and overshoots into its penalty; a shorter step along it lands
+#: on the object, where growing mu instead turns the step toward the gradient and creeps
 #: (the paper's circle grasp: 194 LM iterations and two cut-backs without, 63 with).
+#: Without an object they only cost residuals: the plane X = 0 has its own homotopy
+#: (predictor.ramp), whose stiff tries they slow by ~12 % (an inverse tip goal).
 SHORTENINGS, SHORTEN = 3, 0.25
 
 
-def _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale):
+def _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale, shortenings):
     """One LM iteration of the samples x (b, n) at p (b, J) with residuals r, Jacobians J
     (and dr/dP Jp, or None) and damping mu: the step, capped by max_step (scaled units),
-    kept (or, shortened, one of its SHORTENINGS) where it lowers |r|²; mu ×0.1 on success
-    and ×10 on failure. Returns the new (x, r, J, Jp, mu, done)."""
+    kept (or, shortened, one of its ``shortenings``) where it lowers |r|²; mu ×0.1 on
+    success and ×10 on failure. Returns the new (x, r, J, Jp, mu, done)."""
     step = lm_step(J, r, mu)
     if max_step is not None:
         big = (step / step_scale).abs().amax(-1, keepdim=True) / max_step
@@ -118,7 +125,7 @@ def _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale):
     Jp = None if Jp is None else Jp.clone()
     better = torch.zeros(len(x), dtype=torch.bool)
     rows = None                     # None: every sample (no gathers on the first try)
-    for k in range(SHORTENINGS + 1):
+    for k in range(shortenings + 1):
         sel = slice(None) if rows is None else rows
         x_try = x[sel] + SHORTEN ** k * step[sel]
         J_try, r_try, Jp_try = jac_fn(x_try, p[sel], dp=False)

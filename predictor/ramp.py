@@ -25,7 +25,7 @@ from contract.grasp import APPROACH_P1
 from predictor.graphs import graph_cache, residual_fn, traced
 from predictor.gripper import outline_vertices
 from predictor.jacobians import jacobian_fn
-from predictor.lm import lbfgs, levenberg_marquardt
+from predictor.lm import SHORTENINGS, lbfgs, levenberg_marquardt
 from predictor.options import SolverOptions
 from predictor.progress import Heartbeat
 from predictor.statics import GripperProblem, contact_loads, meets, plane_overlap
@@ -246,8 +246,9 @@ def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = Non
     if opts.method in ("newton", "lm"):
         jac_fn = jacobian_fn(prob, history, opts.jacobian)  # dr/dP: the ramp's predictor
         cap = opts.contact_max_step if history else None
+        shorten = SHORTENINGS if prob.obstacle is not None else 0
         method = lambda x, p, p_prev=None, jac=None: levenberg_marquardt(  # noqa: E731
-            jac_fn, x, p, opts, cap, p_prev, jac, hand_over)
+            jac_fn, x, p, opts, cap, p_prev, jac, hand_over, shorten)
     else:
         method = lambda x, p, p_prev=None, jac=None: lbfgs(residual_fn(prob), x, p, opts)  # noqa: E731
     if not history:

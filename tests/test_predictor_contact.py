@@ -181,12 +181,12 @@ def test_shortened_lm_steps_reach_the_same_grasp_sooner(monkeypatch):
     its penalty. Retrying it shortened (predictor.lm.SHORTENINGS) reaches the plain LM's
     equilibrium (tau within 1e-8) in under half its iterations (63 against 194: two
     steps that stalled 30 iterations and were cut back)."""
-    import predictor.lm as lm
+    import predictor.ramp as ramp
     from predictor.joint import load_joint
 
     problem = dataclasses.replace(GRASP, joint=load_joint(str(SURROGATE)))
     now = solve(problem, t([0.2, 0.3]))
-    monkeypatch.setattr(lm, "SHORTENINGS", 0)
+    monkeypatch.setattr(ramp, "SHORTENINGS", 0)
     plain = solve(problem, t([0.2, 0.3]))
     assert bool(now.converged[0]) and bool(plain.converged[0])
     torch.testing.assert_close(now.tau, plain.tau, rtol=0, atol=1e-8)
