@@ -3,8 +3,9 @@ equilibrium of n = 3J unknowns and the out-of-box penalties, predictor.graphs.re
 batched over samples, and the convergence rule they share (``within``).
 
 LM step (JᵀJ + mu·I) δ = -Jᵀr, kept where it lowers |r|² (else, with an object, first
-retried shortened along δ: SHORTENINGS); mu shrinks ×0.1 on success and grows ×10 on failure, per sample; near
-the root mu -> 1e-12 and the step is Newton's (quadratic convergence).
+retried shortened along δ: SHORTENINGS); mu shrinks ×0.1 on success and grows ×10 on
+failure, per sample; near the root mu -> 1e-12 and the step is Newton's (quadratic
+convergence).
 """
 from __future__ import annotations
 
