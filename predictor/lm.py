@@ -125,18 +125,17 @@ def _lm_iteration(jac_fn, x, p, r, J, Jp, mu, opts, max_step, step_scale, shorte
     x, r, J = x.clone(), r.clone(), J.clone()
     Jp = None if Jp is None else Jp.clone()
     better = torch.zeros(len(x), dtype=torch.bool)
-    rows = None                     # None: every sample (no gathers on the first try)
+    rows = torch.arange(len(x))     # the samples whose step has not lowered |r|² yet
     for k in range(shortenings + 1):
-        sel = slice(None) if rows is None else rows
-        x_try = x[sel] + SHORTEN ** k * step[sel]
-        J_try, r_try, Jp_try = jac_fn(x_try, p[sel], dp=False)
-        ok = r_try.pow(2).sum(-1) < merit[sel]
-        took = ok.nonzero().flatten() if rows is None else rows[ok]
+        x_try = x[rows] + SHORTEN ** k * step[rows]
+        J_try, r_try, Jp_try = jac_fn(x_try, p[rows], dp=False)
+        ok = r_try.pow(2).sum(-1) < merit[rows]
+        took = rows[ok]
         x[took], r[took], J[took] = x_try[ok], r_try[ok], J_try[ok]
         if Jp is not None:
             Jp[took] = Jp_try[ok]
         better[took] = True
-        rows = (~better).nonzero().flatten()
+        rows = rows[~ok]
         if not len(rows):
             break
     mu = torch.where(better, (mu * 0.1).clamp_min(1e-12), mu * 10.0)
