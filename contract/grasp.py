@@ -28,6 +28,7 @@ inner and end faces) carry the same ramp against it, with its own stiffness:
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -209,3 +210,49 @@ def friction_ratio(weight: float, normal_y: float, normal_t: float) -> float:
     if normal_t > 1e-9:
         return num / normal_t
     return math.copysign(1e3, num)
+
+
+@dataclass(frozen=True)
+class GraspCase:
+    """One grasp: the object's spec (contract.grasp.parse_object), the target pressures
+    (MPa) and the region it stands for."""
+
+    spec: str
+    p1: float
+    p2: float
+    region: str = "given"
+
+    @property
+    def name(self) -> str:
+        return f"{re.sub(r'[^A-Za-z0-9.+-]+', '-', self.spec.strip().replace('=', ''))}_{self.p1:g}_{self.p2:g}"
+
+
+#: The grasp validation's cases (fem.grasp_cases, ``make grasp-fem``; issue 36 §3), the table
+#: the report judges its targets over: the paper's six grasps and ten from the predictor's
+#: atlases with the outline contact and the plane X = 0 (results/predictor/atlas_*.json,
+#: 61 x 61, committed surrogate; the 12-step reference ramp gives the same state and friction
+#: use at each). Comments: the atlas' state, friction use |lambda|/mu, normal force and where
+#: on the object the tip's inner face touches.
+GRASP_CASES = [
+    GraspCase("circle", 0.2, 0.3, "paper"),         # holds, 0.08, 0.448 N, tip inner face
+    GraspCase("circle", 0.3, 0.2, "paper"),         # holds, 0.63, 0.554 N
+    GraspCase("ellipse", 0.2, 0.3, "paper"),        # holds, 0.14, 0.474 N
+    GraspCase("ellipse", 0.3, 0.2, "paper"),        # holds, 0.73, 0.572 N
+    GraspCase("rectangle", 0.2, 0.3, "paper"),      # holds, 0.80, 0.416 N, lower half of its side
+    GraspCase("rectangle", 0.3, 0.2, "paper"),      # holds, 0.58, 0.573 N, mid-face
+    # circle: the boundary runs from (0.3, 0.14) to (-0.04, 0.3)
+    GraspCase("circle", 0.1, 0.21, "hold, near the boundary"),      # holds, 0.895, 0.262 N (at P2 0.2: 0.97)
+    GraspCase("circle", 0.2, 0.12, "slip, near the boundary"),      # slips, 1.17, 0.343 N
+    GraspCase("circle", 0.1, -0.1, "slip"),        # slips, 3.91, 0.116 N: joint 2 bent outwards, touches high
+    # ellipse: joint 1 at negative pressure still holds, first contact late (-0.1, 0.1) MPa
+    GraspCase("ellipse", -0.05, 0.3, "hold, near the boundary"),    # holds, 0.81, 0.200 N
+    GraspCase("ellipse", 0.2, 0.15, "slip, near the boundary"),     # slips, 1.07, 0.377 N
+    GraspCase("ellipse", 0.0, 0.1, "slip"),        # slips, 3.16, 0.108 N
+    # rectangle: the tip's inner face meets its upper corner (y -172 mm) at low P2, lies flat on
+    # its side in between, meets its lower corner (y -214 mm) at high P2; between two hold
+    # regions a bay of slips at P1 0.16-0.19, P2 0.16-0.22
+    GraspCase("rectangle", 0.2, 0.12, "hold, near the boundary"),   # holds, 0.91, 0.413 N, upper corner
+    GraspCase("rectangle", 0.18, 0.14, "hold, near the boundary"),  # holds, 0.90, 0.371 N, flat (y -177 mm)
+    GraspCase("rectangle", 0.18, 0.18, "slip, near the boundary"),  # slips, 1.085, 0.307 N, lower corner, the bay
+    GraspCase("rectangle", 0.1, 0.1, "slip"),      # slips, 1.52, 0.236 N, upper corner
+]

@@ -5,9 +5,9 @@
                               [--suffix S]
     python -m fem.grasp_cases --grasps "circle:r=25@0.2,0.3;rectangle@0.25,0.2" --out DIR
 
-Cases (issue 36 §3; pressures MPa, ``CASES``): the paper's six grasps, each default object of
-contract.grasp (circle r 30, ellipse 35 x 25, rectangle 60 x 50 with 1 mm corners, centred
-at (0, -195) mm) at (0.2, 0.3) and (0.3, 0.2), and ten from the predictor's atlases
+Cases (issue 36 §3; pressures MPa, contract.grasp.GRASP_CASES): the paper's six grasps, each
+default object of contract.grasp (circle r 30, ellipse 35 x 25, rectangle 60 x 50 with 1 mm
+corners, centred at (0, -195) mm) at (0.2, 0.3) and (0.3, 0.2), and ten from the predictor's atlases
 (61 x 61, outline contact and the plane X = 0) in the hold and slip regions and near their
 boundary, each frozen with the atlas' state and friction use |lambda|/mu that chose it.
 ``--grasps "SPEC@P1,P2;..."`` solves other grasps instead (SPEC: ``--object``'s spec), named
@@ -61,10 +61,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -73,58 +71,14 @@ from mpi4py import MPI
 import fem.finger_cases as finger_cases     # pyvista before dolfinx (its import order)
 from contract import cli
 from contract.finger import load_finger
-from contract.grasp import FRICTION, OBJECT_WEIGHT, ObjectSpec, approach_for, parse_object
+from contract.grasp import (FRICTION, GRASP_CASES, OBJECT_WEIGHT, GraspCase, ObjectSpec, approach_for,
+                            parse_object)
 from fem.artefacts import GRASP_CASE
 from fem.finger import add_finger_mesh, finger_discretisation, pressure_limits
 from fem.grasp import GraspSolver
 from fem.options import one_rank
 
 OUTLINE_POINTS = 720        # the render's object outline
-
-
-@dataclass(frozen=True)
-class GraspCase:
-    """One grasp: the object's spec (contract.grasp.parse_object), the target pressures
-    (MPa) and the region it stands for."""
-
-    spec: str
-    p1: float
-    p2: float
-    region: str = "given"
-
-    @property
-    def name(self) -> str:
-        return f"{re.sub(r'[^A-Za-z0-9.+-]+', '-', self.spec.strip().replace('=', ''))}_{self.p1:g}_{self.p2:g}"
-
-
-#: The paper's six grasps and ten from the predictor's atlases with the outline contact and
-#: the plane X = 0 (issue 36 §0; results/predictor/atlas_*.json, 61 x 61, committed surrogate;
-#: the 12-step reference ramp gives the same state and friction use at each). Comments: the
-#: atlas' state, friction use |lambda|/mu, normal force and where on the object the tip's
-#: inner face touches.
-CASES = [
-    GraspCase("circle", 0.2, 0.3, "paper"),         # holds, 0.08, 0.448 N, tip inner face
-    GraspCase("circle", 0.3, 0.2, "paper"),         # holds, 0.63, 0.554 N
-    GraspCase("ellipse", 0.2, 0.3, "paper"),        # holds, 0.14, 0.474 N
-    GraspCase("ellipse", 0.3, 0.2, "paper"),        # holds, 0.73, 0.572 N
-    GraspCase("rectangle", 0.2, 0.3, "paper"),      # holds, 0.80, 0.416 N, lower half of its side
-    GraspCase("rectangle", 0.3, 0.2, "paper"),      # holds, 0.58, 0.573 N, mid-face
-    # circle: the boundary runs from (0.3, 0.14) to (-0.04, 0.3)
-    GraspCase("circle", 0.1, 0.21, "hold, near the boundary"),      # holds, 0.895, 0.262 N (at P2 0.2: 0.97)
-    GraspCase("circle", 0.2, 0.12, "slip, near the boundary"),      # slips, 1.17, 0.343 N
-    GraspCase("circle", 0.1, -0.1, "slip"),        # slips, 3.91, 0.116 N: joint 2 bent outwards, touches high
-    # ellipse: joint 1 at negative pressure still holds, first contact late (-0.1, 0.1) MPa
-    GraspCase("ellipse", -0.05, 0.3, "hold, near the boundary"),    # holds, 0.81, 0.200 N
-    GraspCase("ellipse", 0.2, 0.15, "slip, near the boundary"),     # slips, 1.07, 0.377 N
-    GraspCase("ellipse", 0.0, 0.1, "slip"),        # slips, 3.16, 0.108 N
-    # rectangle: the tip's inner face meets its upper corner (y -172 mm) at low P2, lies flat on
-    # its side in between, meets its lower corner (y -214 mm) at high P2; between two hold
-    # regions a bay of slips at P1 0.16-0.19, P2 0.16-0.22
-    GraspCase("rectangle", 0.2, 0.12, "hold, near the boundary"),   # holds, 0.91, 0.413 N, upper corner
-    GraspCase("rectangle", 0.18, 0.14, "hold, near the boundary"),  # holds, 0.90, 0.371 N, flat (y -177 mm)
-    GraspCase("rectangle", 0.18, 0.18, "slip, near the boundary"),  # slips, 1.085, 0.307 N, lower corner, the bay
-    GraspCase("rectangle", 0.1, 0.1, "slip"),      # slips, 1.52, 0.236 N, upper corner
-]
 
 
 def grasp_list(text: str) -> list[GraspCase]:
@@ -176,7 +130,7 @@ def build_parser() -> cli.Parser:
     ap.add_output("--out", folder=True, default="results/validation/grasps_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/grasps_fem)")
     add_finger_mesh(ap)
-    ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c.name for c in CASES))
+    ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c.name for c in GRASP_CASES))
     ap.add_argument("--grasps", type=grasp_list, metavar="SPEC@P1,P2;...",
                     help="solve these grasps instead of the table (object spec as --object, MPa; ';' between)")
     ap.add_argument("--no-plane", action="store_true",
@@ -191,7 +145,7 @@ def build_parser() -> cli.Parser:
 def chosen_cases(ap: cli.Parser, args: argparse.Namespace, limits: np.ndarray) -> list[GraspCase]:
     """The cases of --grasps or the table, those --cases names, this --part's share; an
     unknown name or a pressure beyond its joint's box is a usage error."""
-    table = args.grasps or CASES
+    table = args.grasps or GRASP_CASES
     names = [c.name for c in table]
     chosen = args.cases.split(",") if args.cases else names
     for name in chosen:

@@ -38,21 +38,21 @@ from fem import grasp_cases  # noqa: E402
 from fem.artefacts import GRASP_CASE  # noqa: E402
 from fem.finger import FingerLoad, FingerResult, pressure_limits  # noqa: E402
 from fem.grasp import GraspResult  # noqa: E402
-from fem.grasp_cases import CASES, GraspCase  # noqa: E402
+from contract.grasp import GRASP_CASES, GraspCase  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OBJECTS = ("circle", "ellipse", "rectangle")
 
 
 def test_table_has_the_paper_grasps_inside_the_box_once():
-    keys = [(parse_object(c.spec), c.p1, c.p2) for c in CASES]
+    keys = [(parse_object(c.spec), c.p1, c.p2) for c in GRASP_CASES]
     for kind in OBJECTS:
         for p in ((0.2, 0.3), (0.3, 0.2)):
             assert (parse_object(kind), *p) in keys, (kind, p)
-    assert len(set(keys)) == len(keys) and len({c.name for c in CASES}) == len(CASES)
+    assert len(set(keys)) == len(keys) and len({c.name for c in GRASP_CASES}) == len(GRASP_CASES)
     limits = pressure_limits(load_finger())
-    assert all(abs(c.p1) <= limits[0] and abs(c.p2) <= limits[1] for c in CASES)
-    atlas = [c for c in CASES if c.region != "paper"]
+    assert all(abs(c.p1) <= limits[0] and abs(c.p2) <= limits[1] for c in GRASP_CASES)
+    atlas = [c for c in GRASP_CASES if c.region != "paper"]
     assert len(atlas) >= 6
     regions = {c.region.split(",")[0] for c in atlas}
     assert regions == {"hold", "slip"}
@@ -69,7 +69,7 @@ def _atlas(kind):
 @pytest.mark.skipif(any(_atlas(k) is None for k in OBJECTS),
                     reason="the committed atlases predate the outline contact (issue 36 §0, branch contact36)")
 def test_atlas_cases_are_where_the_atlases_say():
-    for case in CASES:
+    for case in GRASP_CASES:
         doc = _atlas(case.spec)
         i = int(np.argmin(np.abs(np.array(doc["p1_MPa"]) - case.p1)))
         j = int(np.argmin(np.abs(np.array(doc["p2_MPa"]) - case.p2)))

@@ -22,12 +22,14 @@ from __future__ import annotations
 import copy
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
 
+from contract.grasp import GraspCase  # noqa: E402
 from predictor import validate_grasps as vg  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -206,9 +208,12 @@ def test_the_report_states_the_validations_targets():
     assert ISSUE_BOUNDS == vg.TARGETS
 
 
-def test_the_report_section_shows_each_case_and_judges_every_target(coarse, tmp_path):
+def test_the_report_section_shows_each_case_and_judges_every_target(coarse, tmp_path, monkeypatch):
+    from apps.report import grasps as section
     from apps.report.grasps import grasps_section
 
+    planned = [SimpleNamespace(name=e["case"]) for e in coarse["cases"]]
+    monkeypatch.setattr(section, "GRASP_CASES", planned)     # the two coarse records are the whole table
     (tmp_path / "validation").mkdir()
     v = copy.deepcopy(coarse)
     v["cases"][1]["met"]["tip"] = False                 # a miss the summary counts
@@ -222,6 +227,11 @@ def test_the_report_section_shows_each_case_and_judges_every_target(coarse, tmp_
     assert verdict["fingertip"] is False and verdict["FEM"] is True
     met = v["summary"]["met"]
     assert [c.met for c in checks[1:]] == [met[k]["met"] == met[k]["judged"] for k in vg.JUDGED]
+    # a planned case without an FEM grasp is a miss of every target
+    monkeypatch.setattr(section, "GRASP_CASES", planned + [GraspCase("ellipse", 0.3, 0.2)])
+    lines, checks = grasps_section(tmp_path)
+    assert not any(c.met for c in checks) and "1 of the 3 planned cases" in lines[2] and "ellipse_0.3_0.2" in lines[2]
+    assert verdict["FEM"] is True and "| 2 of 3 |" in next(ln for ln in lines if ln.startswith("| FEM grasps conv"))
 
 
 def test_the_report_section_says_not_run_without_the_validation(tmp_path):

@@ -1,14 +1,16 @@
 """The report's grasp-validation section (issue 36 §3): the predictor against the FEM grasps
 (results/validation/grasps.json, predictor.validate_grasps): one row per case with both
-states and the differences, the targets judged over every case (a case the FEM did not
-solve counts as a miss), and the overlays. Before `make validate-grasps` has run, the
-target rows say "not run"."""
+states and the differences, the targets judged over every case compared and every case of
+the planned table (contract.grasp.GRASP_CASES, ``make grasp-fem``) not compared yet (a case
+the FEM did not solve or has not run counts as a miss), and the overlays. Before
+`make validate-grasps` has run, the target rows say "not run"."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from apps.report.common import Check, Target, cells, figure_grid, joint_model, judge, load, num
+from contract.grasp import GRASP_CASES
 
 GRASPS_TITLE = "Grasps: the predictor against the FEM (issue 36)"
 MAKE = "make validate-grasps"
@@ -63,13 +65,20 @@ def case_table(cases: list[dict]) -> list[str]:
     return out
 
 
+def not_compared(v: dict) -> list[str]:
+    """The planned cases (contract.grasp.GRASP_CASES) that grasps.json does not compare."""
+    compared = {e["case"] for e in v["cases"]}
+    return [c.name for c in GRASP_CASES if c.name not in compared]
+
+
 def _checks(v: dict) -> list[tuple[str, str, str, Check]]:
-    """(words, worst, cases met, Check) per target: met by every case it judges."""
-    s, title = v["summary"], GRASPS_TITLE
+    """(words, worst, cases met, Check) per target: met by every case it judges and by
+    every planned case not compared yet (each a miss)."""
+    s, title, missing = v["summary"], GRASPS_TITLE, len(not_compared(v))
     failed = s["cases"] - s["fem_converged"]
     rows = [(CONVERGED, f"{failed} not converged" if failed else "all converged",
-             f"{s['fem_converged']} of {s['cases']}",
-             judge(title, CONVERGED, [(Target(">=", s["cases"], "cases"), s["fem_converged"])]))]
+             f"{s['fem_converged']} of {s['cases'] + missing}",
+             judge(title, CONVERGED, [(Target(">=", s["cases"] + missing, "cases"), s["fem_converged"])]))]
     for key, words, worst, spec in ROWS:
         m = s["met"][key]
         shown = words.format(**v["targets"])
@@ -80,9 +89,18 @@ def _checks(v: dict) -> list[tuple[str, str, str, Check]]:
             value = "n/a" if s[worst] is None else spec.format(s[worst])
         if key == "normal_force" and s["normal_force_error_N_max"] is not None:
             value += f", {s['normal_force_error_N_max']:.4f} N"
-        rows.append((shown, value, f"{m['met']} of {m['judged']}",
-                     judge(title, shown, [(Target(">=", m["judged"], "cases"), m["met"])])))
+        rows.append((shown, value, f"{m['met']} of {m['judged'] + missing}",
+                     judge(title, shown, [(Target(">=", m["judged"] + missing, "cases"), m["met"])])))
     return rows
+
+
+def _missing_words(v: dict) -> str:
+    """The planned cases not compared yet, in words (each a miss of every target)."""
+    missing = not_compared(v)
+    if not missing:
+        return ""
+    return (f" {len(missing)} of the {len(GRASP_CASES)} planned cases (`make grasp-fem`'s table, "
+            f"contract.grasp.GRASP_CASES) have no FEM grasp yet and count as misses: {', '.join(missing)}.")
 
 
 def _figures(root: Path, v: dict) -> list[str]:
@@ -113,7 +131,7 @@ def grasps_section(root: Path) -> tuple[list[str], list[Check]]:
             f"{joint_model(root, v['joint'], MAKE)}; the predictor's time is the median of {v['repeats']} "
             "single-query solves of the whole history in the same run, the FEM's its record's. The contact location "
             "is the normal-force-weighted mean contact point on both sides. "
-            f"{s['compared']} of {s['cases']} cases compared.", ""]
+            f"{s['compared']} of {s['cases']} cases compared." + _missing_words(v), ""]
     out += case_table(v["cases"]) + [""]
     rows = _checks(v)
     out += HEAD + [f"| {words} | {worst} | {met} |" + cells(check) for words, worst, met, check in rows]
