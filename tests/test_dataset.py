@@ -86,6 +86,47 @@ def test_info_counts_split_and_coverage(tmp_path):
     assert out.returncode == 0 and json.loads(out.stdout)["samples"] == 9
 
 
+def test_walk_consistency_is_exact_on_quadratic_data_and_measures_a_cubic(tmp_path):
+    """store.walk_consistency: the trapezoid rule on consecutive samples of one unit (both
+    converged) is exact where the anchors are quadratic in the inputs (miss at round-off);
+    a cubic term c (d.x)^3 on one anchor coordinate makes it miss by exactly |c| |d.dx|^3 / 2
+    on each pair (exact solution: g(t) = c (s0 + t s)^3 gives g(1) - g(0) - (g'(0) + g'(1)) / 2
+    = -c s^3 / 2). 24 samples in units of 4, id 3 mod 7 failed: 13 pairs."""
+    rng = np.random.default_rng(0)
+    A, B = rng.normal(size=(20, 4)), rng.normal(size=(20, 4, 4))
+    B = B + B.transpose(0, 2, 1)
+    d, c = np.array([0.3, -0.2, 0.5, 0.1]), 0.7
+
+    def field(cubic):
+        def edit(arrays):
+            x = arrays["inputs"] / INPUT_BOX
+            a = x @ A.T + 0.5 * np.einsum("ni,kij,nj->nk", x, B, x)
+            J = A[None] + np.einsum("kij,nj->nki", B, x)
+            if cubic:
+                a[:, 0] += c * (x @ d) ** 3
+                J[:, 0] += 3 * c * (x @ d)[:, None] ** 2 * d
+            arrays["anchors"] = a.reshape(-1, 10, 2)
+            arrays["jacobian"] = J / INPUT_BOX          # d a / d inputs (x = inputs / box)
+        return edit
+
+    for cubic in (False, True):
+        root = tmp_path / str(cubic)
+        fabricate(root, samples=24, edit=field(cubic))
+        arrays, manifest = shards.load_dataset(root)
+        w = store.walk_consistency(arrays, manifest.config["unit_size"])
+        ids = arrays["sample_id"]
+        pair = np.nonzero((np.diff(ids) == 1) & (ids[1:] // 4 == ids[:-1] // 4))[0]
+        assert w["pairs"] == len(pair) == 13
+        if not cubic:
+            assert w["max_mm"] < 1e-12
+            continue
+        x = arrays["inputs"] / INPUT_BOX
+        exact = 0.5 * abs(c) * np.abs((x[pair + 1] - x[pair]) @ d) ** 3
+        assert w["max_mm"] == pytest.approx(exact.max(), rel=1e-9)
+        assert w["median_mm"] == pytest.approx(np.median(exact), rel=1e-9)
+    assert store.info(root)["walk_consistency"] == w
+
+
 def test_verify_good_then_corrupt_exit_codes(tmp_path):
     """verify exits 0 on a clean dataset; after one flipped byte inside a shard it exits 1
     naming the corrupt shard; after deleting a listed shard it exits 1 too."""

@@ -42,6 +42,10 @@ def _print_info(d: dict) -> None:
         print(f"  {name:>2}: [{c['min']:+.4g}, {c['max']:+.4g}] of ±{c['box']:g}, "
               f"histogram {c['histogram']}")
     print(f"  grid cells occupied ({cov['grid']}): {100 * cov['cells_occupied']:.1f}%")
+    w = d["walk_consistency"]
+    if w:
+        print(f"  walk consistency (trapezoid rule on the Jacobians, {w['pairs']} pairs): anchors missed by "
+              f"{w['median_mm']:.2e} mm median, {w['p90_mm']:.2e} p90, {w['max_mm']:.2e} max")
     if d["failure_reasons"]:
         print("  failure reasons: " + "; ".join(f"{k} x{v}" for k, v in d["failure_reasons"].items()))
     print(f"  data sha256 {d['checksums']['data_sha256']}; commits {d['git_commits']}")
