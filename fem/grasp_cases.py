@@ -130,7 +130,8 @@ def build_parser() -> cli.Parser:
     ap.add_output("--out", folder=True, default="results/validation/grasps_fem",
                   help="folder for <case>.json and <case>.png (default results/validation/grasps_fem)")
     add_finger_mesh(ap)
-    ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c.name for c in GRASP_CASES))
+    ap.add_argument("--cases", help="comma-separated case names (default: all): "
+                    + ", ".join(c.name for c in GRASP_CASES))
     ap.add_argument("--grasps", type=grasp_list, metavar="SPEC@P1,P2;...",
                     help="solve these grasps instead of the table (object spec as --object, MPa; ';' between)")
     ap.add_argument("--no-plane", action="store_true",
