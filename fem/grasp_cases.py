@@ -7,8 +7,8 @@
 
 Cases (issue 36 §3; pressures MPa, contract.grasp.GRASP_CASES): the paper's six grasps, each
 default object of contract.grasp (circle r 30, ellipse 35 x 25, rectangle 60 x 50 with 1 mm
-corners, centred at (0, -195) mm) at (0.2, 0.3) and (0.3, 0.2), and ten from the predictor's atlases
-(61 x 61, outline contact and the plane X = 0) in the hold and slip regions and near their
+corners, centred at (0, -195) mm) at (0.2, 0.3) and (0.3, 0.2), and ten from the predictor's
+atlases (61 x 61, outline contact and the plane X = 0) in the hold and slip regions and near their
 boundary, each frozen with the atlas' state and friction use |lambda|/mu that chose it.
 ``--grasps "SPEC@P1,P2;..."`` solves other grasps instead (SPEC: ``--object``'s spec), named
 like the table's: ``<spec>_<P1>_<P2>``, the spec without '=' and every run of other

@@ -274,11 +274,12 @@ def snap_off(problem: GripperProblem, options: SolverOptions):
     nor cross X = 0 deeper than options.max_penetration. None without an object."""
     if problem.obstacle is None:
         return None
+    built = []      # the object-free solver, built at the first snap: most ramps never snap
 
     def snap(x, p):
-        # the object-free solver is built here, not per ramp: most ramps never snap
-        run = runner(dataclasses.replace(problem, obstacle=None), options, history=False)
-        x, conv, its, _ = run(x, p)
+        if not built:
+            built.append(runner(dataclasses.replace(problem, obstacle=None), options, history=False))
+        x, conv, its, _ = built[0](x, p)
         normal, depth = contact_depth(problem, torch.nan_to_num(x), p)
         return x, conv & (normal <= 0) & (depth <= options.max_penetration), its, None
     return snap
