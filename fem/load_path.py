@@ -753,6 +753,59 @@ class LoadPathSolver:
             vec.destroy()
         return out
 
+    def stiffness_spectrum(self, iterations: int = 60, rtol: float = 1e-7) -> dict:
+        """How stable the current state is: ``unstable_modes``, the number of negative
+        eigenvalues of the stiffness (0 where the equilibrium is stable; >= 1 past a limit
+        or bifurcation point under these dead and follower loads), and ``lowest_eigenvalue``
+        (N/mm), the stiffness's eigenvalue nearest zero, signed, which passes through zero
+        at such a point. Collective; the next solve refactorises.
+
+        Both come from one exact MUMPS LDL^T of the assembled tangent K(u) (contact blocks
+        included). Sylvester's law of inertia: its negative pivots, INFOG(12), are K's
+        negative eigenvalues. The mixed u-p tangent [[A, B^T], [B, -M/kappa]] has n_p of
+        them from its pressure block (-M/kappa is negative definite) plus those of the
+        condensed stiffness S = A + B^T (M/kappa)^-1 B (Haynsworth), so n_p, the pressure
+        dofs, is subtracted. The eigenvalue: inverse iteration on S, whose inverse is
+        the u block of K^-1 applied to a right-hand side without pressure entries,
+        x <- S^-1 x / |S^-1 x| on the unconstrained displacement dofs, lambda = 1 / (x . S^-1 x).
+        Meaningful only while K is symmetric (the hexahedral joints, ``_factorise``)."""
+        self._assemble_tangent()
+        self._refactor = True           # _P now holds this state's tangent, not its factors'
+        pc = PETSc.PC().create(self.comm)
+        pc.setOperators(self._P)
+        pc.setType("cholesky")
+        pc.setFactorSolverType("mumps")
+        pc.setUp()
+        negative = pc.getFactorMatrix().getMumpsInfog(12)
+        free = np.ones(self._P.getLocalSize()[0], dtype=bool)
+        free[self.constrained_dofs()] = False
+        pressure_dofs = 0
+        if self.problem.displacement_space is not None:
+            u_dofs = np.asarray(self.V.sub(0).collapse()[1])
+            pressure = np.ones_like(free)
+            pressure[u_dofs[u_dofs < len(free)]] = False
+            free &= ~pressure
+            pressure_dofs = self.comm.allreduce(int(pressure.sum()))
+        x, y = self._P.createVecRight(), self._P.createVecRight()
+        rng = np.random.default_rng([11, self.comm.rank])
+        x.array[:] = np.where(free, rng.uniform(-1.0, 1.0, len(free)), 0.0)
+        x.normalize()
+        lam = math.nan
+        for _ in range(iterations):
+            pc.apply(x, y)
+            y.array[~free] = 0.0
+            mu = x.dot(y)
+            new = 1.0 / mu if mu else math.inf
+            y.normalize()
+            x, y = y, x
+            if abs(new - lam) <= rtol * abs(new):
+                lam = new
+                break
+            lam = new
+        for obj in (pc, x, y):
+            obj.destroy()
+        return {"unstable_modes": int(negative) - pressure_dofs, "lowest_eigenvalue": float(lam)}
+
     def constrained_dofs(self) -> np.ndarray:
         """This rank's dofs under a Dirichlet condition (local indices, owned)."""
         return self._K.fixed_owned

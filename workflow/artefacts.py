@@ -33,3 +33,12 @@ MESH_COMPARISON = Format("workflow-mesh-comparison", 1, "workflow.dataset", {
     "samples": int, "ref_samples": int,
     **each("tip_mm", NUM, "mean", "p95", "max"), "phi_end_deg.mean": NUM,
     **each("cap_rotation_deg", NUM, "mean", "p95"), "cpu_s_per_sample.other": NUM})
+
+#: results/fem/stability_<dataset>.json (make failed-samples; workflow.stability): each failed
+#: sample's load path from zero, probed for stability (negative eigenvalues, lowest eigenvalue
+#: N/mm) and contact state (closed valley pairs) at every converged path parameter s.
+STABILITY = Format("workflow-stability", 1, "workflow.stability", {
+    "dataset": str, "path_points[]": NUM,
+    "samples[].sample_id": int, "samples[].inputs[]": NUM, "samples[].verdict": str,
+    "samples[].points[].s": NUM, "samples[].points[].unstable_modes": int,
+    "samples[].points[].lowest_eigenvalue": MAYBE, "samples[].points[].closed_pairs": int})
