@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new learning-curve-new failed-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -165,6 +165,12 @@ dataset-new: | $(SETUP) ## FEM datasets on the production discretisation (NEW_ME
 	$(PY) -m workflow.dataset verify $(NEW_DATA)/heldout_$(NEW_TAG) --require-complete
 	$(PY) -m workflow.dataset verify $(NEW_DATA)/train_$(NEW_TAG) --require-complete --mirror 2
 
+# Why the production train walk's failed samples failed (issue 55 §2): each one's load path
+# from zero probed at every converged step for negative eigenvalues of the stiffness, its
+# lowest eigenvalue and the closed valley pairs (workflow.stability; one core).
+failed-samples: | $(SETUP) ## probe the production train walk's failed samples' load paths for a limit point or a contact change (one core, ~1 h) -> results/fem/stability_train_hex2s3.json
+	nice $(PY) -m workflow.stability $(NEW_DATA)/train_$(NEW_TAG)
+
 # The held-out walk again on the finer joint mesh H:W = 1.697:0.849 (two P2 elements through
 # the wall, 3x the nodes, displacement as the committed sets): the committed datasets'
 # discretisation change over the load distribution the surrogate is judged on, and the
@@ -225,6 +231,35 @@ results/surrogate/sweep/README.md: $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manife
 
 learning-curve: | $(SETUP) ## held-out errors vs 100..1,600 and all train samples, with/without the Jacobian loss, 2nd seed at 400 (1 core, ~1.5 h; resumes) -> results/surrogate/learning_curve.{json,png}
 	nice $(PY) -m surrogate.learning_curve --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) --repeat 400:1
+
+# The surrogate on the production discretisation's walks (issue 55 stage 1), beside the
+# committed one under results/surrogate/$(NEW_TAG)/ until the switch: the sweep on the
+# complete production data (bounded, resumable), the config it chose (the improved config
+# with NEW_SET, docs/decisions.md §9) and the paper's, the KNN baseline, and the learning
+# curve on the same points as the 1.8 mm one.
+NEW_TRAIN     := $(NEW_DATA)/train_$(NEW_TAG)
+NEW_SURROGATE := results/surrogate/$(NEW_TAG)
+NEW_SET       ?=
+SWEEP_HOURS   ?= 2
+sweep-new: | $(SETUP) ## the sweep's variants on the production data (one core, bounded by SWEEP_HOURS, resumes) -> results/surrogate/hex2s3/sweep/
+	@mkdir -p $(NEW_SURROGATE)
+	nice $(PY) -m surrogate.sweep --data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --jobs 1 \
+	  --dir $(NEW_SURROGATE)/sweep --max-hours $(SWEEP_HOURS)
+
+train-new: $(NEW_SURROGATE)/metrics.json ## surrogates (paper, chosen improved) + KNN on the production data, beside the committed ones -> results/surrogate/hex2s3/
+$(NEW_SURROGATE)/paper.pt $(NEW_SURROGATE)/improved.pt: $(NEW_SURROGATE)/%.pt: \
+    $(TIMES) $(wildcard $(NEW_TRAIN)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
+	@mkdir -p $(@D)
+	nice $(PY) -m surrogate.train --config $* $(if $(filter improved,$*),$(NEW_SET:%=--set %)) --data $(NEW_TRAIN) --out $@
+
+$(NEW_SURROGATE)/metrics.json: $(TIMES) $(NEW_SURROGATE)/paper.pt $(NEW_SURROGATE)/improved.pt \
+    surrogate/knn.py $(wildcard $(NEW_HELDOUT)/manifest.json) | $(SETUP)
+	$(PY) -m surrogate.evaluate --report --train-data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --dir $(NEW_SURROGATE)
+
+learning-curve-new: | $(SETUP) ## the learning curve on the production data, the 1.8 mm curve's points (1 core, ~1.5 h idle; resumes) -> results/surrogate/hex2s3/learning_curve.{json,png}
+	@mkdir -p $(NEW_SURROGATE)
+	nice $(PY) -m surrogate.learning_curve --data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --repeat 400:1 \
+	  --out $(NEW_SURROGATE)/learning_curve.json
 
 # Multi-fidelity against fine-only training at equal FEM cost (issue 35 §3). Committed: the
 # development stand-in (coarse = the 1.8 mm train set and improved.pt, fine = the 1.697:0.849

@@ -1,7 +1,7 @@
 """Architecture and loss sweep of the improved surrogate on a campaign dataset.
 
     python -m surrogate.sweep [--data results/data/train] [--heldout results/data/heldout]
-                              [--epochs N] [--jobs 2] [--only NAME ...]
+                              [--epochs N] [--jobs 2] [--only NAME ...] [--max-hours H]
                               [--dir results/surrogate/sweep] [--json]
 
 Data flow: for each variant in VARIANTS, the improved config with that variant's
@@ -17,6 +17,10 @@ A result made with another config (an older format of the code, another epoch co
 on another dataset is *stale*: it is kept, listed as such in the table and on the
 console, and retrained only with ``--replace-stale``; a rerun never drops a variant's row
 nor replaces a committed result silently.
+
+``--max-hours H`` bounds the sweep: once H hours have passed no further variant starts
+(those running finish and are written), the table is written with what is done, and the
+exit code is 3; the same command again resumes with the variants still to train.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
@@ -151,7 +156,9 @@ def main(argv=None) -> int:
                     help="default: the improved config's")
     ap.add_argument("--jobs", type=cli.number(1, os.cpu_count() or 1, integer=True), default=1,
                     help="variants trained at once, 1 thread each")
-    ap.add_argument("--only", nargs="*", choices=sorted(VARIANTS), help="these variants only")
+    ap.add_argument("--only", nargs="*", choices=sorted(VARIANTS), help="these variants only (trained in this order)")
+    ap.add_argument("--max-hours", type=cli.number(0, None, "h", open_lo=True), default=None,
+                    help="start no variant after this many hours; exit 3 if some are left (re-run to resume)")
     ap.add_argument("--replace-stale", action="store_true",
                     help="retrain (and replace) results made with another config or dataset; "
                          "default: keep them, marked stale")
@@ -182,11 +189,18 @@ def main(argv=None) -> int:
             cli.heartbeat(f"surrogate.sweep: training {len(todo)} variant(s)", every=30.0, enabled=bool(todo)):
         futures = [pool.submit(run_variant, n, args.data, data_sha256, args.heldout, args.epochs,
                                str(out / f"{n}.json")) for n in todo]
+        t0 = time.monotonic()
         for f in futures:
+            if f.cancelled():
+                continue
             name = f.result()
             have[name] = stored(out / f"{name}.json")
             stale.pop(name, None)
             say(f"  {name} done")
+            if args.max_hours is not None and time.monotonic() - t0 > 3600 * args.max_hours:
+                left = sum(g.cancel() for g in futures)   # those not yet started
+                if left:
+                    say(f"  --max-hours {args.max_hours:g} reached: {left} variant(s) left for the next run")
     results = [r for r in have.values() if r is not None]
     text = (f"# Improved-surrogate sweep\n\nMade by `python -m surrogate.sweep` on `{args.data}`; held-out: "
             f"`{args.heldout}`. Each run is the improved config with the overrides listed. "
@@ -194,11 +208,12 @@ def main(argv=None) -> int:
             f"another config or dataset than the current code's (`--replace-stale` retrains it).\n\n"
             + table(results, stale))
     write_text(out / "README.md", text)
+    trained = [n for n in todo if have[n] is not None and n not in stale]
     if args.json:
-        cli.print_json({"dir": str(out), "trained": todo, "stale": stale, "results": results})
+        cli.print_json({"dir": str(out), "trained": trained, "stale": stale, "results": results})
     else:
         print(text, end="")
-    return 0
+    return 3 if len(trained) < len(todo) else 0
 
 
 if __name__ == "__main__":
