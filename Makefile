@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new learning-curve-new failed-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -255,6 +255,10 @@ $(NEW_SURROGATE)/paper.pt $(NEW_SURROGATE)/improved.pt: $(NEW_SURROGATE)/%.pt: \
 $(NEW_SURROGATE)/metrics.json: $(TIMES) $(NEW_SURROGATE)/paper.pt $(NEW_SURROGATE)/improved.pt \
     surrogate/knn.py $(wildcard $(NEW_HELDOUT)/manifest.json) | $(SETUP)
 	$(PY) -m surrogate.evaluate --report --train-data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --dir $(NEW_SURROGATE)
+
+bench-surrogate: results/bench/surrogate_cost.json ## the production surrogate's cost per query against the committed one's, batches of 1, 2 and 7,442 (~2 min) -> results/bench/surrogate_cost.json
+results/bench/surrogate_cost.json: $(TIMES) surrogate/bench_cost.py results/surrogate/improved.pt $(NEW_SURROGATE)/improved.pt | $(SETUP)
+	$(PY) -m surrogate.bench_cost results/surrogate/improved.pt $(NEW_SURROGATE)/improved.pt --out $@
 
 learning-curve-new: | $(SETUP) ## the learning curve on the production data, the 1.8 mm curve's points (1 core, ~1.5 h idle; resumes) -> results/surrogate/hex2s3/learning_curve.{json,png}
 	@mkdir -p $(NEW_SURROGATE)

@@ -72,3 +72,10 @@ MULTIFIDELITY = Format("surrogate-multifidelity", 1, "surrogate.multifidelity", 
                                      "comparison[].fine_only?", "comparison[].scale_only?",
                                      "comparison[].reference_curve_at_m?")
        for k in ("heldout_mean_anchor_error_mm", "heldout_tip_error_mm", "heldout_cap_rotation_error_deg")}})
+
+#: results/bench/surrogate_cost.json (make bench-surrogate; surrogate.bench_cost): the median
+#: ms of one query (anchors, cap rotation, Jacobian; float64, one thread) per model and batch
+#: size, timed interleaved, and each model's ratio to the first's.
+BENCH_COST = Format("surrogate-bench-cost", 1, "surrogate.bench_cost", {
+    "models[].model": str, "cases[].batch": int, "cases[].models[].model": str,
+    **each("cases[].models[]", NUM, "ms", "samples_per_s", "ratio_to_first")})

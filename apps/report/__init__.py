@@ -49,8 +49,8 @@ from apps.report.gestures import PREDICTOR_TITLE, predictor_section
 from apps.report.grasps import GRASPS_TITLE, grasps_section
 from apps.report.joint_fem import (CAMPAIGN_TARGETS, CAMPAIGN_TITLE, FEM_TARGETS, FEM_TITLE, campaign_section,
                                    fem_section)
-from apps.report.learning import (CURVE_TITLE, SURROGATE_TARGETS, SURROGATE_TITLE, learning_curve_section,
-                                  surrogate_section)
+from apps.report.learning import (CURVE_TITLE, PRODUCTION_TITLE, SURROGATE_TARGETS, SURROGATE_TITLE,
+                                  learning_curve_section, production_surrogate_section, surrogate_section)
 from apps.report.planning import PLANNING_TITLE, planning_section
 
 __all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGATE_TARGETS", "Check", "Target",
@@ -58,7 +58,8 @@ __all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGA
 
 #: (title, section) in the report's order; a section returns (lines, target checks).
 SECTIONS = ((FEM_TITLE, fem_section), (CAMPAIGN_TITLE, campaign_section), (SURROGATE_TITLE, surrogate_section),
-            (CURVE_TITLE, learning_curve_section), (PREDICTOR_TITLE, predictor_section),
+            (CURVE_TITLE, learning_curve_section), (PRODUCTION_TITLE, production_surrogate_section),
+            (PREDICTOR_TITLE, predictor_section),
             (FINGER_TITLE, finger_section), (FINGER_GRID_TITLE, finger_grid_section),
             (GRASPS_TITLE, grasps_section), (PLANNING_TITLE, planning_section), (CONTACT_TITLE, contact_section),
             (CALIBRATION_TITLE, calibration_section))

@@ -181,3 +181,95 @@ def multifidelity_lines(root: Path) -> list[str]:
             f"({c['cpu_hours']:.1f} CPU h) buys {best['equal_cost_fine_samples'] - best['samples']:,} fine samples, "
             f"{verdict}.", ""]
     return out
+
+
+PRODUCTION_TITLE = "Joint surrogate on the production data (issue 55, stage 1)"
+#: Issue 55's held-out targets for the surrogate trained on the production walks.
+PRODUCTION_TARGETS = (("mean anchor error", "mean_anchor_error_mm", 0.03, "mm"),
+                      ("tip error", "tip_error_mm", 0.05, "mm"),
+                      ("cap rotation error (mean)", "cap_rotation_error_deg", 0.1, "deg"))
+
+
+def production_surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
+    """The surrogates trained on the production walks (hex2:3 mixed) beside the committed
+    ones: the sweep that chose the config, the models against issue 55's targets, their cost
+    per query against the committed model's, and the learning curve beside the 1.8 mm one."""
+    title = PRODUCTION_TITLE
+    out = [f"## {title}", ""]
+    sweep = sorted(root.glob("surrogate/hex2s3/sweep/*.json"))
+    if sweep:
+        rows = [load(root, p.relative_to(root).as_posix()) for p in sweep]
+        rows.sort(key=lambda r: r["val"]["mean_anchor_error_mm"])
+        out += [f"`make sweep-new` (results/surrogate/hex2s3/sweep/, `python -m surrogate.sweep` on "
+                f"results/data/train_hex2s3, bounded and resumable): {len(rows)} variants of the improved config "
+                "trained so far, ranked by validation mean anchor error (validation chooses; held-out shown).", "",
+                "| variant | overrides | val mean anchor (mm) | held-out mean anchor (mm) | tip (mm) | cap rotation (deg) "
+                "| train s |", "|---|---|---|---|---|---|---|"]
+        out += [f"| {r['name']} | {' '.join(r['overrides']) or '(none)'} | {num(r['val']['mean_anchor_error_mm'])} "
+                f"| {num(r['heldout']['mean_anchor_error_mm'])} | {num(r['heldout']['tip_error_mm'])} "
+                f"| {num(r['heldout'].get('cap_rotation_error_deg'), '.3f')} | {num(r['train_time_s'], '.0f')} |"
+                for r in rows]
+        out.append("")
+    m = load(root, "surrogate/hex2s3/metrics.json")
+    if not m:
+        return out + missing("trains the chosen config and the paper's on the production walks", "make train-new"), []
+    n = m.get("datasets", {}).get("train", {}).get("n", {})
+    keys = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm", "phi_end_error_deg", "jacobian_rel_error")
+    out += [f"`make train-new` (results/surrogate/hex2s3/metrics.json): paper.pt, improved.pt (the sweep's choice, "
+            f"its config in the checkpoint) and a KNN trained on the production train walk's split ({n.get('train', '?')} "
+            f"train, {n.get('val', '?')} validation), measured on its test split and on the production held-out walk "
+            "(results/data/heldout_hex2s3). The committed models (results/surrogate/, 1.8 mm data) stay the defaults "
+            "until the switch (stage 3).", "",
+            "| model | set | n | " + " | ".join(keys) + " | cap rotation mean / p95 |", "|---" * (len(keys) + 4) + "|"]
+    for name in ("paper", "improved", "knn"):
+        if name in m:
+            for split in ("test", "heldout"):
+                r = m[name][split]
+                out.append(f"| {name} | {split} | {r['n']} | " + " | ".join(num(r.get(k)) for k in keys)
+                           + f" | {_angles(r, 'cap_rotation_error_deg')} |")
+    held = m["improved"]["heldout"]
+    checks = [judge(title, f"production surrogate {label}", [(Target("<=", bound, unit), held.get(key))])
+              for label, key, bound, unit in PRODUCTION_TARGETS]
+    out += ["", "The chosen model against issue 55's targets (production held-out walk, 256 samples):", "",
+            "| figure | measured | target | met |", "|---|---|---|---|"]
+    out += [f"| {label} | {num(held.get(key))} {unit} |" + cells(c)
+            for (label, key, _, unit), c in zip(PRODUCTION_TARGETS, checks)]
+    out += [f"| cap rotation error, p95 | {num(held.get('p95_cap_rotation_error_deg'), '.3f')} deg |" + cells(None), ""]
+    cost = load(root, "bench/surrogate_cost.json")
+    if cost:
+        out += [f"Cost per query (`make bench-surrogate`, results/bench/surrogate_cost.json: median ms of one "
+                f"{cost['dtype']} call with anchors, cap rotation and Jacobian on {cost['threads']} thread, the models "
+                f"timed interleaved; load average {cost['load_average']:.1f}"
+                + (f", beside: {cost['beside']}" if cost.get("beside") else "") + "):", "",
+                "| batch | " + " | ".join(f"`{mm['model']}` ms" for mm in cost["cases"][0]["models"]) + " | ratio |",
+                "|---" * (len(cost["cases"][0]["models"]) + 2) + "|"]
+        out += [f"| {row['batch']:,} | " + " | ".join(f"{mm['ms']:.3f}" for mm in row["models"])
+                + f" | {row['models'][-1]['ratio_to_first']:.2f} |" for row in cost["cases"]]
+        out.append("")
+    return out + _production_curve(root), checks
+
+
+def _production_curve(root: Path) -> list[str]:
+    """The learning curve on the production data beside the 1.8 mm one, point by point."""
+    out = ["### Learning curve on the production data", ""]
+    new = load(root, "surrogate/hex2s3/learning_curve.json")
+    if not new or not new.get("points"):
+        return out + missing("the learning curve's points on the production walks", "make learning-curve-new")
+    old = load(root, "surrogate/learning_curve.json") or {"points": []}
+    ref = {(p["samples"], p["jacobian_loss"], p["seed"]): p for p in old["points"]}
+    out += [f"`make learning-curve-new` (results/surrogate/hex2s3/learning_curve.json): the `{new['config']}` config "
+            "on nested subsets of the production train split, measured on the production held-out walk, beside the "
+            "same point of the 1.8 mm curve (results/surrogate/learning_curve.json, its own data)."
+            + ("" if new.get("complete") else " **Not finished**: `make learning-curve-new` resumes it."), "",
+            "| samples | Jacobian loss | seed | production: mean anchor (mm), cap (deg) | 1.8 mm: mean anchor (mm), cap (deg) |",
+            "|---|---|---|---|---|"]
+    pair = lambda p: (f"{num(p['heldout_mean_anchor_error_mm'])}, {num(p['heldout_cap_rotation_error_deg'], '.3f')}"
+                      if p else "n/a")
+    for p in new["points"]:
+        out.append(f"| {p['samples']} | {'with' if p['jacobian_loss'] else 'without'} | {p['seed']} | {pair(p)} "
+                   f"| {pair(ref.get((p['samples'], p['jacobian_loss'], p['seed'])))} |")
+    out.append("")
+    return out + figure(root, "surrogate/hex2s3/learning_curve.png", "the learning curve on the production data",
+                        "`make learning-curve-new` (`python -m surrogate.learning_curve` on results/data/train_hex2s3): "
+                        "held-out errors against the training samples, with and without the Jacobian loss.",
+                        "make learning-curve-new")
