@@ -77,5 +77,5 @@ MULTIFIDELITY = Format("surrogate-multifidelity", 1, "surrogate.multifidelity", 
 #: ms of one query (anchors, cap rotation, Jacobian; float64, one thread) per model and batch
 #: size, timed interleaved, and each model's ratio to the first's.
 BENCH_COST = Format("surrogate-bench-cost", 1, "surrogate.bench_cost", {
-    "models[].model": str, "cases[].batch": int, "cases[].models[].model": str,
+    "threads": int, "dtype": str, "models[].model": str, "cases[].batch": int, "cases[].models[].model": str,
     **each("cases[].models[]", NUM, "ms", "samples_per_s", "ratio_to_first")})
