@@ -267,7 +267,7 @@ results/bench/surrogate_cost.json: $(TIMES) surrogate/bench_cost.py results/surr
 learning-curve-new: | $(SETUP) ## the learning curve on the production data, the 1.8 mm curve's points (1 core, ~1.5 h idle; resumes) -> results/surrogate/hex2s3/learning_curve.{json,png}
 	@mkdir -p $(NEW_SURROGATE)
 	nice $(PY) -m surrogate.learning_curve --data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --repeat 400:1 \
-	  --out $(NEW_SURROGATE)/learning_curve.json
+	  --out $(NEW_SURROGATE)/learning_curve.json --reference results/surrogate/learning_curve.json
 
 # Multi-fidelity against fine-only training at equal FEM cost (issue 35 §3). Committed: the
 # development stand-in (coarse = the 1.8 mm train set and improved.pt, fine = the 1.697:0.849

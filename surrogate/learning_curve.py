@@ -3,7 +3,8 @@
     python -m surrogate.learning_curve [--data results/data/train] [--heldout results/data/heldout]
         [--config improved] [--set KEY=VALUE ...] [--sizes 100,200,400,800,1600,all]
         [--modes with,without] [--seed 0] [--repeat SAMPLES:SEED ...] [--min-steps 22400]
-        [--max-hours H] [--out results/surrogate/learning_curve.json] [--plot PNG] [--json]
+        [--max-hours H] [--out results/surrogate/learning_curve.json] [--plot PNG]
+        [--reference OTHER.json] [--json]
 
 Data flow: DIR (verified, split 7:2:1 by the dataset seed, surrogate.data.load_splits; its
 joint, the manifest's, sets the model's anchor count and input box, ModelConfig.for_joint) ->
@@ -163,9 +164,11 @@ def order(points: list[dict]) -> list[dict]:
     return sorted(points, key=lambda p: (p["seed"], not p["jacobian_loss"], p["samples"]))
 
 
-def figure(path: Path, points: list[dict], title: str) -> None:
+def figure(path: Path, points: list[dict], title: str, reference: tuple[str, list[dict]] | None = None) -> None:
     """PNG: held-out mean anchor, tip and cap-rotation errors against training samples
-    (log-log), with and without the Jacobian loss; repeat seeds as open markers."""
+    (log-log), with and without the Jacobian loss; repeat seeds as open markers;
+    ``reference`` (label, points): another curve's first seed dashed beside it (the same
+    figure of another dataset)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -188,6 +191,12 @@ def figure(path: Path, points: list[dict], title: str) -> None:
                     ax.loglog(x, y, "o-", color=color, label=f"{name} (seed {seed})")
                 else:
                     ax.loglog(x, y, "o", mfc="none", color=color, ms=9, label=f"{name} (seed {seed})")
+            if reference:
+                pts = [p for p in reference[1] if p["jacobian_loss"] == jac and p["seed"] == min(
+                    q["seed"] for q in reference[1]) and p[key] is not None]
+                if pts:
+                    ax.loglog([p["samples"] for p in pts], [p[key] for p in pts], "s--", color=color, alpha=0.45,
+                              ms=4, label=f"{name}, {reference[0]}")
         sizes = sorted({p["samples"] for p in points})
         # a size within 15 % of the next one (1,600 beside all 1,792) would overprint its label
         ax.set_xticks([a for a, b in zip(sizes, sizes[1:] + [math.inf]) if b > 1.15 * a])
@@ -248,6 +257,8 @@ def main(argv=None) -> int:
                     help="start no point expected to end past it (exit 3 if unfinished)")
     ap.add_output("--out", suffix=".json", default="results/surrogate/learning_curve.json")
     ap.add_output("--plot", suffix=".png", help="figure (default: OUT with .png)")
+    ap.add_argument("--reference", help="another learning curve's JSON, drawn dashed in the figure "
+                    "(e.g. the 1.8 mm data's beside the production data's)")
     args = ap.parse_args(argv)
     t_start = time.perf_counter()
     out = Path(args.out)
@@ -280,6 +291,7 @@ def main(argv=None) -> int:
               "data": {"train": args.data, "train_sha256": data_sha, "n": {k: len(v) for k, v in splits.items()},
                        "heldout": args.heldout, "heldout_sha256": heldout_sha, "heldout_n": len(heldout)},
               "subsets": "nested: the first s of randperm(train split, seed)",
+              **({"reference": args.reference} if args.reference else {}),
               "epoch_budget": "epochs = max(E0, ceil(min_steps / ceil(s / batch))), "
                               "lr_decay = d0 ** (E0 / epochs)"}
     budget = args.max_hours * 3600 if args.max_hours else math.inf
@@ -337,11 +349,14 @@ def load_points(path: Path) -> list[dict]:
 
 
 def write(out: Path, plot: Path, header: dict, points: list[dict], jobs) -> None:
-    """OUT and its figure, atomically; ``complete`` when every planned point is in."""
+    """OUT and its figure, atomically; ``complete`` when every planned point is in. The
+    header's ``reference`` (another curve's JSON) is drawn dashed beside it."""
     have = {(p["samples"], p["jacobian_loss"], p["seed"]) for p in points}
     LEARNING_CURVE.write(out, header | {"complete": all(job in have for job in jobs), "points": points})
+    ref = header.get("reference")
     figure(plot, points, f"Surrogate learning curve ({header['config']}; held-out n = "
-                         f"{header['data']['heldout_n']}, >= {header['min_steps']} Adam steps per point)")
+                         f"{header['data']['heldout_n']}, >= {header['min_steps']} Adam steps per point)",
+           (f"reference {ref}", load_points(Path(ref))) if ref else None)
 
 
 def row(p: dict) -> str:
