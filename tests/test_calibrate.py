@@ -25,7 +25,7 @@ from predictor.calibration_fit import Prior, Problem, calibrate
 from predictor.calibration_recovery import synthetic_observations
 from predictor.gripper import GripperParams, default_finger, rot
 from predictor.joint import AnalyticJoint
-from predictor.observations import ObservationError, observations_to_json, parse_observations
+from predictor.observations import FINGER, GRIPPER, ObservationError, observations_to_json, parse_observations
 from predictor.solve import solve
 from predictor.statics import ContactParams, GripperProblem, scaled
 
@@ -56,20 +56,30 @@ def _theta(model, B, **values):
 
 def test_residual_is_the_statics_and_a_turned_mount_turns_gravity(model):
     """At the nominal parameters the calibration's residual equals GripperProblem's scaled
-    residual of the finger alone (ALONE) at random tau (<= 1e-15); with the mount turned by 3 deg it equals the
-    residual of a finger file with base_angle + 3 deg turned back by 3 deg (moments
-    unchanged), to 1e-12."""
+    residual at random tau: of the finger alone (ALONE, plane=False) to 1e-15, of the
+    gripper (the plane X = 0's penalty on, where most of these poses cross it by up to
+    ~160 mm) to 1e-12 of its size; with the mount turned by 3 deg and shifted by 1.5 mm it
+    equals, turned back by 3 deg (moments unchanged), the residual of a finger file with
+    base_angle + 3 deg and base_gap + 3 mm, to 1e-12 of its size, for both problems."""
     g = torch.Generator().manual_seed(0)
-    p = torch.tensor(P, dtype=torch.float64)
-    x = 0.3 * torch.randn(len(P), 6, generator=g, dtype=torch.float64)
-    ones = torch.ones(len(P), dtype=torch.float64)
-    ref = scaled(GripperProblem(JOINT, GripperParams(PAPER), contact=ALONE).residual(p, x.reshape(-1, 2, 3)).residual)
-    assert float((model.residual(x, _theta(model, len(P)), p, ones) - ref).abs().max()) <= 1e-15
-    turned = dataclasses.replace(PAPER, base_angle=PAPER.base_angle + math.radians(3.0))
-    ref = scaled(GripperProblem(JOINT, GripperParams(turned), contact=ALONE).residual(p, x.reshape(-1, 2, 3)).residual)
-    ours = model.residual(x, _theta(model, len(P), mount_deg=3.0), p, ones).reshape(-1, 2, 3)
-    back = torch.cat((rot(torch.tensor(math.radians(3.0), dtype=torch.float64), ours[..., :2]), ours[..., 2:]), -1)
-    assert float((back.reshape(len(P), -1) - ref).abs().max()) <= 1e-12
+    p = torch.tensor(P + ((0.25, 0.2),), dtype=torch.float64)
+    B = len(p)
+    x = 0.3 * torch.randn(B, 6, generator=g, dtype=torch.float64)
+    ones = torch.ones(B, dtype=torch.float64)
+    moved = dataclasses.replace(PAPER, base_angle=PAPER.base_angle + math.radians(3.0), base_gap=PAPER.base_gap + 3.0)
+    turn = torch.tensor(math.radians(3.0), dtype=torch.float64)
+    for plane, contact in ((False, ALONE), (True, ContactParams())):
+        ref = scaled(GripperProblem(JOINT, GripperParams(PAPER), contact=contact).residual(p, x.reshape(-1, 2, 3))
+                     .residual)
+        err = float((model.residual(x, _theta(model, B), p, ones, plane) - ref).abs().max())
+        assert err <= (1e-12 * float(ref.abs().max()) if plane else 1e-15), (plane, err)
+        st = GripperProblem(JOINT, GripperParams(moved), contact=contact).residual(p, x.reshape(-1, 2, 3))
+        if plane:
+            assert float(st.plane.overlap.max()) > 100.0   # not a vacuous check: the plane pushes hard
+        ref = scaled(st.residual)
+        ours = model.residual(x, _theta(model, B, mount_deg=3.0, mount_x=1.5), p, ones, plane).reshape(-1, 2, 3)
+        back = torch.cat((rot(turn, ours[..., :2]), ours[..., 2:]), -1)
+        assert float((back.reshape(B, -1) - ref).abs().max()) <= 1e-12 * max(1.0, float(ref.abs().max()))
 
 
 def test_scaled_joint_is_a_stiffer_beam():
@@ -87,18 +97,21 @@ def test_scaled_joint_is_a_stiffer_beam():
 
 
 def test_equilibrium_is_the_solvers(model):
-    """Newton on the calibration's residual lands on predictor.solve's gravity gesture of
-    the finger alone (tau within 1e-6 N, N·mm: the solver stops at 1e-7 N, 1e-5 N·mm), with and without gravity."""
-    obs = synthetic_observations(model, {}, P)
-    d = design(obs, PAPER)
-    x, ok = equilibrium(model, d, _theta(model, len(P)))
-    assert bool(ok.all())
-    ref = solve(GripperProblem(JOINT, GripperParams(PAPER), contact=ALONE), d.pressures)
-    assert float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6
-    d.gravity = torch.zeros(len(P), dtype=torch.float64)
-    x, ok = equilibrium(model, d, _theta(model, len(P)))
-    ref = solve(GripperProblem(JOINT, GripperParams(PAPER), contact=ALONE, gravity=False), d.pressures)
-    assert bool(ok.all()) and float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6
+    """Newton on the calibration's residual lands on predictor.solve's gravity gesture
+    (tau within 1e-6 N, N·mm: the solver stops at 1e-7 N, 1e-5 N·mm): of the gripper (the
+    fingers meet at X = 0 at some of these pressures) for gripper observations, of the
+    finger alone for lone-finger ones, with and without gravity."""
+    for problem, contact in ((GRIPPER, ContactParams()), (FINGER, ALONE)):
+        obs = synthetic_observations(model, {}, P, problem=problem)
+        d = design(obs, PAPER)
+        assert d.plane == (problem == GRIPPER)
+        for gravity in (True, False):
+            d.gravity = torch.full((len(P),), 1.0 if gravity else 0.0, dtype=torch.float64)
+            x, ok = equilibrium(model, d, _theta(model, len(P)))
+            ref = solve(GripperProblem(JOINT, GripperParams(PAPER), contact=contact, gravity=gravity), d.pressures)
+            assert bool(ok.all()) and float((x - ref.tau.reshape(len(P), -1)).abs().max()) <= 1e-6, (problem, gravity)
+            if problem == GRIPPER and gravity:
+                assert float(ref.plane_overlap_mm.max()) > 0.0   # the plane acts at some pressures
 
 
 def test_fit_jacobian_matches_finite_differences(model):
@@ -123,15 +136,17 @@ def test_fit_jacobian_matches_finite_differences(model):
 def test_noise_free_recovery_and_exact_degeneracy(model):
     """Noise-free observations of a known truth (6 pressure pairs): every parameter
     recovered to 1e-6 relative, rms from > 1 mm to < 1e-6 mm. Fitting the mount's shift
-    beside the frame's (an exact degeneracy: both translate the finger along X) flags
-    both unidentifiable."""
+    beside the frame's to a lone finger (an exact degeneracy: both translate it along X;
+    the gripper's plane X = 0 separates them) flags both unidentifiable and the fit
+    untrusted."""
     obs = synthetic_observations(model, TRUTH, P)
     res = calibrate(model, obs, list(TRUTH), starts=1, loo=False)
     for n, v in zip(res.names, res.values):
         assert abs(v - TRUTH[n]) <= 1e-6 * abs(TRUTH[n]), n
     assert res.rms_before_mm > 1.0 and res.rms_after_mm < 1e-6
-    res = calibrate(model, obs, ["offset", "mount_x", "frame_x"], starts=1, loo=False)
-    assert {"mount_x", "frame_x"} <= set(res.unidentifiable)
+    alone = synthetic_observations(model, TRUTH, P, problem=FINGER)   # the gripper's plane X = 0 fixes mount_x
+    res = calibrate(model, alone, ["offset", "mount_x", "frame_x"], starts=1, loo=False)
+    assert {"mount_x", "frame_x"} <= set(res.unidentifiable) and not res.trusted
     assert any({p[0], p[1]} == {"mount_x", "frame_x"} and p[2] < -0.999 for p in res.correlated)
 
 
@@ -246,7 +261,7 @@ def test_tools_apply_the_joint_calibration_keys(model):
     finger = parse_finger(text, "gain.toml")
     p = torch.tensor([[0.1, 0.05]], dtype=torch.float64)
     ref = solve(GripperProblem(JOINT, GripperParams(finger), contact=ALONE), p)
-    obs = synthetic_observations(model, {}, ((0.1, 0.05),))
+    obs = synthetic_observations(model, {}, ((0.1, 0.05),), problem=FINGER)
     x, _ = equilibrium(model, design(obs, PAPER), _theta(model, 1, gain_J1=1.2))
     assert float((x - ref.tau.reshape(1, -1)).abs().max()) <= 1e-6
 
