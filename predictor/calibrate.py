@@ -61,6 +61,7 @@ from predictor.artefacts import RECOVERY
 from predictor.defaults import results_dir
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS
 from predictor.joint import load_joint
+from predictor.progress import set_quiet
 
 LOG = logging.getLogger("softjoint.calibrate")
 #: The installed package's folders: a calibrated file written there would replace what
@@ -134,6 +135,7 @@ def main_fit(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
         outside_package(args.out)
         obs, model = _observations_and_model(args)
@@ -183,6 +185,7 @@ def main_recovery(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
         model = _model(args)
         study = recovery_study(model, seeds=args.seeds, starts=args.starts, progress=LOG.info)
@@ -237,6 +240,7 @@ def main_fem(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_name("heldout.png")
     calibrated = Path(args.calibrated) if args.calibrated else out.with_name("calibrated.toml")
@@ -293,6 +297,7 @@ def main_bench(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
         obs, model = _observations_and_model(args)
         doc = bench_calibration(model, obs, args.repeats, args.beside, progress=LOG.info)

@@ -305,7 +305,8 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
         "observations": {"per_case": ["tip (x, y)", "tip angle"] + [
             f"part {k + 1} at s = {s:g} mm (FEM: {where})" for k, s, where in link_points(model.finger)],
             "sigma_mm": sigma_mm, "sigma_deg": sigma_deg},
-        "fit": {"parameters": res.names, "why": WHY_FIT, "starts": starts},
+        "fit": {"parameters": res.names, "why": WHY_FIT, "starts": starts, "trusted": res.trusted,
+                "untrusted_because": res.why, "reduced_chi2": res.reduced_chi2, "dof": res.dof},
         "parameters": {n: {"value": float(v), "std": float(s), "nominal": float(model.nominal[model.index[n]]),
                            "true": changes.get(n, float(model.nominal[model.index[n]])),
                            "identifiable": n not in res.unidentifiable}

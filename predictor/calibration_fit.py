@@ -12,7 +12,8 @@ would have were the others known; 1/(1 - R_k²) with R_k its multiple correlatio
 the others) exceeds MAX_VIF, or its std exceeds half its bounds' width. Leave-one-out: each
 observation with a tip is predicted by the fit to the others (one start, from the full
 fit's values and equilibria, at most LOO_ITERATIONS steps); its tip error is the
-distance (mm).
+distance (mm). It is run for a trusted fit only (below): a refused fit is not worth the
+check.
 
 Trust (``judge``): the fit is trusted only when none of these holds, each a reason of
 one line in ``why``:
@@ -242,7 +243,9 @@ def on_bounds(prob: "Problem", v: np.ndarray) -> list:
 def poor_fit(prob: "Problem", v: np.ndarray, cost: float) -> bool:
     """Whether a converged answer fails the chi-square or the bound test (module docstring)."""
     dof = len(prob.d.y) + len(prob.priors) - len(v)
-    return not math.isfinite(cost) or bool(on_bounds(prob, v)) or (dof > 0 and 2.0 * cost / dof > chi2_limit(dof))
+    if dof <= 0:   # too few data: no start can make the answer trusted
+        return False
+    return not math.isfinite(cost) or bool(on_bounds(prob, v)) or 2.0 * cost / dof > chi2_limit(dof)
 
 
 def judge(res: "CalibrationResult", lo: np.ndarray, hi: np.ndarray) -> list:
@@ -340,18 +343,23 @@ def calibrate(model: CalibrationModel, obs: Observations, fit_names=DEFAULT_FIT,
     r, jac = prob.residual(v, jacobian=True) if ok else (None, None)
     if r is None:
         raise FitFailed(f"no start of the fit of {', '.join(model.table[i].name for i in idx)} converged")
-    cov = covariance(jac)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    corr = cov / np.outer(np.maximum(std, 1e-300), np.maximum(std, 1e-300))
-    vif = np.diag(cov) * np.diag(jac.T @ jac)
+    # a parameter the data do not see at all (zero column) has an infinite variance: no
+    # warnings for it, its correlations 0, its VIF inf (unidentifiable)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        cov = covariance(jac)
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        corr = np.nan_to_num(cov / np.outer(np.maximum(std, 1e-300), np.maximum(std, 1e-300)), nan=0.0)
+        vif = np.diag(cov) * np.diag(jac.T @ jac)
+    vif = np.where(np.isfinite(vif), vif, np.inf)
     names = [model.table[i].name for i in idx]
     bad, pairs = _identifiability(names, std, corr, vif, prob.lo, prob.hi)
     theta = prob.theta(v)
-    errs = leave_one_out(model, obs, idx, priors, v, prob.x, prob.anchor[2]) if loo else []
-    res = CalibrationResult(names, v, std, corr, vif, bad, pairs, before, _rms_mm(prob, v), cost, theta, errs, ran,
-                            time.perf_counter() - t0, ok, len(d.y), len(prob.priors),
-                            [names[i] for i in on_bounds(prob, v)])
+    res = CalibrationResult(names, v, std, corr, vif, bad, pairs, before, _rms_mm(prob, v), cost, theta, [], ran,
+                            0.0, ok, len(d.y), len(prob.priors), [names[i] for i in on_bounds(prob, v)])
     res.why = judge(res, prob.lo, prob.hi)
+    if loo and not res.why:   # a refused fit is not worth checking (and its refits crawl)
+        res.loo_tip_error_mm = leave_one_out(model, obs, idx, priors, v, prob.x, prob.anchor[2])
+    res.time_s = time.perf_counter() - t0
     return res
 
 

@@ -36,6 +36,7 @@ from predictor.calibration import CalibrationModel, design, equilibrium
 from predictor.calibration_fem import (CALIBRATE_ON, PRESSURES, TRUTH_FINGER, FemCase, case_observation,
                                        known_changes, pairs_arg)
 from predictor.calibration_recovery import synthetic_observations, truth_theta
+from predictor.observations import FINGER
 from predictor.gripper import GripperParams, default_finger
 from predictor.joint import AnalyticJoint
 from predictor.solve import solve
@@ -57,7 +58,7 @@ def model():
 def stand_in_case(model, theta: torch.Tensor, pressures, truth=TRUTH) -> dict:
     """A fem.finger_cases record of the calibration model's gesture at theta: the
     fingertip, its angle, every joint's proximal centre and anchors (measurement frame)."""
-    obs = synthetic_observations(model, {}, (pressures,))
+    obs = synthetic_observations(model, {}, (pressures,), problem=FINGER)   # the FEM cases: lone fingers
     d = design(obs, model.finger)
     th = theta[None]
     x, ok = equilibrium(model, d, th)
@@ -126,6 +127,7 @@ def test_demo_recovers_the_changes_and_predicts_the_heldout(model, stand_in, tmp
     u, c = rec["heldout_tip_error_uncalibrated_mm"], rec["heldout_tip_error_calibrated_mm"]
     assert u["mean"] > 3.0 and c["max"] < 1e-6 and rec["improvement"] >= 5.0
     assert rec["observations_used"] == 4 and rec["heldout_observations"] == 4
+    assert rec["problem"] == FINGER   # records without settings.plane: a lone finger is fitted
     assert sorted(map(tuple, rec["calibrate_on_MPa"])) == sorted(CALIBRATE_ON)
     assert rec["recovery"]["coverage_95"] == json.loads(RECOVERY.read_text())["noisy"]["coverage_95"]
     assert (tmp_path / "heldout.png").stat().st_size > 10_000
