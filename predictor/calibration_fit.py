@@ -24,7 +24,7 @@ one line in ``why``:
   it beyond what the model allows, so its value says nothing;
 - chi2 = |r|² beyond the CHI2_P upper quantile of the chi-square distribution with dof
   degrees of freedom, reported as the reduced chi-square chi2/dof against its limit
-  chi2_ppf(1 - CHI2_P, dof)/dof (2.4 for 15 dof, 1.5 for 100): with the sigmas as stated,
+  chi2_isf(CHI2_P, dof)/dof (2.51 for 15 dof, 2.35 for 18, 1.49 for 100): with the sigmas as stated,
   the model (its problem, gripper or lone finger, and the parameters left at their
   nominal values) does not explain the observations.
 

@@ -311,7 +311,9 @@ def _write(tmp_path, obs, name="obs.json", **top) -> "Path":
 
 
 def _cli(capsys, argv) -> tuple[int, str, str]:
-    """(exit code, stdout, stderr) of the calibrate CLI in this process."""
+    """(exit code, stdout, stderr) of the calibrate CLI in this process (what was printed
+    before it, e.g. the solver's progress while the observations were made, dropped)."""
+    capsys.readouterr()
     try:
         code = calibrate_main(argv)
     except SystemExit as exc:
