@@ -215,8 +215,8 @@ def _pairs(text: str):
 def main_fem(argv) -> int:
     from predictor.artefacts import CALIBRATION
     from predictor.calibration import resolve_fit
-    from predictor.calibration_fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, fem_study, load_cases,
-                                           recovery_summary)
+    from predictor.calibration_fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, case_problem, fem_study,
+                                           load_cases, recovery_summary)
     from predictor.calibration_file import write_calibrated
     from predictor.calibration_fit import FitFailed
     from predictor.calibration_plot import heldout_figure
@@ -252,7 +252,9 @@ def main_fem(argv) -> int:
         model = _model(args)
         names = [n.strip() for n in args.fit.split(",") if n.strip()]
         resolve_fit(names, model.table)
-        LOG.info("calibrating on %d of %d FEM gestures", len(args.calibrate_on), len(cases))
+        LOG.info("calibrating on %d of %d FEM gestures (%s)", len(args.calibrate_on), len(cases),
+                 "the gripper, cases solved with the plane X = 0" if case_problem(cases[0]) == "gripper"
+                 else "a lone finger, as the cases were solved")
         try:
             study = fem_study(model, cases, args.truth, args.calibrate_on, names, starts=args.starts)
         except FitFailed as exc:
@@ -268,13 +270,14 @@ def main_fem(argv) -> int:
     s = {k: record[k] for k in ("heldout_tip_error_uncalibrated_mm", "heldout_tip_error_calibrated_mm",
                                 "improvement", "observations_used", "time_s")}
     if args.json:
-        cli.print_json({**s, "parameters": record["parameters"], "out": str(out)})
+        cli.print_json({**s, "problem": record["problem"], "parameters": record["parameters"], "out": str(out)})
     else:
         u, c = s["heldout_tip_error_uncalibrated_mm"], s["heldout_tip_error_calibrated_mm"]
         for n, p in record["parameters"].items():
             print(f"{n:14s} {p['value']:+.6g} ± {p['std']:.3g} (true {p['true']:+.6g})")
         print(f"held-out fingertip error mean {u['mean']:.3f} -> {c['mean']:.3f} mm (max {u['max']:.3f} -> "
-              f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} in "
+              f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} "
+              f"({'lone finger' if record['problem'] == 'finger' else 'gripper'}) in "
               f"{s['time_s']:.1f} s; wrote {out}, {figure}, {calibrated}")
     return 0
 
