@@ -69,6 +69,10 @@ def load_gripper(model: str | None = None, object: str | None = None, gravity: b
     (predictor.gesture's --finger, --kinematics, --joint-weight, --mu, --object-weight).
     ValueError (one line) for a bad spec, finger file, model, option, an object the model
     cannot represent or one cutting through the fingers at the approach gesture."""
+    if out is not None:
+        from predictor.calibrate import outside_package
+
+        outside_package(out)
     if finger is not None and not isinstance(finger, FingerSpec):
         finger = load_finger(finger)
     params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight)
@@ -91,18 +95,25 @@ def grasp_atlas(gripper: Gripper, grid: int = 61, box=FULL_BOX,
 
 def calibrate(observations: str | Path, fit=("gain", "offset", "stiffness"), finger: str | Path | FingerSpec | None = None,
               model: str | None = None, priors: dict | None = None, out: str | Path | None = None, starts: int = 3,
-              loo: bool = True, kinematics: str = DEFAULT_KINEMATICS, joint_weight: str = DEFAULT_JOINT_WEIGHT):
+              loo: bool = True, kinematics: str = DEFAULT_KINEMATICS, joint_weight: str = DEFAULT_JOINT_WEIGHT,
+              force: bool = False):
     """Fit the gripper to a measurement file, as ``python -m predictor.calibrate``
     (docs/calibration.md): fit names or groups, priors {name: (mean, std)} in the
-    parameters' units; out: the calibrated finger file to write (None: none). Returns
-    predictor.calibration_fit.CalibrationResult (summary() is the CLI's JSON). ValueError
-    (one line) for a bad file, name, prior or finger."""
+    parameters' units; out: the calibrated finger file to write (None: none), written
+    only when the fit is trusted or ``force``. Returns
+    predictor.calibration_fit.CalibrationResult (summary() is the CLI's JSON; ``.trusted``,
+    ``.why``). ValueError (one line) for a bad file, name, prior or finger, an ``out``
+    inside the package, and an untrusted fit with ``out`` (nothing written)."""
     from predictor.calibration import CalibrationModel
     from predictor.calibration_file import write_calibrated
     from predictor.calibration_fit import Prior, calibrate as fit_calibration
     from predictor.joint import load_joint
     from predictor.observations import load_observations
 
+    if out is not None:
+        from predictor.calibrate import outside_package
+
+        outside_package(out)
     if finger is not None and not isinstance(finger, FingerSpec):
         finger = load_finger(finger)
     finger = finger or default_finger()
@@ -111,6 +122,8 @@ def calibrate(observations: str | Path, fit=("gain", "offset", "stiffness"), fin
     res = fit_calibration(cal, obs, tuple(fit), {k: Prior(*v) for k, v in (priors or {}).items()}, starts=starts,
                           loo=loo)
     if out is not None:
+        if not (res.trusted or force):
+            raise ValueError(f"not trusted: {'; '.join(res.why)}; nothing written to {out} (force=True writes it)")
         write_calibrated(out, cal, res, obs.sha256, str(observations))
     return res
 

@@ -2,7 +2,7 @@
 
     python -m predictor.calibrate --observations FILE [--fit NAME,...] [--finger FILE]
         [--model PATH|analytic] [--kinematics cap|tangent] [--joint-weight split|lumped]
-        [--prior NAME=MEAN,STD ...] [--starts N] [--no-loo] --out CALIBRATED.toml [--json]
+        [--prior NAME=MEAN,STD ...] [--starts N] [--no-loo] [--force] --out CALIBRATED.toml [--json]
     python -m predictor.calibrate recovery --out results/calibration/recovery.json
         [--model PATH|analytic] [--seeds N] [--starts N] [--json]
     python -m predictor.calibrate fem --fem results/calibration/fem --out results/calibration/calibration.json
@@ -12,12 +12,20 @@
 
 The first fits the switchable parameters (names or groups of predictor.calibration:
 gain, offset, stiffness, weight, mount, frame; default gain,offset,stiffness) to the
-measurement file (predictor.observations) by weighted least squares with exact
-implicit-function gradients (predictor.calibration_fit), and writes the calibrated finger
-file (predictor.calibration_file) that predictor.gesture --finger, the atlas, the inverse
-and the API read. JSON: ``parameters`` (name -> value, std, identifiable),
+measurement file (predictor.observations; its ``problem`` says whether the gripper, the
+fingers meeting at X = 0, or a lone finger was measured, and the fit solves that one) by
+weighted least squares with exact implicit-function gradients
+(predictor.calibration_fit), judges the fit (``trusted``: enough data, every parameter
+identifiable and off its bounds, a reduced chi-square within its 99.9 % limit) and, when
+trusted (or with ``--force``), writes the calibrated finger file
+(predictor.calibration_file) that predictor.gesture --finger, the atlas, the inverse and
+the API read. JSON: ``parameters`` (name -> value, std, identifiable),
 ``rms_before_mm``, ``rms_after_mm``, ``loo_tip_error_mm`` (mean over the observations
-with a tip; also its max and each), ``unidentifiable``, ``correlated``, ``time_s``, ``out``.
+with a tip; also its max and each), ``unidentifiable``, ``correlated``, ``chi2``, ``dof``,
+``reduced_chi2`` and its limit, ``on_bound``, ``trusted``, ``why``, ``problem``,
+``time_s``, ``out`` (null when nothing was written). The output may not lie inside the
+package's own folders (contract/, predictor/, fem/, surrogate/, workflow/, apps/: the
+default finger files live there), and its folder must exist (contract.cli).
 
 ``recovery`` runs the known-truth study (predictor.calibration_recovery) and writes its
 JSON. ``fem`` calibrates the paper's predictor on four whole-finger FEM gestures of a
@@ -30,9 +38,11 @@ JSON) and the calibrated finger file (default ``calibrated.toml`` beside it); it
 solved for another finger. ``bench`` times the 8-observation calibration
 (predictor.calibration_bench, ``make bench-calibrate``).
 
-Exit codes: 0 done; 1 the fit did not converge (nothing written); 2 bad input (a
-measurement file that fails its schema, an unknown --fit name, a bad finger file, model,
-prior or output) with a one-line reason on stderr, checked before the fit.
+Exit codes: 0 trusted and written; 1 not trusted (one line on stderr naming every reason)
+or not converged: nothing written unless ``--force`` (then the file is written and the
+exit is still 1); 2 bad input (a measurement file that fails its schema, an unknown
+--fit name, a bad finger file, model or prior, an output inside the package or in a
+missing folder) with a one-line reason on stderr, checked before the fit.
 """
 from __future__ import annotations
 
@@ -51,8 +61,23 @@ from predictor.artefacts import RECOVERY
 from predictor.defaults import results_dir
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS
 from predictor.joint import load_joint
+from predictor.progress import set_quiet
 
 LOG = logging.getLogger("softjoint.calibrate")
+#: The installed package's folders: a calibrated file written there would replace what
+#: every later call reads (contract/fingers/paper.toml is the default finger).
+PACKAGE_FOLDERS = ("contract", "predictor", "fem", "surrogate", "workflow", "apps")
+
+
+def outside_package(path: str | Path) -> None:
+    """ValueError (one line) when ``path`` resolves inside one of PACKAGE_FOLDERS."""
+    from predictor.defaults import ROOT
+
+    where = Path(path).resolve()
+    for name in PACKAGE_FOLDERS:
+        folder = (ROOT / name).resolve()
+        if where == folder or folder in where.parents:
+            raise ValueError(f"--out {path}: inside the package ({folder}); write the calibrated finger elsewhere")
 
 
 def prior_arg(text: str):
@@ -73,7 +98,8 @@ def _model_args(ap) -> None:
     ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER), help="finger description file")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
-    ap.add_argument("--starts", type=cli.number(1, 20, integer=True), default=3, help="LM starts (default 3)")
+    ap.add_argument("--starts", type=cli.number(1, 20, integer=True), default=3,
+                    help="at most this many LM starts; after the first, only while the fit is poor (default 3)")
     cli.add_quiet(ap)
 
 
@@ -95,6 +121,7 @@ def main_fit(argv) -> int:
     from predictor.calibration import DEFAULT_FIT, resolve_fit
     from predictor.calibration_file import write_calibrated
     from predictor.calibration_fit import FitFailed, Prior, calibrate
+    from predictor.observations import GRIPPER
 
     ap = cli.Parser(prog="python -m predictor.calibrate", description=__doc__.split("\n\n")[0],
                     epilog="subcommands (each with --help): recovery (the known-truth study), fem (calibrate on "
@@ -103,11 +130,14 @@ def main_fit(argv) -> int:
     ap.add_argument("--fit", default=",".join(DEFAULT_FIT), help="parameters or groups to fit, comma separated")
     ap.add_argument("--prior", type=prior_arg, action="append", default=[], help="NAME=MEAN,STD (repeatable)")
     ap.add_argument("--no-loo", action="store_true", help="skip the leave-one-out predictions")
+    ap.add_argument("--force", action="store_true", help="write the finger file even when the fit is not trusted")
     ap.add_output("--out", required=True, suffix=".toml", help="the calibrated finger file to write")
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
+        outside_package(args.out)
         obs, model = _observations_and_model(args)
         names = [n.strip() for n in args.fit.split(",") if n.strip()]
         resolve_fit(names, model.table)
@@ -116,22 +146,33 @@ def main_fit(argv) -> int:
             if name in priors:
                 raise ValueError(f"--prior {name}: given twice")
             priors[name] = Prior(mean, std)
+        LOG.info("fitting %s to %d observations of the %s", ", ".join(names), len(obs),
+                 "gripper (fingers meeting at X = 0)" if obs.problem == GRIPPER else "lone finger")
         try:
             res = calibrate(model, obs, names, priors, starts=args.starts, loo=not args.no_loo)
         except FitFailed as exc:
-            print(f"python -m predictor.calibrate: {exc}", file=sys.stderr)
+            print(f"python -m predictor.calibrate: {exc}; nothing written", file=sys.stderr)
             return 1
-        write_calibrated(args.out, model, res, obs.sha256, str(args.observations))
-    out = {**res.summary(), "out": str(args.out), "joint": model.joint.name, "observations": len(obs),
-           "observations_sha256": obs.sha256}
+        written = res.trusted or args.force
+        if written:
+            write_calibrated(args.out, model, res, obs.sha256, str(args.observations))
+    out = {**res.summary(), "out": str(args.out) if written else None, "problem": obs.problem,
+           "joint": model.joint.name, "observations": len(obs), "observations_sha256": obs.sha256}
     if args.json:
         cli.print_json(out)
     else:
         for n, p in out["parameters"].items():
             print(f"{n:14s} {p['value']:+.6g} ± {p['std']:.3g}{'' if p['identifiable'] else '  (unidentifiable)'}")
-        loo = out["loo_tip_error_mm"]
-        print(f"rms {out['rms_before_mm']:.3f} -> {out['rms_after_mm']:.3f} mm; leave-one-out tip "
-              f"{'n/a' if loo is None else f'{loo:.3f} mm'}; {out['time_s']:.1f} s; wrote {args.out}")
+        loo, red = out["loo_tip_error_mm"], out["reduced_chi2"]
+        print(f"rms {out['rms_before_mm']:.3f} -> {out['rms_after_mm']:.3f} mm; reduced chi-square "
+              f"{'n/a' if red is None else f'{red:.3g}'}; leave-one-out tip "
+              f"{'n/a' if loo is None else f'{loo:.3f} mm'}; {out['time_s']:.1f} s; "
+              f"{f'wrote {args.out}' if written else 'nothing written'}")
+    if not res.trusted:
+        print(f"python -m predictor.calibrate: not trusted: {'; '.join(res.why)}; "
+              f"{'wrote ' + str(args.out) + ' (--force)' if written else 'nothing written (--force writes it)'}",
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -144,6 +185,7 @@ def main_recovery(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
         model = _model(args)
         study = recovery_study(model, seeds=args.seeds, starts=args.starts, progress=LOG.info)
@@ -173,8 +215,8 @@ def _pairs(text: str):
 def main_fem(argv) -> int:
     from predictor.artefacts import CALIBRATION
     from predictor.calibration import resolve_fit
-    from predictor.calibration_fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, fem_study, load_cases,
-                                           recovery_summary)
+    from predictor.calibration_fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, case_problem, fem_study,
+                                           load_cases, recovery_summary)
     from predictor.calibration_file import write_calibrated
     from predictor.calibration_fit import FitFailed
     from predictor.calibration_plot import heldout_figure
@@ -198,6 +240,7 @@ def main_fem(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_name("heldout.png")
     calibrated = Path(args.calibrated) if args.calibrated else out.with_name("calibrated.toml")
@@ -209,7 +252,9 @@ def main_fem(argv) -> int:
         model = _model(args)
         names = [n.strip() for n in args.fit.split(",") if n.strip()]
         resolve_fit(names, model.table)
-        LOG.info("calibrating on %d of %d FEM gestures", len(args.calibrate_on), len(cases))
+        LOG.info("calibrating on %d of %d FEM gestures (%s)", len(args.calibrate_on), len(cases),
+                 "the gripper, cases solved with the plane X = 0" if case_problem(cases[0]) == "gripper"
+                 else "a lone finger, as the cases were solved")
         try:
             study = fem_study(model, cases, args.truth, args.calibrate_on, names, starts=args.starts)
         except FitFailed as exc:
@@ -225,13 +270,14 @@ def main_fem(argv) -> int:
     s = {k: record[k] for k in ("heldout_tip_error_uncalibrated_mm", "heldout_tip_error_calibrated_mm",
                                 "improvement", "observations_used", "time_s")}
     if args.json:
-        cli.print_json({**s, "parameters": record["parameters"], "out": str(out)})
+        cli.print_json({**s, "problem": record["problem"], "parameters": record["parameters"], "out": str(out)})
     else:
         u, c = s["heldout_tip_error_uncalibrated_mm"], s["heldout_tip_error_calibrated_mm"]
         for n, p in record["parameters"].items():
             print(f"{n:14s} {p['value']:+.6g} ± {p['std']:.3g} (true {p['true']:+.6g})")
         print(f"held-out fingertip error mean {u['mean']:.3f} -> {c['mean']:.3f} mm (max {u['max']:.3f} -> "
-              f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} in "
+              f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} "
+              f"({'lone finger' if record['problem'] == 'finger' else 'gripper'}) in "
               f"{s['time_s']:.1f} s; wrote {out}, {figure}, {calibrated}")
     return 0
 
@@ -254,6 +300,7 @@ def main_bench(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
         obs, model = _observations_and_model(args)
         doc = bench_calibration(model, obs, args.repeats, args.beside, progress=LOG.info)

@@ -15,9 +15,16 @@ nominal mount with gravity turned by -delta: the residual below does that, so ev
 parameter enters as a tensor and autograd differentiates it.
 
 Forward model, per observation b: the equilibrium x_b = tau_b (3J) solves
-R(x_b, theta; P_b) = 0 (Equation 1 of predictor.statics, gravity loads only; the
-residual is the statics' scaled one, checked against GripperProblem.residual by the
-tests), found by Newton steps with the autograd Jacobian. The predicted measurements
+R(x_b, theta; P_b) = 0 (Equation 1 of predictor.statics: gravity loads, and for the
+gripper the frictionless penalty of the plane X = 0 where the two mirror fingers meet;
+the residual is the statics' scaled one, checked against GripperProblem.residual by the
+tests), found by Newton steps with the autograd Jacobian. The observations say which
+problem was measured (predictor.observations ``problem``): ``gripper`` (the default, the
+plane on, as predictor.gesture solves it) or ``finger`` (a lone finger, statics.apart).
+The plane is where the gripper's symmetry puts it, X = 0 of the gripper frame: the
+outline's vertices are mapped by the mount (below, without the camera frame), the
+plane's forces found there (statics.plane_contact) and mapped back, p = B + Rot(-mount)·
+(q - B - (mount_x, 0)), f = Rot(-mount)·f_q. The predicted measurements
 m_b(x_b, theta) are the tip, its angle and marker points mapped to the measurement frame:
 p_meas = Rot(frame) · (B + (mount_x, 0) + Rot(mount)·(p - B)) + frame_xy, B the mount.
 
@@ -40,10 +47,10 @@ import numpy as np
 import torch
 
 from contract.finger import FingerSpec, JointPart
-from predictor.gripper import GripperParams, finger_pose, rot
+from predictor.gripper import GripperParams, finger_pose, outline_vertices, rot
 from predictor.joint import JointModel
-from predictor.observations import Observations
-from predictor.statics import MOMENT_SCALE
+from predictor.observations import GRIPPER, Observations
+from predictor.statics import MOMENT_SCALE, ContactParams, plane_contact
 
 NEWTON_TOL = 1e-10     # N (and N·mm/MOMENT_SCALE): the equilibrium's residual
 
@@ -154,6 +161,7 @@ class CalibrationModel:
         self.load_part, self.load_share = _loads_of_parts(self.params)
         self.J = finger.n_joints
         self.mount = torch.tensor([0.5 * finger.base_gap, 0.0], dtype=torch.float64)
+        self.contact = ContactParams()   # the plane X = 0's penalty, as predictor.gesture's gripper
 
     def _joint_params(self, th):
         idx = [self.index[f"{g}_J{i}"] for i in range(1, self.J + 1) for g in ("gain", "offset", "stiffness")]
@@ -166,9 +174,10 @@ class CalibrationModel:
         joint = ScaledJoint(self.joint, gain, offset, scale)
         return finger_pose(joint, self.params, pressures, x.reshape(-1, self.J, 3))
 
-    def residual(self, x, th, pressures, gravity) -> torch.Tensor:
+    def residual(self, x, th, pressures, gravity, plane: bool = True) -> torch.Tensor:
         """Scaled Equation-1 residual (B, 3J): [R_Fx, R_Fy N, R_M/MOMENT_SCALE] per joint,
-        gravity (B,) float 1/0, computed at the nominal mount with gravity turned by -mount."""
+        gravity (B,) float 1/0, computed at the nominal mount with gravity turned by -mount;
+        ``plane``: the gripper (the fingers meet at X = 0), else the finger alone."""
         pose = self.pose(x, th, pressures)
         tau = x.reshape(-1, self.J, 3)
         layout = self.params.layout
@@ -183,6 +192,10 @@ class CalibrationModel:
         down = rot(-turn, torch.tensor([0.0, -1.0], dtype=x.dtype).expand(x.shape[0], 2))   # (B, 2)
         frc = w[..., None] * down[:, None, :]
         mask = layout.weight_mask.to(x.dtype)
+        if plane:
+            p_pts, p_frc = self.plane_loads(pose, th)
+            pts, frc = torch.cat((pts, p_pts), 1), torch.cat((frc, p_frc), 1)
+            mask = torch.cat((mask, layout.plane_mask.to(x.dtype)), 1)
         f_sum = (mask[:, :, None] * frc[:, None]).sum(2)                                     # (B, J, 2)
         cross = pts[..., 0] * frc[..., 1] - pts[..., 1] * frc[..., 0]
         ends = joints[:, :, -1]
@@ -190,12 +203,27 @@ class CalibrationModel:
         res = torch.cat((rot(pose.theta, tau[..., :2]) - f_sum, ((tau[..., 2] - m_sum) / MOMENT_SCALE)[..., None]), -1)
         return res.reshape(x.shape[0], -1)
 
-    def to_frame(self, p: torch.Tensor, th: torch.Tensor) -> torch.Tensor:
-        """Points p (B, ..., 2) computed at the nominal mount -> measurement frame (mm)."""
+    def plane_loads(self, pose, th) -> tuple[torch.Tensor, torch.Tensor]:
+        """The plane X = 0's Gauss points and forces (B, Kp, 2) mm, N on the outline of
+        ``pose`` (computed at the nominal mount), in that frame (module docstring)."""
+        q = self.to_gripper(outline_vertices(pose, self.params.layout), th)
+        pc = plane_contact(pose, self.params, self.contact, q)
+        turn = torch.deg2rad(th[:, self.index["mount_deg"]])[:, None]
+        shift = torch.stack((th[:, self.index["mount_x"]], torch.zeros_like(th[:, 0])), -1)[:, None]
+        return self.mount + rot(-turn, pc.points - self.mount - shift), rot(-turn, pc.forces)
+
+    def to_gripper(self, p: torch.Tensor, th: torch.Tensor) -> torch.Tensor:
+        """Points p (B, ..., 2) computed at the nominal mount -> the gripper frame (mm):
+        B + (mount_x, 0) + Rot(mount_deg)·(p - B)."""
         extra = (1,) * (p.dim() - 2)
         turn = torch.deg2rad(th[:, self.index["mount_deg"]]).reshape(-1, *extra)
         shift = torch.stack((th[:, self.index["mount_x"]], torch.zeros_like(th[:, 0])), -1).reshape(-1, *extra, 2)
-        q = self.mount + shift + rot(turn, p - self.mount)
+        return self.mount + shift + rot(turn, p - self.mount)
+
+    def to_frame(self, p: torch.Tensor, th: torch.Tensor) -> torch.Tensor:
+        """Points p (B, ..., 2) computed at the nominal mount -> measurement frame (mm)."""
+        extra = (1,) * (p.dim() - 2)
+        q = self.to_gripper(p, th)
         frame = torch.deg2rad(th[:, self.index["frame_deg"]]).reshape(-1, *extra)
         t = torch.stack((th[:, self.index["frame_x"]], th[:, self.index["frame_y"]]), -1).reshape(-1, *extra, 2)
         return rot(frame, q) + t
@@ -220,7 +248,8 @@ class CalibrationModel:
 class Design:
     """Observations as tensors: pressures (B, J), gravity (B,), and the measured values
     y (N,) with sigma (N,), each scalar's observation obs (N,) and what it is ``what``
-    (N tuples: ("x"|"y", part, s) or ("deg",))."""
+    (N tuples: ("x"|"y", part, s) or ("deg",)); ``plane``: the gripper was measured (the
+    fingers meet at X = 0), else a lone finger."""
 
     pressures: torch.Tensor
     gravity: torch.Tensor
@@ -229,6 +258,7 @@ class Design:
     obs: np.ndarray
     what: list
     tip_rows: list          # per observation: (row of x, row of y) of its tip or None
+    plane: bool = True
 
 
 def design(obs: Observations, finger: FingerSpec) -> Design:
@@ -255,7 +285,7 @@ def design(obs: Observations, finger: FingerSpec) -> Design:
             what.append(("deg",))
     return Design(torch.tensor([o.pressures for o in obs.items], dtype=torch.float64),
                   torch.tensor([1.0 if o.gravity else 0.0 for o in obs.items], dtype=torch.float64),
-                  np.array(y), np.array(sigma), np.array(ob), what, tips)
+                  np.array(y), np.array(sigma), np.array(ob), what, tips, obs.problem == GRIPPER)
 
 
 def predict(model: CalibrationModel, d: Design, x: torch.Tensor, th: torch.Tensor) -> torch.Tensor:
@@ -276,52 +306,115 @@ def predict(model: CalibrationModel, d: Design, x: torch.Tensor, th: torch.Tenso
 
 def equilibrium(model: CalibrationModel, d: Design, th: torch.Tensor, x0: torch.Tensor | None = None,
                 max_iter: int = 40) -> tuple[torch.Tensor, torch.Tensor]:
-    """Newton with backtracking on R(x, theta) = 0 per observation, from x0 (default 0).
-    Returns (x (B, 3J), converged (B,) bool: max |R| <= NEWTON_TOL)."""
-    B, n = d.pressures.shape[0], 3 * model.J
-    x = torch.zeros(B, n, dtype=torch.float64) if x0 is None else x0.detach().clone()
+    """R(x, theta) = 0 per observation (B, 3J): Newton from x0 (default: 0 for a lone
+    finger; the predictor's solver for the gripper, ``solved``: Newton from tau = 0 can land
+    far across X = 0, where the plane's penalty is stiff); the rows it leaves unconverged
+    are started again from ``solved`` (when they did not already start there). Returns
+    (x (B, 3J), converged (B,) bool: max |R| <= NEWTON_TOL)."""
     th = th.detach()
+    cold = x0 is None and d.plane
+    if cold:
+        x0 = solved(model, d, th)
+    x, ok = _newton(model, d, th, x0, max_iter)
+    if not cold and not bool(ok.all()):
+        rows = (~ok).nonzero().flatten()
+        sub = dataclasses.replace(d, pressures=d.pressures[rows], gravity=d.gravity[rows])
+        xs, oks = _newton(model, sub, th[rows], solved(model, sub, th[rows]), max_iter)
+        x, ok = x.clone(), ok.clone()
+        x[rows], ok[rows] = xs, oks
+    return x, ok
+
+
+def _newton(model: CalibrationModel, d: Design, th: torch.Tensor, x0: torch.Tensor | None, max_iter: int):
+    """Newton with backtracking on R(x, theta) = 0 from x0 (None: 0); (x, converged)."""
+    B, n = d.pressures.shape[0], 3 * model.J
+    x = torch.zeros(B, n, dtype=torch.float64) if x0 is None else torch.nan_to_num(x0.detach().clone())
     for _ in range(max_iter):
         r, jx = _residual_and_jacobian(model, d, x, th)
         norm = r.abs().amax(1)
         if bool((norm <= NEWTON_TOL).all()):
             break
         step = torch.linalg.solve(jx, -r[..., None])[..., 0]
+        merit = r.norm(dim=1)   # |R|: the Newton step descends it (the max norm may not, near a kink)
         t = torch.ones(B, dtype=torch.float64)
-        for _ in range(12):   # halve each row's step until its residual decreases
+        for _ in range(20):   # halve each row's step until its residual decreases
             with torch.no_grad():
-                trial = model.residual(x + t[:, None] * step, th, d.pressures, d.gravity).abs().amax(1)
-            worse = ~(trial < norm) & (norm > NEWTON_TOL)
+                trial = model.residual(x + t[:, None] * step, th, d.pressures, d.gravity, d.plane).norm(dim=1)
+            worse = ~(trial < merit) & (norm > NEWTON_TOL)
             if not bool(worse.any()):
                 break
             t = torch.where(worse, 0.5 * t, t)
         x = x + torch.where(norm[:, None] > NEWTON_TOL, t[:, None] * step, torch.zeros_like(step))
     with torch.no_grad():
-        ok = model.residual(x, th, d.pressures, d.gravity).abs().amax(1) <= NEWTON_TOL
+        ok = model.residual(x, th, d.pressures, d.gravity, d.plane).abs().amax(1) <= NEWTON_TOL
     return x, ok
+
+
+def finger_at(model: CalibrationModel, theta: torch.Tensor) -> FingerSpec:
+    """The finger file's description of parameters theta (n,): part weights, joint keys
+    (gain, offset, stiffness scale), base_gap + 2·mount_x, base angle + mount_deg (the
+    camera frame is no part of it)."""
+    v = {p.name: float(theta[i]) for i, p in enumerate(model.table)}
+    parts, j = [], 0
+    for k, part in enumerate(model.finger.parts, 1):
+        part = dataclasses.replace(part, weight=v[f"weight_{k}"])
+        if part.kind == "joint":
+            j += 1
+            part = dataclasses.replace(part, pressure_gain=v[f"gain_J{j}"], pressure_offset=v[f"offset_J{j}"],
+                                       stiffness_scale=v[f"stiffness_J{j}"])
+        parts.append(part)
+    return dataclasses.replace(model.finger, parts=tuple(parts), base_gap=model.finger.base_gap + 2.0 * v["mount_x"],
+                               base_angle=model.finger.base_angle + np.radians(v["mount_deg"]), calibration=None)
+
+
+def solved(model: CalibrationModel, d: Design, th: torch.Tensor) -> torch.Tensor:
+    """Equilibria x (B, 3J) by the predictor's solver (predictor.solve, as predictor.gesture:
+    the plane's ramp where the fingers meet) of ``finger_at`` each row's theta, with or
+    without gravity and the plane as ``d`` says; NaN where it does not converge. tau is
+    in the joints' own frames, so the mount's turn leaves it unchanged."""
+    from predictor.solve import solve
+    from predictor.statics import GripperProblem, apart
+
+    x = torch.full((d.pressures.shape[0], 3 * model.J), float("nan"), dtype=torch.float64)
+    keys = [tuple(row) + (g,) for row, g in zip(th.tolist(), d.gravity.tolist())]
+    for key in dict.fromkeys(keys):
+        rows = torch.tensor([i for i, k in enumerate(keys) if k == key])
+        params = GripperParams(finger_at(model, torch.tensor(key[:-1], dtype=torch.float64)),
+                               kinematics=model.params.kinematics, joint_weight=model.params.joint_weight)
+        problem = GripperProblem(model.joint, params, gravity=bool(key[-1]))
+        res = solve(problem if d.plane else apart(problem), d.pressures[rows])
+        x[rows] = torch.where(res.converged[:, None], res.tau.reshape(len(rows), -1), float("nan"))
+    return x
 
 
 def _residual_and_jacobian(model, d, x, th):
     """R (B, 3J) and dR/dx (B, 3J, 3J) by reverse mode (row b of R depends on x_b only)."""
-    x = x.detach().requires_grad_(True)
-    r = model.residual(x, th, d.pressures, d.gravity)
-    rows = [torch.autograd.grad(r[:, i].sum(), x, retain_graph=True)[0] for i in range(r.shape[1])]
-    return r.detach(), torch.stack(rows, 1)
+    r, (rx,) = _rows_and_jacobians(model, d, x, (th.detach(),), 1)
+    return r, rx
 
 
-def sensitivities(model: CalibrationModel, d: Design, x: torch.Tensor, theta: torch.Tensor):
+def _rows_and_jacobians(model, d, x, th: tuple, wrt: int):
+    """R (B, n) at x (B, n), theta (th[0], (B, m)), and the Jacobians of R per row with
+    respect to x and, with wrt = 2, theta: (B, n, n) and (B, n, m). One reverse pass: every
+    row is evaluated n times in one batch (B·n rows; the residual is dispatch-bound, so
+    a batch n times larger costs about as much), copy i of row b carrying R_i's seed."""
+    B, n = x.shape
+    xr = x.detach().repeat_interleave(n, 0).requires_grad_(True)
+    tr = th[0].detach().repeat_interleave(n, 0).requires_grad_(wrt == 2)
+    r = model.residual(xr, tr, d.pressures.repeat_interleave(n, 0), d.gravity.repeat_interleave(n, 0), d.plane)
+    seed = torch.eye(n, dtype=r.dtype).repeat(B, 1)
+    grads = torch.autograd.grad((r * seed).sum(), (xr, tr)[:wrt])
+    return r.detach()[::n], tuple(g.reshape(B, n, -1) for g in grads)
+
+
+def sensitivities(model: CalibrationModel, d: Design, x: torch.Tensor, theta: torch.Tensor, rates: bool = False):
     """(m (N,), dm/dtheta (N, n)) at the converged equilibria x (B, 3J) for the shared
-    parameters theta (n,), by the implicit function theorem (module docstring)."""
+    parameters theta (n,), by the implicit function theorem (module docstring); with
+    ``rates`` also dx/dtheta (B, 3J, n) (the fit's Euler predictor of the next equilibria)."""
     B = x.shape[0]
     th = theta.detach()[None].repeat(B, 1).requires_grad_(True)   # one copy per observation
     xr = x.detach().requires_grad_(True)
-    r = model.residual(xr, th, d.pressures, d.gravity)
-    rx, rt = [], []
-    for i in range(r.shape[1]):
-        gx, gt = torch.autograd.grad(r[:, i].sum(), (xr, th), retain_graph=True)
-        rx.append(gx)
-        rt.append(gt)
-    rx, rt = torch.stack(rx, 1), torch.stack(rt, 1)                     # (B, 3J, 3J), (B, 3J, n)
+    _, (rx, rt) = _rows_and_jacobians(model, d, xr, (th,), 2)           # (B, 3J, 3J), (B, 3J, n)
     dxdt = -torch.linalg.solve(rx, rt)                                   # (B, 3J, n)
     m = predict(model, d, xr, th)
     jac = torch.zeros(m.shape[0], th.shape[1], dtype=m.dtype)
@@ -332,7 +425,7 @@ def sensitivities(model: CalibrationModel, d: Design, x: torch.Tensor, theta: to
         gt = torch.zeros_like(th) if gt is None else gt
         b = torch.as_tensor(d.obs[rows])
         jac[rows] = gt[b] + (gx[b, None, :] @ dxdt[b])[:, 0]
-    return m.detach(), jac
+    return (m.detach(), jac, dxdt.detach()) if rates else (m.detach(), jac)
 
 
 def _independent_groups(d: Design) -> list[list[int]]:

@@ -1,7 +1,7 @@
 """Timing of one calibration from 8 observations (issue 38: <= 10 s on this machine).
 
 The timed calibration is the fit of the committed measurement file
-docs/examples/observations.json (8 gestures of the committed surrogate with the recovery
+docs/examples/observations.json (8 gestures of the committed surrogate's lone finger with the recovery
 study's known changes, noise 0.3 mm / 0.3 deg; tip, tip angle and one marker each): the
 recovery study's 11 parameters (predictor.calibration_recovery.TRUTH's names: gains,
 offsets, stiffness scales, the tip's weight with its weighing as a prior, the mount's

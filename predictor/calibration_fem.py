@@ -15,6 +15,12 @@ before it and the proximal centre of the joint after it), with the stated uncert
 (results/validation/finger.json: fingertip 0.22 mm mean, 0.46 mm max; tip angle 0.19 deg
 max), so the fit is not asked to reproduce the FEM closer than the model can.
 
+What was measured: a case solved with the mirror finger's contact at X = 0
+(fem.finger_cases ``--plane``, its settings ``"plane": true``) is the gripper, every
+other case (the committed ones among them) a lone finger; the observations say so
+(predictor.observations ``problem``: ``case_problem``), so a lone finger is fitted and
+predicted alone, and cases of both kinds together are refused.
+
 Split and fit: the cases at ``CALIBRATE_ON`` (four pairs spread over the box) are
 calibrated on, the others held out. Fitted (``FIT``): each joint's stiffness scale s_i (a
 material stiffer or softer than its datasheet), the tip part's weight (N) and the mount's
@@ -49,7 +55,7 @@ from fem.artefacts import FINGER_CASE
 from predictor.calibration import CalibrationModel, design, equilibrium, predict
 from predictor.calibration_fit import CalibrationResult, calibrate
 from predictor.defaults import ROOT
-from predictor.observations import Marker, Observation, Observations
+from predictor.observations import FINGER, GRIPPER, Marker, Observation, Observations
 
 TRUTH_FINGER = ROOT / "results" / "calibration" / "truth" / "finger.toml"
 #: Gravity pressure pairs (P1, P2) MPa of the FEM cases, inside |P| <= 0.2 MPa (chosen when
@@ -189,6 +195,12 @@ def case_observation(case: FemCase, finger: FingerSpec, sigma_mm: float = SIGMA_
                        r.get("case") or f"P=({p[0]:g}, {p[1]:g})")
 
 
+def case_problem(case: FemCase) -> str:
+    """GRIPPER for a case solved with the plane X = 0 (its settings ``"plane": true``),
+    else FINGER (a lone finger: every case solved without it, which records no such key)."""
+    return GRIPPER if (case.record.get("settings") or {}).get("plane") else FINGER
+
+
 def known_changes(truth: FingerSpec, model: FingerSpec) -> dict:
     """The parameters (predictor.calibration names) the truth file changes against the
     model's finger, with their true values: weights that differ, the mount's turn (deg),
@@ -262,7 +274,12 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
     (module docstring). ValueError (one line) for a split that leaves nothing out or
     names a pair without a case."""
     check_same_chain(model.finger, truth)
-    obs = Observations(tuple(case_observation(c, model.finger, sigma_mm, sigma_deg) for c in cases))
+    problems = {case_problem(c) for c in cases}
+    if len(problems) > 1:
+        raise ValueError("the FEM cases mix lone fingers and gripper cases (fem.finger_cases --plane): "
+                         "calibrate on one kind")
+    obs = Observations(tuple(case_observation(c, model.finger, sigma_mm, sigma_deg) for c in cases),
+                       problem=problems.pop())
     key = lambda p: tuple(round(v, 9) for v in p)   # noqa: E731
     on = {key(p) for p in calibrate_on}
     fit_idx = [i for i, c in enumerate(cases) if key(c.pressures) in on]
@@ -280,7 +297,7 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
     changes = known_changes(truth, model.finger)
     record = {
         "truth_finger": truth.summary(), "model_finger": model.finger.summary(), "joint_model": model.joint.name,
-        "kinematics": model.params.kinematics, "joint_weight": model.params.joint_weight,
+        "kinematics": model.params.kinematics, "joint_weight": model.params.joint_weight, "problem": obs.problem,
         "fem": {"mesh": cases[0].mesh, "nodes": cases[0].record["mesh"]["nodes"],
                 "cases": [{"case": c.record["case"], "file": c.path.name, "sha256": c.sha256,
                            "pressures_MPa": list(c.pressures), "fem_s": c.record["fem_s"],
@@ -288,7 +305,8 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
         "observations": {"per_case": ["tip (x, y)", "tip angle"] + [
             f"part {k + 1} at s = {s:g} mm (FEM: {where})" for k, s, where in link_points(model.finger)],
             "sigma_mm": sigma_mm, "sigma_deg": sigma_deg},
-        "fit": {"parameters": res.names, "why": WHY_FIT, "starts": starts},
+        "fit": {"parameters": res.names, "why": WHY_FIT, "starts": starts, "trusted": res.trusted,
+                "untrusted_because": res.why, "reduced_chi2": res.reduced_chi2, "dof": res.dof},
         "parameters": {n: {"value": float(v), "std": float(s), "nominal": float(model.nominal[model.index[n]]),
                            "true": changes.get(n, float(model.nominal[model.index[n]])),
                            "identifiable": n not in res.unidentifiable}

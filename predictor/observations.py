@@ -1,7 +1,10 @@
 """Measurement files for the calibration (predictor.calibration, docs/calibration.md).
 
-A JSON file, format tag ``softjoint-observations/1``: a list of observed gestures of the
-right finger, each with
+A JSON file, format tag ``softjoint-observations/1``. Top level: ``problem``, what was
+measured: ``"gripper"`` (the default when absent: the two mirror fingers meeting at the
+plane X = 0, predictor.gesture's problem) or ``"finger"`` (a lone finger, nothing at
+X = 0: statics.apart; the whole-finger FEM cases are one); and ``observations``, a list
+of observed gestures of the right finger, each with
 
     pressures   [P1, .., PJ] MPa, |P| <= 0.3, one per joint of the finger
     gravity     true | false (default true)
@@ -33,6 +36,8 @@ from contract.grasp import parse_object
 from contract.spec import PRESSURE_LIMIT
 
 FORMAT = "softjoint-observations/1"
+GRIPPER, FINGER = "gripper", "finger"
+PROBLEMS = (GRIPPER, FINGER)   # what was measured; absent = GRIPPER (files written before the key)
 MAX_OBSERVATIONS = 1000
 MAX_MARKERS = 100
 COORD = 2000.0            # mm: |x|, |y| of a measured point
@@ -75,16 +80,20 @@ class Observation:
 
 @dataclass(frozen=True)
 class Observations:
+    """Observed gestures, the file's sha256 and name, and what was measured (``problem``:
+    GRIPPER or FINGER, module docstring)."""
+
     items: tuple[Observation, ...]
     sha256: str = ""
     source: str = ""
+    problem: str = GRIPPER
 
     def __len__(self) -> int:
         return len(self.items)
 
     def subset(self, keep) -> "Observations":
         """The observations whose indices are in ``keep``."""
-        return Observations(tuple(self.items[i] for i in keep), self.sha256, self.source)
+        return Observations(tuple(self.items[i] for i in keep), self.sha256, self.source, self.problem)
 
 
 def _number(where: str, value, lo: float, hi: float, unit: str, open_lo: bool = False) -> float:
@@ -169,14 +178,18 @@ def parse_observations(text: str, finger: FingerSpec, source: str = "<observatio
         doc = json.loads(text, parse_constant=lambda c: math.nan)
     except json.JSONDecodeError as exc:
         raise ObservationError(f"{source}: not valid JSON ({exc})") from None
-    doc = _table(source, doc, {"format", "finger", "observations", "note"}, {"format", "observations"})
+    doc = _table(source, doc, {"format", "finger", "observations", "note", "problem"}, {"format", "observations"})
     if doc["format"] != FORMAT:
         raise ObservationError(f"{source}: format = {doc['format']!r}, expected {FORMAT!r}")
+    problem = doc.get("problem", GRIPPER)
+    if problem not in PROBLEMS:
+        raise ObservationError(f"{source}: problem = {problem!r}: must be \"gripper\" (the fingers meeting at "
+                               "X = 0) or \"finger\" (a lone finger)")
     items = doc["observations"]
     if not isinstance(items, list) or not 1 <= len(items) <= MAX_OBSERVATIONS:
         raise ObservationError(f"{source}: observations must be a list of 1 to {MAX_OBSERVATIONS} observations")
     obs = tuple(_observation(f"{source}: observations[{i}]", d, finger) for i, d in enumerate(items))
-    return Observations(obs, hashlib.sha256(text.encode()).hexdigest(), source)
+    return Observations(obs, hashlib.sha256(text.encode()).hexdigest(), source, problem)
 
 
 def load_observations(path: str | Path, finger: FingerSpec) -> Observations:
@@ -201,4 +214,4 @@ def observations_to_json(obs: Observations, note: str = "") -> dict:
         if o.markers:
             d["markers"] = [{"part": m.part + 1, "s": m.s, "x": m.x, "y": m.y, "sigma_mm": m.sigma} for m in o.markers]
         items.append(d)
-    return {"format": FORMAT, **({"note": note} if note else {}), "observations": items}
+    return {"format": FORMAT, **({"note": note} if note else {}), "problem": obs.problem, "observations": items}

@@ -36,6 +36,7 @@ from predictor.calibration import CalibrationModel, design, equilibrium
 from predictor.calibration_fem import (CALIBRATE_ON, PRESSURES, TRUTH_FINGER, FemCase, case_observation,
                                        known_changes, pairs_arg)
 from predictor.calibration_recovery import synthetic_observations, truth_theta
+from predictor.observations import FINGER
 from predictor.gripper import GripperParams, default_finger
 from predictor.joint import AnalyticJoint
 from predictor.solve import solve
@@ -57,7 +58,7 @@ def model():
 def stand_in_case(model, theta: torch.Tensor, pressures, truth=TRUTH) -> dict:
     """A fem.finger_cases record of the calibration model's gesture at theta: the
     fingertip, its angle, every joint's proximal centre and anchors (measurement frame)."""
-    obs = synthetic_observations(model, {}, (pressures,))
+    obs = synthetic_observations(model, {}, (pressures,), problem=FINGER)   # the FEM cases: lone fingers
     d = design(obs, model.finger)
     th = theta[None]
     x, ok = equilibrium(model, d, th)
@@ -109,7 +110,8 @@ def test_observation_reads_the_links_ends_from_the_fem_record(model, stand_in):
     case = json.loads((folder / "gravity_0.1_0.05.json").read_text())
     o = case_observation(FemCase(case, folder / "x.json", ""), PAPER)
     assert [(m.part, m.s) for m in o.markers] == [(1, 0.0), (1, 60.0)]
-    ref = synthetic_observations(model, changes, ((0.1, 0.05),), markers=((1, 0.0), (1, 60.0))).items[0]
+    ref = synthetic_observations(model, changes, ((0.1, 0.05),), markers=((1, 0.0), (1, 60.0)),
+                                 problem=FINGER).items[0]
     for m, r in zip(o.markers, ref.markers):
         assert math.hypot(m.x - r.x, m.y - r.y) < 1e-9
     assert math.dist(o.tip[:2], ref.tip[:2]) < 1e-9 and abs(o.tip_angle[0] - ref.tip_angle[0]) < 1e-9
@@ -126,6 +128,7 @@ def test_demo_recovers_the_changes_and_predicts_the_heldout(model, stand_in, tmp
     u, c = rec["heldout_tip_error_uncalibrated_mm"], rec["heldout_tip_error_calibrated_mm"]
     assert u["mean"] > 3.0 and c["max"] < 1e-6 and rec["improvement"] >= 5.0
     assert rec["observations_used"] == 4 and rec["heldout_observations"] == 4
+    assert rec["problem"] == FINGER   # records without settings.plane: a lone finger is fitted
     assert sorted(map(tuple, rec["calibrate_on_MPa"])) == sorted(CALIBRATE_ON)
     assert rec["recovery"]["coverage_95"] == json.loads(RECOVERY.read_text())["noisy"]["coverage_95"]
     assert (tmp_path / "heldout.png").stat().st_size > 10_000
