@@ -334,8 +334,15 @@ FINGER_CASES := $(PY) -m fem.finger_cases $(PAPER_MESH) --no-plane --out $(FINGE
 finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases of one finger alone on the committed 1.8 mm displacement mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
 
-finger-grid: | $(SETUP) ## whole-finger FEM at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, hours; resumes) -> results/fem/finger_grid.json
-	nice $(PY) -m fem.finger_grid --out results/fem/finger_grid.json
+# Issue 56 §2: the 49 gravity pairs of the 7 x 7 grid over [-0.3, 0.3]^2 MPa, each a
+# fem.finger_cases record on the production discretisation (the joint file's [mesh], hex2:3
+# mixed) with the plane X = 0, $(FINGER_FEM)/gravity_P1_P2_hex2s3_plane.json + .png; a
+# record that stands is skipped (whoever wrote it), so a killed run resumes, and the summary
+# results/fem/finger_grid.json is rewritten after every case (FINGER_GRID_ARGS=--summary-only:
+# rebuild it from the records without solving).
+FINGER_GRID_ARGS ?=
+finger-grid: | $(SETUP) ## whole-finger FEM with the plane X = 0 at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, niced, hours; resumes; FINGER_GRID_ARGS=--summary-only to only rebuild the summary) -> results/validation/finger_fem/gravity_*_hex2s3_plane.json, results/fem/finger_grid.json
+	nice $(PY) -m fem.finger_grid --cases $(FINGER_FEM) --out results/fem/finger_grid.json $(FINGER_GRID_ARGS)
 
 # The FEM side of the grasp validation (issue 36 §3, fem/grasp_cases.py, docs/fem-grasps.md):
 # the paper's six grasps and ten atlas cases on the production discretisation (the joint
