@@ -116,7 +116,7 @@ def prepare(args: argparse.Namespace):
         raise ValueError(f"--approach: {len(args.approach)} values for finger {args.finger.name!r} of "
                          f"{n_joints} joints")
     joint = load_joint(args.model, args.finger)
-    options = dict(params=params, mu=args.mu, object_weight=args.object_weight, joint=joint, plane=args.plane)
+    options = dict(params=params, mu=args.mu, object_weight=args.object_weight, joint=joint)
     if args.method == "nn":
         from predictor.nn_checkpoint import load_predictor
 
@@ -124,7 +124,8 @@ def prepare(args: argparse.Namespace):
         problem = load_problem(None, args.object, approach=predictor.config.approach, **options)
         return problem, pressures, joint, predictor
     approach = None if args.approach == "zero" else args.approach or DEFAULT
-    problem = load_problem(None, args.object, gravity=not args.no_gravity, approach=approach, **options)
+    problem = load_problem(None, args.object, gravity=not args.no_gravity, approach=approach, plane=args.plane,
+                           **options)
     return problem, pressures, joint, None
 
 
@@ -184,9 +185,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.polish and args.method != "nn":
         ap.error("--polish finishes an NN prediction: use it with --method nn")
-    if args.method == "nn" and (args.no_gravity or args.approach is not None):
-        ap.error("--method nn predicts the trained case only (gravity on, its own approach): "
-                 "drop --no-gravity and --approach")
+    if args.method == "nn" and (args.no_gravity or args.approach is not None or not args.plane):
+        ap.error("--method nn predicts the trained case only (the gripper with gravity on, its own approach): "
+                 "drop --no-gravity, --approach and --no-plane")
     torch.set_num_threads(1)
     with ap.errors():
         prepared = prepare(args)  # every input checked before the solve
