@@ -345,7 +345,8 @@ results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.
 # inside |P| <= 0.2 MPa; predictor.calibration_fem.PRESSURES is the same list
 # (tests/test_calibration_fem.py checks). One core, niced, on the truth joint file's 1.8 mm
 # mesh (the surrogate's): 15 min for the committed run; a converged case is skipped, so a
-# killed run resumes.
+# killed run resumes. The truth cases are one finger alone (--no-plane; the calibration's
+# problem is issue 56's other part).
 CAL_TRUTH     := results/calibration/truth/finger.toml
 CAL_FEM       := results/calibration/fem
 CAL_PRESSURES := 0.2,0.2;-0.2,0.15;0.15,-0.2;-0.15,-0.15;0,0;0.1,0.05;-0.1,0.2;0.05,-0.1
@@ -354,7 +355,7 @@ CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py
                  predictor/calibrate.py
 
 calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, ~15 min; resumes) -> results/calibration/fem/
-	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --out $(CAL_FEM)
+	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane --out $(CAL_FEM)
 
 calibrate-demo: results/calibration/calibration.json ## calibrate the paper's predictor on 4 FEM gestures of the true finger, predict the other 4 (~1 min; needs make calibration-fem) -> results/calibration/{calibration.json,heldout.png,calibrated.toml}
 results/calibration/calibration.json: $(TIMES) $(CAL_CODE) $(CAL_TRUTH) $(wildcard $(CAL_FEM)/*.json) \
@@ -370,13 +371,21 @@ results/bench/calibrate.json: $(TIMES) $(CAL_CODE) predictor/calibration_recover
 # ---------------------------------------------------------------- finger validation (issue 14)
 # The committed cases are on PAPER_MESH, as the surrogate the predictor runs on.
 FINGER_FEM := results/validation/finger_fem
-FINGER_CASES := $(PY) -m fem.finger_cases $(PAPER_MESH) --out $(FINGER_FEM)
+# They are one finger alone (the tools' default is the gripper, the plane X = 0 on: issue 56).
+FINGER_CASES := $(PY) -m fem.finger_cases $(PAPER_MESH) --no-plane --out $(FINGER_FEM)
 
-finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases on the committed 1.8 mm displacement mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
+finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases of one finger alone on the committed 1.8 mm displacement mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
 
-finger-grid: | $(SETUP) ## whole-finger FEM at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, hours; resumes) -> results/fem/finger_grid.json
-	nice $(PY) -m fem.finger_grid --out results/fem/finger_grid.json
+# Issue 56 §2: the 49 gravity pairs of the 7 x 7 grid over [-0.3, 0.3]^2 MPa, each a
+# fem.finger_cases record on the production discretisation (the joint file's [mesh], hex2:3
+# mixed) with the plane X = 0, $(FINGER_FEM)/gravity_P1_P2_hex2s3_plane.json + .png; a
+# record that stands is skipped (whoever wrote it), so a killed run resumes, and the summary
+# results/fem/finger_grid.json is rewritten after every case (FINGER_GRID_ARGS=--summary-only:
+# rebuild it from the records without solving).
+FINGER_GRID_ARGS ?=
+finger-grid: | $(SETUP) ## whole-finger FEM with the plane X = 0 at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, niced, hours; resumes; FINGER_GRID_ARGS=--summary-only to only rebuild the summary) -> results/validation/finger_fem/gravity_*_hex2s3_plane.json, results/fem/finger_grid.json
+	nice $(PY) -m fem.finger_grid --cases $(FINGER_FEM) --out results/fem/finger_grid.json $(FINGER_GRID_ARGS)
 
 # The FEM side of the grasp validation (issue 36 §3, fem/grasp_cases.py, docs/fem-grasps.md):
 # the paper's six grasps and ten atlas cases on the production discretisation (the joint

@@ -24,7 +24,10 @@ finger cases) are on the paper-fidelity 1.8 mm P2 displacement mesh
 (fem.discretisation.PAPER, COMMITTED_MESH_SIZE and COMMITTED_FORMULATION here), not on the
 production hex2:3 mixed; so the joint FEM of step 1 runs on that mesh (as the surrogate's
 data), and the live finger FEM of step 6 on the coarse H mm (default 4) tetrahedra in the
-same displacement formulation. The demo runs no production-mesh FEM.
+same displacement formulation. The demo runs no production-mesh FEM. The problem: the
+committed finger cases are one finger alone, so the gestures of steps 3, 4 and the finger
+FEM of step 6 are solved with ``--no-plane`` too (a comparison of the gripper, the tools'
+default, with a lone finger would measure the difference of problems, issue 56 §1).
 
 Data flow: each step's JSON (its stdout, or the file it writes) -> ``table_rows`` (pure:
 the errors, times and labels of every row) -> ``summary.json``, ``summary.md`` (the same
@@ -129,7 +132,7 @@ def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
     for p1, p2 in GRAVITY_GESTURES:
         name = gesture_name(p1, p2)
         steps.append(Step(f"gesture_{name}", f"gravity gesture ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
-                          "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--json",
+                          "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--no-plane", "--json",
                                                 "--plot", f"{out}/gesture_{name}.png"]))
     p1, p2, obj = GRASP
     steps.append(Step("grasp", f"grasp of a {obj} at ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
@@ -138,7 +141,7 @@ def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
     h = _g(finger_mesh_size)
     steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.finger_cases)",
                       "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h,
-                                           "--formulation", COMMITTED_FORMULATION],
+                                           "--formulation", COMMITTED_FORMULATION, "--no-plane"],
                       reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
     steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
                       "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h,
@@ -194,7 +197,13 @@ def _predictor_label(d: dict) -> str:
 
 
 def gravity_row(fem: dict, gesture: dict, fem_file: str) -> dict:
-    """A gravity gesture (predictor.gesture JSON) against the committed finger FEM."""
+    """A gravity gesture (predictor.gesture JSON) against the committed finger FEM; ValueError
+    (one line) when they solved different problems (the plane X = 0: ``plane`` of each)."""
+    from predictor.problem import same_problem
+    from predictor.validate_finger import case_plane
+
+    if "plane" in gesture:
+        same_problem(case_plane(fem), gesture["plane"], fem_file)
     p1, p2 = gesture["pressures_MPa"]
     errors = finger_errors(fem, gesture["tip"], gesture["tip_angle_deg"])
     return {"case": f"gravity ({_g(p1)}, {_g(p2)}) MPa",

@@ -81,11 +81,13 @@ GRASP_CASE = Format("fem-grasp-case", 1, "fem.grasp_cases", {
     "contact_patch": dict | None, "mesh.mesh": str, "mesh.nodes": int, "ranks": int,
     "render?.extent_mm": list, "render?.u_max_mm": NUM})
 
-#: results/fem/finger_grid.json (make finger-grid; fem.finger_grid): the finger FEM over an
-#: N x N grid of gravity pressure pairs, each case's convergence, time and Newton figures.
+#: results/fem/finger_grid.json (make finger-grid; fem.finger_grid): the summary of the finger
+#: FEM over an N x N grid of gravity pressure pairs, one fem.finger_cases record each (FINGER_CASE,
+#: ``cases[].file``): each case's problem (``plane``), convergence, time, Newton figures and tip.
 FINGER_GRID = Format("fem-finger-grid", 1, "fem.finger_grid", {
-    "settings.points": int, **each("", int, "pairs", "solved", "converged"), "complete": bool,
-    "max_wall_s": MAYBE, "mesh.nodes": int, "cases[].p1": NUM, "cases[].p2": NUM, "cases[].converged": bool,
+    "settings.points": int, "settings.plane": bool, **each("", int, "pairs", "solved", "converged"),
+    "complete": bool, "max_wall_s": MAYBE, "mesh.nodes": int, "cases[].p1": NUM, "cases[].p2": NUM,
+    "cases[].converged": bool, "cases[].plane": bool, "cases[].tip": list | None,
     "cases[].wall_s": NUM, **each("cases[]", int, "newton_iterations", "load_steps", "cutbacks"),
     "cases[].reason": str})
 

@@ -3,7 +3,7 @@
     python -m fem.finger --p1 0.1 --p2 -0.1 [--no-gravity] [--mesh-size H | --divisions N]
                          [--finger FILE] [--formulation mixed] --json
     python -m fem.finger --finger FILE --pressures 0.1,-0.05,0.2     # any number of joints
-    python -m fem.finger --p1 0.2 --p2 0.2 --plane     # the fingers meet at X = 0
+    python -m fem.finger --p1 0.2 --p2 0.2 --no-plane  # one finger alone: it may cross X = 0
     mpirun -n 2 python -m fem.finger --p1 0.1 --p2 0.1
 
 Model (units mm, N, MPa, N·mm; angles rad in code, degrees in the JSON): one half-model
@@ -67,13 +67,16 @@ converge reports no figures (null in the JSON) and exits 1 with its reason on st
 of the last part's distal face, ``tip_angle`` the orientation of the last part. Rotations
 of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
 
-Where the fingers meet (``--plane``, FingerSolver(plane=True)): the mirror finger's
-contact at X = 0, the predictor's frictionless penalty k_p s(max(0, -X)) on the inner and
-end faces (fem.plane_contact); without it the right finger passes through X = 0 as in the
-paper. With it the record gains ``plane_force_N`` (N, the plane's push along +X on the
-full finger), ``plane_overlap_mm`` (how far its surface crosses X = 0) and
-``base_force_N`` (the clamp's reaction, global, N: it balances the weights and the plane's
-push), and ``"plane": true``.
+The problem (issue 56 §1): by default the gripper, the right finger where it meets the
+mirror finger (FingerSolver(plane=True)): the mirror finger's contact at X = 0, the
+predictor's frictionless penalty k_p s(max(0, -X)) on the inner and end faces
+(fem.plane_contact), the problem ``python -m predictor.gesture`` solves by default.
+``--no-plane`` (FingerSolver(plane=False), the class's default) solves one finger alone,
+which passes through X = 0 as in the paper (``--plane``, the default now, is accepted for
+one release). The record says which (``"plane": true|false``); with the plane it gains
+``plane_force_N`` (N, the plane's push along +X on the full finger), ``plane_overlap_mm``
+(how far its surface crosses X = 0) and ``base_force_N`` (the clamp's reaction, global, N:
+it balances the weights and the plane's push), null without it.
 """
 from __future__ import annotations
 
@@ -597,6 +600,17 @@ def add_finger_mesh(ap: cli.Parser) -> None:
     add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
 
 
+def add_plane_flags(ap: cli.Parser, names: str = "") -> None:
+    """--no-plane and its old opposite --plane (``args.plane``, default True: the gripper,
+    module docstring); ``names``: what the flag does to a tool's file names, if anything."""
+    ap.add_argument("--no-plane", dest="plane", action="store_false",
+                    help="one finger alone, which may cross X = 0 (default: the gripper, the right finger against "
+                         "the mirror finger's contact at X = 0, a frictionless penalty, as predictor.gesture)" + names)
+    ap.add_argument("--plane", dest="plane", action="store_true",
+                    help="the mirror finger's contact at X = 0: the default now (accepted for one release)")
+    ap.set_defaults(plane=True)
+
+
 def build_parser() -> cli.Parser:
     ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
     pressure = cli.number(unit="MPa")     # each joint's box is checked once the finger is read
@@ -606,9 +620,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--pressures", type=cli.number_list(unit="MPa"), metavar="P1,P2,...",
                     help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
     ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
-    ap.add_argument("--plane", action="store_true",
-                    help="the mirror finger's contact at X = 0 (frictionless penalty, the predictor's): the "
-                         "fingers meet instead of passing through each other")
+    add_plane_flags(ap)
     ap.add_argument("--finger", type=finger_arg, default=None,
                     help="finger description file (default: contract/fingers/paper.toml); its joint parts "
                          "name their joint files (default: the paper's joint)")

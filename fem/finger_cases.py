@@ -1,7 +1,7 @@
 """The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
 
     python -m fem.finger_cases --out results/validation/finger_fem [--mesh-size 1.8 | --divisions N]
-                               [--part 1/2] [--formulation displacement] [--plane]
+                               [--part 1/2] [--formulation displacement] [--no-plane]
     python -m fem.finger_cases --finger FILE --pressures "0.2,0.2;-0.1,0.05" --out DIR
 
 Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
@@ -23,8 +23,8 @@ joint the production discretisation, hex2:3 mixed; ``--divisions`` N: the finger
 Q2 hexahedra, fem.mesh_hex, its records' ``mesh.mesh`` "hexN" or "hexN:S") on one mesh
 built once (the mesh build and the form compilation are reported apart from each case's
 solve time, ``fem_s``). The committed cases (results/validation/finger_fem) are on the
-paper-fidelity 1.8 mm displacement: ``make finger-fem`` passes ``--mesh-size 1.8
---formulation displacement`` to resume them. It writes ``<case><suffix>.json``
+paper-fidelity 1.8 mm displacement, one finger alone: ``make finger-fem`` passes
+``--mesh-size 1.8 --formulation displacement --no-plane`` to resume them. It writes ``<case><suffix>.json``
 (FingerResult.summary plus the run's settings; suffix ``--suffix``, by default ``_hexN``
 or ``_hexNsS`` for hexahedra, no colon in a file name, ``_mixed`` for tetrahedra in the
 mixed formulation, none for tetrahedra in displacement: a default never names another
@@ -43,11 +43,16 @@ the mixed formulation and joint files existed stand). A solve that does not
 converge is recorded as such (``converged: false``, no figures) with the solver controls
 it ran with (``solver``), and is tried again when they change.
 
-``--plane``: every case with the mirror finger's contact at X = 0 (fem.plane_contact; the
-fingers meet instead of passing through each other). Its records carry ``plane_force_N``,
-``plane_overlap_mm`` and ``base_force_N``, their settings ``"plane": true`` (absent
-without it, so the cases solved before the plane stand) and their default suffix ends in
-``_plane``: a plane case never resumes from, nor replaces, a case without it.
+The problem (fem.finger, issue 56 §1): by default every case is the gripper's, the right
+finger against the mirror finger's contact at X = 0 (fem.plane_contact; the fingers meet
+instead of passing through each other); ``--no-plane`` solves one finger alone (``--plane``,
+the default now, is accepted for one release). A plane case's record carries
+``plane_force_N``, ``plane_overlap_mm`` and ``base_force_N``, its settings ``"plane":
+true`` (absent without it, so the cases solved before the plane stand) and its default
+suffix ends in ``_plane``: a plane case never resumes from, nor replaces, a case without
+it. The committed lone-finger cases (results/validation/finger_fem/<case>.json on 1.8 mm,
+and the calibration's truth cases, results/calibration/fem) are resumed with
+``--no-plane`` (``make finger-fem``, ``make calibration-fem``).
 """
 from __future__ import annotations
 
@@ -59,6 +64,7 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
@@ -67,8 +73,8 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
-from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, finger_discretisation,
-                        finger_joints, pressure_limits, rotation_matrix, same_settings)
+from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, add_plane_flags,
+                        finger_discretisation, finger_joints, pressure_limits, rotation_matrix, same_settings)
 from fem.solver import config_for
 from contract.finger import finger_arg, load_finger
 from contract.joint import is_paper_joint, joint_digest
@@ -164,6 +170,13 @@ def record_stands(path: Path, settings: dict, solver: dict, finger) -> bool:
         done.get("converged") or done.get("solver") == solver)
 
 
+def pending(cases: list, out: Path, suffix: str, settings: dict, solver: dict, finger) -> list:
+    """The cases [(name, P1, P2, gravity)] whose record ``out/<name><suffix>.json`` does not
+    stand (``record_stands``), each with that path appended: what a run solves."""
+    paths = [(case, Path(out) / f"{case[0]}{suffix}.json") for case in cases]
+    return [(*case, path) for case, path in paths if not record_stands(path, settings, solver, finger)]
+
+
 def part_slice(ap: cli.Parser, text: str) -> slice:
     """The cases of ``--part K/N``: every N-th starting at the K-th (a usage error unless
     1 <= K <= N)."""
@@ -221,6 +234,35 @@ def render(solver: FingerSolver, path: Path, outline: np.ndarray | None = None) 
     return {"extent_mm": extent, "u_max_mm": umax, "cmap": "viridis"}
 
 
+def solve_cases(todo: list, geometry, formulation: str, plane: bool, settings: dict, solver: dict,
+                comm: MPI.Comm = MPI.COMM_WORLD, after: Callable[[Path, dict], None] | None = None) -> None:
+    """Solve the cases ``todo`` [(name, P1, P2, gravity, path)] on one FingerSolver built
+    once (the mesh build and the forms' compilation are ``setup_s``), each written to its
+    ``path`` (FINGER_CASE, atomic; the folder made if needed) with its settings and solver
+    controls (``case_settings``, ``solver_settings``: the resume key) and, if converged,
+    its render beside it (``render``); one line per case on stdout. ``after(path, record)``
+    is called once each record is written (fem.finger_grid: its summary)."""
+    t0 = time.perf_counter()
+    fem_solver = FingerSolver(geometry, comm, formulation=formulation, plane=plane)
+    setup_s = time.perf_counter() - t0
+    for name, p1, p2, gravity, path in todo:
+        res = fem_solver.solve(FingerLoad((p1, p2), gravity))
+        record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
+                  "load_average": os.getloadavg()[0], "setup_s": setup_s,
+                  "mesh": fem_solver.mesh_info(), "formulation": formulation, "settings": settings,
+                  "solver": solver,
+                  "ranks": comm.size}
+        if res.converged:
+            record["render"] = render(fem_solver, path.with_suffix(".png"))
+        cli.make_output_folder(path.parent)
+        FINGER_CASE.write(path, record)
+        print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
+                             f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
+                             f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)
+        if after is not None:
+            after(path, record)
+
+
 def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.finger_cases", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/validation/finger_fem",
@@ -230,8 +272,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
     ap.add_argument("--pressures", type=pressure_cases, metavar="P1,P2;...",
                     help="solve these gravity pressure pairs (MPa, ';' between pairs) instead of the validation cases")
-    ap.add_argument("--plane", action="store_true",
-                    help="the mirror finger's contact at X = 0 (the fingers meet; file names end in _plane)")
+    add_plane_flags(ap, "; file names end in _plane with the plane")
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
     ap.add_argument("--suffix", default=None, help="appended to each file name (e.g. _h1.2 for a finer mesh; "
                     "default: _hexN or _hexNsS on hexahedra, _mixed on mixed tetrahedra, so that they never replace "
@@ -262,32 +303,12 @@ def main(argv=None) -> int:
     solver = solver_settings(geometry)
     suffix = default_suffix(geometry.joint, formulation, args.plane) if args.suffix is None else args.suffix
     out = Path(args.out)
-    todo = []
-    for name, p1, p2, gravity in cases:
-        path = out / f"{name}{suffix}.json"
-        if not record_stands(path, settings, solver, finger):
-            todo.append((name, p1, p2, gravity, path))
+    todo = pending(cases, out, suffix, settings, solver, finger)
     if not todo:
         print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
         return 0
     with ap.errors(), cli.heartbeat("finger cases"):
-        t0 = time.perf_counter()
-        fem_solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
-        setup_s = time.perf_counter() - t0
-        for name, p1, p2, gravity, path in todo:
-            res = fem_solver.solve(FingerLoad((p1, p2), gravity))
-            record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
-                      "load_average": os.getloadavg()[0], "setup_s": setup_s,
-                      "mesh": fem_solver.mesh_info(), "formulation": formulation, "settings": settings,
-                      "solver": solver,
-                      "ranks": comm.size}
-            if res.converged:
-                record["render"] = render(fem_solver, path.with_suffix(".png"))
-            cli.make_output_folder(out)
-            FINGER_CASE.write(path, record)
-            print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
-                                 f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
-                                 f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)
+        solve_cases(todo, geometry, formulation, args.plane, settings, solver, comm)
     return 0
 
 

@@ -1,7 +1,7 @@
 """FEM grasps: the whole finger holding a rigid object, along the predictor's history.
 
     python -m fem.finger --p1 0.2 --p2 0.25 --object circle [--approach -0.15,0]
-                         [--mu 0.3] [--object-weight 0.2] [--plane] [--xdmf out.xdmf] --json
+                         [--mu 0.3] [--object-weight 0.2] [--no-plane] [--xdmf out.xdmf] --json
 
 Model: the finger of fem.finger (gravity on) with the object's contact of
 fem.object_contact (the predictor's law: penalty k_c per length spread over the part's
@@ -15,9 +15,9 @@ docs/fem-grasps.md). History, as the predictor's (docs/gripper.md §9):
 3. the ramp: the pressures go in a straight line to the target (the load path's steps
    and cut-backs, fem.load_path), with the object.
 
-With ``--plane`` the mirror finger's contact at X = 0 (fem.plane_contact) acts throughout
-the history, approach included, and the record carries ``plane_force_N`` and
-``plane_overlap_mm`` beside ``"plane": true``.
+The mirror finger's contact at X = 0 (fem.plane_contact; fem.finger's default, the
+gripper; ``--no-plane``: one finger alone) acts throughout the history, approach included,
+and the record carries ``plane_force_N`` and ``plane_overlap_mm`` beside ``"plane": true``.
 
 Outputs (GraspResult.summary), with the predictor's meanings: ``tip`` [X, Y] mm,
 ``tip_angle_deg``, ``state`` (no_contact, holds, slips; not_converged), ``contact_force_N``

@@ -12,8 +12,10 @@ Every call goes through the same solver and history as ``predictor.gesture --obj
 (approach gesture APPROACH, then the pressure ramp) and the same checks as the command
 lines (predictor.problem: one validation per input, ValueError with the CLI's reason);
 the default joint model is found from the package (predictor.defaults), never the
-working directory. Every result names its joint model, mu and object weight; the objects
-are frozen dataclasses.
+working directory. The problem is the command lines' default, the gripper: the right
+finger against the mirror finger's contact at X = 0 (``load_gripper(plane=True)``);
+``plane=False`` is one finger alone (``--no-plane``). Every result names its joint model,
+mu, object weight and problem (``plane``); the objects are frozen dataclasses.
 """
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ class Gripper:
 class Gesture:
     """One solved gesture: ``result`` (a one-row GestureResult); summary() as in
     ``predictor.gesture --json`` (GestureResult.summary: state, tip mm, tip_angle_deg,
-    contact_force_N, friction_use, slip, joint, mu, object_weight_N; null figures unless
+    contact_force_N, friction_use, slip, joint, mu, object_weight_N, plane; null figures unless
     converged) plus ``first_contact_MPa`` (None without an object or contact)."""
 
     result: GestureResult
@@ -59,14 +61,16 @@ class Gesture:
 def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True,
                  finger: str | Path | FingerSpec | None = None, kinematics: str = DEFAULT_KINEMATICS,
                  joint_weight: str = DEFAULT_JOINT_WEIGHT, mu: float | None = None,
-                 object_weight: float | None = None) -> Gripper:
+                 object_weight: float | None = None, plane: bool = True) -> Gripper:
     """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate,
     results/surrogate/improved.pt of this package or $SOFTJOINT_RESULTS; ValueError when
     missing); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None: no
     object); finger: a finger description file or FingerSpec (None: the paper's,
     contract/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
     mu: friction coefficient, object_weight: N (None: the defaults 0.3 and 0.2 N)
-    (predictor.gesture's --finger, --kinematics, --joint-weight, --mu, --object-weight).
+    plane: the gripper, the mirror finger's contact at X = 0 (True), or one finger alone
+    (False) (predictor.gesture's --finger, --kinematics, --joint-weight, --mu,
+    --object-weight, --no-plane).
     ValueError (one line) for a bad spec, finger file, model, option, an object the model
     cannot represent or one cutting through the fingers at the approach gesture."""
     if out is not None:
@@ -76,7 +80,8 @@ def load_gripper(model: str | None = None, object: str | None = None, gravity: b
     if finger is not None and not isinstance(finger, FingerSpec):
         finger = load_finger(finger)
     params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight)
-    return Gripper(load_problem(model, object, gravity, params, mu=mu, object_weight=object_weight), object)
+    return Gripper(load_problem(model, object, gravity, params, mu=mu, object_weight=object_weight, plane=plane),
+                   object)
 
 
 def solve_gesture(gripper: Gripper, *pressures: float) -> Gesture:

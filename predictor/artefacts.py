@@ -102,7 +102,7 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
     **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "speedup", "fem_s", "fem_cases"),
     "summary{}.cases": int, **each("summary{}", NUM, *_SUMMARY), "judged_variant": str,
     "joint": str, "repeats": int, "finger.name": str, "finger.base_angle_deg?": NUM, "figures?": list,
-    "discretisation?.mesh": str, "discretisation?.formulation": str,
+    "discretisation?.mesh": str, "discretisation?.formulation": str, "plane?": bool | None,
     "fem[].case": str, "fem[].converged": bool, "fem[].gravity": bool, "fem[].pressures_MPa": list,
     "fem[].fem_s": NUM, "fem[].tip": list | None, "fem[].tip_angle_deg": MAYBE,
     "fem[].load_average?": NUM, "fem[].reason?": str, "fem[].mesh.nodes": int, "fem[].mesh.mesh_size?": NUM,
@@ -124,6 +124,7 @@ _GRASP_MET = ("tip", "tip_angle", "normal_force", "contact_location", "state", "
 #: true, false, or null where not judged (the state where the FEM's friction use is near 1).
 GRASP_VALIDATION = Format("predictor-grasp-validation", 1, "predictor.validate_grasps", {
     "joint": str, "finger.name": str, "fem_folder": str, "repeats": int, "figures": list, "judged": list,
+    "plane?": bool | None,
     **each("discretisation", str, "mesh", "formulation"),
     **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "normal_force_rel", "normal_force_N",
            "contact_location_error_mm", "friction_use_band", "fem_s", "speedup"),

@@ -2,7 +2,7 @@
 
     python -m predictor.atlas --object SPEC --grid N [--box P1LO,P1HI,P2LO,P2HI]
         [--path sweep|ramp] [--model PATH|analytic] [--mu MU] [--object-weight N]
-        [--quiet] [--json] [--plot FILE.png] [--out FILE.json]
+        [--no-plane] [--quiet] [--json] [--plot FILE.png] [--out FILE.json]
 
 Every (P1, P2) of an N x N grid over the pressure box (MPa, default the full |P| <= 0.3
 box) is solved along the same history as ``predictor.gesture --object``: the gripper
@@ -38,7 +38,9 @@ contact, GestureResult.where_it_touches) and how far the finger's outline crosse
 symmetry plane X = 0 where the two fingers meet (plane_overlap_mm; the summary's
 max_plane_overlap_mm). The friction
 margin is 1 - u (> 0 where the grasp holds). The summary and JSON name what was solved:
-joint, mu, object_weight_N, gravity, approach_MPa; ``atlas_from_json`` reads an atlas
+joint, mu, object_weight_N, gravity, approach_MPa and plane (true: the gripper, the mirror
+finger's contact at X = 0, the default; false: one finger alone, ``--no-plane``,
+predictor.problem); ``atlas_from_json`` reads an atlas
 back for the same problem and refuses (one line) one of another object, joint or settings.
 A run longer than ~10 s prints progress lines on stderr (``--quiet``: none).
 
@@ -66,7 +68,7 @@ import torch
 
 from contract import cli
 from predictor.artefacts import ATLAS
-from predictor.problem import (FULL_BOX, GRID, add_arguments, box_arg, check_box, load_problem, object_arg,
+from predictor.problem import (FULL_BOX, GRID, add_arguments, add_plane, box_arg, check_box, load_problem, object_arg,
                                placement_error)
 from predictor.progress import Heartbeat, set_quiet
 from predictor.jacobians import jacobian_fn
@@ -126,6 +128,7 @@ class Atlas:
     how: np.ndarray | None = None
     gravity: bool = True
     object_weight_N: float | None = None
+    plane: bool = True
 
     def index(self, p1: float, p2: float) -> int:
         """Flat row of the grid point nearest to (p1, p2) MPa in ``result``."""
@@ -152,7 +155,7 @@ class Atlas:
         overlap = self.plane_overlap()
         return {"grid": len(self.p1), "counts": self.counts(), "best_hold": point, "time_s": self.time_s,
                 "path": self.path, "solved_by": how, "joint": self.joint, "mu": self.mu,
-                "object_weight_N": self.object_weight_N, "gravity": self.gravity,
+                "object_weight_N": self.object_weight_N, "gravity": self.gravity, "plane": self.plane,
                 "max_plane_overlap_mm": float(np.nanmax(overlap)) if np.isfinite(overlap).any() else None}
 
     def plane_overlap(self) -> np.ndarray:
@@ -230,7 +233,7 @@ def grasp_atlas(problem: GripperProblem, grid: int = 61, box=FULL_BOX,
                  first_contact=first.numpy().reshape(*shape, 2), result=res, time_s=elapsed,
                  obstacle=problem.obstacle, joint=problem.joint.name, mu=problem.contact.mu,
                  approach=problem.approach, path=path, how=how.reshape(shape), gravity=problem.gravity,
-                 object_weight_N=res.object_weight_N)
+                 object_weight_N=res.object_weight_N, plane=meets(problem))
 
 
 def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.ndarray,
@@ -451,22 +454,23 @@ def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
                  res.pose.tip_end.numpy().reshape(*n, 2), np.array(doc["first_contact_MPa"], float), res,
                  float(doc.get("time_s", 0.0)), ob, problem.joint.name, problem.contact.mu, problem.approach,
                  doc.get("path", "ramp"), None if doc.get("how") is None else np.array(doc["how"], int),
-                 problem.gravity, res.object_weight_N)
+                 problem.gravity, res.object_weight_N, meets(problem))
 
 
 def _same_settings(path, doc: dict, problem: GripperProblem) -> None:
     """ValueError (one line) when the atlas JSON was computed with other settings than
-    ``problem``: gravity, mu, the object's weight, the approach. Atlases written before
-    these were recorded were computed with the defaults (gravity on, mu 0.3, 0.2 N)."""
+    ``problem``: gravity, mu, the object's weight, the approach, the plane X = 0. Atlases
+    written before these were recorded were computed with the defaults (gravity on, mu
+    0.3, 0.2 N, the plane)."""
     weight = problem.params.object_weight if problem.gravity else 0.0
-    recorded = {"gravity": doc.get("gravity", True), "mu": doc.get("mu", 0.3),
+    recorded = {"plane": doc.get("plane", True), "gravity": doc.get("gravity", True), "mu": doc.get("mu", 0.3),
                 "object_weight_N": doc.get("object_weight_N", 0.2 if doc.get("gravity", True) else 0.0),
                 "approach_MPa": None if doc.get("approach_MPa") is None else tuple(doc["approach_MPa"])}
-    asked = {"gravity": problem.gravity, "mu": problem.contact.mu, "object_weight_N": weight,
+    asked = {"plane": meets(problem), "gravity": problem.gravity, "mu": problem.contact.mu, "object_weight_N": weight,
              "approach_MPa": None if problem.approach is None else tuple(problem.approach)}
     for key, value in asked.items():
         if recorded[key] != value:
-            flag = {"gravity": "--no-gravity", "mu": "--mu", "object_weight_N": "--object-weight",
+            flag = {"plane": "--no-plane", "gravity": "--no-gravity", "mu": "--mu", "object_weight_N": "--object-weight",
                     "approach_MPa": "the approach"}[key]
             raise ValueError(f"{path}: an atlas computed with {key} = {recorded[key]}, this question has "
                              f"{value} ({flag}): compute the atlas with the same settings")
@@ -545,6 +549,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ramp-steps", type=cli.number(1, 1000, integer=True), default=SolverOptions.ramp_steps,
                     help=f"pressure sub-steps of a ramped point (default {SolverOptions.ramp_steps}; --path ramp "
                     "with more steps checks the reference's own path resolution)")
+    add_plane(ap)
     add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
     ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
@@ -552,7 +557,8 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     set_quiet(args.quiet)
     with ap.errors():
-        problem = load_problem(args.model, args.object, mu=args.mu, object_weight=args.object_weight)
+        problem = load_problem(args.model, args.object, mu=args.mu, object_weight=args.object_weight,
+                               plane=args.plane)
         atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
         doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps}
         if args.out:

@@ -4,7 +4,7 @@
         [--mu MU] [--object-weight N] [--approach -0.15,0|zero] [--method newton|lbfgs|nn
         [--polish]] [--model PATH|analytic] [--nn PATH] [--finger FILE]
         [--kinematics cap|tangent] [--joint-weight split|lumped] [--no-gravity]
-        [--plot out.png] [--json]
+        [--no-plane] [--plot out.png] [--json]
     python -m predictor.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
 
 The finger is read from a finger description file (``--finger``, default
@@ -17,6 +17,12 @@ of its last two anchors (tangent, the paper's). ``--joint-weight``: a joint's we
 at each end (split, the default) or at the mean of its anchors (lumped, the paper's)
 (predictor.statics).
 
+The problem (predictor.problem, issue 56 §1): by default the gripper, the right finger
+against the mirror finger's contact at X = 0 (the plane's penalty), the problem
+``python -m fem.finger`` solves by default; ``--no-plane`` solves one finger alone, which
+may cross X = 0 (the paper's gestures, and fem.finger's ``--no-plane``). The JSON says
+which (``plane``: true or false).
+
 Data flow: pressures (MPa) + finger + object spec -> GripperProblem (predictor.problem:
 joint model from ``--model``, a surrogate checkpoint or ``analytic``; default the
 committed surrogate found from the package, predictor.defaults, an error when missing)
@@ -27,7 +33,9 @@ residual_force_mN, residual_moment_Nmm (per joint), tip [x, y] mm (the end of th
 part), tip_angle_deg (global direction of the last part, -90 at rest),
 joint_end_angle_deg (per joint, its global exit angle), contact_force_N, friction_N,
 friction_use = |f|/(mu N) and slip (null where nothing touches), iterations, time_ms,
-joint (the joint model's name), mu and object_weight_N (null without an object), finger
+joint (the joint model's name), mu and object_weight_N (null without an object), plane
+(true: the gripper, the plane X = 0; false: one finger alone; plane_force_N and
+plane_overlap_mm its push, N, and how far the outline crosses X = 0, mm), finger
 {name, sha256}, kinematics, joint_weight, method (what produced the answer: newton, lm,
 newton+lm, nn, nn+newton, ...) beside requested_method (--method). Every figure of the gesture is null when the
 solve did not converge. With ``--method nn`` also the network's own figures before any
@@ -62,7 +70,7 @@ from contract.finger import DEFAULT_FINGER, finger_arg
 from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams
 from predictor.joint import load_joint
-from predictor.problem import DEFAULT, add_arguments, load_problem, object_arg
+from predictor.problem import DEFAULT, add_arguments, add_plane, load_problem, object_arg
 from predictor.solve import APPROACH, SolverOptions, solve
 from predictor.statics import STATES
 
@@ -116,7 +124,8 @@ def prepare(args: argparse.Namespace):
         problem = load_problem(None, args.object, approach=predictor.config.approach, **options)
         return problem, pressures, joint, predictor
     approach = None if args.approach == "zero" else args.approach or DEFAULT
-    problem = load_problem(None, args.object, gravity=not args.no_gravity, approach=approach, **options)
+    problem = load_problem(None, args.object, gravity=not args.no_gravity, approach=approach, plane=args.plane,
+                           **options)
     return problem, pressures, joint, None
 
 
@@ -170,14 +179,15 @@ def main(argv: list[str] | None = None) -> int:
                     "with a Newton step to the iterative solver's tolerances (the contact NN's answer is always "
                     "polished)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
+    add_plane(ap)
     add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the gesture PNG here")
     args = ap.parse_args(argv)
     if args.polish and args.method != "nn":
         ap.error("--polish finishes an NN prediction: use it with --method nn")
-    if args.method == "nn" and (args.no_gravity or args.approach is not None):
-        ap.error("--method nn predicts the trained case only (gravity on, its own approach): "
-                 "drop --no-gravity and --approach")
+    if args.method == "nn" and (args.no_gravity or args.approach is not None or not args.plane):
+        ap.error("--method nn predicts the trained case only (the gripper with gravity on, its own approach): "
+                 "drop --no-gravity, --approach and --no-plane")
     torch.set_num_threads(1)
     with ap.errors():
         prepared = prepare(args)  # every input checked before the solve

@@ -10,6 +10,14 @@ through the fingers where it is brought in (``placement_error``): the gripper se
 at the approach gesture without the object, so an object overlapping that gesture
 would start the grasp inside the fingers.
 
+One problem, said (issue 56 §1): every tool and the API solve the gripper by default, the
+right finger with the mirror finger's contact at X = 0 (``plane=True``, the penalty of
+predictor.statics.ContactParams.plane_stiffness), as fem.finger does; ``--no-plane``
+(``add_plane``; the API's ``plane=False``) solves one finger alone, which may cross X = 0
+as the paper's do (predictor.statics.apart). Every result names its problem (``"plane":
+true|false``, ``problem_words``), and a comparison of two results refuses two problems
+(``same_problem``).
+
 Data flow: model, object spec, options -> load_problem -> GripperProblem (checked).
 """
 from __future__ import annotations
@@ -25,7 +33,7 @@ from contract.spec import PRESSURE_LIMIT
 from predictor.gripper import GripperParams, check_pressures
 from predictor.joint import check_finger, load_joint
 from predictor.solve import APPROACH, approach_for, solve
-from predictor.statics import ContactParams, GripperProblem, parse_object
+from predictor.statics import ContactParams, GripperProblem, apart, parse_object
 
 FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
 
@@ -133,19 +141,44 @@ def add_arguments(ap, model_help: str = "") -> None:
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
+def add_plane(ap) -> None:
+    """--no-plane (``args.plane``, default True): one finger alone instead of the gripper
+    (module docstring); the same flag as fem.finger's."""
+    ap.add_argument("--no-plane", dest="plane", action="store_false",
+                    help="one finger alone, which may cross X = 0 (default: the gripper, the right finger "
+                         "against the mirror finger's contact at X = 0, as fem.finger)")
+
+
+def problem_words(plane: bool) -> str:
+    """The problem in words, for one-line messages."""
+    return "the gripper (the plane X = 0)" if plane else "one finger alone (--no-plane)"
+
+
+def same_problem(first: bool, second: bool, where: str = "",
+                 names: tuple[str, str] = ("the FEM", "the predictor")) -> None:
+    """Refuse to compare two results of different problems: ValueError (one line) when
+    ``first`` and ``second`` (each: solved with the plane X = 0) differ, naming both
+    (``names``) after ``where`` (e.g. a case's file)."""
+    if bool(first) != bool(second):
+        raise ValueError(f"{where + ': ' if where else ''}{names[0]} solved {problem_words(first)}, "
+                         f"{names[1]} {problem_words(second)}: different problems, not compared")
+
+
 DEFAULT = "default"
 
 
 def load_problem(model: str | None, spec: str | None, gravity: bool = True, params: GripperParams | None = None,
                  mu: float | None = None, object_weight: float | None = None,
-                 approach=DEFAULT, joint=None) -> GripperProblem:
+                 approach=DEFAULT, joint=None, plane: bool = True) -> GripperProblem:
     """The GripperProblem of ``predictor.gesture``'s defaults. model: a checkpoint path,
     "analytic", or None (the committed surrogate, predictor.defaults); joint: an already
     loaded JointModel instead; spec: an object spec (None: no object); params: finger and
     chain options (None: the paper's finger, default options); mu, object_weight (N):
     the contact law's friction coefficient and the object's weight (None: the defaults,
     0.3 and GripperParams.object_weight); approach: DEFAULT (APPROACH, or approach_for(J),
-    with an object; none without), None (ramp from zero) or J pressures MPa. ValueError
+    with an object; none without), None (ramp from zero) or J pressures MPa; plane: the
+    gripper, the right finger against the mirror finger's contact at X = 0 (True, the
+    default), or one finger alone (False: predictor.statics.apart). ValueError
     (one line) for any bad value, for a model of another joint than the finger's joint
     parts name (predictor.joint.check_finger) and for an object badly placed
     (``placement_error``)."""
@@ -162,8 +195,12 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
         joint = load_joint(model, params.finger)
     else:
         check_finger(joint, params.finger)   # the model must be of the finger's joints
+    if not isinstance(plane, bool):
+        raise ValueError(f"plane: {plane!r} is not True or False")
     problem = GripperProblem(joint, params, obstacle=obstacle, contact=contact, gravity=gravity,
                              approach=None if approach is None else tuple(approach))
+    if not plane:
+        problem = apart(problem)
     why = placement_error(problem)
     if why:
         raise ValueError(why)

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, fields
 import torch
 
 from predictor.gripper import FACES, FingerPose, part_names, with_rows
-from predictor.statics import NOT_CONVERGED, STATES, GripperProblem, Statics, grasp_state, plane_contact
+from predictor.statics import NOT_CONVERGED, STATES, GripperProblem, Statics, grasp_state, meets, plane_contact
 
 #: The faces a contact site names (gripper.FACES, then the paper's centre-line points).
 SITE_FACES = FACES + ("centre_line",)
@@ -70,6 +70,7 @@ class GestureResult:
     joint: str = ""
     mu: float | None = None
     object_weight_N: float | None = None
+    plane: bool | None = None           # the problem: the gripper (the plane X = 0) or one finger alone
     sites: torch.Tensor | None = None
     plane_force_N: torch.Tensor | None = None
     plane_overlap_mm: torch.Tensor | None = None
@@ -94,7 +95,9 @@ class GestureResult:
         iterate), tip [x, y] mm (the end of the last part), tip_angle_deg (the last part's
         direction), contact_force_N and friction_N (N), friction_use |f|/(mu N) and slip
         (null where nothing touches), iterations, joint, mu and object_weight_N (null
-        without an object). Every figure of the gesture is null unless converged. Time
+        without an object), plane (the problem solved: true, the gripper, the mirror
+        finger's contact at X = 0; false, one finger alone; null if unrecorded). Every
+        figure of the gesture is null unless converged. Time
         excluded: a summary of the same solve is the same."""
         ok = bool(self.converged[i])
         state = STATES[int(self.states()[i])]
@@ -111,7 +114,7 @@ class GestureResult:
                 "friction_use": use if touching else None,
                 "slip": bool(self.slip[i]) if touching else None, "iterations": int(self.iterations[i]),
                 "joint": self.joint, "mu": self.mu, "object_weight_N": self.object_weight_N,
-                **self.where_it_touches(i)}
+                "plane": self.plane, **self.where_it_touches(i)}
 
     def where_it_touches(self, i: int = 0) -> dict:
         """Sample i's contact places as plain JSON types: contacts, a list of {part, face,
@@ -170,11 +173,12 @@ class GestureResult:
 
 
 def result_labels(problem: GripperProblem) -> dict:
-    """The GestureResult fields that name what was solved: joint, mu, object_weight_N."""
+    """The GestureResult fields that name what was solved: joint, mu, object_weight_N and
+    plane (the fingers meet at X = 0: statics.meets)."""
     has = problem.obstacle is not None
     weight = problem.params.object_weight if problem.gravity else 0.0
     return {"joint": problem.joint.name, "mu": problem.contact.mu if has else None,
-            "object_weight_N": weight if has else None}
+            "object_weight_N": weight if has else None, "plane": meets(problem)}
 
 
 def contact_fields(problem: GripperProblem, st: Statics) -> dict:

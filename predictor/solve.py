@@ -153,7 +153,7 @@ def _apart_first(problem: GripperProblem, pressures: torch.Tensor, options: Solv
     ramp where they need it), as if alone: their iterations and method are that solve's
     (the broad phase's try is in ``time_ms`` only), so a result is the one the plane's
     path gives."""
-    res = _free_newton(apart(problem), pressures, options, x0, t0)
+    res = dataclasses.replace(_free_newton(apart(problem), pressures, options, x0, t0), plane=True)  # this problem's
     again = ~res.converged | (res.plane_overlap_mm > 0)
     if not bool(again.any()):
         return res

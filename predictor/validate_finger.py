@@ -7,7 +7,7 @@ Data flow: the FEM cases of fem.finger_cases (one JSON and one render per case: 
 tip angle, every joint's end and chord angle, global mm/deg; the FEM's solve time) ->
 for each case and each predictor variant, one single-query equilibrium solve
 (predictor.solve, Newton) of the same finger file, pressures, gravity and plane X = 0
-(the mirror finger's; only for a case solved with it, fem.finger_cases --plane) -> errors
+(the mirror finger's; only for a case solved with it, fem.finger_cases' default) -> errors
 against the FEM and wall times -> ``finger.json`` and one overlay figure per case
 (the FEM render coloured by |u|, the predictors' centre lines drawn over it).
 
@@ -30,6 +30,17 @@ record's ``mesh.mesh`` in words (contract.joint.mesh_text: "1.8", "1.697:0.849",
 "hex2:3"; older records: their size and wall size), its formulation the record's (absent:
 displacement), so a case on another discretisation, hexahedra included, only enters the
 mesh check.
+
+One problem (issue 56 §1): a case is the gripper's (the mirror finger's contact at X = 0,
+its settings' ``plane``, fem.finger_cases' default) or one finger alone (the committed
+1.8 mm cases), and the predictor solves the same problem as each case (``case_plane``).
+``--plane`` or ``--no-plane`` validates the cases of that problem only (default: every
+case on the validated discretisation, each against its own problem), and asking for a
+problem none of them was solved for is refused (one line, exit 2): a comparison of
+different problems would measure the difference of the problems. The mesh check pairs
+cases of the same problem only. The JSON records ``plane`` (the cases' problem; null if
+they mix both) and ``discretisation`` (the joint mesh and formulation), and each case's
+``plane``.
 """
 from __future__ import annotations
 
@@ -40,6 +51,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import torch
 
@@ -52,6 +64,7 @@ from fem.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
+from predictor.problem import problem_words, same_problem
 from predictor.progress import set_quiet
 from predictor.solve import SolverOptions, solve
 from predictor.statics import GripperProblem, apart
@@ -88,10 +101,14 @@ def case_plane(case: dict) -> bool:
     return bool(case.get("settings", {}).get("plane", False))
 
 
-def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_weight: str):
+def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_weight: str,
+                plane: bool | None = None):
     """One predictor variant on one FEM case: (entry dict, pose). The predictor meets the
     plane X = 0 only where the FEM case did (``case_plane``): the committed cases are one
-    finger alone, and at (0.2, 0.2) MPa with gravity it crosses X = 0."""
+    finger alone, and at (0.2, 0.2) MPa with gravity it crosses X = 0. ``plane``: the
+    problem asked for (None: the case's); ValueError (one line) when it is not the case's."""
+    if plane is not None:
+        same_problem(case_plane(case), plane, f"case {case['case']}")
     params = GripperParams(finger=finger, kinematics=kinematics, joint_weight=joint_weight)
     gravity = bool(case["gravity"]) and method == "predictor"
     problem = GripperProblem(joint, params, gravity=gravity)
@@ -113,7 +130,7 @@ def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_w
     end = _deg(pose.phi[0])
     entry = {
         "case": case["case"], "variant": variant_key(method, kinematics, joint_weight), "p1": case["pressures_MPa"][0], "p2": case["pressures_MPa"][1],
-        "gravity": bool(case["gravity"]), "method": method, "kinematics": kinematics,
+        "gravity": bool(case["gravity"]), "plane": case_plane(case), "method": method, "kinematics": kinematics,
         "joint_weight": joint_weight if method == "predictor" else None, "converged": converged,
         "tip_mm": tip, "tip_angle_deg": math.degrees(float(pose.tip_angle[0])),
         "tip_error_mm": math.hypot(tip[0] - fem_tip[0], tip[1] - fem_tip[1]),
@@ -173,19 +190,41 @@ def split_cases(cases: list[dict], validated: tuple[str, str]) -> tuple[list[dic
     return [c for c, o in zip(cases, on) if o], [c for c, o in zip(cases, on) if not o]
 
 
+def one_problem(cases: list[dict], plane: bool | None, where: str,
+                plane_of: Callable[[dict], bool] | None = None) -> tuple[list[dict], bool | None]:
+    """(the cases validated, their problem) among ``cases`` (fem.finger_cases or
+    fem.grasp_cases records): with ``plane`` None all of them, each against the predictor
+    of its own problem, and their problem (True: the plane X = 0; None when they mix both);
+    else those of ``plane``. ValueError (one line) when none is of the ``plane`` asked for
+    (the comparison asked for would be of different problems); ``where``: the cases in
+    words; ``plane_of``: a case's problem (default ``case_plane``; fem.grasp_cases
+    records: their ``plane``)."""
+    plane_of = plane_of or case_plane
+    kinds = {bool(plane_of(c)) for c in cases}
+    if plane is None:
+        return cases, kinds.pop() if len(kinds) == 1 else None
+    chosen = [c for c in cases if plane_of(c) == plane]
+    if cases and not chosen:
+        raise ValueError(f"{where} were all solved for {problem_words(not plane)}, the predictor was asked for "
+                         f"{problem_words(plane)}: different problems, not compared")
+    return chosen, plane
+
+
 def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:
     """The FEM's fingertip change between the validated discretisation and another one,
-    per case solved on both: the discretisation term of the fingertip error budget
-    (mesh_size, wall_mesh_size: the other mesh's tetrahedron sizes, mm, None where it has
-    none of its own; production_mesh_size only when the validated mesh is tetrahedral)."""
+    per case solved on both for the same problem (``case_plane``): the discretisation term
+    of the fingertip error budget (mesh_size, wall_mesh_size: the other mesh's tetrahedron
+    sizes, mm, None where it has none of its own; production_mesh_size only when the
+    validated mesh is tetrahedral)."""
     base = {c["case"]: c for c in cases if c["converged"]}
     out = []
     for o in others:
         c = base.get(o["case"])
-        if c is None or not o["converged"]:
+        if c is None or not o["converged"] or case_plane(c) != case_plane(o):
             continue
         size = c["mesh"].get("mesh_size")
-        out.append({"case": o["case"], "mesh": finger_case_mesh(o), "production_mesh": finger_case_mesh(c),
+        out.append({"case": o["case"], "plane": case_plane(o), "mesh": finger_case_mesh(o),
+                    "production_mesh": finger_case_mesh(c),
                     "formulation": finger_case_formulation(o), "production_formulation": finger_case_formulation(c),
                     "mesh_size": o["mesh"].get("mesh_size"), "wall_mesh_size": finger_case_wall(o),
                     "nodes": o["mesh"]["nodes"],
@@ -237,6 +276,11 @@ def main(argv=None) -> int:
     ap.add_argument("--formulation", choices=FORMULATIONS, default=COMMITTED_FORMULATION,
                     help=f"validate the cases solved in this formulation (default {COMMITTED_FORMULATION}, "
                          "the committed cases')")
+    problem = ap.add_mutually_exclusive_group()
+    problem.add_argument("--plane", dest="plane", action="store_true", default=None,
+                         help="validate the cases of the gripper (the mirror finger's contact at X = 0)")
+    problem.add_argument("--no-plane", dest="plane", action="store_false",
+                         help="validate the cases of one finger alone (the committed cases')")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
     set_quiet(args.quiet)
@@ -245,7 +289,7 @@ def main(argv=None) -> int:
         finger = load_finger(args.finger)
         joint = load_joint(args.model)
         files = sorted(Path(args.fem).glob("*.json"))
-        cases = []
+        cases, renders = [], {}
         for f in files:
             try:
                 case = json.loads(f.read_text())
@@ -254,6 +298,7 @@ def main(argv=None) -> int:
             if not same_finger(case.get("settings", {}).get("geometry", {}).get("finger", {}), finger):
                 raise ValueError(f"{f} was solved for another finger file than {finger.name!r}")
             cases.append(case)
+            renders[id(case)] = f.with_suffix(".png")     # its own render (a suffixed case's too)
         # The validation runs on one discretisation; a case solved on another one too
         # (fem.finger_cases --suffix) gives the FEM's own discretisation change.
         validated = (mesh_text(args.mesh_size) if args.mesh_size is not None else args.mesh, args.formulation)
@@ -261,6 +306,8 @@ def main(argv=None) -> int:
         if not cases:
             raise ValueError(f"no FEM cases on mesh {validated[0]} ({validated[1]}) in {args.fem}: "
                              "run `make finger-fem` (python -m fem.finger_cases)")
+        cases, plane = one_problem(cases, args.plane, f"the FEM cases on mesh {validated[0]} ({validated[1]}) "
+                                   f"in {args.fem}")
         entries, figures = [], []
         for case in cases:
             if not case["converged"]:
@@ -268,11 +315,11 @@ def main(argv=None) -> int:
                 continue
             poses = {}
             for method, kin, jw in VARIANTS:
-                entry, pose = run_variant(joint, finger, case, method, kin, jw)
+                entry, pose = run_variant(joint, finger, case, method, kin, jw, plane)
                 entries.append(entry)
                 if method == "predictor" and (kin, jw) in OVERLAID:
                     poses[OVERLAID[kin, jw]] = pose
-            png = Path(args.fem) / f"{Path(case['case']).name}.png"
+            png = renders[id(case)]
             if png.is_file():
                 fig = Path(args.figures) / f"finger_{case['case']}.png"
                 overlay(fig, case, png, poses, joint.name)
@@ -282,10 +329,11 @@ def main(argv=None) -> int:
                 for e in entries[-len(VARIANTS):] if e["method"] == "predictor"), flush=True)
         report = {
             "finger": finger.summary(), "joint": joint.name, "fem_folder": args.fem,
-            "discretisation": {"mesh": validated[0], "formulation": validated[1]},
-            "fem": [{k: c.get(k) for k in ("case", "pressures_MPa", "gravity", "converged", "reason", "tip",
-                                           "tip_angle_deg", "joint_end_angle_deg", "fem_s", "fem_cpu_s",
-                                           "load_average", "mesh")} for c in cases],
+            "discretisation": {"mesh": validated[0], "formulation": validated[1]}, "plane": plane,
+            "fem": [{**{k: c.get(k) for k in ("case", "pressures_MPa", "gravity", "converged", "reason", "tip",
+                                              "tip_angle_deg", "joint_end_angle_deg", "fem_s", "fem_cpu_s",
+                                              "load_average", "mesh")}, "plane": case_plane(c),
+                     "plane_force_N": c.get("plane_force_N")} for c in cases],
             "cases": [e for e in entries if "method" in e], "summary": summarise([e for e in entries if "method" in e]),
             "mesh_check": mesh_check(cases, meshes),
             "targets": TARGETS, "judged_variant": JUDGED, "repeats": REPEATS, "figures": figures,

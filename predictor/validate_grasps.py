@@ -41,6 +41,13 @@ its state not_converged and meets nothing; one the predictor did not solve meets
 but the FEM's time. ``summary``: the worst of each figure over the cases both solved, and
 per target how many cases met it of how many were judged.
 
+The problem (issue 56 §1, as predictor.validate_finger): each record is the gripper's (the
+plane X = 0, fem.grasp_cases' default) or one finger alone's, and the predictor solves the
+record's problem; ``--plane`` or ``--no-plane`` validates the records of that problem only,
+and asking for a problem no record was solved for is refused (one line, exit 2). The JSON
+records ``plane`` (the records' problem; null if they mix both) and ``discretisation``,
+each case its ``plane`` and ``mesh``.
+
 Bad input (no such folder, a JSON file that is not a grasp record or was solved for
 another finger file, no record on the chosen discretisation, an unwritable ``--out`` or
 ``--figures``) is refused in one line, exit 2, before the model is loaded.
@@ -67,7 +74,7 @@ from predictor.problem import load_problem
 from predictor.progress import set_quiet
 from predictor.solve import SolverOptions, solve
 from predictor.statics import GripperProblem, apart
-from predictor.validate_finger import mesh_arg, split_cases
+from predictor.validate_finger import mesh_arg, one_problem, split_cases
 
 REPEATS = 5
 #: issue 36's targets: fingertip (mm), tip angle (deg), normal force (fraction of the FEM's,
@@ -308,6 +315,11 @@ def build_parser() -> cli.Parser:
                          f"(default {mesh}, the joint file's)")
     ap.add_argument("--formulation", choices=FORMULATIONS, default=formulation,
                     help=f"validate the records solved in this formulation (default {formulation})")
+    problem = ap.add_mutually_exclusive_group()
+    problem.add_argument("--plane", dest="plane", action="store_true", default=None,
+                         help="validate the grasps of the gripper (the mirror finger's contact at X = 0)")
+    problem.add_argument("--no-plane", dest="plane", action="store_false",
+                         help="validate the grasps of one finger alone")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return ap
 
@@ -348,6 +360,10 @@ def main(argv=None) -> int:
     with ap.errors():
         finger = load_finger(args.finger)
         chosen = chosen_records(args.fem, finger, validated)
+        kept, plane = one_problem([r for _, r in chosen], args.plane,
+                                  f"the FEM grasp records on mesh {validated[0]} ({validated[1]}) in {args.fem}",
+                                  lambda r: bool(r["plane"]))
+        chosen = [(p, r) for p, r in chosen if any(r is k for k in kept)]
         joint = load_joint(args.model, finger)
         entries, figures = [], []
         for path, record in chosen:
@@ -367,7 +383,7 @@ def main(argv=None) -> int:
             if not args.json:
                 print(case_line(entry), flush=True)
         report = {"finger": finger.summary(), "joint": joint.name, "fem_folder": args.fem,
-                  "discretisation": {"mesh": validated[0], "formulation": validated[1]},
+                  "discretisation": {"mesh": validated[0], "formulation": validated[1]}, "plane": plane,
                   "targets": TARGETS, "judged": list(JUDGED), "repeats": REPEATS, "cases": entries,
                   "summary": summarise(entries), "figures": figures}
         GRASP_VALIDATION.write(args.out, report)

@@ -296,6 +296,8 @@ CASES_PREDICTOR = [
                            "--object", "circle"], "a 'softjoint-gravity-nn/1' file, expected a 'softjoint-contact-nn/1'"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--approach", "zero"],
      "--method nn predicts the trained case only"),
+    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--no-plane"],
+     "the gripper with gravity on, its own approach): drop --no-gravity, --approach and --no-plane"),
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--polish"], "--polish finishes an NN prediction"),
     ("predictor.gesture", ["--p1", "0", "--p1", "0.1", "--p2", "0"], "--p1 given twice"),
     # issue 33: objects the mirrored model cannot represent, refused before any solve

@@ -10,7 +10,8 @@ nice 10 on a loaded two-core machine, 37 s of it the plane's gesture):
   pushes with 0.0995 N, and the clamp's reaction balances the plane's push and the
   finger's weight (measured to 3e-13 N, asserted to Newton's tolerance 1e-8 N);
 * the same gesture by the predictor's outline law (contact36's ``predictor.gesture --p1 0.1
-  --p2 0.1 --json``: tip (9.8572, -215.4171) mm, plane force 0.0959 N, overlap 0.027 mm).
+  --p2 0.1 --json``: tip (9.8572, -215.4171) mm, plane force 0.0959 N, overlap 0.027 mm;
+  its default problem, the plane's, checked live on the committed surrogate: issue 56).
   Measured on this mesh: tip (9.8204, -215.4305) mm, 0.039 mm away; force +3.8 %; the FEM's
   own tip is also frozen (to 1e-4 mm);
 * the plane term's tangent (UFL's derivative) against central differences of its
@@ -210,3 +211,18 @@ def test_plane_cases_never_resume_from_cases_without_it(geometry):
     assert not same_settings(without, with_plane, finger)
     assert not same_settings(with_plane, without, finger)
     assert default_suffix(geometry.joint, "mixed", plane=True) == "_mixed_plane"
+
+
+def test_the_predictors_default_is_the_problem_compared(capsys):
+    """predictor.gesture's default problem is this one (issue 56 §1): at MEET, without
+    --no-plane, it answers the figures the FEM is compared with above (the committed
+    surrogate), and says so."""
+    import json
+
+    from predictor.gesture import main
+
+    assert main(["--p1", str(MEET[0]), "--p2", str(MEET[1]), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["plane"] is True
+    assert np.linalg.norm(np.array(out["tip"]) - PREDICTOR_TIP) < 1e-3
+    assert out["plane_force_N"] == pytest.approx(PREDICTOR_FORCE, abs=1e-4)

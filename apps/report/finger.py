@@ -62,6 +62,14 @@ def _validated(v: dict) -> str:
     return _words(d["mesh"], d["formulation"]) if d else _recorded(v["fem"][0]["mesh"], "displacement")
 
 
+def _problem(v: dict) -> str:
+    """The problem finger.json validates, in words after a comma (issue 56 §1; "" if it
+    does not record one: written before, one finger alone)."""
+    plane = v.get("plane", False)
+    return {True: ", the gripper: the mirror finger's contact at X = 0", False: ", one finger alone",
+            None: ", both the gripper's cases and one finger alone's"}[plane] if "plane" in v else ""
+
+
 def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
     """The fingertip error budget: discretisation (the finger FEM on a finer mesh, and
     the joint mesh study), surrogate (held-out set) and finger model (the validation)."""
@@ -233,7 +241,8 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
     name = f"{label.get(judged, judged)} (`{judged}`)"
     out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validate_finger`): the "
             f"finger FEM (`python -m fem.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
-            f"joint mesh {_validated(v) or 'unrecorded'}, one rank) against the predictor on the same finger file and the "
+            f"joint mesh {_validated(v) or 'unrecorded'}, one rank{_problem(v)}) against the predictor on the same "
+            f"finger file{', the same problem' if 'plane' in v else ''} and the "
             f"joint model {joint_model(root, v['joint'], 'make validate-finger')}; every predictor figure is a "
             f"single-query Newton solve (median of {v['repeats']}), timed in this validation run. Angle errors are "
             f"predictor minus FEM. The variant finger.json judges is **{name}**; the others are shown beside it"

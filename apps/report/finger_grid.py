@@ -54,8 +54,11 @@ def finger_grid_section(root: Path) -> tuple[list[str], list[Check]]:
     mesh, s = grid["mesh"], grid["settings"]
     n = s["points"]
     failed = [c for c in grid["cases"] if not c["converged"]]
+    problem = ("the gripper: the right finger against the mirror finger's contact at X = 0" if s.get("plane")
+               else "one finger alone, without the plane X = 0")
     out += [f"`make finger-grid` (results/fem/finger_grid.json, `python -m fem.finger_grid`): the whole-finger FEM "
-            f"with gravity at every pressure pair of a {n} x {n} grid over the joints' box, each solved from the "
+            f"of {problem}, with gravity at every pressure pair of a {n} x {n} grid over the joints' box, each "
+            f"a fem.finger_cases record solved from the "
             f"unloaded state on one rank ({mesh['nodes']:,} P2 nodes, joint mesh {mesh.get('mesh', 'unrecorded')}, "
             f"{s['formulation']} formulation). {grid['converged']} of {grid['solved']} solved pairs converged"
             + ("" if grid["complete"] else f" ({grid['pairs'] - grid['solved']} of {grid['pairs']} still to solve)")
