@@ -73,10 +73,6 @@ def load_gripper(model: str | None = None, object: str | None = None, gravity: b
     --object-weight, --no-plane).
     ValueError (one line) for a bad spec, finger file, model, option, an object the model
     cannot represent or one cutting through the fingers at the approach gesture."""
-    if out is not None:
-        from predictor.calibrate import outside_package
-
-        outside_package(out)
     if finger is not None and not isinstance(finger, FingerSpec):
         finger = load_finger(finger)
     params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight)
