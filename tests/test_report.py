@@ -257,3 +257,19 @@ def test_each_figure_is_labelled_with_the_discretisation_that_made_it(tmp_path):
     assert any("finger FEM per gesture, joint mesh hex2:3 mixed, one core (`make bench-finger`" in c.figure
                for c in checks)
     assert "| heldout | 1.8 mm displacement | 2 |" in text
+
+
+def test_dataset_table_lists_every_committed_walk():
+    """REPORT's dataset table has a row per committed manifest under results/data: the
+    surrogate's train and held-out sets first, then the others (the finer held-out walk and
+    the production hex2:3 walks), each with its discretisation in words."""
+    from apps.report.joint_fem import campaign_section
+
+    lines, _ = campaign_section(RESULTS)
+    lines = lines[:lines.index("### Campaign throughput (`make bench-campaign`)")]   # the dataset table only
+    rows = [ln.split(" | ")[0].lstrip("| ") for ln in lines if ln.startswith("| ") and not ln.startswith("| set ")]
+    names = sorted(p.parent.name for p in (RESULTS / "data").glob("*/manifest.json"))
+    assert rows[:2] == ["train", "heldout"] and sorted(rows) == names
+    for name in ("train_hex2s3", "heldout_hex2s3"):
+        if name in names:
+            assert any(ln.startswith(f"| {name} | hex2:3 mixed |") for ln in lines)
