@@ -380,6 +380,8 @@ CASES_PREDICTOR = [
      "--approach: 1 values for the atlas's two joints"),
     ("predictor.atlas", ["--object", "circle", "--approach", "0.5,0"], "--approach: 0.5 is outside [-0.3, 0.3] MPa"),
     ("predictor.atlas", ["--object", "circle", "--kinematics", "chord"], "invalid choice: 'chord'"),
+    ("predictor.validate_finger", ["--cases", "gravity_0.1_-0.1,nope", "--out", "{tmp}/x.json", "--figures", "{tmp}"],
+     "--cases: no case nope in results/validation/finger_fem"),
     # the NN predictors answer the problem they were trained for: one object, one finger
     ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "rectangle", "--json"],
      "--method nn: the contact NN (results/predictor/contact_nn.pt) was trained for one object, the circle "
