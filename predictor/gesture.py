@@ -41,7 +41,9 @@ mirror-symmetric; its sizes and height are bounded (contract.grasp.object_error)
 through the fingers at the approach gesture is refused; one beyond the fingers' reach
 answers no_contact at once (statics.out_of_reach).
 
-Exit codes: 0 converged; 1 not converged (the JSON says so, its figures are null); 2 bad
+Exit codes: 0 converged; 1 no answer (the JSON says converged false, its figures are null;
+the stderr line says why: the solve did not converge, or the raw gravity NN's own answer is
+outside its bound, naming where its gesture crosses X = 0 and --polish); 2 bad
 input (a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures
 for the finger, a bad finger file or object spec, an object the model cannot represent
 or that intersects the fingers at the approach gesture, a bad --mu or --object-weight,
@@ -180,9 +182,32 @@ def main(argv: list[str] | None = None) -> int:
         for key, value in out.items():
             print(f"{key:>20}: {value}")
     if not out["converged"]:
-        print(f"{ap.prog}: the equilibrium solve did not converge; no gesture returned", file=sys.stderr)
+        print(f"{ap.prog}: {failure(out, prepared)}; no gesture returned", file=sys.stderr)
         return 1
     return 0
+
+
+def failure(out: dict, prepared) -> str:
+    """Why a gesture has no answer, for the one stderr line (``prepared``: prepare(args)).
+    The raw gravity NN answers only within its bound (predictor.nn_answer), which is not a
+    solver failing to converge; it learned one finger alone, so where its gesture crosses
+    X = 0, where the gripper's fingers meet, it leaves the bound by far."""
+    problem, pressures, _, predictor = prepared
+    if predictor is None or problem.obstacle is not None or out["polished"] or out["fallback"]:
+        return "the equilibrium solve did not converge"
+    from predictor.nn_answer import NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM
+    from predictor.statics import plane_overlap
+
+    f, m = max(out["raw_residual_force_mN"]), max(out["raw_residual_moment_Nmm"])
+    why = (f"the gravity NN's own answer is outside its bound (residual up to {f:.3g} mN and {m:.3g} N·mm; an "
+           f"answer needs <= {NN_FORCE_TOL_MN:g} mN and {NN_MOMENT_TOL_NMM:g} N·mm)")
+    with torch.no_grad():   # the network's own gesture, as the answer was judged
+        st = problem.residual(pressures, predictor.net(pressures))
+    cross = float(plane_overlap(st.vertices)[0]) if st.vertices is not None else 0.0
+    if cross > 0:
+        why += (f": its finger crosses X = 0 by {cross:.1f} mm, where the gripper's fingers meet (it learned one "
+                "finger alone)")
+    return why + "; --polish finishes it with a Newton step"
 
 
 if __name__ == "__main__":

@@ -312,3 +312,22 @@ def test_nn_predictor_message_names_the_problem_it_was_trained_for():
         predict_gesture(pred, problem, torch.tensor([[0.1, 0.1]], dtype=torch.float64))
     assert str(exc.value) == ("an NN predictor answers only the problem it was trained for: object circle r=30 mm "
                               "at y=-195 mm (given circle r=25 mm at y=-195 mm)")
+
+
+@pytest.mark.skipif(not SURROGATE.is_file(), reason="no committed surrogate checkpoint yet")
+def test_raw_gravity_nn_outside_its_bound_says_why_not_did_not_converge():
+    """--method nn at (0.1, 0.1) MPa: the committed gravity NN learned one finger alone, and
+    its gesture crosses X = 0, where the gripper's fingers meet, so its own answer is far
+    outside the NN bound: exit 1, the JSON says converged false, and the one stderr line
+    says that (not 'did not converge') and names --polish; with --polish it answers."""
+    bad = run_gesture_cli("--p1", "0.1", "--p2", "0.1", "--method", "nn", "--json")
+    assert bad.returncode == 1 and json.loads(bad.stdout)["converged"] is False
+    line = bad.stderr.strip()
+    assert "\n" not in line and "did not converge" not in line, line
+    assert line.startswith("python -m predictor.gesture: the gravity NN's own answer is outside its bound "
+                           "(residual up to "), line
+    assert "an answer needs <= 2 mN and 1.2 N·mm): its finger crosses X = 0 by " in line
+    assert line.endswith("where the gripper's fingers meet (it learned one finger alone); --polish finishes it "
+                         "with a Newton step; no gesture returned"), line
+    good = run_gesture_cli("--p1", "0.1", "--p2", "0.1", "--method", "nn", "--polish", "--json")
+    assert good.returncode == 0 and json.loads(good.stdout)["converged"] is True, good.stderr
