@@ -286,8 +286,11 @@ def test_ctrl_c_during_the_atlas_ends_with_one_line_and_exit_130(tmp_path):
     p = subprocess.Popen([sys.executable, "-m", "predictor.atlas", "--object", "circle", "--grid", "61",
                           "--path", "ramp", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
-    first = p.stderr.readline()            # the grid solve's first progress line
-    assert first, "the atlas ended before any progress line"
+    first = ""
+    while not first.startswith("[solve"):   # the grid solve's first progress line ("[solve 11 s] ramp step ...")
+        line = p.stderr.readline()
+        assert line, f"the atlas ended before any progress line: {first}"
+        first = line
     time.sleep(0.5)
     p.send_signal(signal.SIGINT)
     stdout, rest = p.communicate(timeout=120)
