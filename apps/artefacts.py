@@ -85,6 +85,7 @@ ARTEFACTS = (
     Artefact("validation/grasps_fem/*.json", "make grasp-fem", fem.GRASP_CASE),
     Artefact("validation/grasps.json", "make validate-grasps", predictor.GRASP_VALIDATION),
     Artefact("demo/finger.json", "make demo", predictor.VALIDATION),
+    Artefact("demo/gravity.json", "make demo", predictor.VALIDATION),
     Artefact("demo/finger_fem/*.json", "make demo", fem.FINGER_CASE),
     Artefact("demo/summary.json", "make demo", demo.SUMMARY),
 )

@@ -1,6 +1,6 @@
 """make demo: the project end to end in a few minutes, FEM against every model.
 
-    python -m apps.demo --out results/demo [--finger-mesh-size 4] [--json]
+    python -m apps.demo --out results/demo [--finger-mesh-size 4] [--finger FILE] [--json]
 
 What runs, one subprocess at a time (``sys.executable -m ...``, so at most one FEM runs):
 
@@ -8,16 +8,32 @@ What runs, one subprocess at a time (``sys.executable -m ...``, so at most one F
    on the committed data's discretisation, rendered -> ``joint.png`` (its JSON is
    ``fem.solve --json``'s);
 2. ``surrogate.predict --json``: the same case on the committed surrogate;
-3. and 4. ``predictor.gesture --json --plot``: the paper's gravity gestures (-0.1, 0.1)
-   and (0.1, -0.1) MPa -> ``gesture_<P1>_<P2>.png``, against the committed whole-finger
-   FEM of the same gestures (results/validation/finger_fem, made by ``make finger-fem``;
-   not solved now);
-5. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
-   a grasp: normal force, friction use |f|/N and hold/slip are shown instead);
-6. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
-   on a coarse joint mesh -> ``finger_fem/<case>.json`` and its render;
-7. ``predictor.validate_finger --mesh-size H``: the predictor against it ->
-   ``finger.json`` and the overlay ``finger_<case>.png``.
+3. ``predictor.validate_finger --cases``: the predictor against the committed whole-finger
+   FEM of the paper's gravity gestures (-0.1, 0.1) and (0.1, -0.1) MPa
+   (results/validation/finger_fem, made by ``make finger-fem``; not solved now) ->
+   ``gravity.json`` and the overlays ``committed/finger_gravity_<P1>_<P2>.png``. Those FEM cases are
+   one finger alone (no plane X = 0), and so is the predictor here (validate_finger
+   matches each case's plane);
+4. and 5. ``predictor.gesture --json --plot``: the same gestures of the gripper, whose
+   fingers meet at X = 0 -> ``gesture_<P1>_<P2>.png``; no FEM of the gripper is committed,
+   so their rows give the fingertip and the force where the fingers meet;
+6. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
+   a grasp here: normal force, friction use |f|/N and hold/slip are shown instead);
+7. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
+   on a coarse joint mesh (one finger alone) -> ``finger_fem/<case>.json`` and its render;
+8. ``predictor.validate_finger --mesh-size H``: the predictor (one finger alone) against
+   it -> ``finger.json`` and the overlay ``finger_<case>.png``.
+
+``--finger FILE`` (a finger of two joints) runs every gesture and the live finger FEM for
+that finger; the committed finger FEM is the paper's finger, so for another finger step 3
+and the rows against the committed FEM are left out (``committed_finger``), and the
+summary names the finger.
+
+Each row names the problem both sides solved (``problem``: one joint, one finger alone, or
+the gripper) and the FEM's discretisation, and a row with a tolerance (the finger
+validation's targets, tip within 2 mm and 1 deg, from its JSON) says whether it is within
+it (``within_tolerance``); the cases beyond it are listed in the table, in
+``beyond_tolerance`` of summary.json and on stderr (the exit stays 0: the run is complete).
 
 Discretisation: the committed artefacts compared with (the surrogate's training data, the
 finger cases) are on the paper-fidelity 1.8 mm P2 displacement mesh
@@ -46,6 +62,7 @@ Units: mm, deg, N, MPa, s.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -59,6 +76,7 @@ from pathlib import Path
 
 from contract import cli
 from contract.files import write_text
+from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
 from contract.records import Format, each
 from fem import artefacts as fem_artefacts
 from fem.geometry import PAPER_MESH_SIZE
@@ -71,6 +89,9 @@ JOINT_CASE = {"p": 0.2, "f1": 1.0, "f2": -1.0, "m": 20.0}        # MPa, N, N, Nย
 GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the paper's Figure 5A
 GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
 FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.finger_cases name
+#: Subfolder of the overlays on the committed finger FEM (the live case's overlay of the same
+#: gesture, finger_<case>.png, is in the output folder itself).
+COMMITTED_FIGURES = "committed"
 HEARTBEAT_S = 30.0
 #: The discretisation of the committed artefacts the demo compares with (module docstring):
 #: fem.discretisation.PAPER, named without its dolfinx (tests/test_demo.py checks the two).
@@ -79,8 +100,10 @@ COMMITTED_MESH_SIZE, COMMITTED_FORMULATION = PAPER_MESH_SIZE, "displacement"
 #: results/demo/summary.json: the run's steps and its table rows (docs/formats.md ยง6.12).
 SUMMARY = Format("demo-summary", 1, "apps.demo", {
     "out": str, **each("", float, "total_s", "finger_mesh_size_mm", "load_average_1min"), "units": str,
+    "finger?.name": str, "finger?.sha256": str, "committed_fem?": bool,
     **each("steps[]", str, "key", "title", "command"), "steps[].wall_s": float | None,
-    **each("rows[]", str, "case", "fem", "model", "error"), "rows[].errors": dict | None,
+    **each("rows[]", str, "case", "problem", "fem", "model", "error"), "rows[].errors": dict | None,
+    "rows[].tolerance": dict | None, "rows[].within_tolerance": bool | None, "beyond_tolerance": list,
     **each("rows[]", float | None, "fem_s", "model_s"), "rows[].figures": list})
 
 
@@ -118,9 +141,14 @@ def gesture_name(p1: float, p2: float) -> str:
     return f"{_g(p1)}_{_g(p2)}"
 
 
-def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
-    """The demo's steps, in order; ``out`` is the output folder relative to the repository."""
+def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
+                committed_fem: bool = True) -> list[Step]:
+    """The demo's steps, in order; ``out`` is the output folder relative to the repository.
+    finger: a finger file for every gesture and finger FEM step (None: the paper's);
+    committed_fem: whether the committed finger FEM is of that finger (otherwise the step
+    that compares with it is left out)."""
     case = [a for k, v in JOINT_CASE.items() for a in (f"--{k}", _g(v))]
+    fing = [] if finger is None else ["--finger", finger]
     committed = ["--mesh-size", _g(COMMITTED_MESH_SIZE), "--formulation", COMMITTED_FORMULATION]
     steps = [
         Step("joint_fem", f"joint FEM, the surrogate's data mesh h={_g(COMMITTED_MESH_SIZE)} mm "
@@ -129,22 +157,34 @@ def build_steps(out: str, finger_mesh_size: float) -> list[Step]:
         Step("surrogate", "joint surrogate, same case (surrogate.predict)", "surrogate.predict",
              ["--model", SURROGATE, *case, "--json"]),
     ]
+    # The committed finger FEM cases are one finger alone (no plane X = 0): the predictor is
+    # compared with them as one finger alone too (predictor.validate_finger matches the
+    # case's plane), and the gripper's gestures (the fingers meet at X = 0) are shown apart.
+    if committed_fem:
+        steps.append(Step("validate_gravity", "predictor, one finger alone, against the committed finger FEM of "
+                          "the paper's gravity gestures (predictor.validate_finger)", "predictor.validate_finger",
+                          ["--fem", COMMITTED_FINGER_FEM, "--cases", ",".join(f"gravity_{gesture_name(*p)}"
+                                                                              for p in GRAVITY_GESTURES),
+                           *committed, *fing, "--out", f"{out}/gravity.json", "--figures", f"{out}/{COMMITTED_FIGURES}",
+                           "--json"],
+                          reads=f"{out}/gravity.json", format=predictor_artefacts.VALIDATION))
     for p1, p2 in GRAVITY_GESTURES:
         name = gesture_name(p1, p2)
-        steps.append(Step(f"gesture_{name}", f"gravity gesture ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
-                          "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--no-plane", "--json",
+        steps.append(Step(f"gesture_{name}", f"gripper gesture ({_g(p1)}, {_g(p2)}) MPa, the fingers meeting at "
+                          "X = 0 (predictor.gesture)",
+                          "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), *fing, "--json",
                                                 "--plot", f"{out}/gesture_{name}.png"]))
     p1, p2, obj = GRASP
     steps.append(Step("grasp", f"grasp of a {obj} at ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
-                      "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--object", obj, "--json",
+                      "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--object", obj, *fing, "--json",
                                             "--plot", f"{out}/grasp.png"]))
     h = _g(finger_mesh_size)
     steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.finger_cases)",
                       "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h,
-                                           "--formulation", COMMITTED_FORMULATION, "--no-plane"],
+                                           "--formulation", COMMITTED_FORMULATION, "--no-plane", *fing],
                       reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
     steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
-                      "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h,
+                      "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h, *fing,
                                                     "--formulation", COMMITTED_FORMULATION,
                                                     "--out", f"{out}/finger.json", "--figures", out, "--json"],
                       reads=f"{out}/finger.json", format=predictor_artefacts.VALIDATION))
@@ -172,9 +212,12 @@ def joint_row(fem: dict, sur: dict, sur_wall_s: float) -> dict:
     if "cap_rotation_deg" in errors:
         text += f"; cap {errors['cap_rotation_deg']:+.2f} deg"
     return {"case": f"joint P={_g(load['P'])} F1={_g(load['F1'])} F2={_g(load['F2'])} M={_g(load['M'])}",
-            "fem": f"joint FEM h={_g(fem['geometry']['mesh_size'])} (now)",
+            "problem": "one joint under (P, F1, F2, M)",
+            "fem": f"joint FEM, {_g(fem['geometry']['mesh_size'])} mm tetrahedra, "
+                   f"{fem.get('formulation') or COMMITTED_FORMULATION} (now)",
             "model": "surrogate (time: process wall)",
-            "errors": errors, "error": text, "fem_s": fem["wall_time_s"], "model_s": sur_wall_s,
+            "errors": errors, "error": text, "tolerance": None, "within_tolerance": None,
+            "fem_s": fem["wall_time_s"], "model_s": sur_wall_s,
             "produced_by": {"fem": "joint_fem: anchors_mm, phi_end_deg, cap_rotation_deg",
                             "model": "surrogate: anchors_mm, phi_end_deg, cap_rotation_deg",
                             "errors": "model minus FEM; anchors: distance per anchor point",
@@ -196,23 +239,71 @@ def _predictor_label(d: dict) -> str:
     return f"predictor ({d['kinematics']}/{d['joint_weight']})"
 
 
-def gravity_row(fem: dict, gesture: dict, fem_file: str) -> dict:
-    """A gravity gesture (predictor.gesture JSON) against the committed finger FEM; ValueError
-    (one line) when they solved different problems (the plane X = 0: ``plane`` of each)."""
-    from predictor.problem import same_problem
-    from predictor.validate_finger import case_plane
+#: The problem each row solves, named in the row (the FEM and the model solve the same one).
+LONE_FINGER = "one finger alone (no plane X = 0)"
+GRIPPER = "gripper: two mirror fingers meeting at X = 0"
 
-    if "plane" in gesture:
-        same_problem(case_plane(fem), gesture["plane"], fem_file)
-    p1, p2 = gesture["pressures_MPa"]
-    errors = finger_errors(fem, gesture["tip"], gesture["tip_angle_deg"])
-    return {"case": f"gravity ({_g(p1)}, {_g(p2)}) MPa",
-            "fem": f"FEM (committed, h={fem_artefacts.finger_case_mesh(fem)})",
-            "model": _predictor_label(gesture), "errors": errors, "error": _tip_text(errors),
-            "fem_s": fem["fem_s"], "model_s": gesture["time_ms"] / 1000.0,
+
+def fem_mesh_label(case: dict) -> str:
+    """A finger FEM record's joint discretisation in words: "1.8 mm tetrahedra, displacement"."""
+    mesh = fem_artefacts.finger_case_mesh(case)
+    kind = mesh if mesh.startswith("hex") else f"{mesh} mm tetrahedra"
+    return f"{kind}, {fem_artefacts.finger_case_formulation(case)}"
+
+
+def judged_entry(validation: dict, case: str) -> dict:
+    """The judged variant's entry of ``case`` in a predictor.validate_finger JSON."""
+    judged = validation["judged_variant"]
+    entry = next((e for e in validation["cases"] if e["case"] == case and e["variant"] == judged), None)
+    if entry is None:
+        raise ValueError(f"predictor.validate_finger has no {judged} entry for {case}")
+    return entry
+
+
+def tip_tolerance(validation: dict) -> dict:
+    """The finger validation's targets (issue 14: within 2 mm and 1 deg of the FEM), from its JSON."""
+    t = validation["targets"]
+    return {"tip_mm": t["tip_error_mm"], "tip_angle_deg": t["tip_angle_error_deg"]}
+
+
+def within(errors: dict | None, tolerance: dict | None) -> bool | None:
+    """Every error within its tolerance (absolute values); None where there is none."""
+    if errors is None or tolerance is None:
+        return None
+    return all(abs(errors[k]) <= v for k, v in tolerance.items())
+
+
+def gravity_row(fem: dict, validation: dict, fem_file: str) -> dict:
+    """A gravity gesture of one finger alone: the predictor (predictor.validate_finger JSON,
+    its judged variant) against the committed finger FEM of the case, which has no plane."""
+    p1, p2 = fem["pressures_MPa"]
+    entry = judged_entry(validation, fem["case"])
+    errors = finger_errors(fem, entry["tip_mm"], entry["tip_angle_deg"])
+    tol = tip_tolerance(validation)
+    return {"case": f"gravity ({_g(p1)}, {_g(p2)}) MPa", "problem": LONE_FINGER,
+            "fem": f"finger FEM, {fem_mesh_label(fem)} (committed)",
+            "model": _predictor_label(entry), "errors": errors, "error": _tip_text(errors),
+            "tolerance": tol, "within_tolerance": within(errors, tol),
+            "fem_s": fem["fem_s"], "model_s": entry["predictor_s"],
             "produced_by": {"fem": f"{fem_file}: tip, tip_angle_deg (make finger-fem)",
-                            "model": f"gesture_{gesture_name(p1, p2)}: tip, tip_angle_deg",
-                            "errors": "model minus FEM", "fem_s": f"{fem_file}: fem_s",
+                            "model": f"validate_gravity: {entry['variant']} tip_mm, tip_angle_deg",
+                            "errors": "model minus FEM", "tolerance": "validate_gravity: targets",
+                            "fem_s": f"{fem_file}: fem_s",
+                            "model_s": "validate_gravity: predictor_s (median of its repeats)"},
+            "figures": [f"{COMMITTED_FIGURES}/finger_{fem['case']}.png"]}
+
+
+def gripper_row(g: dict) -> dict:
+    """A gravity gesture of the gripper (predictor.gesture JSON): no FEM of it is committed,
+    so its fingertip and the force where the fingers meet."""
+    p1, p2 = g["pressures_MPa"]
+    tip, plane = g["tip"], g.get("plane_force_N")
+    meet = "apart" if not plane else f"meet with {plane:.3f} N"
+    return {"case": f"gripper gravity ({_g(p1)}, {_g(p2)}) MPa", "problem": GRIPPER,
+            "fem": "n/a (no FEM of the gripper's gesture)", "model": _predictor_label(g), "errors": None,
+            "error": f"n/a; tip ({tip[0]:.2f}, {tip[1]:.2f}) mm, {g['tip_angle_deg']:.2f} deg, fingers {meet}",
+            "tolerance": None, "within_tolerance": None, "fem_s": None, "model_s": g["time_ms"] / 1000.0,
+            "produced_by": {"error": f"gesture_{gesture_name(p1, p2)}: tip, tip_angle_deg, plane_force_N",
                             "model_s": f"gesture_{gesture_name(p1, p2)}: time_ms"},
             "figures": [f"gesture_{gesture_name(p1, p2)}.png"]}
 
@@ -227,40 +318,47 @@ def grasp_row(g: dict) -> dict:
     p1, p2 = g["pressures_MPa"]
     figures = {"normal_force_N": g["contact_force_N"], "friction_use": g["friction_use"],
                "state": grasp_state(g)}
-    return {"case": f"grasp {g['object']} ({_g(p1)}, {_g(p2)}) MPa", "fem": "n/a", "model": _predictor_label(g),
-            "errors": None, "grasp": figures,
+    return {"case": f"grasp {g['object']} ({_g(p1)}, {_g(p2)}) MPa", "problem": f"{GRIPPER}, holding the object",
+            "fem": "n/a", "model": _predictor_label(g), "errors": None, "grasp": figures,
             "error": f"n/a; normal {figures['normal_force_N']:.3f} N, |f|/(mu N) {figures['friction_use']:.3f}, "
                      f"{figures['state']}",
-            "fem_s": None, "model_s": g["time_ms"] / 1000.0,
+            "tolerance": None, "within_tolerance": None, "fem_s": None, "model_s": g["time_ms"] / 1000.0,
             "produced_by": {"grasp": "grasp: contact_force_N, friction_use, state", "model_s": "grasp: time_ms"},
             "figures": ["grasp.png"]}
 
 
 def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: str) -> list[dict]:
-    """The finger FEM solved now (fem.finger_cases JSON) against the predictor
-    (predictor.validate_finger JSON, its judged variant), and the same FEM against the
-    committed FEM of the case (on the committed data's mesh): the coarse mesh's own error."""
-    h, h0 = _g(fem["mesh"]["mesh_size"]), _g(committed["mesh"]["mesh_size"])
-    judged = validation["judged_variant"]
-    entry = next((e for e in validation["cases"] if e["case"] == fem["case"] and e["variant"] == judged), None)
-    if entry is None:
-        raise ValueError(f"predictor.validate_finger has no {judged} entry for {fem['case']}")
+    """The finger FEM solved now (fem.finger_cases JSON, one finger alone) against the
+    predictor (predictor.validate_finger JSON, its judged variant, one finger alone too),
+    and the same FEM against the committed FEM of the case (on the committed data's mesh):
+    the coarse mesh's own error (no tolerance: it measures the mesh)."""
+    h = fem_mesh_label(fem)
+    entry = judged_entry(validation, fem["case"])
     p1, p2 = fem["pressures_MPa"]
     pred = finger_errors(fem, entry["tip_mm"], entry["tip_angle_deg"])
-    mesh = finger_errors(committed, fem["tip"], fem["tip_angle_deg"])
-    return [
-        {"case": f"finger gravity ({_g(p1)}, {_g(p2)}) MPa", "fem": f"finger FEM h={h} (now)",
+    tol = tip_tolerance(validation)
+    live = [
+        {"case": f"finger gravity ({_g(p1)}, {_g(p2)}) MPa", "problem": LONE_FINGER, "fem": f"finger FEM, {h} (now)",
          "model": _predictor_label(entry), "errors": pred, "error": _tip_text(pred),
+         "tolerance": tol, "within_tolerance": within(pred, tol),
          "fem_s": fem["fem_s"], "model_s": entry["predictor_s"],
-         "produced_by": {"fem": "finger_fem: tip, tip_angle_deg", "model": f"validate: {judged} tip_mm, tip_angle_deg",
-                         "errors": "model minus FEM", "fem_s": "finger_fem: fem_s (the solve, not the mesh build)",
+         "produced_by": {"fem": "finger_fem: tip, tip_angle_deg",
+                         "model": f"validate: {entry['variant']} tip_mm, tip_angle_deg",
+                         "errors": "model minus FEM", "tolerance": "validate: targets",
+                         "fem_s": "finger_fem: fem_s (the solve, not the mesh build)",
                          "model_s": "validate: predictor_s (median of its repeats)"},
-         "figures": [f"finger_{fem['case']}.png", f"finger_fem/{fem['case']}.png"]},
-        {"case": f"finger FEM h={h} vs h={h0} (committed)", "fem": f"finger FEM h={h0} (committed)",
-         "model": f"finger FEM h={h} (now)", "errors": mesh, "error": _tip_text(mesh),
+         "figures": [f"finger_{fem['case']}.png", f"finger_fem/{fem['case']}.png"]}]
+    if committed is None:   # no committed FEM of this finger
+        return live
+    h0, mesh = fem_mesh_label(committed), finger_errors(committed, fem["tip"], fem["tip_angle_deg"])
+    return live + [
+        {"case": f"finger FEM {fem_artefacts.finger_case_mesh(fem)} vs {fem_artefacts.finger_case_mesh(committed)} "
+                 "mm mesh", "problem": LONE_FINGER, "fem": f"finger FEM, {h0} (committed)",
+         "model": f"finger FEM, {h} (now)", "errors": mesh, "error": _tip_text(mesh),
+         "tolerance": None, "within_tolerance": None,
          "fem_s": committed["fem_s"], "model_s": fem["fem_s"],
          "produced_by": {"fem": f"{committed_file}: tip, tip_angle_deg", "model": "finger_fem: tip, tip_angle_deg",
-                         "errors": f"h={h} minus h={h0}", "fem_s": f"{committed_file}: fem_s",
+                         "errors": "the coarse mesh minus the committed one", "fem_s": f"{committed_file}: fem_s",
                          "model_s": "finger_fem: fem_s"},
          "figures": []},
     ]
@@ -268,16 +366,25 @@ def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: st
 
 def table_rows(data: dict) -> list[dict]:
     """Every row of the demo's table from the steps' JSON: ``data`` holds
-    joint {fem, surrogate, surrogate_wall_s}, gravity [{fem, fem_file, gesture}, ...],
-    grasp, finger {fem, validation, committed, committed_file}."""
+    joint {fem, surrogate, surrogate_wall_s}, gravity [{fem, fem_file}, ...] with
+    gravity_validation (the lone finger's predictor.validate_finger JSON), gripper
+    [gesture, ...], grasp, finger {fem, validation, committed, committed_file}; without a
+    committed FEM of the finger, no gravity and finger.committed None."""
     j, f = data["joint"], data["finger"]
     return [joint_row(j["fem"], j["surrogate"], j["surrogate_wall_s"]),
-            *(gravity_row(g["fem"], g["gesture"], g["fem_file"]) for g in data["gravity"]),
+            *(gravity_row(g["fem"], data["gravity_validation"], g["fem_file"]) for g in data.get("gravity", [])),
+            *(gripper_row(g) for g in data["gripper"]),
             grasp_row(data["grasp"]),
             *finger_rows(f["fem"], f["validation"], f["committed"], f["committed_file"])]
 
 
-COLUMNS = [("case", "case"), ("fem", "FEM"), ("model", "model"), ("error", "error (model - FEM)"),
+def beyond_tolerance(rows: list[dict]) -> list[str]:
+    """The cases whose errors exceed their tolerance (flagged in the table and the summary)."""
+    return [r["case"] for r in rows if r.get("within_tolerance") is False]
+
+
+COLUMNS = [("case", "case"), ("problem", "problem"), ("fem", "FEM"), ("model", "model"),
+           ("error", "error (model - FEM)"), ("within_tolerance", "within tolerance"),
            ("fem_s", "FEM s"), ("model_s", "model s")]
 
 
@@ -285,6 +392,11 @@ def _cell(row: dict, key: str) -> str:
     v = row[key]
     if key in ("fem_s", "model_s"):
         return "n/a" if v is None else f"{v:.1f}" if v >= 1 else f"{v:.3f}"
+    if key == "within_tolerance":
+        if v is None:
+            return "-"
+        tol = ", ".join(f"{t:g} {'mm' if k.endswith('_mm') else 'deg'}" for k, t in row["tolerance"].items())
+        return f"yes (<= {tol})" if v else f"NO: beyond {tol}"
     return str(v)
 
 
@@ -296,9 +408,10 @@ def text_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-LEGEND = ("errors: model minus FEM (mm, deg); FEM s: the FEM's solve time from its JSON; model s: the "
-          "model's solve time from its JSON, except the surrogate's (it reports none: its process wall "
-          "time, start-up included)")
+LEGEND = ("errors: model minus FEM (mm, deg), the two solving the problem named in the row; within tolerance: "
+          "the finger validation's targets (tip 2 mm, 1 deg), '-' where a row has none; FEM s: the FEM's solve "
+          "time from its JSON; model s: the model's solve time from its JSON, except the surrogate's (it reports "
+          "none: its process wall time, start-up included)")
 
 
 def markdown(rows: list[dict], steps: list[dict], total_s: float) -> str:
@@ -310,6 +423,9 @@ def markdown(rows: list[dict], steps: list[dict], total_s: float) -> str:
         links = ", ".join(f"[{Path(p).name}]({p})" for p in r["figures"]) or "-"
         cells = [_cell(r, k).replace("|", "\\|") for k, _ in COLUMNS]   # a bare | would split the cell
         out.append("| " + " | ".join(cells + [links]) + " |")
+    beyond = beyond_tolerance(rows)
+    out += ["", f"**Beyond tolerance: {'; '.join(beyond)}.**" if beyond else
+            "Every row with a tolerance is within it."]
     out += ["", "## Steps", "", "| step | command | wall s |", "|---|---|---|"]
     out += [f"| {s['title']} | `{s['command']}` | {s['wall_s']:.1f} |" for s in steps]
     out += ["", "## Figures", ""]
@@ -410,13 +526,27 @@ def _relative(path: Path) -> str:
         return str(path)
 
 
-def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
+def committed_finger(finger: FingerSpec) -> bool:
+    """Whether the committed finger FEM cases were solved for ``finger`` (their settings
+    record it: contract.finger.same_finger)."""
+    try:
+        case = json.loads(Path(ROOT, COMMITTED_FINGER_FEM, f"{FINGER_CASE}.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return same_finger(case.get("settings", {}).get("geometry", {}).get("finger", {}), finger)
+
+
+def run(out: Path, finger_mesh_size: float, as_json: bool = False, finger: str | None = None) -> int:
     """Every step, then the summary files and the table (or, ``as_json``, the summary as
-    JSON on stdout and the progress on stderr). 0 if every step succeeded, else 1."""
+    JSON on stdout and the progress on stderr). 0 if every step succeeded, else 1.
+    finger: a finger file (None: the paper's); the rows against the committed finger FEM
+    are made only when it is of that finger."""
     t0 = time.perf_counter()
     log = sys.stderr if as_json else sys.stdout
     rel = _relative(out)
-    steps = build_steps(rel, finger_mesh_size)
+    spec = load_finger(finger)
+    compare = committed_finger(spec)
+    steps = build_steps(rel, finger_mesh_size, None if finger is None else _relative(Path(finger)), compare)
     by_key = {s.key: s for s in steps}
     env = dict(os.environ)
     # One thread per process: the demo shares the machine, and the FEM is serial here.
@@ -424,8 +554,12 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
         env.setdefault(var, value)
     try:
         # Checked first: the committed FEM the gravity rows compare with.
-        committed = {gesture_name(*p): load_committed(f"gravity_{gesture_name(*p)}") for p in GRAVITY_GESTURES}
-        finger_committed = load_committed(FINGER_CASE)
+        if not compare:
+            print(f"[demo] no committed finger FEM of finger {spec.name!r}: its rows against it are left out",
+                  file=log, flush=True)
+        committed = {gesture_name(*p): load_committed(f"gravity_{gesture_name(*p)}")
+                     for p in GRAVITY_GESTURES} if compare else {}
+        finger_committed = load_committed(FINGER_CASE) if compare else (None, None)
         if not Path(ROOT, SURROGATE).is_file():
             raise StepFailed(f"no committed surrogate {SURROGATE}: run `make train`")
         # No stale summary may describe this run's figures; and fem.finger_cases skips a case
@@ -437,8 +571,10 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
         rows = table_rows({
             "joint": {"fem": by_key["joint_fem"].data, "surrogate": by_key["surrogate"].data,
                       "surrogate_wall_s": by_key["surrogate"].wall_s},
-            "gravity": [{"fem": committed[gesture_name(*p)][0], "fem_file": committed[gesture_name(*p)][1],
-                         "gesture": by_key[f"gesture_{gesture_name(*p)}"].data} for p in GRAVITY_GESTURES],
+            "gravity": [{"fem": committed[gesture_name(*p)][0], "fem_file": committed[gesture_name(*p)][1]}
+                        for p in GRAVITY_GESTURES] if compare else [],
+            "gravity_validation": by_key["validate_gravity"].data if compare else None,
+            "gripper": [by_key[f"gesture_{gesture_name(*p)}"].data for p in GRAVITY_GESTURES],
             "grasp": by_key["grasp"].data,
             "finger": {"fem": by_key["finger_fem"].data, "validation": by_key["validate"].data,
                        "committed": finger_committed[0], "committed_file": finger_committed[1]}})
@@ -450,9 +586,11 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
         return 1
     total = time.perf_counter() - t0
     step_log = [{"key": s.key, "title": s.title, "command": s.command(), "wall_s": s.wall_s} for s in steps]
+    beyond = beyond_tolerance(rows)
     summary = {"out": rel, "total_s": total, "finger_mesh_size_mm": finger_mesh_size,
+               "finger": {"name": spec.name, "sha256": spec.digest}, "committed_fem": compare,
                "load_average_1min": os.getloadavg()[0], "units": "mm, deg, N, MPa, s",
-               "rows": rows, "steps": step_log}
+               "rows": rows, "beyond_tolerance": beyond, "steps": step_log}
     SUMMARY.write(out / "summary.json", summary)
     write_text(out / "summary.md", markdown(rows, step_log, total))
     if as_json:
@@ -461,6 +599,8 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False) -> int:
         print(f"\n{text_table(rows)}\n{LEGEND}\n", flush=True)
     print(f"[demo] all {len(steps)} steps done in {total:.0f} s: {rel}/summary.md, summary.json and the PNGs",
           file=log, flush=True)
+    if beyond:   # the run is complete, its table true: the flag is for the reader
+        print(f"[demo] beyond tolerance: {'; '.join(beyond)}", file=sys.stderr, flush=True)
     return 0
 
 
@@ -469,8 +609,21 @@ def main(argv=None) -> int:
     ap.add_output("--out", folder=True, default="results/demo", help="output folder (default results/demo)")
     ap.add_argument("--finger-mesh-size", type=cli.number(0.3, 10, "mm"), default=4.0,
                     help="joint mesh size of the live finger FEM, mm (default 4: coarse, for time)")
+    ap.add_argument("--finger", type=_finger_file, default=None,
+                    help="finger file of every gesture and finger FEM (default the paper's, "
+                    "contract/fingers/paper.toml); the rows against the committed finger FEM need the paper's")
     args = ap.parse_args(argv)
-    return run(Path(args.out), args.finger_mesh_size, args.json)
+    return run(Path(args.out), args.finger_mesh_size, args.json, args.finger)
+
+
+def _finger_file(text: str) -> str:
+    """--finger: a finger file of two joints (the demo's gestures are pressure pairs),
+    read and checked while parsing (contract.finger.finger_arg); its path is passed on."""
+    spec = finger_arg(text)
+    if spec.n_joints != 2:
+        raise argparse.ArgumentTypeError(f"finger {spec.name!r} has {spec.n_joints} joints: the demo's gestures "
+                                         "are pressure pairs, for a finger of two joints")
+    return text
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@
   stderr (``add_quiet`` and ``setup_logging``); ``--quiet`` keeps only warnings. stdout
   stays the result alone (strict JSON with ``--json``).
 - Under mpirun, srun or Slurm only the launcher's rank 0 prints the error line.
+- Ctrl-C inside ``errors()`` ends with one line and exit 130 (EXIT_INTERRUPTED).
 
 Usage::
 
@@ -43,6 +44,7 @@ from pathlib import Path
 from contract.files import dumps
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
 #: Set to 1 to see the traceback behind a one-line error (development).
 TRACEBACK_ENV = "SOFTJOINT_TRACEBACK"
 
@@ -268,9 +270,15 @@ class Parser(argparse.ArgumentParser):
     @contextlib.contextmanager
     def errors(self):
         """Turn a ValueError or OSError from the tool's work (bad value found late, corrupt
-        file, unwritable output) into one line and exit 2."""
+        file, unwritable output) into one line and exit 2, and Ctrl-C into one line and exit
+        130 (128 + SIGINT, the shells' convention) instead of a traceback (a file output is
+        written whole or not at all: contract.files' atomic writes)."""
         try:
             yield
+        except KeyboardInterrupt:
+            if os.environ.get(TRACEBACK_ENV) == "1":
+                raise
+            self.exit(EXIT_INTERRUPTED, f"{self.prog}: interrupted (Ctrl-C)\n")
         except (ValueError, OSError) as exc:
             if os.environ.get(TRACEBACK_ENV) == "1":
                 raise

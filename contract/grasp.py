@@ -95,6 +95,13 @@ class ObjectSpec:
         if why:
             raise ValueError(why)
 
+    def describe(self) -> str:
+        """One line for messages, in the spec's own keys: ``circle r=30 mm at y=-195 mm``."""
+        turn = f", turned {math.degrees(self.angle):g} deg" if self.angle else ""
+        size = {"circle": f"r={self.a:g}", "ellipse": f"a={self.a:g}, b={self.b:g}",
+                "rectangle": f"w={2 * self.a:g}, h={2 * self.b:g}, rc={self.corner:g}"}.get(self.kind, "")
+        return f"{self.kind} {size} mm at y={self.y:g} mm{turn}"
+
     def local(self, points: np.ndarray) -> np.ndarray:
         """Global points (..., 2) mm in the object's frame (centre, axes)."""
         q = np.asarray(points, dtype=float) - (self.x, self.y)

@@ -76,12 +76,12 @@ GESTURES = Format("predictor-gestures", 1, "predictor.figures", {
 #: results/predictor/atlas_<object>.json and its ramp/, ramp_fine/ references (make atlas):
 #: the grasp state over a (P1, P2) grid; ``state`` holds codes into ``states``.
 ATLAS = Format("predictor-atlas", 1, "predictor.atlas", {
-    "grid": int, "approach_MPa": list, "mu": NUM, "joint?": str, "states": list, "state[]": list,
+    "grid": int, "approach_MPa": list | None, "mu": NUM, "joint?": str, "states": list, "state[]": list,
     **each("counts", int, "no_contact", "holds", "slips", "not_converged"),
     "best_hold?.pressures_MPa": list, "best_hold?.friction_use": MAYBE,
     "targets.atlas_s_per_object": NUM, "measured.atlas_s_per_object": NUM, "measured.grid_points": int,
     "solved_by?{}": int, "ramp_steps?": int, "max_plane_overlap_mm?": MAYBE, "plane_overlap_mm?[]": list,
-    "object?.corner_mm?": NUM})
+    "object?.corner_mm?": NUM, "finger?.name": str, "finger?.sha256": str})
 
 #: results/predictor/inverse.json (make inverse): each goal's pressures, verified forward.
 INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {

@@ -2,7 +2,12 @@
 
     python -m predictor.atlas --object SPEC --grid N [--box P1LO,P1HI,P2LO,P2HI]
         [--path sweep|ramp] [--model PATH|analytic] [--mu MU] [--object-weight N]
-        [--no-plane] [--quiet] [--json] [--plot FILE.png] [--out FILE.json]
+        [--finger FILE] [--kinematics cap|tangent] [--joint-weight split|lumped]
+        [--approach P1,P2|zero] [--no-gravity] [--no-plane] [--quiet] [--json] [--plot FILE.png] [--out FILE.json]
+
+The finger, approach and gravity options are predictor.gesture's (a finger of two joints:
+the atlas spans (P1, P2)); the JSON records the finger (name, sha256 of its file,
+kinematics, joint weights) beside the settings below.
 
 Every (P1, P2) of an N x N grid over the pressure box (MPa, default the full |P| <= 0.3
 box) is solved along the same history as ``predictor.gesture --object``: the gripper
@@ -51,8 +56,9 @@ the flattened grid) -> ``Atlas.to_json()`` / ``save_atlas_figure``; JSON + Gripp
 
 Exit codes: 0 atlas written; 2 bad input (a bad number, grid, box, object spec, an
 object the model cannot represent, unwritable output, a missing default model, an object
-that intersects the fingers at the approach gesture), one line on stderr, before the
-grid solve. The API (``grasp_atlas``) applies the same checks (predictor.problem).
+that intersects the fingers at the approach gesture, a finger of other than two joints or
+one no gesture can be solved for, predictor.problem.finger_error), one line on stderr,
+before the grid solve; 130 interrupted (Ctrl-C): one line, no traceback, no file. The API (``grasp_atlas``) applies the same checks (predictor.problem).
 """
 from __future__ import annotations
 
@@ -68,15 +74,15 @@ import torch
 
 from contract import cli
 from predictor.artefacts import ATLAS
-from predictor.problem import (FULL_BOX, GRID, add_arguments, add_plane, box_arg, check_box, load_problem, object_arg,
-                               placement_error)
+from predictor.problem import (DEFAULT, FULL_BOX, GRID, OBJECT_HELP, add_arguments, add_finger_arguments, add_plane,
+                               approach_arg, box_arg, check_box, load_problem, object_arg, params_of, placement_error)
 from predictor.progress import Heartbeat, set_quiet
 from predictor.jacobians import jacobian_fn
 from predictor.options import SolverOptions
 from predictor.ramp import advance, attempts, plane_first, plane_ramp, ramp_method, runner
 from predictor.ramp import ramp as ramp_between
 from predictor.result import GestureResult, contact_fields, result_labels
-from predictor.solve import gesture_result, solve
+from predictor.solve import APPROACH, gesture_result, solve
 from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
                                meets, out_of_reach)
 
@@ -539,8 +545,7 @@ def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.atlas", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--object", type=object_arg, required=True,
-                    help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
+    ap.add_argument("--object", type=object_arg, required=True, help=OBJECT_HELP)
     ap.add_argument("--grid", type=GRID.arg, default=61, help="N: N x N grid (default 61)")
     ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (default the full box)")
     ap.add_argument("--path", choices=PATHS, default="sweep",
@@ -550,22 +555,34 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"pressure sub-steps of a ramped point (default {SolverOptions.ramp_steps}; --path ramp "
                     "with more steps checks the reference's own path resolution)")
     add_plane(ap)
+    add_finger_arguments(ap)
+    ap.add_argument("--approach", type=approach_arg, help="P1,P2 (MPa) at which the object is brought in (default "
+                    f"{APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with the object present")
+    ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
     add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
     ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     set_quiet(args.quiet)
+    params = params_of(args)
+    if params.n_joints != 2:   # before any model is loaded
+        ap.error(f"the grasp atlas spans (P1, P2): finger {params.finger.name!r} has {params.n_joints} joints")
+    if args.approach not in (None, "zero") and len(args.approach) != 2:
+        ap.error(f"--approach: {len(args.approach)} values for the atlas's two joints (P1,P2 MPa, or 'zero')")
+    approach = None if args.approach == "zero" else args.approach or DEFAULT
     with ap.errors():
-        problem = load_problem(args.model, args.object, mu=args.mu, object_weight=args.object_weight,
-                               plane=args.plane)
+        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=params, mu=args.mu,
+                               object_weight=args.object_weight, approach=approach, plane=args.plane)
         atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
-        doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps}
+        finger = {"name": params.finger.name, "sha256": params.finger.digest, "kinematics": params.kinematics,
+                  "joint_weight": params.joint_weight}
+        doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps, "finger": finger}
         if args.out:
             ATLAS.write(args.out, doc)
         if args.plot:
             save_atlas_figure(args.plot, atlas, problem)
-    print_figures({**atlas.summary(), "spec": args.object}, args.json)
+    print_figures({**atlas.summary(), "spec": args.object, "finger": finger}, args.json)
     return 0
 
 

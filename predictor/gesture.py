@@ -49,13 +49,18 @@ mirror-symmetric; its sizes and height are bounded (contract.grasp.object_error)
 through the fingers at the approach gesture is refused; one beyond the fingers' reach
 answers no_contact at once (statics.out_of_reach).
 
-Exit codes: 0 converged; 1 not converged (the JSON says so, its figures are null); 2 bad
+Exit codes: 0 converged; 1 no answer (the JSON says converged false, its figures are null;
+the stderr line says why: the solve did not converge, or the raw gravity NN's own answer is
+outside its bound, naming where its gesture crosses X = 0 and --polish); 2 bad
 input (a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures
 for the finger, a bad finger file or object spec, an object the model cannot represent
 or that intersects the fingers at the approach gesture, a bad --mu or --object-weight,
 an unwritable --plot, a missing, damaged or other-kind model, cap kinematics on a joint
-model without a cap head, an NN checkpoint trained for another finger or options) with a
-one-line reason on stderr, checked before the solve.
+model without a cap head, a finger whose weights load a joint beyond the joint model's
+box or whose mounts are too close for the fingers to meet at X = 0
+(predictor.problem.finger_error), an NN checkpoint trained for another finger, options or
+object: the contact NN knows one object) with a one-line reason on stderr, checked before
+the solve; 130 interrupted (Ctrl-C), one line.
 """
 from __future__ import annotations
 
@@ -66,25 +71,11 @@ import sys
 import torch
 
 from contract import cli
-from contract.finger import DEFAULT_FINGER, finger_arg
-from contract.spec import PRESSURE_LIMIT
-from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams
 from predictor.joint import load_joint
-from predictor.problem import DEFAULT, add_arguments, add_plane, load_problem, object_arg
+from predictor.problem import (DEFAULT, OBJECT_HELP, PRESSURE, add_arguments, add_finger_arguments, add_plane,
+                               approach_arg, load_problem, object_arg, params_of, pressure_list)
 from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import STATES
-
-PRESSURE = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
-
-
-def _pressure_list(text: str) -> tuple[float, ...]:
-    """P1,P2[,..] MPa, each a finite number within ±0.3 (the count is checked against the finger)."""
-    return tuple(PRESSURE(p.strip()) for p in text.split(","))
-
-
-def _approach(text: str):
-    """--approach: ``zero`` or P1,..,PJ in MPa."""
-    return "zero" if text.strip().lower() == "zero" else _pressure_list(text)
+from predictor.statics import STATES, Obstacle, parse_object
 
 
 def pressures_of(args: argparse.Namespace, n_joints: int) -> tuple[float, ...]:
@@ -109,7 +100,7 @@ def prepare(args: argparse.Namespace):
     joint, NN predictor or None). ValueError (one line) for any bad input, a missing
     default model, an object the model cannot represent or that cuts through the fingers
     at the approach gesture (predictor.problem.load_problem)."""
-    params = GripperParams(args.finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
+    params = params_of(args)
     n_joints = params.n_joints
     pressures = torch.tensor([pressures_of(args, n_joints)], dtype=torch.float64)
     if args.approach not in (None, "zero") and len(args.approach) != n_joints:
@@ -121,6 +112,12 @@ def prepare(args: argparse.Namespace):
         from predictor.nn_checkpoint import load_predictor
 
         predictor = load_predictor(args.nn, joint, contact=args.object is not None, params=params)
+        trained = predictor.config.obstacle
+        if args.object is not None and parse_object(args.object) != Obstacle(**trained):
+            # The contact NN learned one grasp: any other object is a question it never saw.
+            raise ValueError(f"--method nn: the contact NN ({args.nn or 'results/predictor/contact_nn.pt'}) was "
+                             f"trained for one object, the {Obstacle(**trained).describe()}, not the "
+                             f"{parse_object(args.object).describe()}: use --method newton for it")
         problem = load_problem(None, args.object, approach=predictor.config.approach, **options)
         return problem, pressures, joint, predictor
     approach = None if args.approach == "zero" else args.approach or DEFAULT
@@ -158,18 +155,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = cli.Parser(prog="python -m predictor.gesture", description=__doc__.split("\n\n")[0])
     ap.add_argument("--p1", type=PRESSURE, help="joint-1 pressure, MPa (|P| <= 0.3)")
     ap.add_argument("--p2", type=PRESSURE, help="joint-2 pressure, MPa (|P| <= 0.3)")
-    ap.add_argument("--pressures", type=_pressure_list, help="P1,..,PJ MPa, one per joint of the finger, base "
+    ap.add_argument("--pressures", type=pressure_list, help="P1,..,PJ MPa, one per joint of the finger, base "
                     "to tip (instead of --p1 --p2)")
-    ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
-                    help="finger description file (TOML, contract.finger; default contract/fingers/paper.toml)")
-    ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
-                    help="a part leaves a joint along its last anchors' chord (tangent, the paper's) "
-                    "or its cap face (cap)")
-    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT,
-                    help="a joint's weight at its anchors' mean (lumped) or half at each end (split)")
-    ap.add_argument("--object", type=object_arg,
-                    help="circle[:r=,x=,y=,deg=] | ellipse[:a=,b=,...] | rectangle[:w=,h=,...] (mm)")
-    ap.add_argument("--approach", type=_approach, help="P1,P2[,..] (MPa, one per joint) at which the object is "
+    add_finger_arguments(ap)
+    ap.add_argument("--object", type=object_arg, help=OBJECT_HELP)
+    ap.add_argument("--approach", type=approach_arg, help="P1,P2[,..] (MPa, one per joint) at which the object is "
                     f"brought in (grasp history; default {APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with "
                     "the object present")
     ap.add_argument("--method", choices=("newton", "lbfgs", "nn"), default="newton")
@@ -202,9 +192,32 @@ def main(argv: list[str] | None = None) -> int:
         for key, value in out.items():
             print(f"{key:>20}: {value}")
     if not out["converged"]:
-        print(f"{ap.prog}: the equilibrium solve did not converge; no gesture returned", file=sys.stderr)
+        print(f"{ap.prog}: {failure(out, prepared)}; no gesture returned", file=sys.stderr)
         return 1
     return 0
+
+
+def failure(out: dict, prepared) -> str:
+    """Why a gesture has no answer, for the one stderr line (``prepared``: prepare(args)).
+    The raw gravity NN answers only within its bound (predictor.nn_answer), which is not a
+    solver failing to converge; it learned one finger alone, so where its gesture crosses
+    X = 0, where the gripper's fingers meet, it leaves the bound by far."""
+    problem, pressures, _, predictor = prepared
+    if predictor is None or problem.obstacle is not None or out["polished"] or out["fallback"]:
+        return "the equilibrium solve did not converge"
+    from predictor.nn_answer import NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM
+    from predictor.statics import plane_overlap
+
+    f, m = max(out["raw_residual_force_mN"]), max(out["raw_residual_moment_Nmm"])
+    why = (f"the gravity NN's own answer is outside its bound (residual up to {f:.3g} mN and {m:.3g} N·mm; an "
+           f"answer needs <= {NN_FORCE_TOL_MN:g} mN and {NN_MOMENT_TOL_NMM:g} N·mm)")
+    with torch.no_grad():   # the network's own gesture, as the answer was judged
+        st = problem.residual(pressures, predictor.net(pressures))
+    cross = float(plane_overlap(st.vertices)[0]) if st.vertices is not None else 0.0
+    if cross > 0:
+        why += (f": its finger crosses X = 0 by {cross:.1f} mm, where the gripper's fingers meet (it learned one "
+                "finger alone)")
+    return why + "; --polish finishes it with a Newton step"
 
 
 if __name__ == "__main__":

@@ -44,6 +44,16 @@ BRANCH_TIP_MM = 1.0
 BRANCH_ROUNDS = 3    # newton_iterate calls from the contact network's tau (``newton_on_branch``)
 
 
+_FIELD = {"obstacle": "object", "params": "the finger"}
+
+
+def _describe(value) -> str:
+    """A problem field for a message: objects and fingers in words, not their reprs."""
+    if value is None:
+        return "none"
+    return value.describe() if hasattr(value, "describe") else str(value)
+
+
 def raw_answer(net: nn.Module, problem: GripperProblem, pressures: torch.Tensor):
     """The network's own answer, no solver: (tau (B, J, 3), Statics at it, grasp state
     (B,) codes: its classifier's for a ContactNet, else its tau's contact)."""
@@ -95,9 +105,10 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     """
     trained = pred.config.problem(problem.joint)
     if problem != trained:
-        diff = "; ".join(f"{f.name} {getattr(trained, f.name)} (given {getattr(problem, f.name)})"
+        diff = "; ".join(f"{_FIELD.get(f.name, f.name)} {_describe(getattr(trained, f.name))} "
+                         f"(given {_describe(getattr(problem, f.name))})"
                          for f in fields(trained) if getattr(problem, f.name) != getattr(trained, f.name))
-        raise ValueError(f"this NN predictor was trained for {diff}")
+        raise ValueError(f"an NN predictor answers only the problem it was trained for: {diff}")
     check_pressures(pressures)
     t0 = time.perf_counter()
     if polish and problem.obstacle is None:

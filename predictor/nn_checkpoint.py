@@ -69,7 +69,9 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
         raise checkpoint.CheckpointError(f"{path}: inconsistent NN predictor checkpoint "
                                          f"({type(exc).__name__}: {str(exc).splitlines()[0][:120]})") from None
     if params is not None and params != trained_params:
-        raise ValueError(f"{path} was trained for {trained_params.describe()}, not {params.describe()}")
+        raise ValueError(f"{path} was trained for {trained_params.describe()}, not {params.describe()}: an NN "
+                         "predictor answers only its own finger and options (train one for these with python -m "
+                         "predictor.nn --finger FILE, or solve with the iterative solvers)")
     if joint is not None and joint_name != joint.name:
         raise ValueError(f"{path} was trained with joint {joint_name!r}, not {joint.name!r}")
     if joint is not None and params is not None:

@@ -6,7 +6,10 @@ the API (``Check.value``: "mu: ..."), so a value refused by one is refused by th
 with the same reason. ``load_problem`` builds the GripperProblem of predictor.gesture's
 defaults (joint from predictor.defaults, object from a spec, approach gesture APPROACH)
 and refuses an object the model cannot represent (contract.grasp.object_error) or that cuts
-through the fingers where it is brought in (``placement_error``): the gripper settles
+through the fingers where it is brought in (``placement_error``), and a finger that no
+gesture can be solved for (``finger_error``: its weights load a joint beyond the joint
+model's box in the hanging pose, or its mounts are so close that the two fingers overlap
+at X = 0), so that every tool says why instead of "not converged". The gripper settles
 at the approach gesture without the object, so an object overlapping that gesture
 would start the grasp inside the fingers.
 
@@ -17,6 +20,10 @@ predictor.statics.ContactParams.plane_stiffness), as fem.finger does; ``--no-pla
 as the paper's do (predictor.statics.apart). Every result names its problem (``"plane":
 true|false``, ``problem_words``), and a comparison of two results refuses two problems
 (``same_problem``).
+
+The flags every gesture tool shares are defined here once: ``add_finger_arguments``
+(--finger, --kinematics, --joint-weight), ``approach_arg``, ``OBJECT_HELP`` and
+``add_arguments`` (--model, --mu, --object-weight, --quiet).
 
 Data flow: model, object spec, options -> load_problem -> GripperProblem (checked).
 """
@@ -29,11 +36,13 @@ from dataclasses import dataclass
 import torch
 
 from contract import cli
-from contract.spec import PRESSURE_LIMIT
-from predictor.gripper import GripperParams, check_pressures
+from contract.finger import DEFAULT_FINGER, finger_arg
+from contract.spec import INPUT_BOX, PRESSURE_LIMIT
+from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
+                               check_pressures, outline_vertices, rot)
 from predictor.joint import check_finger, load_joint
 from predictor.solve import APPROACH, approach_for, solve
-from predictor.statics import ContactParams, GripperProblem, apart, parse_object
+from predictor.statics import ContactParams, GripperProblem, apart, meets, parse_object, plane_overlap
 
 FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
 
@@ -131,6 +140,86 @@ def placement_error(problem: GripperProblem) -> str | None:
     return None
 
 
+def hanging_loads(problem: GripperProblem) -> torch.Tensor:
+    """(J, 3) [F1 N, F2 N, M N·mm]: the loads each joint carries in the finger's unloaded
+    hanging pose (zero pressure, every joint at its load-free shape), from the parts'
+    weights alone (no object, no plane X = 0). A static estimate: Equation 1's residual at
+    tau = 0 is minus the distal loads, turned into each joint's frame."""
+    free = apart(GripperProblem(problem.joint, problem.params, None, problem.contact, problem.gravity))
+    J = problem.n_joints
+    with torch.no_grad():
+        st = free.residual(torch.zeros(1, J, dtype=torch.float64), torch.zeros(1, J, 3, dtype=torch.float64))
+    force = rot(-st.pose.theta, -st.residual[..., :2])
+    return torch.cat((force, -st.residual[..., 2:]), -1)[0]
+
+
+def finger_error(problem: GripperProblem) -> str | None:
+    """Why no gesture of ``problem``'s finger can be trusted, or None (one line):
+
+    - with gravity, a joint whose load in the hanging pose (``hanging_loads``) leaves the
+      joint model's box |F1|, |F2| <= 3 N, |M| <= 100 N·mm: the solvers keep tau in that
+      box, so they fail at every pressure (a finger of 1 N parts, 3.5 N on joint 1: none
+      of 15 pressures over the box converged, after about a minute of ramping; of 0.8 N
+      parts, 2.8 N: all 15 did);
+    - where the fingers meet at X = 0, a finger whose outline already crosses X = 0 in
+      that pose (base_gap too small): the plane cannot push the mounted base back, so the
+      two fingers would overlap at every pressure."""
+    finger = problem.params.finger
+    if problem.gravity:
+        box = INPUT_BOX[1:]
+        out = [f"joint {j + 1} {name} = {v:.2f} {unit}" for j, load in enumerate(hanging_loads(problem).tolist())
+               for name, v, lim, unit in zip(("F1", "F2", "M"), load, box, ("N", "N", "N·mm")) if abs(v) > lim]
+        if out:
+            return (f"finger {finger.name!r} is too heavy for its joints: hanging at zero pressure under the "
+                    f"parts' weights, {', '.join(out)}, beyond the joint model's box |F1|, |F2| <= {box[0]:g} N, "
+                    f"|M| <= {box[2]:g} N·mm, so no gesture can be solved (lighten the parts, or solve without "
+                    "gravity)")
+    if meets(problem):
+        J = problem.n_joints
+        with torch.no_grad():
+            pose = problem.pose(torch.zeros(1, J, dtype=torch.float64), torch.zeros(1, J, 3, dtype=torch.float64))
+            overlap = float(plane_overlap(outline_vertices(pose, problem.params.layout))[0])
+        if overlap > 0:
+            return (f"finger {finger.name!r}: base_gap = {finger.base_gap:g} mm puts the two fingers across each "
+                    f"other (the right one crosses X = 0 by {overlap:.1f} mm hanging at zero pressure): the "
+                    f"fingers meet at X = 0, so base_gap must be at least {finger.base_gap + 2 * overlap:.1f} mm")
+    return None
+
+
+#: --object's help: the keys a user can change (``x`` exists only as x=0: the model mirrors
+#: one finger, contract.grasp.object_error, so it is not advertised).
+OBJECT_HELP = ("circle[:r=,y=] | ellipse[:a=,b=,y=,deg=] | rectangle[:w=,h=,y=,deg=,rc=] (mm, deg; centred on the "
+               "gripper's axis X = 0)")
+PRESSURE = cli.number(-PRESSURE_LIMIT, PRESSURE_LIMIT, "MPa")
+
+
+def pressure_list(text: str) -> tuple[float, ...]:
+    """P1,P2[,..] MPa, each a finite number within ±0.3 (the count is checked against the finger)."""
+    return tuple(PRESSURE(p.strip()) for p in text.split(","))
+
+
+def approach_arg(text: str):
+    """--approach: ``zero`` or P1,..,PJ in MPa."""
+    return "zero" if text.strip().lower() == "zero" else pressure_list(text)
+
+
+def add_finger_arguments(ap) -> None:
+    """The finger's flags, the same on every tool that solves gestures: --finger,
+    --kinematics, --joint-weight (predictor.gripper.GripperParams)."""
+    ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
+                    help="finger description file (TOML, contract.finger; default contract/fingers/paper.toml)")
+    ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
+                    help="a part leaves a joint along its last anchors' chord (tangent, the paper's) "
+                    "or its cap face (cap)")
+    ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT,
+                    help="a joint's weight at its anchors' mean (lumped) or half at each end (split)")
+
+
+def params_of(args) -> GripperParams:
+    """The GripperParams of add_finger_arguments' flags."""
+    return GripperParams(args.finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
+
+
 def add_arguments(ap, model_help: str = "") -> None:
     """The flags of every planning tool: --model, --mu, --object-weight, --quiet."""
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
@@ -180,8 +269,9 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
     gripper, the right finger against the mirror finger's contact at X = 0 (True, the
     default), or one finger alone (False: predictor.statics.apart). ValueError
     (one line) for any bad value, for a model of another joint than the finger's joint
-    parts name (predictor.joint.check_finger) and for an object badly placed
-    (``placement_error``)."""
+    parts name (predictor.joint.check_finger), for a finger no gesture can be solved for
+    (``finger_error``: joints loaded beyond the model's box by the parts' weights, fingers
+    overlapping at their mounts) and for an object badly placed (``placement_error``)."""
     params = params or GripperParams()
     if object_weight is not None:
         params = dataclasses.replace(params, object_weight=OBJECT_WEIGHT.value("object_weight", object_weight))
@@ -201,7 +291,7 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
                              approach=None if approach is None else tuple(approach))
     if not plane:
         problem = apart(problem)
-    why = placement_error(problem)
+    why = finger_error(problem) or placement_error(problem)
     if why:
         raise ValueError(why)
     return problem

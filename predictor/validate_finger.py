@@ -1,7 +1,7 @@
 """The gesture predictor against the whole-finger FEM: ``make validate-finger``.
 
     python -m predictor.validate_finger --fem results/validation/finger_fem \\
-        --model results/surrogate/improved.pt --out results/validation/finger.json
+        --model results/surrogate/improved.pt --out results/validation/finger.json [--cases NAME,..]
 
 Data flow: the FEM cases of fem.finger_cases (one JSON and one render per case: tip,
 tip angle, every joint's end and chord angle, global mm/deg; the FEM's solve time) ->
@@ -281,6 +281,9 @@ def main(argv=None) -> int:
                          help="validate the cases of the gripper (the mirror finger's contact at X = 0)")
     problem.add_argument("--no-plane", dest="plane", action="store_false",
                          help="validate the cases of one finger alone (the committed cases')")
+    ap.add_argument("--cases", type=lambda t: [c.strip() for c in t.split(",") if c.strip()], default=None,
+                    help="NAME[,NAME..]: validate only these cases of the folder (default all; make demo "
+                    "checks the paper's two gravity gestures)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
     set_quiet(args.quiet)
@@ -289,6 +292,11 @@ def main(argv=None) -> int:
         finger = load_finger(args.finger)
         joint = load_joint(args.model)
         files = sorted(Path(args.fem).glob("*.json"))
+        if args.cases is not None:
+            missing = sorted(set(args.cases) - {f.stem for f in files})
+            if missing:
+                raise ValueError(f"--cases: no case {', '.join(missing)} in {args.fem}")
+            files = [f for f in files if f.stem in args.cases]
         cases, renders = [], {}
         for f in files:
             try:

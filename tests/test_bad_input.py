@@ -362,6 +362,39 @@ CASES_PREDICTOR = [
     ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "lumped"],
      "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'paper', "
      "cap kinematics, lumped joint weights"),
+    # issue 57: a finger no gesture can be solved for is refused where the problem is built
+    # (predictor.problem.finger_error), naming the cause, by every tool
+    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/heavy_parts.toml", "--json"],
+     "finger 'heavy_parts' is too heavy for its joints: hanging at zero pressure under the parts' weights, "
+     "joint 1 F1 = 7.00 N, beyond the joint model's box |F1|, |F2| <= 3 N, |M| <= 100 N·mm"),
+    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/no_gap.toml",
+                           "--plot", "{tmp}/x.png"],
+     "finger 'no_gap': base_gap = 0 mm puts the two fingers across each other (the right one crosses X = 0 by "
+     "10.0 mm hanging at zero pressure): the fingers meet at X = 0, so base_gap must be at least 20.0 mm"),
+    ("predictor.atlas", ["--object", "circle", "--grid", "3", "--finger", "tests/data/fingers/heavy_parts.toml",
+                         "--out", "{tmp}/x.json"], "finger 'heavy_parts' is too heavy for its joints"),
+    ("predictor.atlas", ["--object", "circle", "--grid", "3", "--finger", "tests/data/fingers/no_gap.toml",
+                         "--out", "{tmp}/x.json"], "base_gap must be at least 20.0 mm"),
+    # the atlas takes the finger, approach and gravity options of predictor.gesture
+    ("predictor.atlas", ["--object", "circle", "--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/x.json"],
+     "the grasp atlas spans (P1, P2): finger 'three' has 3 joints"),
+    ("predictor.atlas", ["--object", "circle", "--approach", "0.1", "--out", "{tmp}/x.json"],
+     "--approach: 1 values for the atlas's two joints"),
+    ("predictor.atlas", ["--object", "circle", "--approach", "0.5,0"], "--approach: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.atlas", ["--object", "circle", "--kinematics", "chord"], "invalid choice: 'chord'"),
+    ("predictor.validate_finger", ["--cases", "gravity_0.1_-0.1,nope", "--out", "{tmp}/x.json", "--figures", "{tmp}"],
+     "--cases: no case nope in results/validation/finger_fem"),
+    # the NN predictors answer the problem they were trained for: one object, one finger
+    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "rectangle", "--json"],
+     "--method nn: the contact NN (results/predictor/contact_nn.pt) was trained for one object, the circle "
+     "r=30 mm at y=-195 mm, not the rectangle w=60, h=50, rc=1 mm at y=-195 mm: use --method newton for it"),
+    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "circle:r=25",
+                           "--plot", "{tmp}/x.png"],
+     "trained for one object, the circle r=30 mm at y=-195 mm, not the circle r=25 mm at y=-195 mm"),
+    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--finger",
+                           "tests/data/fingers/long_tip.toml", "--json"],
+     "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'long_tip', cap kinematics, "
+     "split joint weights: an NN predictor answers only its own finger and options"),
     # predictor.nn / bench / figures: outputs and inputs refused before any training or solve
     ("predictor.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
     ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],

@@ -16,6 +16,7 @@ an error.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import logging
 import math
@@ -292,3 +293,44 @@ def test_full_disk_gives_one_line_and_keeps_the_shard(tmp_path):
         assert shard.read_bytes() == before and [p.name for p in disk.iterdir()] == [shard.name]
     finally:
         subprocess.run(["umount", str(disk)], check=True)
+
+
+# ---------------------------------------------------------------- issue 57: messages that name the cause
+
+def test_a_finger_no_gesture_can_be_solved_for_is_refused_where_the_problem_is_built():
+    """load_problem (every tool and the API build their problem with it) refuses the
+    finger of 2 N parts, naming the joint and load that leave the joint model's box in the
+    hanging pose, and the finger with base_gap 0, naming the overlap and the least gap; the
+    heavy finger without gravity, and the paper's finger, load. The hanging loads are the
+    distal weights: joint 1 carries half its own 2 N (split weights) and the 6 N beyond it
+    along its axis, joint 2 half its own and the 2 N tip."""
+    from predictor.api import load_gripper
+    from predictor.gripper import GripperParams
+    from predictor.problem import hanging_loads, load_problem
+
+    heavy = GripperParams(load_finger(FINGERS / "heavy_parts.toml"))
+    with pytest.raises(ValueError) as exc:
+        load_problem("analytic", None, params=heavy)
+    assert str(exc.value) == ("finger 'heavy_parts' is too heavy for its joints: hanging at zero pressure under the "
+                              "parts' weights, joint 1 F1 = 7.00 N, beyond the joint model's box |F1|, |F2| <= 3 N, "
+                              "|M| <= 100 N·mm, so no gesture can be solved (lighten the parts, or solve without "
+                              "gravity)")
+    free = load_problem("analytic", None, gravity=False, params=heavy)   # no weights: nothing to carry
+    assert not hanging_loads(free).any()
+    np.testing.assert_allclose(hanging_loads(dataclasses.replace(free, gravity=True)).numpy(),
+                               [[7.0, 0.0, 0.0], [3.0, 0.0, 0.0]], atol=1e-9)
+    with pytest.raises(ValueError, match="finger 'no_gap': base_gap = 0 mm puts the two fingers across each other "
+                                         r"\(the right one crosses X = 0 by 10.0 mm"):
+        load_gripper(model="analytic", finger=str(FINGERS / "no_gap.toml"))
+    assert load_problem("analytic", None).params.finger.name == "paper"
+
+
+def test_ctrl_c_inside_errors_is_one_line_and_exit_130(capsys):
+    """contract.cli.Parser.errors turns KeyboardInterrupt into '<prog>: interrupted
+    (Ctrl-C)' and exit 130, like a ValueError into one line and exit 2."""
+    ap = cli.Parser(prog="t")
+    with pytest.raises(SystemExit) as exc:
+        with ap.errors():
+            raise KeyboardInterrupt
+    assert exc.value.code == 130 == cli.EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "t: interrupted (Ctrl-C)\n"

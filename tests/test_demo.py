@@ -47,12 +47,17 @@ def finger_case(name, tip, angle, h, fem_s):
             "tip_angle_deg": angle, "fem_s": fem_s, "mesh": {"mesh_size": h}}
 
 
-def validation(case, tip, angle):
-    entry = {"case": case, "variant": "predictor_cap_split", "tip_mm": tip, "tip_angle_deg": angle,
-             "predictor_s": 0.02, "kinematics": "cap", "joint_weight": "split"}
-    other = {**entry, "variant": "predictor_tangent_lumped", "tip_mm": [0.0, 0.0],
-             "kinematics": "tangent", "joint_weight": "lumped"}
-    return {"judged_variant": "predictor_cap_split", "cases": [other, entry]}
+def validation(*cases):
+    """A predictor.validate_finger JSON: (case, tip, angle) per case, the judged variant's."""
+    entries = []
+    for case, tip, angle in cases:
+        entry = {"case": case, "variant": "predictor_cap_split", "tip_mm": tip, "tip_angle_deg": angle,
+                 "predictor_s": 0.02, "kinematics": "cap", "joint_weight": "split"}
+        other = {**entry, "variant": "predictor_tangent_lumped", "tip_mm": [0.0, 0.0],
+                 "kinematics": "tangent", "joint_weight": "lumped"}
+        entries += [other, entry]
+    return {"judged_variant": "predictor_cap_split", "cases": entries,
+            "targets": {"tip_error_mm": 2.0, "tip_angle_error_deg": 1.0, "speedup": 1000.0, "fem_s": 600.0}}
 
 
 def data():
@@ -61,12 +66,16 @@ def data():
     return {
         "joint": {"fem": joint_fem(), "surrogate": surrogate(), "surrogate_wall_s": 3.0},
         "gravity": [
-            {"fem": finger_case("gravity_-0.1_0.1", [40.0, -210.0], -92.0, 1.8, 500.0), "fem_file": "a.json",
-             "gesture": gesture(-0.1, 0.1, [40.0 + 0.3, -210.0 - 0.4], -91.0)},
-            {"fem": committed, "fem_file": "b.json", "gesture": gesture(0.1, -0.1, [7.0, -214.0 + 2.0], -88.25)},
+            {"fem": finger_case("gravity_-0.1_0.1", [40.0, -210.0], -92.0, 1.8, 500.0), "fem_file": "a.json"},
+            {"fem": committed, "fem_file": "b.json"},
         ],
+        # the lone finger's predictor: 0.5 mm and 1 deg off, then 2 mm and -0.25 deg
+        "gravity_validation": validation(("gravity_-0.1_0.1", [40.0 + 0.3, -210.0 - 0.4], -91.0),
+                                         ("gravity_0.1_-0.1", [7.0, -214.0 + 2.0], -88.25)),
+        "gripper": [gesture(-0.1, 0.1, [40.3, -210.4], -91.0),
+                    {**gesture(0.1, -0.1, [3.5, -213.0], -80.0), "plane_force_N": 0.05}],
         "grasp": gesture(0.1, 0.2, [27.0, -214.5], -99.9, obj="circle", normal=0.227, use=0.9, state="holds"),
-        "finger": {"fem": coarse, "validation": validation("gravity_0.1_-0.1", [13.0 - 0.6, -222.0 + 0.8], -87.0),
+        "finger": {"fem": coarse, "validation": validation(("gravity_0.1_-0.1", [13.0 - 0.6, -222.0 + 0.8], -87.0)),
                    "committed": committed, "committed_file": "b.json"},
     }
 
@@ -75,8 +84,9 @@ def test_rows_errors_and_times():
     rows = demo.table_rows(data())
     assert [r["case"] for r in rows] == [
         "joint P=0.2 F1=1 F2=-1 M=20", "gravity (-0.1, 0.1) MPa", "gravity (0.1, -0.1) MPa",
-        "grasp circle (0.1, 0.2) MPa", "finger gravity (0.1, -0.1) MPa", "finger FEM h=4 vs h=1.8 (committed)"]
-    joint, g1, g2, grasp, finger, mesh = rows
+        "gripper gravity (-0.1, 0.1) MPa", "gripper gravity (0.1, -0.1) MPa",
+        "grasp circle (0.1, 0.2) MPa", "finger gravity (0.1, -0.1) MPa", "finger FEM 4 vs 1.8 mm mesh"]
+    joint, g1, g2, r1, r2, grasp, finger, mesh = rows
     # every anchor offset by (3, 4): exactly 5 mm, max and mean
     assert joint["errors"]["anchor_max_mm"] == pytest.approx(5.0, abs=1e-12)
     assert joint["errors"]["anchor_mean_mm"] == pytest.approx(5.0, abs=1e-12)
@@ -84,19 +94,43 @@ def test_rows_errors_and_times():
     assert joint["errors"]["cap_rotation_deg"] == pytest.approx(-0.25)
     assert (joint["fem_s"], joint["model_s"]) == (120.0, 3.0)
     assert "process wall" in joint["model"]
+    assert joint["fem"] == "joint FEM, 1.8 mm tetrahedra, displacement (now)"
     assert g1["errors"]["tip_mm"] == pytest.approx(0.5) and g1["errors"]["tip_angle_deg"] == pytest.approx(1.0)
     assert g2["errors"]["tip_mm"] == pytest.approx(2.0) and g2["errors"]["tip_angle_deg"] == pytest.approx(-0.25)
-    assert g1["fem"] == g2["fem"] == "FEM (committed, h=1.8)"
-    assert (g1["fem_s"], g1["model_s"]) == (500.0, 0.04)
+    # the committed finger FEM is one finger alone, its mesh named exactly; so is the predictor of these rows
+    assert g1["fem"] == g2["fem"] == "finger FEM, 1.8 mm tetrahedra, displacement (committed)"
+    assert g1["problem"] == g2["problem"] == finger["problem"] == mesh["problem"] == demo.LONE_FINGER
+    assert (g1["fem_s"], g1["model_s"]) == (500.0, 0.02)
+    # the gripper's gestures (the fingers meet at X = 0) have no FEM: never compared with the lone finger's
+    assert r1["problem"] == r2["problem"] == demo.GRIPPER
+    assert r1["errors"] is None and r1["fem_s"] is None and r1["within_tolerance"] is None
+    assert "fingers apart" in r1["error"] and "fingers meet with 0.050 N" in r2["error"]
     assert grasp["fem"] == "n/a" and grasp["errors"] is None and grasp["fem_s"] is None
     assert grasp["grasp"] == {"normal_force_N": 0.227, "friction_use": 0.9, "state": "holds"}
     # the judged variant, not the first entry of the case
     assert finger["errors"]["tip_mm"] == pytest.approx(1.0) and finger["errors"]["tip_angle_deg"] == pytest.approx(0.5)
-    assert finger["fem"] == "finger FEM h=4 (now)" and finger["model"] == "predictor (cap/split)"
+    assert finger["fem"] == "finger FEM, 4 mm tetrahedra, displacement (now)"
+    assert finger["model"] == "predictor (cap/split)"
     assert (finger["fem_s"], finger["model_s"]) == (150.0, 0.02)
-    # the coarse mesh against the committed production mesh: a 6-8-10 offset
+    # the coarse mesh against the committed mesh: a 6-8-10 offset, no tolerance (it measures the mesh)
     assert mesh["errors"]["tip_mm"] == pytest.approx(10.0) and mesh["errors"]["tip_angle_deg"] == pytest.approx(0.5)
     assert (mesh["fem_s"], mesh["model_s"]) == (490.0, 150.0)
+    assert mesh["within_tolerance"] is None
+
+
+def test_rows_beyond_their_tolerance_are_flagged():
+    rows = demo.table_rows(data())
+    # tolerance from the validation JSON's targets: 2 mm, 1 deg; the bounds themselves pass
+    assert [r["within_tolerance"] for r in rows] == [None, True, True, None, None, None, True, None]
+    assert demo.beyond_tolerance(rows) == []
+    assert "Every row with a tolerance is within it." in demo.markdown(rows, [], 1.0)
+    d = data()
+    d["gravity_validation"]["cases"][-1]["tip_mm"] = [7.0, -214.0 + 7.2]   # a lone finger 7.2 mm off
+    rows = demo.table_rows(d)
+    assert rows[2]["within_tolerance"] is False and rows[2]["tolerance"] == {"tip_mm": 2.0, "tip_angle_deg": 1.0}
+    assert demo.beyond_tolerance(rows) == ["gravity (0.1, -0.1) MPa"]
+    assert "NO: beyond 2 mm, 1 deg" in demo.text_table(rows)
+    assert "**Beyond tolerance: gravity (0.1, -0.1) MPa.**" in demo.markdown(rows, [], 1.0)
 
 
 def test_max_and_mean_differ():
@@ -183,6 +217,10 @@ def test_demo_fem_runs_on_the_committed_discretisation_not_the_production_one():
     for key in ("finger_fem", "validate"):
         args = steps[key]
         assert args[args.index("--mesh-size") + 1] == "4" and args[args.index("--formulation") + 1] == "displacement"
+    # the committed cases are validated on their own mesh, one finger alone, those two cases only
+    args = steps["validate_gravity"]
+    assert any(args[i:i + 4] == paper for i in range(len(args)))
+    assert args[args.index("--cases") + 1] == "gravity_-0.1_0.1,gravity_0.1_-0.1"
     for name in ("gravity_-0.1_0.1", "gravity_0.1_-0.1"):
         case, _ = demo.load_committed(name)
         assert case["mesh"]["mesh_size"] == 1.8 and case.get("formulation", "displacement") == "displacement"
@@ -205,3 +243,31 @@ def test_a_committed_case_on_another_discretisation_is_refused(monkeypatch, tmp_
         assert "make finger-fem" in str(err.value)
     (folder / "x.json").write_text(json.dumps(committed))
     assert demo.load_committed("x")[0] == committed
+
+
+def test_the_demo_takes_a_finger_file():
+    """--finger FILE goes to every gesture and finger FEM step; the committed finger FEM is
+    the paper's finger, so for another finger the step and rows against it are left out
+    (committed_finger), and a finger of three joints is refused in one line, exit 2."""
+    from contract.finger import load_finger
+
+    fingers = Path(demo.ROOT, "tests", "data", "fingers")
+    assert demo.committed_finger(load_finger(None))
+    assert not demo.committed_finger(load_finger(fingers / "long_tip.toml"))
+    steps = {s.key: s.args for s in demo.build_steps("out", 4.0, "tests/data/fingers/long_tip.toml", False)}
+    assert "validate_gravity" not in steps
+    for key in ("gesture_-0.1_0.1", "gesture_0.1_-0.1", "grasp", "finger_fem", "validate"):
+        assert steps[key][steps[key].index("--finger") + 1] == "tests/data/fingers/long_tip.toml", key
+    assert all("--finger" not in args for args in
+               (s.args for s in demo.build_steps("out", 4.0)))    # the paper's: the tools' default
+    d = data()
+    d["gravity"], d["gravity_validation"], d["finger"]["committed"] = [], None, None
+    assert [r["case"] for r in demo.table_rows(d)] == [
+        "joint P=0.2 F1=1 F2=-1 M=20", "gripper gravity (-0.1, 0.1) MPa", "gripper gravity (0.1, -0.1) MPa",
+        "grasp circle (0.1, 0.2) MPa", "finger gravity (0.1, -0.1) MPa"]
+    r = subprocess.run([sys.executable, "-m", "apps.demo", "--finger", "tests/data/fingers/three.toml",
+                        "--out", "build/never"], cwd=demo.ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr == ("python -m apps.demo: error: argument --finger: finger 'three' has 3 joints: the demo's "
+                        "gestures are pressure pairs, for a finger of two joints\n")
+    assert not Path(demo.ROOT, "build", "never").exists()

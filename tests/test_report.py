@@ -275,3 +275,19 @@ def test_production_surrogate_targets_are_judged_from_its_metrics(tmp_path):
     assert [c.met for c in checks] == [True, False, True]
     assert checks[1].verdict.startswith("no") and "0.0612" in "\n".join(lines)
     assert "0.410 deg" in "\n".join(lines)                 # the p95 shown, not judged
+
+
+def test_dataset_table_lists_every_committed_walk():
+    """REPORT's dataset table has a row per committed manifest under results/data: the
+    surrogate's train and held-out sets first, then the others (the finer held-out walk and
+    the production hex2:3 walks), each with its discretisation in words."""
+    from apps.report.joint_fem import campaign_section
+
+    lines, _ = campaign_section(RESULTS)
+    lines = lines[:lines.index("### Campaign throughput (`make bench-campaign`)")]   # the dataset table only
+    rows = [ln.split(" | ")[0].lstrip("| ") for ln in lines if ln.startswith("| ") and not ln.startswith("| set ")]
+    names = sorted(p.parent.name for p in (RESULTS / "data").glob("*/manifest.json"))
+    assert rows[:2] == ["train", "heldout"] and sorted(rows) == names
+    for name in ("train_hex2s3", "heldout_hex2s3"):
+        if name in names:
+            assert any(ln.startswith(f"| {name} | hex2:3 mixed |") for ln in lines)

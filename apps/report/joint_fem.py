@@ -231,7 +231,11 @@ def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
     title = CAMPAIGN_TITLE
     out, checks = [f"## {title}", ""], []
     rows = []
-    for name in ("train", "heldout"):
+    # The committed walks: the surrogate's train and held-out sets first, then every other
+    # committed one (the finer held-out walk, the production hex2:3 walks of make dataset-new).
+    others = sorted(p.parent.name for p in (root / "data").glob("*/manifest.json")
+                    if p.parent.name not in ("train", "heldout"))
+    for name in ("train", "heldout", *others):
         m = load(root, f"data/{name}/manifest.json")
         if m:
             done = m["samples"] + m["failures"]
@@ -240,7 +244,8 @@ def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
                         f"({100 * m['failures'] / max(done, 1):.2f} %) | {m['cpu_hours']:.2f} | "
                         f"{'yes' if m['complete'] else 'no (resumes)'} |")
     if rows:
-        out += ["From the committed manifests (`make dataset`; `python -m workflow.dataset info DIR`).",
+        out += ["From the committed manifests under results/data (`make dataset`, `make dataset-fine`, "
+                "`make dataset-new`; `python -m workflow.dataset info DIR`).",
                 "", "| set | discretisation | seed | converged samples | units | failures | CPU hours | complete |",
                 "|---|---|---|---|---|---|---|---|", *rows, ""]
     else:
