@@ -6,7 +6,8 @@ The command line of predictor.inversion, and ``make inverse``'s cases.
         [--atlas ATLAS.json] [--model PATH|analytic] [--mu MU] [--object-weight N]
         [--no-gravity] [--quiet] [--json] [--plot FILE.png]
     python -m predictor.inverse --goal tip:X,Y[,DEG] [--object SPEC] ...
-    python -m predictor.inverse --cases [--atlas-dir DIR] [--out FILE.json]
+    python -m predictor.inverse --cases [--atlas-dir DIR] [--out FILE.json] [--track-plot FILE.png]
+    python -m predictor.inverse --track FILE|demo [--out FILE.json] [--plot FILE.png] [--finger FILE]
 
 Goals, gradients, search and answers: predictor.inversion. Exit 0: the goal is met
 (``feasible``); 1: ``infeasible`` (the closest achievable answer and the limit that stops
@@ -17,7 +18,11 @@ tip targets CASE_TIPS, with median timings of REPEATS identical queries (a tip t
 and a cold hold each as a process's first question, its coarse start grid solved anew;
 the tip targets also ``warm``: the grid kept from the question before,
 predictor.inversion.coarse_atlas); each case also
-records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``).
+records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``),
+and ``--cases`` also tracks the demo path (predictor.track) into the JSON's ``track``.
+``--track FILE`` answers a list of fingertip goals in order, each warm-started from the
+last answer (predictor.track; exit 1 when a goal is unreachable, all answered). ``--atlas``
+is read strictly (``read_atlas``); ``--finger`` as predictor.gesture's.
 """
 from __future__ import annotations
 
@@ -214,10 +219,13 @@ def run_track(problem: GripperProblem, goals: list, label: str) -> tuple[dict, o
     doc = {**res.summary(), "label": label, "joint": problem.joint.name,
            "targets": {"reachable_warm_ms": TARGET_REACHABLE_MS, "any_warm_ms": TARGET_ANY_MS,
                        "rate_hz": TARGET_RATE_HZ, "tip_error_mm": TIP_TOL_MM},
-           "load_average_before": load_before, "load_average_after": list(os.getloadavg()),
+           "load_average_before": load_before, "load_average_after": list(os.getloadavg()), "beside": BESIDE,
            "threads": torch.get_num_threads()}
     return doc, res
 
+
+#: What ran beside the timings (recorded with the load averages; set SOFTJOINT_BESIDE).
+BESIDE = __import__("os").environ.get("SOFTJOINT_BESIDE", "not recorded (set SOFTJOINT_BESIDE)")
 
 #: What ``make track``'s figure and JSON say produced them.
 TRACK_LABEL = ("closed-loop tracking (predictor.inverse --track demo): joint model the committed surrogate "

@@ -9,12 +9,17 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    goal residual's gradient through the equilibrium by the implicit function theorem,
    continuation steps with the plane's homotopy, steps capped, bounds) from the previous
    answer's equilibrium; the first goal starts from the best points of the kept grid.
+   Near the last answer a position goal is first tried by Newton on the square system
+   of the equilibrium and the goal in (x, P) at once (``Tracker._newton``), which needs
+   the outline clear of X = 0 and the step inside the box; otherwise the Gauss-Newton.
 2. Unreachable goals: the search stops at the locally closest tip. The kept grid (a
-   START_GRID x START_GRID grid of forward answers solved once per process, refined
-   by every verified answer) is looked up (no solve): when one of its tips is closer to
-   the goal than the local answer, the search restarts from the N_STARTS best of them and
-   the closest verified answer is kept. No global search otherwise; the answer is
-   flagged ``unreachable`` with its position error (and wrapped angle error).
+   START_GRID x START_GRID cold grid of forward answers and the coarse COARSE x COARSE
+   one of predictor.inversion with the gestures pressed on X = 0, solved once per
+   process, refined by every verified answer) is looked up (no solve): when one of its
+   tips is closer to the goal than the local answer, the search restarts from the
+   N_STARTS best of them and the closest verified answer is kept. No global search
+   otherwise; the answer is flagged ``unreachable`` with its position error (and
+   wrapped angle error), never farther from the goal than the kept grid's best.
 3. Verification (every answer): the forward equilibrium at the answer's pressures and at
    its 8 ±REGULATOR neighbours (the regulators' resolution), solved anew: in one batched
    cold solve of the predictor (predictor.solve from tau = 0, without the plane's
@@ -54,6 +59,8 @@ from predictor.result import GestureResult
 from predictor.solve import gesture_result, meets_tolerances, solve
 from predictor.statics import GripperProblem, apart
 
+NEWTON_ITER = 6           # Tracker._newton: iterations before the search takes over
+NEWTON_TOL = 1e-9         # Tracker._newton: the scaled residual (N, N, N·mm/100) it converges to
 START_GRID = 9            # the kept grid of forward answers: START_GRID x START_GRID over the box
 MAX_GOALS = 100_000       # goals in one track file
 COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
@@ -108,7 +115,8 @@ class Tracker:
     """Answers tip goals one after the other (module docstring). problem: a 2-joint
     GripperProblem without an object; box (P1lo, P1hi, P2lo, P2hi) MPa."""
 
-    def __init__(self, problem: GripperProblem, box=FULL_BOX, options: SolverOptions = SolverOptions()):
+    def __init__(self, problem: GripperProblem, box=FULL_BOX, options: SolverOptions = SolverOptions(),
+                 keep_coarse: bool = False):
         if problem.obstacle is not None:
             raise ValueError("--track: fingertip goals of the gripper without an object (drop --object)")
         if problem.n_joints != 2:
@@ -120,6 +128,22 @@ class Tracker:
         self.kept = [P, tau, tip, ang]
         self.branch: _Branch | None = None      # the previous answer's equilibrium (search)
         self.anchor = None                      # the previous verified gesture (p (1, 2), x (1, 6))
+        self.coarse_kept = False
+        if keep_coarse:
+            self._keep_coarse()
+
+    def _keep_coarse(self) -> None:
+        """Add predictor.inversion.coarse_atlas (COARSE x COARSE, solved by continuation with
+        the plane X = 0, once per process) to the kept grid: it holds the gestures pressed on
+        X = 0 that the cold grid leaves out; solved at the first goal that is not met."""
+        from predictor.inversion import coarse_atlas
+
+        res = coarse_atlas(self.problem, self.box, self.options).result
+        ok = res.converged
+        P, tau, tip, ang = self.kept
+        self.kept = [torch.cat((P, res.pressures[ok])), torch.cat((tau, res.tau.reshape(-1, 6)[ok])),
+                     torch.cat((tip, res.pose.tip_end[ok])), torch.cat((ang, res.pose.tip_angle[ok]))]
+        self.coarse_kept = True
 
     def _ip(self, goal: Goal) -> InverseProblem:
         return InverseProblem(self.problem, goal, self.box, self.options)
@@ -144,17 +168,69 @@ class Tracker:
                 chosen.append(i)
         return chosen
 
+    def _newton(self, ip: InverseProblem, branch: _Branch) -> float | None:
+        """The fast path of a position goal near the last answer: Newton on the square
+        system of the equilibrium and the goal, r(x, P) = 0 (6 scaled rows) and
+        tip(x, P) = (X, Y) (2), in the 8 unknowns (x, P) at once, from the branch's point,
+        with the solver's difference Jacobian (predictor.jacobians) and the pose's
+        (predictor.inversion._traced_tip_fn). It needs the outline clear of X = 0 and the
+        steps inside the box and under MAX_STEP MPa; f when it converged (the residual to
+        NEWTON_TOL scaled, the tip within 0.1 TIP_TOL_MM), the branch moved there; else
+        None, the branch unchanged (the search goes on by continuation)."""
+        from predictor.inversion import MAX_STEP, _traced_tip_fn
+        from predictor.jacobians import difference_offsets, jacobian_fn
+
+        prob = self.problem
+        jac = jacobian_fn(apart(prob))
+        tip_fn = _traced_tip_fn(prob)
+        gx, gy = search_tip(ip.goal)
+        lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
+        hi = torch.tensor([self.box[1], self.box[3]], dtype=torch.float64)
+        hx, offsets = difference_offsets(6, 1e-6)
+        hp = 1e-6 * 0.3
+        x, p = branch.x.clone(), branch.p.clone()
+        for _ in range(NEWTON_ITER):
+            J, r, Jp = jac(x, p)
+            X = torch.cat((x + offsets, x.expand(4, 6)))
+            P = torch.cat((p.expand(13, 2), p + hp * torch.eye(2, dtype=torch.float64),
+                           p - hp * torch.eye(2, dtype=torch.float64)))
+            with torch.inference_mode():
+                T = tip_fn(X, P)[:, :2].clone()                        # (17, 2)
+            e = T[0] - torch.tensor((gx, gy), dtype=torch.float64)
+            if float(r[0].abs().max()) <= NEWTON_TOL and float(e.norm()) <= 0.1 * TIP_TOL_MM:
+                if bool(_crosses(prob, x, p)):
+                    return None
+                branch.restore((p, x, (J[:, :6], Jp)))
+                return float(e @ e)
+            ex = ((T[1:7] - T[7:13]) / (2 * hx[:, None])).T             # (2, 6)
+            ep = ((T[13:15] - T[15:17]) / (2 * hp)).T                   # (2, 2)
+            A = torch.cat((torch.cat((J[0, :6], Jp[0]), 1), torch.cat((ex, ep), 1)))   # (8, 8)
+            b = torch.cat((r[0, :6], e))
+            dz, info = torch.linalg.solve_ex(A, -b)
+            if int(info) != 0:
+                return None
+            dp = dz[6:]
+            if float(dp.abs().max()) > MAX_STEP:
+                return None
+            p_new = p + dp[None]
+            if bool(((p_new < lo) | (p_new > hi)).any()):
+                return None                                            # a bound: the projected search
+            x, p = x + dz[None, :6], p_new
+        return None
+
     def _search(self, ip: InverseProblem, branch: _Branch) -> float:
         """Gauss-Newton from the branch (the search's iterates at the solver's 100x looser
         tolerance, as predictor.inversion's: the verification's forward solve converges the
         answer fully and its tip is the one reported); f."""
         _gauss_newton(ip, branch)
-        with torch.no_grad():
-            st = self.problem.residual(branch.p, branch.x.reshape(1, 2, 3))
-        e = st.pose.tip_end[0] - torch.tensor(search_tip(ip.goal), dtype=torch.float64)
+        from predictor.inversion import _traced_tip_fn
+
+        with torch.inference_mode():
+            T = _traced_tip_fn(self.problem)(branch.x, branch.p)[0].clone()
+        e = T[:2] - torch.tensor(search_tip(ip.goal), dtype=torch.float64)
         f = float(e @ e)
         if ip.goal.angle_deg is not None:
-            d = float(st.pose.tip_angle[0]) - math.radians(ip.goal.angle_deg)
+            d = float(T[2]) - math.radians(ip.goal.angle_deg)
             f += (self.problem.params.tip_length * math.atan2(math.sin(d), math.cos(d))) ** 2
         return f
 
@@ -165,18 +241,27 @@ class Tracker:
             raise ValueError("a track's goals are fingertip goals tip:X,Y[,DEG]")
         ip = self._ip(goal)
         found = []                                   # (f, branch, anchor)
+        exact = (0.1 * TIP_TOL_MM) ** 2
         if self.branch is not None:
-            found.append((self._search(ip, self.branch), self.branch, self.anchor))
+            quick = self._newton(ip, self.branch) if goal.angle_deg is None else None
+            if quick is not None:
+                found.append((quick, self.branch, self.anchor))
+            else:
+                found.append((self._search(ip, self.branch), self.branch, self.anchor))
+        best = lambda: min((t[0] for t in found), default=math.inf)  # noqa: E731
         restarted = False
-        grid_best = float(self._grid_scores(goal).min())
-        if not found or (found[0][0] > (0.1 * TIP_TOL_MM) ** 2 and grid_best < found[0][0] - 1e-12):
-            restarted = bool(found)
+        for _ in range(2):
+            if found and best() > exact and not self.coarse_kept:
+                self._keep_coarse()     # an unmet goal: the coarse grid's pressed gestures join the kept grid
+            if found and (best() <= exact or float(self._grid_scores(goal).min()) >= best() - 1e-12):
+                break                   # met, or the kept grid knows nothing closer: no restart
+            restarted = restarted or bool(found)
             P, tau = self.kept[0], self.kept[1]
             for i in self._grid_starts(goal):
                 b = _Branch(ip, P[i], tau[i])
                 anchor = (b.p.clone(), b.x.clone())
                 found.append((self._search(ip, b), b, anchor))
-                if found[-1][0] <= (0.1 * TIP_TOL_MM) ** 2:
+                if found[-1][0] <= exact:
                     break
         found.sort(key=lambda t: t[0])
         for f, branch, anchor in found:
@@ -216,31 +301,44 @@ class Tracker:
         res = solve(apart(prob), ps, opts)
         x, ok = res.tau.reshape(9, 6).clone(), res.converged.clone()
         pressed = ~ok | (res.plane_overlap_mm > 0)
-        if bool(pressed.any()):
+        if not bool(pressed.any()):   # every row the problem's own (the solver's rule checked them)
+            g = res
+        else:
             cont = _Branch(ip, anchor[0], anchor[1])
             cont.tol = opts
             xc, okc = cont.neighbours(ps[pressed])
             x[pressed], ok[pressed] = xc, okc
-        # the forward model's own convergence rule at the verified points (residual, box)
-        g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
-                           "track-verify", None)
-        ok = ok & meets_tolerances(g, torch.nan_to_num(x), opts)
+            # the forward model's own convergence rule at the verified points (residual, box)
+            g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
+                               "track-verify", None)
+            ok = ok & meets_tolerances(g, torch.nan_to_num(x), opts)
         centre = g.rows([0])
-        with torch.no_grad():
-            st = prob.residual(branch.p, branch.x.reshape(1, 2, 3))
-        agree = bool(ok[0]) and float((centre.pose.tip_end[0] - st.pose.tip_end[0]).norm()) <= VERIFY_TOL_MM
+        from predictor.inversion import _traced_tip_fn
+
+        with torch.inference_mode():
+            searched = _traced_tip_fn(prob)(branch.x, branch.p)[0, :2].clone()   # the search's fingertip
+        agree = bool(ok[0]) and float((centre.pose.tip_end[0] - searched).norm()) <= VERIFY_TOL_MM
         if not agree and not force:
             return None
         centre = dataclasses.replace(centre, converged=ok[:1].clone())
         return centre, agree, agree and bool(ok.all())
 
 
+def _crosses(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+    """Whether the outline at (x, p) lies across X = 0 (the plane's penalty would act)."""
+    from predictor.ramp import crosses_plane
+
+    return crosses_plane(problem, x, p).any()
+
+
 @dataclass(frozen=True)
 class TrackResult:
-    """answers (one per goal, in order), total_ms (wall time of the whole track)."""
+    """answers (one per goal, in order), total_ms (wall time of the goals' answers, end to
+    end), setup_ms (the kept grids, solved before the first goal)."""
 
     answers: tuple[TrackAnswer, ...]
     total_ms: float
+    setup_ms: float = 0.0
 
     def summary(self) -> dict:
         """Per-goal rows and the issue's figures: goals, median_ms, p95_ms, max_ms, rate_hz
@@ -253,7 +351,7 @@ class TrackResult:
         return {"goals": len(self.answers), "median_ms": float(np.median(t)), "p95_ms": float(np.percentile(t, 95)),
                 "max_ms": float(t.max()), "first_ms": float(t[0]),
                 "warm_median_ms": med(t[1:].tolist()),
-                "rate_hz": 1e3 * len(t) / self.total_ms, "total_ms": self.total_ms,
+                "rate_hz": 1e3 * len(t) / self.total_ms, "total_ms": self.total_ms, "setup_ms": self.setup_ms,
                 "max_tip_error_mm": max((a.position_error_mm for a in reached), default=None),
                 "verified": all(a.verified for a in self.answers),
                 "robust": sum(a.robust for a in self.answers),
@@ -266,13 +364,15 @@ class TrackResult:
 
 
 def track(problem: GripperProblem, goals, box=FULL_BOX, options: SolverOptions = SolverOptions()) -> TrackResult:
-    """Answer ``goals`` (Goals, or (X, Y[, DEG]) tuples) in order with one Tracker; the
-    kept grid is solved before the clock starts (``start_grid``, once per process)."""
-    tracker = Tracker(problem, box, options)
-    goals = [g if isinstance(g, Goal) else tip_goal(*g) for g in goals]
+    """Answer ``goals`` (Goals, or (X, Y[, DEG]) tuples) in order with one Tracker; its
+    kept grids (``start_grid`` and the coarse one, once per process) are solved first and
+    timed apart (``setup_ms``)."""
     t0 = time.perf_counter()
+    tracker = Tracker(problem, box, options, keep_coarse=True)
+    goals = [g if isinstance(g, Goal) else tip_goal(*g) for g in goals]
+    t1 = time.perf_counter()
     answers = tuple(tracker.answer(g) for g in goals)
-    return TrackResult(answers, 1e3 * (time.perf_counter() - t0))
+    return TrackResult(answers, 1e3 * (time.perf_counter() - t1), 1e3 * (t1 - t0))
 
 
 def tip_goal(x: float, y: float, deg: float | None = None) -> Goal:

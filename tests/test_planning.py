@@ -223,7 +223,13 @@ def test_closest_tip_pressed_on_the_plane_is_the_stiff_continuations(free):
     ans = inverse_pressures(free, goal="tip:9.04,-214.93,-88.37")
     assert ans.status == "infeasible" and ans.verified
     assert ans.pressures == pytest.approx((0.07851131233192438, -0.06816379473653308), abs=1e-6)
-    assert ans.tip_error_mm == pytest.approx(2.0215922370790325, abs=1e-5)
+    # the errors apart (issue 57): position mm, angle deg wrapped; their goal measure
+    # hypot(position, tip length x angle) is the frozen 2.02159224 mm
+    assert ans.tip_error_mm == pytest.approx(math.hypot(ans.tip[0] - 9.04, ans.tip[1] + 214.93), rel=1e-12)
+    assert ans.angle_error_deg == pytest.approx(ans.tip_angle_deg + 88.37, abs=1e-9)
+    l_tip = free.problem.params.tip_length
+    assert math.hypot(ans.tip_error_mm, l_tip * math.radians(ans.angle_error_deg)) == pytest.approx(
+        2.0215922370790325, abs=1e-5)
     assert where_it_touches(ans)["plane_force_N"] > 0
 
 
