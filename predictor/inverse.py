@@ -262,7 +262,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--track", help="a file of fingertip goals X,Y[,DEG] (CSV, or JSON: a list of [X, Y(, DEG)]), "
                     "each answered warm-started from the previous answer (predictor.track); 'demo': make track's "
                     "100-goal path; --out writes the answers, --plot the closed-loop figure")
-    ap.add_argument("--track-plot", help="--cases: also write the demo track's figure here")
+    ap.add_output("--track-plot", suffix=".png", help="--cases: also write the demo track's figure here")
+    ap.add_output("--track-out", suffix=".json", help="--cases: also write the demo track's answers here")
+    ap.add_argument("--into", help="--track: also put the track's summary into this make inverse JSON's "
+                    "'track' (make track: inverse.json, track.json and track.png from one run)")
     add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the answer's gesture here")
     args = ap.parse_args(argv)
@@ -281,6 +284,9 @@ def main(argv: list[str] | None = None) -> int:
                 save_inverse_figure(args.plot, figs)
             if args.track_plot:
                 save_track_figure(args.track_plot, tres, free, TRACK_LABEL)
+            if args.track_out:
+                from contract.files import write_json
+                write_json(args.track_out, tdoc, 1)
         print_figures({**doc["measured"], **{f"track_{k}": doc["track"][k] for k in
                                              ("goals", "median_ms", "p95_ms", "max_tip_error_mm", "verified")}},
                       args.json)
@@ -294,12 +300,16 @@ def main(argv: list[str] | None = None) -> int:
             problem = load_problem(args.model, None, gravity=not args.no_gravity, params=_params(args))
             goals = demo_goals(problem) if args.track == "demo" else load_track(args.track)
             label = TRACK_LABEL if args.track == "demo" else f"predictor.inverse --track {args.track}"
+            into = INVERSE.load(args.into) if args.into else None    # checked before the run
             tdoc, tres = run_track(problem, goals, label)
             if args.out:
                 from contract.files import write_json
                 write_json(args.out, tdoc, 1)
             if args.plot:
                 save_track_figure(args.plot, tres, problem, label)
+            if into is not None:
+                into["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
+                INVERSE.write(args.into, into)
         print_figures(tdoc if args.json else {k: v for k, v in tdoc.items() if k != "answers"}, args.json)
         if tdoc["unreachable"]:
             print(f"{ap.prog}: {tdoc['unreachable']} of {tdoc['goals']} goals unreachable: answered with the "

@@ -525,6 +525,8 @@ def save_track_figure(path: str, result: TrackResult, problem: GripperProblem, l
     ax.set_ylabel("pressure, MPa")
     ax.legend(fontsize=7)
     ax.set_title("pressures against time")
-    fig.suptitle(label, fontsize=9)
+    import textwrap
+
+    fig.suptitle("\n".join(textwrap.wrap(label, 150)), fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, 110)

@@ -139,9 +139,16 @@ def test_track_cli(tmp_path):
     written (--out) and verified."""
     f = tmp_path / "t.csv"
     f.write_text("40,-212\n40.5,-212.2\n0,-400\n")
-    out = tmp_path / "track.json"
-    r = _cli("--track", str(f), "--out", str(out), "--quiet")
+    out, inv = tmp_path / "track.json", tmp_path / "inverse.json"
+    inv.write_text((ROOT / "results/predictor/inverse.json").read_text())
+    r = _cli("--track", str(f), "--out", str(out), "--into", str(inv), "--quiet")
     assert r.returncode == 1, r.stderr
     doc = json.loads(out.read_text())
     assert doc["goals"] == 3 and doc["verified"] and doc["reached"] == 2 and doc["unreachable"] == 1
     assert [a["status"] for a in doc["answers"]] == ["reached", "reached", "unreachable"]
+    assert all(a["position_error_mm"] <= TIP_TOL_MM for a in doc["answers"][:2])
+    # --into: make inverse's JSON carries this run's summary as its track (answers apart)
+    from predictor.artefacts import INVERSE
+
+    track = INVERSE.load(inv)["track"]
+    assert track["median_ms"] == doc["median_ms"] and "answers" not in track
