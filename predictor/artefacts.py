@@ -96,7 +96,7 @@ INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
     "track?.goals": int, **each("track?", NUM, "median_ms", "p95_ms", "rate_hz", "setup_ms", "first_ms"),
     "track?.max_tip_error_mm": MAYBE, "track?.verified": bool, **each("track?", int, "reached", "unreachable"),
     "track?.reached_warm_median_ms": MAYBE, "track?.unreachable_median_ms": MAYBE,
-    "track?.load_average_before": list, "track?.beside": str})
+    "track?.load_average_before": list, "track?.beside": str, "track?.cpu_median_ms?": NUM})
 
 _SUMMARY = ("tip_error_mm_max", "tip_error_mm_mean", "tip_angle_error_deg_max",
             "joint_end_angle_error_deg_max", "speedup_min")

@@ -90,6 +90,7 @@ class TrackAnswer:
     restarted: bool
     plane_force_N: float
     time_ms: float
+    cpu_ms: float = 0.0
     gesture: GestureResult | None = None
 
     def summary(self) -> dict:
@@ -236,7 +237,7 @@ class Tracker:
 
     def answer(self, goal: Goal) -> TrackAnswer:
         """The verified answer to a tip goal (module docstring)."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         if goal.kind != "tip":
             raise ValueError("a track's goals are fingertip goals tip:X,Y[,DEG]")
         ip = self._ip(goal)
@@ -286,7 +287,8 @@ class Tracker:
                            position_error_mm=pos, angle_error_deg=ang, verified=verified, robust=robust,
                            restarted=restarted,
                            plane_force_N=0.0 if gest.plane_force_N is None else float(gest.plane_force_N[0]),
-                           time_ms=1e3 * (time.perf_counter() - t0), gesture=gest)
+                           time_ms=1e3 * (time.perf_counter() - t0), cpu_ms=1e3 * (time.process_time() - c0),
+                           gesture=gest)
 
     def _verify(self, ip: InverseProblem, branch: _Branch, anchor, force: bool = False):
         """(verifying gesture (one row), verified, robust), or None when the forward solve
@@ -348,6 +350,7 @@ class TrackResult:
         reached = [a for a in self.answers if a.status == "reached"]
         unreach = [a for a in self.answers if a.status != "reached"]
         med = lambda xs: float(np.median(xs)) if xs else None  # noqa: E731
+        c = np.array([a.cpu_ms for a in self.answers])
         return {"goals": len(self.answers), "median_ms": float(np.median(t)), "p95_ms": float(np.percentile(t, 95)),
                 "max_ms": float(t.max()), "first_ms": float(t[0]),
                 "warm_median_ms": med(t[1:].tolist()),
@@ -360,6 +363,11 @@ class TrackResult:
                                               self.answers[0] else [a.time_ms for a in reached]),
                 "unreachable_median_ms": med([a.time_ms for a in unreach]),
                 "restarts": sum(a.restarted for a in self.answers),
+                # CPU time (process, one thread): the answers' own cost on a shared machine
+                "cpu_median_ms": float(np.median(c)), "cpu_p95_ms": float(np.percentile(c, 95)),
+                "cpu_rate_hz": 1e3 * len(c) / float(c.sum()),
+                "reached_warm_cpu_median_ms": med([a.cpu_ms for a in reached if a is not self.answers[0]]),
+                "unreachable_cpu_median_ms": med([a.cpu_ms for a in unreach]),
                 "answers": [a.summary() for a in self.answers]}
 
 

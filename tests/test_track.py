@@ -89,6 +89,17 @@ def test_short_trajectory_reaches_and_flags(free):
     json.dumps(s, allow_nan=False)
 
 
+def test_api_track_tip(free):
+    """The API's track_tip takes goal strings and tuples; a goal that is not a tip is refused."""
+    from predictor import track_tip
+
+    res = track_tip(free, ["tip:40,-212", (40.2, -212.1)])
+    assert [a.status for a in res.answers] == ["reached", "reached"]
+    assert all(a.verified and a.position_error_mm <= TIP_TOL_MM and a.cpu_ms > 0 for a in res.answers)
+    with pytest.raises(ValueError, match="fingertip goals"):
+        track_tip(free, ["hold"])
+
+
 def test_track_files(tmp_path):
     """CSV (header, comments) and JSON tracks; NaN, unknown keys and wrong counts refused
     in one line."""

@@ -81,7 +81,9 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                 "verified by a forward solve along the ramp, and its robustness checked at the "
                 f"regulators' +/-{inv['tolerances']['regulator_MPa']} MPa. Joint model: "
                 f"{joint_model(root, inv.get('joint'), 'make inverse')}. Times are predictor.inverse's own wall times "
-                "(inverse.json, not a benchmark).", "",
+                "(inverse.json, not a benchmark; the machine's load when they were taken is the track's, below: "
+                "the same process). A tip goal's error is its position error, and its angle error (wrapped) "
+                "apart.", "",
                 "| goal | object | status | pressures (MPa) | friction use / tip error | verified | robust "
                 "| time (inverse.json) |",
                 "|---|---|---|---|---|---|---|---|"]
@@ -132,14 +134,20 @@ def _track(tr: dict | None, title: str, checks: list) -> list[str]:
            f"The kept grids (solved before the first goal): {tr['setup_ms']:.0f} ms.", "",
            "| figure (inverse.json track) | measured | target | met |", "|---|---|---|---|"]
     t = tr.get("targets", {})
-    rows = [("reachable goal, warm (median)", tr.get("reached_warm_median_ms"), Target("<=", t.get("reachable_warm_ms", 5.0), "ms")),
+    rows = [("reachable goal, warm (median)", tr.get("reached_warm_median_ms"),
+             Target("<=", t.get("reachable_warm_ms", 5.0), "ms")),
             ("any goal (median)", tr["median_ms"], Target("<=", t.get("any_warm_ms", 20.0), "ms")),
-            ("track rate, end to end", tr["rate_hz"], Target(">=", t.get("rate_hz", 50.0), "Hz")),
+            ("rate, end to end", tr["rate_hz"], Target(">=", t.get("rate_hz", 50.0), "Hz")),
             ("tip error where reachable (max)", tr["max_tip_error_mm"], Target("<=", t.get("tip_error_mm", 0.1), "mm"))]
     for label, value, target in rows:
         checks.append(judge(title, f"track {label}", [(target, value)]))
         shown = "-" if value is None else f"{value:.3g}"
         out.append(f"| {label} | {shown} {target.unit} |" + cells(checks[-1]))
+    if tr.get("cpu_median_ms") is not None:   # the answers' own CPU time: the cost without the machine's load
+        out += [f"| CPU time per goal: reachable warm / any / unreachable (median) | "
+                f"{num(tr['reached_warm_cpu_median_ms'])} / {num(tr['cpu_median_ms'])} / "
+                f"{num(tr['unreachable_cpu_median_ms'])} ms |" + cells(None),
+                f"| track rate by CPU time | {tr['cpu_rate_hz']:.3g} Hz |" + cells(None)]
     out += [f"| unreachable goal (median) | {num(tr.get('unreachable_median_ms'))} ms |" + cells(None),
             f"| p95 per goal | {tr['p95_ms']:.0f} ms |" + cells(None),
             f"| first goal | {tr['first_ms']:.0f} ms |" + cells(None),
