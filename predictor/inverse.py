@@ -179,7 +179,7 @@ def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
     try:
         doc = json.loads(text, parse_constant=constant)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+        raise ValueError(f"{path}: not JSON ({exc})") from None
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: not a predictor.atlas JSON (an object of keys expected)")
     for key in doc:

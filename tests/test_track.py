@@ -163,3 +163,8 @@ def test_track_cli(tmp_path):
 
     track = INVERSE.load(inv)["track"]
     assert track["median_ms"] == doc["median_ms"] and "answers" not in track
+    # a bad track file: exit 2, one line
+    bad = tmp_path / "bad.csv"
+    bad.write_text("40,-212\n40,nan\n")
+    r = _cli("--track", str(bad), "--quiet")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "bad.csv:2: Y = nan: must be a finite number" in r.stderr
