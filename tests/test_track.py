@@ -167,4 +167,5 @@ def test_track_cli(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("40,-212\n40,nan\n")
     r = _cli("--track", str(bad), "--quiet")
-    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "bad.csv:2: Y = nan: must be a finite number" in r.stderr
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "bad.csv:2: Y = nan: must be a finite number" in r.stderr
