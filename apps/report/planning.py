@@ -81,9 +81,9 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                 "verified by a forward solve along the ramp, and its robustness checked at the "
                 f"regulators' +/-{inv['tolerances']['regulator_MPa']} MPa. Joint model: "
                 f"{joint_model(root, inv.get('joint'), 'make inverse')}. Times are predictor.inverse's own wall times "
-                "(inverse.json, not a benchmark; the machine's load when they were taken is the track's, below: "
-                "the same process). A tip goal's error is its position error, and its angle error (wrapped) "
-                "apart.", "",
+                "(inverse.json, not a benchmark), taken on the machine the track's load averages below describe "
+                "(make inverse's run records the track too; make track replaces that part). A tip goal's error "
+                "is its position error, and its angle error (wrapped) apart.", "",
                 "| goal | object | status | pressures (MPa) | friction use / tip error | verified | robust "
                 "| time (inverse.json) |",
                 "|---|---|---|---|---|---|---|---|"]
