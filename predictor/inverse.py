@@ -224,6 +224,12 @@ def run_track(problem: GripperProblem, goals: list, label: str) -> tuple[dict, o
     return doc, res
 
 
+def _load_text(tdoc: dict) -> str:
+    """The track figure's note of the machine: load averages before the run, and beside what."""
+    load = ", ".join(f"{v:.1f}" for v in tdoc["load_average_before"])
+    return f". Load averages {load} before the run, beside: {tdoc['beside']}"
+
+
 #: What ran beside the timings (recorded with the load averages; set SOFTJOINT_BESIDE).
 BESIDE = __import__("os").environ.get("SOFTJOINT_BESIDE", "not recorded (set SOFTJOINT_BESIDE)")
 
@@ -283,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.plot:
                 save_inverse_figure(args.plot, figs)
             if args.track_plot:
-                save_track_figure(args.track_plot, tres, free, TRACK_LABEL)
+                save_track_figure(args.track_plot, tres, free, TRACK_LABEL, _load_text(tdoc))
             if args.track_out:
                 from contract.files import write_json
                 write_json(args.track_out, tdoc, 1)
@@ -306,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
                 from contract.files import write_json
                 write_json(args.out, tdoc, 1)
             if args.plot:
-                save_track_figure(args.plot, tres, problem, label)
+                save_track_figure(args.plot, tres, problem, label, _load_text(tdoc))
             if into is not None:
                 into["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
                 INVERSE.write(args.into, into)
