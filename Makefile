@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -328,10 +328,23 @@ results/predictor/ramp_fine/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
 
-inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, two tip targets -> results/predictor/inverse.{json,png}
-results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py | $(SETUP)
+# A benchmark, not a test: medians of wall times on this machine, with its load recorded
+# (inverse.json's track.load_average_*); the tip cases and the track at one thread.
+inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, three tip targets, the 100-goal track -> results/predictor/inverse.{json,png}, track.png
+results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py \
+    predictor/track.py | $(SETUP)
 	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
-	  --out $@ --plot results/predictor/inverse.png --json
+	  --out $@ --plot results/predictor/inverse.png --track-plot results/predictor/track.png \
+	  --track-out results/predictor/track.json --json
+
+# Issue 60's closed loop alone (a benchmark): the fingertip along the 100-goal demo path
+# across the reachable region and out of it, each goal warm-started from the last answer and
+# verified through the forward equilibrium (predictor.track) -> results/predictor/track.{json,png},
+# and inverse.json's `track` replaced by this run's (the three from one run, as make inverse's).
+# Exit 1 (some goals unreachable, by design of the path) is its normal end.
+track: results/predictor/inverse.json | $(SETUP) ## closed-loop tip tracking, 100 goals in and out of reach, timed and verified -> results/predictor/track.{json,png}, inverse.json's track
+	nice $(PY) -m predictor.inverse --track demo --model $(PRED_JOINT) --out results/predictor/track.json \
+	  --plot results/predictor/track.png --into results/predictor/inverse.json; test $$? -le 1
 
 # ---------------------------------------------------------------- calibration (issue 38)
 calibrate-recovery: results/calibration/recovery.json ## calibration on known truth: the fit recovers parameters from predictor observations, noise-free and 20 noisy seeds (~1 min) -> results/calibration/recovery.json

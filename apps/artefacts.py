@@ -73,6 +73,7 @@ ARTEFACTS = (
     Artefact("predictor/ramp/atlas_*.json", "make atlas-reference", predictor.ATLAS),
     Artefact("predictor/ramp_fine/atlas_*.json", "make atlas-reference-fine", predictor.ATLAS),
     Artefact("predictor/inverse.json", "make inverse", predictor.INVERSE),
+    Artefact("predictor/track.json", "make track", predictor.TRACK),
     Artefact("predictor/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
              "--out results/predictor/contact_change.json", predictor.CONTACT_CHANGE),
     Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),

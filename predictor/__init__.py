@@ -1,9 +1,9 @@
 """Gripper gesture predictor (docs/gripper.md). The grasp-planning API (predictor.api) is
-re-exported here: load_gripper, solve_gesture, grasp_atlas, inverse_pressures, Gripper,
-Gesture. They are loaded on first use, so that ``python -m predictor.<tool>`` does not
+re-exported here: load_gripper, solve_gesture, grasp_atlas, inverse_pressures, track_tip,
+Gripper, Gesture. They are loaded on first use, so that ``python -m predictor.<tool>`` does not
 import its own module twice (and importing predictor stays light: no torch, no dolfinx)."""
 
-__all__ = ["Gesture", "Gripper", "grasp_atlas", "inverse_pressures", "load_gripper", "solve_gesture"]
+__all__ = ["Gesture", "Gripper", "grasp_atlas", "inverse_pressures", "load_gripper", "solve_gesture", "track_tip"]
 
 
 def __getattr__(name):

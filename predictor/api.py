@@ -5,6 +5,7 @@
     gesture = solve_gesture(g, 0.2, 0.3)              # Gesture: .summary() -> dict
     atlas = grasp_atlas(g, grid=21)                   # predictor.atlas.Atlas: .summary(), .to_json()
     answer = inverse_pressures(g, goal="hold", atlas=atlas)   # InverseResult: .summary()
+    path = track_tip(load_gripper(), [(40, -212), (41, -212.5)])   # TrackResult: .summary()
     fit = calibrate("observations.json", fit=("gain", "offset"), out="calibrated.toml")
 
 Units: pressures MPa, lengths mm (global frame of docs/gripper.md, right finger), forces N.
@@ -136,3 +137,20 @@ def inverse_pressures(gripper: Gripper, goal: str = "hold", min_normal: float = 
     coarse one is solved; refused when solved with other settings)."""
     g = dataclasses.replace(_inverse.parse_goal(goal), min_normal=min_normal, least_pressure=least_pressure)
     return _inverse.inverse_pressures(_inverse.InverseProblem(gripper.problem, g, box), atlas)
+
+
+def track_tip(gripper: Gripper, goals, box=FULL_BOX):
+    """Fingertip goals along a trajectory (predictor.track, ``predictor.inverse --track``):
+    goals a list of (X, Y) or (X, Y, DEG) (mm, degrees) or "tip:X,Y[,DEG]" strings, each
+    answered warm-started from the previous answer and verified through the forward
+    equilibrium; the gripper without an object. Returns predictor.track.TrackResult
+    (answers: TrackAnswer each, with status reached | unreachable (the closest reachable
+    answer), position_error_mm, angle_error_deg wrapped, verified, robust, time_ms;
+    summary() -> dict)."""
+    from predictor.track import track
+
+    goals = [_inverse.parse_goal(g) if isinstance(g, str) else g for g in goals]
+    if any(isinstance(g, _inverse.Goal) and g.kind != "tip" for g in goals):
+        raise ValueError("a track's goals are fingertip goals tip:X,Y[,DEG]")
+    return track(gripper.problem, goals, box)
+

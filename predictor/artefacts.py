@@ -90,8 +90,13 @@ INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
     "tolerances.regulator_MPa": NUM,
     **each("cases[]", str, "goal", "status"), "cases[].object": str | None, "cases[].pressures": list,
     "cases[].friction_use": MAYBE, "cases[].tip_error_mm?": MAYBE, "cases[].verified": bool | None,
-    "cases[].robust": bool | None, "cases[].time_ms_median": NUM,
-    **{f"cases[].{k}": kind for k, kind in _WHERE.items()}})
+    "cases[].robust": bool | None, "cases[].time_ms_median": NUM, "cases[].angle_error_deg?": MAYBE,
+    **{f"cases[].{k}": kind for k, kind in _WHERE.items()},
+    # issue 60: the demo track (predictor.track), timed beside what the load averages say
+    "track?.goals": int, **each("track?", NUM, "median_ms", "p95_ms", "rate_hz", "setup_ms", "first_ms"),
+    "track?.max_tip_error_mm": MAYBE, "track?.verified": bool, **each("track?", int, "reached", "unreachable"),
+    "track?.reached_warm_median_ms": MAYBE, "track?.unreachable_median_ms": MAYBE,
+    "track?.load_average_before": list, "track?.beside": str, "track?.cpu_median_ms?": NUM})
 
 _SUMMARY = ("tip_error_mm_max", "tip_error_mm_mean", "tip_angle_error_deg_max",
             "joint_end_angle_error_deg_max", "speedup_min")
@@ -189,3 +194,9 @@ CALIBRATION_BENCH = Format("predictor-calibration-bench", 1, "predictor.calibrat
     "observations": int, "parameters": list, "starts": int, "repeats": int, "joint": str,
     **each("", NUM, "fit_median_s", "fit_cpu_median_s", "with_loo_median_s", "with_loo_cpu_median_s", "target_s"),
     "fit_s": list, "with_loo_s": list, "load_average_before": list, "load_average_after": list, "beside": str})
+
+#: results/predictor/track.json (make track, make inverse; predictor.inverse --track): every
+#: goal of a trajectory answered warm from the previous answer, verified; times in ms.
+TRACK = Format("predictor-track", 1, "predictor.inverse", {
+    "goals": int, **each("", NUM, "median_ms", "p95_ms", "rate_hz"), "max_tip_error_mm": MAYBE,
+    "verified": bool, **each("", int, "reached", "unreachable"), "answers": list, "label": str})

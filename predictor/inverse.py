@@ -6,7 +6,8 @@ The command line of predictor.inversion, and ``make inverse``'s cases.
         [--atlas ATLAS.json] [--model PATH|analytic] [--mu MU] [--object-weight N]
         [--no-gravity] [--quiet] [--json] [--plot FILE.png]
     python -m predictor.inverse --goal tip:X,Y[,DEG] [--object SPEC] ...
-    python -m predictor.inverse --cases [--atlas-dir DIR] [--out FILE.json]
+    python -m predictor.inverse --cases [--atlas-dir DIR] [--out FILE.json] [--track-plot FILE.png]
+    python -m predictor.inverse --track FILE|demo [--out FILE.json] [--plot FILE.png] [--finger FILE]
 
 Goals, gradients, search and answers: predictor.inversion. Exit 0: the goal is met
 (``feasible``); 1: ``infeasible`` (the closest achievable answer and the limit that stops
@@ -17,7 +18,11 @@ tip targets CASE_TIPS, with median timings of REPEATS identical queries (a tip t
 and a cold hold each as a process's first question, its coarse start grid solved anew;
 the tip targets also ``warm``: the grid kept from the question before,
 predictor.inversion.coarse_atlas); each case also
-records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``).
+records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``),
+and ``--cases`` also tracks the demo path (predictor.track) into the JSON's ``track``.
+``--track FILE`` answers a list of fingertip goals in order, each warm-started from the
+last answer (predictor.track; exit 1 when a goal is unreachable, all answered). ``--atlas``
+is read strictly (``read_atlas``); ``--finger`` as predictor.gesture's.
 """
 from __future__ import annotations
 
@@ -30,12 +35,14 @@ import numpy as np
 import torch
 
 from contract import cli
-from predictor.artefacts import INVERSE
+from contract.finger import DEFAULT_FINGER, finger_arg
+from predictor.artefacts import INVERSE, TRACK
 from predictor.atlas import STATES, Atlas, atlas_from_json
 from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
                                  VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, coarse_atlas, inverse_pressures,
                                  parse_goal)
 from predictor.problem import FULL_BOX, MIN_NORMAL, add_arguments, box_arg, load_problem, object_arg
+from predictor.gripper import GripperParams
 from predictor.progress import Heartbeat, set_quiet
 from predictor.statics import GripperProblem
 
@@ -143,6 +150,95 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
     return doc, figs
 
 
+#: The keys a predictor.atlas --out JSON may carry (Atlas.to_json, the CLI's spec and
+#: ramp_steps, and the finger that wrote it); ``read_atlas`` refuses any other.
+ATLAS_KEYS = frozenset((
+    "grid", "counts", "best_hold", "time_s", "path", "solved_by", "joint", "mu", "object_weight_N", "gravity",
+    "max_plane_overlap_mm", "object", "approach_MPa", "states", "p1_MPa", "p2_MPa", "state", "how",
+    "normal_force_N", "friction_use", "tip_mm", "first_contact_MPa", "tau", "contact_part", "contact_face",
+    "contact_point_mm", "plane_force_N", "plane_overlap_mm", "targets", "measured", "spec", "ramp_steps", "finger"))
+ATLAS_OBJECT_KEYS = frozenset(("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad", "corner_mm"))
+
+
+def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
+    """The --atlas file, read as strictly as a measurement file (predictor.observations):
+    valid JSON without NaN or Infinity (nor a number that overflows), no key but
+    ATLAS_KEYS (and ATLAS_OBJECT_KEYS in ``object``), then predictor.atlas.atlas_from_json's
+    checks (an atlas of this object, joint and settings). ValueError, one line."""
+    import json
+    import math
+
+    try:
+        text = Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read the atlas {path}: {getattr(exc, 'strerror', None) or exc}") from None
+
+    def constant(c):
+        raise ValueError(f"{path}: {c} in the atlas: not a number (the atlas writes null where a figure is missing)")
+
+    try:
+        doc = json.loads(text, parse_constant=constant)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: not a predictor.atlas JSON (an object of keys expected)")
+    for key in doc:
+        if key not in ATLAS_KEYS:
+            raise ValueError(f"{path}: unknown key {key!r} in the atlas (a predictor.atlas --out JSON has "
+                             f"{', '.join(sorted(ATLAS_KEYS))})")
+    if isinstance(doc.get("object"), dict):
+        for key in doc["object"]:
+            if key not in ATLAS_OBJECT_KEYS:
+                raise ValueError(f"{path}: unknown key object.{key!r} in the atlas (use "
+                                 f"{', '.join(sorted(ATLAS_OBJECT_KEYS))})")
+    stack = [("", doc)]
+    while stack:
+        where, v = stack.pop()
+        if isinstance(v, dict):
+            stack.extend((f"{where}.{k}" if where else k, w) for k, w in v.items())
+        elif isinstance(v, list):
+            stack.extend((f"{where}[{i}]", w) for i, w in enumerate(v))
+        elif isinstance(v, float) and not math.isfinite(v):
+            raise ValueError(f"{path}: {where} = {v}: not a finite number")
+    return atlas_from_json(path, problem)
+
+
+def _params(args) -> GripperParams:
+    """The finger and chain options of --finger (predictor.gesture's way)."""
+    return GripperParams(args.finger)
+
+
+def run_track(problem: GripperProblem, goals: list, label: str) -> tuple[dict, object]:
+    """Answer the goals in order (predictor.track.track); (its JSON document, the result)."""
+    import os
+
+    from predictor.track import TARGET_ANY_MS, TARGET_RATE_HZ, TARGET_REACHABLE_MS, track
+
+    load_before = list(os.getloadavg())
+    res = track(problem, goals)
+    doc = {**res.summary(), "label": label, "joint": problem.joint.name,
+           "targets": {"reachable_warm_ms": TARGET_REACHABLE_MS, "any_warm_ms": TARGET_ANY_MS,
+                       "rate_hz": TARGET_RATE_HZ, "tip_error_mm": TIP_TOL_MM},
+           "load_average_before": load_before, "load_average_after": list(os.getloadavg()), "beside": BESIDE,
+           "threads": torch.get_num_threads()}
+    return doc, res
+
+
+def _load_text(tdoc: dict) -> str:
+    """The track figure's note of the machine: load averages before the run, and beside what."""
+    load = ", ".join(f"{v:.1f}" for v in tdoc["load_average_before"])
+    return f". Load averages {load} before the run, beside: {tdoc['beside']}"
+
+
+#: What ran beside the timings (recorded with the load averages; set SOFTJOINT_BESIDE).
+BESIDE = __import__("os").environ.get("SOFTJOINT_BESIDE", "not recorded (set SOFTJOINT_BESIDE)")
+
+#: What ``make track``'s figure and JSON say produced them.
+TRACK_LABEL = ("closed-loop tracking (predictor.inverse --track demo): joint model the committed surrogate "
+               "results/surrogate/improved.pt (1.8 mm data), the paper's finger, gravity, no object, "
+               "the fingers meeting at the plane X = 0")
+
+
 def main(argv: list[str] | None = None) -> int:
     from predictor.atlas import print_figures
 
@@ -167,6 +263,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--atlas", help="the object's predictor.atlas --out JSON for the starts (default: "
                     f"a {COARSE}x{COARSE} grid solved now)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
+    ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
+                    help="finger description file (default contract/fingers/paper.toml); the inverse needs 2 joints")
+    ap.add_argument("--track", help="a file of fingertip goals X,Y[,DEG] (CSV, or JSON: a list of [X, Y(, DEG)]), "
+                    "each answered warm-started from the previous answer (predictor.track); 'demo': make track's "
+                    "100-goal path; --out writes the answers, --plot the closed-loop figure")
+    ap.add_output("--track-plot", suffix=".png", help="--cases: also write the demo track's figure here")
+    ap.add_output("--track-out", suffix=".json", help="--cases: also write the demo track's answers here")
+    ap.add_argument("--into", help="--track: also put the track's summary into this make inverse JSON's "
+                    "'track' (make track: inverse.json, track.json and track.png from one run)")
     add_arguments(ap)
     ap.add_output("--plot", suffix=".png", help="write the answer's gesture here")
     args = ap.parse_args(argv)
@@ -175,14 +280,48 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(1)
         with ap.errors():
             doc, figs = run_cases(args.model, Path(args.atlas_dir))
+            free = load_problem(args.model, None, params=_params(args))
+            from predictor.track import demo_goals, save_track_figure
+            tdoc, tres = run_track(free, demo_goals(free), TRACK_LABEL)
+            doc["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
             if args.out:
                 INVERSE.write(args.out, doc)
             if args.plot:
                 save_inverse_figure(args.plot, figs)
-        print_figures(doc["measured"], args.json)
+            if args.track_plot:
+                save_track_figure(args.track_plot, tres, free, TRACK_LABEL, _load_text(tdoc))
+            if args.track_out:
+                TRACK.write(args.track_out, tdoc)
+        print_figures({**doc["measured"], **{f"track_{k}": doc["track"][k] for k in
+                                             ("goals", "median_ms", "p95_ms", "max_tip_error_mm", "verified")}},
+                      args.json)
+        return 0
+    if args.track is not None:
+        if args.goal is not None or args.object:
+            ap.error("--track answers fingertip goals without an object: drop --goal and --object")
+        torch.set_num_threads(1)
+        with ap.errors():
+            from predictor.track import demo_goals, load_track, save_track_figure
+            problem = load_problem(args.model, None, gravity=not args.no_gravity, params=_params(args))
+            goals = demo_goals(problem) if args.track == "demo" else load_track(args.track)
+            label = TRACK_LABEL if args.track == "demo" else f"predictor.inverse --track {args.track}"
+            into = INVERSE.load(args.into) if args.into else None    # checked before the run
+            tdoc, tres = run_track(problem, goals, label)
+            if args.out:
+                TRACK.write(args.out, tdoc)
+            if args.plot:
+                save_track_figure(args.plot, tres, problem, label, _load_text(tdoc))
+            if into is not None:
+                into["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
+                INVERSE.write(args.into, into)
+        print_figures(tdoc if args.json else {k: v for k, v in tdoc.items() if k != "answers"}, args.json)
+        if tdoc["unreachable"]:
+            print(f"{ap.prog}: {tdoc['unreachable']} of {tdoc['goals']} goals unreachable: answered with the "
+                  "closest reachable tip (status unreachable)", file=sys.stderr)
+            return 1
         return 0
     if args.goal is None:
-        ap.error("give --goal (or --cases)")
+        ap.error("give --goal (or --cases, --track)")
     goal = dataclasses.replace(parse_goal(args.goal), min_normal=args.min_normal, least_pressure=args.least_pressure)
     if goal.kind == "hold" and not args.object:
         ap.error("--goal hold needs an --object")
@@ -190,10 +329,10 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--min-normal and --least-pressure apply to --goal hold only")
     torch.set_num_threads(1)
     with ap.errors():
-        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, mu=args.mu,
+        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=_params(args), mu=args.mu,
                                object_weight=args.object_weight)
         ip = InverseProblem(problem, goal, args.box)
-        atlas = atlas_from_json(args.atlas, problem) if args.atlas else None
+        atlas = read_atlas(args.atlas, problem) if args.atlas else None
         res = inverse_pressures(ip, atlas)
         if args.plot:
             save_inverse_figure(args.plot, [(args.goal, res, problem)])

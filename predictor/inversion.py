@@ -12,7 +12,10 @@ Every goal is a least-squares one, f = |e|² with a goal residual e:
   least pressure that holds with a friction margin of HOLD_MARGIN.
 - ``tip:X,Y[,DEG]``: the fingertip at (X, Y) mm, and its tip angle at DEG degrees (the
   ``tip_angle_deg`` of ``predictor.gesture --json``, the direction of the rigid tip):
-  e = (x_tip - X, y_tip - Y[, l_tip·(phi_2 - DEG)]) mm, DEG wrapped to (-180, 180]. With DEG the goal has three
+  e = (x_tip - X, y_tip - Y[, l_tip·wrap(phi_2 - DEG)]) mm, the angles' difference wrapped
+  to (-180, 180] deg (a goal farther than FAR_GOAL_MM is searched for that far in its
+  direction, ``search_tip``). The answer reports the position error (tip_error_mm, mm)
+  and the wrapped angle error (angle_error_deg, deg) apart. With DEG the goal has three
   conditions for two pressures: it is met only where the target lies on the reachable
   surface (within TIP_TOL_MM), else it is answered ``infeasible`` with its least-squares
   closest gesture.
@@ -80,7 +83,7 @@ from predictor.options import SolverOptions
 from predictor.ramp import advance, attempts, homotopy, in_turn
 from predictor.result import GestureResult
 from predictor.solve import solve
-from predictor.statics import GripperProblem, box_scale, meets
+from predictor.statics import GripperProblem, apart, box_scale, meets
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
 HOLD_MARGIN = 0.2  # friction margin 1 - u required by --least-pressure
@@ -116,6 +119,34 @@ class Goal:
 def wrap_deg(angle: float) -> float:
     """An angle (deg) wrapped to (-180, 180]: 631.63 -> -88.37."""
     return 180.0 - (180.0 - angle) % 360.0
+
+
+#: mm from the origin: a tip goal farther than this is searched for at this distance in
+#: its direction (the closest reachable tip of a goal 1e308 mm away is that of one 1e4 mm
+#: away, to ~(reach)²/1e4 mm; its squared error would overflow); its errors are the real goal's.
+FAR_GOAL_MM = 1e4
+
+
+def search_tip(goal: "Goal") -> tuple[float, float]:
+    """The (X, Y) mm the search aims at: the goal's, pulled in to FAR_GOAL_MM when farther."""
+    x, y = goal.tip
+    r = math.hypot(x, y)
+    return (x, y) if r <= FAR_GOAL_MM else (x * (FAR_GOAL_MM / r), y * (FAR_GOAL_MM / r))
+
+
+def tip_errors(tip, angle_deg: float, goal: "Goal") -> tuple[float, float | None]:
+    """(position error mm, angle error deg or None) of a fingertip (X, Y) mm at tip angle
+    ``angle_deg`` against a tip goal: the distance to (X, Y), and achieved minus asked
+    angle wrapped to (-180, 180] (None when the goal has no angle). They are reported
+    apart; a goal is met when hypot(position, tip_length·angle in rad) <= TIP_TOL_MM."""
+    pos = math.hypot(tip[0] - goal.tip[0], tip[1] - goal.tip[1])
+    return pos, None if goal.angle_deg is None else wrap_deg(angle_deg - goal.angle_deg)
+
+
+def tip_met(ip: "InverseProblem", pos_mm: float, angle_err_deg: float | None) -> bool:
+    """The tip goal's test: hypot(position error, tip_length × wrapped angle error) <= TIP_TOL_MM."""
+    ang = 0.0 if angle_err_deg is None else ip.problem.params.tip_length * math.radians(angle_err_deg)
+    return math.hypot(pos_mm, ang) <= TIP_TOL_MM
 
 
 def parse_goal(text: str) -> Goal:
@@ -160,7 +191,8 @@ class InverseResult:
     """status: feasible | infeasible (goal_met: the same as a bool); pressures (P1, P2) MPa
     of the answer (or of the closest achievable value when infeasible); grasp_state (atlas
     STATES) of the gesture there, which is not the goal's verdict; tip (X, Y) mm and
-    tip_angle_deg; tip_error_mm (tip goals); normal_N, friction_use (|f|/(mu N)); objective
+    tip_angle_deg; tip_error_mm (tip goals): the position error, mm; angle_error_deg (tip
+    goals with an angle): achieved minus asked, wrapped to (-180, 180]; normal_N, friction_use (|f|/(mu N)); objective
     f; verified: the ramp solve agreed; robust: the goal's state holds on the ±REGULATOR
     stencil; stencil_states (9, centre first); candidates: starts tried; time_ms: whole
     query; reason: one line; joint, mu, object_weight_N: what was solved (statics);
@@ -185,6 +217,7 @@ class InverseResult:
     joint: str = ""
     mu: float | None = None
     object_weight_N: float | None = None
+    angle_error_deg: float | None = None
     gesture: GestureResult | None = None
 
     @property
@@ -197,7 +230,7 @@ class InverseResult:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "gesture"}
 
 
-class _Branch:
+class Branch:
     """An equilibrium (P (1, 2), x (1, 6), Jacobians) moved by continuation."""
 
     def __init__(self, ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
@@ -280,10 +313,11 @@ def _goal_terms(ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
     prob, goal = ip.problem, ip.goal
     st = prob.residual(p, x.reshape(-1, 2, 3))
     if goal.kind == "tip":
-        tip = st.pose.tip_end
-        e = [tip[:, 0] - goal.tip[0], tip[:, 1] - goal.tip[1]]
-        if goal.angle_deg is not None:
-            e.append(prob.params.tip_length * (st.pose.tip_angle - math.radians(goal.angle_deg)))
+        tip, (gx, gy) = st.pose.tip_end, search_tip(goal)
+        e = [tip[:, 0] - gx, tip[:, 1] - gy]
+        if goal.angle_deg is not None:   # the angle's difference wrapped to (-pi, pi]
+            d = st.pose.tip_angle - math.radians(goal.angle_deg)
+            e.append(prob.params.tip_length * torch.atan2(torch.sin(d), torch.cos(d)))
     else:
         c = st.contact
         use = c.ratio.abs() / prob.contact.mu
@@ -297,7 +331,7 @@ def _goal_terms(ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
     return (e * e).sum(-1), e, st
 
 
-def gradient(ip: InverseProblem, branch: _Branch):
+def gradient(ip: InverseProblem, branch: Branch):
     """At the branch's converged point: (f, df/dP (2,), e (k,), de/dP (k, 2)) by the
     implicit function theorem (module docstring), df/dP = 2 eᵀ de/dP, with ∂e/∂(x, P)
     (``_goal_derivatives``)."""
@@ -319,6 +353,19 @@ def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
         steps = torch.diag(h)                                                        # (8, 8)
         y = torch.cat((x, p), 1)
         Y = torch.cat((y, y + steps, y - steps))                                     # (17, 8)
+        if ip.goal.kind == "tip":   # the pose's graph, one per problem: a track's goals share it
+            with torch.inference_mode():
+                T = traced_tip_fn(ip.problem)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())   # (17, 3)
+            dT = (T[1:9] - T[9:]) / (2 * h[:, None])                                   # (8, 3)
+            (gx, gy), l_tip = search_tip(ip.goal), ip.problem.params.tip_length
+            e = [T[0, 0] - gx, T[0, 1] - gy]
+            cols = [dT[:, 0], dT[:, 1]]
+            if ip.goal.angle_deg is not None:
+                a = T[0, 2] - math.radians(ip.goal.angle_deg)
+                e.append(l_tip * torch.atan2(torch.sin(a), torch.cos(a)))
+                cols.append(l_tip * dT[:, 2])
+            d = torch.stack(cols)                                                      # (k, 8)
+            return torch.stack(e), d[:, :6].clone(), d[:, 6:].clone()
         with torch.inference_mode():
             E = _traced_goal_fn(ip)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())
         d = ((E[1:9] - E[9:]) / (2 * h[:, None])).T.clone()                          # (k, 8)
@@ -334,12 +381,26 @@ def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
 
 
 @graph_cache
+def traced_tip_fn(problem: GripperProblem):
+    """(x (B, 6), p (B, 2)) -> (B, 3): the fingertip X, Y mm and its angle rad (the pose,
+    which the plane X = 0 does not change), recorded once per problem: it does not depend
+    on the goal, so the tip goals of one gripper (a track's) share it."""
+    prob = apart(problem)
+
+    def tip(x, p):
+        pose = prob.residual(p, x.reshape(-1, 2, 3)).pose
+        return torch.cat((pose.tip_end, pose.tip_angle[:, None]), -1)
+
+    return traced(tip, 6, 2)
+
+
+@graph_cache
 def _traced_goal_fn(ip: InverseProblem):
     """e(x (B, 6), p (B, 2)) -> (B, k), recorded by predictor.graphs.traced."""
     return traced(lambda x, p: _goal_terms(ip, p, x)[1], 6, 2)
 
 
-def _clip(ip: InverseProblem, p: np.ndarray) -> np.ndarray:
+def clip_to_box(ip: InverseProblem, p: np.ndarray) -> np.ndarray:
     return np.clip(p, [ip.box[0], ip.box[2]], [ip.box[1], ip.box[3]])
 
 
@@ -348,7 +409,7 @@ MAX_STEP_CONTACT = 0.05  # MPa: with an object, continuation steps stay short
 STALL = 1e-3  # stop when a Gauss-Newton step gains less than this fraction of f
 
 
-def _gauss_newton(ip: InverseProblem, branch: _Branch) -> None:
+def gauss_newton(ip: InverseProblem, branch: Branch) -> None:
     """Projected Gauss-Newton (Levenberg-damped, capped, backtracking) on f = |e|² from the
     branch, within the box: a component at a bound whose step points out is held there
     and the other one moves alone (sliding along the bound)."""
@@ -371,7 +432,7 @@ def _gauss_newton(ip: InverseProblem, branch: _Branch) -> None:
             step[k] = -float(de[:, k] @ e) / float(de[:, k] @ de[:, k] + damp)
         step *= min(1.0, cap / max(np.abs(step).max(), 1e-300))
         for _ in range(6):  # backtrack: the bounds and the contact branch may cut the step
-            p_try = _clip(ip, p0 + step)
+            p_try = clip_to_box(ip, p0 + step)
             if np.abs(p_try - p0).max() <= 1e-9:
                 return
             if branch.move(torch.from_numpy(p_try)):
@@ -407,19 +468,17 @@ def _result_at(ip: InverseProblem, res: GestureResult, i: int) -> dict:
     tip = res.pose.tip_end[i].tolist()
     out = {"pressures": tuple(res.pressures[i].tolist()), "state": STATES[state[i]], "tip": tuple(tip),
            "tip_angle_deg": math.degrees(float(res.pose.tip_angle[i])), "normal_N": float(res.normal_force_N[i]),
-           "friction_use": None if math.isnan(use[i]) else float(use[i]), "tip_error_mm": None}
+           "friction_use": None if math.isnan(use[i]) else float(use[i]), "tip_error_mm": None,
+           "angle_error_deg": None}
     if ip.goal.kind == "tip":
-        err = math.hypot(tip[0] - ip.goal.tip[0], tip[1] - ip.goal.tip[1])
-        if ip.goal.angle_deg is not None:
-            err = math.hypot(err, ip.problem.params.tip_length * math.radians(out["tip_angle_deg"] - ip.goal.angle_deg))
-        out["tip_error_mm"] = err
+        out["tip_error_mm"], out["angle_error_deg"] = tip_errors(tip, out["tip_angle_deg"], ip.goal)
     return out
 
 
 def _meets(ip: InverseProblem, v: dict) -> bool:
     """Does an achieved value meet the goal?"""
     if ip.goal.kind == "tip":
-        ok = v["tip_error_mm"] is not None and v["tip_error_mm"] <= TIP_TOL_MM
+        ok = v["tip_error_mm"] is not None and tip_met(ip, v["tip_error_mm"], v["angle_error_deg"])
         return ok and (ip.problem.obstacle is None or v["state"] != "not_converged")
     ok = v["state"] == "holds" and v["normal_N"] >= ip.goal.min_normal
     # least pressure: the margin is a penalty term, met to within LEAST_PRESSURE_SLACK
@@ -441,10 +500,11 @@ def _starts(ip: InverseProblem, atlas: Atlas) -> list[tuple[torch.Tensor, torch.
             score = score + 10.0 * (atlas.normal_N.ravel() < ip.goal.min_normal)
         score = torch.from_numpy(score)
     else:
-        e = res.pose.tip_end - torch.tensor(ip.goal.tip, dtype=torch.float64)
+        e = res.pose.tip_end - torch.tensor(search_tip(ip.goal), dtype=torch.float64)
         score = e.pow(2).sum(-1)
         if ip.goal.angle_deg is not None:
-            score = score + (ip.problem.params.tip_length * (res.pose.tip_angle - math.radians(ip.goal.angle_deg))) ** 2
+            d = res.pose.tip_angle - math.radians(ip.goal.angle_deg)
+            score = score + (ip.problem.params.tip_length * torch.atan2(torch.sin(d), torch.cos(d))) ** 2
     score = torch.where(ok, score, torch.inf)
     chosen = []
     for i in torch.argsort(score).tolist():
@@ -456,7 +516,7 @@ def _starts(ip: InverseProblem, atlas: Atlas) -> list[tuple[torch.Tensor, torch.
     return [(res.pressures[i], res.tau[i].reshape(6)) for i in chosen]
 
 
-def _verified(ip: InverseProblem, ver: GestureResult, branch: _Branch, f: float) -> dict:
+def _verified(ip: InverseProblem, ver: GestureResult, branch: Branch, f: float) -> dict:
     """A candidate (the continuation's ``branch``, objective f) against its forward ramp
     solve ``ver`` (one row): the achieved values, verified (converged, tip within
     VERIFY_TOL_MM, same contact and hold state) and meets (verified and the goal met)."""
@@ -478,10 +538,10 @@ def _stencil(ip: InverseProblem, ver: GestureResult, cand: dict) -> dict:
     if not cand["verified"]:
         return {"robust": False, "stencil_states": (cand["state"],)}
     i = cand["index"]
-    branch = _Branch(ip, ver.pressures[i], ver.tau[i])
+    branch = Branch(ip, ver.pressures[i], ver.tau[i])
     d = REGULATOR * torch.tensor([(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
                                  dtype=torch.float64)
-    ps = torch.from_numpy(_clip(ip, (branch.p + d).numpy()))
+    ps = torch.from_numpy(clip_to_box(ip, (branch.p + d).numpy()))
     xs, ok = branch.neighbours(ps)
     with torch.no_grad():
         st = ip.problem.residual(ps, xs.reshape(-1, 2, 3))
@@ -536,8 +596,8 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
     beat = Heartbeat("inverse")
     for k, (p, x) in enumerate(starts):
         beat(f"start {k + 1} of {len(starts)}")
-        branch = _Branch(ip, p, x)
-        _gauss_newton(ip, branch)
+        branch = Branch(ip, p, x)
+        gauss_newton(ip, branch)
         branch.refine()
         cands.append((branch.p[0].clone(), branch))
         if gradient(ip, branch)[0] <= _exact(ip):
@@ -565,18 +625,26 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
         reason = "goal met, verified by the ramp solve" + ("; robust to ±0.01 MPa" if robust else
                                                           "; NOT robust to the regulators' ±0.01 MPa")
     elif ip.goal.kind == "tip":
-        reason = (f"unreachable: the closest achievable tip is {cand['tip_error_mm']:.2f} mm away "
-                  f"(tolerance {TIP_TOL_MM} mm)")
+        reason = unreachable_reason(cand["tip_error_mm"], cand["angle_error_deg"])
     else:
         reason = _hold_reason(ip, cand, checked, atlas)
     return InverseResult(
         status="feasible" if cand["meets"] else "infeasible", goal_met=bool(cand["meets"]),
         pressures=cand["pressures"], grasp_state=cand["state"],
         tip=cand["tip"], tip_angle_deg=cand["tip_angle_deg"], tip_error_mm=cand["tip_error_mm"],
+        angle_error_deg=cand["angle_error_deg"],
         normal_N=cand["normal_N"], friction_use=cand["friction_use"], objective=cand["objective"],
         verified=cand["verified"], robust=robust, stencil_states=stencil, candidates=len(cands),
         time_ms=1e3 * (time.perf_counter() - t0), reason=reason, joint=ip.problem.joint.name,
         mu=cand["gesture"].mu, object_weight_N=cand["gesture"].object_weight_N, gesture=cand["gesture"])
+
+
+def unreachable_reason(pos_mm: float, angle_err_deg: float | None) -> str:
+    """The one line of an unreachable tip goal: the closest tip's position error (and its
+    wrapped angle error) and the tolerance."""
+    ang = "" if angle_err_deg is None else f", its tip angle {angle_err_deg:+.2f} deg off"
+    dist = f"{pos_mm:.2f}" if pos_mm < 1e6 else f"{pos_mm:.3g}"
+    return f"unreachable: the closest achievable tip is {dist} mm away{ang} (tolerance {TIP_TOL_MM} mm)"
 
 
 def _atlas_matches(atlas: Atlas, problem: GripperProblem) -> None:

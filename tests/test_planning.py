@@ -21,7 +21,7 @@ from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
 from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify, grasp_atlas as atlas_of
 from predictor.inverse import where_it_touches
-from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, _Branch, coarse_atlas, gradient
+from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, Branch, coarse_atlas, gradient
 from predictor.solve import solve
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -182,7 +182,7 @@ def test_ift_gradient_matches_finite_differences(circle, free):
     for ip, p in cases:
         p = torch.tensor(p, dtype=torch.float64)
         res = solve(ip.problem, p[None])
-        branch = _Branch(ip, p, res.tau[0])
+        branch = Branch(ip, p, res.tau[0])
         f, df, _, _ = gradient(ip, branch)
         fd = []
         for k in range(2):
@@ -191,7 +191,7 @@ def test_ift_gradient_matches_finite_differences(circle, free):
             vals = []
             for sign in (1, -1):
                 r = solve(ip.problem, (p + sign * dp)[None])
-                vals.append(gradient(ip, _Branch(ip, p + sign * dp, r.tau[0]))[0])
+                vals.append(gradient(ip, Branch(ip, p + sign * dp, r.tau[0]))[0])
             fd.append((vals[0] - vals[1]) / (2 * h))
         fd = torch.tensor(fd, dtype=torch.float64)
         assert torch.allclose(df, fd, rtol=1e-3, atol=1e-3 * float(fd.abs().max())), (df, fd)
@@ -223,7 +223,13 @@ def test_closest_tip_pressed_on_the_plane_is_the_stiff_continuations(free):
     ans = inverse_pressures(free, goal="tip:9.04,-214.93,-88.37")
     assert ans.status == "infeasible" and ans.verified
     assert ans.pressures == pytest.approx((0.07851131233192438, -0.06816379473653308), abs=1e-6)
-    assert ans.tip_error_mm == pytest.approx(2.0215922370790325, abs=1e-5)
+    # the errors apart (issue 57): position mm, angle deg wrapped; their goal measure
+    # hypot(position, tip length x angle) is the frozen 2.02159224 mm
+    assert ans.tip_error_mm == pytest.approx(math.hypot(ans.tip[0] - 9.04, ans.tip[1] + 214.93), rel=1e-12)
+    assert ans.angle_error_deg == pytest.approx(ans.tip_angle_deg + 88.37, abs=1e-9)
+    l_tip = free.problem.params.tip_length
+    assert math.hypot(ans.tip_error_mm, l_tip * math.radians(ans.angle_error_deg)) == pytest.approx(
+        2.0215922370790325, abs=1e-5)
     assert where_it_touches(ans)["plane_force_N"] > 0
 
 

@@ -81,13 +81,16 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                 "verified by a forward solve along the ramp, and its robustness checked at the "
                 f"regulators' +/-{inv['tolerances']['regulator_MPa']} MPa. Joint model: "
                 f"{joint_model(root, inv.get('joint'), 'make inverse')}. Times are predictor.inverse's own wall times "
-                "(inverse.json, not a benchmark).", "",
+                "(inverse.json, not a benchmark), taken on the machine the track's load averages below describe "
+                "(make inverse's run records the track too; make track replaces that part). A tip goal's error "
+                "is its position error, and its angle error (wrapped) apart.", "",
                 "| goal | object | status | pressures (MPa) | friction use / tip error | verified | robust "
                 "| time (inverse.json) |",
                 "|---|---|---|---|---|---|---|---|"]
         for c in inv["cases"]:
+            angle = c.get("angle_error_deg")
             shown = (f"{num(c['friction_use'])}" if c["friction_use"] is not None
-                      else f"{num(c['tip_error_mm'])} mm")
+                      else f"{num(c['tip_error_mm'])} mm" + ("" if angle is None else f", {angle:+.2f}°"))
             out.append(f"| {c['goal']} | {c['object'] or '-'} | {c['status']} | "
                        f"{', '.join(f'{v:.4f}' for v in c['pressures'])} | {shown} | {c['verified']} | "
                        f"{c['robust']} | {c['time_ms_median']:.0f} ms |")
@@ -97,14 +100,59 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
         for label, key in rows:
             checks.append(judge(title, f"inverse {label}", [(Target("<=", t[key], "ms"), m[key])]))
             out.append(f"| {label} | {m[key]:.0f} ms |" + cells(checks[-1]))
-        out += [f"| hold goal, without an atlas (median) | {m['inverse_hold_cold_ms']:.0f} ms |" + cells(None), ""]
+        out += [f"| hold goal, without an atlas (median) | {m['inverse_hold_cold_ms']:.0f} ms |" + cells(None)]
+        if m.get("inverse_tip_warm_ms") is not None:
+            out += [f"| fingertip target, warm (median) | {m['inverse_tip_warm_ms']:.0f} ms |" + cells(None)]
+        out += [""]
+        out += _track(inv.get("track"), title, checks)
     else:
         out += missing("inverse pressures", "make inverse")
     out += figure(root, "predictor/inverse.png", "inverse answers",
                    f"`make inverse` (`python -m predictor.inverse --cases`, joint model "
                    f"{joint_model(root, (inv or {}).get('joint'))}): each case's answer drawn, its goal "
                    "and status in the title (x: a fingertip target).", "make inverse")
+    out += figure(root, "predictor/track.png", "closed-loop tracking",
+                  "`make inverse` (`python -m predictor.inverse --cases --track-plot`; alone: `make track`), "
+                  "joint model the committed surrogate results/surrogate/improved.pt (1.8 mm data), no object, the "
+                  "fingers meeting at X = 0: the 100 goals across the reachable region and out of it, the verified "
+                  "forward fingertip at each answer, the time per goal, the tip error and the pressures against "
+                  "time.", "make inverse")
     return out, checks
+
+
+def _track(tr: dict | None, title: str, checks: list) -> list[str]:
+    """Issue 60's track (inverse.json ``track``): its figures against the targets."""
+    if not tr:
+        return missing("the closed-loop track (inverse.json track)", "make inverse")
+    load = ", ".join(f"{v:.1f}" for v in tr.get("load_average_before", []))
+    out = ["#### Fingertip goals along a trajectory (issue 60)", "",
+           f"{tr['goals']} goals across the reachable region and out of it (`predictor.track`), each warm-started "
+           f"from the previous answer and verified through the forward equilibrium (with the ±0.01 MPa stencil): "
+           f"{tr['reached']} reached, {tr['unreachable']} unreachable (answered with the closest reachable tip, "
+           f"flagged), {tr['restarts'] if 'restarts' in tr else '?'} restarts from the kept grid. A benchmark: "
+           f"wall times at one thread, load averages {load} before the run, beside: {tr.get('beside', '?')}. "
+           f"The kept grids (solved before the first goal): {tr['setup_ms']:.0f} ms.", "",
+           "| figure (inverse.json track) | measured | target | met |", "|---|---|---|---|"]
+    t = tr.get("targets", {})
+    rows = [("reachable goal, warm (median)", tr.get("reached_warm_median_ms"),
+             Target("<=", t.get("reachable_warm_ms", 5.0), "ms")),
+            ("any goal (median)", tr["median_ms"], Target("<=", t.get("any_warm_ms", 20.0), "ms")),
+            ("rate, end to end", tr["rate_hz"], Target(">=", t.get("rate_hz", 50.0), "Hz")),
+            ("tip error where reachable (max)", tr["max_tip_error_mm"], Target("<=", t.get("tip_error_mm", 0.1), "mm"))]
+    for label, value, target in rows:
+        checks.append(judge(title, f"track {label}", [(target, value)]))
+        shown = "-" if value is None else f"{value:.3g}"
+        out.append(f"| {label} | {shown} {target.unit} |" + cells(checks[-1]))
+    if tr.get("cpu_median_ms") is not None:   # the answers' own CPU time: the cost without the machine's load
+        out += [f"| CPU time per goal: reachable warm / any / unreachable (median) | "
+                f"{num(tr['reached_warm_cpu_median_ms'])} / {num(tr['cpu_median_ms'])} / "
+                f"{num(tr['unreachable_cpu_median_ms'])} ms |" + cells(None),
+                f"| track rate by CPU time | {tr['cpu_rate_hz']:.3g} Hz |" + cells(None)]
+    out += [f"| unreachable goal (median) | {num(tr.get('unreachable_median_ms'))} ms |" + cells(None),
+            f"| p95 per goal | {tr['p95_ms']:.0f} ms |" + cells(None),
+            f"| first goal | {tr['first_ms']:.0f} ms |" + cells(None),
+            f"| every answer verified | {tr['verified']} |" + cells(None), ""]
+    return out
 
 def _finer_ramp(root: Path, kind: str, a: dict) -> list[str]:
     """The reference's own path resolution: the sweep ``a`` and the ramp reference against

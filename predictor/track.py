@@ -1,0 +1,544 @@
+"""Fingertip goals along a trajectory (issue 60): each answered warm-started from the
+previous answer, every answer verified through the forward equilibrium.
+
+A closed-loop controller asks, many times a second, which pressures (P1, P2) put the
+fingertip at its next goal (X, Y[, DEG]) mm, deg (right finger, no object, the fingers
+meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the other:
+
+1. Search: the projected Gauss-Newton of predictor.inversion (``gauss_newton``: the
+   goal residual's gradient through the equilibrium by the implicit function theorem,
+   continuation steps with the plane's homotopy, steps capped, bounds) from the previous
+   answer's equilibrium; the first goal starts from the best points of the kept grid.
+   Near the last answer a position goal is first tried by Newton on the square system
+   of the equilibrium and the goal in (x, P) at once (``Tracker._newton``), which needs
+   the outline clear of X = 0 and the step inside the box; otherwise the Gauss-Newton.
+2. Unreachable goals: the search stops at the locally closest tip. The kept grid (a
+   START_GRID x START_GRID cold grid of forward answers and the coarse COARSE x COARSE
+   one of predictor.inversion with the gestures pressed on X = 0, solved once per
+   process, refined by every verified answer) is looked up (no solve): when one of its
+   tips is closer to the goal than the local answer, the search restarts from the
+   N_STARTS best of them and the closest verified answer is kept. No global search
+   otherwise; the answer is flagged ``unreachable`` with its position error (and
+   wrapped angle error), never farther from the goal than the kept grid's best.
+3. Verification (every answer): the forward equilibrium at the answer's pressures and at
+   its 8 ±REGULATOR neighbours (the regulators' resolution), solved anew: in one batched
+   cold solve of the predictor (predictor.solve from tau = 0, without the plane's
+   penalty, whose answer is the gripper's wherever the outline stays at X >= 0 — the
+   broad phase ``solve`` itself uses), and where the finger presses on X = 0 by the
+   solver's continuation (the LM with the plane's homotopy, full tolerance) from the
+   previous verified gesture (the gripper's history along the track). The answer is
+   ``verified`` when its forward solve converged and its fingertip lies within
+   VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
+   angle are the forward solve's; an unverified search result is never returned as
+   verified (``verified`` false, and ``Tracker.answer`` then retries from the grid).
+
+Data flow: GripperProblem -> Tracker (kept grid) -> answer(Goal) -> TrackAnswer; or
+``track(problem, goals)`` -> TrackResult (answers, per-goal time, summary()).
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import functools
+import io
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from predictor.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_MM, VERIFY_TOL_MM, Goal,
+                                 InverseProblem, Branch, clip_to_box, gauss_newton, search_tip, tip_errors,
+                                 tip_met, wrap_deg)
+from predictor.options import SolverOptions
+from predictor.problem import FULL_BOX, check_box
+from predictor.result import GestureResult
+from predictor.solve import gesture_result, meets_tolerances, solve
+from predictor.statics import GripperProblem, apart
+
+NEWTON_ITER = 6           # Tracker._newton: iterations before the search takes over
+NEWTON_TOL = 1e-9         # Tracker._newton: the scaled residual (N, N, N·mm/100) it converges to
+START_GRID = 9            # the kept grid of forward answers: START_GRID x START_GRID over the box
+MAX_GOALS = 100_000       # goals in one track file
+COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
+#: Issue 60's targets (medians, one thread): per goal along a track, a reachable tip goal
+#: warm, any tip goal warm, and the rate of a 100-goal track end to end.
+TARGET_REACHABLE_MS, TARGET_ANY_MS, TARGET_RATE_HZ = 5.0, 20.0, 50.0
+
+
+@dataclass(frozen=True)
+class TrackAnswer:
+    """One goal's answer. goal (X, Y, DEG or None); status ``reached`` | ``unreachable``
+    (the closest reachable answer); pressures (P1, P2) MPa; tip (X, Y) mm and
+    tip_angle_deg of the verifying forward solve; position_error_mm, angle_error_deg
+    (wrapped, None without DEG); verified, robust (module docstring); restarted: the kept
+    grid knew a closer tip and the search restarted from it; time_ms: the whole answer,
+    verification included; gesture: the verifying GestureResult (one row)."""
+
+    goal: tuple
+    status: str
+    pressures: tuple[float, float]
+    tip: tuple[float, float]
+    tip_angle_deg: float
+    position_error_mm: float
+    angle_error_deg: float | None
+    verified: bool
+    robust: bool
+    restarted: bool
+    plane_force_N: float
+    time_ms: float
+    cpu_ms: float = 0.0
+    gesture: GestureResult | None = None
+
+    def summary(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "gesture"}
+
+
+@functools.lru_cache(maxsize=8)
+def start_grid(problem: GripperProblem, box: tuple, options: SolverOptions):
+    """The kept grid: START_GRID x START_GRID pressures over ``box`` solved in one batched
+    cold solve of the problem without the plane's penalty; the rows that converged with
+    the outline at X >= 0 are the problem's own forward answers (the others, pressed on
+    X = 0 where the fingers meet, are left out). Returns (P (n, 2), tau (n, 6), tip (n, 2),
+    angle (n,) rad) of those rows; solved once per process per problem, box and options."""
+    p1 = torch.linspace(box[0], box[1], START_GRID, dtype=torch.float64)
+    p2 = torch.linspace(box[2], box[3], START_GRID, dtype=torch.float64)
+    P = torch.cartesian_prod(p1, p2)
+    res = solve(apart(problem), P, options)
+    ok = res.converged & ~(res.plane_overlap_mm > 0) if res.plane_overlap_mm is not None else res.converged
+    return (P[ok], res.tau.reshape(-1, 6)[ok], res.pose.tip_end[ok].clone(), res.pose.tip_angle[ok].clone())
+
+
+class Tracker:
+    """Answers tip goals one after the other (module docstring). problem: a 2-joint
+    GripperProblem without an object; box (P1lo, P1hi, P2lo, P2hi) MPa."""
+
+    def __init__(self, problem: GripperProblem, box=FULL_BOX, options: SolverOptions = SolverOptions(),
+                 keep_coarse: bool = False):
+        if problem.obstacle is not None:
+            raise ValueError("--track: fingertip goals of the gripper without an object (drop --object)")
+        if problem.n_joints != 2:
+            raise ValueError(f"the inverse search spans (P1, P2): finger {problem.params.finger.name!r} has "
+                             f"{problem.n_joints} joints")
+        self.problem, self.box, self.options = problem, check_box(box), options
+        P, tau, tip, ang = start_grid(problem, self.box, options)
+        # the kept grid, refined by every verified answer (lists of rows)
+        self.kept = [P, tau, tip, ang]
+        self.branch: Branch | None = None      # the previous answer's equilibrium (search)
+        self.anchor = None                      # the previous verified gesture (p (1, 2), x (1, 6))
+        self.coarse_kept = False
+        if keep_coarse:
+            self._keep_coarse()
+
+    def _keep_coarse(self) -> None:
+        """Add predictor.inversion.coarse_atlas (COARSE x COARSE, solved by continuation with
+        the plane X = 0, once per process) to the kept grid: it holds the gestures pressed on
+        X = 0 that the cold grid leaves out; solved at the first goal that is not met."""
+        from predictor.inversion import coarse_atlas
+
+        res = coarse_atlas(self.problem, self.box, self.options).result
+        ok = res.converged
+        P, tau, tip, ang = self.kept
+        self.kept = [torch.cat((P, res.pressures[ok])), torch.cat((tau, res.tau.reshape(-1, 6)[ok])),
+                     torch.cat((tip, res.pose.tip_end[ok])), torch.cat((ang, res.pose.tip_angle[ok]))]
+        self.coarse_kept = True
+
+    def _ip(self, goal: Goal) -> InverseProblem:
+        return InverseProblem(self.problem, goal, self.box, self.options)
+
+    def _grid_scores(self, goal: Goal) -> torch.Tensor:
+        """The kept grid's goal objective |e|² per row (as the search's)."""
+        P, _, tip, ang = self.kept
+        e = tip - torch.tensor(search_tip(goal), dtype=torch.float64)
+        score = e.pow(2).sum(-1)
+        if goal.angle_deg is not None:
+            d = ang - math.radians(goal.angle_deg)
+            score = score + (self.problem.params.tip_length * torch.atan2(torch.sin(d), torch.cos(d))) ** 2
+        return score
+
+    def _grid_starts(self, goal: Goal) -> list[int]:
+        P = self.kept[0]
+        chosen = []
+        for i in torch.argsort(self._grid_scores(goal)).tolist():
+            if len(chosen) == N_STARTS:
+                break
+            if all(float((P[i] - P[j]).abs().max()) >= START_SEPARATION for j in chosen):
+                chosen.append(i)
+        return chosen
+
+    def _newton(self, ip: InverseProblem, branch: Branch) -> float | None:
+        """The fast path of a position goal near the last answer: Newton on the square
+        system of the equilibrium and the goal, r(x, P) = 0 (6 scaled rows) and
+        tip(x, P) = (X, Y) (2), in the 8 unknowns (x, P) at once, from the branch's point,
+        with the solver's difference Jacobian (predictor.jacobians) and the pose's
+        (predictor.inversion.traced_tip_fn). It needs the outline clear of X = 0 and the
+        steps inside the box and under MAX_STEP MPa; f when it converged (the residual to
+        NEWTON_TOL scaled, the tip within 0.1 TIP_TOL_MM), the branch moved there; else
+        None, the branch unchanged (the search goes on by continuation)."""
+        from predictor.inversion import MAX_STEP, traced_tip_fn
+        from predictor.jacobians import difference_offsets, jacobian_fn
+
+        prob = self.problem
+        jac = jacobian_fn(apart(prob))
+        tip_fn = traced_tip_fn(prob)
+        gx, gy = search_tip(ip.goal)
+        lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
+        hi = torch.tensor([self.box[1], self.box[3]], dtype=torch.float64)
+        hx, offsets = difference_offsets(6, 1e-6)
+        hp = 1e-6 * 0.3
+        x, p = branch.x.clone(), branch.p.clone()
+        for _ in range(NEWTON_ITER):
+            J, r, Jp = jac(x, p)
+            X = torch.cat((x + offsets, x.expand(4, 6)))
+            P = torch.cat((p.expand(13, 2), p + hp * torch.eye(2, dtype=torch.float64),
+                           p - hp * torch.eye(2, dtype=torch.float64)))
+            with torch.inference_mode():
+                T = tip_fn(X, P)[:, :2].clone()                        # (17, 2)
+            e = T[0] - torch.tensor((gx, gy), dtype=torch.float64)
+            if float(r[0].abs().max()) <= NEWTON_TOL and float(e.norm()) <= 0.1 * TIP_TOL_MM:
+                if bool(_crosses(prob, x, p)):
+                    return None
+                branch.restore((p, x, (J[:, :6], Jp)))
+                return float(e @ e)
+            ex = ((T[1:7] - T[7:13]) / (2 * hx[:, None])).T             # (2, 6)
+            ep = ((T[13:15] - T[15:17]) / (2 * hp)).T                   # (2, 2)
+            A = torch.cat((torch.cat((J[0, :6], Jp[0]), 1), torch.cat((ex, ep), 1)))   # (8, 8)
+            b = torch.cat((r[0, :6], e))
+            dz, info = torch.linalg.solve_ex(A, -b)
+            if int(info) != 0:
+                return None
+            dp = dz[6:]
+            if float(dp.abs().max()) > MAX_STEP:
+                return None
+            p_new = p + dp[None]
+            if bool(((p_new < lo) | (p_new > hi)).any()):
+                return None                                            # a bound: the projected search
+            x, p = x + dz[None, :6], p_new
+        return None
+
+    def _search(self, ip: InverseProblem, branch: Branch) -> float:
+        """Gauss-Newton from the branch (the search's iterates at the solver's 100x looser
+        tolerance, as predictor.inversion's: the verification's forward solve converges the
+        answer fully and its tip is the one reported); f."""
+        gauss_newton(ip, branch)
+        from predictor.inversion import traced_tip_fn
+
+        with torch.inference_mode():
+            T = traced_tip_fn(self.problem)(branch.x, branch.p)[0].clone()
+        e = T[:2] - torch.tensor(search_tip(ip.goal), dtype=torch.float64)
+        f = float(e @ e)
+        if ip.goal.angle_deg is not None:
+            d = float(T[2]) - math.radians(ip.goal.angle_deg)
+            f += (self.problem.params.tip_length * math.atan2(math.sin(d), math.cos(d))) ** 2
+        return f
+
+    def answer(self, goal: Goal) -> TrackAnswer:
+        """The verified answer to a tip goal (module docstring)."""
+        t0, c0 = time.perf_counter(), time.process_time()
+        if goal.kind != "tip":
+            raise ValueError("a track's goals are fingertip goals tip:X,Y[,DEG]")
+        ip = self._ip(goal)
+        found = []                                   # (f, branch, anchor)
+        exact = (0.1 * TIP_TOL_MM) ** 2
+        if self.branch is not None:
+            quick = self._newton(ip, self.branch) if goal.angle_deg is None else None
+            if quick is not None:
+                found.append((quick, self.branch, self.anchor))
+            else:
+                found.append((self._search(ip, self.branch), self.branch, self.anchor))
+        best = lambda: min((t[0] for t in found), default=math.inf)  # noqa: E731
+        restarted = False
+        for _ in range(2):
+            if found and best() > exact and not self.coarse_kept:
+                self._keep_coarse()     # an unmet goal: the coarse grid's pressed gestures join the kept grid
+            if found and (best() <= exact or float(self._grid_scores(goal).min()) >= best() - 1e-12):
+                break                   # met, or the kept grid knows nothing closer: no restart
+            restarted = restarted or bool(found)
+            P, tau = self.kept[0], self.kept[1]
+            for i in self._grid_starts(goal):
+                b = Branch(ip, P[i], tau[i])
+                anchor = (b.p.clone(), b.x.clone())
+                found.append((self._search(ip, b), b, anchor))
+                if found[-1][0] <= exact:
+                    break
+        found.sort(key=lambda t: t[0])
+        for f, branch, anchor in found:
+            ver = self._verify(ip, branch, anchor)
+            if ver is not None:
+                break
+        else:   # no candidate verified: the best, flagged unverified (never returned as verified)
+            f, branch, anchor = found[0]
+            ver = self._verify(ip, branch, anchor, force=True)
+        gest, verified, robust = ver
+        tip = tuple(gest.pose.tip_end[0].tolist())
+        angle = math.degrees(float(gest.pose.tip_angle[0]))
+        pos, ang = tip_errors(tip, angle, goal)
+        if verified:
+            self.branch, self.anchor = branch, (gest.pressures.clone(), gest.tau.reshape(1, 6).clone())
+            P, tau, tp, an = self.kept
+            self.kept = [torch.cat((P, gest.pressures)), torch.cat((tau, gest.tau.reshape(1, 6))),
+                         torch.cat((tp, gest.pose.tip_end)), torch.cat((an, gest.pose.tip_angle))]
+        return TrackAnswer(goal=(goal.tip[0], goal.tip[1], goal.angle_deg),
+                           status="reached" if verified and tip_met(ip, pos, ang) else "unreachable",
+                           pressures=tuple(gest.pressures[0].tolist()), tip=tip, tip_angle_deg=angle,
+                           position_error_mm=pos, angle_error_deg=ang, verified=verified, robust=robust,
+                           restarted=restarted,
+                           plane_force_N=0.0 if gest.plane_force_N is None else float(gest.plane_force_N[0]),
+                           time_ms=1e3 * (time.perf_counter() - t0), cpu_ms=1e3 * (time.process_time() - c0),
+                           gesture=gest)
+
+    def _verify(self, ip: InverseProblem, branch: Branch, anchor, force: bool = False):
+        """(verifying gesture (one row), verified, robust), or None when the forward solve
+        disagrees (unless ``force``: then returned with verified False). Module docstring
+        §3: the centre and its 8 neighbours in one batched cold solve without the plane's
+        penalty, the rows pressed on X = 0 by continuation from ``anchor``."""
+        prob, opts = self.problem, self.options
+        d = REGULATOR * torch.tensor([(0, 0)] + [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
+                                     dtype=torch.float64)
+        ps = torch.from_numpy(clip_to_box(ip, (branch.p + d).numpy()))
+        t0 = time.perf_counter()
+        res = solve(apart(prob), ps, opts)
+        x, ok = res.tau.reshape(9, 6).clone(), res.converged.clone()
+        pressed = ~ok | (res.plane_overlap_mm > 0)
+        if not bool(pressed.any()):   # every row the problem's own (the solver's rule checked them)
+            g = res
+        else:
+            cont = Branch(ip, anchor[0], anchor[1])
+            cont.tol = opts
+            xc, okc = cont.neighbours(ps[pressed])
+            x[pressed], ok[pressed] = xc, okc
+            # the forward model's own convergence rule at the verified points (residual, box)
+            g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
+                               "track-verify", None)
+            ok = ok & meets_tolerances(g, torch.nan_to_num(x), opts)
+        centre = g.rows([0])
+        from predictor.inversion import traced_tip_fn
+
+        with torch.inference_mode():
+            searched = traced_tip_fn(prob)(branch.x, branch.p)[0, :2].clone()   # the search's fingertip
+        agree = bool(ok[0]) and float((centre.pose.tip_end[0] - searched).norm()) <= VERIFY_TOL_MM
+        if not agree and not force:
+            return None
+        centre = dataclasses.replace(centre, converged=ok[:1].clone())
+        return centre, agree, agree and bool(ok.all())
+
+
+def _crosses(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+    """Whether the outline at (x, p) lies across X = 0 (the plane's penalty would act)."""
+    from predictor.ramp import crosses_plane
+
+    return crosses_plane(problem, x, p).any()
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """answers (one per goal, in order), total_ms (wall time of the goals' answers, end to
+    end), setup_ms (the kept grids, solved before the first goal)."""
+
+    answers: tuple[TrackAnswer, ...]
+    total_ms: float
+    setup_ms: float = 0.0
+
+    def summary(self) -> dict:
+        """Per-goal rows and the issue's figures: goals, median_ms, p95_ms, max_ms, rate_hz
+        (end to end), max_tip_error_mm (over the reached goals), verified (all), reached,
+        unreachable, the reached and unreachable goals' median times."""
+        t = np.array([a.time_ms for a in self.answers])
+        reached = [a for a in self.answers if a.status == "reached"]
+        unreach = [a for a in self.answers if a.status != "reached"]
+        med = lambda xs: float(np.median(xs)) if xs else None  # noqa: E731
+        c = np.array([a.cpu_ms for a in self.answers])
+        return {"goals": len(self.answers), "median_ms": float(np.median(t)), "p95_ms": float(np.percentile(t, 95)),
+                "max_ms": float(t.max()), "first_ms": float(t[0]),
+                "warm_median_ms": med(t[1:].tolist()),
+                "rate_hz": 1e3 * len(t) / self.total_ms, "total_ms": self.total_ms, "setup_ms": self.setup_ms,
+                "max_tip_error_mm": max((a.position_error_mm for a in reached), default=None),
+                "verified": all(a.verified for a in self.answers),
+                "robust": sum(a.robust for a in self.answers),
+                "reached": len(reached), "unreachable": len(unreach),
+                "reached_warm_median_ms": med([a.time_ms for a in reached[1:]] if reached and reached[0] is
+                                              self.answers[0] else [a.time_ms for a in reached]),
+                "unreachable_median_ms": med([a.time_ms for a in unreach]),
+                "restarts": sum(a.restarted for a in self.answers),
+                # CPU time (process, one thread): the answers' own cost on a shared machine
+                "cpu_median_ms": float(np.median(c)), "cpu_p95_ms": float(np.percentile(c, 95)),
+                "cpu_rate_hz": 1e3 * len(c) / float(c.sum()),
+                "reached_warm_cpu_median_ms": med([a.cpu_ms for a in reached if a is not self.answers[0]]),
+                "unreachable_cpu_median_ms": med([a.cpu_ms for a in unreach]),
+                "answers": [a.summary() for a in self.answers]}
+
+
+def track(problem: GripperProblem, goals, box=FULL_BOX, options: SolverOptions = SolverOptions()) -> TrackResult:
+    """Answer ``goals`` (Goals, or (X, Y[, DEG]) tuples) in order with one Tracker; its
+    kept grids (``start_grid`` and the coarse one, once per process) are solved first and
+    timed apart (``setup_ms``)."""
+    t0 = time.perf_counter()
+    tracker = Tracker(problem, box, options, keep_coarse=True)
+    goals = [g if isinstance(g, Goal) else tip_goal(*g) for g in goals]
+    t1 = time.perf_counter()
+    answers = tuple(tracker.answer(g) for g in goals)
+    return TrackResult(answers, 1e3 * (time.perf_counter() - t1), 1e3 * (t1 - t0))
+
+
+def tip_goal(x: float, y: float, deg: float | None = None) -> Goal:
+    """A tip Goal from numbers (DEG wrapped to (-180, 180])."""
+    return Goal("tip", (float(x), float(y)), None if deg is None else wrap_deg(float(deg)))
+
+
+def _goal_row(where: str, vals) -> Goal:
+    if len(vals) not in (2, 3):
+        raise ValueError(f"{where}: a goal is X,Y or X,Y,DEG (mm, mm, deg), got {len(vals)} values")
+    nums = []
+    for name, v in zip(("X", "Y", "DEG"), vals):
+        if isinstance(v, str):
+            try:
+                v = float(v.strip())
+            except ValueError:
+                raise ValueError(f"{where}: {name} = {v!r} is not a number") from None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > COORD_MM:
+            raise ValueError(f"{where}: {name} = {v!r}: must be a finite number, |{name}| <= {COORD_MM:g}")
+        nums.append(float(v))
+    return tip_goal(*nums)
+
+
+def load_track(path: str | Path) -> list[Goal]:
+    """The goals of a track file (ValueError, one line): CSV rows X,Y[,DEG] (mm, mm, deg;
+    an optional header row x,y[,deg]; # comments and blank lines skipped) or JSON: a list
+    of [X, Y(, DEG)] or {"x": , "y": (, "deg": )} (or {"goals": that list}); NaN refused."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read the track {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    goals = []
+    if path.suffix.lower() == ".json":
+        def constant(c):
+            raise ValueError(f"{path}: {c} is not a number (JSON)")
+        try:
+            doc = json.loads(text, parse_constant=constant)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+        if isinstance(doc, dict):
+            if set(doc) - {"goals", "note"} or "goals" not in doc:
+                raise ValueError(f"{path}: a track JSON is a list of goals or {{\"goals\": [...]}} (keys: goals, note)")
+            doc = doc["goals"]
+        if not isinstance(doc, list):
+            raise ValueError(f"{path}: a track JSON is a list of goals")
+        for i, g in enumerate(doc):
+            where = f"{path}: goals[{i}]"
+            if isinstance(g, dict):
+                if set(g) - {"x", "y", "deg"} or not {"x", "y"} <= set(g):
+                    raise ValueError(f"{where}: keys x, y (mm) and optionally deg, got {sorted(g)}")
+                g = [g["x"], g["y"]] + ([g["deg"]] if "deg" in g else [])
+            if not isinstance(g, list):
+                raise ValueError(f"{where}: a goal is [X, Y(, DEG)] or {{x, y(, deg)}}")
+            goals.append(_goal_row(where, g))
+    else:
+        rows = [r for r in csv.reader(io.StringIO(text))]
+        for n, row in enumerate(rows, 1):
+            row = [c.strip() for c in row]
+            if not row or not any(row) or row[0].startswith("#"):
+                continue
+            if not goals and [c.lower() for c in row] in (["x", "y"], ["x", "y", "deg"]):
+                continue
+            goals.append(_goal_row(f"{path}:{n}", row))
+    if not 1 <= len(goals) <= MAX_GOALS:
+        raise ValueError(f"{path}: {len(goals)} goals; a track has 1 to {MAX_GOALS}")
+    return goals
+
+
+def demo_goals(problem: GripperProblem, n: int = 100) -> list[Goal]:
+    """``make track``'s path of n goals (mm): across the reachable region and out of it —
+    the fingertip of the pressure path P = (-0.25 + 0.5 s, -0.2 + 0.3 s²) for the first
+    half (reachable by construction, forward solves), then a straight line from its end
+    to (-10, -225) (behind the other finger, below the reach: unreachable), then back to
+    the start of the path."""
+    h = n // 2
+    s = torch.linspace(0.0, 1.0, h, dtype=torch.float64)
+    P = torch.stack((-0.25 + 0.5 * s, -0.2 + 0.3 * s * s), -1)
+    tips = solve(problem, P).pose.tip_end.tolist()
+    out, back = tips[-1], (-10.0, -225.0)
+    m = (n - h) // 2
+    line = [(out[0] + (back[0] - out[0]) * t, out[1] + (back[1] - out[1]) * t) for t in np.linspace(0, 1, m + 1)[1:]]
+    rest = n - h - m
+    ret = [(back[0] + (tips[0][0] - back[0]) * t, back[1] + (tips[0][1] - back[1]) * t)
+           for t in np.linspace(0, 1, rest + 1)[1:]]
+    return [tip_goal(x, y) for x, y in tips + line + ret]
+
+
+def goal_text(g: Goal) -> str:
+    return f"tip:{g.tip[0]:g},{g.tip[1]:g}" + ("" if g.angle_deg is None else f",{g.angle_deg:g}")
+
+
+def save_track_figure(path: str, result: TrackResult, problem: GripperProblem, label: str,
+                      load: str = "") -> None:
+    """The closed-loop demonstration: the goals and the verified fingertips (the
+    predictor's forward answer) in the plane with the reachable region's kept grid, the
+    per-goal time (wall and CPU; ``load``: what the title adds about the machine), the
+    position error, and the pressures against goal index (time)."""
+    import matplotlib.pyplot as plt
+
+    from predictor.plot import save_figure
+
+    a = result.answers
+    k = np.arange(len(a))
+    goals = np.array([x.goal[:2] for x in a])
+    tips = np.array([x.tip for x in a])
+    reached = np.array([x.status == "reached" for x in a])
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8.5))
+    ax = axes[0, 0]
+    g = 61
+    p = torch.linspace(-0.3, 0.3, g, dtype=torch.float64)
+    ring = torch.cat((torch.stack((p, torch.full_like(p, -0.3)), -1), torch.stack((torch.full_like(p, 0.3), p), -1),
+                      torch.stack((p.flip(0), torch.full_like(p, 0.3)), -1),
+                      torch.stack((torch.full_like(p, -0.3), p.flip(0)), -1)))
+    edge = solve(problem, ring).pose.tip_end.numpy()
+    ax.plot(edge[:, 0], edge[:, 1], "-", color="0.75", lw=1, label="tip at the pressure box's edge (forward)")
+    ax.axvline(0.0, color="0.5", ls=":", lw=1)
+    ax.plot(goals[:, 0], goals[:, 1], "k.", ms=4, label="goals")
+    ax.plot(tips[:, 0], tips[:, 1], "-", color="tab:blue", lw=1.2, label="forward tip at the answers")
+    ax.plot(tips[~reached, 0], tips[~reached, 1], "o", mfc="none", color="tab:red", ms=5,
+            label="closest reachable (unreachable goal)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("X mm")
+    ax.set_ylabel("Y mm")
+    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title("fingertip goals and the verified answers")
+    ax = axes[0, 1]
+    t = np.array([x.time_ms for x in a])
+    ax.semilogy(k, t, ".-", lw=0.8, label="wall time")
+    ax.axhline(TARGET_ANY_MS, color="tab:red", ls="--", lw=1, label=f"{TARGET_ANY_MS:g} ms (50 Hz)")
+    ax.axhline(TARGET_REACHABLE_MS, color="tab:green", ls="--", lw=1, label=f"{TARGET_REACHABLE_MS:g} ms")
+    ax.set_xlabel("goal")
+    ax.set_ylabel("time per goal, ms (verification included)")
+    s = result.summary()
+    ax.semilogy(k, [x.cpu_ms for x in a], ".", ms=3, color="0.5", label="CPU time (process, one thread)")
+    ax.legend(fontsize=7)
+    ax.set_title(f"wall: median {s['median_ms']:.3g} ms, p95 {s['p95_ms']:.3g} ms, {s['rate_hz']:.3g} Hz end to end;\n"
+                 f"CPU: median {s['cpu_median_ms']:.3g} ms ({s['cpu_rate_hz']:.3g} Hz)", fontsize=9)
+    ax = axes[1, 0]
+    err = np.array([x.position_error_mm for x in a])
+    ax.semilogy(k, np.maximum(err, 1e-6), ".-", lw=0.8)
+    ax.axhline(TIP_TOL_MM, color="tab:red", ls="--", lw=1, label=f"tolerance {TIP_TOL_MM} mm")
+    ax.fill_between(k, 1e-6, 1e3, where=~reached, color="tab:red", alpha=0.08, label="unreachable goals")
+    ax.set_ylim(1e-6, 1e3)
+    ax.set_xlabel("goal")
+    ax.set_ylabel("|forward tip - goal|, mm")
+    ax.legend(fontsize=7)
+    ax.set_title("tip error of the verified forward answer")
+    ax = axes[1, 1]
+    P = np.array([x.pressures for x in a])
+    ax.plot(k, P[:, 0], ".-", lw=0.8, label="P1")
+    ax.plot(k, P[:, 1], ".-", lw=0.8, label="P2")
+    ax.set_xlabel("goal (one per control step)")
+    ax.set_ylabel("pressure, MPa")
+    ax.legend(fontsize=7)
+    ax.set_title("pressures against time")
+    import textwrap
+
+    fig.suptitle("\n".join(textwrap.wrap(label + load, 150)), fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path, 110)

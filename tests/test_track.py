@@ -1,0 +1,171 @@
+"""Fingertip goals along a trajectory (issue 60) and the inverse's inputs and errors (issue 57).
+
+Physical assertions on a short trajectory of the committed surrogate without an object (the
+fingers meeting at X = 0): each verified answer's forward fingertip (predictor.solve, the
+gesture's own history) within the tolerance of its goal where it is reached, and an
+unreachable goal's answer no farther than the best point of the inverse's coarse grid.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from predictor import load_gripper
+from predictor.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, coarse_atlas, search_tip, tip_errors,
+                                 unreachable_reason)
+from predictor.options import SolverOptions
+from predictor.problem import FULL_BOX
+from predictor.solve import solve
+from predictor.track import load_track, tip_goal, track
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = str(ROOT / "results/surrogate/improved.pt")
+ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def free():
+    return load_gripper(MODEL, None)
+
+
+def _cli(*args, timeout=600):
+    return subprocess.run([sys.executable, "-m", "predictor.inverse", *args], cwd=ROOT, env=ENV,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_errors_are_split_and_the_angle_wrapped():
+    """Position (mm) and angle (deg) errors apart: a tip at (3, 4) mm against the goal
+    (0, 0) is 5 mm off; its angle 170 deg against -170 deg is -20 deg off (wrapped, not
+    340); the reason names both."""
+    pos, ang = tip_errors((3.0, 4.0), 170.0, Goal("tip", (0.0, 0.0), -170.0))
+    assert pos == 5.0 and ang == pytest.approx(-20.0, abs=1e-12)
+    assert tip_errors((3.0, 4.0), 170.0, Goal("tip", (0.0, 0.0))) == (5.0, None)
+    assert tip_errors((1.0, 0.0), -179.0, tip_goal(0.0, 0.0, 900.0))[1] == pytest.approx(1.0, abs=1e-12)
+    assert unreachable_reason(5.0, -20.0) == ("unreachable: the closest achievable tip is 5.00 mm away, its tip "
+                                              "angle -20.00 deg off (tolerance 0.1 mm)")
+    # a goal far beyond reach is searched for FAR_GOAL_MM away in its own direction
+    far = search_tip(Goal("tip", (1e308, -212.0)))
+    assert math.hypot(*far) == pytest.approx(FAR_GOAL_MM) and far[0] > 0
+
+
+def test_short_trajectory_reaches_and_flags(free):
+    """Four reachable goals (forward fingertips of four pressures, one pressed on X = 0)
+    and two unreachable ones (behind the other finger, far below): every answer verified;
+    a reached goal's forward fingertip (a new solve at its pressures) within TIP_TOL_MM
+    of the goal; an unreachable one's answer no farther than the coarse 5 x 5 grid's best
+    point, its reported tip the forward solve's (VERIFY_TOL_MM)."""
+    prob = free.problem
+    P = torch.tensor([[-0.10, -0.15], [-0.08, -0.14], [0.0, -0.1], [0.3, 0.2]], dtype=torch.float64)
+    tips = solve(prob, P).pose.tip_end.tolist()
+    goals = [tip_goal(*t) for t in tips[:3]] + [tip_goal(-10.0, -225.0), tip_goal(0.0, -400.0), tip_goal(*tips[3])]
+    res = track(prob, goals)
+    assert [a.status for a in res.answers] == ["reached"] * 3 + ["unreachable"] * 2 + ["reached"]
+    assert all(a.verified for a in res.answers)
+    grid = coarse_atlas(prob, FULL_BOX, SolverOptions())
+    for g, a in zip(goals, res.answers):
+        fwd = solve(prob, torch.tensor([a.pressures], dtype=torch.float64))
+        assert bool(fwd.converged[0])
+        tip = fwd.pose.tip_end[0]
+        assert float((tip - torch.tensor(a.tip)).norm()) <= VERIFY_TOL_MM
+        err = float((tip - torch.tensor(g.tip)).norm())
+        if a.status == "reached":
+            assert err <= TIP_TOL_MM and a.position_error_mm <= TIP_TOL_MM
+        else:
+            best = float((grid.result.pose.tip_end - torch.tensor(g.tip)).norm(dim=-1).min())
+            assert err <= best + 1e-9, (err, best)
+            assert a.position_error_mm > TIP_TOL_MM
+    assert res.answers[3].plane_force_N > 0          # behind the other finger: pressed on X = 0
+    s = res.summary()
+    assert s["goals"] == 6 and s["verified"] and s["reached"] == 4 and s["max_tip_error_mm"] <= TIP_TOL_MM
+    json.dumps(s, allow_nan=False)
+
+
+def test_api_track_tip(free):
+    """The API's track_tip takes goal strings and tuples; a goal that is not a tip is refused."""
+    from predictor import track_tip
+
+    res = track_tip(free, ["tip:40,-212", (40.2, -212.1)])
+    assert [a.status for a in res.answers] == ["reached", "reached"]
+    assert all(a.verified and a.position_error_mm <= TIP_TOL_MM and a.cpu_ms > 0 for a in res.answers)
+    with pytest.raises(ValueError, match="fingertip goals"):
+        track_tip(free, ["hold"])
+
+
+def test_track_files(tmp_path):
+    """CSV (header, comments) and JSON tracks; NaN, unknown keys and wrong counts refused
+    in one line."""
+    f = tmp_path / "t.csv"
+    f.write_text("x,y,deg\n# a comment\n40,-212\n\n41,-212.5,-70\n")
+    goals = load_track(f)
+    assert [g.tip for g in goals] == [(40.0, -212.0), (41.0, -212.5)] and goals[1].angle_deg == -70.0
+    j = tmp_path / "t.json"
+    j.write_text(json.dumps({"goals": [[40, -212], {"x": 41, "y": -212.5, "deg": 290}]}))
+    assert load_track(j)[1].angle_deg == -70.0
+    for text, why in (("[[40, NaN]]", "NaN is not a number"), ('[{"x": 1, "y": 2, "z": 3}]', "keys x, y"),
+                      ("[[1]]", "X,Y or X,Y,DEG"), ("[]", "0 goals")):
+        j.write_text(text)
+        with pytest.raises(ValueError, match=why):
+            load_track(j)
+    f.write_text("40,abc\n")
+    with pytest.raises(ValueError, match="is not a number"):
+        load_track(f)
+
+
+def test_atlas_reader_is_strict(tmp_path):
+    """--atlas refuses an unknown key and a NaN like the observation reader: exit 2, one
+    line on stderr, before any search."""
+    doc = json.loads((ROOT / "results/predictor/atlas_circle.json").read_text())
+    bad = tmp_path / "unknown.json"
+    bad.write_text(json.dumps({**doc, "surprise": 1}))
+    r = _cli("--goal", "hold", "--object", "circle", "--atlas", str(bad), "--quiet", timeout=300)
+    assert r.returncode == 2 and "unknown key 'surprise'" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    nan = tmp_path / "nan.json"
+    nan.write_text(json.dumps(doc).replace('"mu": 0.3', '"mu": NaN', 1))
+    r = _cli("--goal", "hold", "--object", "circle", "--atlas", str(nan), "--quiet", timeout=300)
+    assert r.returncode == 2 and "NaN" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_far_goal_is_unreachable_with_finger_flag():
+    """tip:1e308,-212 is an unreachable goal: exit 1 with the closest answer (not exit 2);
+    --finger is accepted (the paper's file, as predictor.gesture)."""
+    r = _cli("--goal", "tip:1e308,-212", "--finger", str(ROOT / "contract/fingers/paper.toml"), "--json", "--quiet")
+    assert r.returncode == 1, r.stderr
+    out = json.loads(r.stdout)
+    assert out["status"] == "infeasible" and out["verified"] and out["angle_error_deg"] is None
+    assert out["tip"][0] > 150.0          # the farthest reach toward +X
+    assert "unreachable" in r.stderr
+
+
+def test_track_cli(tmp_path):
+    """--track FILE answers each goal; an unreachable one makes exit 1, the answers all
+    written (--out) and verified."""
+    f = tmp_path / "t.csv"
+    f.write_text("40,-212\n40.5,-212.2\n0,-400\n")
+    out, inv = tmp_path / "track.json", tmp_path / "inverse.json"
+    inv.write_text((ROOT / "results/predictor/inverse.json").read_text())
+    r = _cli("--track", str(f), "--out", str(out), "--into", str(inv), "--quiet")
+    assert r.returncode == 1, r.stderr
+    doc = json.loads(out.read_text())
+    assert doc["goals"] == 3 and doc["verified"] and doc["reached"] == 2 and doc["unreachable"] == 1
+    assert [a["status"] for a in doc["answers"]] == ["reached", "reached", "unreachable"]
+    assert all(a["position_error_mm"] <= TIP_TOL_MM for a in doc["answers"][:2])
+    # --into: make inverse's JSON carries this run's summary as its track (answers apart)
+    from predictor.artefacts import INVERSE
+
+    track = INVERSE.load(inv)["track"]
+    assert track["median_ms"] == doc["median_ms"] and "answers" not in track
+    # a bad track file: exit 2, one line
+    bad = tmp_path / "bad.csv"
+    bad.write_text("40,-212\n40,nan\n")
+    r = _cli("--track", str(bad), "--quiet")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "bad.csv:2: Y = nan: must be a finite number" in r.stderr
