@@ -113,7 +113,7 @@ def calibrate(observations: str | Path, fit=("gain", "offset", "stiffness"), fin
     from predictor.observations import load_observations
 
     if out is not None:
-        from predictor.calibrate import outside_package
+        from predictor.calibration_file import outside_package
 
         outside_package(out)
     if finger is not None and not isinstance(finger, FingerSpec):

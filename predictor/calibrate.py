@@ -64,22 +64,6 @@ from predictor.joint import load_joint
 from predictor.progress import set_quiet
 
 LOG = logging.getLogger("softjoint.calibrate")
-#: The installed package's folders: a calibrated file written there would replace what
-#: every later call reads (contract/fingers/paper.toml is the default finger).
-PACKAGE_FOLDERS = ("contract", "predictor", "fem", "surrogate", "workflow", "apps")
-
-
-def outside_package(path: str | Path) -> None:
-    """ValueError (one line) when ``path`` resolves inside one of PACKAGE_FOLDERS."""
-    from predictor.defaults import ROOT
-
-    where = Path(path).resolve()
-    for name in PACKAGE_FOLDERS:
-        folder = (ROOT / name).resolve()
-        if where == folder or folder in where.parents:
-            raise ValueError(f"--out {path}: inside the package ({folder}); write the calibrated finger elsewhere")
-
-
 def prior_arg(text: str):
     """--prior NAME=MEAN,STD (STD > 0, in the parameter's unit)."""
     name, eq, rest = text.partition("=")
@@ -137,6 +121,7 @@ def main_fit(argv) -> int:
     cli.setup_logging(args.quiet)
     set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
     with ap.errors():
+        from predictor.calibration_file import outside_package
         outside_package(args.out)
         obs, model = _observations_and_model(args)
         names = [n.strip() for n in args.fit.split(",") if n.strip()]

@@ -77,3 +77,19 @@ def write_calibrated(path: str | Path, model: CalibrationModel, res: Calibration
     spec = parse_finger(text, str(path))
     write_text(path, text)
     return spec
+
+
+#: The installed package's folders: a calibrated file written there would replace what
+#: every later call reads (contract/fingers/paper.toml is the default finger).
+PACKAGE_FOLDERS = ("contract", "predictor", "fem", "surrogate", "workflow", "apps")
+
+
+def outside_package(path: str | Path) -> None:
+    """ValueError (one line) when ``path`` resolves inside one of PACKAGE_FOLDERS."""
+    from predictor.defaults import ROOT
+
+    where = Path(path).resolve()
+    for name in PACKAGE_FOLDERS:
+        folder = (ROOT / name).resolve()
+        if where == folder or folder in where.parents:
+            raise ValueError(f"--out {path}: inside the package ({folder}); write the calibrated finger elsewhere")

@@ -38,7 +38,8 @@ def test_validation_selects_the_committed_discretisation_and_reproduces_its_mesh
     validation = json.loads((ROOT / "results/validation/finger.json").read_text())
     assert [c["case"] for c in cases] == [c["case"] for c in validation["fem"]]
     assert all(c["mesh"]["mesh_size"] == 1.8 for c in cases)
-    assert {vf.finger_case_mesh(o) for o in others} == {"1.35", "1.697:0.849"}
+    # the lone-finger refinements; the production cases with the plane X = 0 (issue 56) pair with none
+    assert {vf.finger_case_mesh(o) for o in others if not vf.case_plane(o)} == {"1.35", "1.697:0.849"}
     committed = validation["mesh_check"]
     rows = vf.mesh_check(cases, others)
     assert [(r["case"], r["mesh_size"], r["wall_mesh_size"]) for r in rows] == \

@@ -123,13 +123,13 @@ def test_hex_finger_agrees_with_the_tetrahedral_finger(hex_free):
 
 
 def test_cli_divisions_solves_the_python_calls_finger(hex_free, capsys):
-    """``python -m fem.finger --divisions 1 --formulation mixed --no-gravity --json`` at
-    FREE: the fingertip, tip angle and every joint's end angle of the Python call to 1e-8
+    """``python -m fem.finger --divisions 1 --formulation mixed --no-gravity --no-plane --json``
+    at FREE (one finger alone, as the fixture's FingerSolver): the fingertip, tip angle and every joint's end angle of the Python call to 1e-8
     (one rank, the same mesh and solver), the same node count, and the record says hex1:
     ``mesh.mesh`` "hex1" and ``mesh.divisions`` 1 with no tetrahedron ``mesh_size``, and
     the geometry's joint ``divisions`` 1."""
     solver, plus, _ = hex_free
-    argv = ["--p1", str(FREE[0]), "--p2", str(FREE[1]), "--no-gravity", "--divisions", "1",
+    argv = ["--p1", str(FREE[0]), "--p2", str(FREE[1]), "--no-gravity", "--no-plane", "--divisions", "1",
             "--formulation", "mixed", "--json", "--quiet"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
@@ -139,4 +139,4 @@ def test_cli_divisions_solves_the_python_calls_finger(hex_free, capsys):
     np.testing.assert_allclose(out["joint_end_angle_deg"], np.degrees(plus.end_angle), atol=1e-8)
     assert out["mesh"]["mesh"] == "hex1" and out["mesh"]["divisions"] == 1 and "mesh_size" not in out["mesh"]
     assert out["mesh"]["nodes"] == solver.mesh_info()["nodes"] == 10561
-    assert out["geometry"]["joint"]["divisions"] == 1 and out["formulation"] == "mixed"
+    assert out["geometry"]["joint"]["divisions"] == 1 and out["formulation"] == "mixed" and out["plane"] is False

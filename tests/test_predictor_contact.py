@@ -273,11 +273,12 @@ def test_gesture_result_summary_and_rows():
     assert json.loads(json.dumps(s0)) == s0
     assert list(s0) == ["pressures_MPa", "converged", "state", "tau", "residual_force_mN", "residual_moment_Nmm",
                         "tip", "tip_angle_deg", "contact_force_N", "friction_N", "friction_use", "slip", "iterations",
-                        "joint", "mu", "object_weight_N", "contacts", "contact_part", "contact_face",
+                        "joint", "mu", "object_weight_N", "plane", "contacts", "contact_part", "contact_face",
                         "contact_point_mm", "plane_force_N", "plane_overlap_mm"]
     assert s0["pressures_MPa"] == [-0.1, 0.1] and s0["converged"] is True and s0["state"] == "no_contact"
     assert s0["slip"] is None and s0["friction_use"] is None and s0["joint"] == J.name and s0["mu"] is None
     assert s0["contacts"] is None and s0["contact_part"] is None and s0["plane_overlap_mm"] == 0.0
+    assert s0["plane"] is True                      # the gripper (the fingers meet at X = 0), the default
     assert s0["tau"] == good.tau[0].tolist() and s0["tip"] == good.pose.tip_end[0].tolist()
     assert s0["tip_angle_deg"] == math.degrees(float(good.pose.phi[0, 1])) and s0["iterations"] == good.iterations[0]
     s1 = bad.summary(1)

@@ -108,7 +108,7 @@ def test_nn_checkpoint_round_trip_and_refusals(tmp_path):
     for call, needle in ((lambda: load_predictor(path, J, contact=True), "softjoint-gravity-nn/1"),
                          (lambda: load_predictor(bad, J), "no valid checkpoint header"),
                          (lambda: load_predictor(path, LeftJoint()), "trained with joint"),
-                         (lambda: predict_gesture(back, GRASP, p), "trained for obstacle None")):
+                         (lambda: predict_gesture(back, GRASP, p), "trained for: object none")):
         with pytest.raises(ValueError, match=needle) as info:
             call()
         assert "\n" not in str(info.value)
