@@ -81,10 +81,11 @@ demo: $(SETUP) ## the main job (~2 min): joint FEM (1.8 mm) vs surrogate, gestur
 	$(PY) -m apps.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
-# fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 10.5 min of
-# pytest, 11.5 min with set-up (apt packages present), in a fresh clone on this 2-core machine
-# beside a 2-rank FEM campaign at nice 19 (1,376 tests).
-test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~12 min with set-up)
+# fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 22.9 min of
+# pytest, 23.7 min with set-up (apt packages present), in a fresh clone on this 2-core machine
+# beside a one-core FEM stability probe (1,456 tests; 11.5 min for 1,376 tests before the
+# calibration's, the track's and the plane's tests, beside a niced campaign).
+test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~24 min with set-up)
 	$(PY) -m pytest -q -ra -n 2 --dist loadfile --durations=15
 
 # ---------------------------------------------------------------- fem (issue 2)
