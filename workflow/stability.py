@@ -30,7 +30,6 @@ Exit 0 when the probe ran (whatever it found), 2 for bad input.
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
