@@ -84,3 +84,23 @@ def sha256_file(path: str | Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def read_text(path: str | Path, what: str) -> str:
+    """The text of the ``what`` file at ``path`` (ValueError, one line, if it cannot be read)."""
+    try:
+        return Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read the {what} {path}: {getattr(exc, 'strerror', None) or exc}") from None
+
+
+def strict_json(text: str, path: str | Path, what: str):
+    """``text`` parsed as JSON without NaN or Infinity, which Python's json accepts and JSON
+    has not (ValueError, one line, naming ``path``, the ``what`` file)."""
+    def constant(c):
+        raise ValueError(f"{path}: {c} in the {what}: not a number (JSON has no NaN or Infinity)")
+
+    try:
+        return json.loads(text, parse_constant=constant)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not JSON ({exc})") from None

@@ -165,21 +165,11 @@ def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
     valid JSON without NaN or Infinity (nor a number that overflows), no key but
     ATLAS_KEYS (and ATLAS_OBJECT_KEYS in ``object``), then predictor.atlas.atlas_from_json's
     checks (an atlas of this object, joint and settings). ValueError, one line."""
-    import json
     import math
 
-    try:
-        text = Path(path).read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"cannot read the atlas {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    from contract.files import read_text, strict_json
 
-    def constant(c):
-        raise ValueError(f"{path}: {c} in the atlas: not a number (the atlas writes null where a figure is missing)")
-
-    try:
-        doc = json.loads(text, parse_constant=constant)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not JSON ({exc})") from None
+    doc = strict_json(read_text(path, "atlas"), path, "atlas")
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: not a predictor.atlas JSON (an object of keys expected)")
     for key in doc:

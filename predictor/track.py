@@ -41,7 +41,6 @@ import csv
 import dataclasses
 import functools
 import io
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -49,6 +48,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from contract.files import read_text, strict_json
 
 from predictor.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_MM, VERIFY_TOL_MM, Goal,
                                  InverseProblem, Branch, clip_to_box, gauss_newton, search_tip, tip_errors,
@@ -409,18 +410,10 @@ def load_track(path: str | Path) -> list[Goal]:
     an optional header row x,y[,deg]; # comments and blank lines skipped) or JSON: a list
     of [X, Y(, DEG)] or {"x": , "y": (, "deg": )} (or {"goals": that list}); NaN refused."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"cannot read the track {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    text = read_text(path, "track")
     goals = []
     if path.suffix.lower() == ".json":
-        def constant(c):
-            raise ValueError(f"{path}: {c} is not a number (JSON)")
-        try:
-            doc = json.loads(text, parse_constant=constant)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+        doc = strict_json(text, path, "track")
         if isinstance(doc, dict):
             if set(doc) - {"goals", "note"} or "goals" not in doc:
                 raise ValueError(f"{path}: a track JSON is a list of goals or {{\"goals\": [...]}} (keys: goals, note)")

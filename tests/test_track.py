@@ -110,7 +110,7 @@ def test_track_files(tmp_path):
     j = tmp_path / "t.json"
     j.write_text(json.dumps({"goals": [[40, -212], {"x": 41, "y": -212.5, "deg": 290}]}))
     assert load_track(j)[1].angle_deg == -70.0
-    for text, why in (("[[40, NaN]]", "NaN is not a number"), ('[{"x": 1, "y": 2, "z": 3}]', "keys x, y"),
+    for text, why in (("[[40, NaN]]", "NaN in the track: not a number"), ('[{"x": 1, "y": 2, "z": 3}]', "keys x, y"),
                       ("[[1]]", "X,Y or X,Y,DEG"), ("[]", "0 goals")):
         j.write_text(text)
         with pytest.raises(ValueError, match=why):
