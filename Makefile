@@ -81,11 +81,10 @@ demo: $(SETUP) ## the main job (~2 min): joint FEM (1.8 mm) vs surrogate, gestur
 	$(PY) -m apps.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
-# fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 22.9 min of
-# pytest, 23.7 min with set-up (apt packages present), in a fresh clone on this 2-core machine
-# beside a one-core FEM stability probe (1,456 tests; 11.5 min for 1,376 tests before the
-# calibration's, the track's and the plane's tests, beside a niced campaign).
-test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~24 min with set-up)
+# fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 13.5 min of
+# pytest, 14.0 min with set-up (apt packages present), in a fresh clone on this 2-core machine
+# with nothing beside (1,460 tests); 23.7 min beside a one-core FEM job.
+test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~14 min with set-up)
 	$(PY) -m pytest -q -ra -n 2 --dist loadfile --durations=15
 
 # ---------------------------------------------------------------- fem (issue 2)
