@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -170,6 +170,14 @@ dataset-new: | $(SETUP) ## FEM datasets on the production discretisation (NEW_ME
 # lowest eigenvalue and the closed valley pairs (workflow.stability; one core).
 failed-samples: | $(SETUP) ## probe the production train walk's failed samples' load paths for a limit point or a contact change (one core, ~1 h) -> results/fem/stability_train_hex2s3.json
 	nice $(PY) -m workflow.stability $(NEW_DATA)/train_$(NEW_TAG)
+
+# The failed samples re-solved (workflow.resolve): the campaign's own solver and mesh, only
+# the path finer (steps of 0.005 from s = 0.8, 24 Newton iterations a step); each solved
+# sample is stored in its unit's shard and the manifest rebuilt (resumes; exit 3 while some
+# stay failed), then the walk is verified.
+resolve-samples: | $(SETUP) ## re-solve the production train walk's failed samples on a finer load path and store them (one core, ~1 h; resumes) -> results/data/train_hex2s3/
+	nice $(PY) -m workflow.resolve $(NEW_DATA)/train_$(NEW_TAG) --max-hours $(DATASET_HOURS)
+	$(PY) -m workflow.dataset verify $(NEW_DATA)/train_$(NEW_TAG) --require-complete
 
 # The held-out walk again on the finer joint mesh H:W = 1.697:0.849 (two P2 elements through
 # the wall, 3x the nodes, displacement as the committed sets): the committed datasets'

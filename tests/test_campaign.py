@@ -327,3 +327,46 @@ def test_production_is_hex2s3_mixed_and_the_default_campaign_is_its_manifest(tmp
         assert _cli_config(tmp_path, *flags, *PAPER_MESH) == committed, name
         assert _cli_config(tmp_path, *flags) != committed
     assert not (tmp_path / "new").exists()
+
+
+def test_a_failed_sample_resolved_on_a_finer_path_equals_the_campaigns_answer(reference, tmp_path, capsys):
+    """workflow.resolve: sample 3 (unit 1's continuation sample) turned into a failure is
+    re-solved from zero along segments of the load path and stored back in its unit's
+    shard, in sample order, with how it was solved in the shard's meta: its anchors equal
+    the campaign's to 1e-6 mm and its Jacobian to 1e-6 relative (a static equilibrium does
+    not depend on the path that reached it), its walk pair's trapezoid miss is the
+    campaign's, and the dataset verifies as before. A re-run finds nothing to do; an id
+    that is not a failure is refused with exit 2."""
+    from workflow import resolve
+
+    root = tmp_path / "ds"
+    shutil.copytree(reference, root)
+    shard = root / store.shard_file(1)
+    arrays, meta = shards.read_shard(shard)
+    ref = {k: v.copy() for k, v in arrays.items()}
+    i = int(np.flatnonzero(arrays["sample_id"] == 3)[0])
+    keep = arrays["sample_id"] != 3
+    failed = {k: arrays[k][keep] for k in shards.DATA_KEYS}
+    failed.update(failed_sample_id=np.array([3]), failed_inputs=arrays["inputs"][i:i + 1],
+                  failed_reason=np.array(["no convergence (made up by the test)"]))
+    shards.write_shard(shard, {**arrays, **failed}, meta)          # the manifest is stale now
+    assert resolve.main([str(root), "--fine-step", "0.05", "--quiet", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    (entry,) = out["samples"]
+    assert entry["sample_id"] == 3 and entry["converged"] and out["failures"] == 0 and out["stored"] == 4
+    got, meta2 = shards.read_shard(shard)
+    assert got["sample_id"].tolist() == ref["sample_id"].tolist() and len(got["failed_sample_id"]) == 0
+    assert np.abs(got["anchors"][i] - ref["anchors"][i]).max() < 1e-6
+    assert np.abs(got["jacobian"][i] - ref["jacobian"][i]).max() < 1e-6 * np.abs(ref["jacobian"][i]).max()
+    np.testing.assert_array_equal(got["inputs"], ref["inputs"])
+    ((pair, miss),) = entry["walk_miss_mm"].items()
+    assert pair == "2-3" and miss == pytest.approx(store.walk_misses(ref, 2)[-1][2], abs=1e-6)
+    (how,) = meta2["resolved"]
+    assert how["sample_id"] == 3 and how["max_it"] == 24 and how["path_points"][-1] == 1.0
+    v = store.verify(root)
+    assert v["ok"] and v["n"] == 4 and v["failures"] == 0, v
+    assert resolve.main([str(root), "--quiet", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["samples"] == []
+    with pytest.raises(SystemExit) as exc:
+        resolve.main([str(root), "--samples", "3"])
+    assert exc.value.code == 2 and "not failed samples" in capsys.readouterr().err

@@ -225,27 +225,32 @@ def coverage(inputs: np.ndarray, bins: int = 4, box=INPUT_BOX) -> dict:
     return {"per_input": per, "grid": f"{bins}^{N_INPUTS}", "cells_occupied": len(cells) / bins ** N_INPUTS}
 
 
-def walk_consistency(arrays: dict, unit_size: int) -> dict | None:
-    """How well a dataset's Jacobians predict its walks (a data-quality figure, mm).
-
-    Consecutive converged samples i, i + 1 of one unit (ids u K .. u K + K - 1: one
-    continuation walk) obey the trapezoid rule a_{i+1} - a_i = (J_i + J_{i+1}) / 2
-    (x_{i+1} - x_i) exactly where the anchors a (k, 2) are quadratic in the inputs x; its
-    miss, the largest anchor distance of the pair, measures the data's curvature over a
-    walk step and any noise or inconsistency between anchors and Jacobians. Returns
-    {"pairs", "median_mm", "p90_mm", "max_mm"}, or None without two consecutive samples
-    with finite Jacobians."""
+def walk_misses(arrays: dict, unit_size: int) -> list[tuple[int, int, float]]:
+    """The trapezoid miss (mm) of every walk pair: consecutive converged samples i, i + 1
+    of one unit (ids u K .. u K + K - 1: one continuation walk) with finite Jacobians,
+    as (id_i, id_{i+1}, miss). The anchors a (k, 2) of such a pair obey
+    a_{i+1} - a_i = (J_i + J_{i+1}) / 2 (x_{i+1} - x_i) exactly where they are quadratic in
+    the inputs x; the miss is the largest anchor distance of the pair from it."""
     ids, x = arrays["sample_id"], arrays["inputs"]
     a = arrays["anchors"].reshape(len(ids), -1)              # rows x_1, y_1, x_2, ... as J's
     J = arrays["jacobian"]
     pair = (np.diff(ids) == 1) & (ids[1:] // unit_size == ids[:-1] // unit_size)
     pair &= np.isfinite(J[1:]).all((1, 2)) & np.isfinite(J[:-1]).all((1, 2))
-    if not pair.any():
-        return None
     i = np.nonzero(pair)[0]
     step = np.einsum("nij,nj->ni", 0.5 * (J[i] + J[i + 1]), x[i + 1] - x[i])
     miss = np.linalg.norm((step - (a[i + 1] - a[i])).reshape(len(i), -1, 2), axis=-1).max(-1)
-    return {"pairs": int(len(i)), "median_mm": float(np.median(miss)), "p90_mm": float(np.quantile(miss, 0.9)),
+    return [(int(ids[k]), int(ids[k + 1]), float(m)) for k, m in zip(i, miss)]
+
+
+def walk_consistency(arrays: dict, unit_size: int) -> dict | None:
+    """How well a dataset's Jacobians predict its walks (a data-quality figure, mm): the
+    walk pairs' trapezoid misses (``walk_misses``), which measure the data's curvature
+    over a walk step and any noise or inconsistency between anchors and Jacobians.
+    Returns {"pairs", "median_mm", "p90_mm", "max_mm"}, or None without a walk pair."""
+    miss = np.array([m for _, _, m in walk_misses(arrays, unit_size)])
+    if not len(miss):
+        return None
+    return {"pairs": int(len(miss)), "median_mm": float(np.median(miss)), "p90_mm": float(np.quantile(miss, 0.9)),
             "max_mm": float(miss.max())}
 
 
