@@ -354,6 +354,7 @@ def test_a_failed_sample_resolved_on_a_finer_path_equals_the_campaigns_answer(re
     out = json.loads(capsys.readouterr().out)
     (entry,) = out["samples"]
     assert entry["sample_id"] == 3 and entry["converged"] and out["failures"] == 0 and out["stored"] == 4
+    assert entry["stiffness"]["unstable_modes"] == 0 and entry["stiffness"]["lowest_eigenvalue"] > 0   # stable
     got, meta2 = shards.read_shard(shard)
     assert got["sample_id"].tolist() == ref["sample_id"].tolist() and len(got["failed_sample_id"]) == 0
     assert np.abs(got["anchors"][i] - ref["anchors"][i]).max() < 1e-6

@@ -17,12 +17,14 @@ the dataset's own solver (workflow.mirror.recorded_solver: joint, mesh, formulat
 contact penalty, tolerances unchanged) with only the path controls changed (``max_it``,
 ``min_step``), from zero along a(s) = s a_target in the segments of
 workflow.stability.path_points, each by LoadPathSolver.follow -> at s = 1: anchors,
-phi_end, cap rotation and the Jacobian (as a campaign sample), and the trapezoid miss
+phi_end, cap rotation and the Jacobian (as a campaign sample), the stiffness's negative
+eigenvalues and its eigenvalue nearest zero (LoadPathSolver.stiffness_spectrum: 0 and
+positive for a stable equilibrium), and the trapezoid miss
 of each walk pair it forms with its stored neighbours (workflow.store.walk_misses, mm:
 a state on another branch than its neighbours shows as a miss far above the dataset's)
 -> the sample moves in its unit's shard from the failure arrays to the data arrays
 (sample order kept; ``meta["resolved"]`` records how: path points, path controls, Newton
-iterations, wall time) -> the shard is rewritten atomically, then the manifest is
+iterations, wall time, the stiffness figures) -> the shard is rewritten atomically, then the manifest is
 rebuilt from the shards (workflow.store.build_manifest). A sample that does not reach
 s = 1 stays a failure, unchanged.
 
@@ -168,11 +170,13 @@ def main(argv=None) -> int:
                 arrays = move_to_data(arrays, sid, {
                     "inputs": f["inputs"], **sample_record(solver), "newton_iterations": sum(path["newton"]),
                     "wall_time_s": wall})
+                entry["stiffness"] = solver.solver.stiffness_spectrum()
                 pairs = walk_misses(arrays, unit_size)
                 entry["walk_miss_mm"] = {f"{int(a)}-{int(b)}": m for a, b, m in pairs if sid in (a, b)}
                 meta = {**meta, "cpu_s": meta.get("cpu_s", 0.0) + wall, "resolved": meta.get("resolved", []) + [{
                     "sample_id": sid, "path_points": points, **controls, "newton": path["newton"],
-                    "cutbacks": path["cutbacks"], "wall_s": wall, "git_commit": commit}]}
+                    "cutbacks": path["cutbacks"], "wall_s": wall, "stiffness": entry["stiffness"],
+                    "git_commit": commit}]}
                 error = save_shard(shard, arrays, meta)
                 if error:
                     print(f"python -m workflow.resolve: error: {error}", file=sys.stderr)
