@@ -68,6 +68,7 @@ ARTEFACTS = (
     Artefact("surrogate/hex2s3/sweep/*.json", "make sweep-new", surrogate.SWEEP),
     Artefact("bench/surrogate_cost.json", "make bench-surrogate", surrogate.BENCH_COST),
     Artefact("fem/stability_*.json", "make failed-samples", workflow.STABILITY),
+    Artefact("fem/resolved_*.json", "make resolve-samples", workflow.RESOLVED),
     Artefact("predictor/gestures.json", "make gestures", predictor.GESTURES),
     Artefact("predictor/atlas_*.json", "make atlas", predictor.ATLAS),
     Artefact("predictor/ramp/atlas_*.json", "make atlas-reference", predictor.ATLAS),

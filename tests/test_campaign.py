@@ -338,6 +338,7 @@ def test_a_failed_sample_resolved_on_a_finer_path_equals_the_campaigns_answer(re
     campaign's, and the dataset verifies as before. A re-run finds nothing to do; an id
     that is not a failure is refused with exit 2."""
     from workflow import resolve
+    from workflow.artefacts import RESOLVED
 
     root = tmp_path / "ds"
     shutil.copytree(reference, root)
@@ -350,7 +351,8 @@ def test_a_failed_sample_resolved_on_a_finer_path_equals_the_campaigns_answer(re
     failed.update(failed_sample_id=np.array([3]), failed_inputs=arrays["inputs"][i:i + 1],
                   failed_reason=np.array(["no convergence (made up by the test)"]))
     shards.write_shard(shard, {**arrays, **failed}, meta)          # the manifest is stale now
-    assert resolve.main([str(root), "--fine-step", "0.05", "--quiet", "--json"]) == 0
+    summary = tmp_path / "resolved.json"
+    assert resolve.main([str(root), "--fine-step", "0.05", "--out", str(summary), "--quiet", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     (entry,) = out["samples"]
     assert entry["sample_id"] == 3 and entry["converged"] and out["failures"] == 0 and out["stored"] == 4
@@ -366,7 +368,13 @@ def test_a_failed_sample_resolved_on_a_finer_path_equals_the_campaigns_answer(re
     assert how["sample_id"] == 3 and how["max_it"] == 24 and how["path_points"][-1] == 1.0
     v = store.verify(root)
     assert v["ok"] and v["n"] == 4 and v["failures"] == 0, v
-    assert resolve.main([str(root), "--quiet", "--json"]) == 0
+    doc = RESOLVED.load(summary)              # the summary JSON, rebuilt from the shards' meta
+    (row,) = doc["samples"]
+    assert (doc["stored"], doc["failures"], row["sample_id"], row["unstable_modes"]) == (4, 0, 3, 0)
+    assert row["walk_pairs"] == [{"pair": "2-3", "miss_mm": pytest.approx(miss, abs=1e-12)}]
+    summary.unlink()
+    assert resolve.main([str(root), "--summary-only", "--out", str(summary)]) == 0 and RESOLVED.load(summary) == doc
+    assert resolve.main([str(root), "--out", str(summary), "--quiet", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["samples"] == []
     with pytest.raises(SystemExit) as exc:
         resolve.main([str(root), "--samples", "3"])

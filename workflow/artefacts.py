@@ -42,3 +42,16 @@ STABILITY = Format("workflow-stability", 1, "workflow.stability", {
     "samples[].sample_id": int, "samples[].inputs[]": NUM, "samples[].verdict": str,
     "samples[].points[].s": NUM, "samples[].points[].unstable_modes": int,
     "samples[].points[].lowest_eigenvalue": MAYBE, "samples[].points[].closed_pairs": int})
+
+#: results/fem/resolved_<dataset>.json (make resolve-samples; workflow.resolve): the campaign's
+#: failed samples that a finer load path solved and stored (from the shards' meta["resolved"]):
+#: how (path segments, Newton iterations, cut-backs, s), the stored state's stiffness
+#: (negative eigenvalues, eigenvalue nearest zero N/mm), the trapezoid miss of its walk pairs
+#: (mm) beside the whole walk's; and the dataset's stored and failed counts.
+RESOLVED = Format("workflow-resolved", 1, "workflow.resolve", {
+    "dataset": str, "samples_requested": int, "stored": int, "failures": int,
+    **each("walk_consistency", NUM, "median_mm", "p90_mm", "max_mm"),
+    "samples[].sample_id": int, "samples[].inputs[]": NUM, "samples[].path_segments": int,
+    "samples[].newton_iterations": int, "samples[].cutbacks": int, "samples[].wall_s": NUM,
+    "samples[].unstable_modes": int, "samples[].lowest_eigenvalue": MAYBE,
+    "samples[].walk_pairs[].pair": str, "samples[].walk_pairs[].miss_mm": NUM})

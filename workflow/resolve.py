@@ -2,7 +2,7 @@
 
     python -m workflow.resolve DATASET [--samples ID,...] [--coarse-step 0.1]
         [--fine-from 0.8] [--fine-step 0.005] [--max-it 24] [--min-step 2^-12]
-        [--max-hours H] [--json] [--quiet]
+        [--max-hours H] [--out results/fem/resolved_<dataset>.json] [--summary-only] [--json] [--quiet]
 
 Why. A campaign sample is solved by continuation along its walk and, failing that, once
 from zero, each by fem.load_path's cut-back Newton (12 iterations a step, steps halved
@@ -25,8 +25,10 @@ a state on another branch than its neighbours shows as a miss far above the data
 -> the sample moves in its unit's shard from the failure arrays to the data arrays
 (sample order kept; ``meta["resolved"]`` records how: path points, path controls, Newton
 iterations, wall time, the stiffness figures) -> the shard is rewritten atomically, then the manifest is
-rebuilt from the shards (workflow.store.build_manifest). A sample that does not reach
-s = 1 stays a failure, unchanged.
+rebuilt from the shards (workflow.store.build_manifest), and the summary JSON (``summary``,
+format workflow.artefacts.RESOLVED) is written again from every shard's meta. A sample that
+does not reach s = 1 stays a failure, unchanged. ``--summary-only`` rewrites the summary
+without solving.
 
 Resume: a killed run leaves every shard either as it was or with its resolved samples
 (atomic writes); the next run rebuilds the manifest from the shards before it starts,
@@ -53,10 +55,11 @@ from contract import cli
 from contract.spec import phi_end
 from fem.options import one_rank
 from workflow.campaign import EXIT_INCOMPLETE, git_commit, save_shard
+from workflow.artefacts import RESOLVED
 from workflow.mirror import recorded_solver
-from workflow.shards import DATA_KEYS, FAILURE_KEYS, Manifest, read_shard
+from workflow.shards import DATA_KEYS, FAILURE_KEYS, Manifest, load_dataset, read_shard
 from workflow.stability import failed_samples, path_points
-from workflow.store import ShardScanner, build_manifest, shard_file, walk_misses
+from workflow.store import ShardScanner, build_manifest, shard_file, walk_consistency, walk_misses
 
 
 def solve_along(solver, target: np.ndarray, points: list[float]) -> dict:
@@ -102,6 +105,31 @@ def move_to_data(arrays: dict, sid: int, record: dict) -> dict:
     return out
 
 
+def summary(root: Path) -> dict:
+    """The RESOLVED document of dataset ``root``, from its manifest and every shard's
+    meta["resolved"] (module docstring)."""
+    manifest = Manifest.load(root)
+    data, _ = load_dataset(root)
+    unit_size = manifest.config["unit_size"]
+    pairs = walk_misses(data, unit_size)
+    samples = []
+    for e in manifest.shards:
+        for r in read_shard(root / e.file)[1].get("resolved", []):
+            sid = r["sample_id"]
+            i = int(np.flatnonzero(data["sample_id"] == sid)[0])
+            stiffness = r.get("stiffness", {})
+            samples.append({
+                "sample_id": sid, "inputs": data["inputs"][i].tolist(), "path_segments": len(r["path_points"]),
+                "newton_iterations": int(sum(r["newton"])), "cutbacks": r["cutbacks"], "wall_s": r["wall_s"],
+                "max_it": r["max_it"], "min_step": r["min_step"],
+                "unstable_modes": stiffness.get("unstable_modes", -1),
+                "lowest_eigenvalue": stiffness.get("lowest_eigenvalue"),
+                "walk_pairs": [{"pair": f"{a}-{b}", "miss_mm": m} for a, b, m in pairs if sid in (a, b)]})
+    return {"format": RESOLVED.tag, "dataset": str(root), "samples_requested": manifest.samples_requested,
+            "stored": manifest.samples, "failures": manifest.failures,
+            "walk_consistency": walk_consistency(data, unit_size), "samples": samples}
+
+
 def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m workflow.resolve", description=__doc__.split("\n\n")[0])
     ap.add_argument("dataset", help="campaign dataset folder (its manifest names the joint and discretisation)")
@@ -119,6 +147,8 @@ def main(argv=None) -> int:
                     help="smallest path step, as a fraction of a segment (default 2^-12; the campaign's 2^-8)")
     ap.add_argument("--max-hours", type=cli.number(0.0, None, open_lo=True),
                     help="start no sample after this many hours (re-run to go on)")
+    ap.add_output("--out", suffix=".json", help="the summary JSON (default results/fem/resolved_<dataset>.json)")
+    ap.add_argument("--summary-only", action="store_true", help="only rewrite the summary JSON from the shards")
     cli.add_quiet(ap)
     comm = MPI.COMM_WORLD
     one_rank(ap, comm)
@@ -139,6 +169,12 @@ def main(argv=None) -> int:
         manifest = build_manifest(root, manifest.samples_requested, manifest.config, manifest.seed,
                                   scanner.scan(), manifest)
         failed = failed_samples(root)
+    out = Path(args.out or f"results/fem/resolved_{root.name}.json")
+    if args.summary_only:
+        with ap.errors():
+            RESOLVED.write(out, summary(root))
+        lock.close()
+        return 0
     if args.samples is not None:
         wanted = {int(i) for i in args.samples}
         unknown = sorted(wanted - {f["sample_id"] for f in failed})
@@ -183,6 +219,7 @@ def main(argv=None) -> int:
                     return 1
                 manifest = build_manifest(root, manifest.samples_requested, manifest.config, manifest.seed,
                                           scanner.scan(), manifest)
+                RESOLVED.write(out, summary(root))
                 entry["wall_s"] = wall
                 say(f"sample {sid}: solved, {sum(path['newton'])} Newton iterations, {path['cutbacks']} cut-backs, "
                     f"{wall:.0f} s; walk misses {entry['walk_miss_mm']} mm -> {shard}")
@@ -191,11 +228,11 @@ def main(argv=None) -> int:
                 entry["wall_s"] = time.perf_counter() - t0
                 say(f"sample {sid}: still failed at s = {path['reached_s']:.4f} ({path['reason']})")
             results.append(entry)
-    summary = {"dataset": str(root), "path_points": points, "max_it": args.max_it, "min_step": args.min_step,
+    figures = {"dataset": str(root), "path_points": points, "max_it": args.max_it, "min_step": args.min_step,
                "samples": results, "stored": manifest.samples, "failures": manifest.failures,
                "wall_s": time.perf_counter() - t_start}
     if args.json:
-        cli.print_json(summary)
+        cli.print_json(figures)
     else:
         print(f"{root}: {sum(r['converged'] for r in results)} of {len(results)} resolved; "
               f"{manifest.samples} stored, {manifest.failures} failed")

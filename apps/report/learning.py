@@ -246,7 +246,51 @@ def production_surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
         out += [f"| {row['batch']:,} | " + " | ".join(f"{mm['ms']:.3f}" for mm in row["models"])
                 + f" | {row['models'][-1]['ratio_to_first']:.2f} |" for row in cost["cases"]]
         out.append("")
-    return out + _production_curve(root), checks
+    lines, accounted = _failed_samples(root)
+    return out + _production_curve(root) + lines, checks + accounted
+
+
+def _failed_samples(root: Path, name: str = "train_hex2s3") -> tuple[list[str], list[Check]]:
+    """Issue 55 stage 2: the production train walk's samples accounted for (its manifest),
+    and each failed sample that workflow.resolve solved afterwards (fem/resolved_<name>.json):
+    how, the stored state's stiffness, and its walk pairs' trapezoid miss beside the
+    whole walk's."""
+    m = load(root, f"data/{name}/manifest.json")
+    if not m:
+        return [], []
+    doc = load(root, f"fem/resolved_{name}.json")
+    resolved = doc["samples"] if doc else []
+    title = PRODUCTION_TITLE
+    check = judge(title, "production train walk: samples accounted for",
+                  [(Target(">=", m["samples_requested"], "samples", shown=f"{m['samples_requested']:,}"), m["samples"])])
+    out = ["### The production train walk's failed samples (issue 55, stage 2)", "",
+           f"results/data/{name}: {m['samples']:,} of {m['samples_requested']:,} samples stored, {m['failures']} "
+           "failed (`python -m workflow.dataset info`). `make resolve-samples` (workflow.resolve) solves the "
+           "campaign's failures again from zero, with the campaign's own solver and mesh on a finer path, stores "
+           "each one that converges in its unit's shard and records how, with the stored state's stiffness "
+           f"(results/fem/resolved_{name}.json; `make failed-samples` probes a path's stability, docs/decisions.md §9).",
+           ""]
+    if resolved:
+        walk = doc["walk_consistency"]
+        out += ["| sample | P (MPa), F1, F2 (N), M (N·mm) | path segments | Newton iterations (max a step) | cut-backs "
+                "| wall s | unstable modes | lowest eigenvalue (N/mm) | walk-pair miss (mm) |", "|---" * 9 + "|"]
+        for r in resolved:
+            x = r["inputs"]
+            out.append(f"| {r['sample_id']} | {x[0]:.4f}, {x[1]:.3f}, {x[2]:.3f}, {x[3]:.2f} | {r['path_segments']} "
+                       f"| {r['newton_iterations']} ({r['max_it']}) | {r['cutbacks']} | {r['wall_s']:.0f} "
+                       f"| {r['unstable_modes']} | {num(r['lowest_eigenvalue'], '.3g')} | "
+                       + ", ".join(f"{p['pair']}: {p['miss_mm']:.3g}" for p in r["walk_pairs"]) + " |")
+        out += ["", f"Walk-pair miss: the trapezoid rule's miss over a walk step (workflow.store.walk_misses); the "
+                f"whole walk's median {walk['median_mm']:.3g} mm, p90 {walk['p90_mm']:.3g} mm, max "
+                f"{walk['max_mm']:.3g} mm: a resolved state on the walk's branch misses as its neighbours do.", ""]
+        if not m["failures"] and all(r["unstable_modes"] == 0 for r in resolved):
+            out += ["Every failure was solved, each a stable equilibrium (no negative eigenvalue of the stiffness): the "
+                    "campaign's path controls failed at the valley contact front, the joint did not become unstable, "
+                    "so no part of the input box lies beyond the stable range.", ""]
+    out += ["| figure | measured | target | met |", "|---|---|---|---|",
+            f"| samples accounted for (stored; none recorded beyond the stable range) | {m['samples']:,} |"
+            + cells(check), ""]
+    return out, [check]
 
 
 def _production_curve(root: Path) -> list[str]:
