@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibration-fem-new calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger validate-finger-new report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -378,6 +378,14 @@ CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py
 calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, ~15 min; resumes) -> results/calibration/fem/
 	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane --out $(CAL_FEM)
 
+# The same truth cases on the production joint mesh (hex2:3 mixed, issue 55 stage 3: solved
+# beforehand so that the switch only re-fits), in a folder of their own (the calibration
+# keeps one mesh per folder); about 25 min a case on half a core beside another FEM job.
+CAL_FEM_NEW := results/calibration/fem_hex2s3
+calibration-fem-new: | $(SETUP) ## the calibration's truth cases on the production joint mesh (1 core, niced, ~2-3 h; resumes) -> results/calibration/fem_hex2s3/
+	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane \
+	  --divisions 2 --hex-size 3 --formulation mixed --out $(CAL_FEM_NEW)
+
 calibrate-demo: results/calibration/calibration.json ## calibrate the paper's predictor on 4 FEM gestures of the true finger, predict the other 4 (~1 min; needs make calibration-fem) -> results/calibration/{calibration.json,heldout.png,calibrated.toml}
 results/calibration/calibration.json: $(TIMES) $(CAL_CODE) $(CAL_TRUTH) $(wildcard $(CAL_FEM)/*.json) \
     results/calibration/recovery.json | $(SETUP)
@@ -432,6 +440,17 @@ results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predic
 	$(MAKE) --no-print-directory finger-fem
 	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement --model $(PRED_JOINT) \
 	  --out $@ --figures results/validation
+
+# The predictor against the production-mesh finger cases with the plane X = 0 (issue 56 §3;
+# the files *_hex2s3_plane.json of make finger-grid and the free cases), with the stage-1
+# production surrogate (results/surrogate/hex2s3/improved.pt) until the switch makes it the
+# default and validate-finger takes these cases over.
+validate-finger-new: results/validation/finger_hex2s3.json ## predictor with the production surrogate against the production-mesh finger FEM cases, plane X = 0 (~1 min) -> results/validation/finger_hex2s3.json + overlays in results/validation/finger_hex2s3/
+results/validation/finger_hex2s3.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validate_finger.py \
+    $(PRED_CORE) $(NEW_SURROGATE)/improved.pt | $(SETUP)
+	@mkdir -p results/validation/finger_hex2s3
+	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh hex2:3 --formulation mixed --plane \
+	  --model $(NEW_SURROGATE)/improved.pt --out $@ --figures results/validation/finger_hex2s3
 
 # ---------------------------------------------------------------- one joint file to a predictor (issue 37)
 # (section owned by apps/pipeline.py) Render, the two campaigns, training, held-out errors and
