@@ -58,7 +58,7 @@ from workflow.campaign import EXIT_INCOMPLETE, git_commit, save_shard
 from workflow.artefacts import RESOLVED
 from workflow.mirror import recorded_solver
 from workflow.shards import DATA_KEYS, FAILURE_KEYS, Manifest, load_dataset, read_shard
-from workflow.stability import failed_samples, path_points
+from workflow.stability import add_path_options, chosen, failed_samples, path_points
 from workflow.store import ShardScanner, build_manifest, shard_file, walk_consistency, walk_misses
 
 
@@ -132,15 +132,7 @@ def summary(root: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m workflow.resolve", description=__doc__.split("\n\n")[0])
-    ap.add_argument("dataset", help="campaign dataset folder (its manifest names the joint and discretisation)")
-    ap.add_argument("--samples", type=cli.number_list(0, None), metavar="ID,...",
-                    help="these failed sample ids only (default: every failed sample)")
-    ap.add_argument("--coarse-step", type=cli.number(0.0, 1.0, open_lo=True), default=0.1,
-                    help="path step up to --fine-from (default 0.1)")
-    ap.add_argument("--fine-from", type=cli.number(0.0, 1.0), default=0.8,
-                    help="path parameter from which the fine steps start (default 0.8)")
-    ap.add_argument("--fine-step", type=cli.number(0.0, 1.0, open_lo=True), default=0.005,
-                    help="path step from --fine-from on (default 0.005)")
+    add_path_options(ap, fine_step=0.005)
     ap.add_argument("--max-it", type=cli.number(1, 200, integer=True), default=24,
                     help="Newton iterations a step before it is cut back (default 24; the campaign's 12)")
     ap.add_argument("--min-step", type=cli.number(0.0, 1.0, open_lo=True), default=2.0 ** -12,
@@ -175,12 +167,7 @@ def main(argv=None) -> int:
             RESOLVED.write(out, summary(root))
         lock.close()
         return 0
-    if args.samples is not None:
-        wanted = {int(i) for i in args.samples}
-        unknown = sorted(wanted - {f["sample_id"] for f in failed})
-        if unknown:
-            ap.error(f"--samples: {unknown} are not failed samples of {root}")
-        failed = [f for f in failed if f["sample_id"] in wanted]
+    failed = chosen(ap, failed, args.samples, root)
     cli.setup_logging(args.quiet)
     say = (lambda s: None) if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     points = path_points(args.coarse_step, args.fine_from, args.fine_step)

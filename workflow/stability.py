@@ -124,8 +124,9 @@ def limit_ahead(s: list[float], lam: list[float], s_fail: float) -> bool:
     return bool(slope < 0 and -icept / slope <= s_fail + 1e-12)
 
 
-def main(argv=None) -> int:
-    ap = cli.Parser(prog="python -m workflow.stability", description=__doc__.split("\n\n")[0])
+def add_path_options(ap, fine_step: float) -> None:
+    """The dataset, --samples and the path's segments (path_points), shared with
+    workflow.resolve."""
     ap.add_argument("dataset", help="campaign dataset folder (its manifest names the joint and discretisation)")
     ap.add_argument("--samples", type=cli.number_list(0, None), metavar="ID,...",
                     help="these failed sample ids only (default: every failed sample)")
@@ -133,8 +134,25 @@ def main(argv=None) -> int:
                     help="path step up to --fine-from (default 0.1)")
     ap.add_argument("--fine-from", type=cli.number(0.0, 1.0), default=0.8,
                     help="path parameter from which the fine steps start (default 0.8)")
-    ap.add_argument("--fine-step", type=cli.number(0.0, 1.0, open_lo=True), default=0.01,
-                    help="path step from --fine-from on (default 0.01)")
+    ap.add_argument("--fine-step", type=cli.number(0.0, 1.0, open_lo=True), default=fine_step,
+                    help=f"path step from --fine-from on (default {fine_step:g})")
+
+
+def chosen(ap, failed: list[dict], samples, dataset) -> list[dict]:
+    """The failed samples ``samples`` asks for (all for None); an id that is not a failure
+    is a usage error (one line, exit 2)."""
+    if samples is None:
+        return failed
+    wanted = {int(i) for i in samples}
+    unknown = sorted(wanted - {f["sample_id"] for f in failed})
+    if unknown:
+        ap.error(f"--samples: {unknown} are not failed samples of {dataset}")
+    return [f for f in failed if f["sample_id"] in wanted]
+
+
+def main(argv=None) -> int:
+    ap = cli.Parser(prog="python -m workflow.stability", description=__doc__.split("\n\n")[0])
+    add_path_options(ap, fine_step=0.01)
     ap.add_output("--out", suffix=".json", help="the probe's JSON (default results/fem/stability_<dataset>.json)")
     cli.add_quiet(ap)
     comm = MPI.COMM_WORLD
@@ -143,11 +161,7 @@ def main(argv=None) -> int:
     with ap.errors():
         manifest = Manifest.load(args.dataset)
         failed = failed_samples(args.dataset)
-    if args.samples is not None:
-        unknown = sorted(set(int(i) for i in args.samples) - {f["sample_id"] for f in failed})
-        if unknown:
-            ap.error(f"--samples: {unknown} are not failed samples of {args.dataset}")
-        failed = [f for f in failed if f["sample_id"] in set(int(i) for i in args.samples)]
+    failed = chosen(ap, failed, args.samples, args.dataset)
     out = Path(args.out or f"results/fem/stability_{Path(args.dataset).name}.json")
     cli.setup_logging(args.quiet)
     points = path_points(args.coarse_step, args.fine_from, args.fine_step)
