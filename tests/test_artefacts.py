@@ -41,10 +41,9 @@ COMMITTED = _committed()
 #: hours each on the production mesh, and the grasp validation that reads them (make
 #: validate-grasps). Their formats are checked by tests/test_finger_grid.py,
 #: test_grasp_cases.py and test_validate_grasps.py on hand-made or coarse records.
-#: Likewise the failed samples' stability probe (make failed-samples) and their re-solve
-#: (make resolve-samples) while they run.
+#: Likewise the failed samples' stability probe (make failed-samples) while it runs.
 PENDING = {"fem/finger_grid.json", "validation/grasps_fem/*.json", "validation/grasps.json",
-           "fem/stability_*.json", "fem/resolved_*.json"}
+           "fem/stability_*.json"}
 
 
 def test_every_committed_json_is_a_known_artefact():
