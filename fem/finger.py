@@ -100,16 +100,16 @@ from petsc4py import PETSc
 from contract import cli
 from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
 from contract.grasp import APPROACH_P1, FRICTION, OBJECT_WEIGHT, ObjectSpec, approach_for, parse_object
-from contract.joint import JointSpec, MaterialLaw, joint_digest
+from contract.joint import FORMULATIONS, JointSpec, MaterialLaw, joint_digest
 from fem.contact import ContactTerms
-from fem.discretisation import FORMULATION
+from fem.discretisation import FORMULATION, SolverConfig
 from fem.geometry import FingerGeometry, finger_tags
-from fem.load_path import LoadPathSolver, SolverConfig
+from fem.load_path import LoadPathSolver
 from fem.mesh import MeshData, create_mesh
 from fem.plane_contact import PlaneContact
 from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
                          joint_geometry)
-from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
+from fem.problem import (Average, LoadTerm, Material, Problem, as_law, bellow_work,
                          chamber_pressures, clamp_and_symmetry, contact_penalty_for, deformation_gradient,
                          displacement_space, elastic_work, facet_tags_present, mixed_bellow_work,
                          mixed_clamp_and_symmetry, mixed_elastic_work, mixed_space, region_volume,

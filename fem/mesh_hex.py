@@ -72,10 +72,11 @@ from typing import Callable
 import numpy as np
 from mpi4py import MPI
 
+from fem.discretisation import HEX_QUADRATURE
 from fem.geometry import TAGS, FingerGeometry, JointGeometry, finger_tags
 
 #: quadrature degree of Q2 hexahedra: 3 x 3 x 3 Gauss points (module docstring)
-QUADRATURE = 4
+QUADRATURE = HEX_QUADRATURE
 _TOL = 1e-6     # mm: coordinates closer than this are one breakpoint
 
 

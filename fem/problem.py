@@ -81,7 +81,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from contract.joint import MaterialLaw
+from contract.joint import FORMULATIONS, MaterialLaw
 from fem.contact import ValleyContact
 from fem.geometry import TAGS, JointGeometry
 from fem.materials import energy, mixed_energy
@@ -360,7 +360,6 @@ def displacement_space(mesh_data: MeshData, degree: int, quadrature_degree: int)
 
 
 # ---------------------------------------------------------------------- mixed u-p
-FORMULATIONS = ("displacement", "mixed")
 
 
 @dataclass(frozen=True, eq=False)
