@@ -105,7 +105,8 @@ from fem.contact import ContactTerms
 from fem.discretisation import FORMULATION, SolverConfig
 from fem.geometry import FingerGeometry, finger_tags
 from fem.load_path import LoadPathSolver
-from fem.mesh import MeshData, create_mesh
+from fem.mesh import create_mesh
+from fem.mesh_data import MeshData
 from fem.plane_contact import PlaneContact
 from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
                          joint_geometry)

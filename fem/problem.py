@@ -85,7 +85,7 @@ from contract.joint import FORMULATIONS, MaterialLaw
 from fem.contact import ValleyContact
 from fem.geometry import TAGS, JointGeometry
 from fem.materials import energy, mixed_energy
-from fem.mesh import MeshData
+from fem.mesh_data import MeshData
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,8 @@ from fem.discretisation import FORMULATION
 from fem.geometry import BeamGeometry, JointGeometry, anchor_points
 from fem.discretisation import HEX_QUADRATURE, SolverConfig
 from fem.load_path import LoadPathSolver
-from fem.mesh import MeshData, create_mesh
+from fem.mesh import create_mesh
+from fem.mesh_data import MeshData
 from fem.problem import Material, as_law, joint_problem
 
 # Material and SolverConfig are re-exported: the joint's public configuration.
