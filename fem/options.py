@@ -30,10 +30,11 @@ from dataclasses import replace
 import numpy as np
 
 from contract import cli
+from contract.finger import FingerSpec
 from contract.joint import FORMULATIONS, MAX_DIVISIONS, JointSpec, joint_arg, load_joint
 from contract.spec import INPUT_BOX, INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
 from fem.discretisation import MESH_SIZE, MESH_SIZE_RANGE, parse_mesh
-from fem.geometry import JointGeometry
+from fem.geometry import FingerGeometry, JointGeometry, finger_joints
 
 MESH_SIZE_TEXT = f"mm in [{MESH_SIZE_RANGE[0]:g}, {MESH_SIZE_RANGE[1]:g}]"
 LOAD_HELP = ("chamber pressure P, MPa (signed)", "axial end force F1, N",
@@ -175,3 +176,43 @@ def on_root(comm, write) -> None:
     error = comm.bcast(error, root=0) if comm.size > 1 else error
     if error is not None:
         raise error
+
+
+# ---------------------------------------------------------------- the whole finger
+def add_finger_mesh(ap: cli.Parser) -> None:
+    """The finger's discretisation options, read by :func:`finger_discretisation`: the
+    joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'
+    element size and the formulation; each absent one is the first joint file's [mesh]."""
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
+                         "--divisions N their hexahedra are at most this / N long)")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+
+
+def add_plane_flags(ap: cli.Parser, names: str = "") -> None:
+    """--no-plane and its old opposite --plane (``args.plane``, default True: the gripper,
+    module docstring); ``names``: what the flag does to a tool's file names, if anything."""
+    ap.add_argument("--no-plane", dest="plane", action="store_false",
+                    help="one finger alone, which may cross X = 0 (default: the gripper, the right finger against "
+                         "the mirror finger's contact at X = 0, a frictionless penalty, as predictor.gesture)" + names)
+    ap.add_argument("--plane", dest="plane", action="store_true",
+                    help="the mirror finger's contact at X = 0: the default now (accepted for one release)")
+    ap.set_defaults(plane=True)
+
+
+def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
+                          finger: FingerSpec) -> tuple[FingerGeometry, str]:
+    """(FingerGeometry, formulation) of the options on the finger's joints: the first
+    joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size,
+    --divisions (a parser without it: none) or --formulation are given, every other joint
+    of its own shape with the same mesh settings (FingerGeometry); --divisions with a
+    tetrahedron size is a usage error."""
+    first = finger_joints(finger)[0]
+    try:
+        geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
+    except ValueError as exc:
+        ap.error(exc)
+    return geometry, args.formulation or first.formulation

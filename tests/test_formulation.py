@@ -31,7 +31,7 @@ pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
 from contract.finger import parse_finger  # noqa: E402
-from fem import finger as fem_finger  # noqa: E402
+from fem import finger_cli as fem_finger  # noqa: E402
 from fem import solve as fem_solve  # noqa: E402
 from fem.finger import FingerLoad, FingerSolver  # noqa: E402
 from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
