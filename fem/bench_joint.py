@@ -42,8 +42,8 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.artefacts import BENCH_JOINT
-from fem.discretisation import PAPER, PRODUCTION, Discretisation, discretisation
-from fem.options import FORMULATION_CHOICES, mesh_text, one_rank
+from fem.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation
+from fem.options import mesh_text, one_rank
 from fem.solver import JointSolver, Load
 from contract.spec import INPUT_BOX
 
@@ -126,7 +126,7 @@ def main(argv=None) -> int:
     ap.add_argument("--mesh", type=mesh_text, default=PRODUCTION.mesh, metavar="MESH",
                     help=f"the discretisation timed: tetrahedra H[:W] (mm) or hexahedra hexN "
                     f"(default {PRODUCTION.mesh}, the production mesh)")
-    ap.add_argument("--formulation", choices=FORMULATION_CHOICES, default=PRODUCTION.formulation,
+    ap.add_argument("--formulation", choices=FORMULATIONS, default=PRODUCTION.formulation,
                     help=f"its formulation (default {PRODUCTION.formulation}, the production one)")
     one_rank(ap, MPI.COMM_WORLD)
     args = ap.parse_args(argv)

@@ -6,7 +6,7 @@ H; written "H" or "H:W"), or the swept hexahedra of n divisions (JointGeometry.d
 fem.mesh_hex: n elements through every wall; written "hexN"), optionally graded by S mm
 (JointGeometry.hex_size: long intervals cut into elements of at most S / n; "hexN:S"). Then the formulation
 ("displacement": P2 / Q2 displacement; "mixed": Taylor-Hood P2-P1 / Q2-Q1 u-p, see
-fem.problem), the quadrature degree q (at least fem.mesh_hex.QUADRATURE on hexahedra) and
+fem.problem), the quadrature degree q (at least HEX_QUADRATURE on hexahedra) and
 the valley-contact penalty kappa (MPa/mm).
 
 * PAPER: the paper-fidelity 1.8 mm P2 displacement discretisation (H = PAPER_MESH_SIZE),
@@ -18,22 +18,64 @@ the valley-contact penalty kappa (MPa/mm).
   Discretisation's defaults, JointGeometry's default mesh, FORMULATION and the paper joint
   file's [mesh] are PRODUCTION's.
 
-A dataset's manifest records its geometry and solver settings, and its formulation only
-when it is not "displacement" (so manifests written before the mixed formulation existed
-read as what they are).
+A dataset's manifest records its geometry and solver settings (SolverConfig: the
+discretisation's keywords and the Newton / load-stepping controls of fem.load_path), and its
+formulation only when it is not "displacement" (so manifests written before the mixed
+formulation existed read as what they are).
+
+Value objects only: this module imports no dolfinx, so the command-line pieces
+(fem.options) and the dolfinx modules (fem.mesh_hex, fem.problem, fem.load_path) all build
+on it.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
+from contract import cli
+from contract.joint import FORMULATIONS
 from fem.geometry import MAX_DIVISIONS, PAPER_MESH_SIZE, JointGeometry
-from fem.load_path import SolverConfig
-from fem.mesh_hex import QUADRATURE as HEX_QUADRATURE
-from fem.problem import FORMULATIONS
 
 #: the formulation new data is generated on (PRODUCTION's)
 FORMULATION = "mixed"
+#: Quadrature degree of Q2 hexahedra (fem.mesh_hex): dolfinx's default for Q2 is 2 x 2 x 2,
+#: which under-integrates the Q2 stiffness (hourglass modes).
+HEX_QUADRATURE = 4
+#: Tetrahedron and hexahedron sizes, mm: finer meshes than 0.3 mm do not fit in memory (the
+#: paper-fidelity 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser ones than 10 mm no
+#: longer resolve the 2.5 mm valleys of the joint or the 2 mm beam.
+MESH_SIZE_RANGE = (0.3, 10.0)
+MESH_SIZE = cli.number(*MESH_SIZE_RANGE, "mm")   # argparse type, and parse_mesh's check
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Discretisation and Newton / load-stepping controls."""
+
+    degree: int = 2                 # Lagrange degree of u
+    quadrature_degree: int = 2      # exact for the linearised P2 stiffness; see mesh study
+    atol: float = 1e-8              # Newton: absolute residual 2-norm (N)
+    stol: float = 1e-9              # Newton: |du| <= stol |u|, just above round-off
+    max_it: int = 12
+    chord_steps: int = 3            # extra back-substitutions per factorisation (see newton)
+    krylov_rtol: float = 1e-9       # Newton corrections: GMRES on the current tangent with
+                                    # a recent tangent's factorisation as preconditioner
+    sensitivity_rtol: float = 1e-10 # GMRES for d u / d inputs
+    krylov_max_it: int = 30         # more: refactorise (the preconditioner went stale)
+    mumps_blr: float | None = 1e-8  # MUMPS block low-rank dropping threshold (None: exact)
+    box_step: float = 0.25          # first step: at most this fraction of the box per input
+    first_step: float | None = None # or a fixed first path fraction (e.g. for the beam)
+    max_step: float = 1.0
+    min_step: float = 1.0 / 256     # give up below this path fraction
+    grow: float = 1.5               # step growth after an easy step (<= 6 iterations)
+    contact_penalty: float = 100.0  # valley self-contact, MPa/mm of overlap (0: off), at
+                                    # E = 12.2 MPa: fem.problem.contact_penalty_for
+
+    def discretisation(self) -> dict:
+        """The keyword arguments of the problem builders (fem.problem.joint_problem)."""
+        return {"degree": self.degree, "quadrature_degree": self.quadrature_degree,
+                "contact_penalty": self.contact_penalty}
+
 
 
 @dataclass(frozen=True)
@@ -124,11 +166,9 @@ PRODUCTION = Discretisation()
 
 def parse_mesh(text: str) -> dict:
     """The mesh fields of a Discretisation from its text: "H" or "H:W" (mm, each in
-    fem.options.MESH_SIZE's range), "hexN" (N divisions, with the hexahedra's quadrature
+    MESH_SIZE's range), "hexN" (N divisions, with the hexahedra's quadrature
     degree) or "hexN:S" (graded by S mm, in MESH_SIZE's range). Raises ValueError with a
     one-line reason."""
-    from fem.options import MESH_SIZE
-
     text = text.strip()
     if text.startswith("hex"):
         n, _, s = text[3:].partition(":")

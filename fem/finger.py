@@ -80,14 +80,11 @@ it balances the weights and the plane's push), null without it.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import logging
 import math
-import sys
 import time
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
@@ -97,47 +94,29 @@ from dolfinx.fem.petsc import assemble_vector
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from contract import cli
-from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
-from contract.grasp import APPROACH_P1, FRICTION, OBJECT_WEIGHT, ObjectSpec, approach_for, parse_object
-from contract.joint import JointSpec, MaterialLaw, joint_digest
+from contract.finger import FingerSpec, same_finger
+from contract.joint import FORMULATIONS, MaterialLaw
 from fem.contact import ContactTerms
-from fem.discretisation import FORMULATION
-from fem.geometry import FingerGeometry, finger_tags
-from fem.load_path import LoadPathSolver, SolverConfig
-from fem.mesh import MeshData, create_mesh
+from fem.discretisation import FORMULATION, SolverConfig
+from fem.geometry import FingerGeometry, finger_joints, finger_tags, pressure_limits
+from fem.load_path import LoadPathSolver
+from fem.mesh import create_mesh
+from fem.mesh_data import MeshData
 from fem.plane_contact import PlaneContact
-from fem.options import (MESH_SIZE, add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size,
-                         joint_geometry)
-from fem.problem import (FORMULATIONS, Average, LoadTerm, Material, Problem, as_law, bellow_work,
+from fem.problem import (Average, LoadTerm, Material, Problem, as_law, bellow_work,
                          chamber_pressures, clamp_and_symmetry, contact_penalty_for, deformation_gradient,
                          displacement_space, elastic_work, facet_tags_present, mixed_bellow_work,
                          mixed_clamp_and_symmetry, mixed_elastic_work, mixed_space, region_volume,
                          rotation_about_z, valley_contact)
 from contract.spec import check_box
 from fem.solver import config_for
-from fem.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
-MAX_JOINTS = 4        # --p1 .. --p4
-
-
-def finger_joints(finger: FingerSpec) -> list[JointSpec]:
-    """The joint description of every joint part, base to tip (contract.finger: a part's
-    own joint file, or the paper's joint)."""
-    return [finger.parts[k].spec for k in finger.joints]
-
-
 def joint_laws(finger: FingerSpec, material: MaterialLaw | Material | None = None) -> dict:
     """{part index k: the body's law of joint part k}: each joint's own (None), or
     ``material`` for every joint."""
     return {k: as_law(material) if material is not None else finger.parts[k].spec.material
             for k in finger.joints}
-
-
-def pressure_limits(finger: FingerSpec) -> np.ndarray:
-    """|P_j| bound (MPa) of every joint, base to tip: its input box's pressure_mpa."""
-    return np.array([spec.pressure_mpa for spec in finger_joints(finger)])
 
 
 @dataclass(frozen=True)
@@ -587,190 +566,7 @@ def same_settings(recorded: dict | None, settings: dict, finger: FingerSpec) -> 
             and same_finger(recorded["geometry"]["finger"], finger))
 
 
-def add_finger_mesh(ap: cli.Parser) -> None:
-    """The finger's discretisation options, read by :func:`finger_discretisation`: the
-    joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'
-    element size and the formulation; each absent one is the first joint file's [mesh]."""
-    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
-    add_wall_mesh_size(ap)
-    add_divisions(ap)
-    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
-                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
-                         "--divisions N their hexahedra are at most this / N long)")
-    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+if __name__ == "__main__":      # `python -m fem.finger`: the command is fem.finger_cli's
+    import runpy
 
-
-def add_plane_flags(ap: cli.Parser, names: str = "") -> None:
-    """--no-plane and its old opposite --plane (``args.plane``, default True: the gripper,
-    module docstring); ``names``: what the flag does to a tool's file names, if anything."""
-    ap.add_argument("--no-plane", dest="plane", action="store_false",
-                    help="one finger alone, which may cross X = 0 (default: the gripper, the right finger against "
-                         "the mirror finger's contact at X = 0, a frictionless penalty, as predictor.gesture)" + names)
-    ap.add_argument("--plane", dest="plane", action="store_true",
-                    help="the mirror finger's contact at X = 0: the default now (accepted for one release)")
-    ap.set_defaults(plane=True)
-
-
-def build_parser() -> cli.Parser:
-    ap = cli.Parser(prog="python -m fem.finger", description="Solve one whole-finger gesture with DOLFINx.")
-    pressure = cli.number(unit="MPa")     # each joint's box is checked once the finger is read
-    for j in range(1, MAX_JOINTS + 1):
-        ap.add_argument(f"--p{j}", type=pressure, default=None,
-                        help=f"joint-{j} pressure, MPa (|P| <= its joint's input box, the paper's 0.3; default 0)")
-    ap.add_argument("--pressures", type=cli.number_list(unit="MPa"), metavar="P1,P2,...",
-                    help="every joint's pressure, MPa, base to tip (any number of joints; instead of --p1..--p4)")
-    ap.add_argument("--no-gravity", action="store_true", help="no weights (free pressurisation)")
-    add_plane_flags(ap)
-    ap.add_argument("--finger", type=finger_arg, default=None,
-                    help="finger description file (default: contract/fingers/paper.toml); its joint parts "
-                         "name their joint files (default: the paper's joint)")
-    add_finger_mesh(ap)
-    ap.add_output("--xdmf", suffix=".xdmf", help="also write the displacement field (+ its .h5)")
-    add_grasp_arguments(ap)
-    cli.add_quiet(ap)
-    ap.add_argument("-v", "--verbose", action="store_true", help="also log every Newton iteration")
-    return ap
-
-
-def parsed_pressures(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpec) -> tuple[float, ...]:
-    """One pressure per joint of ``finger`` (MPa) from --pressures or --p1..--p4 (missing
-    ones 0), each within its joint's box; a count that does not fit the finger, or a
-    pressure beyond its box, is a usage error."""
-    n = finger.n_joints
-    given = [j for j in range(1, MAX_JOINTS + 1) if getattr(args, f"p{j}") is not None]
-    if args.pressures is not None:
-        if given:
-            ap.error(f"give either --p1..--p{MAX_JOINTS} or --pressures, not both")
-        if len(args.pressures) != n:
-            ap.error(f"--pressures: {len(args.pressures)} values for finger {finger.name!r} of {n} joint(s)")
-        flags, pressures = ["--pressures"] * n, tuple(args.pressures)
-    else:
-        if given and max(given) > n:
-            ap.error(f"--p{max(given)} given, but finger {finger.name!r} has {n} joint(s)")
-        flags = [f"--p{j}" for j in range(1, n + 1)]
-        pressures = tuple(getattr(args, f"p{j}", None) or 0.0 for j in range(1, n + 1))
-    for flag, p, limit in zip(flags, pressures, pressure_limits(finger)):
-        if abs(p) > limit:
-            ap.error(f"argument {flag}: {p:g} is outside [{-limit:g}, {limit:g}] MPa (its joint's input box)")
-    return pressures
-
-
-def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
-                          finger: FingerSpec) -> tuple[FingerGeometry, str]:
-    """(FingerGeometry, formulation) of the options on the finger's joints: the first
-    joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size,
-    --divisions (a parser without it: none) or --formulation are given, every other joint
-    of its own shape with the same mesh settings (FingerGeometry); --divisions with a
-    tetrahedron size is a usage error."""
-    first = finger_joints(finger)[0]
-    try:
-        geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
-    except ValueError as exc:
-        ap.error(exc)
-    return geometry, args.formulation or first.formulation
-
-
-def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int) -> None:
-    load = result.load
-    print(f"finger {finger.name!r}, P = {list(load.pressures)} MPa, gravity {load.gravity}: "
-          f"converged={result.converged} {result.reason}")
-    if result.converged:
-        print(f"  tip = ({result.tip[0]:.4f}, {result.tip[1]:.4f}) mm, "
-              f"tip angle {math.degrees(result.tip_angle):.3f} deg")
-        for j, s in enumerate(out["joints"]):
-            print(f"  joint {j + 1}: end angle {s['end_angle_deg']:.3f} deg, chord {s['chord_angle_deg']:.3f} deg, "
-                  f"cap rotation {s['cap_rotation_deg']:.3f} deg")
-        if out["plane_force_N"] is not None:
-            bx, by = out["base_force_N"]
-            print(f"  plane X = 0: force {out['plane_force_N']:.4f} N, overlap {out['plane_overlap_mm']:.4f} mm, "
-                  f"base force ({bx:.4f}, {by:.4f}) N")
-    else:
-        print("  tip = none (did not converge)")
-    print(f"  {result.load_steps} load steps, Newton {result.newton_iterations}, "
-          f"{result.wall_time:.1f} s, mesh {out['mesh']['mesh']}: {out['mesh']['nodes']} nodes ({out['formulation']}), "
-          f"{ranks} rank(s)")
-
-
-def add_grasp_arguments(ap: cli.Parser) -> None:
-    """--object, --approach, --mu, --object-weight: a grasp (fem.grasp)."""
-    ap.add_argument("--object", type=object_arg, default=None,
-                    help="hold a rigid object, kind[:key=value,...] as predictor.gesture --object "
-                         "(circle, ellipse, rectangle; mm, deg): the approach, the object, the pressure ramp")
-    ap.add_argument("--approach", type=cli.number_list(unit="MPa"), metavar="P1,P2", default=None,
-                    help="with --object: the approach pressures, one per joint (default joint 1 at "
-                         f"{APPROACH_P1:g} MPa, the others 0)")
-    ap.add_argument("--mu", type=cli.number(0.0, 10.0), default=FRICTION,
-                    help=f"with --object: friction coefficient (default {FRICTION:g})")
-    ap.add_argument("--object-weight", type=cli.number(0.0, 100.0, unit="N"), default=OBJECT_WEIGHT,
-                    help=f"with --object: its weight, N (default {OBJECT_WEIGHT:g})")
-
-
-def object_arg(text: str) -> ObjectSpec:
-    """argparse type of --object (contract.grasp.parse_object)."""
-    try:
-        return parse_object(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def parsed_approach(ap: cli.Parser, args: argparse.Namespace, finger: FingerSpec) -> tuple[float, ...]:
-    """The approach pressures (MPa) of a grasp: one per joint, each within its box."""
-    if args.object is None:
-        if args.approach is not None:
-            ap.error("--approach needs --object")
-        return ()
-    if args.no_gravity:
-        ap.error("--object: a grasp lifts the object's weight; drop --no-gravity")
-    approach = approach_for(finger.n_joints) if args.approach is None else tuple(args.approach)
-    if len(approach) != finger.n_joints:
-        ap.error(f"--approach: {len(approach)} values for finger {finger.name!r} of {finger.n_joints} joint(s)")
-    for j, (p, limit) in enumerate(zip(approach, pressure_limits(finger))):
-        if abs(p) > limit:
-            ap.error(f"argument --approach: P{j + 1} = {p:g} is outside [{-limit:g}, {limit:g}] MPa")
-    return approach
-
-
-def main(argv=None) -> int:
-
-    ap = build_parser()
-    args = ap.parse_args(argv)
-    finger = args.finger or load_finger()
-    load = FingerLoad(parsed_pressures(ap, args, finger), not args.no_gravity)
-    approach = parsed_approach(ap, args, finger)
-    cli.setup_logging(args.quiet, args.verbose)
-    geometry, formulation = finger_discretisation(ap, args, finger)
-    if args.object is not None:
-        from fem.grasp import grasp_main     # fem.grasp builds on this module's solver
-        return grasp_main(ap, args, geometry, formulation, load, approach)
-    comm = MPI.COMM_WORLD
-    with ap.errors(), cli.heartbeat(f"finger {finger.name!r}", enabled=comm.rank == 0):
-        if comm.rank == 0:
-            log.info("finger %r: meshing and compiling the forms (the first run compiles for tens of seconds)",
-                     finger.name)
-        solver = FingerSolver(geometry, comm, formulation=formulation, plane=args.plane)
-        if comm.rank == 0:
-            log.info("mesh ready (%d nodes); solving P = %s MPa, gravity %s", solver.mesh_info()["nodes"],
-                     list(load.pressures), load.gravity)
-        result = solver.solve(load)
-        if args.xdmf and result.converged:
-            # write_xdmf takes anything with comm, mesh_data and u: here u's own space (mixed: no
-            # mixed field is written)
-            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.mesh_data,
-                                                  u=solver.displacement()))
-    if comm.rank == 0:
-        out = {**result.summary(), "finger": finger.summary(), "mesh": solver.mesh_info(),
-               "geometry": geometry.as_dict(), "formulation": formulation, "plane": args.plane,
-               "joint_files": [{"name": j.name, "sha256": joint_digest(j)} for j in finger_joints(finger)],
-               "ranks": comm.size}
-        if args.json:
-            cli.print_json(out)
-        else:
-            _print_text(out, result, finger, comm.size)
-        if not result.converged:
-            print(f"{ap.prog}: did not converge: {' '.join(result.reason.split()) or 'no reason given'}; no figures reported",
-                  file=sys.stderr, flush=True)
-    return 0 if result.converged else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    runpy.run_module("fem.finger_cli", run_name="__main__", alter_sys=True)

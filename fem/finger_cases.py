@@ -73,13 +73,12 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.artefacts import FINGER_CASE
-from fem.finger import (FINGER_CONFIG, FingerLoad, FingerSolver, add_finger_mesh, add_plane_flags,
-                        finger_discretisation, finger_joints, pressure_limits, rotation_matrix, same_settings)
+from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, rotation_matrix, same_settings
+from fem.geometry import JointGeometry, finger_joints, pressure_limits
+from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation, one_rank
 from fem.solver import config_for
 from contract.finger import finger_arg, load_finger
 from contract.joint import is_paper_joint, joint_digest
-from fem.geometry import JointGeometry
-from fem.options import one_rank
 
 #: (name, P1, P2, gravity)
 CASES = [

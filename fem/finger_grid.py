@@ -42,7 +42,8 @@ from contract import cli
 from contract.files import json_safe
 from contract.finger import FingerSpec, finger_arg, load_finger
 from fem.artefacts import FINGER_CASE, FINGER_GRID
-from fem.finger import add_finger_mesh, add_plane_flags, finger_discretisation, pressure_limits
+from fem.geometry import pressure_limits
+from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation
 from fem.finger_cases import case_name, case_settings, default_suffix, pending, solve_cases, solver_settings
 from fem.options import one_rank
 

@@ -43,7 +43,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from contract.finger import FingerSpec
-from contract.joint import GEOMETRY_KEYS, MAX_DIVISIONS, mesh_text
+from contract.joint import GEOMETRY_KEYS, MAX_DIVISIONS, JointSpec, mesh_text
 from contract.spec import JOINT_LENGTH, N_ANCHORS
 
 #: Physical-group tags, shared with fem.problem.
@@ -562,3 +562,14 @@ def anchor_points(length: float, n: int = N_ANCHORS) -> np.ndarray:
     """Material anchor points X_i = (i·L/n, 0, 0), i = 1..n (docs/physics.md). Shape (n, 3), mm."""
     x = np.arange(1, n + 1) * length / n
     return np.column_stack([x, np.zeros(n), np.zeros(n)])
+
+
+def finger_joints(finger: FingerSpec) -> list[JointSpec]:
+    """The joint description of every joint part, base to tip (contract.finger: a part's
+    own joint file, or the paper's joint)."""
+    return [finger.parts[k].spec for k in finger.joints]
+
+
+def pressure_limits(finger: FingerSpec) -> np.ndarray:
+    """|P_j| bound (MPa) of every joint, base to tip: its input box's pressure_mpa."""
+    return np.array([spec.pressure_mpa for spec in finger_joints(finger)])

@@ -1,7 +1,9 @@
 """FEM grasps: the whole finger holding a rigid object, along the predictor's history.
 
-    python -m fem.finger --p1 0.2 --p2 0.25 --object circle [--approach -0.15,0]
+    python -m fem.finger_cli --p1 0.2 --p2 0.25 --object circle [--approach -0.15,0]
                          [--mu 0.3] [--object-weight 0.2] [--no-plane] [--xdmf out.xdmf] --json
+
+(the command line is fem.finger_cli's, the same as fem.finger's without --object).
 
 Model: the finger of fem.finger (gravity on) with the object's contact of
 fem.object_contact (the predictor's law: penalty k_c per length spread over the part's
@@ -124,48 +126,3 @@ class GraspSolver:
         contact = self.object.state(self.fem.u) if result.converged else {}
         base = self.base_force() if result.converged else None
         return GraspResult(result, tuple(approach), contact, base, gap, time.perf_counter() - t0)
-
-
-def _print_text(out: dict) -> None:
-    print(f"grasp: P = {out['pressures_MPa']} MPa from the approach {out['approach_MPa']} MPa: "
-          f"state {out['state']} {out['reason']}")
-    if out["tip"] is not None:
-        print(f"  tip = ({out['tip'][0]:.4f}, {out['tip'][1]:.4f}) mm, tip angle {out['tip_angle_deg']:.3f} deg")
-        print(f"  contact force {out['contact_force_N']:.4f} N, friction use {out['friction_use']}, "
-              f"base force {out['base_force_N']} N")
-    print(f"  {out['load_steps']} load steps, Newton {out['iterations']}, {out['grasp_wall_time_s']:.1f} s")
-
-
-def grasp_main(ap, args, geometry: FingerGeometry, formulation: str, load: FingerLoad,
-               approach: tuple[float, ...]) -> int:
-    """fem.finger's command line with --object (module docstring): exit 0 converged, 1 not
-    converged (figures null), 2 an object that cuts the approach gesture."""
-    from contract import cli
-    from fem.xdmf import write_xdmf
-    from types import SimpleNamespace
-    import sys
-
-    comm = MPI.COMM_WORLD
-    with ap.errors(), cli.heartbeat("grasp", enabled=comm.rank == 0):
-        solver = GraspSolver(geometry, args.object, comm, formulation, mu=args.mu, weight=args.object_weight,
-                             plane=args.plane)
-        try:
-            result = solver.solve(load.pressures, approach)
-        except ObjectCutsFinger as exc:
-            ap.error(str(exc))
-        if args.xdmf and result.finger.converged:
-            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.fem.mesh_data,
-                                                  u=solver.fem.displacement()))
-    if comm.rank == 0:
-        out = {**result.summary(), "object": args.object.__dict__, "mu": args.mu,
-               "object_weight_N": args.object_weight, "finger": geometry.finger.summary(),
-               "mesh": solver.fem.mesh_info(), "formulation": formulation, "plane": args.plane,
-               "ranks": comm.size}
-        if args.json:
-            cli.print_json(out)
-        else:
-            _print_text(out)
-        if not result.finger.converged:
-            print(f"{ap.prog}: did not converge: {' '.join(result.finger.reason.split())}; no figures reported",
-                  file=sys.stderr, flush=True)
-    return 0 if result.finger.converged else 1

@@ -74,7 +74,8 @@ from contract.finger import load_finger
 from contract.grasp import (FRICTION, GRASP_CASES, OBJECT_WEIGHT, GraspCase, ObjectSpec, approach_for,
                             parse_object)
 from fem.artefacts import GRASP_CASE
-from fem.finger import add_finger_mesh, finger_discretisation, pressure_limits
+from fem.geometry import pressure_limits
+from fem.options import add_finger_mesh, finger_discretisation
 from fem.grasp import GraspSolver
 from fem.options import one_rank
 

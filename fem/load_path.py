@@ -50,6 +50,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem.block_krylov import block_gmres
+from fem.discretisation import SolverConfig
 from fem.problem import Problem
 
 log = logging.getLogger("softjoint.fem")
@@ -59,34 +60,6 @@ log = logging.getLogger("softjoint.fem")
 #: SolverConfig field: a campaign's solver (its config, in every manifest) is unchanged.
 MUMPS_WORKSPACE_PERCENT = 100
 
-
-@dataclass(frozen=True)
-class SolverConfig:
-    """Discretisation and Newton / load-stepping controls."""
-
-    degree: int = 2                 # Lagrange degree of u
-    quadrature_degree: int = 2      # exact for the linearised P2 stiffness; see mesh study
-    atol: float = 1e-8              # Newton: absolute residual 2-norm (N)
-    stol: float = 1e-9              # Newton: |du| <= stol |u|, just above round-off
-    max_it: int = 12
-    chord_steps: int = 3            # extra back-substitutions per factorisation (see newton)
-    krylov_rtol: float = 1e-9       # Newton corrections: GMRES on the current tangent with
-                                    # a recent tangent's factorisation as preconditioner
-    sensitivity_rtol: float = 1e-10 # GMRES for d u / d inputs
-    krylov_max_it: int = 30         # more: refactorise (the preconditioner went stale)
-    mumps_blr: float | None = 1e-8  # MUMPS block low-rank dropping threshold (None: exact)
-    box_step: float = 0.25          # first step: at most this fraction of the box per input
-    first_step: float | None = None # or a fixed first path fraction (e.g. for the beam)
-    max_step: float = 1.0
-    min_step: float = 1.0 / 256     # give up below this path fraction
-    grow: float = 1.5               # step growth after an easy step (<= 6 iterations)
-    contact_penalty: float = 100.0  # valley self-contact, MPa/mm of overlap (0: off), at
-                                    # E = 12.2 MPa: fem.problem.contact_penalty_for
-
-    def discretisation(self) -> dict:
-        """The keyword arguments of the problem builders (fem.problem.joint_problem)."""
-        return {"degree": self.degree, "quadrature_degree": self.quadrature_degree,
-                "contact_penalty": self.contact_penalty}
 
 @dataclass
 class Rates:

@@ -8,24 +8,14 @@ meshed by fem.mesh_hex instead (one structured grid, no gmsh).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from mpi4py import MPI
 
 from fem.geometry import (BeamGeometry, FingerGeometry, JointGeometry, build_beam, build_finger,
                           build_joint)
+from fem.mesh_data import MeshData
+from fem.mesh_hex import create_hex_finger_mesh, create_hex_mesh
 
 BUILDERS = {JointGeometry: build_joint, BeamGeometry: build_beam, FingerGeometry: build_finger}
-
-
-@dataclass
-class MeshData:
-    """A distributed mesh with its cell tags (volumes) and facet tags (surfaces)."""
-
-    mesh: object
-    cell_tags: object
-    facet_tags: object
-    geometry: JointGeometry | BeamGeometry | FingerGeometry
 
 
 def create_mesh(geometry: JointGeometry | BeamGeometry | FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> MeshData:
@@ -35,12 +25,8 @@ def create_mesh(geometry: JointGeometry | BeamGeometry | FingerGeometry, comm: M
     from dolfinx.io import gmshio
 
     if isinstance(geometry, JointGeometry) and geometry.divisions:
-        from fem.mesh_hex import create_hex_mesh
-
         return create_hex_mesh(geometry, comm)
     if isinstance(geometry, FingerGeometry) and geometry.divisions:
-        from fem.mesh_hex import create_hex_finger_mesh
-
         return create_hex_finger_mesh(geometry, comm)
 
     import gmsh

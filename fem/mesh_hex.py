@@ -59,7 +59,7 @@ degree, and fem.discretisation uses it for every hexahedral discretisation.
 
 Data flow: JointGeometry(divisions=n) or FingerGeometry(finger, JointGeometry(divisions=n))
 -> fem.mesh.create_mesh -> create_hex_mesh / create_hex_finger_mesh -> layout -> hexahedra
--> fem.mesh.MeshData -> fem.problem / fem.solver / fem.finger, exactly as the gmsh
+-> fem.mesh_data.MeshData -> fem.problem / fem.solver / fem.finger, exactly as the gmsh
 tetrahedra.
 """
 
@@ -72,10 +72,12 @@ from typing import Callable
 import numpy as np
 from mpi4py import MPI
 
+from fem.discretisation import HEX_QUADRATURE
 from fem.geometry import TAGS, FingerGeometry, JointGeometry, finger_tags
+from fem.mesh_data import MeshData
 
 #: quadrature degree of Q2 hexahedra: 3 x 3 x 3 Gauss points (module docstring)
-QUADRATURE = 4
+QUADRATURE = HEX_QUADRATURE
 _TOL = 1e-6     # mm: coordinates closer than this are one breakpoint
 
 
@@ -335,11 +337,9 @@ def _meshtags(mesh, dim: int, entities: np.ndarray, values: np.ndarray):
 
 def _distributed(geometry: JointGeometry | FingerGeometry, n: int, comm: MPI.Comm):
     """The hexahedra of ``n`` divisions of ``geometry`` distributed over ``comm``
-    (collective; rank 0 builds the cells), tagged by its layout: a fem.mesh.MeshData."""
+    (collective; rank 0 builds the cells), tagged by its layout: a fem.mesh_data.MeshData."""
     import ufl
     from dolfinx.mesh import compute_midpoints, create_mesh, locate_entities_boundary
-
-    from fem.mesh import MeshData
 
     if comm.rank == 0:
         points, cells = hexahedra(geometry, n)
@@ -362,12 +362,12 @@ def _distributed(geometry: JointGeometry | FingerGeometry, n: int, comm: MPI.Com
 def create_hex_mesh(geometry: JointGeometry, comm: MPI.Comm = MPI.COMM_WORLD):
     """The joint half-model as straight-sided hexahedra of ``geometry.divisions`` (>= 1)
     divisions (module docstring), distributed over ``comm`` (collective): a
-    fem.mesh.MeshData."""
+    fem.mesh_data.MeshData."""
     return _distributed(geometry, geometry.divisions, comm)
 
 
 def create_hex_finger_mesh(geometry: FingerGeometry, comm: MPI.Comm = MPI.COMM_WORLD):
     """The finger half-model as straight-sided hexahedra, every joint of its own shape and
     of ``geometry.joint.divisions`` (>= 1) divisions (module docstring), distributed over
-    ``comm`` (collective): a fem.mesh.MeshData tagged by fem.geometry.finger_tags."""
+    ``comm`` (collective): a fem.mesh_data.MeshData tagged by fem.geometry.finger_tags."""
     return _distributed(geometry, geometry.joint.divisions, comm)

@@ -1,8 +1,6 @@
 """Command-line pieces shared by the fem tools, on top of :mod:`contract.cli` (no dolfinx).
 
-* ``--mesh-size`` h (mm) in MESH_SIZE_RANGE = [0.3, 10]: finer meshes than 0.3 mm do not
-  fit in memory (the paper-fidelity 1.8 mm mesh has 17,359 P2 nodes, nodes ~ h^-3), coarser
-  ones than 10 mm no longer resolve the 2.5 mm valleys of the joint or the 2 mm beam.
+* ``--mesh-size`` h (mm) in fem.discretisation.MESH_SIZE_RANGE, [0.3, 10];
 * the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the joint's box
   (the paper's: |P| <= 0.3, |F1|, |F2| <= 3, |M| <= 100) is checked by
   :func:`contract.spec.check_box` right after parsing (before any mesh), unless
@@ -32,16 +30,13 @@ from dataclasses import replace
 import numpy as np
 
 from contract import cli
-from contract.joint import MAX_DIVISIONS, JointSpec, joint_arg, load_joint
+from contract.finger import FingerSpec
+from contract.joint import FORMULATIONS, MAX_DIVISIONS, JointSpec, joint_arg, load_joint
 from contract.spec import INPUT_BOX, INPUT_NAMES, INPUT_UNITS, OutOfBoxError, check_box
-from fem.geometry import JointGeometry
+from fem.discretisation import MESH_SIZE, MESH_SIZE_RANGE, parse_mesh
+from fem.geometry import FingerGeometry, JointGeometry, finger_joints
 
-MESH_SIZE_RANGE = (0.3, 10.0)  # mm
-MESH_SIZE = cli.number(*MESH_SIZE_RANGE, "mm")   # argparse type
 MESH_SIZE_TEXT = f"mm in [{MESH_SIZE_RANGE[0]:g}, {MESH_SIZE_RANGE[1]:g}]"
-#: fem.problem.FORMULATIONS, spelled out here: this module imports no dolfinx
-#: (tests/test_formulation.py checks that the two agree).
-FORMULATION_CHOICES = ("displacement", "mixed")
 LOAD_HELP = ("chamber pressure P, MPa (signed)", "axial end force F1, N",
              "transverse end force F2, N", "end couple M about +z, N*mm")
 
@@ -73,10 +68,7 @@ def add_divisions(ap: cli.Parser) -> None:
 
 def mesh_text(text: str) -> str:
     """argparse type: a discretisation's mesh, "H", "H:W" (tetrahedra, mm) or "hexN"
-    (hexahedra), checked by fem.discretisation.parse_mesh (imported when called: it
-    imports dolfinx)."""
-    from fem.discretisation import parse_mesh
-
+    (hexahedra), checked by fem.discretisation.parse_mesh."""
     try:
         parse_mesh(text)
     except ValueError as exc:
@@ -89,7 +81,7 @@ def add_formulation(ap: cli.Parser,
     """``--formulation`` {displacement, mixed}; default None: the production formulation
     (fem.discretisation.FORMULATION) or, for a tool with ``--joint``, the joint file's
     (formulation_of), resolved by the tool and described by ``shown``."""
-    ap.add_argument("--formulation", choices=FORMULATION_CHOICES, default=None,
+    ap.add_argument("--formulation", choices=FORMULATIONS, default=None,
                     help="finite elements: P2 displacement, or Taylor-Hood P2-P1 u-p 'mixed' "
                          f"(no volumetric locking); default: {shown}")
 
@@ -184,3 +176,43 @@ def on_root(comm, write) -> None:
     error = comm.bcast(error, root=0) if comm.size > 1 else error
     if error is not None:
         raise error
+
+
+# ---------------------------------------------------------------- the whole finger
+def add_finger_mesh(ap: cli.Parser) -> None:
+    """The finger's discretisation options, read by :func:`finger_discretisation`: the
+    joints' mesh (--mesh-size, --wall-mesh-size, --divisions, --hex-size), the rigid parts'
+    element size and the formulation; each absent one is the first joint file's [mesh]."""
+    add_mesh_size(ap, None, "joint tetrahedron size", shown="the first joint file's [mesh] size")
+    add_wall_mesh_size(ap)
+    add_divisions(ap)
+    ap.add_argument("--rigid-mesh-size", type=MESH_SIZE, default=FingerGeometry.rigid_mesh_size,
+                    help=f"element size in the rigid parts, mm (default {FingerGeometry.rigid_mesh_size:g}; with "
+                         "--divisions N their hexahedra are at most this / N long)")
+    add_formulation(ap, "the first joint file's [mesh] formulation (the paper's: the production one)")
+
+
+def add_plane_flags(ap: cli.Parser, names: str = "") -> None:
+    """--no-plane and its old opposite --plane (``args.plane``, default True: the gripper,
+    module docstring); ``names``: what the flag does to a tool's file names, if anything."""
+    ap.add_argument("--no-plane", dest="plane", action="store_false",
+                    help="one finger alone, which may cross X = 0 (default: the gripper, the right finger against "
+                         "the mirror finger's contact at X = 0, a frictionless penalty, as predictor.gesture)" + names)
+    ap.add_argument("--plane", dest="plane", action="store_true",
+                    help="the mirror finger's contact at X = 0: the default now (accepted for one release)")
+    ap.set_defaults(plane=True)
+
+
+def finger_discretisation(ap: cli.Parser, args: argparse.Namespace,
+                          finger: FingerSpec) -> tuple[FingerGeometry, str]:
+    """(FingerGeometry, formulation) of the options on the finger's joints: the first
+    joint's shape with its [mesh] defaults unless --mesh-size, --wall-mesh-size,
+    --divisions (a parser without it: none) or --formulation are given, every other joint
+    of its own shape with the same mesh settings (FingerGeometry); --divisions with a
+    tetrahedron size is a usage error."""
+    first = finger_joints(finger)[0]
+    try:
+        geometry = FingerGeometry(finger, joint_geometry(args, first), args.rigid_mesh_size)
+    except ValueError as exc:
+        ap.error(exc)
+    return geometry, args.formulation or first.formulation

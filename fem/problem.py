@@ -81,11 +81,11 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from contract.joint import MaterialLaw
+from contract.joint import FORMULATIONS, MaterialLaw
 from fem.contact import ValleyContact
 from fem.geometry import TAGS, JointGeometry
 from fem.materials import energy, mixed_energy
-from fem.mesh import MeshData
+from fem.mesh_data import MeshData
 
 
 @dataclass(frozen=True)
@@ -360,7 +360,6 @@ def displacement_space(mesh_data: MeshData, degree: int, quadrature_degree: int)
 
 
 # ---------------------------------------------------------------------- mixed u-p
-FORMULATIONS = ("displacement", "mixed")
 
 
 @dataclass(frozen=True, eq=False)

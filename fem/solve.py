@@ -29,7 +29,6 @@ from __future__ import annotations
 import logging
 import sys
 from dataclasses import asdict
-from types import SimpleNamespace
 
 from mpi4py import MPI
 
@@ -98,9 +97,7 @@ def main(argv=None) -> int:
         result = solver.solve(load, allow_extrapolation=args.allow_extrapolation)
         jac = solver.sensitivities() if args.jacobian and result.converged else None
         if args.xdmf and result.converged:
-            # write_xdmf takes anything with comm, mesh_data and u: u in its own space
-            write_xdmf(args.xdmf, SimpleNamespace(comm=comm, mesh_data=solver.mesh_data,
-                                                  u=solver.displacement()))
+            write_xdmf(args.xdmf, solver)
     if comm.rank == 0:
         out = {**result.summary(), "mesh": solver.mesh_info(), "geometry": asdict(geo),
                "formulation": formulation, "joint": {"name": joint.name, "sha256": joint_digest(joint)},

@@ -44,9 +44,10 @@ from contract.joint import JointSpec, MaterialLaw
 from contract.spec import INPUT_BOX, N_ANCHORS, check_box, outside_box, phi_end
 from fem.discretisation import FORMULATION
 from fem.geometry import BeamGeometry, JointGeometry, anchor_points
-from fem.load_path import LoadPathSolver, SolverConfig
-from fem.mesh import MeshData, create_mesh
-from fem.mesh_hex import QUADRATURE as HEX_QUADRATURE
+from fem.discretisation import HEX_QUADRATURE, SolverConfig
+from fem.load_path import LoadPathSolver
+from fem.mesh import create_mesh
+from fem.mesh_data import MeshData
 from fem.problem import Material, as_law, joint_problem
 
 # Material and SolverConfig are re-exported: the joint's public configuration.
@@ -206,7 +207,7 @@ class EndLoadedSolver:
 
 def config_for(geometry, config: SolverConfig = SolverConfig()) -> SolverConfig:
     """``config`` with at least the quadrature degree Q2 hexahedra need
-    (fem.mesh_hex.QUADRATURE: fewer points leave hourglass modes) when ``geometry`` is a
+    (fem.discretisation.HEX_QUADRATURE: fewer points leave hourglass modes) when ``geometry`` is a
     hexahedral joint (JointGeometry.divisions > 0); unchanged otherwise."""
     if getattr(geometry, "divisions", 0) and config.quadrature_degree < HEX_QUADRATURE:
         return replace(config, quadrature_degree=HEX_QUADRATURE)

@@ -2,7 +2,8 @@
 
 ``write_xdmf(path, solver)`` writes the mesh and the displacement u (mm) of a solved model
 (fem.solver.JointSolver, fem.finger.FingerSolver: anything with ``comm``, ``mesh_data``
-and ``u``) to NAME.xdmf and the NAME.h5 it names. Every rank writes its part into a hidden
+and ``displacement()``, u in its own space: the mixed formulation's pressure is not
+written) to NAME.xdmf and the NAME.h5 it names. Every rank writes its part into a hidden
 folder beside ``path``; rank 0 then fsyncs both files and renames them into place, .h5
 first, so a reader never sees a half-written pair.
 """
@@ -30,7 +31,7 @@ def write_xdmf(path: str | Path, solver) -> None:
     try:
         with XDMFFile(comm, str(tmp / path.name), "w") as f:
             f.write_mesh(solver.mesh_data.mesh)
-            f.write_function(solver.u)
+            f.write_function(solver.displacement())
         comm.barrier()
 
         def publish():

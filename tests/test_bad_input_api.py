@@ -232,7 +232,7 @@ def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys
     """fem.finger's command line around a solve that does not converge (a stand-in solver
     returns it, so no FEM runs): JSON with null figures on stdout, the same in the text
     output, exit 1 and one reason line on stderr (with --quiet, the only line)."""
-    import fem.finger as finger_cli
+    import fem.finger_cli as finger_cli
 
     class Unconverged:
         def __init__(self, geometry, comm, **settings):

@@ -28,7 +28,8 @@ from petsc4py import PETSc  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
-from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver, main  # noqa: E402
+from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver  # noqa: E402
+from fem.finger_cli import main  # noqa: E402
 from fem.geometry import FingerGeometry, JointGeometry, finger_tags  # noqa: E402
 from fem.mesh import create_mesh  # noqa: E402
 from fem.mesh_hex import QUADRATURE, hexahedra  # noqa: E402

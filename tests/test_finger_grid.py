@@ -30,7 +30,7 @@ pytest.importorskip("dolfinx")
 from fem.artefacts import FINGER_CASE, FINGER_GRID  # noqa: E402
 import fem.finger_cases as fc  # noqa: E402
 import fem.finger_grid as fg  # noqa: E402
-from fem.finger import pressure_limits  # noqa: E402
+from fem.geometry import pressure_limits  # noqa: E402
 from fem.finger_grid import grid_cases, grid_pairs, grid_summary  # noqa: E402
 
 FINGER = load_finger()

@@ -30,7 +30,9 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
 from contract.joint import load_joint  # noqa: E402
-from fem.finger import FingerLoad, FingerSolver, build_parser, finger_discretisation  # noqa: E402
+from fem.finger import FingerLoad, FingerSolver  # noqa: E402
+from fem.finger_cli import build_parser  # noqa: E402
+from fem.options import finger_discretisation  # noqa: E402
 from fem.geometry import TAGS, FingerGeometry, JointGeometry, finger_tags, shape_of  # noqa: E402
 from fem.mesh import create_mesh  # noqa: E402
 from fem.mesh_hex import hexahedra, q2_nodes  # noqa: E402

@@ -36,7 +36,8 @@ from contract.finger import load_finger  # noqa: E402
 from contract.grasp import approach_for, parse_object  # noqa: E402
 from fem import grasp_cases  # noqa: E402
 from fem.artefacts import GRASP_CASE  # noqa: E402
-from fem.finger import FingerLoad, FingerResult, pressure_limits  # noqa: E402
+from fem.finger import FingerLoad, FingerResult  # noqa: E402
+from fem.geometry import pressure_limits  # noqa: E402
 from fem.grasp import GraspResult  # noqa: E402
 from contract.grasp import GRASP_CASES, GraspCase  # noqa: E402
 

@@ -392,7 +392,8 @@ def test_finger_fem_takes_each_joints_law_and_box(tmp_path):
     another shape is meshed in its own shape with the finger's mesh settings
     (FingerGeometry.joint_at), and a mesh joint of another shape than the first joint's is
     refused (it would be ignored)."""
-    from fem.finger import joint_laws, pressure_limits
+    from fem.finger import joint_laws
+    from fem.geometry import pressure_limits
     from fem.geometry import FingerGeometry
     from fem.problem import Material
 

@@ -34,7 +34,7 @@ def _make_var(name: str) -> str:
 
 def test_fem_parsers_default_to_the_plane():
     pytest.importorskip("dolfinx")
-    from fem.finger import build_parser
+    from fem.finger_cli import build_parser
     from fem.finger_grid import build_parser as grid_parser
 
     ap = build_parser()
