@@ -10,8 +10,10 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    continuation steps with the plane's homotopy, steps capped, bounds) from the previous
    answer's equilibrium; the first goal starts from the best points of the kept grid.
    Near the last answer a position goal is first tried by Newton on the square system
-   of the equilibrium and the goal in (x, P) at once (``Tracker._newton``), which needs
-   the outline clear of X = 0 and the step inside the box; otherwise the Gauss-Newton.
+   of the equilibrium and the goal in (x, P) at once (``Tracker._newton``: the problem's
+   own residual, with the plane's penalty where the outline crosses X = 0, steps
+   backtracked), which needs the steps inside the box and a quadratic descent; otherwise
+   the Gauss-Newton.
 2. Unreachable goals: the search stops at the locally closest tip. The kept grid (a
    START_GRID x START_GRID cold grid of forward answers and the coarse COARSE x COARSE
    one of predictor.inversion with the gestures pressed on X = 0, solved once per
@@ -25,8 +27,9 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    cold solve of the predictor (predictor.solve from tau = 0, without the plane's
    penalty, whose answer is the gripper's wherever the outline stays at X >= 0 — the
    broad phase ``solve`` itself uses), and where the finger presses on X = 0 by the
-   solver's continuation (the LM with the plane's homotopy, full tolerance) from the
-   previous verified gesture (the gripper's history along the track). The answer is
+   solver's continuation (the LM with the plane's homotopy, full tolerance): the centre
+   from the previous verified gesture (the gripper's history along the track), the
+   stencil's pressed rows from the verified centre (0.01 MPa steps). The answer is
    ``verified`` when its forward solve converged and its fingertip lies within
    VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
    angle are the forward solve's; an unverified search result is never returned as
@@ -312,28 +315,12 @@ class Tracker:
 
     def _continue(self, ip: InverseProblem, start, ps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The forward equilibria at ps (n, 2) by the solver's continuation from the
-        equilibrium ``start`` (p (1, 2), x (1, 6)), full tolerance: first one LM step of the
-        stiff plane from the tangent predictor (the solver's max_iter, the ramp's depth
-        check: pressed on X = 0 a 0.01 MPa step converges in ~25-30 LM iterations, the
-        outline's vertices entering the plane one by one, where the homotopy's softer planes
-        cost 4-10x more); the rows it leaves go through the homotopy's softer planes with
-        cut-backs (Branch.neighbours).
-        Returns (x (n, 6), converged (n,))."""
-        from predictor.jacobians import jacobian_fn
-        from predictor.lm import levenberg_marquardt
-        from predictor.ramp import contact_depth
-
-        prob, opts = self.problem, self.options
-        n = len(ps)
-        p0, x0 = start[0].reshape(1, 2), start[1].reshape(1, 6)
-        x, ok, _, _ = levenberg_marquardt(jacobian_fn(prob), x0.expand(n, 6), ps, opts, None, p0.expand(n, 2))
-        ok = ok & (contact_depth(prob, torch.nan_to_num(x), ps)[1] <= opts.max_penetration)
-        if not bool(ok.all()):
-            bad = ~ok
-            cont = Branch(ip, p0, x0)
-            cont.tol = opts
-            x[bad], ok[bad] = cont.neighbours(ps[bad])
-        return x, ok
+        equilibrium ``start`` (p (1, 2), x (1, 6)) at full tolerance (Branch.neighbours: the
+        stiff plane's LM from the tangent predictor, then the homotopy's softer planes and
+        cut-backs for the rows it leaves). Returns (x (n, 6), converged (n,))."""
+        cont = Branch(ip, start[0], start[1])
+        cont.tol = self.options
+        return cont.neighbours(ps)
 
     def _verify(self, ip: InverseProblem, branch: Branch, anchor, force: bool = False):
         """(verifying gesture (one row), verified, robust), or None when the forward solve
