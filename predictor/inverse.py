@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,17 @@ def _cold(ip: InverseProblem) -> InverseResult:
     return inverse_pressures(ip)
 
 
+def _timed(query, repeats: int = REPEATS) -> tuple[list, float]:
+    """(``repeats`` answers of query(), the median process CPU time of one, ms): the
+    query's own cost on a shared machine, beside its wall time (InverseResult.time_ms)."""
+    out, cpu = [], []
+    for _ in range(repeats):
+        c0 = time.process_time()
+        out.append(query())
+        cpu.append(1e3 * (time.process_time() - c0))
+    return out, float(np.median(cpu))
+
+
 def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
     """``make inverse``: every case REPEATS times (median time); hold goals start from the
     object's committed atlas ``atlas_dir/atlas_KIND.json`` when present (the planned use),
@@ -114,11 +126,12 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
         ip = InverseProblem(problem, Goal("hold"))
         path = atlas_dir / f"atlas_{kind}.json"
         atlas = atlas_from_json(path, problem) if path.is_file() else None
-        runs = [inverse_pressures(ip, atlas) for _ in range(REPEATS)]
-        cold = _cold(ip)
-        res = runs[0]
+        runs, cpu = _timed(lambda: inverse_pressures(ip, atlas))
+        cold, cold_cpu = _timed(lambda: _cold(ip), 1)
+        res, cold = runs[0], cold[0]
         cases.append({"goal": "hold", "object": kind, **res.summary(), **where_it_touches(res),
                       "time_ms_median": float(np.median([r.time_ms for r in runs])),
+                      "cpu_ms_median": cpu, "cold_cpu_ms": cold_cpu,
                       "starts_from": str(path) if atlas is not None else f"coarse {COARSE}x{COARSE}",
                       "cold_time_ms": cold.time_ms, "cold_status": cold.status, "cold_pressures": cold.pressures,
                       "atlas_check": atlas_check(res, atlas) if atlas is not None else None})
@@ -127,15 +140,17 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
     for text in CASE_TIPS:
         beat(text)
         ip = InverseProblem(free, parse_goal(text))
-        runs = [_cold(ip) for _ in range(REPEATS)]
-        warm = [inverse_pressures(ip) for _ in range(REPEATS)]   # the start grid kept from the last
+        runs, cpu = _timed(lambda: _cold(ip))
+        warm, warm_cpu = _timed(lambda: inverse_pressures(ip))   # the start grid kept from the last
         res = runs[0]
         cases.append({"goal": text, "object": None, **res.summary(), **where_it_touches(res),
                       "time_ms_median": float(np.median([r.time_ms for r in runs])),
+                      "cpu_ms_median": cpu, "warm_cpu_ms_median": warm_cpu,
                       "warm_time_ms_median": float(np.median([r.time_ms for r in warm])),
                       "warm_pressures": warm[0].pressures})
         figs.append((text, res, free))
     med = lambda sel: float(np.median([c["time_ms_median"] for c in cases if sel(c)]))  # noqa: E731
+    cmed = lambda key, sel: float(np.median([c[key] for c in cases if sel(c)]))  # noqa: E731
     doc = {"joint": free.joint.name, "cases": cases,
            "targets": {"inverse_tip_ms": TARGET_TIP_MS, "inverse_hold_ms": TARGET_HOLD_MS},
            "measured": {"inverse_tip_ms": med(lambda c: c["goal"] != "hold"),
@@ -145,6 +160,11 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
                         # a planner's later tip questions: the start grid kept (coarse_atlas)
                         "inverse_tip_warm_ms": float(np.median([c["warm_time_ms_median"] for c in cases
                                                                 if c["goal"] != "hold"]))},
+           # the same medians in process CPU time (one thread): the queries' own cost on a shared machine
+           "measured_cpu": {"inverse_tip_ms": cmed("cpu_ms_median", lambda c: c["goal"] != "hold"),
+                            "inverse_hold_ms": cmed("cpu_ms_median", lambda c: c["goal"] == "hold"),
+                            "inverse_hold_cold_ms": cmed("cold_cpu_ms", lambda c: c["goal"] == "hold"),
+                            "inverse_tip_warm_ms": cmed("warm_cpu_ms_median", lambda c: c["goal"] != "hold")},
            "tolerances": {"tip_mm": TIP_TOL_MM, "verify_tip_mm": VERIFY_TOL_MM, "regulator_MPa": REGULATOR,
                           "least_pressure_margin": HOLD_MARGIN}}
     return doc, figs

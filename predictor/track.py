@@ -10,8 +10,10 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    continuation steps with the plane's homotopy, steps capped, bounds) from the previous
    answer's equilibrium; the first goal starts from the best points of the kept grid.
    Near the last answer a position goal is first tried by Newton on the square system
-   of the equilibrium and the goal in (x, P) at once (``Tracker._newton``), which needs
-   the outline clear of X = 0 and the step inside the box; otherwise the Gauss-Newton.
+   of the equilibrium and the goal in (x, P) at once (``Tracker._newton``: the problem's
+   own residual, with the plane's penalty where the outline crosses X = 0, steps
+   backtracked), which needs the steps inside the box and a quadratic descent; otherwise
+   the Gauss-Newton.
 2. Unreachable goals: the search stops at the locally closest tip. The kept grid (a
    START_GRID x START_GRID cold grid of forward answers and the coarse COARSE x COARSE
    one of predictor.inversion with the gestures pressed on X = 0, solved once per
@@ -25,8 +27,9 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    cold solve of the predictor (predictor.solve from tau = 0, without the plane's
    penalty, whose answer is the gripper's wherever the outline stays at X >= 0 — the
    broad phase ``solve`` itself uses), and where the finger presses on X = 0 by the
-   solver's continuation (the LM with the plane's homotopy, full tolerance) from the
-   previous verified gesture (the gripper's history along the track). The answer is
+   solver's continuation (the LM with the plane's homotopy, full tolerance): the centre
+   from the previous verified gesture (the gripper's history along the track), the
+   stencil's pressed rows from the verified centre (0.01 MPa steps). The answer is
    ``verified`` when its forward solve converged and its fingertip lies within
    VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
    angle are the forward solve's; an unverified search result is never returned as
@@ -60,8 +63,9 @@ from predictor.result import GestureResult
 from predictor.solve import gesture_result, meets_tolerances, solve
 from predictor.statics import GripperProblem, apart
 
-NEWTON_ITER = 6           # Tracker._newton: iterations before the search takes over
-NEWTON_TOL = 1e-9         # Tracker._newton: the scaled residual (N, N, N·mm/100) it converges to
+NEWTON_ITER = 8           # Tracker._newton: iterations before the search takes over
+NEWTON_HALVINGS = 4       # Tracker._newton: step halvings of its backtracking
+NEWTON_STALL = 0.5        # Tracker._newton: an accepted step must lower |r|² + |e|² below this fraction
 START_GRID = 9            # the kept grid of forward answers: START_GRID x START_GRID over the box
 MAX_GOALS = 100_000       # goals in one track file
 COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
@@ -174,50 +178,68 @@ class Tracker:
         """The fast path of a position goal near the last answer: Newton on the square
         system of the equilibrium and the goal, r(x, P) = 0 (6 scaled rows) and
         tip(x, P) = (X, Y) (2), in the 8 unknowns (x, P) at once, from the branch's point,
-        with the solver's difference Jacobian (predictor.jacobians) and the pose's
-        (predictor.inversion.traced_tip_fn). It needs the outline clear of X = 0 and the
-        steps inside the box and under MAX_STEP MPa; f when it converged (the residual to
-        NEWTON_TOL scaled, the tip within 0.1 TIP_TOL_MM), the branch moved there; else
-        None, the branch unchanged (the search goes on by continuation)."""
+        with the solver's difference Jacobian of the problem itself (predictor.jacobians;
+        where the outline crosses X = 0 the plane's penalty is in r, the broad phase
+        ``gated`` leaves it out elsewhere) and the pose's (predictor.inversion.traced_tip_fn).
+        Steps backtrack on |r|² + |e|² (NEWTON_HALVINGS: where the finger meets X = 0
+        within a step, the full step lands deep in the plane's stiff penalty, which the
+        Jacobian at the start did not see); it needs the steps inside the box and under
+        MAX_STEP MPa, and each to lower the merit below NEWTON_STALL of the last (pressed
+        on X = 0 the outline's vertices enter the plane one by one and Newton crawls: the
+        LM of the search does better there). f when it converged (the solver's tolerances,
+        ``_converged``, the tip within 0.1 TIP_TOL_MM), the branch moved there; else None,
+        the branch unchanged (the search goes on by continuation)."""
         from predictor.inversion import MAX_STEP, traced_tip_fn
         from predictor.jacobians import difference_offsets, jacobian_fn
 
         prob = self.problem
-        jac = jacobian_fn(apart(prob))
+        jac = jacobian_fn(prob)
         tip_fn = traced_tip_fn(prob)
         gx, gy = search_tip(ip.goal)
         lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
         hi = torch.tensor([self.box[1], self.box[3]], dtype=torch.float64)
         hx, offsets = difference_offsets(6, 1e-6)
         hp = 1e-6 * 0.3
-        x, p = branch.x.clone(), branch.p.clone()
-        for _ in range(NEWTON_ITER):
+        goal = torch.tensor((gx, gy), dtype=torch.float64)
+        dP = hp * torch.eye(2, dtype=torch.float64)
+
+        def at(x, p):
+            """(J, r, dr/dP, tip rows (17, 2), e, merit |r|² + |e|²) at (x, p)."""
             J, r, Jp = jac(x, p)
-            X = torch.cat((x + offsets, x.expand(4, 6)))
-            P = torch.cat((p.expand(13, 2), p + hp * torch.eye(2, dtype=torch.float64),
-                           p - hp * torch.eye(2, dtype=torch.float64)))
             with torch.inference_mode():
-                T = tip_fn(X, P)[:, :2].clone()                        # (17, 2)
-            e = T[0] - torch.tensor((gx, gy), dtype=torch.float64)
-            if float(r[0].abs().max()) <= NEWTON_TOL and float(e.norm()) <= 0.1 * TIP_TOL_MM:
-                if bool(_crosses(prob, x, p)):
-                    return None
+                T = tip_fn(torch.cat((x + offsets, x.expand(4, 6))),
+                           torch.cat((p.expand(13, 2), p + dP, p - dP)))[:, :2].clone()   # (17, 2)
+            e = T[0] - goal
+            return J, r, Jp, T, e, float(r[0] @ r[0] + e @ e)
+
+        x, p = branch.x.clone(), branch.p.clone()
+        here = at(x, p)
+        for _ in range(NEWTON_ITER):
+            J, r, Jp, T, e, merit = here
+            if _converged(r, self.options) and float(e.norm()) <= 0.1 * TIP_TOL_MM:
                 branch.restore((p, x, (J[:, :6], Jp)))
                 return float(e @ e)
             ex = ((T[1:7] - T[7:13]) / (2 * hx[:, None])).T             # (2, 6)
             ep = ((T[13:15] - T[15:17]) / (2 * hp)).T                   # (2, 2)
             A = torch.cat((torch.cat((J[0, :6], Jp[0]), 1), torch.cat((ex, ep), 1)))   # (8, 8)
-            b = torch.cat((r[0, :6], e))
-            dz, info = torch.linalg.solve_ex(A, -b)
-            if int(info) != 0:
+            dz, info = torch.linalg.solve_ex(A, -torch.cat((r[0, :6], e)))
+            if int(info) != 0 or float(dz[6:].abs().max()) > MAX_STEP:
                 return None
-            dp = dz[6:]
-            if float(dp.abs().max()) > MAX_STEP:
+            # backtracking on |r|² + |e|²: where the finger meets X = 0 within the step the
+            # full step lands deep in the plane's stiff penalty (its Jacobian did not see it)
+            for _ in range(NEWTON_HALVINGS):
+                p_new = p + dz[None, 6:]
+                if bool(((p_new < lo) | (p_new > hi)).any()):
+                    return None                                        # a bound: the projected search
+                trial = at(x + dz[None, :6], p_new)
+                if trial[-1] < merit:
+                    break
+                dz = 0.5 * dz
+            else:
                 return None
-            p_new = p + dp[None]
-            if bool(((p_new < lo) | (p_new > hi)).any()):
-                return None                                            # a bound: the projected search
-            x, p = x + dz[None, :6], p_new
+            if trial[-1] > NEWTON_STALL * merit and not _converged(trial[1], self.options):
+                return None     # a linear crawl (the outline's vertices entering X = 0): the search's LM
+            x, p, here = x + dz[None, :6], p_new, trial
         return None
 
     def _search(self, ip: InverseProblem, branch: Branch) -> float:
@@ -291,6 +313,15 @@ class Tracker:
                            time_ms=1e3 * (time.perf_counter() - t0), cpu_ms=1e3 * (time.process_time() - c0),
                            gesture=gest)
 
+    def _continue(self, ip: InverseProblem, start, ps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forward equilibria at ps (n, 2) by the solver's continuation from the
+        equilibrium ``start`` (p (1, 2), x (1, 6)) at full tolerance (Branch.neighbours: the
+        stiff plane's LM from the tangent predictor, then the homotopy's softer planes and
+        cut-backs for the rows it leaves). Returns (x (n, 6), converged (n,))."""
+        cont = Branch(ip, start[0], start[1])
+        cont.tol = self.options
+        return cont.neighbours(ps)
+
     def _verify(self, ip: InverseProblem, branch: Branch, anchor, force: bool = False):
         """(verifying gesture (one row), verified, robust), or None when the forward solve
         disagrees (unless ``force``: then returned with verified False). Module docstring
@@ -307,10 +338,14 @@ class Tracker:
         if not bool(pressed.any()):   # every row the problem's own (the solver's rule checked them)
             g = res
         else:
-            cont = Branch(ip, anchor[0], anchor[1])
-            cont.tol = opts
-            xc, okc = cont.neighbours(ps[pressed])
-            x[pressed], ok[pressed] = xc, okc
+            # the centre from the previous verified gesture, then the stencil's pressed rows
+            # from the verified centre (steps of REGULATOR: the tangent predictor lands close)
+            if bool(pressed[0]):
+                x[:1], ok[:1] = self._continue(ip, anchor, ps[:1])
+            rest = pressed.clone()
+            rest[0] = False
+            if bool(rest.any()):
+                x[rest], ok[rest] = self._continue(ip, (ps[:1], x[:1]) if bool(ok[0]) else anchor, ps[rest])
             # the forward model's own convergence rule at the verified points (residual, box)
             g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
                                "track-verify", None)
@@ -327,11 +362,15 @@ class Tracker:
         return centre, agree, agree and bool(ok.all())
 
 
-def _crosses(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
-    """Whether the outline at (x, p) lies across X = 0 (the plane's penalty would act)."""
-    from predictor.ramp import crosses_plane
+def _converged(r: torch.Tensor, options: SolverOptions) -> bool:
+    """The solver's convergence rule (predictor.lm.within) on one residual row r (1, 12):
+    each joint's |R_F| <= tol_force N, |R_M| <= tol_moment N·mm, no out-of-box penalty."""
+    from predictor.lm import within
+    from predictor.statics import MOMENT_SCALE
 
-    return crosses_plane(problem, x, p).any()
+    eq = r[:, :6].reshape(-1, 2, 3)
+    return bool(within(eq[..., :2].norm(dim=-1), eq[..., 2].abs() * MOMENT_SCALE, r[:, 6:].abs().amax(-1) == 0,
+                       options)[0])
 
 
 @dataclass(frozen=True)

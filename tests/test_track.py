@@ -89,6 +89,27 @@ def test_short_trajectory_reaches_and_flags(free):
     json.dumps(s, allow_nan=False)
 
 
+def test_pressed_goals_by_newton_match_the_forward_pressures(free):
+    """Goals along a pressure path pressed on X = 0 (the fingers meet: plane force > 0),
+    their fingertips the gripper's own forward solves (predictor.solve, the ramp from zero
+    pressure): each answered reached and verified, its forward tip (a new solve at the
+    answer's pressures) within TIP_TOL_MM of the goal, and the pressures those of the path
+    (the tip map is one to one there: 1e-3 MPa), the square Newton of the track answering
+    pressed goals (not the continuation's softer planes: no restarts)."""
+    prob = free.problem
+    P = torch.tensor([[0.10 + 0.01 * k, 0.20 - 0.005 * k] for k in range(5)], dtype=torch.float64)
+    fwd = solve(prob, P)
+    assert bool(fwd.converged.all()) and bool((fwd.plane_force_N > 0).all())
+    res = track(prob, [tip_goal(*t) for t in fwd.pose.tip_end.tolist()])
+    assert all(a.status == "reached" and a.verified and a.plane_force_N > 0 for a in res.answers)
+    assert not any(a.restarted for a in res.answers[1:])
+    got = torch.tensor([a.pressures for a in res.answers], dtype=torch.float64)
+    assert float((got - P).abs().max()) <= 1e-3
+    again = solve(prob, got)
+    err = (again.pose.tip_end - fwd.pose.tip_end).norm(dim=-1)
+    assert bool(again.converged.all()) and float(err.max()) <= TIP_TOL_MM
+
+
 def test_api_track_tip(free):
     """The API's track_tip takes goal strings and tuples; a goal that is not a tip is refused."""
     from predictor import track_tip
