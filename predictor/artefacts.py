@@ -178,7 +178,7 @@ CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change
 CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
     "joint_model": str, "truth_finger.name": str, "model_finger.name": str,
     "fem.mesh": str, "fem.nodes": int, "fem.cases[].sha256": str, "fem.cases[].role": str,
-    "fit.parameters": list, "fit.why": str, **each("parameters{}", NUM, "value", "std", "nominal", "true"),
+    "fit.parameters": list, "fit.why": str, "fit.trusted?": bool, **each("parameters{}", NUM, "value", "std", "nominal", "true"),
     "observations_used": int, "heldout_observations": int, "calibrate_on_MPa": list, "heldout_MPa": list,
     **each("heldout_tip_error_uncalibrated_mm", NUM, "mean", "max"),
     **each("heldout_tip_error_calibrated_mm", NUM, "mean", "max"), "improvement": NUM,
