@@ -191,7 +191,8 @@ CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
 #: results/bench/calibrate.json (make bench-calibrate; predictor.calibrate bench): wall times
 #: of the 8-observation calibration, with the machine's load and what ran beside it.
 CALIBRATION_BENCH = Format("predictor-calibration-bench", 1, "predictor.calibrate", {
-    "observations": int, "parameters": list, "starts": int, "repeats": int, "joint": str,
+    "observations": int, "observations_sha256": str, "observations_file": str, "parameters": list, "trusted": bool,
+    "starts": int, "repeats": int, "joint": str,
     **each("", NUM, "fit_median_s", "fit_cpu_median_s", "with_loo_median_s", "with_loo_cpu_median_s", "target_s"),
     "fit_s": list, "with_loo_s": list, "load_average_before": list, "load_average_after": list, "beside": str})
 
