@@ -19,7 +19,7 @@ import torch
 
 from predictor import load_gripper
 from predictor.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, coarse_atlas, search_tip, tip_errors,
-                                 unreachable_reason)
+                                 unreachable_reason, wrap_deg)
 from predictor.options import SolverOptions
 from predictor.problem import FULL_BOX
 from predictor.solve import solve
@@ -132,6 +132,24 @@ def test_atlas_reader_is_strict(tmp_path):
     nan.write_text(json.dumps(doc).replace('"mu": 0.3', '"mu": NaN', 1))
     r = _cli("--goal", "hold", "--object", "circle", "--atlas", str(nan), "--quiet", timeout=300)
     assert r.returncode == 2 and "NaN" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_tip_goal_at_900_deg_reports_its_errors_apart():
+    """Issue 57's case predictor.inverse --goal tip:40,-212,900 (900 deg is 180): exit 1
+    and one stderr line naming the closest tip's position error (mm, its distance to
+    (40, -212), not the 256.89 mm that added tip length x unwrapped angle) and its angle
+    error (deg, achieved minus 180 wrapped to (-180, 180]), the JSON's figures. Frozen
+    (the committed surrogate, this commit): 25.34 mm and +61.24 deg at (-0.1484, 0.3) MPa."""
+    r = _cli("--goal", "tip:40,-212,900", "--json", "--quiet")
+    assert r.returncode == 1, r.stderr
+    out = json.loads(r.stdout)
+    assert out["status"] == "infeasible" and out["verified"]
+    pos, ang = out["tip_error_mm"], out["angle_error_deg"]
+    assert pos == pytest.approx(math.hypot(out["tip"][0] - 40.0, out["tip"][1] + 212.0), rel=1e-12)
+    assert ang == pytest.approx(wrap_deg(out["tip_angle_deg"] - 180.0), abs=1e-9) and -180.0 < ang <= 180.0
+    assert r.stderr == f"python -m predictor.inverse: infeasible: {unreachable_reason(pos, ang)}\n"
+    assert (pos, ang) == (pytest.approx(25.34, abs=0.01), pytest.approx(61.24, abs=0.01))
+    assert out["pressures"] == pytest.approx([-0.1484, 0.3], abs=1e-3)
 
 
 def test_far_goal_is_unreachable_with_finger_flag():
