@@ -163,6 +163,31 @@ def test_far_goal_is_unreachable_with_finger_flag():
     assert "unreachable" in r.stderr
 
 
+def test_inverse_answers_for_the_finger_it_is_given():
+    """predictor.inverse --finger tests/data/fingers/long_tip.toml (the paper's finger with a
+    70 mm tip, 5 mm longer): the goal is that finger's forward fingertip at (0.1, 0.05) MPa;
+    the answer meets it (exit 0, verified, within TIP_TOL_MM), and a new forward solve of
+    that finger at the answer's pressures puts its tip there, where the paper's finger at
+    the same pressures is more than 4 mm away (5.02 mm): the file reached the search."""
+    from contract.finger import load_finger
+    from predictor.gripper import GripperParams
+    from predictor.problem import load_problem
+
+    finger = ROOT / "tests/data/fingers/long_tip.toml"
+    long_tip = load_problem(MODEL, None, params=GripperParams(load_finger(finger)))
+    paper = load_problem(MODEL, None)
+    goal = solve(long_tip, torch.tensor([[0.1, 0.05]], dtype=torch.float64)).pose.tip_end[0].tolist()
+    r = _cli("--goal", f"tip:{goal[0]!r},{goal[1]!r}", "--finger", str(finger), "--json", "--quiet")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
+    p = torch.tensor([out["pressures"]], dtype=torch.float64)
+    for prob, near in ((long_tip, True), (paper, False)):
+        fwd = solve(prob, p)
+        err = float((fwd.pose.tip_end[0] - torch.tensor(goal)).norm())
+        assert bool(fwd.converged[0]) and (err <= TIP_TOL_MM if near else err > 4.0), (near, err)
+
+
 def test_track_cli(tmp_path):
     """--track FILE answers each goal; an unreachable one makes exit 1, the answers all
     written (--out) and verified."""
