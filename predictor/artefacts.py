@@ -178,7 +178,7 @@ CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change
 CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
     "joint_model": str, "truth_finger.name": str, "model_finger.name": str,
     "fem.mesh": str, "fem.nodes": int, "fem.cases[].sha256": str, "fem.cases[].role": str,
-    "fit.parameters": list, "fit.why": str, **each("parameters{}", NUM, "value", "std", "nominal", "true"),
+    "fit.parameters": list, "fit.why": str, "fit.trusted?": bool, **each("parameters{}", NUM, "value", "std", "nominal", "true"),
     "observations_used": int, "heldout_observations": int, "calibrate_on_MPa": list, "heldout_MPa": list,
     **each("heldout_tip_error_uncalibrated_mm", NUM, "mean", "max"),
     **each("heldout_tip_error_calibrated_mm", NUM, "mean", "max"), "improvement": NUM,
@@ -191,7 +191,8 @@ CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
 #: results/bench/calibrate.json (make bench-calibrate; predictor.calibrate bench): wall times
 #: of the 8-observation calibration, with the machine's load and what ran beside it.
 CALIBRATION_BENCH = Format("predictor-calibration-bench", 1, "predictor.calibrate", {
-    "observations": int, "parameters": list, "starts": int, "repeats": int, "joint": str,
+    "observations": int, "observations_sha256": str, "observations_file": str, "parameters": list, "trusted": bool,
+    "starts": int, "repeats": int, "joint": str,
     **each("", NUM, "fit_median_s", "fit_cpu_median_s", "with_loo_median_s", "with_loo_cpu_median_s", "target_s"),
     "fit_s": list, "with_loo_s": list, "load_average_before": list, "load_average_after": list, "beside": str})
 

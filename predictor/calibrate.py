@@ -7,7 +7,7 @@
         [--model PATH|analytic] [--seeds N] [--starts N] [--json]
     python -m predictor.calibrate fem --fem results/calibration/fem --out results/calibration/calibration.json
         [--truth FILE] [--pressures "P1,P2;..."] [--calibrate-on "P1,P2;..."] [--fit NAME,...]
-        [--recovery results/calibration/recovery.json] [--figure PNG] [--calibrated TOML] [--json]
+        [--recovery results/calibration/recovery.json] [--figure PNG] [--calibrated TOML] [--force] [--json]
     python -m predictor.calibrate bench --out results/bench/calibrate.json [--repeats N] [--beside TEXT]
 
 The first fits the switchable parameters (names or groups of predictor.calibration:
@@ -35,7 +35,9 @@ deliberately different finger and predicts the held-out ones (predictor.calibrat
 the before/after figure (predictor.calibration_plot; default ``heldout.png`` beside the
 JSON) and the calibrated finger file (default ``calibrated.toml`` beside it); it refuses
 (exit 2, one line, nothing written) FEM cases that are missing, did not converge, or were
-solved for another finger. ``bench`` times the 8-observation calibration
+solved for another finger, and judges its fit as the first does: an untrusted one (the
+JSON's ``fit.trusted``, ``fit.untrusted_because``) exits 1 with one line naming why and
+writes none of the three unless ``--force`` (then all three, and the exit is still 1). ``bench`` times the 8-observation calibration
 (predictor.calibration_bench, ``make bench-calibrate``).
 
 Exit codes: 0 trusted and written; 1 not trusted (one line on stderr naming every reason)
@@ -222,6 +224,7 @@ def main_fem(argv) -> int:
     ap.add_output("--out", required=True, suffix=".json", help="calibration.json to write")
     ap.add_output("--figure", suffix=".png", help="before/after figure (default: heldout.png beside --out)")
     ap.add_output("--calibrated", suffix=".toml", help="calibrated finger file (default: calibrated.toml beside --out)")
+    ap.add_argument("--force", action="store_true", help="write the files even when the fit is not trusted (exit 1 still)")
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
@@ -243,19 +246,25 @@ def main_fem(argv) -> int:
         try:
             study = fem_study(model, cases, args.truth, args.calibrate_on, names, starts=args.starts)
         except FitFailed as exc:
-            print(f"python -m predictor.calibrate fem: {exc}", file=sys.stderr)
+            print(f"python -m predictor.calibrate fem: {exc}; nothing written", file=sys.stderr)
             return 1
         held = {tuple(c["pressures_MPa"]) for c in study.record["heldout"]}
-        # the finger file first: it is checked before it is written, the JSON (make's target) last
-        write_calibrated(calibrated, model, study.result, _cases_digest(cases), str(args.fem))
-        heldout_figure(figure, study, [c for c in cases if c.pressures in held])
         record = {**study.record, "fem_folder": str(args.fem), "recovery": {"source": str(args.recovery), **recovery},
                   "figure": str(figure), "calibrated_finger": str(calibrated)}
-        CALIBRATION.write(out, record)
+        # as the observations' fit: an untrusted fit writes nothing unless --force
+        written = study.result.trusted or args.force
+        if written:
+            # the finger file first: it is checked before it is written, the JSON (make's target) last
+            write_calibrated(calibrated, model, study.result, _cases_digest(cases), str(args.fem))
+            heldout_figure(figure, study, [c for c in cases if c.pressures in held])
+            CALIBRATION.write(out, record)
     s = {k: record[k] for k in ("heldout_tip_error_uncalibrated_mm", "heldout_tip_error_calibrated_mm",
                                 "improvement", "observations_used", "time_s")}
+    wrote = ", ".join(map(str, (out, figure, calibrated)))
     if args.json:
-        cli.print_json({**s, "problem": record["problem"], "parameters": record["parameters"], "out": str(out)})
+        cli.print_json({**s, "problem": record["problem"], "parameters": record["parameters"],
+                        "trusted": study.result.trusted, "why": study.result.why,
+                        "reduced_chi2": study.result.reduced_chi2, "out": str(out) if written else None})
     else:
         u, c = s["heldout_tip_error_uncalibrated_mm"], s["heldout_tip_error_calibrated_mm"]
         for n, p in record["parameters"].items():
@@ -263,7 +272,12 @@ def main_fem(argv) -> int:
         print(f"held-out fingertip error mean {u['mean']:.3f} -> {c['mean']:.3f} mm (max {u['max']:.3f} -> "
               f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} "
               f"({'lone finger' if record['problem'] == 'finger' else 'gripper'}) in "
-              f"{s['time_s']:.1f} s; wrote {out}, {figure}, {calibrated}")
+              f"{s['time_s']:.1f} s; {f'wrote {wrote}' if written else 'nothing written'}")
+    if not study.result.trusted:
+        print(f"python -m predictor.calibrate fem: not trusted: {'; '.join(study.result.why)}; "
+              f"{'wrote ' + wrote + ' (--force)' if written else 'nothing written (--force writes it)'}",
+              file=sys.stderr)
+        return 1
     return 0
 
 

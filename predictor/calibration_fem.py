@@ -53,7 +53,7 @@ import torch
 from contract.finger import FingerSpec, same_finger
 from fem.artefacts import FINGER_CASE
 from predictor.calibration import CalibrationModel, design, equilibrium, predict
-from predictor.calibration_fit import CalibrationResult, calibrate
+from predictor.calibration_fit import CalibrationResult, FitFailed, calibrate
 from predictor.defaults import ROOT
 from predictor.observations import FINGER, GRIPPER, Marker, Observation, Observations
 
@@ -272,7 +272,9 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
               fit=FIT, starts: int = 3, sigma_mm: float = SIGMA_MM, sigma_deg: float = SIGMA_DEG) -> FemStudy:
     """Calibrate ``model`` on the cases at ``calibrate_on`` and predict the others
     (module docstring). ValueError (one line) for a split that leaves nothing out or
-    names a pair without a case."""
+    names a pair without a case; FitFailed when no start converges or the calibrated
+    predictor cannot solve a held-out case. The record's ``fit.trusted`` is the fit's
+    verdict (predictor.calibration_fit.judge); the caller refuses an untrusted one."""
     check_same_chain(model.finger, truth)
     problems = {case_problem(c) for c in cases}
     if len(problems) > 1:
@@ -290,7 +292,11 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
     res = calibrate(model, obs.subset(fit_idx), fit, starts=starts, loo=False)
     heldout = obs.subset(held_idx)
     before = predict_gestures(model, heldout, model.nominal)
-    after = predict_gestures(model, heldout, res.theta)
+    try:
+        after = predict_gestures(model, heldout, res.theta)
+    except ValueError as exc:   # the fit's answer, not the input, is at fault: exit 1, not 2
+        why = f" (not trusted: {'; '.join(res.why)})" if res.why else ""
+        raise FitFailed(f"calibrated, {exc}{why}") from None
     measured = np.array([o.tip[:2] for o in heldout.items])
     angle = np.array([o.tip_angle[0] for o in heldout.items])
     e0, e1 = (np.linalg.norm(p.tips - measured, axis=1) for p in (before, after))

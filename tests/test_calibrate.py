@@ -450,3 +450,34 @@ def test_outputs_inside_the_package_or_in_a_missing_folder_are_refused(tmp_path,
         code, _, err = _cli(capsys, ["--observations", str(path), "--model", "analytic", "--out", str(out)])
         assert code == 2 and err.count("\n") == 1 and why in err, err
     assert paper.read_bytes() == before and not (ROOT / "predictor" / "x.toml").exists()
+
+
+def test_committed_bench_timed_the_current_example():
+    """results/bench/calibrate.json (make bench-calibrate) names the measurement file it
+    timed and its sha256: that file as committed now, so the figure is of today's example
+    (a changed example needs the bench rerun; the Makefile's rule depends on it); its fit
+    was trusted, so its leave-one-out ran and was timed."""
+    from predictor.artefacts import CALIBRATION_BENCH
+    from predictor.calibration_bench import OBSERVATIONS
+
+    bench = CALIBRATION_BENCH.load(ROOT / "results/bench/calibrate.json")
+    assert ROOT / bench["observations_file"] == OBSERVATIONS
+    assert bench["observations_sha256"] == parse_observations(OBSERVATIONS.read_text(), PAPER).sha256
+    # a trusted fit, so "with leave-one-out" timed the leave-one-out (a refused fit skips it)
+    assert bench["trusted"] and bench["loo_tip_error_mm"] is not None
+    assert bench["with_loo_cpu_median_s"] > bench["fit_cpu_median_s"]
+    rule = re.search(r"^results/bench/calibrate.json:(.*?)\n\t", (ROOT / "Makefile").read_text(), re.M | re.S)[1]
+    assert "docs/examples/observations.json" in rule
+
+
+def test_bench_refuses_to_time_an_untrusted_fit(tmp_path, capsys, model):
+    """predictor.calibrate bench on one observation (3 measured values for the bench's 10
+    parameters and a prior: dof -6) refuses after the first fit: exit 2, one stderr line
+    naming the file and why the fit is not trusted, no JSON written."""
+    path = _write(tmp_path, _gripper_observations(model, ((0.1, 0.05),)))
+    out = tmp_path / "bench.json"
+    code, stdout, err = _cli(capsys, ["bench", "--observations", str(path), "--model", "analytic", "--repeats", "1",
+                                      "--quiet", "--out", str(out)])
+    assert code == 2 and err.count("\n") == 1 and stdout == "", (code, err)
+    assert "the timed fit is not trusted" in err and "3 measured values and 1 priors for 10 fitted parameters" in err, err
+    assert not out.exists()

@@ -11,6 +11,9 @@ finger's known changes (no FEM solve; seconds):
   fingertips: the file carries what the fit found;
 - missing, unconverged and foreign cases, and a bad pressure list, are refused with exit 2
   and one line, nothing written;
+- an untrusted fit (the mount alone fitted to a finger whose joints and tip differ too)
+  exits 1 with one line naming why and writes nothing; --force writes it, still exit 1,
+  the record and the report saying it is not trusted; a trusted fit says so in both;
 - the Makefile's CAL_PRESSURES are the module's PRESSURES, and fem.finger_cases takes
   them (--pressures) as named gravity cases, refusing pairs outside the joints' boxes
   before any solve;
@@ -145,7 +148,8 @@ def test_demo_recovers_the_changes_and_predicts_the_heldout(model, stand_in, tmp
 
 def test_report_judges_the_fem_calibration(stand_in, tmp_path):
     """With the demo's calibration.json the report's (b) rows judge the calibrated error
-    (<= 1 mm) and the improvement (>= 5x) as met; without it, (b) is "not run"."""
+    (<= 1 mm) and the improvement (>= 5x) as met and say the fit is trusted; without it,
+    (b) is "not run"."""
     folder, _ = stand_in
     root = tmp_path / "results"
     (root / "calibration").mkdir(parents=True)
@@ -157,6 +161,39 @@ def test_report_judges_the_fem_calibration(stand_in, tmp_path):
     fem = [c for c in checks if c.figure.startswith("FEM calibration")]
     assert len(fem) == 2 and all(c.met for c in fem), fem
     assert "not run: FEM cases pending" not in text and "![held-out gestures" in text
+    # the stand-in cases are the model's own gestures: chi-square ~0, trusted, and said so
+    fit = CALIBRATION.load(root / "calibration/calibration.json")["fit"]
+    assert fit["trusted"] is True and fit["untrusted_because"] == [] and fit["reduced_chi2"] < 1e-6
+    assert fit["dof"] == 4 * 7 - 4   # 4 cases x (tip x, y, angle, 2 link ends x 2) - 4 parameters
+    assert "the fit trusted (reduced chi-square" in text
+
+
+def test_untrusted_fit_exits_1_and_writes_nothing_unless_forced(stand_in, tmp_path, capsys):
+    """Fitting the mount alone leaves the stiffer joints and the heavier tip unexplained:
+    the reduced chi-square is far beyond its limit, so the demo refuses as the
+    observations' fit does (exit 1, one stderr line naming why, no file); --force writes
+    all three, still exit 1, the JSON saying it is not trusted and the report too."""
+    folder, _ = stand_in
+    out = tmp_path / "refused" / "calibration.json"
+    out.parent.mkdir()
+    assert _run(folder, out, "--fit", "mount_deg", "--json") == 1
+    cap = capsys.readouterr()
+    assert cap.err.count("\n") == 1 and "not trusted: reduced chi-square" in cap.err, cap.err
+    assert "nothing written (--force writes it)" in cap.err
+    shown = json.loads(cap.out)
+    assert shown["trusted"] is False and shown["out"] is None and shown["reduced_chi2"] > 100
+    assert not list(out.parent.iterdir())
+    root = tmp_path / "results"
+    (root / "calibration").mkdir(parents=True)
+    shutil.copy(RECOVERY, root / "calibration/recovery.json")
+    forced = root / "calibration/calibration.json"
+    assert _run(folder, forced, "--fit", "mount_deg", "--force") == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "(--force)" in err and "not trusted: reduced chi-square" in err, err
+    rec = CALIBRATION.load(forced)
+    assert rec["fit"]["trusted"] is False and rec["fit"]["untrusted_because"][0].startswith("reduced chi-square")
+    assert (forced.parent / "calibrated.toml").is_file() and (forced.parent / "heldout.png").is_file()
+    assert "the fit NOT trusted, written with --force (reduced chi-square" in report_app.report(root)
 
 
 def _drop(folder: Path):

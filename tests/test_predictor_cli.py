@@ -274,6 +274,41 @@ def test_atlas_takes_the_finger_approach_and_gravity_options(tmp_path):
         assert "x=" not in text.replace("\n", " "), text
 
 
+def test_atlas_solves_the_finger_approach_and_gravity_it_is_given(tmp_path):
+    """predictor.atlas --finger tests/data/fingers/long_tip.toml (a 5 mm longer tip)
+    --no-gravity --approach -0.1,0.05 --path ramp on a 2 x 2 grid: each point's tip is
+    predictor.solve's for that finger without gravity ramped from that approach (the
+    problem predictor.gesture builds from the same options) to 1e-6 mm (measured: 0),
+    where the same finger with gravity is 0.02-0.06 mm away and the default problem (the
+    paper's finger, gravity) 4.94-5.00 mm: more than 4 mm at every point. The object is
+    not touched on this grid, so the approach is checked as recorded, not by its path."""
+    from contract.finger import load_finger
+    from predictor.problem import load_problem
+
+    out, spec = tmp_path / "atlas.json", "circle:y=-260"
+    finger = ROOT / "tests/data/fingers/long_tip.toml"
+    r = subprocess.run([sys.executable, "-m", "predictor.atlas", "--object", spec, "--grid", "2", "--box",
+                        "0,0.1,0,0.1", "--path", "ramp", "--finger", str(finger), "--no-gravity", "--approach",
+                        "-0.1,0.05", "--out", str(out), "--quiet"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(out.read_text())
+    assert doc["finger"]["name"] == "long_tip" and doc["approach_MPa"] == [-0.1, 0.05] and doc["gravity"] is False
+    p = torch.tensor([[a, b] for a in doc["p1_MPa"] for b in doc["p2_MPa"]], dtype=torch.float64)
+    tips = torch.tensor(doc["tip_mm"], dtype=torch.float64).reshape(-1, 2)
+    asked = load_problem(str(SURROGATE), spec, gravity=False, params=GripperParams(load_finger(finger)),
+                         approach=(-0.1, 0.05))
+    ref = solve(asked, p)
+    assert bool(ref.converged.all())
+    assert float((ref.pose.tip_end - tips).norm(dim=-1).max()) <= 1e-6
+    assert doc["counts"]["no_contact"] == 4
+    heavy = solve(load_problem(str(SURROGATE), spec, params=GripperParams(load_finger(finger)),
+                               approach=(-0.1, 0.05)), p)
+    assert float((heavy.pose.tip_end - tips).norm(dim=-1).min()) > 0.01     # --no-gravity reached the solve
+    default = solve(load_problem(str(SURROGATE), spec), p)
+    assert float((default.pose.tip_end - tips).norm(dim=-1).min()) > 4.0
+
+
 def test_ctrl_c_during_the_atlas_ends_with_one_line_and_exit_130(tmp_path):
     """SIGINT while the atlas's grid is solved: exit 130 (128 + SIGINT), the last stderr
     line 'python -m predictor.atlas: interrupted (Ctrl-C)', no traceback, nothing on

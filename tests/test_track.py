@@ -19,7 +19,7 @@ import torch
 
 from predictor import load_gripper
 from predictor.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, coarse_atlas, search_tip, tip_errors,
-                                 unreachable_reason)
+                                 unreachable_reason, wrap_deg)
 from predictor.options import SolverOptions
 from predictor.problem import FULL_BOX
 from predictor.solve import solve
@@ -155,6 +155,24 @@ def test_atlas_reader_is_strict(tmp_path):
     assert r.returncode == 2 and "NaN" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+def test_tip_goal_at_900_deg_reports_its_errors_apart():
+    """Issue 57's case predictor.inverse --goal tip:40,-212,900 (900 deg is 180): exit 1
+    and one stderr line naming the closest tip's position error (mm, its distance to
+    (40, -212), not the 256.89 mm that added tip length x unwrapped angle) and its angle
+    error (deg, achieved minus 180 wrapped to (-180, 180]), the JSON's figures. Frozen
+    (the committed surrogate, this commit): 25.34 mm and +61.24 deg at (-0.1484, 0.3) MPa."""
+    r = _cli("--goal", "tip:40,-212,900", "--json", "--quiet")
+    assert r.returncode == 1, r.stderr
+    out = json.loads(r.stdout)
+    assert out["status"] == "infeasible" and out["verified"]
+    pos, ang = out["tip_error_mm"], out["angle_error_deg"]
+    assert pos == pytest.approx(math.hypot(out["tip"][0] - 40.0, out["tip"][1] + 212.0), rel=1e-12)
+    assert ang == pytest.approx(wrap_deg(out["tip_angle_deg"] - 180.0), abs=1e-9) and -180.0 < ang <= 180.0
+    assert r.stderr == f"python -m predictor.inverse: infeasible: {unreachable_reason(pos, ang)}\n"
+    assert (pos, ang) == (pytest.approx(25.34, abs=0.01), pytest.approx(61.24, abs=0.01))
+    assert out["pressures"] == pytest.approx([-0.1484, 0.3], abs=1e-3)
+
+
 def test_far_goal_is_unreachable_with_finger_flag():
     """tip:1e308,-212 is an unreachable goal: exit 1 with the closest answer (not exit 2);
     --finger is accepted (the paper's file, as predictor.gesture)."""
@@ -164,6 +182,31 @@ def test_far_goal_is_unreachable_with_finger_flag():
     assert out["status"] == "infeasible" and out["verified"] and out["angle_error_deg"] is None
     assert out["tip"][0] > 150.0          # the farthest reach toward +X
     assert "unreachable" in r.stderr
+
+
+def test_inverse_answers_for_the_finger_it_is_given():
+    """predictor.inverse --finger tests/data/fingers/long_tip.toml (the paper's finger with a
+    70 mm tip, 5 mm longer): the goal is that finger's forward fingertip at (0.1, 0.05) MPa;
+    the answer meets it (exit 0, verified, within TIP_TOL_MM), and a new forward solve of
+    that finger at the answer's pressures puts its tip there, where the paper's finger at
+    the same pressures is more than 4 mm away (5.02 mm): the file reached the search."""
+    from contract.finger import load_finger
+    from predictor.gripper import GripperParams
+    from predictor.problem import load_problem
+
+    finger = ROOT / "tests/data/fingers/long_tip.toml"
+    long_tip = load_problem(MODEL, None, params=GripperParams(load_finger(finger)))
+    paper = load_problem(MODEL, None)
+    goal = solve(long_tip, torch.tensor([[0.1, 0.05]], dtype=torch.float64)).pose.tip_end[0].tolist()
+    r = _cli("--goal", f"tip:{goal[0]!r},{goal[1]!r}", "--finger", str(finger), "--json", "--quiet")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
+    p = torch.tensor([out["pressures"]], dtype=torch.float64)
+    for prob, near in ((long_tip, True), (paper, False)):
+        fwd = solve(prob, p)
+        err = float((fwd.pose.tip_end[0] - torch.tensor(goal)).norm())
+        assert bool(fwd.converged[0]) and (err <= TIP_TOL_MM if near else err > 4.0), (near, err)
 
 
 def test_track_cli(tmp_path):

@@ -95,6 +95,16 @@ def _pairs(pairs: list) -> str:
     return ", ".join("(" + ", ".join(f"{p:g}" for p in pair) + ")" for pair in pairs)
 
 
+def _trust(fit: dict) -> str:
+    """The fit's verdict in words (predictor.calibration_fit.judge): an untrusted fit
+    written with --force says so and why."""
+    if "trusted" not in fit:
+        return "the fit's trust not recorded (a record older than the verdict: rerun `make calibrate-demo`)"
+    if fit["trusted"]:   # a trusted fit has degrees of freedom, so a reduced chi-square
+        return f"the fit trusted (reduced chi-square {fit['reduced_chi2']:.3g} for {fit['dof']} degrees of freedom)"
+    return f"the fit NOT trusted, written with --force ({'; '.join(fit['untrusted_because'])})"
+
+
 def _fem(root: Path, cal: dict | None) -> tuple[list[str], list[Check]]:
     """(b): the held-out fingertip errors before and after, the fitted values, the figure;
     or the row saying the FEM cases are pending."""
@@ -117,7 +127,7 @@ def _fem(root: Path, cal: dict | None) -> tuple[list[str], list[Check]]:
             f"{joint_model(root, cal['joint_model'], 'make calibrate-demo')}; fitted: "
             f"{', '.join(cal['fit']['parameters'])} ({cal['fit']['why']}); calibrated on "
             f"{cal['observations_used']} gestures ({_pairs(cal['calibrate_on_MPa'])} MPa) in {cal['time_s']:.1f} s, "
-            f"{cal['heldout_observations']} held out ({_pairs(cal['heldout_MPa'])} MPa).", "",
+            f"{cal['heldout_observations']} held out ({_pairs(cal['heldout_MPa'])} MPa); {_trust(cal['fit'])}.", "",
             "| figure | measured | target | met |", "|---|---|---|---|",
             f"| held-out fingertip error, uncalibrated (mean / max) | {u['mean']:.2f} / {u['max']:.2f} mm |"
             + cells(None),
