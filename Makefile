@@ -49,7 +49,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibration-fem-new calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger validate-finger-new report clean
+        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibration-fem-new calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger validate-finger-new predictor-new report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -290,6 +290,10 @@ multifidelity: | $(SETUP) ## coarse surrogate + a learned fine-minus-coarse corr
 # Joint model for the predictor: the committed surrogate (`make train` makes it; the analytic
 # stand-in only when asked for by name, PRED_JOINT=analytic).
 PRED_JOINT ?= results/surrogate/improved.pt
+# Where the predictor's artefacts go; predictor-new sets both (and PRED_JOINT) to build the
+# predictor on the production surrogate beside today's (issue 55 §3).
+PRED_DIR   ?= results/predictor
+PRED_BENCH ?= results/bench/predictor.json
 PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
               predictor/defaults.py predictor/problem.py predictor/progress.py predictor/result.py \
               predictor/options.py predictor/graphs.py predictor/jacobians.py predictor/lm.py predictor/newton.py \
@@ -297,62 +301,76 @@ PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predi
               predictor/nn_eval.py predictor/nn_checkpoint.py contract/grasp.py \
               $(filter-out analytic,$(PRED_JOINT))
 
-gestures: results/predictor/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
-results/predictor/gestures.json: $(TIMES) $(PRED_CORE) predictor/plot.py predictor/figures.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
-	nice $(PY) -m predictor.figures --out results/predictor --model $(PRED_JOINT)
+gestures: $(PRED_DIR)/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
+$(PRED_DIR)/gestures.json: $(TIMES) $(PRED_CORE) predictor/plot.py predictor/figures.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
+	nice $(PY) -m predictor.figures --out $(PRED_DIR) --nn-dir $(PRED_DIR) --model $(PRED_JOINT)
 
-results/predictor/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN (75 epochs, ~2 min)
+$(PRED_DIR)/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN (75 epochs, ~2 min)
+	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
 
-results/predictor/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels (SiLU + L-BFGS, ~2 min)
+$(PRED_DIR)/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels (SiLU + L-BFGS, ~2 min)
+	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
 
-results/predictor/contact_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
+$(PRED_DIR)/contact_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
+	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
 
-bench-predictor: results/bench/predictor.json ## predictor timings and residuals, torch.compile graphs (~10 min) -> results/bench/predictor.json
-results/bench/predictor.json: $(TIMES) $(PRED_CORE) predictor/bench.py results/predictor/gravity_nn_paper.pt results/predictor/gravity_nn.pt results/predictor/contact_nn.pt | $(SETUP)
-	$(PY) -m predictor.bench --model $(PRED_JOINT) --graphs compile --out $@
+bench-predictor: $(PRED_BENCH) ## predictor timings and residuals, torch.compile graphs (~10 min) -> results/bench/predictor.json
+$(PRED_BENCH): $(TIMES) $(PRED_CORE) predictor/bench.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
+	$(PY) -m predictor.bench --model $(PRED_JOINT) --nn-dir $(PRED_DIR) --graphs compile --out $@
 
 # ---------------------------------------------------------------- grasp planning (issue 16)
 # (section owned by predictor/)
 ATLAS_OBJECTS := circle ellipse rectangle
-ATLAS_JSON    := $(foreach o,$(ATLAS_OBJECTS),results/predictor/atlas_$(o).json)
+ATLAS_JSON    := $(foreach o,$(ATLAS_OBJECTS),$(PRED_DIR)/atlas_$(o).json)
 PLAN_CODE     := $(PRED_CORE) predictor/atlas.py predictor/plot.py
 
 atlas: $(ATLAS_JSON) ## grasp atlas 61x61 of the three objects -> results/predictor/atlas_{circle,ellipse,rectangle}.{png,json}
-results/predictor/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
+$(PRED_DIR)/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
+	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --model $(PRED_JOINT) \
-	  --plot results/predictor/atlas_$*.png --out $@ --json
+	  --plot $(PRED_DIR)/atlas_$*.png --out $@ --json
 
-ATLAS_RAMP    := $(foreach o,$(ATLAS_OBJECTS),results/predictor/ramp/atlas_$(o).json)
+ATLAS_RAMP    := $(foreach o,$(ATLAS_OBJECTS),$(PRED_DIR)/ramp/atlas_$(o).json)
 atlas-reference: $(ATLAS_RAMP) ## the atlases with every point ramped on its own (the sweep's reference, ~10 min) -> results/predictor/ramp/
-results/predictor/ramp/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
+$(PRED_DIR)/ramp/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --model $(PRED_JOINT) --out $@ --json
 
-atlas-reference-fine: results/predictor/ramp_fine/atlas_rectangle.json ## the rectangle's reference ramp with 48 sub-steps instead of 12: its path resolution (~9 min) -> results/predictor/ramp_fine/
-results/predictor/ramp_fine/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
+atlas-reference-fine: $(PRED_DIR)/ramp_fine/atlas_rectangle.json ## the rectangle's reference ramp with 48 sub-steps instead of 12: its path resolution (~9 min) -> results/predictor/ramp_fine/
+$(PRED_DIR)/ramp_fine/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
 
 # A benchmark, not a test: medians of wall times on this machine, with its load recorded
 # (inverse.json's track.load_average_*); the tip cases and the track at one thread.
-inverse: results/predictor/inverse.json ## inverse pressures: hold the three objects, three tip targets, the 100-goal track -> results/predictor/inverse.{json,png}, track.png
-results/predictor/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py \
+inverse: $(PRED_DIR)/inverse.json ## inverse pressures: hold the three objects, three tip targets, the 100-goal track -> results/predictor/inverse.{json,png}, track.png
+$(PRED_DIR)/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py \
     predictor/track.py | $(SETUP)
-	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir results/predictor \
-	  --out $@ --plot results/predictor/inverse.png --track-plot results/predictor/track.png \
-	  --track-out results/predictor/track.json --json
+	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir $(PRED_DIR) \
+	  --out $@ --plot $(PRED_DIR)/inverse.png --track-plot $(PRED_DIR)/track.png \
+	  --track-out $(PRED_DIR)/track.json --json
 
 # Issue 60's closed loop alone (a benchmark): the fingertip along the 100-goal demo path
 # across the reachable region and out of it, each goal warm-started from the last answer and
-# verified through the forward equilibrium (predictor.track) -> results/predictor/track.{json,png},
+# verified through the forward equilibrium (predictor.track) -> $(PRED_DIR)/track.{json,png},
 # and inverse.json's `track` replaced by this run's (the three from one run, as make inverse's).
 # Exit 1 (some goals unreachable, by design of the path) is its normal end.
-track: results/predictor/inverse.json | $(SETUP) ## closed-loop tip tracking, 100 goals in and out of reach, timed and verified -> results/predictor/track.{json,png}, inverse.json's track
-	nice $(PY) -m predictor.inverse --track demo --model $(PRED_JOINT) --out results/predictor/track.json \
-	  --plot results/predictor/track.png --into results/predictor/inverse.json; test $$? -le 1
+track: $(PRED_DIR)/inverse.json | $(SETUP) ## closed-loop tip tracking, 100 goals in and out of reach, timed and verified -> results/predictor/track.{json,png}, inverse.json's track
+	nice $(PY) -m predictor.inverse --track demo --model $(PRED_JOINT) --out $(PRED_DIR)/track.json \
+	  --plot $(PRED_DIR)/track.png --into $(PRED_DIR)/inverse.json; test $$? -le 1
+
+# The predictor on the production surrogate, beside today's (issue 55 §3): the three NNs,
+# the gestures, the atlases and their reference ramps, the inverse cases and the bench, built
+# by the targets above into results/predictor/hex2s3/ and results/bench/predictor_hex2s3.json;
+# the switch makes them the defaults. About 1.5 h on one core (the contact NN's 20,000 labels
+# and training: 75 min of it).
+NEW_PRED := results/predictor/$(NEW_TAG)
+predictor-new: | $(SETUP) ## the predictor's NNs, gestures, atlases, inverse and bench on the production surrogate, beside today's (1 core, ~1.5 h) -> results/predictor/hex2s3/, results/bench/predictor_hex2s3.json
+	$(MAKE) gestures atlas atlas-reference atlas-reference-fine inverse bench-predictor \
+	  PRED_JOINT=$(NEW_SURROGATE)/improved.pt PRED_DIR=$(NEW_PRED) PRED_BENCH=results/bench/predictor_$(NEW_TAG).json
 
 # ---------------------------------------------------------------- calibration (issue 38)
 calibrate-recovery: results/calibration/recovery.json ## calibration on known truth: the fit recovers parameters from predictor observations, noise-free and 20 noisy seeds (~1 min) -> results/calibration/recovery.json

@@ -75,6 +75,14 @@ ARTEFACTS = (
     Artefact("predictor/ramp_fine/atlas_*.json", "make atlas-reference-fine", predictor.ATLAS),
     Artefact("predictor/inverse.json", "make inverse", predictor.INVERSE),
     Artefact("predictor/track.json", "make track", predictor.TRACK),
+    # the same, on the production surrogate beside today's until the switch (issue 55 §3)
+    Artefact("bench/predictor_hex2s3.json", "make predictor-new", predictor.BENCH),
+    Artefact("predictor/hex2s3/gestures.json", "make predictor-new", predictor.GESTURES),
+    Artefact("predictor/hex2s3/atlas_*.json", "make predictor-new", predictor.ATLAS),
+    Artefact("predictor/hex2s3/ramp/atlas_*.json", "make predictor-new", predictor.ATLAS),
+    Artefact("predictor/hex2s3/ramp_fine/atlas_*.json", "make predictor-new", predictor.ATLAS),
+    Artefact("predictor/hex2s3/inverse.json", "make predictor-new", predictor.INVERSE),
+    Artefact("predictor/hex2s3/track.json", "make predictor-new", predictor.TRACK),
     Artefact("predictor/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
              "--out results/predictor/contact_change.json", predictor.CONTACT_CHANGE),
     Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),

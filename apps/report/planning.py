@@ -64,6 +64,7 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
         out.append("")
         for kind, a in atlases:
             out += _finer_ramp(root, kind, a)
+        out += _production_atlases(root, atlases)
     else:
         out += missing("grasp atlas", "make atlas")
     for kind in kinds:
@@ -118,6 +119,37 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                   "forward fingertip at each answer, the time per goal, the tip error and the pressures against "
                   "time.", "make inverse")
     return out, checks
+
+
+def _differ(a: dict, b: dict) -> int:
+    """How many grid points two atlases of one grid give different states."""
+    return sum(u != v for ru, rv in zip(a["state"], b["state"]) for u, v in zip(ru, rv))
+
+
+def _production_atlases(root: Path, atlases: list) -> list[str]:
+    """The atlases on the production surrogate, built beside today's by make predictor-new
+    (issue 55 §3): each one's counts, and how many grid points change state from today's
+    atlas and differ from its own ramp reference. Shown, not judged, until the switch."""
+    rows = []
+    for kind, a in atlases:
+        new = load(root, f"predictor/hex2s3/atlas_{kind}.json")
+        if not new or new.get("grid") != a["grid"]:
+            continue
+        c, ref = new["counts"], load(root, f"predictor/hex2s3/ramp/atlas_{kind}.json")
+        best = ", ".join(f"{v:.3f}" for v in (new.get("best_hold") or {}).get("pressures_MPa", [])) or "none"
+        own = f"{_differ(new, ref)}" if ref and ref.get("grid") == new["grid"] else "n/a"
+        rows.append(f"| {kind} | {c['no_contact']} / {c['holds']} / {c['slips']} / {c['not_converged']} | {best} "
+                    f"| {_differ(new, a)} of {a['grid'] ** 2} | {own} | {new['time_s']:.1f} s |")
+    if not rows:
+        return []
+    joint = joint_model(root, load(root, f"predictor/hex2s3/atlas_{atlases[0][0]}.json").get("joint"))
+    return ["#### The atlases on the production surrogate, beside (issue 55 §3)", "",
+            "`make predictor-new` builds the atlases on results/surrogate/hex2s3/improved.pt (joint model "
+            f"{joint}, the hex2:3 mixed data) into results/predictor/hex2s3/; they become the defaults at the "
+            "switch. Shown, not judged: their times were taken beside the contact NN's training.", "",
+            "| object | no contact / holds / slips / not converged | best hold (P1, P2) MPa | points whose state "
+            "changes from today's atlas | points differing from its own ramp reference | time |",
+            "|---|---|---|---|---|---|", *rows, ""]
 
 
 def _track(tr: dict | None, title: str, checks: list) -> list[str]:
