@@ -42,7 +42,11 @@ solve did not converge. With ``--method nn`` also the network's own figures befo
 solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
 answer is the solver's polish of them (polished: contact, or gravity with ``--polish``,
 one Newton step from the network's tau) or the full ramp's (fallback; gravity: the
-LM's); with an object raw_state, the network's own grasp state.
+LM's); with an object raw_state, the network's own grasp state; and nn_problem, the problem
+the network learned ("gripper": the plane X = 0's equilibrium, the one answered; or
+"finger_alone": a gravity network trained on one finger alone, ``predictor.nn
+--no-plane`` or a checkpoint written before its config recorded ``plane``, whose raw
+answer stands only where its finger stays at X >= 0).
 
 Objects: the model mirrors the right finger, so an object is centred (x = 0) and
 mirror-symmetric; its sizes and height are bounded (contract.grasp.object_error); one cutting
@@ -147,7 +151,8 @@ def run(args: argparse.Namespace, prepared=None):
                    raw_residual_moment_Nmm=res.raw_residual_moment_Nmm[0].tolist(),
                    polished=bool(res.polished[0]), fallback=bool(res.fallback[0]),
                    newton_from_nn=None if res.stepped is None else bool(res.stepped[0]),
-                   raw_state=None if res.raw_state is None else STATES[int(res.raw_state[0])])
+                   raw_state=None if res.raw_state is None else STATES[int(res.raw_state[0])],
+                   nn_problem="gripper" if predictor.config.learns_gripper() else "finger_alone")
     return out, res, problem
 
 
@@ -200,8 +205,10 @@ def main(argv: list[str] | None = None) -> int:
 def failure(out: dict, prepared) -> str:
     """Why a gesture has no answer, for the one stderr line (``prepared``: prepare(args)).
     The raw gravity NN answers only within its bound (predictor.nn_answer), which is not a
-    solver failing to converge; it learned one finger alone, so where its gesture crosses
-    X = 0, where the gripper's fingers meet, it leaves the bound by far."""
+    solver failing to converge. One that learned one finger alone (its config's ``plane``
+    false) leaves the bound by far where its gesture crosses X = 0, where the gripper's
+    fingers meet; one that learned the gripper leaves it where its finger presses on the
+    plane, whose stiff penalty turns a tau error of 1e-8 N into a residual of mN."""
     problem, pressures, _, predictor = prepared
     if predictor is None or problem.obstacle is not None or out["polished"] or out["fallback"]:
         return "the equilibrium solve did not converge"
@@ -214,9 +221,12 @@ def failure(out: dict, prepared) -> str:
     with torch.no_grad():   # the network's own gesture, as the answer was judged
         st = problem.residual(pressures, predictor.net(pressures))
     cross = float(plane_overlap(st.vertices)[0]) if st.vertices is not None else 0.0
-    if cross > 0:
+    if cross > 0 and not predictor.config.learns_gripper():
         why += (f": its finger crosses X = 0 by {cross:.1f} mm, where the gripper's fingers meet (it learned one "
                 "finger alone)")
+    elif cross > 0:
+        why += (f": its finger presses on the plane X = 0 ({cross:.2g} mm deep), whose stiff penalty multiplies a "
+                "tau error by up to 1e5")
     return why + "; --polish finishes it with a Newton step"
 
 
