@@ -18,8 +18,10 @@ Newton steps on its branch, converged to the issue's 0.1 mN and 0.01 N·mm per s
 one batch of 2,000 pressures on every core in float64; ``details.contact_throughput`` has
 it at the solver's own tolerance too, and ``contact_ramp_batched_per_s`` the ramp solve's
 batch), ``gravity_batched_per_s`` and ``nn_single_query_ms`` (the
-delivered NN path, predictor.nn_answer.predict_gesture: network, kinematics and its residual
-check). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
+raw NN path, predictor.nn_answer.predict_gesture with ``polish=False``: network,
+kinematics and its residual check; the default path also polishes the gestures of a
+gripper-trained network that press on the plane X = 0, a solver's time, which
+``gravity_fast_median_ms`` measures). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
 in float32 on every core (``batched_dtype``, ``batched_threads``; the network and the
 joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
 float64 on one thread and on every core beside them in the details; every other figure
@@ -30,9 +32,10 @@ over the same pressures in the same run.
 
 NN residuals are means over fresh random validation pressures of the worst joint per
 sample (p95 and max are recorded beside them). A raw gravity network is judged on the
-problem it learns, one finger alone without the plane X = 0 (NNConfig.training_problem;
-``details.gravity_nn_problem`` = "finger_alone"); its delivered paths (the fast path, the
-single query, the throughputs) answer the gripper, with the plane. ``contact_nn_residual_*`` is the delivered
+problem it learns (NNConfig.training_problem; ``details.gravity_nn_problem``): the gripper
+with the plane X = 0 ("gripper"), or one finger alone without it ("finger_alone", a
+network written before its config recorded ``plane``); its fast path, single query and
+throughputs answer the gripper, with the plane. ``contact_nn_residual_*`` is the delivered
 contact predictor, the NN's tau finished by Newton steps or the capped LM (ramp fallback
 for the few neither converges: ``contact_nn_polished_fallback_rate``; share the Newton
 steps answered: ``contact_nn_newton_rate``); the raw network, no solver, is
@@ -138,8 +141,8 @@ def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_m
 def _gravity_throughput(pred, problem, pressures, threads: int, dtype=torch.float64) -> dict:
     """Best of 3 batched runs on ``threads`` torch threads over pressures (N, 2) in
     ``dtype`` (float32: Predictor.astype, GripperProblem.astype): the NN alone, the NN with
-    the kinematics (``problem.pose``), and the delivered path (predict_gesture: network,
-    kinematics, the residual check). Gestures per second."""
+    the kinematics (``problem.pose``), and the raw NN path (predict_gesture with
+    ``polish=False``: network, kinematics, the residual check). Gestures per second."""
     pred, problem, pressures = pred.astype(dtype), problem.astype(dtype), pressures.to(dtype)
     torch.set_num_threads(threads)
     try:
@@ -154,8 +157,8 @@ def _gravity_throughput(pred, problem, pressures, threads: int, dtype=torch.floa
                 t0 = time.perf_counter()
                 pred.net(pressures)
                 tau_only_s = min(tau_only_s, time.perf_counter() - t0)
-        predict_gesture(pred, problem, pressures[:10])
-        delivered_s = min(predict_gesture(pred, problem, pressures).time_ms for _ in range(3)) / 1e3
+        predict_gesture(pred, problem, pressures[:10], polish=False)
+        delivered_s = min(predict_gesture(pred, problem, pressures, polish=False).time_ms for _ in range(3)) / 1e3
     finally:
         torch.set_num_threads(1)
     n = len(pressures)
@@ -252,8 +255,8 @@ def _gravity_throughputs(grav_pred, joint, n: dict) -> SimpleNamespace:
     one = _gravity_throughput(grav_pred, problem, p_big, 1)
     every64 = _gravity_throughput(grav_pred, problem, p_big, cores)
     every = _gravity_throughput(grav_pred, problem, p_big, cores, torch.float32)
-    predict_gesture(grav_pred, problem, p_big[:1])   # records the answer's statics graph
-    single = [predict_gesture(grav_pred, problem, p_big[i:i + 1]).time_ms for i in range(n["single"])]
+    predict_gesture(grav_pred, problem, p_big[:1], polish=False)   # records the answer's statics graph
+    single = [predict_gesture(grav_pred, problem, p_big[i:i + 1], polish=False).time_ms for i in range(n["single"])]
     return SimpleNamespace(one=one, every64=every64, every=every, single=single)
 
 

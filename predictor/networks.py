@@ -13,9 +13,14 @@ Variants (VARIANTS, ``python -m predictor.nn --variant ...``):
   go to zero instead of stalling on ReLU's kinks), supervised by the Newton solver's
   equilibria at 20,000 pressures, Adam (batch 200, lr 3e-3 decayed ×0.95, 60 epochs), then
   500 iterations of full-batch L-BFGS.
-  Both gravity variants learn one finger alone (``NNConfig.training_problem``: without the
-  plane X = 0 where the gripper's fingers meet, whose stiff penalty puts a kink in the map
-  and turns a pose error of 0.1 mm into a residual of tens of mN).
+  Both gravity variants learn the gripper (``NNConfig.training_problem``, ``plane`` True):
+  the right finger against the plane X = 0 where the mirror finger meets it, the problem
+  they answer. The plane's stiff penalty puts a kink in the map where the fingers begin
+  to meet and turns a tau error of 1e-6 N into a residual over 10 mN there, so where the
+  finger presses on it the raw answer cannot meet the NN bound and the delivered path
+  polishes it (predictor.nn_answer). ``plane=False`` (``predictor.nn --no-plane``, and
+  the checkpoints written before the config recorded it) learns one finger alone, a
+  smooth map whose gestures may cross X = 0.
 - ``contact``: the grasp of the default circle (statics.Obstacle: r = 30 mm, 0.2 N, centre
   Y = -195 mm; approach P = APPROACH) for (P1, P2) in [-0.15, 0.2] x [-0.05, 0.25], a domain
   with gestures that touch nothing, hold and slip. A ContactNet: a grasp-state classifier
@@ -95,6 +100,12 @@ class NNConfig:
     finger: dict | None = None  # contract.finger.finger_to_dict; None: the paper's finger
     kinematics: str = DEFAULT_KINEMATICS
     joint_weight: str = DEFAULT_JOINT_WEIGHT
+    # The problem the labels (and the equilibrium loss) are of and the raw residual is
+    # judged on (``training_problem``): the gripper, the right finger against the plane
+    # X = 0 where the mirror finger meets it (True, the Newton solver's default problem),
+    # or one finger alone (False, statics.apart). A checkpoint without the key was trained
+    # before it was recorded, on one finger alone (predictor.nn_checkpoint).
+    plane: bool = True
 
     def params(self) -> GripperParams:
         """The finger and chain options this predictor is trained for."""
@@ -109,14 +120,20 @@ class NNConfig:
                               approach=self.approach)
 
     def training_problem(self, joint: JointModel) -> GripperProblem:
-        """The problem the network learns and its raw residual is judged on: a gravity
-        network's (no object) is one finger alone, without the plane X = 0
-        (statics.apart): a smooth map of the pressures, whose gestures may cross X = 0 as
-        the paper's do; where the gripper's fingers meet, the solver takes the network's
-        tau as its start and adds the plane. A contact network's is ``problem`` itself,
-        the grasp with the plane."""
+        """The problem the network learns and its raw residual is judged on: ``problem``
+        itself, the gripper with the plane X = 0, unless a gravity network (no object) is
+        configured ``plane=False``: then one finger alone, without the plane
+        (statics.apart), a smooth map of the pressures whose gestures may cross X = 0 as
+        the paper's do, which answers the gripper only where its finger stays at X >= 0
+        (elsewhere the solver takes its tau as a start, ``--polish``). A contact
+        network's is always the grasp with the plane."""
         problem = self.problem(joint)
-        return problem if self.obstacle else apart(problem)
+        return problem if self.obstacle or self.plane else apart(problem)
+
+    def learns_gripper(self) -> bool:
+        """Whether the network learned the gripper's equilibrium, the problem it answers
+        (``problem``), rather than one finger alone."""
+        return bool(self.obstacle) or self.plane
 
     def for_params(self, params: GripperParams) -> "NNConfig":
         """This config for another finger or options: the finger recorded, the network's

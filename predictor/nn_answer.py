@@ -1,9 +1,17 @@
 """Answers of a trained NN predictor in the solver's result format (NNGestureResult),
 pressures (B, J) MPa:
 
-- gravity, raw: the network's tau, an answer only within the NN bound (NN_FORCE_TOL_MN,
-  NN_MOMENT_TOL_NMM: 2 mN, 1.2 N·mm), NaN elsewhere; method "nn";
-- gravity with ``polish``: the network's tau finished by one Newton step
+- gravity (``polish`` None, the default): the network's tau where its residual is within
+  the NN bound (NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM: 2 mN, 1.2 N·mm), method "nn"; where
+  it is not because the network's gesture presses on the plane X = 0 (``at_plane``: a
+  network that learned the gripper, its outline within PLANE_REACH_MM of X = 0), the
+  network's tau finished by the polish below, reported ``polished`` with the raw residual
+  kept beside it: the plane's penalty is so stiff (dR/dtau has a singular value over 1e4
+  there) that no network's tau meets the bound on it; NaN elsewhere and where the polish
+  does not converge either;
+- gravity raw (``polish`` False): the network's own answer only, NaN outside the bound
+  (the float32 throughput mode is this: the polish is a float64 solver);
+- gravity with ``polish`` True: every sample's tau finished by one Newton step
   (predictor.solve.newton_polish; the LM where its check fails); method "nn+newton"
   (joined with "lm" where the LM answered rows);
 - contact: full Newton steps from the network's tau (``newton_on_branch``), kept where they
@@ -23,12 +31,12 @@ from dataclasses import dataclass, fields, replace
 import torch
 from torch import nn
 
-from predictor.gripper import check_pressures, nan_unless
+from predictor.gripper import check_pressures, nan_unless, outline_vertices, with_rows
 from predictor.networks import ContactNet, Predictor
 from predictor.options import SolverOptions
-from predictor.result import GestureResult, result_labels
+from predictor.result import GestureResult, contact_fields, result_labels
 from predictor.solve import gesture_result, joined, meets_tolerances, newton_iterate, newton_polish, solve, statics_at
-from predictor.statics import GripperProblem, Statics, grasp_state, residual_norms
+from predictor.statics import GripperProblem, Statics, grasp_state, meets, residual_norms
 
 
 # LM step cap (scaled units) when polishing a contact NN prediction: small enough that the
@@ -37,6 +45,13 @@ POLISH_STEP = 0.02
 # The issue's NN bound: a prediction counts as an answer only within it.
 NN_FORCE_TOL_MN = 2.0
 NN_MOMENT_TOL_NMM = 1.2
+# mm: a gravity network's own gesture outside the NN bound is finished by the polish
+# (``at_plane``) when its outline comes this close to X = 0 (or crosses it): a gesture that
+# stops short of the plane where the equilibrium presses on it misses the plane's force.
+# Measured (a gripper network on the production surrogate, 400 random pressures): the rows
+# outside the bound lay at -1.2..0.9 mm from X = 0 where the Newton equilibrium presses,
+# and >= 1.5 mm away where it does not but the network is off by 2.1-5.3 mN.
+PLANE_REACH_MM = 1.0
 # mm: a Newton answer from the contact NN's tau counts only if its fingertip is this close to
 # the network's (``newton_on_branch``; bench-predictor's details.contact_nn_vs_solver.
 # newton_from_raw gives the largest shift to the ramp's equilibrium and the smallest to another).
@@ -74,7 +89,10 @@ class NNGestureResult(GestureResult):
     raw_state (B,) codes of statics.STATES: the grasp state by the network itself (its
     classifier; the contact of its tau for a network without one), None without an object;
     stepped (B,): contact, the answer is full Newton steps' from the network's tau (kept on
-    its branch, ``newton_on_branch``), not the capped LM's; None without an object."""
+    its branch, ``newton_on_branch``), not the capped LM's; None without an object;
+    at_plane (B,): gravity, the network's own gesture is outside the NN bound where it
+    presses on the plane X = 0 (``at_plane``), so the answer is the polish's (``polished``
+    where it converged), not the network's; None with an object."""
 
     fallback: torch.Tensor = None
     raw_residual_force_mN: torch.Tensor = None
@@ -82,17 +100,22 @@ class NNGestureResult(GestureResult):
     polished: torch.Tensor = None
     raw_state: torch.Tensor = None
     stepped: torch.Tensor = None
+    at_plane: torch.Tensor = None
 
 
 def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.Tensor,
-                    polish: bool = False, options: SolverOptions = SolverOptions()) -> NNGestureResult:
+                    polish: bool | None = None, options: SolverOptions = SolverOptions()) -> NNGestureResult:
     """NN gesture in the solver's result format, pressures (B, J) MPa.
 
     ``problem`` must be the one the NN was trained for (``pred.config.problem(joint)``),
-    ValueError otherwise. Gravity: the raw NN tau; ``converged`` means its residual is
-    within the NN bound (2 mN, 1.2 N·mm), other samples get NaN. Gravity with ``polish``:
-    the NN tau finished by one Newton step (solve.newton_polish; the LM where its check
-    fails, ``fallback``) to the iterative solver's tolerances. Contact: full Newton steps
+    ValueError otherwise. Gravity (``polish`` None): the raw NN tau where its residual is
+    within the NN bound (2 mN, 1.2 N·mm); where it is not because the network's gesture
+    presses on the plane X = 0 (``at_plane``), the NN tau finished as with ``polish``
+    below and reported ``polished``; NaN elsewhere and where that polish fails. Gravity
+    with ``polish`` False: the raw NN tau only (NaN outside the bound). Gravity with
+    ``polish`` True: every NN tau finished by one Newton step (solve.newton_polish; the LM
+    where its check fails, ``fallback``) to the iterative solver's tolerances. Contact
+    (``polish`` ignored): full Newton steps
     from the NN tau (predictor.newton.newton_iterate), kept where they converge on the network's
     branch (``stepped``, ``newton_on_branch``); the other samples start again from the NN
     tau with the LM under a small step cap (POLISH_STEP) so the iterates stay on the NN's
@@ -114,23 +137,30 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     if polish and problem.obstacle is None:
         with torch.no_grad():
             tau = pred.net(pressures)
-        res, start = newton_polish(problem, pressures, tau, options, t0=t0)
-        f, m = residual_norms(start)   # the network's own residual, from the step's pass
-        return NNGestureResult(**{**res.__dict__, "method": joined("nn", res.method)},
-                               fallback=res.iterations > 1, polished=res.converged, raw_residual_force_mN=f,
-                               raw_residual_moment_Nmm=m)
+        return _polished(problem, pressures, tau, options, t0)
     tau, st, raw_state = raw_answer(pred.net, problem, pressures)
     f, m = residual_norms(st.residual)
     raw = {"raw_residual_force_mN": f, "raw_residual_moment_Nmm": m}
     if problem.obstacle is None:
         ok = (f.amax(-1) <= NN_FORCE_TOL_MN) & (m.amax(-1) <= NN_MOMENT_TOL_NMM)
         c = st.contact
-        return NNGestureResult(
+        res = NNGestureResult(
             pressures=pressures, tau=nan_unless(ok, tau), converged=ok, residual_force_mN=f, residual_moment_Nmm=m,
             normal_force_N=c.normal, friction_N=c.friction, friction_ratio=c.ratio, slip=c.slip,
             iterations=torch.zeros(len(ok), dtype=torch.long), time_ms=1e3 * (time.perf_counter() - t0),
             pose=st.pose.masked(ok), method="nn", **result_labels(problem),
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
+        near = torch.zeros_like(ok)
+        if polish is None and pressures.dtype == torch.float64 and pred.config.learns_gripper():
+            near[~ok] = at_plane(problem, pressures[~ok], tau[~ok])
+        if not bool(near.any()):
+            return replace(res, at_plane=near)
+        pol = _polished(problem, pressures[near], tau[near], options, t0)
+        mixed = replace(res, **contact_fields(problem, st)).with_rows(near, pol)   # the plane's figures too
+        return replace(mixed, method=pol.method,
+                       time_ms=1e3 * (time.perf_counter() - t0), at_plane=near,
+                       fallback=with_rows(res.fallback, near, pol.fallback),
+                       polished=with_rows(res.polished, near, pol.polished), **raw)
     raw["raw_state"] = raw_state
     res, stepped = newton_on_branch(problem, pressures, tau, st, raw_state, t0, options)
     rest = ~stepped
@@ -147,6 +177,32 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
         method = joined(method, lm.method)
     return NNGestureResult(**{**res.__dict__, "time_ms": 1e3 * (time.perf_counter() - t0), "method": method},
                            fallback=fallback, polished=~fallback, stepped=stepped, **raw)
+
+
+def _polished(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, options: SolverOptions,
+              t0: float) -> NNGestureResult:
+    """The gravity network's tau (B, J, 3) finished by solve.newton_polish (one Newton step,
+    more and the LM where its check fails: ``fallback``), with the network's own residual
+    from the step's pass beside it; ``polished`` where it converged."""
+    res, start = newton_polish(problem, pressures, tau, options, t0=t0)
+    f, m = residual_norms(start)
+    return NNGestureResult(**{**res.__dict__, "method": joined("nn", res.method)},
+                           fallback=res.iterations > 1, polished=res.converged, raw_residual_force_mN=f,
+                           raw_residual_moment_Nmm=m, at_plane=None)
+
+
+def at_plane(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+    """Whether the gesture at tau (B, J, 3) presses on the plane X = 0 (B,) bool: its
+    outline crosses X = 0 or comes within PLANE_REACH_MM of it, where the gripper's fingers
+    meet (always False for one finger alone). There a network's raw residual cannot meet
+    the NN bound: the plane's penalty (ContactParams.plane_stiffness, N/mm per mm of edge)
+    turns a tau error of 1e-6 N into a residual over 10 mN, and a gesture that stops short
+    misses the plane's push."""
+    if not meets(problem) or not len(pressures):
+        return torch.zeros(len(pressures), dtype=torch.bool)
+    with torch.no_grad():
+        pose = problem.pose(pressures, tau)
+    return outline_vertices(pose, problem.params.layout)[..., 0].amin(-1) <= PLANE_REACH_MM
 
 
 def newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, raw: Statics,

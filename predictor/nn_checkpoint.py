@@ -58,8 +58,11 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
     ck = checkpoint.load(path, checkpoint_kind(contact), "NN predictor checkpoint")
     try:
         # Checkpoints written before the chain options record them were trained with the
-        # paper's chain (tangent kinematics, lumped joint weights), not today's defaults.
-        saved = {"kinematics": "tangent", "joint_weight": "lumped", **ck["config"]}
+        # paper's chain (tangent kinematics, lumped joint weights), not today's defaults;
+        # those written before ``plane`` was recorded learned one finger alone (a gravity
+        # network's labels without the plane X = 0; a contact network's always had it).
+        legacy = {"kinematics": "tangent", "joint_weight": "lumped", "plane": contact}
+        saved = {**legacy, **ck["config"]}
         cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
         trained_params = cfg.params()
         net = network(cfg)

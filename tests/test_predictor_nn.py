@@ -158,8 +158,10 @@ def test_nn_predictor_cli_matches_solver():
 
 @pytest.mark.skipif(not (SURROGATE.is_file() and GRAVITY_NN.is_file()), reason="no committed surrogate and NN")
 def test_gravity_nn_learns_one_finger_and_the_gripper_adds_the_plane():
-    """A gravity network learns one finger alone (NNConfig.training_problem: the plane
-    X = 0 off), a contact network the grasp with the plane. The committed gravity NN on
+    """A gravity network configured ``plane=False`` learns one finger alone
+    (NNConfig.training_problem: the plane X = 0 off), a contact network the grasp with the
+    plane either way. The committed gravity NN (written before the config recorded
+    ``plane``, so read as one finger alone) on
     400 pressures of its domain: raw residual on one finger within the NN bound (mean 2 mN,
     1.2 N·mm); on the gripper the residual is the same (1e-12) where its outline stays at
     X >= 0, and exactly there the raw delivered path answers; where it crosses, the polish
@@ -172,11 +174,13 @@ def test_gravity_nn_learns_one_finger_and_the_gripper_adds_the_plane():
     from predictor.nn_eval import evaluate
     from predictor.statics import meets
 
-    assert not meets(VARIANTS["gravity-improved"].training_problem(J)) and meets(VARIANTS["gravity-improved"].problem(J))
-    assert not meets(VARIANTS["gravity-paper"].training_problem(J))
+    for name in ("gravity-improved", "gravity-paper"):
+        alone = dataclasses.replace(VARIANTS[name], plane=False)
+        assert not meets(alone.training_problem(J)) and meets(alone.problem(J)), name
     assert VARIANTS["contact"].training_problem(J) == VARIANTS["contact"].problem(J)
     joint = load_joint(SURROGATE)
     pred = load_predictor(GRAVITY_NN, joint)
+    assert not pred.config.learns_gripper()
     alone, gripper = pred.config.training_problem(joint), pred.config.problem(joint)
     p = sample_pressures(400, pred.config, torch.Generator().manual_seed(5))
     own = evaluate(pred.net, alone, p)
@@ -217,8 +221,8 @@ def test_float32_batched_gravity_nn_agrees_with_float64():
         pytest.skip("the gravity NN was trained on another joint model")
     problem = pred.config.problem(load_joint(SURROGATE))
     p = sample_pressures(2000, pred.config, torch.Generator().manual_seed(11))
-    a = predict_gesture(pred, problem, p)
-    b = predict_gesture(pred.astype(torch.float32), problem.astype(torch.float32), p.float())
+    a = predict_gesture(pred, problem, p, polish=False)   # the raw network: float32 has no polish
+    b = predict_gesture(pred.astype(torch.float32), problem.astype(torch.float32), p.float(), polish=False)
     assert b.tau.dtype == b.pose.tip_end.dtype == b.residual_force_mN.dtype == torch.float32
     assert torch.equal(a.converged, b.converged) and int(a.converged.sum()) >= 1000
     ok = a.converged
@@ -408,3 +412,202 @@ def test_contact_nn_newton_answers_are_the_ramps_equilibria(monkeypatch):
     lm = answer.predict_gesture(pred, problem, p[:6])
     assert not bool(lm.stepped.any()) and bool(lm.converged.all()) and lm.method == "nn+lm"
     assert torch.allclose(lm.tau, ref.tau[:6], rtol=0, atol=1e-4)
+
+
+# ---------------------------------------------------------------- issue 55 §3: the gravity NN learns the gripper
+def test_gravity_nn_learns_the_problem_its_config_records(tmp_path):
+    """NNConfig.plane (default True) is the problem a gravity network's labels are of:
+    every variant learns the gripper, the problem it answers (the plane X = 0's penalty on
+    in its training problem, which is its ``problem``), plane=False one finger alone
+    (statics.apart), a contact network the grasp with the plane either way. The
+    checkpoint records it; one written before it was recorded reads as what it was
+    trained on: a gravity checkpoint one finger alone, a contact checkpoint the grasp with
+    the plane."""
+    from dataclasses import asdict
+
+    from predictor.networks import VARIANTS, NNConfig
+    from predictor.nn_checkpoint import checkpoint_kind, load_predictor, save_predictor
+    from predictor.nn_train import train
+    from predictor.statics import apart, meets
+    from surrogate import checkpoint
+
+    for name, cfg in VARIANTS.items():
+        assert cfg.plane and cfg.learns_gripper() and meets(cfg.training_problem(J)), name
+        assert cfg.training_problem(J) == cfg.problem(J), name
+    alone = dataclasses.replace(VARIANTS["gravity-improved"], plane=False)
+    assert not alone.learns_gripper() and alone.training_problem(J) == apart(alone.problem(J))
+    assert meets(alone.problem(J))   # it answers the gripper, where its finger stays at X >= 0
+    contact = dataclasses.replace(VARIANTS["contact"], plane=False)
+    assert contact.learns_gripper() and contact.training_problem(J) == contact.problem(J)
+
+    for plane in (True, False):
+        pred = train(NNConfig(n_train=60, n_val=20, epochs=1, plane=plane), J)
+        path = tmp_path / f"{plane}.pt"
+        save_predictor(pred, path)
+        assert load_predictor(path, J).config.plane is plane
+    # written before ``plane`` was recorded: a gravity network learned one finger alone
+    payload = {"config": {k: v for k, v in asdict(pred.config).items() if k != "plane"},
+               "state_dict": pred.net.state_dict(), "joint": pred.joint_name, "metrics": pred.metrics,
+               "history": pred.history}
+    old = tmp_path / "old.pt"
+    checkpoint.save(old, checkpoint_kind(False), payload)
+    back = load_predictor(old, J)
+    assert back.config.plane is False and not meets(back.config.training_problem(J))
+    checkpoint.save(old, checkpoint_kind(True), {**payload, "config": {**payload["config"],
+                                                                        "obstacle": VARIANTS["contact"].obstacle}})
+    assert load_predictor(old, J, contact=True).config.plane is True
+
+
+@pytest.mark.skipif(not (GRAVITY_NN.is_file() and (ROOT / "results/predictor/contact_nn.pt").is_file()),
+                    reason="no committed NN checkpoints")
+def test_committed_nn_checkpoints_read_as_the_problem_they_learned():
+    """The committed checkpoints were written before the config recorded ``plane``: the
+    gravity networks read as one finger alone (their labels and equilibrium loss had the
+    plane off), the contact network as the grasp with the plane (its labels had it on)."""
+    from predictor.nn_checkpoint import load_predictor
+
+    for name in ("gravity_nn.pt", "gravity_nn_paper.pt"):
+        cfg = load_predictor(GRAVITY_NN.parent / name).config
+        assert cfg.plane is False and not cfg.learns_gripper(), name
+    assert load_predictor(GRAVITY_NN.parent / "contact_nn.pt", contact=True).config.learns_gripper()
+
+
+def test_gravity_nn_trained_on_the_gripper_stays_on_its_side_of_the_plane():
+    """On the analytic joint, the improved architecture (narrowed) trained briefly on 120
+    Newton labels of the gripper (the default, plane X = 0 on) and of one finger alone
+    (plane=False), judged at six pressures where one finger alone crosses X = 0 by 27-143
+    mm. The gripper-trained network's own gesture crosses X = 0 by at most 3 mm (the
+    solver's equilibria by <= 0.1 mm) and its tip is within 6 mm of the Newton solver's
+    gripper answer (5.6 mm at (0.25, -0.05) MPa when written); the lone-finger network's
+    crosses by over 25 mm and misses the tip by over 40 mm, and its residual on the gripper is over 30 times the gripper-trained one's.
+    Neither meets the raw NN bound (2 mN) there: at the gripper's equilibrium the
+    residual's Jacobian dR/dtau has a singular value over 1e4 (the stiff plane pressed by
+    the finger; one finger alone: all below 10), so a tau error of 1e-6 N is a residual
+    over 10 mN."""
+    from predictor.networks import VARIANTS
+    from predictor.nn_train import train
+    from predictor.statics import apart, plane_overlap
+
+    gripper = GripperProblem(J)
+    q = t([[0.1, -0.1], [0.1, 0.1], [0.15, 0.0], [0.2, 0.2], [0.0, 0.25], [0.25, -0.05]])
+    ref, lone = solve(gripper, q), solve(apart(gripper), q)
+    assert bool(ref.converged.all()) and bool(lone.converged.all())
+    from predictor.gripper import outline_vertices
+
+    assert float(plane_overlap(outline_vertices(lone.pose, gripper.params.layout)).min()) >= 25.0
+    assert float(plane_overlap(outline_vertices(ref.pose, gripper.params.layout)).max()) <= 0.1
+    small = dataclasses.replace(VARIANTS["gravity-improved"], widths=(2, 64, 64, 6), n_train=120, n_val=20,
+                                epochs=30, batch=40, lbfgs_iters=200)
+    got = {}
+    for plane in (True, False):
+        net = train(dataclasses.replace(small, plane=plane), J).net
+        with torch.no_grad():
+            st = gripper.residual(q, net(q))
+        got[plane] = (plane_overlap(st.vertices), (st.pose.tip_end - ref.pose.tip_end).norm(dim=-1),
+                      st.residual[..., :2].norm(dim=-1).amax(-1) * 1e3)
+    (cross, tip, res), (cross_alone, tip_alone, res_alone) = got[True], got[False]
+    assert float(cross.max()) <= 3.0 and float(tip.max()) <= 6.0
+    assert float(cross_alone.min()) >= 25.0 and float(tip_alone.min()) >= 40.0
+    assert bool((res_alone >= 30 * res).all()) and bool((res > 2.0).all())
+    i = 3   # (0.2, 0.2) MPa
+    f = lambda problem: lambda x: problem.residual(q[i:i + 1], x.reshape(1, 2, 3)).residual.reshape(-1)  # noqa: E731
+    stiff = torch.linalg.svdvals(torch.autograd.functional.jacobian(f(gripper), ref.tau[i].reshape(-1)))
+    free = torch.linalg.svdvals(torch.autograd.functional.jacobian(f(apart(gripper)), lone.tau[i].reshape(-1)))
+    assert float(stiff.max()) >= 1e4 and float(free.max()) <= 10.0
+
+
+class _TableNet(torch.nn.Module):
+    """A stand-in gravity network: the tau (n, J, 3) stored for each of n pressures (n, J),
+    answered for the nearest stored pressure."""
+
+    def __init__(self, pressures: torch.Tensor, tau: torch.Tensor):
+        super().__init__()
+        self.register_buffer("p", pressures)
+        self.register_buffer("tau", tau)
+
+    def forward(self, pressures: torch.Tensor) -> torch.Tensor:
+        return self.tau[(pressures[:, None, :] - self.p[None]).abs().amax(-1).argmin(1)]
+
+
+def test_gravity_nn_gesture_at_the_plane_is_its_polish():
+    """The delivered gravity path (predict_gesture, polish None) with a network that learned
+    the gripper, standing in as the Newton solver's equilibria plus 1e-5 in every tau
+    component, at three pressures whose gestures stay 15 mm from X = 0 and five where the
+    finger presses on it (0.003-0.054 mm deep). Away from the plane the raw residual is
+    0.015 mN, within the NN bound: the answer is the network's own tau (method nn, 0
+    iterations, not polished). On the plane the same 1e-5 error is a residual of 9.5-164 mN
+    and 1.3-20 N·mm (the plane's stiff penalty): each of those is ``at_plane``, finished by
+    the Newton step (and the LM where its check fails, (0.15, 0) MPa), reported polished
+    with its raw residual kept, and equals the Newton solver's tau to 1e-8 (its tip to 1e-6
+    mm; the raw rows' tips are 1e-3 mm off). polish=False is
+    the raw network alone (no answer on the plane); the same table configured to have
+    learned one finger alone is never polished unasked (its crossing gesture is far from
+    the gripper's); polish=True finishes every row."""
+    from predictor.networks import VARIANTS, Predictor
+    from predictor.nn_answer import NN_FORCE_TOL_MN, predict_gesture
+
+    q = t([[-0.1, 0.1], [0.0, 0.0], [-0.3, -0.3], [0.1, -0.1], [0.1, 0.1], [0.2, 0.2], [0.15, 0.0], [0.0, 0.25]])
+    free, plane = torch.arange(8) < 3, torch.arange(8) >= 3
+    ref = solve(GRAVITY, q)
+    assert bool(ref.converged.all()) and bool((ref.plane_overlap_mm[free] == 0).all())
+    assert 0.002 <= float(ref.plane_overlap_mm[plane].min()) and float(ref.plane_overlap_mm[plane].max()) <= 0.06
+    pred = Predictor(_TableNet(q, ref.tau + 1e-5), VARIANTS["gravity-improved"], "analytic")
+    res = predict_gesture(pred, GRAVITY, q)
+    raw_f = res.raw_residual_force_mN.amax(-1)
+    assert bool(res.converged.all()) and torch.equal(res.at_plane, plane) and torch.equal(res.polished, plane)
+    assert float(raw_f[free].max()) <= 0.02 and float(raw_f[plane].min()) >= 4 * NN_FORCE_TOL_MN
+    assert torch.equal(res.tau[free], ref.tau[free] + 1e-5) and bool((res.iterations[free] == 0).all())
+    assert torch.equal(res.residual_force_mN[free], res.raw_residual_force_mN[free])
+    assert float((res.tau[plane] - ref.tau[plane]).abs().max()) <= 1e-8
+    assert float(res.residual_force_mN[plane].max()) <= 1e-4 and bool((res.iterations[plane] >= 1).all())
+    tip = (res.pose.tip_end - ref.pose.tip_end).norm(dim=-1)   # mm: the raw 1e-5 moves the tip ~1e-3 mm
+    assert float(tip[free].max()) <= 2e-3 and float(tip[plane].max()) <= 1e-6
+    assert res.method == "nn+newton+lm" and bool(res.fallback[6])
+    assert float((res.plane_overlap_mm[plane] - ref.plane_overlap_mm[plane]).abs().max()) <= 1e-6
+    raw = predict_gesture(pred, GRAVITY, q, polish=False)
+    assert torch.equal(raw.converged, free) and not bool(raw.at_plane.any()) and raw.method == "nn"
+    alone = Predictor(pred.net, dataclasses.replace(pred.config, plane=False), "analytic")
+    assert torch.equal(predict_gesture(alone, GRAVITY, q).converged, free)
+    every = predict_gesture(pred, GRAVITY, q, polish=True)
+    assert bool(every.converged.all()) and bool(every.polished.all()) and every.at_plane is None
+    assert float((every.tau - ref.tau).abs().max()) <= 1e-7   # each within the solver tolerance
+
+
+def test_gravity_nn_cli_answers_at_the_plane_polished(tmp_path):
+    """predictor.gesture --method nn with a small gravity network trained on the gripper
+    (analytic joint, 120 labels, widths 2-64-64-6; written by predictor.nn's save): at
+    (0.1, 0.1) MPa its own gesture crosses X = 0 (raw residual thousands of mN), so the
+    answer is its tau polished, exit 0, the JSON says polished and at_plane with the raw
+    residual beside the answer's, and tau is the Newton solver's to 1e-6; at (0, 0) its
+    gesture is 15 mm from X = 0 and its residual (~6 mN) outside the bound: no answer,
+    exit 1, and the stderr line names --polish."""
+    from predictor.networks import VARIANTS
+    from predictor.nn_checkpoint import save_predictor
+    from predictor.nn_train import train
+
+    small = dataclasses.replace(VARIANTS["gravity-improved"], widths=(2, 64, 64, 6), n_train=120, n_val=20,
+                                epochs=30, batch=40, lbfgs_iters=200)
+    path = tmp_path / "gripper.pt"
+    save_predictor(train(small, J), path)
+
+    def gesture(*args):   # a polish beside other jobs can outlast run_gesture_cli's 60 s
+        return subprocess.run([sys.executable, "-m", "predictor.gesture", *args, "--model", "analytic", "--method",
+                               "nn", "--nn", str(path), "--json"], cwd=ROOT, capture_output=True, text=True,
+                              timeout=600)
+
+    out = gesture("--p1", "0.1", "--p2", "0.1")
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["converged"] and got["polished"] and got["at_plane"] and got["nn_problem"] == "gripper"
+    assert got["method"].startswith("nn+newton") and max(got["residual_force_mN"]) <= 1e-4
+    assert min(got["raw_residual_force_mN"]) >= 1e3 and got["plane_overlap_mm"] <= 0.1
+    ref = solve(GRAVITY, t([[0.1, 0.1]]))
+    np.testing.assert_allclose(np.array(got["tau"]), ref.tau[0].numpy(), atol=1e-6)
+    bad = gesture("--p1", "0", "--p2", "0")
+    assert bad.returncode == 1, bad.stderr
+    got = json.loads(bad.stdout)
+    assert not got["converged"] and not got["at_plane"] and not got["polished"] and got["tau"] is None
+    line = bad.stderr.strip()
+    assert "\n" not in line and line.startswith("python -m predictor.gesture: the gravity NN's own answer is outside "
+                                                "its bound"), line
+    assert line.endswith("; --polish finishes it with a Newton step; no gesture returned"), line

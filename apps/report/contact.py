@@ -39,6 +39,14 @@ COSTS = (
     "regulators' stencil by ramp solves (Grasp planning).",
 )
 
+#: COSTS[1] for a bench whose gravity network learned the gripper (details.gravity_nn_problem).
+GRIPPER_NN_COST = (
+    "The gravity networks learn the gripper, the plane X = 0 included, and their raw residual is judged there "
+    "(Gesture predictor section, docs/gripper.md §11): where the finger presses on the plane its stiff penalty "
+    "puts the raw residual outside the NN bound for any network, so the delivered answer there is the network's "
+    "tau polished by the Newton step, reported as polished, and the LM finishes the rows whose one-step check "
+    "fails{lm}.")
+
 
 def _load_note(root: Path) -> str:
     """What the bench's machine was doing (bench/predictor.json): its load average at the
@@ -66,7 +74,8 @@ def _costs(root: Path) -> list[str]:
     fast = (b or {}).get("details", {}).get("gravity_fast")
     lm = f" ({fast['fallbacks']} of {fast['n']} bench cases)" if fast else ""
     out = ["Targets of other sections that this model moves, and why:", ""]
-    out += ["- " + COSTS[0], "- " + COSTS[1].format(lm=lm), "- " + COSTS[2]]
+    gripper = (b or {}).get("details", {}).get("gravity_nn_problem") == "gripper"
+    out += ["- " + COSTS[0], "- " + (GRIPPER_NN_COST if gripper else COSTS[1]).format(lm=lm), "- " + COSTS[2]]
     note = _load_note(root)
     return out + ([f"- {note}"] if note else []) + [""]
 

@@ -33,10 +33,12 @@ def _domain(b: dict, name: str) -> str:
 
 def _nn_problem(b: dict) -> str:
     """ " on ..." : the problem a raw gravity network's residual was measured on (bench
-    details.gravity_nn_problem): one finger alone, the problem it learns; a bench without
-    the key measured it on the gripper with the plane X = 0."""
+    details.gravity_nn_problem): the problem it learns, one finger alone or the gripper; a
+    bench without the key measured a network of one finger alone on the gripper."""
     if b["details"].get("gravity_nn_problem") == "finger_alone":
         return " on one finger alone (the problem it learns: no plane X = 0)"
+    if b["details"].get("gravity_nn_problem") == "gripper":
+        return " on the gripper (the problem it learns: the plane X = 0 where the fingers meet)"
     return (" on the gripper with the plane X = 0 (a bench that did not judge it on one finger alone, "
             "the problem it learns: re-run `make bench-predictor`)")
 
@@ -200,11 +202,21 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                 + (f"Newton steps / LM from tau = 0 = {b['gravity_newton_median_ms'] / b['gravity_lm_median_ms']:.2f}; "
                    if "gravity_lm_median_ms" in b else "")
                 + f"contact fastest path / ramp = {b['contact_fast_median_ms'] / b['contact_median_ms']:.2f}."]
-    out += ["", "The gravity networks learn one finger alone (predictor.networks.NNConfig.training_problem): a "
-            "smooth map of the pressures whose gestures may cross X = 0, as the paper's do; their raw residual "
-            "is judged there. The gripper's answers add the plane X = 0 where the fingers meet: the fastest "
-            "path, the single query and the throughputs above check the network's tau on the gripper's "
-            "equilibrium, and the fastest path finishes it there by Newton steps (the LM where the check fails)."]
+    if b["details"].get("gravity_nn_problem") == "gripper":
+        out += ["", "The gravity networks learn the gripper (predictor.networks.NNConfig.training_problem), the "
+                "plane X = 0 where the fingers meet included, and their raw residual is judged there. Where the "
+                "finger presses on the plane, its stiff penalty puts any network's raw residual outside the NN "
+                "bound, so `predictor.gesture --method nn` answers there with the network's tau polished by the "
+                "Newton step (the LM where its check fails), reported as polished with the raw residual beside it "
+                "(predictor.nn_answer.at_plane); the single query and the throughputs above are the raw network's "
+                "path (no polish), the fastest path polishes every query."]
+    else:
+        out += ["", "The gravity networks learn one finger alone (predictor.networks.NNConfig.training_problem): a "
+                "smooth map of the pressures whose gestures may cross X = 0, as the paper's do; their raw residual "
+                "is judged there. The gripper's answers add the plane X = 0 where the fingers meet: the fastest "
+                "path, the single query and the throughputs above check the network's tau on the gripper's "
+                "equilibrium, and the fastest path finishes it there by Newton steps (the LM where the check "
+                "fails)."]
     imp, mlp = b["details"].get("gravity_nn_improved"), b["details"].get("gravity_nn_paper_mlp")
     if imp and mlp:
         worse = [k for k in ("force_mN_mean", "moment_Nmm_mean") if imp[k] > mlp[k]]
