@@ -42,7 +42,7 @@ from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS,
                                  VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, coarse_atlas, inverse_pressures,
                                  parse_goal)
 from predictor.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
-                               approach_arg, box_arg, load_problem, object_arg, params_of)
+                               approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
 from predictor.gripper import GripperParams
 from predictor.progress import Heartbeat, set_quiet
 from predictor.statics import GripperProblem
@@ -355,7 +355,8 @@ def main(argv: list[str] | None = None) -> int:
         res = inverse_pressures(ip, atlas)
         if args.plot:
             save_inverse_figure(args.plot, [(args.goal, res, problem)])
-    print_figures({**res.summary(), "goal": args.goal, "object": args.object}, args.json)
+    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "finger": finger_record(_params(args)),
+                   "plane": args.plane}, args.json)
     if res.status != "feasible":
         print(f"{ap.prog}: infeasible: {res.reason}", file=sys.stderr)
         return 1

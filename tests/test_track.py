@@ -202,6 +202,7 @@ def test_inverse_answers_for_the_finger_it_is_given():
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
+    assert out["finger"]["name"] == "long_tip" and out["finger"]["sha256"] == load_finger(finger).digest
     p = torch.tensor([out["pressures"]], dtype=torch.float64)
     for prob, near in ((long_tip, True), (paper, False)):
         fwd = solve(prob, p)
@@ -231,6 +232,8 @@ def test_inverse_takes_the_plane_chain_and_approach_options():
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
+    assert out["finger"] == {"name": "paper", "sha256": params.finger.digest, "kinematics": "tangent",
+                             "joint_weight": "lumped"} and out["plane"] is False    # what it answered for
     p = torch.tensor([out["pressures"]], dtype=torch.float64)
     for prob, near in ((alone, True), (default, False)):
         fwd = solve(prob, p)
