@@ -75,7 +75,8 @@ import torch
 from contract import cli
 from predictor.artefacts import ATLAS
 from predictor.problem import (DEFAULT, FULL_BOX, GRID, OBJECT_HELP, add_arguments, add_finger_arguments, add_plane,
-                               approach_arg, box_arg, check_box, load_problem, object_arg, params_of, placement_error)
+                               approach_arg, box_arg, check_box, finger_record, load_problem, object_arg, params_of,
+                               placement_error)
 from predictor.progress import Heartbeat, set_quiet
 from predictor.jacobians import jacobian_fn
 from predictor.options import SolverOptions
@@ -575,8 +576,7 @@ def main(argv: list[str] | None = None) -> int:
         problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=params, mu=args.mu,
                                object_weight=args.object_weight, approach=approach, plane=args.plane)
         atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
-        finger = {"name": params.finger.name, "sha256": params.finger.digest, "kinematics": params.kinematics,
-                  "joint_weight": params.joint_weight}
+        finger = finger_record(params)
         doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps, "finger": finger}
         if args.out:
             ATLAS.write(args.out, doc)

@@ -36,13 +36,13 @@ import numpy as np
 import torch
 
 from contract import cli
-from contract.finger import DEFAULT_FINGER, finger_arg
 from predictor.artefacts import INVERSE, TRACK
 from predictor.atlas import STATES, Atlas, atlas_from_json
 from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
                                  VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, coarse_atlas, inverse_pressures,
                                  parse_goal)
-from predictor.problem import FULL_BOX, MIN_NORMAL, add_arguments, box_arg, load_problem, object_arg
+from predictor.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
+                               approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
 from predictor.gripper import GripperParams
 from predictor.progress import Heartbeat, set_quiet
 from predictor.statics import GripperProblem
@@ -214,8 +214,9 @@ def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
 
 
 def _params(args) -> GripperParams:
-    """The finger and chain options of --finger (predictor.gesture's way)."""
-    return GripperParams(args.finger)
+    """The finger and chain options of --finger, --kinematics, --joint-weight
+    (predictor.gesture's way)."""
+    return params_of(args)
 
 
 def run_track(problem: GripperProblem, goals: list, label: str) -> tuple[dict, object]:
@@ -273,8 +274,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--atlas", help="the object's predictor.atlas --out JSON for the starts (default: "
                     f"a {COARSE}x{COARSE} grid solved now)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
-    ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
-                    help="finger description file (default contract/fingers/paper.toml); the inverse needs 2 joints")
+    add_plane(ap)
+    add_finger_arguments(ap)    # predictor.gesture's --finger, --kinematics, --joint-weight; 2 joints
+    ap.add_argument("--approach", type=approach_arg, help="hold: P1,P2 (MPa) at which the object is brought in "
+                    "(default as predictor.atlas), or 'zero' to ramp from 0 with the object present")
     ap.add_argument("--track", help="a file of fingertip goals X,Y[,DEG] (CSV, or JSON: a list of [X, Y(, DEG)]), "
                     "each answered warm-started from the previous answer (predictor.track); 'demo': make track's "
                     "100-goal path; --out writes the answers, --plot the closed-loop figure")
@@ -290,7 +293,7 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(1)
         with ap.errors():
             doc, figs = run_cases(args.model, Path(args.atlas_dir))
-            free = load_problem(args.model, None, params=_params(args))
+            free = load_problem(args.model, None, params=_params(args), plane=args.plane)
             from predictor.track import demo_goals, save_track_figure
             tdoc, tres = run_track(free, demo_goals(free), TRACK_LABEL)
             doc["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
@@ -307,12 +310,13 @@ def main(argv: list[str] | None = None) -> int:
                       args.json)
         return 0
     if args.track is not None:
-        if args.goal is not None or args.object:
-            ap.error("--track answers fingertip goals without an object: drop --goal and --object")
+        if args.goal is not None or args.object or args.approach is not None:
+            ap.error("--track answers fingertip goals without an object: drop --goal, --object and --approach")
         torch.set_num_threads(1)
         with ap.errors():
             from predictor.track import demo_goals, load_track, save_track_figure
-            problem = load_problem(args.model, None, gravity=not args.no_gravity, params=_params(args))
+            problem = load_problem(args.model, None, gravity=not args.no_gravity, params=_params(args),
+                                   plane=args.plane)
             goals = demo_goals(problem) if args.track == "demo" else load_track(args.track)
             label = TRACK_LABEL if args.track == "demo" else f"predictor.inverse --track {args.track}"
             into = INVERSE.load(args.into) if args.into else None    # checked before the run
@@ -337,16 +341,22 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--goal hold needs an --object")
     if goal.kind == "tip" and (args.min_normal or args.least_pressure):
         ap.error("--min-normal and --least-pressure apply to --goal hold only")
+    if args.approach is not None and goal.kind != "hold":
+        ap.error("--approach applies to --goal hold only (the pressures at which the object is brought in)")
+    if args.approach not in (None, "zero") and len(args.approach) != 2:
+        ap.error(f"--approach: {len(args.approach)} values for the inverse's two joints (P1,P2 MPa, or 'zero')")
+    approach = None if args.approach == "zero" else args.approach or DEFAULT
     torch.set_num_threads(1)
     with ap.errors():
         problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=_params(args), mu=args.mu,
-                               object_weight=args.object_weight)
+                               object_weight=args.object_weight, approach=approach, plane=args.plane)
         ip = InverseProblem(problem, goal, args.box)
         atlas = read_atlas(args.atlas, problem) if args.atlas else None
         res = inverse_pressures(ip, atlas)
         if args.plot:
             save_inverse_figure(args.plot, [(args.goal, res, problem)])
-    print_figures({**res.summary(), "goal": args.goal, "object": args.object}, args.json)
+    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "finger": finger_record(_params(args)),
+                   "plane": args.plane}, args.json)
     if res.status != "feasible":
         print(f"{ap.prog}: infeasible: {res.reason}", file=sys.stderr)
         return 1

@@ -230,6 +230,13 @@ def add_arguments(ap, model_help: str = "") -> None:
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
+def finger_record(params: GripperParams) -> dict:
+    """The finger a tool answered for, as its JSON records it (name, file digest, chain
+    options): predictor.atlas's and predictor.inverse's "finger"."""
+    return {"name": params.finger.name, "sha256": params.finger.digest, "kinematics": params.kinematics,
+            "joint_weight": params.joint_weight}
+
+
 def add_plane(ap) -> None:
     """--no-plane (``args.plane``, default True): one finger alone instead of the gripper
     (module docstring); the same flag as fem.finger's."""

@@ -202,11 +202,48 @@ def test_inverse_answers_for_the_finger_it_is_given():
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
+    assert out["finger"]["name"] == "long_tip" and out["finger"]["sha256"] == load_finger(finger).digest
     p = torch.tensor([out["pressures"]], dtype=torch.float64)
     for prob, near in ((long_tip, True), (paper, False)):
         fwd = solve(prob, p)
         err = float((fwd.pose.tip_end[0] - torch.tensor(goal)).norm())
         assert bool(fwd.converged[0]) and (err <= TIP_TOL_MM if near else err > 4.0), (near, err)
+
+
+def test_inverse_takes_the_plane_chain_and_approach_options():
+    """predictor.inverse takes predictor.gesture's --no-plane, --kinematics, --joint-weight
+    (issue 57: every tool every finger option). The goal is the forward fingertip of one
+    finger alone, tangent kinematics, lumped joint weights, at (0.1, 0.05) MPa: (-14.9,
+    -212.1) mm, across X = 0, where the default gripper's tip is at X = +9.9 mm. The
+    answer meets it (exit 0, verified) and a forward solve of that problem at the answer's
+    pressures puts the tip there, while the default problem's tip there is > 4 mm away.
+    --approach is for hold goals only, and needs two values: exit 2, one line, before a solve."""
+    from contract.finger import DEFAULT_FINGER, load_finger
+    from predictor.gripper import GripperParams
+    from predictor.problem import load_problem
+
+    params = GripperParams(load_finger(DEFAULT_FINGER), kinematics="tangent", joint_weight="lumped")
+    alone = load_problem(MODEL, None, params=params, plane=False)
+    default = load_problem(MODEL, None)
+    goal = solve(alone, torch.tensor([[0.1, 0.05]], dtype=torch.float64)).pose.tip_end[0].tolist()
+    assert goal[0] < -10.0     # across X = 0: the gripper's fingers could not put it there
+    r = _cli("--goal", f"tip:{goal[0]!r},{goal[1]!r}", "--no-plane", "--kinematics", "tangent",
+             "--joint-weight", "lumped", "--json", "--quiet")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
+    assert out["finger"] == {"name": "paper", "sha256": params.finger.digest, "kinematics": "tangent",
+                             "joint_weight": "lumped"} and out["plane"] is False    # what it answered for
+    p = torch.tensor([out["pressures"]], dtype=torch.float64)
+    for prob, near in ((alone, True), (default, False)):
+        fwd = solve(prob, p)
+        err = float((fwd.pose.tip_end[0] - torch.tensor(goal)).norm())
+        assert bool(fwd.converged[0]) and (err <= TIP_TOL_MM if near else err > 4.0), (near, err)
+    for args, why in ((("--goal", "tip:40,-212", "--approach", "0,0"), "--approach applies to --goal hold only"),
+                      (("--goal", "hold", "--object", "circle", "--approach", "0.1,0,0"), "3 values for the inverse's two joints"),
+                      (("--track", "demo", "--approach", "0,0"), "drop --goal, --object and --approach")):
+        r = _cli(*args, timeout=120)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and why in r.stderr, r.stderr
 
 
 def test_track_cli(tmp_path):
