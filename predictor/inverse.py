@@ -45,7 +45,7 @@ from predictor.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add
                                approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
 from predictor.gripper import GripperParams
 from predictor.progress import Heartbeat, set_quiet
-from predictor.statics import GripperProblem
+from predictor.statics import GripperProblem, meets
 
 
 def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, GripperProblem]]) -> None:
@@ -244,10 +244,12 @@ def _load_text(tdoc: dict) -> str:
 #: What ran beside the timings (recorded with the load averages; set SOFTJOINT_BESIDE).
 BESIDE = __import__("os").environ.get("SOFTJOINT_BESIDE", "not recorded (set SOFTJOINT_BESIDE)")
 
-#: What ``make track``'s figure and JSON say produced them.
-TRACK_LABEL = ("closed-loop tracking (predictor.inverse --track demo): joint model the committed surrogate "
-               "results/surrogate/improved.pt (1.8 mm data), the paper's finger, gravity, no object, "
-               "the fingers meeting at the plane X = 0")
+def track_label(problem: GripperProblem) -> str:
+    """What ``make track``'s figure and JSON say produced them: the model and the problem
+    the track was run on, read from the problem itself."""
+    return (f"closed-loop tracking (predictor.inverse --track demo): joint model {problem.joint.name}, "
+            f"finger {problem.params.finger.name!r}, {'gravity' if problem.gravity else 'no gravity'}, no object, "
+            + ("the fingers meeting at the plane X = 0" if meets(problem) else "one finger alone"))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -295,14 +297,14 @@ def main(argv: list[str] | None = None) -> int:
             doc, figs = run_cases(args.model, Path(args.atlas_dir))
             free = load_problem(args.model, None, params=_params(args), plane=args.plane)
             from predictor.track import demo_goals, save_track_figure
-            tdoc, tres = run_track(free, demo_goals(free), TRACK_LABEL)
+            tdoc, tres = run_track(free, demo_goals(free), track_label(free))
             doc["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
             if args.out:
                 INVERSE.write(args.out, doc)
             if args.plot:
                 save_inverse_figure(args.plot, figs)
             if args.track_plot:
-                save_track_figure(args.track_plot, tres, free, TRACK_LABEL, _load_text(tdoc))
+                save_track_figure(args.track_plot, tres, free, tdoc["label"], _load_text(tdoc))
             if args.track_out:
                 TRACK.write(args.track_out, tdoc)
         print_figures({**doc["measured"], **{f"track_{k}": doc["track"][k] for k in
@@ -318,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
             problem = load_problem(args.model, None, gravity=not args.no_gravity, params=_params(args),
                                    plane=args.plane)
             goals = demo_goals(problem) if args.track == "demo" else load_track(args.track)
-            label = TRACK_LABEL if args.track == "demo" else f"predictor.inverse --track {args.track}"
+            label = track_label(problem) if args.track == "demo" else f"predictor.inverse --track {args.track}"
             into = INVERSE.load(args.into) if args.into else None    # checked before the run
             tdoc, tres = run_track(problem, goals, label)
             if args.out:

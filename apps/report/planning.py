@@ -114,7 +114,7 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                    "and status in the title (x: a fingertip target).", "make inverse")
     out += figure(root, "predictor/track.png", "closed-loop tracking",
                   "`make inverse` (`python -m predictor.inverse --cases --track-plot`; alone: `make track`), "
-                  "joint model the committed surrogate results/surrogate/improved.pt (1.8 mm data), no object, the "
+                  f"joint model {joint_model(root, ((inv or {}).get('track') or {}).get('joint'))}, no object, the "
                   "fingers meeting at X = 0: the 100 goals across the reachable region and out of it, the verified "
                   "forward fingertip at each answer, the time per goal, the tip error and the pressures against "
                   "time.", "make inverse")
@@ -143,7 +143,20 @@ def _production_atlases(root: Path, atlases: list) -> list[str]:
     if not rows:
         return []
     joint = joint_model(root, load(root, f"predictor/hex2s3/atlas_{atlases[0][0]}.json").get("joint"))
-    return ["#### The atlases on the production surrogate, beside (issue 55 §3)", "",
+    inv = load(root, "predictor/hex2s3/inverse.json")
+    if inv:
+        rows += ["", "The inverse cases on it (results/predictor/hex2s3/inverse.json, `make predictor-new`):", "",
+                 "| goal | object | status | pressures (MPa) | friction use / tip error | robust |", "|---|---|---|---|---|---|"]
+        rows += [f"| {c['goal']} | {c['object'] or '-'} | {c['status']} | "
+                 f"{', '.join(f'{v:.4f}' for v in c['pressures'])} | "
+                 f"{num(c['friction_use']) if c['friction_use'] is not None else num(c['tip_error_mm']) + ' mm'} "
+                 f"| {c['robust']} |" for c in inv["cases"]]
+        tr = inv.get("track") or {}
+        if tr:
+            rows += ["", f"Its track: {tr['reached']} goals reached, {tr['unreachable']} unreachable, {tr['robust']} "
+                         f"robust, largest tip error {tr['max_tip_error_mm']:.3f} mm, CPU median "
+                         f"{tr['cpu_median_ms']:.0f} ms a goal ({tr['reached_warm_cpu_median_ms']:.1f} ms reached, warm)."]
+    return ["#### Planning on the production surrogate, beside (issue 55 §3)", "",
             "`make predictor-new` builds the atlases on results/surrogate/hex2s3/improved.pt (joint model "
             f"{joint}, the hex2:3 mixed data) into results/predictor/hex2s3/; they become the defaults at the "
             "switch. Shown, not judged: their times were taken beside the contact NN's training.", "",
