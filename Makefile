@@ -309,11 +309,11 @@ $(PRED_DIR)/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the p
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
 
-$(PRED_DIR)/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels (SiLU + L-BFGS, ~2 min)
+$(PRED_DIR)/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels of the gripper (SiLU + L-BFGS; ~30 min, its 20,000 labels ramped to the plane X = 0)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
 
-$(PRED_DIR)/contact_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~35 min)
+$(PRED_DIR)/contact_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~50 min)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
 
@@ -365,10 +365,11 @@ track: $(PRED_DIR)/inverse.json | $(SETUP) ## closed-loop tip tracking, 100 goal
 # The predictor on the production surrogate, beside today's (issue 55 §3): the three NNs,
 # the gestures, the atlases and their reference ramps, the inverse cases and the bench, built
 # by the targets above into results/predictor/hex2s3/ and results/bench/predictor_hex2s3.json;
-# the switch makes them the defaults. About 1.5 h on one core (the contact NN's 20,000 labels
-# and training: 75 min of it).
+# the switch makes them the defaults. About 2 h on one core, measured piece by piece: the
+# contact NN 52 min and the improved gravity NN 32 min (mostly their ramped labels), the atlases
+# with their references 25 min, the gestures, inverse cases and bench about 20 min.
 NEW_PRED := results/predictor/$(NEW_TAG)
-predictor-new: | $(SETUP) ## the predictor's NNs, gestures, atlases, inverse and bench on the production surrogate, beside today's (1 core, ~1.5 h) -> results/predictor/hex2s3/, results/bench/predictor_hex2s3.json
+predictor-new: | $(SETUP) ## the predictor's NNs, gestures, atlases, inverse and bench on the production surrogate, beside today's (1 core, ~2 h) -> results/predictor/hex2s3/, results/bench/predictor_hex2s3.json
 	$(MAKE) gestures atlas atlas-reference atlas-reference-fine inverse bench-predictor \
 	  PRED_JOINT=$(NEW_SURROGATE)/improved.pt PRED_DIR=$(NEW_PRED) PRED_BENCH=results/bench/predictor_$(NEW_TAG).json
 
