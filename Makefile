@@ -81,9 +81,9 @@ demo: $(SETUP) ## the main job (~2 min): joint FEM (1.8 mm) vs surrogate, gestur
 	$(PY) -m apps.demo --out results/demo
 
 # Two workers, one test file each at a time (--dist loadfile keeps a file's module
-# fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 13.5 min of
+# fixtures, e.g. the Slurm cluster and the coarse FEM solvers, on one worker): 13.4 min of
 # pytest, 14.0 min with set-up (apt packages present), in a fresh clone on this 2-core machine
-# with nothing beside (1,460 tests); 23.7 min beside a one-core FEM job.
+# with nothing beside (1,519 tests); 23.7 min beside a one-core FEM job.
 test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~14 min with set-up)
 	$(PY) -m pytest -q -ra -n 2 --dist loadfile --durations=15
 
