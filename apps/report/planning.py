@@ -54,9 +54,8 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
             ref = load(root, f"predictor/ramp/atlas_{kind}.json")
             same = "n/a (make atlas-reference)"
             if ref and ref.get("grid") == a["grid"]:
-                pairs = [(u, v) for ru, rv in zip(ref["state"], a["state"]) for u, v in zip(ru, rv)]
-                differ = sum(u != v for u, v in pairs)
-                same = f"{1 - differ / len(pairs):.2%} ({differ} differ)"
+                differ = _differ(ref, a)
+                same = f"{1 - differ / a['grid'] ** 2:.2%} ({differ} differ)"
             out.append(f"| {kind} | {c['no_contact']} | {c['holds']} | {c['slips']} | {c['not_converged']} | "
                        f"{hold_p} | {num(best.get('friction_use'))} | {how} | {same} | "
                        f"{a['measured']['atlas_s_per_object']:.1f} s "
@@ -130,11 +129,12 @@ def _production_atlases(root: Path, atlases: list) -> list[str]:
     """The atlases on the production surrogate, built beside today's by make predictor-new
     (issue 55 §3): each one's counts, and how many grid points change state from today's
     atlas and differ from its own ramp reference. Shown, not judged, until the switch."""
-    rows = []
+    rows, joint = [], None
     for kind, a in atlases:
         new = load(root, f"predictor/hex2s3/atlas_{kind}.json")
         if not new or new.get("grid") != a["grid"]:
             continue
+        joint = joint or joint_model(root, new.get("joint"))
         c, ref = new["counts"], load(root, f"predictor/hex2s3/ramp/atlas_{kind}.json")
         best = ", ".join(f"{v:.3f}" for v in (new.get("best_hold") or {}).get("pressures_MPa", [])) or "none"
         own = f"{_differ(new, ref)}" if ref and ref.get("grid") == new["grid"] else "n/a"
@@ -142,7 +142,6 @@ def _production_atlases(root: Path, atlases: list) -> list[str]:
                     f"| {_differ(new, a)} of {a['grid'] ** 2} | {own} | {new['time_s']:.1f} s |")
     if not rows:
         return []
-    joint = joint_model(root, load(root, f"predictor/hex2s3/atlas_{atlases[0][0]}.json").get("joint"))
     inv = load(root, "predictor/hex2s3/inverse.json")
     if inv:
         rows += ["", "The inverse cases on it (results/predictor/hex2s3/inverse.json, `make predictor-new`):", "",
