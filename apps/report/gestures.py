@@ -215,8 +215,10 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                 "smooth map of the pressures whose gestures may cross X = 0, as the paper's do; their raw residual "
                 "is judged there. The gripper's answers add the plane X = 0 where the fingers meet: the fastest "
                 "path, the single query and the throughputs above check the network's tau on the gripper's "
-                "equilibrium, and the fastest path finishes it there by Newton steps (the LM where the check "
-                "fails)."]
+                "equilibrium; where its gesture presses on the plane or crosses it, `predictor.gesture --method nn` "
+                "and the fastest path answer with its tau finished by Newton steps (the LM where the check fails, "
+                "the ramp where the LM stalls), reported as polished with the raw residual beside it "
+                "(predictor.nn_answer.at_plane)."]
     imp, mlp = b["details"].get("gravity_nn_improved"), b["details"].get("gravity_nn_paper_mlp")
     if imp and mlp:
         worse = [k for k in ("force_mN_mean", "moment_Nmm_mean") if imp[k] > mlp[k]]
