@@ -298,11 +298,11 @@ gestures: $(PRED_DIR)/gestures.json ## paper's gesture cases, grasps and NN curv
 $(PRED_DIR)/gestures.json: $(TIMES) $(PRED_CORE) predictor/plot.py predictor/figures.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
 	nice $(PY) -m predictor.figures --out $(PRED_DIR) --nn-dir $(PRED_DIR) --model $(PRED_JOINT)
 
-$(PRED_DIR)/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN (75 epochs, ~2 min)
+$(PRED_DIR)/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN on one finger's equilibrium loss (75 epochs, ~1 min)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
 
-$(PRED_DIR)/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels of the gripper (SiLU + L-BFGS; ~30 min, its 20,000 labels ramped to the plane X = 0)
+$(PRED_DIR)/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels of one finger alone (SiLU + L-BFGS; ~2 min: 20,000 labels 6 s, training 92 s)
 	@mkdir -p $(@D)
 	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
 
@@ -440,7 +440,7 @@ results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) 
 # The predictor against the production-mesh finger cases with the plane X = 0 (issue 56 §3;
 # the files *_hex2s3_plane.json of make finger-grid and the free cases), on the production
 # surrogate; it never runs the FEM itself.
-validate-finger: results/validation/finger.json ## predictor against the production-mesh finger FEM cases, plane X = 0 (~1 min) -> results/validation/finger.json + overlays finger_*.png
+validate-finger: results/validation/finger.json ## predictor against the production-mesh finger FEM cases, plane X = 0 (8 cases: 36 CPU s, 2.7 min at load 4) -> results/validation/finger.json + overlays finger_*.png
 results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validate_finger.py \
     $(PRED_CORE) | $(SETUP)
 	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh hex2:3 --formulation mixed --plane \

@@ -45,18 +45,18 @@ gravity at the plane, below: one Newton step from the network's tau) or the full
 (fallback; gravity: the LM's); with an object raw_state, the network's own grasp state;
 without one at_plane: the network's own gesture is outside the NN bound where it presses on
 the plane X = 0, so the answer shown is its polish, never the network's (the raw figures
-stay the network's); and nn_problem, the problem the network learned ("gripper": the plane
-X = 0's equilibrium, the one answered; or "finger_alone": a gravity network trained on one
-finger alone, ``predictor.nn --no-plane`` or a checkpoint written before its config
-recorded ``plane``, whose raw answer stands only where its finger stays at X >= 0).
+stay the network's); and nn_problem, the problem the network learned ("finger_alone": a gravity network trained on
+one finger alone, the default, whose gestures may cross X = 0; or "gripper": the plane X = 0's
+equilibrium, ``predictor.nn --plane``).
 
 The gravity NN's answer (predictor.nn_answer.predict_gesture): the network's own tau where
-its residual is within the NN bound (2 mN, 1.2 N·mm; method nn); where a network that
-learned the gripper is outside it because its gesture presses on the plane X = 0 (within
-1 mm of it, nn_answer.PLANE_REACH_MM), whose stiff penalty turns any network's tau error
-into a residual over the bound, its tau finished by the Newton step (the LM where the
-step's check fails; method nn+newton, nn+newton+lm); no answer elsewhere, nor where that
-polish does not converge either. ``--polish`` finishes every gravity answer so.
+its residual on the gripper is within the NN bound (2 mN, 1.2 N·mm; method nn), which is
+where its finger stays off the plane X = 0; where it is outside it because its gesture
+presses on the plane or crosses it (within 1 mm of X = 0, nn_answer.PLANE_REACH_MM), whose
+stiff penalty turns any network's tau error into a residual over the bound, its tau
+finished by the Newton step (the LM where the step's check fails, the full ramp where the
+LM does not converge; method nn+newton, nn+newton+lm, ...); no answer where the network is
+off by more than the bound away from the plane. ``--polish`` finishes every gravity answer so.
 
 Objects: the model mirrors the right finger, so an object is centred (x = 0) and
 mirror-symmetric; its sizes and height are bounded (contract.grasp.object_error); one cutting
@@ -65,8 +65,8 @@ answers no_contact at once (statics.out_of_reach).
 
 Exit codes: 0 converged; 1 no answer (the JSON says converged false, its figures are null;
 the stderr line says why: the solve did not converge, or the raw gravity NN's own answer is
-outside its bound, naming where a lone-finger network's gesture crosses X = 0 and --polish,
-or where its gesture presses on the plane and the polish did not converge either); 2 bad
+outside its bound away from the plane X = 0, naming --polish, or where its gesture presses on
+the plane and the polish did not converge either); 2 bad
 input (a pressure that is not a number or beyond ±0.3 MPa, the wrong number of pressures
 for the finger, a bad finger file or object spec, an object the model cannot represent
 or that intersects the fingers at the approach gesture, a bad --mu or --object-weight,
@@ -217,29 +217,20 @@ def main(argv: list[str] | None = None) -> int:
 def failure(out: dict, prepared) -> str:
     """Why a gesture has no answer, for the one stderr line (``prepared``: prepare(args)).
     The raw gravity NN answers only within its bound (predictor.nn_answer), which is not a
-    solver failing to converge. Where a network that learned the gripper leaves the bound
-    because its gesture presses on the plane X = 0, the polish was tried already
-    (``at_plane``); one that learned one finger alone (its config's ``plane`` false) leaves
-    it by far where its gesture crosses X = 0, where the gripper's fingers meet."""
+    solver failing to converge; where its gesture presses on the plane X = 0 the polish
+    was tried already (``at_plane``)."""
     problem, pressures, _, predictor = prepared
     if predictor is None or problem.obstacle is not None or (not out["at_plane"] and (out["polished"] or
                                                                                        out["fallback"])):
         return "the equilibrium solve did not converge"
     from predictor.nn_answer import NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM
-    from predictor.statics import plane_overlap
 
     f, m = max(out["raw_residual_force_mN"]), max(out["raw_residual_moment_Nmm"])
     why = (f"the gravity NN's own answer is outside its bound (residual up to {f:.3g} mN and {m:.3g} N·mm; an "
            f"answer needs <= {NN_FORCE_TOL_MN:g} mN and {NN_MOMENT_TOL_NMM:g} N·mm)")
     if out["at_plane"]:
         return why + (": its finger presses on the plane X = 0, where the gripper's fingers meet, and the polish "
-                      "of its tau (Newton steps, then the LM) did not converge either")
-    with torch.no_grad():   # the network's own gesture, as the answer was judged
-        st = problem.residual(pressures, predictor.net(pressures))
-    cross = float(plane_overlap(st.vertices)[0]) if st.vertices is not None else 0.0
-    if cross > 0 and not predictor.config.learns_gripper():
-        why += (f": its finger crosses X = 0 by {cross:.1f} mm, where the gripper's fingers meet (it learned one "
-                "finger alone)")
+                      "of its tau (Newton steps, the LM, then the full ramp) did not converge either")
     return why + "; --polish finishes it with a Newton step"
 
 

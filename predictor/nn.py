@@ -2,12 +2,14 @@
 
     python -m predictor.nn --variant gravity-paper|gravity-improved|contact --out FILE.pt
         [--model SURROGATE.pt|analytic] [--epochs N] [--finger FILE.toml]
-        [--kinematics K] [--joint-weight W] [--no-plane] [--quiet] [--json]
+        [--kinematics K] [--joint-weight W] [--plane] [--quiet] [--json]
 
-The variants are predictor.networks.VARIANTS; every one learns the gripper's equilibrium,
-the right finger against the plane X = 0 where the mirror finger meets it (the problem
-predictor.gesture and the Newton solver solve by default); ``--no-plane`` trains a gravity
-variant on one finger alone instead (the checkpoint's config records ``plane``). For another finger or chain options the
+The variants are predictor.networks.VARIANTS. The gravity variants learn one finger alone
+(a smooth map, as the paper's), the contact variant the grasp, the right finger against the
+plane X = 0 where the mirror finger meets it; every one answers the gripper (the problem
+predictor.gesture and the Newton solver solve by default; predictor.nn_answer). ``--plane``
+trains a gravity variant on the gripper's equilibrium instead (the checkpoint's config
+records ``plane``; ``--no-plane``, the gravity default, is accepted). For another finger or chain options the
 variant's config is adapted (NNConfig.for_params). Training: predictor.nn_train;
 checkpoint: predictor.nn_checkpoint; answers: predictor.nn_answer; evaluation:
 predictor.nn_eval. The names re-exported below serve code written against the former
@@ -56,16 +58,19 @@ def main(argv: list[str] | None = None) -> int:
                     help="finger description file (default: the paper's, contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
-    ap.add_argument("--no-plane", dest="plane", action="store_false",
-                    help="gravity variants: learn one finger alone, which may cross X = 0 (default: the gripper's "
-                         "equilibrium, the right finger against the mirror finger's contact at X = 0)")
+    side = ap.add_mutually_exclusive_group()
+    side.add_argument("--plane", dest="plane", action="store_const", const=True,
+                      help="gravity variants: learn the gripper's equilibrium, the right finger against the mirror "
+                           "finger's contact at X = 0 (default: one finger alone, which may cross X = 0)")
+    side.add_argument("--no-plane", dest="plane", action="store_const", const=False,
+                      help="gravity variants: one finger alone (the default)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = ap.parse_args(argv)
-    if not args.plane and VARIANTS[args.variant].obstacle is not None:
+    if args.plane is False and VARIANTS[args.variant].obstacle is not None:
         ap.error(f"--no-plane: the {args.variant} variant learns a grasp, which the gripper's plane X = 0 is part of")
     progress.set_quiet(args.quiet)
     torch.set_num_threads(1)
-    cfg = replace(VARIANTS[args.variant], plane=args.plane)
+    cfg = VARIANTS[args.variant] if args.plane is None else replace(VARIANTS[args.variant], plane=args.plane)
     with ap.errors():
         finger = args.finger or default_finger()
         joint = load_joint(args.model, finger)

@@ -1,19 +1,22 @@
 """Answers of a trained NN predictor in the solver's result format (NNGestureResult),
 pressures (B, J) MPa:
 
-- gravity (``polish`` None, the default): the network's tau where its residual is within
-  the NN bound (NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM: 2 mN, 1.2 N·mm), method "nn"; where
-  it is not because the network's gesture presses on the plane X = 0 (``at_plane``: a
-  network that learned the gripper, its outline within PLANE_REACH_MM of X = 0), the
-  network's tau finished by the polish below, reported ``polished`` with the raw residual
-  kept beside it: the plane's penalty is so stiff (dR/dtau has a singular value over 1e4
-  there) that no network's tau meets the bound on it; NaN elsewhere and where the polish
-  does not converge either;
+- gravity (``polish`` None, the default): the network's tau where its residual (on the
+  gripper, the problem answered) is within the NN bound (NN_FORCE_TOL_MN,
+  NN_MOMENT_TOL_NMM: 2 mN, 1.2 N·mm), method "nn"; where it is not because the network's
+  gesture presses on the plane X = 0 (``at_plane``: its outline within PLANE_REACH_MM of
+  X = 0 or across it, as a network that learned one finger alone crosses it where the
+  gripper's fingers meet), the network's tau finished by the polish below, reported
+  ``polished`` with the raw residual kept beside it: the plane's penalty is so stiff
+  (dR/dtau has a singular value over 1e4 there) that no network's tau meets the bound on
+  it; NaN elsewhere (a network off by more than the bound away from the plane) and where
+  the polish does not converge either;
 - gravity raw (``polish`` False): the network's own answer only, NaN outside the bound
   (the float32 throughput mode is this: the polish is a float64 solver);
 - gravity with ``polish`` True: every sample's tau finished by one Newton step
-  (predictor.solve.newton_polish; the LM where its check fails); method "nn+newton"
-  (joined with "lm" where the LM answered rows);
+  (predictor.solve.newton_polish; the LM where its check fails, the full pressure ramp
+  where that does not converge); method "nn+newton" (joined with "lm" where the LM
+  answered rows);
 - contact: full Newton steps from the network's tau (``newton_on_branch``), kept where they
   converge on the network's branch (fingertip within BRANCH_TIP_MM, the classifier's grasp
   state, penetration within max_penetration), since undamped steps can land on another
@@ -114,7 +117,8 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     below and reported ``polished``; NaN elsewhere and where that polish fails. Gravity
     with ``polish`` False: the raw NN tau only (NaN outside the bound). Gravity with
     ``polish`` True: every NN tau finished by one Newton step (solve.newton_polish; the LM
-    where its check fails, ``fallback``) to the iterative solver's tolerances. Contact
+    where its check fails, ``fallback``; the full ramp where the LM does not converge) to
+    the iterative solver's tolerances. Contact
     (``polish`` ignored): full Newton steps
     from the NN tau (predictor.newton.newton_iterate), kept where they converge on the network's
     branch (``stepped``, ``newton_on_branch``); the other samples start again from the NN
@@ -151,7 +155,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
             pose=st.pose.masked(ok), method="nn", **result_labels(problem),
             fallback=torch.zeros_like(ok), polished=torch.zeros_like(ok), **raw)
         near = torch.zeros_like(ok)
-        if polish is None and pressures.dtype == torch.float64 and pred.config.learns_gripper():
+        if polish is None and pressures.dtype == torch.float64:
             near[~ok] = at_plane(problem, pressures[~ok], tau[~ok])
         if not bool(near.any()):
             return replace(res, at_plane=near)
@@ -182,9 +186,17 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
 def _polished(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, options: SolverOptions,
               t0: float) -> NNGestureResult:
     """The gravity network's tau (B, J, 3) finished by solve.newton_polish (one Newton step,
-    more and the LM where its check fails: ``fallback``), with the network's own residual
+    more and the LM where its check fails: ``fallback``), and where that does not converge
+    by the full pressure ramp (solve without a start), with the network's own residual
     from the step's pass beside it; ``polished`` where it converged."""
     res, start = newton_polish(problem, pressures, tau, options, t0=t0)
+    miss = ~res.converged
+    if bool(miss.any()):
+        # A start far across X = 0 (a lone-finger network's, where the finger presses on the
+        # plane) can leave the LM stalled: the full pressure ramp, as without a network.
+        ramp = solve(problem, pressures[miss], options)
+        res = replace(res.with_rows(miss, ramp), method=joined(res.method, ramp.method),
+                      time_ms=1e3 * (time.perf_counter() - t0))
     f, m = residual_norms(start)
     return NNGestureResult(**{**res.__dict__, "method": joined("nn", res.method)},
                            fallback=res.iterations > 1, polished=res.converged, raw_residual_force_mN=f,

@@ -31,8 +31,8 @@ COSTS = (
     "The gravity networks learn one finger alone, whose gestures may cross X = 0, and their raw residual is "
     "judged there (Gesture predictor section, docs/gripper.md §11); the gripper's answers add the plane: the raw "
     "answer stands only where the fingers stay apart (there the two residuals are the same), and where they meet "
-    "the fastest path's Newton step from the network's tau misses its check, so the LM finishes it on the "
-    "gripper's equilibrium{lm}.",
+    "`predictor.gesture --method nn` and the fastest path answer with the network's tau polished on the gripper's "
+    "equilibrium, reported as polished: the Newton step from it misses its check, so the LM finishes it{lm}.",
     "Contact gestures, the atlases and the inverse: every solve with an object integrates the penalty over the "
     "outline's edges instead of summing it at fixed centre-line points; the inverse's tip goals start from a "
     "coarse grid of object-free gestures (plane solves), and every answer is verified and checked at the "
