@@ -40,16 +40,21 @@ endif
 
 # The discretisations (fem/discretisation.py). Every tool defaults to the production one,
 # the paper joint file's [mesh]: swept Q2 hexahedra hex2:3 in the mixed u-p formulation
-# (docs/decisions.md §9). The committed datasets results/data/{train,heldout} (and the
-# 1.697:0.849 held-out walk), the surrogate trained on them and the finger cases are on the
-# paper-fidelity PAPER, 1.8 mm P2 tetrahedra in displacement, until `make dataset-new` and
-# what follows regenerate them: every target that resumes, extends, checks or redraws one of
-# them passes PAPER_MESH, so that it keeps doing what it did.
+# (docs/decisions.md §9), and so do the committed datasets results/data/{train,heldout}, the
+# surrogate results/surrogate/ trained on them, the predictor's results/predictor/ and the
+# calibration's truth cases (issue 55 §3, the switch). The paper-fidelity PAPER, 1.8 mm P2
+# tetrahedra in displacement, is the reference REPORT compares against: its walks
+# results/data/{train,heldout}_h1.8 (and the 1.697:0.849 held-out walk), the surrogate and
+# predictor in results/{surrogate,predictor}/h1.8/ and the lone-finger cases of
+# results/validation/finger_fem/<case>.json; every target that resumes, extends, checks or
+# redraws one of them passes PAPER_MESH, so that it keeps doing what it did, and
+# docs/decisions.md §9 gives the variables that rebuild the rest.
 PAPER_MESH := --mesh-size 1.8 --formulation displacement
+PROD_MESH  := --divisions 2 --hex-size 3 --formulation mixed
 
 .DEFAULT_GOAL := help
 .PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
-        dataset dataset-new dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve sweep-new train-new bench-surrogate learning-curve-new failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibration-fem-new calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger validate-finger-new predictor-new report clean
+        dataset dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve bench-surrogate failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger validate-finger-h1.8 report clean
 
 help: ## show this help
 	@echo "softjoint make targets (README.md explains each):"
@@ -75,8 +80,10 @@ $(SETUP): pyproject.toml constraints.txt
 # ---------------------------------------------------------------- main commands
 # One joint FEM against the surrogate, the paper's gravity and grasp gestures, one coarse
 # whole-finger FEM against the predictor: PNGs + summary.{json,md} + a table (apps/demo.py).
-# Its FEM runs on the committed data's meshes (the joint on PAPER's 1.8 mm, the finger on
-# 4 mm tetrahedra, both displacement), never on the production hexahedra.
+# Its FEM runs on the 1.8 mm reference's meshes (the joint on PAPER's 1.8 mm, the finger on
+# 4 mm tetrahedra, both displacement), never on the production hexahedra, and is compared
+# with the 1.8 mm reference surrogate (results/surrogate/h1.8/); the gripper's gestures use
+# the default, production one.
 demo: $(SETUP) ## the main job (~2 min): joint FEM (1.8 mm) vs surrogate, gestures, coarse finger FEM vs predictor -> results/demo/
 	$(PY) -m apps.demo --out results/demo
 
@@ -139,69 +146,66 @@ results/fem/joint.png: $(TIMES) fem/*.py | $(SETUP)
 # The datasets are resumable: each campaign stops cleanly after DATASET_HOURS (exit 3,
 # which stops make) and `make dataset` again resumes from the shards. Train and held-out
 # sets use different seeds; the held-out set uses 16-sample units (more independent walks
-# for its 256 samples); ranks = DATASET_RANKS groups of one rank. They are on PAPER_MESH
-# (the committed sets'; the production discretisation's are dataset-new's).
+# for its 256 samples); ranks = DATASET_RANKS groups of one rank. DATA_MESH and DATA_TAG
+# choose the discretisation and the folders' suffix: by default the production walks
+# results/data/{heldout,train} (hex2:3 mixed, the held-out walk first); the paper-fidelity
+# reference walks results/data/{heldout,train}_h1.8 resume with
+#   make dataset DATA_MESH="--mesh-size 1.8 --formulation displacement" DATA_TAG=_h1.8
 DATASET_RANKS ?= 2
 DATASET_HOURS ?= 2
+DATA_MESH     ?= $(PROD_MESH)
+DATA_TAG      ?=
+TRAIN_DATA    := results/data/train$(DATA_TAG)
+HELDOUT_DATA  := results/data/heldout$(DATA_TAG)
 CAMPAIGN      := nice $(MPIRUN) -n $(DATASET_RANKS) $(PY) -m workflow.campaign
 SMOKE_DIR     := build/dataset-smoke
 
-dataset: | $(SETUP) ## FEM datasets on PAPER's 1.8 mm displacement: results/data/train (2560, seed 1) + heldout (256, seed 2); re-run resumes
-	$(CAMPAIGN) --samples 2560 --seed 1 $(PAPER_MESH) --out results/data/train --max-hours $(DATASET_HOURS)
-	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(PAPER_MESH) --out results/data/heldout --max-hours $(DATASET_HOURS)
-	$(PY) -m workflow.dataset verify results/data/train --require-complete --mirror 2
-	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
-
-# The datasets on the production discretisation (docs/decisions.md §9; NEW_MESH, default
-# hex2:3 mixed u-p, spelled out; NEW_TAG names their folders), the held-out walk first. They stay in their
-# own folders until everything downstream is retrained on them; then they become
-# results/data/{train,heldout} and the 1.8 mm sets results/data/{train,heldout}_h1.8.
-NEW_MESH ?= --divisions 2 --hex-size 3 --formulation mixed
-NEW_TAG  ?= hex2s3
-NEW_DATA := results/data
-dataset-new: | $(SETUP) ## FEM datasets on the production discretisation (NEW_MESH, default hex2:3 mixed): results/data/heldout_hex2s3 (256, seed 2) then train_hex2s3 (2560, seed 1); DATASET_HOURS per run; re-run resumes
-	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(NEW_MESH) --out $(NEW_DATA)/heldout_$(NEW_TAG) --max-hours $(DATASET_HOURS)
-	$(CAMPAIGN) --samples 2560 --seed 1 $(NEW_MESH) --out $(NEW_DATA)/train_$(NEW_TAG) --max-hours $(DATASET_HOURS)
-	$(PY) -m workflow.dataset verify $(NEW_DATA)/heldout_$(NEW_TAG) --require-complete
-	$(PY) -m workflow.dataset verify $(NEW_DATA)/train_$(NEW_TAG) --require-complete --mirror 2
+dataset: | $(SETUP) ## FEM datasets on the production discretisation (hex2:3 mixed): results/data/heldout (256, seed 2) then train (2560, seed 1); DATASET_HOURS per run; re-run resumes
+	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(DATA_MESH) --out $(HELDOUT_DATA) --max-hours $(DATASET_HOURS)
+	$(CAMPAIGN) --samples 2560 --seed 1 $(DATA_MESH) --out $(TRAIN_DATA) --max-hours $(DATASET_HOURS)
+	$(PY) -m workflow.dataset verify $(HELDOUT_DATA) --require-complete
+	$(PY) -m workflow.dataset verify $(TRAIN_DATA) --require-complete --mirror 2
 
 # Why the production train walk's failed samples failed (issue 55 §2): each one's load path
 # from zero probed at every converged step for negative eigenvalues of the stiffness, its
 # lowest eigenvalue and the closed valley pairs (workflow.stability; one core).
-failed-samples: | $(SETUP) ## probe the production train walk's failed samples' load paths for a limit point or a contact change (one core, ~1 h) -> results/fem/stability_train_hex2s3.json
-	nice $(PY) -m workflow.stability $(NEW_DATA)/train_$(NEW_TAG)
+failed-samples: | $(SETUP) ## probe the production train walk's failed samples' load paths for a limit point or a contact change (one core, ~1 h) -> results/fem/stability_train.json
+	nice $(PY) -m workflow.stability $(TRAIN_DATA)
 
 # The failed samples re-solved (workflow.resolve): the campaign's own solver and mesh, only
 # the path finer (steps of 0.005 from s = 0.8, 24 Newton iterations a step); each solved
 # sample is stored in its unit's shard and the manifest rebuilt (resumes; exit 3 while some
 # stay failed), then the walk is verified.
-resolve-samples: | $(SETUP) ## re-solve the production train walk's failed samples on a finer load path and store them (one core, ~1 h; resumes) -> results/data/train_hex2s3/
-	nice $(PY) -m workflow.resolve $(NEW_DATA)/train_$(NEW_TAG) --max-hours $(DATASET_HOURS)
-	$(PY) -m workflow.dataset verify $(NEW_DATA)/train_$(NEW_TAG) --require-complete
+resolve-samples: | $(SETUP) ## re-solve the production train walk's failed samples on a finer load path and store them (one core, ~1 h; resumes) -> results/data/train/, results/fem/resolved_train.json
+	nice $(PY) -m workflow.resolve $(TRAIN_DATA) --max-hours $(DATASET_HOURS)
+	$(PY) -m workflow.dataset verify $(TRAIN_DATA) --require-complete
 
 # The held-out walk again on the finer joint mesh H:W = 1.697:0.849 (two P2 elements through
-# the wall, 3x the nodes, displacement as the committed sets): the committed datasets'
+# the wall, 3x the nodes, displacement as the 1.8 mm reference walks): the reference data's
 # discretisation change over the load distribution the surrogate is judged on, and the
-# surrogate against it. Resumes.
+# reference surrogate (results/surrogate/h1.8/) against it. Resumes.
 FINE_MESH    := --mesh-size 1.697 --wall-mesh-size 0.849 --formulation displacement
 FINE_HELDOUT := results/data/heldout_h1.697w0.849
+# The paper-fidelity reference: the 1.8 mm walks and the surrogate trained on them.
+REF_TRAIN     := results/data/train_h1.8
+REF_HELDOUT   := results/data/heldout_h1.8
+REF_SURROGATE := results/surrogate/h1.8
 dataset-fine: | $(SETUP) ## held-out walk on the finer mesh 1.697:0.849 (~1.7 h on 2 cores; resumes) + its comparison -> results/fem/heldout_mesh.json
 	$(CAMPAIGN) --samples 256 --seed 2 --unit-size 16 $(FINE_MESH) --out $(FINE_HELDOUT) --max-hours $(DATASET_HOURS)
 	$(MAKE) fine-compare
 
-fine-compare: | $(SETUP) ## compare what the finer-mesh held-out walk holds so far -> results/fem/heldout_mesh.json, results/surrogate/heldout_fine.json
+fine-compare: | $(SETUP) ## compare what the finer-mesh held-out walk holds so far with the 1.8 mm one -> results/fem/heldout_mesh.json, results/surrogate/h1.8/heldout_fine.json
 	$(PY) -m workflow.dataset verify $(FINE_HELDOUT)
-	$(PY) -m workflow.dataset compare results/data/heldout $(FINE_HELDOUT) --out results/fem/heldout_mesh.json
-	$(PY) -m surrogate.evaluate --model results/surrogate/improved.pt --data $(FINE_HELDOUT) --out results/surrogate/heldout_fine.json
+	$(PY) -m workflow.dataset compare $(REF_HELDOUT) $(FINE_HELDOUT) --out results/fem/heldout_mesh.json
+	$(PY) -m surrogate.evaluate --model $(REF_SURROGATE)/improved.pt --data $(FINE_HELDOUT) --out $(REF_SURROGATE)/heldout_fine.json
 
-# The held-out walk on the production discretisation (make dataset-new) against the committed
-# 1.8 mm walk: the committed data's own discretisation error over the loads the surrogate is
-# judged on, and the committed surrogate against it.
-NEW_HELDOUT := $(NEW_DATA)/heldout_$(NEW_TAG)
-production-compare: | $(SETUP) ## compare the committed held-out walk with the production discretisation's (needs it complete) -> results/fem/heldout_production.json, results/surrogate/heldout_production.json
-	$(PY) -m workflow.dataset verify $(NEW_HELDOUT) --require-complete
-	$(PY) -m workflow.dataset compare results/data/heldout $(NEW_HELDOUT) --out results/fem/heldout_production.json
-	$(PY) -m surrogate.evaluate --model results/surrogate/improved.pt --data $(NEW_HELDOUT) --out results/surrogate/heldout_production.json
+# The production held-out walk against the 1.8 mm reference walk: the reference data's own
+# discretisation error over the loads the surrogate is judged on, and the reference
+# surrogate against it.
+production-compare: | $(SETUP) ## compare the 1.8 mm held-out walk with the production one -> results/fem/heldout_production.json, results/surrogate/h1.8/heldout_production.json
+	$(PY) -m workflow.dataset verify results/data/heldout --require-complete
+	$(PY) -m workflow.dataset compare $(REF_HELDOUT) results/data/heldout --out results/fem/heldout_production.json
+	$(PY) -m surrogate.evaluate --model $(REF_SURROGATE)/improved.pt --data results/data/heldout --out $(REF_SURROGATE)/heldout_production.json
 
 dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse 4 mm mesh (mixed) into build/dataset-smoke, verified
 	rm -rf $(SMOKE_DIR) && mkdir -p build
@@ -210,88 +214,77 @@ dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse 4 mm mesh (mixed
 	$(PY) -m workflow.dataset verify $(SMOKE_DIR) --require-complete --mirror 1
 	$(PY) -m workflow.dataset info $(SMOKE_DIR)
 
-bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh, on the committed data's 1.8 mm mesh -> results/bench/campaign.json
+bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh, on the 1.8 mm reference mesh -> results/bench/campaign.json
 results/bench/campaign.json: $(TIMES) workflow/campaign.py workflow/bench_campaign.py fem/solver.py | $(SETUP)
-	nice $(PY) -m workflow.bench_campaign $(PAPER_MESH) --mpirun "$(MPIRUN)" --out $@
+	nice $(PY) -m workflow.bench_campaign $(PAPER_MESH) --mpirun "$(MPIRUN)" --data $(REF_TRAIN) $(REF_HELDOUT) --out $@
 
 # ---------------------------------------------------------------- surrogate (issue 4)
 # (section owned by surrogate/)
-SURROGATE_TRAIN   := results/data/train
-SURROGATE_HELDOUT := results/data/heldout
-SURROGATE_CODE    := surrogate/data.py surrogate/model.py surrogate/train.py surrogate/evaluate.py \
-                     workflow/shards.py
-
-train: results/surrogate/metrics.json ## surrogates (paper, improved) + KNN -> results/surrogate/
-
-results/surrogate/paper.pt results/surrogate/improved.pt: results/surrogate/%.pt: \
-    $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
-	nice $(PY) -m surrogate.train --config $* --data $(SURROGATE_TRAIN) --out $@
-
-results/surrogate/metrics.json: $(TIMES) results/surrogate/paper.pt results/surrogate/improved.pt \
-    surrogate/knn.py $(wildcard $(SURROGATE_HELDOUT)/manifest.json) | $(SETUP)
-	$(PY) -m surrogate.evaluate --report --train-data $(SURROGATE_TRAIN) \
-	  --heldout $(SURROGATE_HELDOUT) --dir results/surrogate
-
-sweep: results/surrogate/sweep/README.md ## architecture/loss variants of the improved surrogate (its 800 epochs each, 2 jobs, ~20 min)
-results/surrogate/sweep/README.md: $(TIMES) $(wildcard $(SURROGATE_TRAIN)/manifest.json) $(SURROGATE_CODE) surrogate/sweep.py | $(SETUP)
-	nice $(PY) -m surrogate.sweep --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) \
-	  --jobs 2 --dir results/surrogate/sweep --replace-stale
-
-learning-curve: | $(SETUP) ## held-out errors vs 100..1,600 and all train samples, with/without the Jacobian loss, 2nd seed at 400 (1 core, ~1.5 h; resumes) -> results/surrogate/learning_curve.{json,png}
-	nice $(PY) -m surrogate.learning_curve --data $(SURROGATE_TRAIN) --heldout $(SURROGATE_HELDOUT) --repeat 400:1
-
-# The surrogate on the production discretisation's walks (issue 55 stage 1), beside the
-# committed one under results/surrogate/$(NEW_TAG)/ until the switch: the sweep on the
-# complete production data (bounded, resumable), the config it chose (the improved config
-# with NEW_SET, docs/decisions.md §9) and the paper's, the KNN baseline, and the learning
-# curve on the same points as the 1.8 mm one.
-NEW_TRAIN     := $(NEW_DATA)/train_$(NEW_TAG)
-NEW_SURROGATE := results/surrogate/$(NEW_TAG)
-# The sweep's choice on the production data (results/surrogate/hex2s3/sweep/, docs/decisions.md
-# §9): the lowest validation error among the variants that meet issue 55's targets without
+# The production surrogate (issue 55 stage 1) in SURROGATE_DIR, trained on the production
+# walks: the sweep on the complete data (bounded, resumable), the config it chose (the
+# improved config with SURROGATE_SET, docs/decisions.md §9) and the paper's, the KNN
+# baseline, and the learning curve beside the 1.8 mm reference's. The 1.8 mm reference models
+# (results/surrogate/h1.8/) rebuild with
+#   make train sweep learning-curve DATA_TAG=_h1.8 SURROGATE_DIR=results/surrogate/h1.8 SURROGATE_SET= LC_REFERENCE=
+SURROGATE_DIR  ?= results/surrogate
+SURROGATE_CODE := surrogate/data.py surrogate/model.py surrogate/train.py surrogate/evaluate.py \
+                  workflow/shards.py
+# The sweep's choice on the production data (results/surrogate/sweep/, docs/decisions.md §9):
+# the lowest validation error among the variants that meet issue 55's targets without
 # slowing the predictor, symmetric 4 x 64 (validation 0.0142 mm; symmetric 4 x 128's 0.0098 mm
 # costs a 61 x 61 atlas 1.3x).
-NEW_SET       ?= equivariant=false symmetric=true hidden=64,64,64,64
-SWEEP_HOURS   ?= 2
-sweep-new: | $(SETUP) ## the sweep's variants on the production data (one core, bounded by SWEEP_HOURS, resumes) -> results/surrogate/hex2s3/sweep/
-	@mkdir -p $(NEW_SURROGATE)
-	nice $(PY) -m surrogate.sweep --data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --jobs 1 \
-	  --dir $(NEW_SURROGATE)/sweep --max-hours $(SWEEP_HOURS)
+SURROGATE_SET  ?= equivariant=false symmetric=true hidden=64,64,64,64
+SWEEP_HOURS    ?= 2
+LC_REFERENCE   ?= $(REF_SURROGATE)/learning_curve.json
 
-train-new: $(NEW_SURROGATE)/metrics.json ## surrogates (paper, chosen improved) + KNN on the production data, beside the committed ones -> results/surrogate/hex2s3/
-$(NEW_SURROGATE)/paper.pt $(NEW_SURROGATE)/improved.pt: $(NEW_SURROGATE)/%.pt: \
-    $(TIMES) $(wildcard $(NEW_TRAIN)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
+train: $(SURROGATE_DIR)/metrics.json ## surrogates (paper, chosen improved) + KNN on the production data -> results/surrogate/
+
+$(SURROGATE_DIR)/paper.pt $(SURROGATE_DIR)/improved.pt: $(SURROGATE_DIR)/%.pt: \
+    $(TIMES) $(wildcard $(TRAIN_DATA)/manifest.json) $(SURROGATE_CODE) | $(SETUP)
 	@mkdir -p $(@D)
-	nice $(PY) -m surrogate.train --config $* $(if $(filter improved,$*),$(NEW_SET:%=--set %)) --data $(NEW_TRAIN) --out $@
+	nice $(PY) -m surrogate.train --config $* $(if $(filter improved,$*),$(SURROGATE_SET:%=--set %)) --data $(TRAIN_DATA) --out $@
 
-$(NEW_SURROGATE)/metrics.json: $(TIMES) $(NEW_SURROGATE)/paper.pt $(NEW_SURROGATE)/improved.pt \
-    surrogate/knn.py $(wildcard $(NEW_HELDOUT)/manifest.json) | $(SETUP)
-	$(PY) -m surrogate.evaluate --report --train-data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --dir $(NEW_SURROGATE)
+$(SURROGATE_DIR)/metrics.json: $(TIMES) $(SURROGATE_DIR)/paper.pt $(SURROGATE_DIR)/improved.pt \
+    surrogate/knn.py $(wildcard $(HELDOUT_DATA)/manifest.json) | $(SETUP)
+	$(PY) -m surrogate.evaluate --report --train-data $(TRAIN_DATA) --heldout $(HELDOUT_DATA) --dir $(SURROGATE_DIR)
 
-bench-surrogate: results/bench/surrogate_cost.json ## the production surrogate's cost per query against the committed one's, batches of 1, 2 and 7,442 (~2 min) -> results/bench/surrogate_cost.json
-results/bench/surrogate_cost.json: $(TIMES) surrogate/bench_cost.py results/surrogate/improved.pt $(NEW_SURROGATE)/improved.pt | $(SETUP)
-	$(PY) -m surrogate.bench_cost results/surrogate/improved.pt $(NEW_SURROGATE)/improved.pt --out $@
+sweep: | $(SETUP) ## the sweep's variants of the improved config on the production data (one core, bounded by SWEEP_HOURS, resumes) -> results/surrogate/sweep/
+	@mkdir -p $(SURROGATE_DIR)
+	nice $(PY) -m surrogate.sweep --data $(TRAIN_DATA) --heldout $(HELDOUT_DATA) --jobs 1 \
+	  --dir $(SURROGATE_DIR)/sweep --max-hours $(SWEEP_HOURS)
 
-learning-curve-new: | $(SETUP) ## the learning curve on the production data, the 1.8 mm curve's points (1 core, ~1.5 h idle; resumes) -> results/surrogate/hex2s3/learning_curve.{json,png}
-	@mkdir -p $(NEW_SURROGATE)
-	nice $(PY) -m surrogate.learning_curve --data $(NEW_TRAIN) --heldout $(NEW_HELDOUT) --repeat 400:1 \
-	  --out $(NEW_SURROGATE)/learning_curve.json --reference results/surrogate/learning_curve.json
+learning-curve: | $(SETUP) ## held-out errors vs 100..1,600 and all train samples, with/without the Jacobian loss, 2nd seed at 400, beside the 1.8 mm curve (1 core, ~1.5 h idle; resumes) -> results/surrogate/learning_curve.{json,png}
+	@mkdir -p $(SURROGATE_DIR)
+	nice $(PY) -m surrogate.learning_curve --data $(TRAIN_DATA) --heldout $(HELDOUT_DATA) --repeat 400:1 \
+	  --out $(SURROGATE_DIR)/learning_curve.json $(if $(LC_REFERENCE),--reference $(LC_REFERENCE))
+
+bench-surrogate: results/bench/surrogate_cost.json ## the production surrogate's cost per query against the 1.8 mm reference's, batches of 1, 2 and 7,442 (~2 min) -> results/bench/surrogate_cost.json
+results/bench/surrogate_cost.json: $(TIMES) surrogate/bench_cost.py $(REF_SURROGATE)/improved.pt results/surrogate/improved.pt | $(SETUP)
+	$(PY) -m surrogate.bench_cost $(REF_SURROGATE)/improved.pt results/surrogate/improved.pt --out $@
 
 # Multi-fidelity against fine-only training at equal FEM cost (issue 35 §3). Committed: the
-# development stand-in (coarse = the 1.8 mm train set and improved.pt, fine = the 1.697:0.849
-# held-out walk split 128/32/96); on new data pass MF_FINE/MF_HELDOUT.
+# development stand-in on the 1.8 mm reference (coarse = the 1.8 mm train walk and its
+# improved.pt, fine = the 1.697:0.849 held-out walk split 128/32/96, judged against the 1.8 mm
+# learning curve), in results/surrogate/h1.8/; on new data pass MF_FINE/MF_HELDOUT.
 MF_FINE    ?= $(FINE_HELDOUT)
 MF_HELDOUT ?=
-multifidelity: | $(SETUP) ## coarse surrogate + a learned fine-minus-coarse correction vs fine-only at equal CPU hours (1 core, ~15 min; resumes) -> results/surrogate/multifidelity.{json,png}
-	nice $(PY) -m surrogate.multifidelity --coarse $(SURROGATE_TRAIN) --coarse-model results/surrogate/improved.pt --fine $(MF_FINE) $(if $(MF_HELDOUT),--heldout $(MF_HELDOUT))
+multifidelity: | $(SETUP) ## coarse surrogate + a learned fine-minus-coarse correction vs fine-only at equal CPU hours, on the 1.8 mm reference (1 core, ~15 min; resumes) -> results/surrogate/h1.8/multifidelity.{json,png}
+	nice $(PY) -m surrogate.multifidelity --coarse $(REF_TRAIN) --coarse-model $(REF_SURROGATE)/improved.pt --fine $(MF_FINE) \
+	  $(if $(MF_HELDOUT),--heldout $(MF_HELDOUT)) --reference-curve $(REF_SURROGATE)/learning_curve.json \
+	  --out $(REF_SURROGATE)/multifidelity.json
 
 # ---------------------------------------------------------------- predictor (issue 5)
 # (section owned by predictor/)
-# Joint model for the predictor: the committed surrogate (`make train` makes it; the analytic
-# stand-in only when asked for by name, PRED_JOINT=analytic).
+# Joint model for the predictor: the committed production surrogate (`make train` makes it;
+# the analytic stand-in only when asked for by name, PRED_JOINT=analytic). PRED_DIR and
+# PRED_BENCH say where the predictor's artefacts go; the 1.8 mm reference's rebuild with
+#   make gestures atlas atlas-reference atlas-reference-fine inverse bench-predictor \
+#     PRED_JOINT=results/surrogate/h1.8/improved.pt PRED_DIR=results/predictor/h1.8 \
+#     PRED_BENCH=results/bench/predictor_h1.8.json
+# About 2 h on one core, measured piece by piece on the production surrogate: the contact NN
+# 52 min and the improved gravity NN 32 min (mostly their ramped labels), the atlases with
+# their references 25 min, the gestures, inverse cases and bench about 20 min.
 PRED_JOINT ?= results/surrogate/improved.pt
-# Where the predictor's artefacts go; predictor-new sets both (and PRED_JOINT) to build the
-# predictor on the production surrogate beside today's (issue 55 §3).
 PRED_DIR   ?= results/predictor
 PRED_BENCH ?= results/bench/predictor.json
 PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
@@ -362,17 +355,6 @@ track: $(PRED_DIR)/inverse.json | $(SETUP) ## closed-loop tip tracking, 100 goal
 	nice $(PY) -m predictor.inverse --track demo --model $(PRED_JOINT) --out $(PRED_DIR)/track.json \
 	  --plot $(PRED_DIR)/track.png --into $(PRED_DIR)/inverse.json; test $$? -le 1
 
-# The predictor on the production surrogate, beside today's (issue 55 §3): the three NNs,
-# the gestures, the atlases and their reference ramps, the inverse cases and the bench, built
-# by the targets above into results/predictor/hex2s3/ and results/bench/predictor_hex2s3.json;
-# the switch makes them the defaults. About 2 h on one core, measured piece by piece: the
-# contact NN 52 min and the improved gravity NN 32 min (mostly their ramped labels), the atlases
-# with their references 25 min, the gestures, inverse cases and bench about 20 min.
-NEW_PRED := results/predictor/$(NEW_TAG)
-predictor-new: | $(SETUP) ## the predictor's NNs, gestures, atlases, inverse and bench on the production surrogate, beside today's (1 core, ~2 h) -> results/predictor/hex2s3/, results/bench/predictor_hex2s3.json
-	$(MAKE) gestures atlas atlas-reference atlas-reference-fine inverse bench-predictor \
-	  PRED_JOINT=$(NEW_SURROGATE)/improved.pt PRED_DIR=$(NEW_PRED) PRED_BENCH=results/bench/predictor_$(NEW_TAG).json
-
 # ---------------------------------------------------------------- calibration (issue 38)
 calibrate-recovery: results/calibration/recovery.json ## calibration on known truth: the fit recovers parameters from predictor observations, noise-free and 20 noisy seeds (~1 min) -> results/calibration/recovery.json
 results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.py predictor/calibration.py \
@@ -383,27 +365,22 @@ results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.
 # Issue 38 §3(b): the whole-finger FEM of a deliberately different finger (CAL_TRUTH: joints
 # E x 1.15, the tip 20 % heavier, the mount turned 2 deg) at CAL_PRESSURES with gravity, all
 # inside |P| <= 0.2 MPa; predictor.calibration_fem.PRESSURES is the same list
-# (tests/test_calibration_fem.py checks). One core, niced, on the truth joint file's 1.8 mm
-# mesh (the surrogate's): 15 min for the committed run; a converged case is skipped, so a
-# killed run resumes. The truth cases are one finger alone (--no-plane; the calibration's
-# problem is issue 56's other part).
+# (tests/test_calibration_fem.py checks). One core, niced, on the production joint mesh
+# (CAL_MESH, hex2:3 mixed, the surrogate's data's): 168-1,360 s a case, about 25 min a case
+# on half a core beside another FEM job; a converged case is skipped, so a killed run
+# resumes. The truth cases are one finger alone (--no-plane; the calibration's problem is
+# issue 56's other part). The 1.8 mm reference cases (results/calibration/fem_h1.8/, 15 min)
+# are CAL_MESH= (the truth joint file's own mesh, 1.8 mm) CAL_FEM=results/calibration/fem_h1.8.
 CAL_TRUTH     := results/calibration/truth/finger.toml
-CAL_FEM       := results/calibration/fem
+CAL_FEM       ?= results/calibration/fem
+CAL_MESH      ?= $(PROD_MESH)
 CAL_PRESSURES := 0.2,0.2;-0.2,0.15;0.15,-0.2;-0.15,-0.15;0,0;0.1,0.05;-0.1,0.2;0.05,-0.1
 CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py predictor/calibration_fit.py \
                  predictor/calibration_file.py predictor/calibration_fem.py predictor/calibration_plot.py \
                  predictor/calibrate.py
 
-calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs (1 core, niced, ~15 min; resumes) -> results/calibration/fem/
-	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane --out $(CAL_FEM)
-
-# The same truth cases on the production joint mesh (hex2:3 mixed, issue 55 stage 3: solved
-# beforehand so that the switch only re-fits), in a folder of their own (the calibration
-# keeps one mesh per folder); about 25 min a case on half a core beside another FEM job.
-CAL_FEM_NEW := results/calibration/fem_hex2s3
-calibration-fem-new: | $(SETUP) ## the calibration's truth cases on the production joint mesh (1 core, niced, ~2-3 h; resumes) -> results/calibration/fem_hex2s3/
-	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane \
-	  --divisions 2 --hex-size 3 --formulation mixed --out $(CAL_FEM_NEW)
+calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs on the production joint mesh (1 core, niced, ~2-3 h; resumes) -> results/calibration/fem/
+	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane $(CAL_MESH) --out $(CAL_FEM)
 
 # The fit is judged as the observations' fit is (predictor.calibration_fit.judge): an
 # untrusted one exits 1 and writes nothing (no --force here: a demo that stops trusting
@@ -421,7 +398,9 @@ results/bench/calibrate.json: $(TIMES) $(CAL_CODE) predictor/calibration_recover
 	$(PY) -m predictor.calibrate bench --observations docs/examples/observations.json --model $(PRED_JOINT) --out $@
 
 # ---------------------------------------------------------------- finger validation (issue 14)
-# The committed cases are on PAPER_MESH, as the surrogate the predictor runs on.
+# The lone-finger cases of finger-fem are on PAPER_MESH, as the 1.8 mm reference surrogate
+# they are validated with (validate-finger-h1.8); the production cases with the plane are
+# finger-grid's and the free ones (*_hex2s3_plane.json), validated by validate-finger.
 FINGER_FEM := results/validation/finger_fem
 # They are one finger alone (the tools' default is the gripper, the plane X = 0 on: issue 56).
 FINGER_CASES := $(PY) -m fem.finger_cases $(PAPER_MESH) --no-plane --out $(FINGER_FEM)
@@ -458,22 +437,24 @@ results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) 
 	$(PY) -m predictor.validate_grasps --fem $(GRASP_FEM) --mesh hex2:3 --formulation mixed --model $(PRED_JOINT) \
 	  --out $@ --figures $(GRASP_FIGURES)
 
-validate-finger: results/validation/finger.json ## predictor (tangent/cap kinematics) against the finger FEM -> results/validation/finger.json + overlays
-results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) | $(SETUP)
-	$(MAKE) --no-print-directory finger-fem
-	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement --model $(PRED_JOINT) \
-	  --out $@ --figures results/validation
-
 # The predictor against the production-mesh finger cases with the plane X = 0 (issue 56 §3;
-# the files *_hex2s3_plane.json of make finger-grid and the free cases), with the stage-1
-# production surrogate (results/surrogate/hex2s3/improved.pt) until the switch makes it the
-# default and validate-finger takes these cases over.
-validate-finger-new: results/validation/finger_hex2s3.json ## predictor with the production surrogate against the production-mesh finger FEM cases, plane X = 0 (~1 min) -> results/validation/finger_hex2s3.json + overlays in results/validation/finger_hex2s3/
-results/validation/finger_hex2s3.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validate_finger.py \
-    $(PRED_CORE) $(NEW_SURROGATE)/improved.pt | $(SETUP)
-	@mkdir -p results/validation/finger_hex2s3
+# the files *_hex2s3_plane.json of make finger-grid and the free cases), on the production
+# surrogate; it never runs the FEM itself.
+validate-finger: results/validation/finger.json ## predictor against the production-mesh finger FEM cases, plane X = 0 (8 cases: 36 CPU s, 2.7 min at load 4) -> results/validation/finger.json + overlays finger_*.png
+results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validate_finger.py \
+    $(PRED_CORE) | $(SETUP)
 	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh hex2:3 --formulation mixed --plane \
-	  --model $(NEW_SURROGATE)/improved.pt --out $@ --figures results/validation/finger_hex2s3
+	  --model $(PRED_JOINT) --out $@ --figures results/validation
+
+# The 1.8 mm reference: the lone-finger cases of finger-fem (solved first if missing) against
+# the predictor on the 1.8 mm reference surrogate.
+validate-finger-h1.8: results/validation/finger_h1.8.json ## predictor (tangent/cap kinematics) on the 1.8 mm reference surrogate against the 1.8 mm lone-finger FEM -> results/validation/finger_h1.8.json + overlays in finger_h1.8/
+results/validation/finger_h1.8.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) \
+    $(REF_SURROGATE)/improved.pt | $(SETUP)
+	$(MAKE) --no-print-directory finger-fem
+	@mkdir -p results/validation/finger_h1.8
+	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement \
+	  --model $(REF_SURROGATE)/improved.pt --out $@ --figures results/validation/finger_h1.8
 
 # ---------------------------------------------------------------- one joint file to a predictor (issue 37)
 # (section owned by apps/pipeline.py) Render, the two campaigns, training, held-out errors and

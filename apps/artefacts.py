@@ -42,6 +42,10 @@ class Artefact:
             raise ValueError(str(exc)) from None
 
 
+#: The make variables that rebuild the paper-fidelity 1.8 mm reference (docs/decisions.md §9).
+REF_SURROGATE = "DATA_TAG=_h1.8 SURROGATE_DIR=results/surrogate/h1.8 SURROGATE_SET="
+REF_PREDICTOR = "PRED_JOINT=results/surrogate/h1.8/improved.pt PRED_DIR=results/predictor/h1.8"
+
 ARTEFACTS = (
     Artefact("fem/validation.json", "make validation", fem.VALIDATION),
     Artefact("fem/mesh_study.json", "make mesh-study", fem.MESH_STUDY),
@@ -56,16 +60,20 @@ ARTEFACTS = (
     Artefact("bench/finger.json", "make bench-finger", fem.BENCH_FINGER),
     Artefact("bench/campaign.json", "make bench-campaign", workflow.BENCH_CAMPAIGN),
     Artefact("bench/predictor.json", "make bench-predictor", predictor.BENCH),
+    Artefact("bench/predictor_h1.8.json", "make bench-predictor PRED_JOINT=results/surrogate/h1.8/improved.pt "
+             "PRED_BENCH=results/bench/predictor_h1.8.json", predictor.BENCH),
     Artefact(f"data/*/{MANIFEST}", "make dataset", None),
     Artefact("surrogate/metrics.json", "make train", surrogate.METRICS),
-    Artefact("surrogate/heldout_fine.json", "make fine-compare", surrogate.EVALUATION),
-    Artefact("surrogate/heldout_production.json", "make production-compare", surrogate.EVALUATION),
     Artefact("surrogate/learning_curve.json", "make learning-curve", surrogate.LEARNING_CURVE),
-    Artefact("surrogate/multifidelity.json", "make multifidelity", surrogate.MULTIFIDELITY),
     Artefact("surrogate/sweep/*.json", "make sweep", surrogate.SWEEP),
-    Artefact("surrogate/hex2s3/metrics.json", "make train-new", surrogate.METRICS),
-    Artefact("surrogate/hex2s3/learning_curve.json", "make learning-curve-new", surrogate.LEARNING_CURVE),
-    Artefact("surrogate/hex2s3/sweep/*.json", "make sweep-new", surrogate.SWEEP),
+    # the paper-fidelity reference, the surrogate on the 1.8 mm walks (docs/decisions.md §9)
+    Artefact("surrogate/h1.8/metrics.json", f"make train {REF_SURROGATE}", surrogate.METRICS),
+    Artefact("surrogate/h1.8/learning_curve.json", f"make learning-curve {REF_SURROGATE} LC_REFERENCE=",
+             surrogate.LEARNING_CURVE),
+    Artefact("surrogate/h1.8/sweep/*.json", f"make sweep {REF_SURROGATE}", surrogate.SWEEP),
+    Artefact("surrogate/h1.8/heldout_fine.json", "make fine-compare", surrogate.EVALUATION),
+    Artefact("surrogate/h1.8/heldout_production.json", "make production-compare", surrogate.EVALUATION),
+    Artefact("surrogate/h1.8/multifidelity.json", "make multifidelity", surrogate.MULTIFIDELITY),
     Artefact("bench/surrogate_cost.json", "make bench-surrogate", surrogate.BENCH_COST),
     Artefact("fem/stability_*.json", "make failed-samples", workflow.STABILITY),
     Artefact("fem/resolved_*.json", "make resolve-samples", workflow.RESOLVED),
@@ -75,23 +83,24 @@ ARTEFACTS = (
     Artefact("predictor/ramp_fine/atlas_*.json", "make atlas-reference-fine", predictor.ATLAS),
     Artefact("predictor/inverse.json", "make inverse", predictor.INVERSE),
     Artefact("predictor/track.json", "make track", predictor.TRACK),
-    # the same, on the production surrogate beside today's until the switch (issue 55 §3)
-    Artefact("bench/predictor_hex2s3.json", "make predictor-new", predictor.BENCH),
-    Artefact("predictor/hex2s3/gestures.json", "make predictor-new", predictor.GESTURES),
-    Artefact("predictor/hex2s3/atlas_*.json", "make predictor-new", predictor.ATLAS),
-    Artefact("predictor/hex2s3/ramp/atlas_*.json", "make predictor-new", predictor.ATLAS),
-    Artefact("predictor/hex2s3/ramp_fine/atlas_*.json", "make predictor-new", predictor.ATLAS),
-    Artefact("predictor/hex2s3/inverse.json", "make predictor-new", predictor.INVERSE),
-    Artefact("predictor/hex2s3/track.json", "make predictor-new", predictor.TRACK),
-    Artefact("predictor/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
-             "--out results/predictor/contact_change.json", predictor.CONTACT_CHANGE),
+    # the same on the 1.8 mm reference surrogate (docs/decisions.md §9)
+    Artefact("predictor/h1.8/gestures.json", f"make gestures {REF_PREDICTOR}", predictor.GESTURES),
+    Artefact("predictor/h1.8/atlas_*.json", f"make atlas {REF_PREDICTOR}", predictor.ATLAS),
+    Artefact("predictor/h1.8/ramp/atlas_*.json", f"make atlas-reference {REF_PREDICTOR}", predictor.ATLAS),
+    Artefact("predictor/h1.8/ramp_fine/atlas_*.json", f"make atlas-reference-fine {REF_PREDICTOR}", predictor.ATLAS),
+    Artefact("predictor/h1.8/inverse.json", f"make inverse {REF_PREDICTOR}", predictor.INVERSE),
+    Artefact("predictor/h1.8/track.json", f"make track {REF_PREDICTOR}", predictor.TRACK),
+    Artefact("predictor/h1.8/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
+             "--after results/predictor/h1.8 --out results/predictor/h1.8/contact_change.json",
+             predictor.CONTACT_CHANGE),
     Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),
     Artefact("calibration/calibration.json", "make calibrate-demo", predictor.CALIBRATION),
     Artefact("calibration/fem/*.json", "make calibration-fem", fem.FINGER_CASE),
-    Artefact("calibration/fem_hex2s3/*.json", "make calibration-fem-new", fem.FINGER_CASE),
+    Artefact("calibration/fem_h1.8/*.json", "make calibration-fem CAL_MESH= CAL_FEM=results/calibration/fem_h1.8",
+             fem.FINGER_CASE),
     Artefact("bench/calibrate.json", "make bench-calibrate", predictor.CALIBRATION_BENCH),
     Artefact("validation/finger.json", "make validate-finger", predictor.VALIDATION),
-    Artefact("validation/finger_hex2s3.json", "make validate-finger-new", predictor.VALIDATION),
+    Artefact("validation/finger_h1.8.json", "make validate-finger-h1.8", predictor.VALIDATION),
     Artefact("validation/finger_fem/*.json", "make finger-fem", fem.FINGER_CASE),
     Artefact("fem/finger_grid.json", "make finger-grid", fem.FINGER_GRID),
     Artefact("validation/grasps_fem/*.json", "make grasp-fem", fem.GRASP_CASE),

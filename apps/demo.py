@@ -7,22 +7,23 @@ What runs, one subprocess at a time (``sys.executable -m ...``, so at most one F
 1. ``fem.render --json``: the joint FEM of (P, F1, F2, M) = (0.2 MPa, 1 N, -1 N, 20 N·mm)
    on the committed data's discretisation, rendered -> ``joint.png`` (its JSON is
    ``fem.solve --json``'s);
-2. ``surrogate.predict --json``: the same case on the committed surrogate;
-3. ``predictor.validate_finger --cases``: the predictor against the committed whole-finger
+2. ``surrogate.predict --json``: the same case on the surrogate trained on that
+   discretisation's data (FEM_SURROGATE, the 1.8 mm reference results/surrogate/h1.8/);
+3. ``predictor.validate_finger --cases``: the predictor (on FEM_SURROGATE) against the committed whole-finger
    FEM of the paper's gravity gestures (-0.1, 0.1) and (0.1, -0.1) MPa
    (results/validation/finger_fem, made by ``make finger-fem``; not solved now) ->
    ``gravity.json`` and the overlays ``committed/finger_gravity_<P1>_<P2>.png``. Those FEM cases are
    one finger alone (no plane X = 0), and so is the predictor here (validate_finger
    matches each case's plane);
 4. and 5. ``predictor.gesture --json --plot``: the same gestures of the gripper, whose
-   fingers meet at X = 0 -> ``gesture_<P1>_<P2>.png``; no FEM of the gripper is committed,
+   fingers meet at X = 0, on the default (production) surrogate -> ``gesture_<P1>_<P2>.png``; no FEM of the gripper is committed,
    so their rows give the fingertip and the force where the fingers meet;
 6. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
    a grasp here: normal force, friction use |f|/N and hold/slip are shown instead);
 7. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
    on a coarse joint mesh (one finger alone) -> ``finger_fem/<case>.json`` and its render;
-8. ``predictor.validate_finger --mesh-size H``: the predictor (one finger alone) against
-   it -> ``finger.json`` and the overlay ``finger_<case>.png``.
+8. ``predictor.validate_finger --mesh-size H``: the predictor (one finger alone, on
+   FEM_SURROGATE) against it -> ``finger.json`` and the overlay ``finger_<case>.png``.
 
 ``--finger FILE`` (a finger of two joints) runs every gesture and the live finger FEM for
 that finger; the committed finger FEM is the paper's finger, so for another finger step 3
@@ -35,12 +36,14 @@ validation's targets, tip within 2 mm and 1 deg, from its JSON) says whether it 
 it (``within_tolerance``); the cases beyond it are listed in the table, in
 ``beyond_tolerance`` of summary.json and on stderr (the exit stays 0: the run is complete).
 
-Discretisation: the committed artefacts compared with (the surrogate's training data, the
-finger cases) are on the paper-fidelity 1.8 mm P2 displacement mesh
-(fem.discretisation.PAPER, COMMITTED_MESH_SIZE and COMMITTED_FORMULATION here), not on the
-production hex2:3 mixed; so the joint FEM of step 1 runs on that mesh (as the surrogate's
-data), and the live finger FEM of step 6 on the coarse H mm (default 4) tetrahedra in the
-same displacement formulation. The demo runs no production-mesh FEM. The problem: the
+Discretisation: the committed finger cases the demo compares with are on the
+paper-fidelity 1.8 mm P2 displacement mesh (fem.discretisation.PAPER, COMMITTED_MESH_SIZE
+and COMMITTED_FORMULATION here), not on the production hex2:3 mixed; so the joint FEM of
+step 1 runs on that mesh, and the live finger FEM of step 7 on the coarse H mm (default 4)
+tetrahedra in the same displacement formulation, and every step compared with a FEM runs on
+the surrogate trained on that mesh's data, the 1.8 mm reference (FEM_SURROGATE; since the
+switch, issue 55 §3, the default surrogate is the production one, which the gripper's
+gestures use). The demo runs no production-mesh FEM. The problem: the
 committed finger cases are one finger alone, so the gestures of steps 3, 4 and the finger
 FEM of step 6 are solved with ``--no-plane`` too (a comparison of the gripper, the tools'
 default, with a lone finger would measure the difference of problems, issue 56 §1).
@@ -84,6 +87,9 @@ from predictor import artefacts as predictor_artefacts
 
 ROOT = Path(__file__).resolve().parents[1]
 SURROGATE = "results/surrogate/improved.pt"
+#: The surrogate trained on the data of the demo's FEM discretisation (module docstring): the
+#: 1.8 mm reference, so that a FEM row measures the model, not the change of mesh.
+FEM_SURROGATE = "results/surrogate/h1.8/improved.pt"
 COMMITTED_FINGER_FEM = "results/validation/finger_fem"
 JOINT_CASE = {"p": 0.2, "f1": 1.0, "f2": -1.0, "m": 20.0}        # MPa, N, N, N·mm
 GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the paper's Figure 5A
@@ -155,7 +161,7 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
              f"{COMMITTED_FORMULATION}, and its render (fem.render)", "fem.render",
              [*case, *committed, "--out", f"{out}/joint.png", "--json"]),
         Step("surrogate", "joint surrogate, same case (surrogate.predict)", "surrogate.predict",
-             ["--model", SURROGATE, *case, "--json"]),
+             ["--model", FEM_SURROGATE, *case, "--json"]),
     ]
     # The committed finger FEM cases are one finger alone (no plane X = 0): the predictor is
     # compared with them as one finger alone too (predictor.validate_finger matches the
@@ -165,7 +171,8 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
                           "the paper's gravity gestures (predictor.validate_finger)", "predictor.validate_finger",
                           ["--fem", COMMITTED_FINGER_FEM, "--cases", ",".join(f"gravity_{gesture_name(*p)}"
                                                                               for p in GRAVITY_GESTURES),
-                           *committed, *fing, "--out", f"{out}/gravity.json", "--figures", f"{out}/{COMMITTED_FIGURES}",
+                           *committed, "--model", FEM_SURROGATE, *fing, "--out", f"{out}/gravity.json",
+                           "--figures", f"{out}/{COMMITTED_FIGURES}",
                            "--json"],
                           reads=f"{out}/gravity.json", format=predictor_artefacts.VALIDATION))
     for p1, p2 in GRAVITY_GESTURES:
@@ -185,7 +192,7 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
                       reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
     steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
                       "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h, *fing,
-                                                    "--formulation", COMMITTED_FORMULATION,
+                                                    "--formulation", COMMITTED_FORMULATION, "--model", FEM_SURROGATE,
                                                     "--out", f"{out}/finger.json", "--figures", out, "--json"],
                       reads=f"{out}/finger.json", format=predictor_artefacts.VALIDATION))
     return steps
@@ -560,8 +567,10 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False, finger: str |
         committed = {gesture_name(*p): load_committed(f"gravity_{gesture_name(*p)}")
                      for p in GRAVITY_GESTURES} if compare else {}
         finger_committed = load_committed(FINGER_CASE) if compare else (None, None)
-        if not Path(ROOT, SURROGATE).is_file():
-            raise StepFailed(f"no committed surrogate {SURROGATE}: run `make train`")
+        for model in (SURROGATE, FEM_SURROGATE):
+            if not Path(ROOT, model).is_file():
+                raise StepFailed(f"no committed surrogate {model}: run `make train` (docs/decisions.md §9 for the "
+                                 "1.8 mm reference's)")
         # No stale summary may describe this run's figures; and fem.finger_cases skips a case
         # whose JSON exists, so the live finger FEM removes its own last result first.
         for old in (out / "summary.json", out / "summary.md", out / "finger_fem" / f"{FINGER_CASE}.json"):

@@ -23,7 +23,7 @@ checks, one-line errors and resume), in DIR (default results/joints/<joint name>
                 samples), summary.json and summary.txt: errors, sample counts, wall time
                 per stage
 
-Budgets (docs/pipeline.md; the learning curve results/surrogate/learning_curve.json of
+Budgets (docs/pipeline.md; the learning curve results/surrogate/h1.8/learning_curve.json of
 the paper's joint): ``full`` is the paper joint's campaign, 2,560 training and 256
 held-out samples and the improved surrogate's 800 epochs. ``small`` is 256 training
 (a 7:2:1 split, so 192 to train on) and 64 held-out samples, trained for the

@@ -10,9 +10,10 @@ fem.problem), the quadrature degree q (at least HEX_QUADRATURE on hexahedra) and
 the valley-contact penalty kappa (MPa/mm).
 
 * PAPER: the paper-fidelity 1.8 mm P2 displacement discretisation (H = PAPER_MESH_SIZE),
-  which the committed artefacts are on (results/data/{train,heldout}, the surrogate trained
-  on them, results/validation/finger_fem) until they are regenerated; the tools that resume
-  or check them pass it explicitly (the Makefile's PAPER_MESH);
+  the reference the committed artefacts were on before the switch (issue 55 §3) and are
+  kept as (results/data/{train,heldout}_h1.8, results/*/h1.8, the lone-finger cases of
+  results/validation/finger_fem); the tools that resume or check them pass it explicitly
+  (the Makefile's PAPER_MESH);
 * PRODUCTION: what new data is generated on, "hex2:3" mixed with quadrature 4 (key
   ``hex2s3_mixed_q4_k100``; chosen by ``make mesh-study``, issue 35, docs/decisions.md §9):
   Discretisation's defaults, JointGeometry's default mesh, FORMULATION and the paper joint

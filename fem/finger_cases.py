@@ -51,8 +51,9 @@ the default now, is accepted for one release). A plane case's record carries
 true`` (absent without it, so the cases solved before the plane stand) and its default
 suffix ends in ``_plane``: a plane case never resumes from, nor replaces, a case without
 it. The committed lone-finger cases (results/validation/finger_fem/<case>.json on 1.8 mm,
-and the calibration's truth cases, results/calibration/fem) are resumed with
-``--no-plane`` (``make finger-fem``, ``make calibration-fem``).
+and the calibration's truth cases, results/calibration/fem on the production mesh and
+fem_h1.8 on 1.8 mm) are resumed with ``--no-plane`` (``make finger-fem``, ``make
+calibration-fem``).
 """
 from __future__ import annotations
 

@@ -160,7 +160,7 @@ RECOVERY = Format("predictor-calibration-recovery", 1, "predictor.calibrate", {
     "noisy.coverage_95": NUM, "noisy.coverage_95_per_parameter{}": MAYBE,
     "noisy.runs[].seed": int, "noisy.runs[].rms_after_mm": NUM, "noisy.runs[].parameters": dict})
 
-#: results/predictor/contact_change.json (python -m predictor.contact_change): what the
+#: results/predictor/h1.8/contact_change.json (python -m predictor.contact_change): what the
 #: contact on the finger's outline and the plane X = 0 changed, before against after.
 CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change", {
     "before": str,

@@ -12,7 +12,7 @@ Observations, per FEM case (global frame of the right finger, mm, deg): the fing
 paper's finger the link, part 2 at s = 0 and 60 mm: the FEM's last anchor of the joint
 before it and the proximal centre of the joint after it), with the stated uncertainties
 ``SIGMA_MM``, ``SIGMA_DEG``: the predictor's own error against the paper finger's FEM
-(results/validation/finger.json: fingertip 0.22 mm mean, 0.46 mm max; tip angle 0.19 deg
+(results/validation/finger_h1.8.json: fingertip 0.22 mm mean, 0.46 mm max; tip angle 0.19 deg
 max), so the fit is not asked to reproduce the FEM closer than the model can.
 
 What was measured: a case solved with the mirror finger's contact at X = 0

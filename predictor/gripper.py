@@ -87,7 +87,7 @@ EDGE_GAUSS = 6
 #: penalty profile is piecewise quadratic (exact where it lies within the C1 ramp, or
 #: beyond it).
 PLANE_GAUSS = 3
-#: The defaults: the chain that matches the whole-finger FEM (results/validation/finger.json:
+#: The defaults: the chain that matches the whole-finger FEM (results/validation/finger_h1.8.json:
 #: fingertip within 0.5 mm, against 5 mm for the paper's tangent kinematics).
 DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT = "cap", "split"
 

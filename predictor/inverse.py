@@ -176,7 +176,8 @@ ATLAS_KEYS = frozenset((
     "grid", "counts", "best_hold", "time_s", "path", "solved_by", "joint", "mu", "object_weight_N", "gravity",
     "max_plane_overlap_mm", "object", "approach_MPa", "states", "p1_MPa", "p2_MPa", "state", "how",
     "normal_force_N", "friction_use", "tip_mm", "first_contact_MPa", "tau", "contact_part", "contact_face",
-    "contact_point_mm", "plane_force_N", "plane_overlap_mm", "targets", "measured", "spec", "ramp_steps", "finger"))
+    "contact_point_mm", "plane_force_N", "plane_overlap_mm", "targets", "measured", "spec", "ramp_steps", "finger",
+    "plane"))
 ATLAS_OBJECT_KEYS = frozenset(("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad", "corner_mm"))
 
 

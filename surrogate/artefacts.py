@@ -36,7 +36,7 @@ METRICS = Format("surrogate-metrics", 1, "surrogate.evaluate", {
     **_model("improved", False), **_model("paper", True), **_model("knn", True),
     **each("datasets?.train?.n?", int, "train?", "val?")})
 
-#: results/surrogate/heldout_fine.json (make fine-compare; surrogate.evaluate --out): one
+#: results/surrogate/h1.8/heldout_fine.json (make fine-compare; surrogate.evaluate --out): one
 #: model against one dataset (its split, model and data paths beside the metrics).
 EVALUATION = Format("surrogate-evaluation", 1, "surrogate.evaluate", {
     **_METRICS, **each("", str, "split", "model", "data")})
@@ -57,7 +57,7 @@ SWEEP = Format("surrogate-sweep", 1, "surrogate.sweep", {
     "train_config": dict, "best_epoch": int, "train_time_s": NUM,
     **{f"{split}.{k}": kind for split in ("val", "heldout") for k, kind in _METRICS.items()}})
 
-#: results/surrogate/multifidelity.json (surrogate.multifidelity): the multi-fidelity
+#: results/surrogate/h1.8/multifidelity.json (surrogate.multifidelity): the multi-fidelity
 #: surrogate against fine-only training at equal FEM cost; one point per (kind, samples),
 #: one comparison row per multi-fidelity point.
 MULTIFIDELITY = Format("surrogate-multifidelity", 1, "surrogate.multifidelity", {

@@ -3,7 +3,7 @@
     python -m surrogate.multifidelity --coarse DIR --fine DIR [--heldout DIR]
         [--coarse-model PATH] [--sizes 50,100,200,400,all] [--seed 0] [--min-steps 22400]
         [--set KEY=VALUE ...] [--reference-curve JSON] [--max-hours H]
-        [--out results/surrogate/multifidelity.json] [--plot PNG] [--json]
+        [--out results/surrogate/h1.8/multifidelity.json] [--plot PNG] [--json]
 
 Model. A coarse surrogate C, trained on the coarse set (the improved config; or
 --coarse-model), is frozen. On n fine samples a correction in two stages is fitted: least-
@@ -96,7 +96,8 @@ CORRECTION = ("hidden=32,32", "w_phi=0")
 #: Without a separate held-out set: blocks of 16 walk samples dealt 4:1:3 (pool, val, held-out).
 SELF_SPLIT = (4, 1, 3)
 SELF_SPLIT_SEED = 0
-REFERENCE_CURVE = Path("results/surrogate/learning_curve.json")
+#: The committed stand-in's fine-only reference: the 1.8 mm learning curve (make multifidelity).
+REFERENCE_CURVE = Path("results/surrogate/h1.8/learning_curve.json")
 ERRORS = ("heldout_mean_anchor_error_mm", "heldout_tip_error_mm", "heldout_cap_rotation_error_deg",
           "heldout_phi_end_error_deg", "heldout_jacobian_rel_error")
 POINT_KEYS = ("kind", "samples", "seed", "min_steps", "model_config", "train_config", "correction_form",
@@ -567,7 +568,7 @@ def parser() -> cli.Parser:
                                               "skipped if absent)")
     ap.add_argument("--max-hours", type=cli.number(0, None, "h", open_lo=True), default=None,
                     help="start no run expected to end past it (exit 3 if unfinished)")
-    ap.add_output("--out", suffix=".json", default="results/surrogate/multifidelity.json")
+    ap.add_output("--out", suffix=".json", default="results/surrogate/h1.8/multifidelity.json")
     ap.add_output("--plot", suffix=".png", help="figure (default: OUT with .png)")
     return ap
 

@@ -178,21 +178,21 @@ CASES_WORKFLOW = [
     # committed held-out set is on the paper-fidelity mesh, `make dataset`'s --mesh-size 1.8
     # --formulation displacement; the production defaults are another config)
     ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--mesh-size", "3",
-                           "--formulation", "displacement", "--out", "results/data/heldout"],
-     "results/data/heldout holds a campaign made with --mesh-size 1.8 mm (this run: 3 mm)"),
+                           "--formulation", "displacement", "--out", "results/data/heldout_h1.8"],
+     "results/data/heldout_h1.8 holds a campaign made with --mesh-size 1.8 mm (this run: 3 mm)"),
     ("workflow.campaign", ["--samples", "256", "--unit-size", "8", "--seed", "2", "--mesh-size", "1.8",
-                           "--formulation", "displacement", "--out", "results/data/heldout"],
+                           "--formulation", "displacement", "--out", "results/data/heldout_h1.8"],
      "made with --unit-size 16 (this run: 8)"),
-    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--out", "results/data/heldout"],
-     "results/data/heldout holds a campaign made with --formulation displacement (this run: mixed); --divisions "
+    ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--out", "results/data/heldout_h1.8"],
+     "results/data/heldout_h1.8 holds a campaign made with --formulation displacement (this run: mixed); --divisions "
      "tetrahedra (this run: 2)"),
     ("workflow.campaign", ["--samples", "128", "--unit-size", "16", "--seed", "2", "--mesh-size", "1.8",
-                           "--formulation", "displacement", "--out", "results/data/heldout"],
-     "results/data/heldout holds a campaign of --samples 256; --samples 128 would drop its other shards"),
+                           "--formulation", "displacement", "--out", "results/data/heldout_h1.8"],
+     "results/data/heldout_h1.8 holds a campaign of --samples 256; --samples 128 would drop its other shards"),
     # another seed than the committed held-out set's: refused before the lock is taken
     ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "3", "--mesh-size", "1.8",
-                           "--formulation", "displacement", "--out", "results/data/heldout"],
-     "results/data/heldout holds a campaign of --seed 2, not --seed 3"),
+                           "--formulation", "displacement", "--out", "results/data/heldout_h1.8"],
+     "results/data/heldout_h1.8 holds a campaign of --seed 2, not --seed 3"),
     # workflow.dataset: a folder that is not a dataset, bad --mirror, merge of a non-dataset
     ("workflow.dataset", ["info", "/etc"], "/etc: no manifest.json (not a softjoint dataset)"),
     ("workflow.dataset", ["verify", "/etc"], "/etc: no manifest.json (not a softjoint dataset)"),

@@ -128,12 +128,12 @@ def _snapshot(root: Path) -> dict[str, bytes]:
 def test_refused_run_leaves_the_dataset_untouched(tmp_path):
     """A campaign refused by the compatibility check (another --seed, another config: here
     the mesh, named with both values, or the production discretisation of the defaults
-    against the committed set's paper-fidelity one; or fewer --samples: a campaign never
+    against the 1.8 mm reference set's paper-fidelity one; or fewer --samples: a campaign never
     shrinks) exits 2 with one line and leaves an existing dataset folder byte for
     byte as it was (the mesh, or the wall mesh alone): no .campaign.lock, no shards/ folder, no manifest rewrite; pointed at a
     folder that does not exist yet, a refused run (--units beyond the unit count) creates
     nothing either."""
-    held = ROOT / "results/data/heldout"                   # the committed set (seed 2)
+    held = ROOT / "results/data/heldout_h1.8"              # the 1.8 mm reference set (seed 2)
     partial = tmp_path / "heldout"
     shutil.copytree(held, partial)
     (partial / "shards" / "unit-00003.npz").unlink()      # an unfinished campaign to resume
@@ -268,9 +268,9 @@ def test_two_ranks_give_identical_samples(reference, tmp_path):
     assert_same_samples(tmp_path / "mpi", reference)
 
 
-#: The config of the production held-out campaign (`make dataset-new`: --samples 256 --seed 2
+#: The config of the production held-out campaign (`make dataset`: --samples 256 --seed 2
 #: --unit-size 16 --divisions 2 --hex-size 3 --formulation mixed), frozen from its manifest
-#: (results/data/heldout_hex2s3, written by the running campaign): the default campaign of
+#: (results/data/heldout, the production walk): the default campaign of
 #: the paper's joint file must keep producing it, or that campaign could not resume.
 HEX2S3_CONFIG = {
     "formulation": "mixed", "fresh_check_every": 8,
@@ -297,8 +297,9 @@ def test_production_is_hex2s3_mixed_and_the_default_campaign_is_its_manifest(tmp
     hex2s3_mixed_q4_k100), and it is every default: JointGeometry's mesh, JointSolver's
     formulation and (config_for) quadrature, the paper joint file's [mesh], fem.bench_joint's
     --mesh/--formulation. The campaign of the paper's joint without mesh options, and the
-    one `make dataset-new` spells out, both record HEX2S3_CONFIG key for key; the PAPER
-    options of `make dataset` record the committed sets' configs."""
+    one `make dataset` spells out, both record HEX2S3_CONFIG key for key, and the
+    defaults record the committed sets' configs; the PAPER options record the 1.8 mm
+    reference sets' (results/data/*_h1.8)."""
     import inspect
 
     from contract.joint import load_joint
@@ -323,9 +324,10 @@ def test_production_is_hex2s3_mixed_and_the_default_campaign_is_its_manifest(tmp
     assert campaign.campaign_config(JointGeometry(divisions=2, hex_size=3.0), 16, campaign.DEFAULT_STEP, 8,
                                     "mixed") == HEX2S3_CONFIG
     for name, flags in (("heldout", ["--unit-size", "16"]), ("train", ["--unit-size", "64"])):
-        committed = Manifest.load(ROOT / "results/data" / name).config
-        assert _cli_config(tmp_path, *flags, *PAPER_MESH) == committed, name
-        assert _cli_config(tmp_path, *flags) != committed
+        reference = Manifest.load(ROOT / "results/data" / f"{name}_h1.8").config
+        assert _cli_config(tmp_path, *flags, *PAPER_MESH) == reference, name
+        assert _cli_config(tmp_path, *flags) != reference
+        assert _cli_config(tmp_path, *flags) == Manifest.load(ROOT / "results/data" / name).config, name
     assert not (tmp_path / "new").exists()
 
 

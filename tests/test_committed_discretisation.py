@@ -1,10 +1,11 @@
-"""The committed artefacts stay on their own discretisation now that the production one is
-hex2:3 mixed (fem.discretisation.PRODUCTION) and the committed finger cases, datasets and
-surrogate are on PAPER (1.8 mm P2 displacement).
+"""The committed artefacts stay on their own discretisation: the production one is hex2:3
+mixed (fem.discretisation.PRODUCTION), and the committed lone-finger cases, the 1.8 mm
+reference datasets and surrogate (results/*/h1.8, finger_h1.8.json) are on PAPER (1.8 mm
+P2 displacement).
 
 * predictor.validate_finger picks the cases of one (mesh, formulation): on the committed
   cases its default (PAPER's) selects the 1.8 mm displacement cases the committed
-  finger.json validated, and its mesh check reproduces that file's rows (fingertip change,
+  finger_h1.8.json validated, and its mesh check reproduces that file's rows (fingertip change,
   nodes) exactly;
   a 1.8 mm case in the mixed formulation is another discretisation (mesh check, named
   with its formulation), and --mesh texts are read in the records' spelling;
@@ -35,7 +36,7 @@ def test_validation_selects_the_committed_discretisation_and_reproduces_its_mesh
 
     cases, others = vf.split_cases(committed_cases(), (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION))
     assert (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION) == ("1.8", "displacement")
-    validation = json.loads((ROOT / "results/validation/finger.json").read_text())
+    validation = json.loads((ROOT / "results/validation/finger_h1.8.json").read_text())
     assert [c["case"] for c in cases] == [c["case"] for c in validation["fem"]]
     assert all(c["mesh"]["mesh_size"] == 1.8 for c in cases)
     # the lone-finger refinements; the production cases with the plane X = 0 (issue 56) pair with none
@@ -85,8 +86,8 @@ def test_finger_case_files_and_the_finger_bench_keep_to_their_discretisation():
 
 def test_validation_meets_the_plane_only_where_the_fem_case_did():
     """The committed cases are one finger alone (no settings.plane): at gravity (0.2, 0.2)
-    MPa, a case where that finger crosses X = 0, the judged variant reproduces the committed
-    finger.json's fingertip (1e-9 mm), which lies across X = 0; the same record marked as
+    MPa, a case where that finger crosses X = 0, the judged variant on the 1.8 mm reference
+    surrogate reproduces the committed finger_h1.8.json's fingertip (1e-9 mm), which lies across X = 0; the same record marked as
     solved with the plane (fem.finger_cases --plane) gets the gripper's answer instead,
     within 0.1 mm of X = 0 (issue 36 §0)."""
     pytest.importorskip("torch")
@@ -95,10 +96,10 @@ def test_validation_meets_the_plane_only_where_the_fem_case_did():
     from predictor.joint import load_joint
 
     case = json.loads((CASES / "gravity_0.2_0.2.json").read_text())
-    validation = json.loads((ROOT / "results/validation/finger.json").read_text())
+    validation = json.loads((ROOT / "results/validation/finger_h1.8.json").read_text())
     committed = {(e["case"], e["variant"]): e for e in validation["cases"]}
     judged = committed[(case["case"], vf.JUDGED)]
-    joint = load_joint(str(ROOT / "results/surrogate/improved.pt"))
+    joint = load_joint(str(ROOT / "results/surrogate/h1.8/improved.pt"))
     finger = load_finger_of(case)
     kin, weight = judged["kinematics"], judged["joint_weight"]
     alone, _ = vf.run_variant(joint, finger, case, "predictor", kin, weight)

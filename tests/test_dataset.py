@@ -321,7 +321,7 @@ def test_manifest_corrupt_or_missing(tmp_path):
         Manifest.load(tmp_path)
 
 
-@pytest.mark.parametrize("name, n", [("train", 2560), ("heldout", 256)])
+@pytest.mark.parametrize("name, n", [("train", 2560), ("heldout", 256), ("train_h1.8", 2560), ("heldout_h1.8", 256)])
 def test_committed_dataset_verifies_complete(name, n):
     """The committed FEM datasets (results/data) verify clean and complete: every shard's
     sha256 and checksum, the unit layout, 0 failures, the paper's 2,560 training samples

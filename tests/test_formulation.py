@@ -69,10 +69,10 @@ def test_formulation_option(capsys, tmp_path):
 
 
 def test_displacement_config_is_the_committed_one():
-    """campaign_config of the committed held-out set's settings, displacement: equal to its
-    manifest's config (so it still resumes and verifies); mixed: that config plus
+    """campaign_config of the 1.8 mm reference held-out set's settings (results/data/
+    heldout_h1.8), displacement: equal to its manifest's config (so it still resumes and verifies); mixed: that config plus
     "formulation": "mixed" and nothing else."""
-    m = Manifest.load(ROOT / "results/data/heldout")
+    m = Manifest.load(ROOT / "results/data/heldout_h1.8")
     cfg = m.config
     args = (JointGeometry.from_record(cfg["geometry"]), cfg["unit_size"], cfg["walk_step"],
             cfg["fresh_check_every"])

@@ -63,7 +63,9 @@ def test_table_has_the_paper_grasps_inside_the_box_once():
 
 
 def _atlas(kind):
-    doc = json.loads((ROOT / f"results/predictor/atlas_{kind}.json").read_text())
+    # the atlases the cases were chosen on: the 1.8 mm reference surrogate's (the defaults
+    # then; on the production atlases ellipse (-0.05, 0.3) holds with friction use 0.68)
+    doc = json.loads((ROOT / f"results/predictor/h1.8/atlas_{kind}.json").read_text())
     return doc if "max_plane_overlap_mm" in doc else None      # the outline contact and the plane
 
 

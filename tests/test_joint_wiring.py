@@ -189,18 +189,18 @@ def _config(joint=None, **kw):
     from fem.options import joint_geometry
     from types import SimpleNamespace
 
-    # the committed sets' paper-fidelity mesh, as `make dataset` passes it (--mesh-size 1.8)
+    # the 1.8 mm reference sets' paper-fidelity mesh, as their campaigns pass it (--mesh-size 1.8)
     geometry = joint_geometry(SimpleNamespace(mesh_size=1.8, wall_mesh_size=None), joint or load_joint())
     return campaign_config(geometry, kw.get("unit_size", 16), 0.1, 8, "displacement", joint)
 
 
 def test_paper_manifests_unchanged_and_another_joint_recorded():
-    """The paper's joint (and a renamed copy) gives the committed heldout manifest's config
-    exactly, so that campaign resumes; another joint adds its description and digest, and
+    """The paper's joint (and a renamed copy) gives the 1.8 mm reference heldout manifest's
+    config exactly (results/data/heldout_h1.8), so that campaign resumes; another joint adds its description and digest, and
     workflow.store.recorded_joint rebuilds it (digest and law) from the config alone."""
-    committed = Manifest.load(ROOT / "results/data/heldout").config
+    committed = Manifest.load(ROOT / "results/data/heldout_h1.8").config
     assert _config() == committed and _config(parse_joint(joint_text(name="copy"))) == committed
-    assert check_compatible(ROOT / "results/data/heldout", committed, 2, 256) is not None
+    assert check_compatible(ROOT / "results/data/heldout_h1.8", committed, 2, 256) is not None
     yeoh = parse_joint(joint_text("yeoh", name="yeoh", pressure_mpa="0.2"))
     config = _config(yeoh)
     assert config["joint_sha256"] == joint_digest(yeoh) and "name" not in config["joint"]

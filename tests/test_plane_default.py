@@ -95,9 +95,11 @@ def test_committed_lone_finger_cases_stand_for_the_makefile(monkeypatch, capsys)
     assert len(todo) == 18 and all(str(path).endswith("_plane.json") for *_, path in todo)
 
     recipe = re.search(r"^calibration-fem:.*\n\t(.+)$", MAKEFILE, re.M)[1]
-    assert "--no-plane" in shlex.split(recipe)
+    assert "--no-plane" in shlex.split(recipe) and "$(CAL_MESH)" in shlex.split(recipe)
+    # the truth cases on the production joint mesh (CAL_MESH's default, PROD_MESH)
     todo, out = _resume(monkeypatch, capsys, ["--finger", "results/calibration/truth/finger.toml", "--pressures",
-                                              _make_var("CAL_PRESSURES"), "--no-plane", "--out",
+                                              _make_var("CAL_PRESSURES"), "--no-plane",
+                                              *shlex.split(_make_var("PROD_MESH")), "--out",
                                               "results/calibration/fem"])
     assert todo == [] and "all 8 cases are up to date" in out
 

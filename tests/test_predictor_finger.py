@@ -42,17 +42,18 @@ def _reference_problem(joint, case: str) -> GripperProblem:
 
 #: Frozen iteration counts that changed since: the LM retries a failed step shortened
 #: (predictor.lm.SHORTENINGS), (model, case) -> (frozen, now); the same equilibria.
-SHORTENED = {("results/surrogate/paper.pt", "circle"): (110, 66)}
+SHORTENED = {("results/surrogate/h1.8/paper.pt", "circle"): (110, 66)}
 
 
-@pytest.mark.parametrize("model", ["analytic", "results/surrogate/paper.pt"])
+@pytest.mark.parametrize("model", ["analytic", "results/surrogate/h1.8/paper.pt"])
 def test_paper_finger_reproduces_the_frozen_predictor(model):
     """The paper's finger (contract/fingers/paper.toml) through the generic chain, with tangent
     kinematics, lumped weights, contact on the centre lines and no symmetry plane (the
     paper's model, kept as options), reproduces the predictor as it was before issue 14 (its
     hard-wired joint-link-joint-tip chain, frozen at commit bbc0df4 into
     tests/data/predictor_reference.json by tests/data/freeze_predictor_reference.py), on
-    the analytic joint and on the committed paper surrogate: gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1) and one
+    the analytic joint and on the 1.8 mm reference paper surrogate (h1.8/paper.pt, the
+    committed one then): gravity at (-0.1, 0.1) and (0.1, -0.1) MPa, no gravity at (0.1, 0.1) and one
     circle grasp from the approach gesture. tau to 1e-9 N / N·mm, the tip and every pose
     point (both joints, link, tip, contact sample points) to 1e-9 mm, the angles to
     1e-10 rad (the last Newton iterate moves by ~1e-12 with the solver's Jacobian, which

@@ -270,8 +270,9 @@ def test_cap_head_gradient_matches_finite_differences():
 def test_model_without_head_and_old_checkpoints(tmp_path):
     """A model without the head refuses with_cap with a one-line ModelError. A checkpoint
     written before the head existed (no cap_rotation/cap_target in its model_config, as
-    the committed paper.pt) loads without the head and gives the saved model's anchors bit
-    for bit; the committed paper.pt loads so, and the committed improved.pt has the head."""
+    the 1.8 mm reference's paper.pt) loads without the head and gives the saved model's
+    anchors bit for bit; that paper.pt (results/surrogate/h1.8/) loads so, and the committed
+    improved.pt has the head."""
     model = _fresh(activation="silu", residual=True, equivariant=True, abs_pressure=True)
     assert not model.has_cap_rotation
     with pytest.raises(ModelError, match="no cap-rotation head") as err:
@@ -287,7 +288,7 @@ def test_model_without_head_and_old_checkpoints(tmp_path):
     x = torch.randn(50, 4, dtype=torch.float64) * torch.as_tensor(INPUT_BOX)
     assert not loaded.has_cap_rotation and "cap_scale" not in loaded.normalisation
     assert torch.equal(loaded(x), model(x).detach())
-    committed = RESULTS / "surrogate/paper.pt"      # trained before the head existed
+    committed = RESULTS / "surrogate/h1.8/paper.pt"  # trained before the head existed
     if committed.is_file():
         ckpt = load_checkpoint(committed)
         assert "cap_rotation" not in ckpt["model_config"]

@@ -93,10 +93,11 @@ def _sha(t: torch.Tensor) -> str:
 
 @pytest.mark.parametrize("name", sorted(FROZEN))
 def test_committed_checkpoints_load_as_the_paper_joint_bit_for_bit(name):
-    """The committed checkpoints (no n_anchors or input_box in their model_config) load as
-    the paper's joint (10 anchors, contract.spec.INPUT_BOX) and give the frozen anchors,
-    Jacobians and cap rotations bit for bit."""
-    path = ROOT / f"results/surrogate/{name}.pt"
+    """The committed 1.8 mm reference checkpoints (results/surrogate/h1.8/, the defaults
+    when frozen; no n_anchors or input_box in their model_config) load as the paper's joint
+    (10 anchors, contract.spec.INPUT_BOX) and give the frozen anchors, Jacobians and cap
+    rotations bit for bit."""
+    path = ROOT / f"results/surrogate/h1.8/{name}.pt"
     if not path.is_file():
         pytest.skip("no committed surrogate")
     assert not {"n_anchors", "input_box"} & set(load_checkpoint(path)["model_config"])

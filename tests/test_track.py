@@ -160,7 +160,8 @@ def test_tip_goal_at_900_deg_reports_its_errors_apart():
     and one stderr line naming the closest tip's position error (mm, its distance to
     (40, -212), not the 256.89 mm that added tip length x unwrapped angle) and its angle
     error (deg, achieved minus 180 wrapped to (-180, 180]), the JSON's figures. Frozen
-    (the committed surrogate, this commit): 25.34 mm and +61.24 deg at (-0.1484, 0.3) MPa."""
+    (the committed production surrogate, since the switch): 25.66 mm and +58.77 deg at
+    (-0.1532, 0.3) MPa (the 1.8 mm surrogate's were 25.34 mm, +61.24 deg at (-0.1484, 0.3))."""
     r = _cli("--goal", "tip:40,-212,900", "--json", "--quiet")
     assert r.returncode == 1, r.stderr
     out = json.loads(r.stdout)
@@ -169,8 +170,8 @@ def test_tip_goal_at_900_deg_reports_its_errors_apart():
     assert pos == pytest.approx(math.hypot(out["tip"][0] - 40.0, out["tip"][1] + 212.0), rel=1e-12)
     assert ang == pytest.approx(wrap_deg(out["tip_angle_deg"] - 180.0), abs=1e-9) and -180.0 < ang <= 180.0
     assert r.stderr == f"python -m predictor.inverse: infeasible: {unreachable_reason(pos, ang)}\n"
-    assert (pos, ang) == (pytest.approx(25.34, abs=0.01), pytest.approx(61.24, abs=0.01))
-    assert out["pressures"] == pytest.approx([-0.1484, 0.3], abs=1e-3)
+    assert (pos, ang) == (pytest.approx(25.66, abs=0.01), pytest.approx(58.77, abs=0.01))
+    assert out["pressures"] == pytest.approx([-0.1532, 0.3], abs=1e-3)
 
 
 def test_far_goal_is_unreachable_with_finger_flag():

@@ -54,10 +54,11 @@ formulation existed reads as what it is (fem.discretisation.recorded_formulation
 resuming with another formulation is refused like any other config change. Without
 ``--mesh-size``, ``--wall-mesh-size`` or ``--divisions`` the mesh is the joint file's (the
 paper's: the production hex2:3, JointGeometry's default mesh, in the mixed formulation).
-The committed datasets results/data/{train,heldout} are on the paper-fidelity 1.8 mm
-displacement (fem.discretisation.PAPER): ``make dataset`` resumes them with
-``--mesh-size 1.8 --formulation displacement``, and the production defaults are refused
-there (another config).
+The committed datasets results/data/{train,heldout} are on the production discretisation
+(``make dataset``); the paper-fidelity 1.8 mm displacement reference walks
+results/data/{train,heldout}_h1.8 (fem.discretisation.PAPER) resume with ``--mesh-size 1.8
+--formulation displacement``, and the production defaults are refused there (another
+config).
 
 Path check. Every ``--fresh-check-every``-th unit also re-solves its last sample from zero
 and records the largest anchor difference in the shard's meta (``fresh_checks``). If the

@@ -7,7 +7,7 @@
 Why. A campaign sample is solved by continuation along its walk and, failing that, once
 from zero, each by fem.load_path's cut-back Newton (12 iterations a step, steps halved
 down to 1/256 of the path). Where the valley contact front sweeps over many node pairs
-at once (train_hex2s3 unit 36: P about -0.22 MPa with opposing end forces) that budget
+at once (the production train walk results/data/train, unit 36: P about -0.22 MPa with opposing end forces) that budget
 runs out although the joint is stable there (workflow.stability: no negative eigenvalue
 of the stiffness along the path, the lowest one flat). Such a sample is a solver
 failure, and a finer path solves it.

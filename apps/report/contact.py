@@ -1,7 +1,7 @@
 """The report's contact section (issue 36 §0, §4): how far the right finger crosses the
 symmetry plane X = 0 in every committed gesture, atlas point and inverse answer (judged),
 and what the contact on the finger's outline changed against the model before
-(results/predictor/contact_change.json: atlas states, the reference ramps' failures, the
+(results/predictor/h1.8/contact_change.json: atlas states, the reference ramps' failures, the
 paper's gestures)."""
 
 from __future__ import annotations
@@ -136,11 +136,12 @@ def _overlap(root: Path, checks: list[Check]) -> list[str]:
 
 
 def _changes(root: Path) -> list[str]:
-    c = load(root, "predictor/contact_change.json")
+    c = load(root, "predictor/h1.8/contact_change.json")
     if not c:
         return missing("what the outline contact changed", "python -m predictor.contact_change")
-    out = [f"Against the model before ({c['before']}), from results/predictor/contact_change.json "
-           "(`python -m predictor.contact_change`, the two models' committed artefacts compared).", "",
+    out = [f"Against the model before ({c['before']}), from results/predictor/h1.8/contact_change.json "
+           "(`python -m predictor.contact_change`, the two models' committed artefacts compared, both on the 1.8 mm "
+           "reference surrogate: the change was measured before the switch).", "",
            "| object | atlas points whose state changed | how | 12-step reference: not converged before -> after "
            "| 48-step reference: not converged before -> after |", "|---|---|---|---|---|"]
     for kind in OBJECTS:

@@ -1,13 +1,14 @@
 """The report's section on the finger FEM over the pressure box (issue 36 §1): the gravity
 grid of results/fem/finger_grid.json (fem.finger_grid) drawn as a table, one cell per
 pressure pair with its solve time or its failure, and the targets (every pair converged,
-<= 10 min per gesture on one core)."""
+<= 10 min per gesture on one core). The predictor against these cases is the whole-finger
+section's validation (results/validation/finger.json, make validate-finger)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from apps.report.common import Check, Target, cells, figure, judge, load
+from apps.report.common import Check, Target, cells, judge, load
 
 FINGER_GRID_TITLE = "Finger FEM over the pressure box (issue 36)"
 GESTURE_TARGET_S = 600.0     # issue 36: <= 10 min per gesture on one core
@@ -72,42 +73,4 @@ def finger_grid_section(root: Path) -> tuple[list[str], list[Check]]:
         out += ["| figure | value | target | met |", "|---|---|---|---|",
                 f"| pairs converged | {grid['converged']} of {grid['pairs']} |" + cells(checks[0]),
                 f"| slowest gesture (one rank) | {grid['max_wall_s']:.0f} s |" + cells(checks[1]), ""]
-    return out + _production_validation(root), checks
-
-
-def _production_validation(root: Path) -> list[str]:
-    """The predictor with the stage-1 production surrogate against the production-mesh cases
-    with the plane solved so far (validation/finger_hex2s3.json, make validate-finger-new):
-    shown per case, not judged until the switch makes that surrogate the default."""
-    v = load(root, "validation/finger_hex2s3.json")
-    if not v:
-        return []
-    judged, by = v["judged_variant"], {}
-    for e in v["cases"]:
-        by.setdefault(e["case"], {})[e["variant"]] = e
-    paper = next(k for k in v["summary"] if k.startswith("predictor_tangent_lumped"))
-    out = ["### The predictor against these cases (production surrogate, before the switch)", "",
-           "`make validate-finger-new` (results/validation/finger_hex2s3.json, `python -m predictor.validate_finger "
-           "--mesh hex2:3 --formulation mixed --plane`): the production-mesh cases with the plane solved so far (the "
-           "grid's and the four free ones) against the predictor on the same problem with the stage-1 production "
-           f"surrogate results/surrogate/hex2s3/improved.pt (`{v['joint']}`), not yet the default; shown, judged once "
-           "the switch makes it the default (issue 56's targets: fingertip <= 1 mm, tip angle <= 0.5°, speed-up "
-           ">= 1e4x, every case). Errors predictor minus FEM, single-query solves timed in this run.", "",
-           f"| case | FEM tip (X, Y) mm, angle | {judged} (cap / split) | {paper} (paper's) | FEM wall | predictor |",
-           "|---|---|---|---|---|---|"]
-    for c in v["fem"]:
-        rows = by.get(c["case"], {})
-        if not c["converged"] or judged not in rows:
-            continue
-        cell = lambda k: f"{rows[k]['tip_error_mm']:.2f} mm / {rows[k]['tip_angle_error_deg']:+.2f}°" if k in rows else "n/a"
-        out.append(f"| {c['case']} | ({c['tip'][0]:.2f}, {c['tip'][1]:.2f}), {c['tip_angle_deg']:.2f}° | {cell(judged)} "
-                   f"| {cell(paper)} | {c['fem_s']:.0f} s | {1000 * rows[judged]['predictor_s']:.0f} ms |")
-    j = v["summary"][judged]
-    out += ["", f"{judged} over {j['cases']} cases: fingertip max {j['tip_error_mm_max']:.2f} mm (mean "
-            f"{j['tip_error_mm_mean']:.2f}), tip angle max {j['tip_angle_error_deg_max']:.2f}°, speed-up min "
-            f"{j['speedup_min']:,.0f}x.", ""]
-    worst = max((rows[judged] for rows in by.values() if judged in rows), key=lambda e: e["tip_error_mm"])
-    png = f"validation/finger_hex2s3/finger_{worst['case']}.png"
-    return out + figure(root, png, f"worst case {worst['case']}",
-                        f"The worst-agreeing case, {worst['case']}: the finger FEM (colour: |u|) and the predictor "
-                        "(lines), production mesh and surrogate, the plane X = 0.", "make validate-finger-new")
+    return out, checks

@@ -18,10 +18,31 @@ def predictor_section(root: Path) -> tuple[list[str], list[Check]]:
     out += ["### Timings and residuals (`make bench-predictor`)", ""]
     if b:
         out += _predictor_bench(root, title, b, checks)
+        out += _reference_bench(root, b)
     else:
         out += missing("predictor timings", "make bench-predictor")
     out += _gestures(root)
     return out, checks
+
+
+def _reference_bench(root: Path, b: dict) -> list[str]:
+    """The 1.8 mm reference's bench (bench/predictor_h1.8.json, the default before the
+    switch): its load beside this one's, so that a timing that moved says whether the machine
+    or the model moved it."""
+    ref = load(root, "bench/predictor_h1.8.json")
+    if not ref:
+        return []
+    loads = lambda d: ", ".join(f"{v:.1f}" for v in d.get("load_average_at_start", [])) or "unrecorded"
+    cost = load(root, "bench/surrogate_cost.json") or {"cases": []}
+    ratios = ", ".join(f"{r['models'][-1]['ratio_to_first']:.2f}x at {r['batch']}" for r in cost["cases"]
+                       if r["batch"] <= 2) or "unmeasured"
+    return [f"The timings above are the production predictor's, measured at load averages {loads(b)} at the start "
+            "(the machine's two cores busy with FEM jobs and helpers); the 1.8 mm reference's bench "
+            f"(results/bench/predictor_h1.8.json, `make bench-predictor` on the 1.8 mm surrogate before the switch) "
+            f"ran at {loads(ref)}. Timing targets met there and missed here moved with the load as much as with the "
+            f"model (the production surrogate costs {ratios} the reference's per query in the small batches a "
+            "gesture's Newton steps use, `make bench-surrogate`); `make bench-predictor` on an idle machine judges "
+            "them.", ""]
 
 
 def _domain(b: dict, name: str) -> str:

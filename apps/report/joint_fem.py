@@ -43,7 +43,7 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
     out += ["### The joint (`make joint-render`)", ""]
     out += figure(root, "fem/joint.png", "joint render",
                    "`make joint-render` (`python -m fem.render --mesh-size 1.8 --formulation displacement --out "
-                   "results/fem/joint.png`: the committed data's paper-fidelity 1.8 mm P2 displacement mesh, its "
+                   "results/fem/joint.png`: the 1.8 mm reference data's paper-fidelity P2 displacement mesh, its "
                    "default load case, written in the picture): left the undeformed half-model cut open at "
                    "z = 0; right the deformed joint coloured by |u| (mm), red dots the anchor points.",
                    "make joint-render")
@@ -134,7 +134,7 @@ def _mesh_causes(mc: dict | None) -> list[str]:
         return out + missing("the causes of the mesh error", "make mesh-causes")
     base = mc["base"]
     out += [f"results/fem/mesh_causes.json (`python -m fem.mesh_causes`{'' if mc['complete'] else ', not complete yet'}):"
-            f" each factor changed alone from the paper-fidelity discretisation of the committed data ({base['H']:g} mm, "
+            f" each factor changed alone from the paper-fidelity discretisation of the 1.8 mm reference data ({base['H']:g} mm, "
             f"{base['formulation']} P2), at the mesh study's four corners and four interior loads; effect = the "
             "largest anchor change in % of the largest anchor displacement, worst over the loads solved; "
             f"reference: {mc['reference']}; solve s: one core, from zero, measured beside other jobs. "
@@ -219,9 +219,9 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     shown = (f"{ms['production_mesh']} {prod['formulation']}" if prod else
              f"{ms['production']} (not solved at every load yet)")
     paper = next((f"{m['mesh']} {m['formulation']}" for m in ms["meshes"] if m["key"] == ms["paper"]), ms["paper"])
-    out += ["", f"Production discretisation (the study's `--production`, fem.discretisation.PRODUCTION: what new "
-            f"data is generated on; the committed datasets, surrogate and finger cases are on the paper-fidelity "
-            f"{paper} until `make dataset-new` and what follows regenerate them): "
+    out += ["", f"Production discretisation (the study's `--production`, fem.discretisation.PRODUCTION: what the "
+            f"committed datasets results/data/{{train,heldout}} and the default surrogate are on since the switch, "
+            f"issue 55 §3; the paper-fidelity {paper} data and models are kept as the reference, results/*/h1.8): "
             f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "
             f"{PAPER['mesh_change_percent']} %) and the paper's resolution. The others are shown, not judged.", ""]
     return out
@@ -231,8 +231,8 @@ def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
     title = CAMPAIGN_TITLE
     out, checks = [f"## {title}", ""], []
     rows = []
-    # The committed walks: the surrogate's train and held-out sets first, then every other
-    # committed one (the finer held-out walk, the production hex2:3 walks of make dataset-new).
+    # The committed walks: the surrogate's train and held-out sets first (production), then every
+    # other committed one (the 1.8 mm reference walks, the finer held-out walk).
     others = sorted(p.parent.name for p in (root / "data").glob("*/manifest.json")
                     if p.parent.name not in ("train", "heldout"))
     for name in ("train", "heldout", *others):
@@ -244,8 +244,9 @@ def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
                         f"({100 * m['failures'] / max(done, 1):.2f} %) | {m['cpu_hours']:.2f} | "
                         f"{'yes' if m['complete'] else 'no (resumes)'} |")
     if rows:
-        out += ["From the committed manifests under results/data (`make dataset`, `make dataset-fine`, "
-                "`make dataset-new`; `python -m workflow.dataset info DIR`).",
+        out += ["From the committed manifests under results/data (`make dataset`; the 1.8 mm reference walks "
+                "`make dataset DATA_MESH=\"--mesh-size 1.8 --formulation displacement\" DATA_TAG=_h1.8`; "
+                "`make dataset-fine`; `python -m workflow.dataset info DIR`).",
                 "", "| set | discretisation | seed | converged samples | units | failures | CPU hours | complete |",
                 "|---|---|---|---|---|---|---|---|", *rows, ""]
     else:
@@ -254,8 +255,10 @@ def campaign_section(root: Path) -> tuple[list[str], list[Check]]:
     out += ["### Campaign throughput (`make bench-campaign`)", ""]
     if b:
         setup = b.get("setup", {})
+        roots = ", ".join(d["root"] for d in b.get("datasets", []))
         out += [f"Two campaigns of the same units on {_mesh_words(setup.get('mesh', {}))} "
-                f"{setup.get('formulation', 'displacement')}.", ""]
+                f"{setup.get('formulation', 'displacement')}; the committed data's CPU hours are those of "
+                f"{roots or 'the datasets it names'} (the walks on that mesh).", ""]
         rate, eff = (judge(title, f, [(t, b[t.key])]) for f, t in
                      zip(("campaign samples per hour, 2 ranks", "campaign parallel efficiency"),
                          CAMPAIGN_TARGETS))

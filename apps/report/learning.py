@@ -1,6 +1,8 @@
 """The report's surrogate sections: the models on the test and held-out sets against
 issue 4's targets (SURROGATE_TARGETS), end angles, inference times, and the learning curve
-(issue 35)."""
+(issue 35); then the production surrogate against issue 55's targets beside the
+paper-fidelity reference (REFERENCE: the models on the 1.8 mm displacement walks, kept in
+results/surrogate/h1.8/ since the switch, issue 55 §3)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,9 @@ from apps.report.common import PAPER, Check, Target, cells, figure, figure_grid,
 
 SURROGATE_TITLE = "Joint surrogate (issue 4)"
 CURVE_TITLE = "Surrogate learning curve (issue 35)"
+#: The paper-fidelity reference's surrogate folder (under results/) and its words.
+REFERENCE = "surrogate/h1.8"
+REFERENCE_WORDS = "paper-fidelity reference, 1.8 mm displacement data"
 
 
 # Issue 4's accuracy targets for the improved surrogate on the held-out set.
@@ -37,9 +42,11 @@ def surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
     names = [name for name in ("paper", "improved", "knn") if name in m]
     n = m.get("datasets", {}).get("train", {}).get("n", {})
     out += [f"`make train` (results/surrogate/metrics.json, written by `python -m surrogate.evaluate --report`): "
-            f"results/surrogate/paper.pt and improved.pt trained on the train split "
-            f"{n.get('train', '?')} samples, chosen on validation ({n.get('val', '?')}), and a KNN; test split "
-            f"and the separate held-out set. Paper's mean anchor error: NN {PAPER['surrogate_nn_mm']} mm, "
+            f"results/surrogate/paper.pt and improved.pt trained on the train split of "
+            f"{m.get('datasets', {}).get('train', {}).get('root', '?')} "
+            f"({n.get('train', '?')} samples), chosen on validation ({n.get('val', '?')}), and a KNN; test split "
+            f"and the separate held-out set ({m.get('datasets', {}).get('heldout', {}).get('root', '?')}). "
+            f"Paper's mean anchor error: NN {PAPER['surrogate_nn_mm']} mm, "
             f"KNN {PAPER['surrogate_knn_mm']} mm (docs/decisions.md §0).", "",
             "| model | set | n | " + " | ".join(keys) + " | train time (s) |",
             "|---" * (len(keys) + 4) + "|"]
@@ -87,6 +94,17 @@ def surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
     cap = ("no cap head" if held.get("cap_rotation_error_deg") is None else
            f"{held['cap_rotation_error_deg']:.3f} deg; {num(held.get('p95_cap_rotation_error_deg'), '.3f')} deg")
     out += [f"| cap rotation error (mean; p95) | {cap} |" + cells(None)]
+    ref = (load(root, f"{REFERENCE}/metrics.json") or {}).get("improved", {}).get("timing", {})
+    if ref.get("batched_samples_per_s_float32_all_cores"):
+        out += [f"| the {REFERENCE_WORDS} improved.pt: single-sample (f64); batched (f32, "
+                f"{max(ref.get('threads', [1]))} thread(s)) | {num(ref.get('single_ms_float64'), '.3f')} ms; "
+                f"{num(ref['batched_samples_per_s_float32_all_cores'], '.3g')} /s |" + cells(None)]
+        if batched is not None and batched < 1e6 <= ref["batched_samples_per_s_float32_all_cores"]:
+            out += ["", "The batched throughput moved below issue 4's 1e6 /s with the switch: the production "
+                    "config is the sweep's symmetric 4 x 64 (two network passes a query), which costs more than "
+                    "the reference's one-pass 3 x 96 at large batches (`make bench-surrogate`, the production "
+                    "surrogate's section), and metrics.json timed it beside other jobs; the predictor's gesture "
+                    "times, in batches of 1 and 2, are the figures it was chosen on (docs/decisions.md §9)."]
     return out + [""], checks
 
 
@@ -119,8 +137,9 @@ def learning_curve_section(root: Path) -> tuple[list[str], list[Check]]:
             f"with its Jacobian loss and without it (w_jac = 0), the whole validation split ({n['val']}) choosing the "
             f"kept epoch, measured on the held-out set ({c['data']['heldout_n']}). Every point gets at least "
             f"{c['min_steps']:,} Adam steps with the same learning-rate path ({c['epoch_budget']}), so a small set is "
-            f"not also under-trained. Shown, not judged: it sizes the next campaign (issue 35's accuracy targets "
-            "apply to the surrogate trained on the new data)." + ("" if c.get("complete") else " **The curve is not finished**: "
+            f"not also under-trained, on {c['data']['train']} and {c['data']['heldout']}. Shown, not judged "
+            "(issue 55's accuracy targets are judged on the production model below, and its points are compared "
+            f"with the {REFERENCE_WORDS} curve that sized the production campaign there)." + ("" if c.get("complete") else " **The curve is not finished**: "
                                           "`make learning-curve` resumes it."), "",
             "| samples | Jacobian loss | seed | mean anchor (mm) | tip (mm) | cap rotation (deg) | phi_end (deg) "
             "| Jacobian rel. | train anchor (mm) | Adam steps | train time (s) |", "|---" * 11 + "|"]
@@ -146,12 +165,13 @@ def multifidelity_lines(root: Path) -> list[str]:
     """Fewer fine solves (surrogate.multifidelity): the coarse surrogate plus a correction
     learned from n fine samples, against fine-only training on the same n and, at equal
     FEM CPU hours, the learning curve at m samples (a proxy: its own data)."""
-    m = load(root, "surrogate/multifidelity.json")
+    m = load(root, f"{REFERENCE}/multifidelity.json")
     out = ["### Fewer fine solves: a multi-fidelity surrogate", ""]
     if not m or not m.get("comparison"):
         return out + missing("learns a fine-minus-coarse correction", "make multifidelity")
     c, f, h = m["coarse"], m["fine"], m["heldout"]
-    out += [f"`make multifidelity` (results/surrogate/multifidelity.json, `python -m surrogate.multifidelity`): the "
+    out += [f"`make multifidelity` (results/{REFERENCE}/multifidelity.json, `python -m surrogate.multifidelity`; "
+            f"on the {REFERENCE_WORDS}): the "
             f"coarse surrogate ({c['model']}, trained on {c['samples']:,} samples of {c['root']}, "
             f"{c['cpu_s_per_sample']:.1f} CPU s each) frozen, plus a correction (a least-squares scale of the coarse "
             f"displacement and a small network) trained on n samples of {f['root']} ({f['cpu_s_per_sample']:.1f} CPU s "
@@ -183,7 +203,7 @@ def multifidelity_lines(root: Path) -> list[str]:
     return out
 
 
-PRODUCTION_TITLE = "Joint surrogate on the production data (issue 55, stage 1)"
+PRODUCTION_TITLE = "The production surrogate against the 1.8 mm reference (issue 55)"
 #: Issue 55's held-out targets for the surrogate trained on the production walks.
 PRODUCTION_TARGETS = (("mean anchor error", "mean_anchor_error_mm", 0.03, "mm"),
                       ("tip error", "tip_error_mm", 0.05, "mm"),
@@ -191,17 +211,18 @@ PRODUCTION_TARGETS = (("mean anchor error", "mean_anchor_error_mm", 0.03, "mm"),
 
 
 def production_surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
-    """The surrogates trained on the production walks (hex2:3 mixed) beside the committed
-    ones: the sweep that chose the config, the models against issue 55's targets, their cost
-    per query against the committed model's, and the learning curve beside the 1.8 mm one."""
+    """The surrogates trained on the production walks (hex2:3 mixed), the defaults since the
+    switch: the sweep that chose the config, the chosen model against issue 55's targets
+    beside the 1.8 mm reference models, its cost per query against the reference model's,
+    and the learning curve beside the 1.8 mm one."""
     title = PRODUCTION_TITLE
     out = [f"## {title}", ""]
-    sweep = sorted(root.glob("surrogate/hex2s3/sweep/*.json"))
+    sweep = sorted(root.glob("surrogate/sweep/*.json"))
     if sweep:
         rows = [load(root, p.relative_to(root).as_posix()) for p in sweep]
         rows.sort(key=lambda r: r["val"]["mean_anchor_error_mm"])
-        out += [f"`make sweep-new` (results/surrogate/hex2s3/sweep/, `python -m surrogate.sweep` on "
-                f"results/data/train_hex2s3, bounded and resumable): {len(rows)} variants of the improved config "
+        out += [f"`make sweep` (results/surrogate/sweep/, `python -m surrogate.sweep` on "
+                f"results/data/train, bounded and resumable): {len(rows)} variants of the improved config "
                 "trained so far, ranked by validation mean anchor error (validation chooses; held-out shown).", "",
                 "| variant | overrides | val mean anchor (mm) | held-out mean anchor (mm) | tip (mm) | cap rotation (deg) "
                 "| train s |", "|---|---|---|---|---|---|---|"]
@@ -210,34 +231,37 @@ def production_surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
                 f"| {num(r['heldout'].get('cap_rotation_error_deg'), '.3f')} | {num(r['train_time_s'], '.0f')} |"
                 for r in rows]
         out.append("")
-    m = load(root, "surrogate/hex2s3/metrics.json")
+    m = load(root, "surrogate/metrics.json")
     if not m:
-        return out + missing("trains the chosen config and the paper's on the production walks", "make train-new"), []
-    n = m.get("datasets", {}).get("train", {}).get("n", {})
+        return out + missing("trains the chosen config and the paper's on the production walks", "make train"), []
     keys = ("mean_anchor_error_mm", "p95_anchor_error_mm", "tip_error_mm", "phi_end_error_deg", "jacobian_rel_error")
-    out += [f"`make train-new` (results/surrogate/hex2s3/metrics.json): paper.pt, improved.pt (the sweep's choice, "
-            f"its config in the checkpoint) and a KNN trained on the production train walk's split ({n.get('train', '?')} "
-            f"train, {n.get('val', '?')} validation), measured on its test split and on the production held-out walk "
-            "(results/data/heldout_hex2s3). The committed models (results/surrogate/, 1.8 mm data) stay the defaults "
-            "until the switch (stage 3).", "",
-            "| model | set | n | " + " | ".join(keys) + " | cap rotation mean / p95 |", "|---" * (len(keys) + 4) + "|"]
-    for name in ("paper", "improved", "knn"):
-        if name in m:
-            for split in ("test", "heldout"):
-                r = m[name][split]
-                out.append(f"| {name} | {split} | {r['n']} | " + " | ".join(num(r.get(k)) for k in keys)
-                           + f" | {_angles(r, 'cap_rotation_error_deg')} |")
+    ref = load(root, f"{REFERENCE}/metrics.json")
+    if ref:
+        out += [f"The {REFERENCE_WORDS} (results/{REFERENCE}/metrics.json, the defaults before the switch): paper.pt, "
+                f"improved.pt and a KNN trained on {ref['datasets']['train']['root']}, measured on its test split and on "
+                f"{ref['datasets']['heldout']['root']}, each against its own data (the production models' table is "
+                "the section above):", "",
+                "| model | set | n | " + " | ".join(keys) + " | cap rotation mean / p95 |", "|---" * (len(keys) + 4) + "|"]
+        for name in ("paper", "improved", "knn"):
+            if name in ref:
+                for split in ("test", "heldout"):
+                    r = ref[name][split]
+                    out.append(f"| {name} (1.8 mm) | {split} | {r['n']} | " + " | ".join(num(r.get(k)) for k in keys)
+                               + f" | {_angles(r, 'cap_rotation_error_deg')} |")
+        out.append("")
     held = m["improved"]["heldout"]
     checks = [judge(title, f"production surrogate {label}", [(Target("<=", bound, unit), held.get(key))])
               for label, key, bound, unit in PRODUCTION_TARGETS]
-    out += ["", "The chosen model against issue 55's targets (production held-out walk, 256 samples):", "",
+    out += ["The chosen model (results/surrogate/improved.pt, the default) against issue 55's targets (production "
+            f"held-out walk, {held['n']} samples):", "",
             "| figure | measured | target | met |", "|---|---|---|---|"]
     out += [f"| {label} | {num(held.get(key))} {unit} |" + cells(c)
             for (label, key, _, unit), c in zip(PRODUCTION_TARGETS, checks)]
     out += [f"| cap rotation error, p95 | {num(held.get('p95_cap_rotation_error_deg'), '.3f')} deg |" + cells(None), ""]
     cost = load(root, "bench/surrogate_cost.json")
     if cost:
-        out += [f"Cost per query (`make bench-surrogate`, results/bench/surrogate_cost.json: median ms of one "
+        out += [f"Cost per query against the 1.8 mm reference model (`make bench-surrogate`, "
+                f"results/bench/surrogate_cost.json, measured before the switch moved the files: median ms of one "
                 f"{cost['dtype']} call with anchors, cap rotation and Jacobian on {cost['threads']} thread, the models "
                 f"timed interleaved; load average {cost['load_average']:.1f}"
                 + (f", beside: {cost['beside']}" if cost.get("beside") else "") + "):", "",
@@ -250,7 +274,7 @@ def production_surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
     return out + _production_curve(root) + lines, checks + accounted
 
 
-def _failed_samples(root: Path, name: str = "train_hex2s3") -> tuple[list[str], list[Check]]:
+def _failed_samples(root: Path, name: str = "train") -> tuple[list[str], list[Check]]:
     """Issue 55 stage 2: the production train walk's samples accounted for (its manifest),
     and each failed sample that workflow.resolve solved afterwards (fem/resolved_<name>.json):
     how, the stored state's stiffness, and its walk pairs' trapezoid miss beside the
@@ -296,15 +320,15 @@ def _failed_samples(root: Path, name: str = "train_hex2s3") -> tuple[list[str], 
 def _production_curve(root: Path) -> list[str]:
     """The learning curve on the production data beside the 1.8 mm one, point by point."""
     out = ["### Learning curve on the production data", ""]
-    new = load(root, "surrogate/hex2s3/learning_curve.json")
+    new = load(root, "surrogate/learning_curve.json")
     if not new or not new.get("points"):
-        return out + missing("the learning curve's points on the production walks", "make learning-curve-new")
-    old = load(root, "surrogate/learning_curve.json") or {"points": []}
+        return out + missing("the learning curve's points on the production walks", "make learning-curve")
+    old = load(root, f"{REFERENCE}/learning_curve.json") or {"points": []}
     ref = {(p["samples"], p["jacobian_loss"], p["seed"]): p for p in old["points"]}
-    out += [f"`make learning-curve-new` (results/surrogate/hex2s3/learning_curve.json): the `{new['config']}` config "
+    out += [f"`make learning-curve` (results/surrogate/learning_curve.json): the `{new['config']}` config "
             "on nested subsets of the production train split, measured on the production held-out walk, beside the "
-            "same point of the 1.8 mm curve (results/surrogate/learning_curve.json, its own data)."
-            + ("" if new.get("complete") else " **Not finished**: `make learning-curve-new` resumes it."), "",
+            f"same point of the {REFERENCE_WORDS} curve (results/{REFERENCE}/learning_curve.json, its own data)."
+            + ("" if new.get("complete") else " **Not finished**: `make learning-curve` resumes it."), "",
             "| samples | Jacobian loss | seed | production: mean anchor (mm), cap (deg) | 1.8 mm: mean anchor (mm), cap (deg) |",
             "|---|---|---|---|---|"]
     pair = lambda p: (f"{num(p['heldout_mean_anchor_error_mm'])}, {num(p['heldout_cap_rotation_error_deg'], '.3f')}"
@@ -313,7 +337,4 @@ def _production_curve(root: Path) -> list[str]:
         out.append(f"| {p['samples']} | {'with' if p['jacobian_loss'] else 'without'} | {p['seed']} | {pair(p)} "
                    f"| {pair(ref.get((p['samples'], p['jacobian_loss'], p['seed'])))} |")
     out.append("")
-    return out + figure(root, "surrogate/hex2s3/learning_curve.png", "the learning curve on the production data",
-                        "`make learning-curve-new` (`python -m surrogate.learning_curve` on results/data/train_hex2s3): "
-                        "held-out errors against the training samples, with and without the Jacobian loss.",
-                        "make learning-curve-new")
+    return out   # its figure (both curves) is the learning-curve section's

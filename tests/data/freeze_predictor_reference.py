@@ -4,7 +4,7 @@ Run with the predictor of commit bbc0df4 (its hard-wired joint-link-joint-tip ch
 the path, from the repository root:
 
     git worktree add /tmp/bbc0df4 bbc0df4
-    PYTHONPATH=/tmp/bbc0df4 .venv/bin/python tests/data/freeze_predictor_reference.py --model results/surrogate/paper.pt
+    PYTHONPATH=/tmp/bbc0df4 .venv/bin/python tests/data/freeze_predictor_reference.py --model results/surrogate/h1.8/paper.pt
 
 It adds (or replaces) the entry of ``--model`` ("analytic" or a surrogate checkpoint
 unchanged since that commit). The cases and their off-equilibrium tau offsets are those of
