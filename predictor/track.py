@@ -290,8 +290,10 @@ class Tracker:
         predictor.inversion) and e' = e - ex J⁻¹ r; dP minimises |e' + G dP|² (Levenberg-
         damped as predictor.inversion.gauss_newton, a component at a bound whose step points
         out held there, capped at MAX_STEP, clipped to the box), dx follows. Steps backtrack
-        on |r|² + |e|² (NEWTON_HALVINGS). It stops where the solver's tolerances hold
-        (``_converged``) and the step moves P less than LS_DP_MPA or its linear model
+        on |r|² + |e|² (NEWTON_HALVINGS), or on |r| alone where |e|² stays within the
+        model's |e'|² (near a far goal's minimum |e|² is mm², |r|² far below its rounding).
+        It stops where the solver's tolerances hold (``_converged``) and the step moves P
+        less than LS_DP_MPA or its linear model
         gains less than STALL of f (predictor.inversion.gauss_newton's stall, on the model:
         stationary, Gᵀe' ~ 0, or held at the bounds; a crawl where the outline's vertices
         enter X = 0, whose model promises more than the steps gain, runs out): f, the
@@ -332,9 +334,14 @@ class Tracker:
                 self._newton_at = (x, p, (J, r, Jp, T))
                 return f
             dx = -(M[:, 0] + M[:, 1:] @ dp)
+            rr = float(r[0] @ r[0])
             for _ in range(NEWTON_HALVINGS):
                 trial = _scored(self._evaluate(x + dx[None], p + dp[None]), goal)
-                if trial[-1] < merit:
+                # |r|² and |e|² differ by orders near a far goal's minimum (mm² against the
+                # scaled residual's): a step that finishes the equilibrium and keeps the tip's
+                # |e|² within that of the equilibrium's own correction (|e'|², the model's) is taken
+                if trial[-1] < merit or (float(trial[1][0] @ trial[1][0]) < rr
+                                         and float(trial[4] @ trial[4]) <= float(e1 @ e1) + 1e-12 * f):
                     break
                 dx, dp = 0.5 * dx, 0.5 * dp
             else:
