@@ -12,24 +12,40 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    Near the last answer a position goal is first tried by Newton on the square system
    of the equilibrium and the goal in (x, P) at once (``Tracker._newton``: the problem's
    own residual, with the plane's penalty where the outline crosses X = 0, steps
-   backtracked), which needs the steps inside the box and a quadratic descent; otherwise
-   the Gauss-Newton.
+   backtracked), which needs the steps inside the box and a quadratic descent; where it
+   leaves the box or its step is too long (beyond the reach, a bound; not where it
+   crawls) the same system with the goal in the least-squares sense (``Tracker.
+   _least_squares``: the reduced Gauss-Newton of predictor.inversion on one Jacobian per
+   step, no continuation, to gauss_newton's stall); otherwise the Gauss-Newton. The last
+   converged point's Jacobian and tip rows (they do not depend on the goal) start the
+   next goal's Newton.
 2. Unreachable goals: the search stops at the locally closest tip. The kept grid (a
    START_GRID x START_GRID cold grid of forward answers and the coarse COARSE x COARSE
    one of predictor.inversion with the gestures pressed on X = 0, solved once per
    process, refined by every verified answer) is looked up (no solve): when one of its
    tips is closer to the goal than the local answer, the search restarts from the
-   N_STARTS best of them and the closest verified answer is kept. No global search
+   N_STARTS best of them and the closest verified answer is kept; when the kept grid's
+   best is closer by SAME_TIP_MM or less (the search's loose tolerance against a kept
+   earlier answer) that kept row itself is the candidate instead. No global search
    otherwise; the answer is flagged ``unreachable`` with its position error (and
    wrapped angle error), never farther from the goal than the kept grid's best.
 3. Verification (every answer): the forward equilibrium at the answer's pressures and at
    its 8 ±REGULATOR neighbours (the regulators' resolution), solved anew: in one batched
    cold solve of the predictor (predictor.solve from tau = 0, without the plane's
    penalty, whose answer is the gripper's wherever the outline stays at X >= 0 — the
-   broad phase ``solve`` itself uses), and where the finger presses on X = 0 by the
-   solver's continuation (the LM with the plane's homotopy, full tolerance): the centre
-   from the previous verified gesture (the gripper's history along the track), the
-   stencil's pressed rows from the verified centre (0.01 MPa steps). The answer is
+   broad phase ``solve`` itself uses), and where the finger presses on X = 0: the centre
+   by up to WARM_STEPS of the solver's Newton steps (predictor.newton.newton_iterate, the
+   problem's residual with the plane's penalty) from the search's own equilibrium at the
+   same pressures, checked by the solver's rule (``meets_tolerances``) — still a check of
+   the forward equilibrium, not of the search: the search's iterate is only the start
+   (at 100x the tolerance, from the search's own Jacobians and continuation), the answer
+   is the forward residual's root at full tolerance, and its tip (the forward statics)
+   must lie within VERIFY_TOL_MM of the search's; the branch is the search's, itself
+   continued from the previous verified gesture or a kept forward answer. Where Newton
+   fails, the solver's continuation (the LM with the plane's homotopy, full tolerance)
+   from the previous verified gesture (the gripper's history along the track), as for
+   the stencil's pressed rows from the verified centre (0.01 MPa steps; Newton alone
+   fails there, the outline's vertices entering and leaving X = 0: measured). The answer is
    ``verified`` when its forward solve converged and its fingertip lies within
    VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
    angle are the forward solve's; an unverified search result is never returned as
@@ -60,12 +76,17 @@ from predictor.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_
 from predictor.options import SolverOptions
 from predictor.problem import FULL_BOX, check_box
 from predictor.result import GestureResult
-from predictor.solve import gesture_result, meets_tolerances, solve
+from predictor.solve import gesture_result, meets_tolerances, newton_iterate, solve
 from predictor.statics import GripperProblem, apart
 
 NEWTON_ITER = 8           # Tracker._newton: iterations before the search takes over
 NEWTON_HALVINGS = 4       # Tracker._newton: step halvings of its backtracking
 NEWTON_STALL = 0.5        # Tracker._newton: an accepted step must lower |r|² + |e|² below this fraction
+WARM_STEPS = 4            # Tracker._warm: Newton steps of a verification warm from a neighbour's equilibrium
+TIP_DP = 1e-6 * 0.3       # MPa: the central difference of the tip in P (Tracker._evaluate)
+LS_ITER = 8               # Tracker._least_squares: iterations before the search takes over
+LS_DP_MPA = 1e-5          # Tracker._least_squares: a step moving P less than this ends it (~1e-3 mm of tip)
+SAME_TIP_MM = 1e-3        # Tracker.answer: a kept row no closer than the search's by more is taken as is
 START_GRID = 9            # the kept grid of forward answers: START_GRID x START_GRID over the box
 MAX_GOALS = 100_000       # goals in one track file
 COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
@@ -135,6 +156,8 @@ class Tracker:
         self.branch: Branch | None = None      # the previous answer's equilibrium (search)
         self.anchor = None                      # the previous verified gesture (p (1, 2), x (1, 6))
         self.coarse_kept = False
+        self._newton_at = None                  # (x, p, its evaluation) of the last converged _newton
+        self.crawled = False                    # the last _newton stopped in a crawl (backtracking failed)
         if keep_coarse:
             self._keep_coarse()
 
@@ -174,6 +197,31 @@ class Tracker:
                 chosen.append(i)
         return chosen
 
+    def _evaluate(self, x: torch.Tensor, p: torch.Tensor):
+        """(J, r, dr/dP, tip rows T (17, 2)) at (x (1, 6), p (1, 2)): the solver's difference
+        Jacobian of the problem itself (predictor.jacobians; where the outline crosses X = 0
+        the plane's penalty is in r) and the fingertip at the point and at its central
+        differences in x (12 rows) and P (4 rows) (predictor.inversion.traced_tip_fn):
+        neither depends on the goal."""
+        from predictor.inversion import traced_tip_fn
+        from predictor.jacobians import difference_offsets, jacobian_fn
+
+        _, offsets = difference_offsets(6, 1e-6)
+        dP = TIP_DP * torch.eye(2, dtype=torch.float64)
+        J, r, Jp = jacobian_fn(self.problem)(x, p)
+        with torch.inference_mode():
+            T = traced_tip_fn(self.problem)(torch.cat((x + offsets, x.expand(4, 6))),
+                                            torch.cat((p.expand(13, 2), p + dP, p - dP)))[:, :2].clone()
+        return J, r, Jp, T
+
+    @staticmethod
+    def _tip_derivatives(T: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(d tip/dx (2, 6), d tip/dP (2, 2)) from ``_evaluate``'s tip rows (central differences)."""
+        from predictor.jacobians import difference_offsets
+
+        hx, _ = difference_offsets(6, 1e-6)
+        return ((T[1:7] - T[7:13]) / (2 * hx[:, None])).T, ((T[13:15] - T[15:17]) / (2 * TIP_DP)).T
+
     def _newton(self, ip: InverseProblem, branch: Branch) -> float | None:
         """The fast path of a position goal near the last answer: Newton on the square
         system of the equilibrium and the goal, r(x, P) = 0 (6 scaled rows) and
@@ -189,38 +237,26 @@ class Tracker:
         LM of the search does better there). f when it converged (the solver's tolerances,
         ``_converged``, the tip within 0.1 TIP_TOL_MM), the branch moved there; else None,
         the branch unchanged (the search goes on by continuation)."""
-        from predictor.inversion import MAX_STEP, traced_tip_fn
-        from predictor.jacobians import difference_offsets, jacobian_fn
+        from predictor.inversion import MAX_STEP
 
-        prob = self.problem
-        jac = jacobian_fn(prob)
-        tip_fn = traced_tip_fn(prob)
-        gx, gy = search_tip(ip.goal)
+        goal = torch.tensor(search_tip(ip.goal), dtype=torch.float64)
         lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
         hi = torch.tensor([self.box[1], self.box[3]], dtype=torch.float64)
-        hx, offsets = difference_offsets(6, 1e-6)
-        hp = 1e-6 * 0.3
-        goal = torch.tensor((gx, gy), dtype=torch.float64)
-        dP = hp * torch.eye(2, dtype=torch.float64)
-
-        def at(x, p):
-            """(J, r, dr/dP, tip rows (17, 2), e, merit |r|² + |e|²) at (x, p)."""
-            J, r, Jp = jac(x, p)
-            with torch.inference_mode():
-                T = tip_fn(torch.cat((x + offsets, x.expand(4, 6))),
-                           torch.cat((p.expand(13, 2), p + dP, p - dP)))[:, :2].clone()   # (17, 2)
-            e = T[0] - goal
-            return J, r, Jp, T, e, float(r[0] @ r[0] + e @ e)
-
+        at = lambda x, p: _scored(self._evaluate(x, p), goal)  # noqa: E731
+        self.crawled = False
         x, p = branch.x.clone(), branch.p.clone()
-        here = at(x, p)
+        # the last converged Newton's own evaluation at this very point (the previous
+        # answer's): the Jacobians and tip rows do not depend on the goal, only e does
+        last = self._newton_at
+        same = last is not None and torch.equal(last[0], x) and torch.equal(last[1], p)
+        here = _scored(last[2], goal) if same else at(x, p)
         for _ in range(NEWTON_ITER):
             J, r, Jp, T, e, merit = here
             if _converged(r, self.options) and float(e.norm()) <= 0.1 * TIP_TOL_MM:
                 branch.restore((p, x, (J[:, :6], Jp)))
+                self._newton_at = (x, p, (J, r, Jp, T))
                 return float(e @ e)
-            ex = ((T[1:7] - T[7:13]) / (2 * hx[:, None])).T             # (2, 6)
-            ep = ((T[13:15] - T[15:17]) / (2 * hp)).T                   # (2, 2)
+            ex, ep = self._tip_derivatives(T)
             A = torch.cat((torch.cat((J[0, :6], Jp[0]), 1), torch.cat((ex, ep), 1)))   # (8, 8)
             dz, info = torch.linalg.solve_ex(A, -torch.cat((r[0, :6], e)))
             if int(info) != 0 or float(dz[6:].abs().max()) > MAX_STEP:
@@ -236,10 +272,81 @@ class Tracker:
                     break
                 dz = 0.5 * dz
             else:
+                self.crawled = True
                 return None
             if trial[-1] > NEWTON_STALL * merit and not _converged(trial[1], self.options):
+                self.crawled = True
                 return None     # a linear crawl (the outline's vertices entering X = 0): the search's LM
             x, p, here = x + dz[None, :6], p_new, trial
+        return None
+
+    def _least_squares(self, ip: InverseProblem, branch: Branch) -> float | None:
+        """The fast path of a position goal the square Newton cannot meet (beyond the reach,
+        or a bound): Gauss-Newton on the same system with the goal in the least-squares
+        sense, in (x, P) at once from the branch's point (``_evaluate``: one Jacobian and
+        the tip rows per iteration, no continuation). Eliminating dx from the linearised
+        equilibrium J dx + dr/dP dP = -r leaves the tip's e + ex dx + ep dP = e' + G dP with
+        G = ep - ex J⁻¹ dr/dP (the implicit function theorem's de/dP, module
+        predictor.inversion) and e' = e - ex J⁻¹ r; dP minimises |e' + G dP|² (Levenberg-
+        damped as predictor.inversion.gauss_newton, a component at a bound whose step points
+        out held there, capped at MAX_STEP, clipped to the box), dx follows. Steps backtrack
+        on |r|² + |e|² (NEWTON_HALVINGS), or on |r| alone where |e|² stays within the
+        model's |e'|² (near a far goal's minimum |e|² is mm², |r|² far below its rounding).
+        It stops where the solver's tolerances hold (``_converged``) and the step moves P
+        less than LS_DP_MPA or its linear model
+        gains less than STALL of f (predictor.inversion.gauss_newton's stall, on the model:
+        stationary, Gᵀe' ~ 0, or held at the bounds; a crawl where the outline's vertices
+        enter X = 0, whose model promises more than the steps gain, runs out): f, the
+        branch moved there; else (LS_ITER steps, a failed backtracking) None, the branch
+        unchanged (the search goes on by continuation). The answer's f is the stationary
+        value gauss_newton's continuation would reach from here (same objective, same
+        stall), reached without a continuation LM per step."""
+        from predictor.inversion import MAX_STEP, STALL
+
+        goal = torch.tensor(search_tip(ip.goal), dtype=torch.float64)
+        lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
+        hi = torch.tensor([self.box[1], self.box[3]], dtype=torch.float64)
+        x, p = branch.x.clone(), branch.p.clone()
+        last = self._newton_at
+        same = last is not None and torch.equal(last[0], x) and torch.equal(last[1], p)
+        here = _scored(last[2] if same else self._evaluate(x, p), goal)
+        for _ in range(LS_ITER):
+            J, r, Jp, T, e, merit = here
+            ex, ep = self._tip_derivatives(T)
+            M = torch.linalg.solve(J[0, :6], torch.cat((r[0, :6, None], Jp[0]), 1))   # J⁻¹ [r, dr/dP]
+            e1, G = e - ex @ M[:, 0], ep - ex @ M[:, 1:]
+            f = float(e @ e)
+            A = G.T @ G + 1e-9 * torch.eye(2, dtype=torch.float64)
+            dp = -torch.linalg.solve(A, G.T @ e1)
+            stuck = ((p[0] <= lo) & (dp < 0)) | ((p[0] >= hi) & (dp > 0))
+            if bool(stuck.all()):
+                dp = torch.zeros(2, dtype=torch.float64)
+            elif bool(stuck.any()):          # slide along the bound: the free component alone
+                k = int((~stuck).nonzero()[0])
+                dp = torch.zeros(2, dtype=torch.float64)
+                dp[k] = -float(G[:, k] @ e1) / float(G[:, k] @ G[:, k] + 1e-9)
+            dp = dp * min(1.0, MAX_STEP / max(float(dp.abs().max()), 1e-300))
+            dp = torch.minimum(torch.maximum(p[0] + dp, lo), hi) - p[0]
+            e2 = e1 + G @ dp
+            gain = float(e1 @ e1 - e2 @ e2)        # the linear model's own: nothing left to gain
+            if _converged(r, self.options) and (float(dp.abs().max()) <= LS_DP_MPA or gain <= STALL * f):
+                branch.restore((p, x, (J[:, :6], Jp)))
+                self._newton_at = (x, p, (J, r, Jp, T))
+                return f
+            dx = -(M[:, 0] + M[:, 1:] @ dp)
+            rr = float(r[0] @ r[0])
+            for _ in range(NEWTON_HALVINGS):
+                trial = _scored(self._evaluate(x + dx[None], p + dp[None]), goal)
+                # |r|² and |e|² differ by orders near a far goal's minimum (mm² against the
+                # scaled residual's): a step that finishes the equilibrium and keeps the tip's
+                # |e|² within that of the equilibrium's own correction (|e'|², the model's) is taken
+                if trial[-1] < merit or (float(trial[1][0] @ trial[1][0]) < rr
+                                         and float(trial[4] @ trial[4]) <= float(e1 @ e1) + 1e-12 * f):
+                    break
+                dx, dp = 0.5 * dx, 0.5 * dp
+            else:
+                return None
+            x, p, here = x + dx[None], p + dp[None], trial
         return None
 
     def _search(self, ip: InverseProblem, branch: Branch) -> float:
@@ -267,7 +374,11 @@ class Tracker:
         found = []                                   # (f, branch, anchor)
         exact = (0.1 * TIP_TOL_MM) ** 2
         if self.branch is not None:
-            quick = self._newton(ip, self.branch) if goal.angle_deg is None else None
+            quick = None
+            if goal.angle_deg is None:
+                quick = self._newton(ip, self.branch)
+                if quick is None and not self.crawled:     # a bound or beyond reach, not a crawl
+                    quick = self._least_squares(ip, self.branch)
             if quick is not None:
                 found.append((quick, self.branch, self.anchor))
             else:
@@ -277,8 +388,21 @@ class Tracker:
         for _ in range(2):
             if found and best() > exact and not self.coarse_kept:
                 self._keep_coarse()     # an unmet goal: the coarse grid's pressed gestures join the kept grid
-            if found and (best() <= exact or float(self._grid_scores(goal).min()) >= best() - 1e-12):
-                break                   # met, or the kept grid knows nothing closer: no restart
+            if found and best() <= exact:
+                break                   # met: no restart
+            if found:
+                scores = self._grid_scores(goal)
+                i = int(scores.argmin())
+                if float(scores[i]) >= best() - 1e-12:
+                    break               # the kept grid knows nothing closer: no restart
+                if math.sqrt(best()) - math.sqrt(float(scores[i])) <= SAME_TIP_MM:
+                    # the kept grid's best is as close as the search's answer (to SAME_TIP_MM:
+                    # the search's loose tolerance; a kept earlier answer): that row itself
+                    # (a forward answer) is the candidate, verified as any, instead of the
+                    # N_STARTS searches that end there (measured: ~1 s on the demo track)
+                    b = Branch(ip, self.kept[0][i], self.kept[1][i])
+                    found.append((float(scores[i]), b, (b.p.clone(), b.x.clone())))
+                    break
             restarted = restarted or bool(found)
             P, tau = self.kept[0], self.kept[1]
             for i in self._grid_starts(goal):
@@ -322,6 +446,19 @@ class Tracker:
         cont.tol = self.options
         return cont.neighbours(ps)
 
+    def _warm(self, ps: torch.Tensor, x0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forward equilibria at ps (n, 2) by up to WARM_STEPS of the solver's full Newton
+        steps (predictor.newton.newton_iterate: the problem's own residual, with the plane's
+        penalty) from x0 (n, 6), each checked by the solver's convergence rule at its
+        answer (``meets_tolerances``: every joint's residual within the tolerances, tau in
+        the box). No LM here: a row Newton leaves is the continuation's (``_continue``).
+        Returns (x (n, 6), converged (n,))."""
+        x, its, _ = newton_iterate(self.problem, ps, x0.reshape(-1, 2, 3), self.options, WARM_STEPS)
+        ok = torch.isfinite(x).all(-1)
+        x = torch.nan_to_num(x)
+        g = gesture_result(self.problem, ps, x, ok, its, time.perf_counter(), "newton", None)
+        return x, ok & meets_tolerances(g, x, self.options)
+
     def _verify(self, ip: InverseProblem, branch: Branch, anchor, force: bool = False):
         """(verifying gesture (one row), verified, robust), or None when the forward solve
         disagrees (unless ``force``: then returned with verified False). Module docstring
@@ -338,10 +475,15 @@ class Tracker:
         if not bool(pressed.any()):   # every row the problem's own (the solver's rule checked them)
             g = res
         else:
-            # the centre from the previous verified gesture, then the stencil's pressed rows
-            # from the verified centre (steps of REGULATOR: the tangent predictor lands close)
+            # the centre by Newton from the search's own equilibrium at the same pressures
+            # (``_warm``), else by continuation from the previous verified gesture; the
+            # stencil's pressed rows by continuation from the verified centre (steps of
+            # REGULATOR: the tangent predictor lands close; Newton alone fails there, the
+            # outline's vertices entering and leaving X = 0 within the step: measured)
             if bool(pressed[0]):
-                x[:1], ok[:1] = self._continue(ip, anchor, ps[:1])
+                x[:1], ok[:1] = self._warm(ps[:1], branch.x)
+                if not bool(ok[0]):
+                    x[:1], ok[:1] = self._continue(ip, anchor, ps[:1])
             rest = pressed.clone()
             rest[0] = False
             if bool(rest.any()):
@@ -360,6 +502,14 @@ class Tracker:
             return None
         centre = dataclasses.replace(centre, converged=ok[:1].clone())
         return centre, agree, agree and bool(ok.all())
+
+
+def _scored(evaluation, goal: torch.Tensor):
+    """``Tracker._evaluate``'s (J, r, dr/dP, T) with the goal's e = tip - goal (2,) and the
+    merit |r|² + |e|²."""
+    J, r, Jp, T = evaluation
+    e = T[0] - goal
+    return J, r, Jp, T, e, float(r[0] @ r[0] + e @ e)
 
 
 def _converged(r: torch.Tensor, options: SolverOptions) -> bool:

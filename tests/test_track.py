@@ -23,7 +23,7 @@ from predictor.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, c
 from predictor.options import SolverOptions
 from predictor.problem import FULL_BOX
 from predictor.solve import solve
-from predictor.track import load_track, tip_goal, track
+from predictor.track import Tracker, load_track, tip_goal, track
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = str(ROOT / "results/surrogate/improved.pt")
@@ -108,6 +108,37 @@ def test_pressed_goals_by_newton_match_the_forward_pressures(free):
     again = solve(prob, got)
     err = (again.pose.tip_end - fwd.pose.tip_end).norm(dim=-1)
     assert bool(again.converged.all()) and float(err.max()) <= TIP_TOL_MM
+
+
+def test_least_squares_newton_ends_where_the_continuation_does(free):
+    """A goal beyond the reach next to a verified answer (as on the demo's return leg: the
+    closest tip held at P2 = -0.3 MPa): the least-squares Newton in (x, P) (one Jacobian per
+    step, no continuation) ends at an equilibrium within the solver's tolerances (a new
+    forward solve at its pressures puts the tip within VERIFY_TOL_MM of its tip) and as
+    close to the goal as the single inverse's Gauss-Newton by continuation from the same
+    point (0.01 mm), and no closer than the reach allows (farther than TIP_TOL_MM)."""
+    from predictor.inversion import Branch, InverseProblem, gauss_newton, traced_tip_fn
+
+    prob = free.problem
+    tracker = Tracker(prob)
+    P = torch.tensor([[0.0, -0.3]], dtype=torch.float64)
+    tip = solve(prob, P).pose.tip_end[0].tolist()
+    assert tracker.answer(tip_goal(*tip)).status == "reached"
+    goal = tip_goal(tip[0], tip[1] + 15.0)      # 15 mm above: beyond the reach (held at P2 = -0.3 MPa)
+    ip = InverseProblem(prob, goal)
+    other = Branch(ip, tracker.branch.p.clone(), tracker.branch.x.clone())
+    f = tracker._least_squares(ip, tracker.branch)
+    assert f is not None
+    gauss_newton(ip, other)
+    with torch.no_grad():
+        t_gn = traced_tip_fn(prob)(other.x, other.p)[0, :2]
+        t_ls = traced_tip_fn(prob)(tracker.branch.x, tracker.branch.p)[0, :2]
+    g = torch.tensor(goal.tip, dtype=torch.float64)
+    assert math.sqrt(f) == pytest.approx(float((t_ls - g).norm()), abs=1e-9)
+    assert abs(float((t_ls - g).norm()) - float((t_gn - g).norm())) <= 0.01
+    assert math.sqrt(f) > TIP_TOL_MM and float(tracker.branch.p[0, 1]) == -0.3
+    fwd = solve(prob, tracker.branch.p)
+    assert bool(fwd.converged[0]) and float((fwd.pose.tip_end[0] - t_ls).norm()) <= VERIFY_TOL_MM
 
 
 def test_api_track_tip(free):
