@@ -168,15 +168,18 @@ def test_shard_blocked_by_a_folder_keeps_it(tmp_path):
 
 
 def test_sweep_rerun_keeps_committed_results(tmp_path, capsys):
-    """The README's rerun of three variants whose committed results predate the cap head:
-    nothing is retrained or replaced, the table keeps all its rows, each stale one says so."""
+    """The README's rerun of three variants whose committed results predate the cap head
+    (the 1.8 mm reference sweep, on its own data): nothing is retrained or replaced, the
+    table keeps all its rows, each stale one says so."""
     from surrogate import sweep
 
-    committed = ROOT / "results" / "surrogate" / "sweep"
+    committed = ROOT / "results" / "surrogate" / "h1.8" / "sweep"
     work = tmp_path / "sweep"
     shutil.copytree(committed, work)
     before = {p.name: p.read_bytes() for p in work.glob("*.json")}
-    assert sweep.main(["--only", "improved", "nojac", "symmetric-w64x4", "--dir", str(work)]) == 0
+    data = [str(ROOT / "results" / "data" / f"{name}_h1.8") for name in ("train", "heldout")]
+    assert sweep.main(["--only", "improved", "nojac", "symmetric-w64x4", "--dir", str(work),
+                       "--data", data[0], "--heldout", data[1]]) == 0
     said = capsys.readouterr().out
     assert "0 of 3 variants current, 0 to train" in said and "3 stale result(s) kept" in said
     assert {p.name: p.read_bytes() for p in work.glob("*.json")} == before

@@ -99,7 +99,8 @@ def test_report_judges_the_worst_overlap(folders, tmp_path):
     0.02; with it at 0.05 mm the worst is the atlases' 0.08 mm, met."""
     _, after = folders
     root = after.parent
-    out = tmp_path / "after" / "predictor" / "contact_change.json"
+    out = tmp_path / "after" / "predictor" / "h1.8" / "contact_change.json"   # where the report reads it
+    out.parent.mkdir(parents=True)
     run = subprocess.run([sys.executable, "-m", "predictor.contact_change", "--before", str(folders[0]),
                           "--after", str(after), "--label", "test", "--out", str(out)], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
@@ -127,7 +128,7 @@ def test_costs_quote_the_bench_and_its_machine(monkeypatch, tmp_path):
              "details": {"gravity_fast": {"n": 30, "fallbacks": 28}, "gravity_nn_throughput": thr}}
     monkeypatch.setattr(contact, "load", lambda root, rel: bench if rel == "bench/predictor.json" else None)
     text = "\n".join(contact_section(tmp_path)[0])
-    assert "so the LM finishes it on the gripper's equilibrium (28 of 30 bench cases)." in text
+    assert "the Newton step from it misses its check, so the LM finishes it (28 of 30 bench cases)." in text
     assert ("a load average of 3.8 on this machine's 2 cores, where its runs on every core were slower than on one "
             "(the gravity NN's network and kinematics, float64: 2e+04 against 3e+04 gestures per second)") in text
     thr["every_core_float64"]["nn_and_kinematics_per_s"] = 6.0e4
