@@ -281,9 +281,9 @@ multifidelity: | $(SETUP) ## coarse surrogate + a learned fine-minus-coarse corr
 #   make gestures atlas atlas-reference atlas-reference-fine inverse bench-predictor \
 #     PRED_JOINT=results/surrogate/h1.8/improved.pt PRED_DIR=results/predictor/h1.8 \
 #     PRED_BENCH=results/bench/predictor_h1.8.json
-# About 2 h on one core, measured piece by piece on the production surrogate: the contact NN
-# 52 min and the improved gravity NN 32 min (mostly their ramped labels), the atlases with
-# their references 25 min, the gestures, inverse cases and bench about 20 min.
+# About 1.5 h on one core, measured piece by piece on the production surrogate: the contact NN
+# 52 min (mostly its ramped labels), the gravity NNs 2 min and 1 min (one finger alone), the
+# atlases with their references 25 min, the gestures, inverse cases and bench about 20 min.
 PRED_JOINT ?= results/surrogate/improved.pt
 PRED_DIR   ?= results/predictor
 PRED_BENCH ?= results/bench/predictor.json
