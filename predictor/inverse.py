@@ -43,7 +43,6 @@ from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS,
                                  parse_goal)
 from predictor.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
                                approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
-from predictor.gripper import GripperParams
 from predictor.progress import Heartbeat, set_quiet
 from predictor.statics import GripperProblem, meets
 
@@ -214,12 +213,6 @@ def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
     return atlas_from_json(path, problem)
 
 
-def _params(args) -> GripperParams:
-    """The finger and chain options of --finger, --kinematics, --joint-weight
-    (predictor.gesture's way)."""
-    return params_of(args)
-
-
 def run_track(problem: GripperProblem, goals: list, label: str) -> tuple[dict, object]:
     """Answer the goals in order (predictor.track.track); (its JSON document, the result)."""
     import os
@@ -296,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(1)
         with ap.errors():
             doc, figs = run_cases(args.model, Path(args.atlas_dir))
-            free = load_problem(args.model, None, params=_params(args), plane=args.plane)
+            free = load_problem(args.model, None, params=params_of(args), plane=args.plane)
             from predictor.track import demo_goals, save_track_figure
             tdoc, tres = run_track(free, demo_goals(free), track_label(free))
             doc["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
@@ -318,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(1)
         with ap.errors():
             from predictor.track import demo_goals, load_track, save_track_figure
-            problem = load_problem(args.model, None, gravity=not args.no_gravity, params=_params(args),
+            problem = load_problem(args.model, None, gravity=not args.no_gravity, params=params_of(args),
                                    plane=args.plane)
             goals = demo_goals(problem) if args.track == "demo" else load_track(args.track)
             label = track_label(problem) if args.track == "demo" else f"predictor.inverse --track {args.track}"
@@ -351,14 +344,14 @@ def main(argv: list[str] | None = None) -> int:
     approach = None if args.approach == "zero" else args.approach or DEFAULT
     torch.set_num_threads(1)
     with ap.errors():
-        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=_params(args), mu=args.mu,
+        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=params_of(args), mu=args.mu,
                                object_weight=args.object_weight, approach=approach, plane=args.plane)
         ip = InverseProblem(problem, goal, args.box)
         atlas = read_atlas(args.atlas, problem) if args.atlas else None
         res = inverse_pressures(ip, atlas)
         if args.plot:
             save_inverse_figure(args.plot, [(args.goal, res, problem)])
-    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "finger": finger_record(_params(args)),
+    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "finger": finger_record(params_of(args)),
                    "plane": args.plane}, args.json)
     if res.status != "feasible":
         print(f"{ap.prog}: infeasible: {res.reason}", file=sys.stderr)

@@ -23,6 +23,14 @@ SURROGATE_TARGETS = (("mean anchor error", "mean_anchor_error_mm", 0.10, "mm"),
                      ("phi_end error", "phi_end_error_deg", 0.3, "deg"),
                      ("Jacobian relative error", "jacobian_rel_error", 0.05, ""))
 
+
+def _split_rows(m: dict, names, keys, tag: str, last) -> list[str]:
+    """One table row per model and split (test, held-out) of a metrics.json: its n, the
+    ``keys`` figures and ``last(name, record)`` in the final column."""
+    return [f"| {name}{tag} | {split} | {m[name][split]['n']} | "
+            + " | ".join(num(m[name][split].get(k)) for k in keys) + f" | {last(name, m[name][split])} |"
+            for name in names for split in ("test", "heldout")]
+
 def _angles(r: dict, key: str) -> str:
     """'mean / p95' of the held-out angle error ``key`` (deg), or why there is none."""
     if r.get(key) is None:
@@ -50,11 +58,7 @@ def surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
             f"KNN {PAPER['surrogate_knn_mm']} mm (docs/decisions.md §0).", "",
             "| model | set | n | " + " | ".join(keys) + " | train time (s) |",
             "|---" * (len(keys) + 4) + "|"]
-    for name in names:
-        for split in ("test", "heldout"):
-            r = m[name][split]
-            out.append(f"| {name} | {split} | {r['n']} | " + " | ".join(num(r.get(k)) for k in keys)
-                       + f" | {num(m[name].get('train_time_s'), '.0f')} |")
+    out += _split_rows(m, names, keys, "", lambda name, r: num(m[name].get("train_time_s"), ".0f"))
     out.append("")
     out += figure(root, "surrogate/comparison.png", "surrogates against the held-out FEM data",
                    "`make train` (`python -m surrogate.evaluate --report`, results/surrogate/paper.pt, improved.pt "
@@ -242,12 +246,8 @@ def production_surrogate_section(root: Path) -> tuple[list[str], list[Check]]:
                 f"{ref['datasets']['heldout']['root']}, each against its own data (the production models' table is "
                 "the section above):", "",
                 "| model | set | n | " + " | ".join(keys) + " | cap rotation mean / p95 |", "|---" * (len(keys) + 4) + "|"]
-        for name in ("paper", "improved", "knn"):
-            if name in ref:
-                for split in ("test", "heldout"):
-                    r = ref[name][split]
-                    out.append(f"| {name} (1.8 mm) | {split} | {r['n']} | " + " | ".join(num(r.get(k)) for k in keys)
-                               + f" | {_angles(r, 'cap_rotation_error_deg')} |")
+        out += _split_rows(ref, [n for n in ("paper", "improved", "knn") if n in ref], keys, " (1.8 mm)",
+                           lambda name, r: _angles(r, "cap_rotation_error_deg"))
         out.append("")
     held = m["improved"]["heldout"]
     checks = [judge(title, f"production surrogate {label}", [(Target("<=", bound, unit), held.get(key))])
