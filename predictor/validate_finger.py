@@ -83,8 +83,12 @@ JUDGED = f"predictor_{DEFAULT_KINEMATICS}_{DEFAULT_JOINT_WEIGHT}"
 OVERLAID = {(DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT):
             f"{DEFAULT_KINEMATICS} kinematics, {DEFAULT_JOINT_WEIGHT} joint weights (default)",
             ("tangent", "lumped"): "tangent kinematics, lumped weights (paper)"}
-TARGETS = {"tip_error_mm": 2.0, "tip_angle_error_deg": 1.0, "speedup": 1000.0, "fem_s": 600.0,
-           "fem_cases": 14}   # 4 free, 2 gravity and at least 8 more pairs with gravity
+#: Issue 56's targets on the production mesh, every case with the plane: the 7 x 7 grid with
+#: gravity and the 4 free cases (53), the finger FEM's fingertip change under one further
+#: refinement of the joints' mesh (mesh_check). The 1.8 mm reference (finger_h1.8.json)
+#: records those it was written under (issue 14's: 2 mm, 1 deg, 1000x, 14 cases).
+TARGETS = {"tip_error_mm": 1.0, "tip_angle_error_deg": 0.5, "speedup": 1e4, "fem_s": 600.0,
+           "fem_cases": 53, "refinement_tip_change_mm": 0.5}
 
 
 def _deg(a: torch.Tensor) -> list[float]:
