@@ -263,9 +263,12 @@ class Parser(argparse.ArgumentParser):
             if action is None or isinstance(action, (argparse._AppendAction, argparse._CountAction,
                                                      argparse._HelpAction)):
                 continue
+            option = token.split("=", 1)[0]
             if action.dest in seen:
-                self.error(f"{seen[action.dest]} given twice: give each option once")
-            seen[action.dest] = token.split("=", 1)[0]
+                first = seen[action.dest]
+                self.error(f"{first} given twice: give each option once" if first == option else
+                           f"{first} and {option} both given: give one of them")
+            seen[action.dest] = option
 
     @contextlib.contextmanager
     def errors(self):

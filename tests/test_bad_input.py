@@ -404,7 +404,7 @@ CASES_PREDICTOR = [
     ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--no-plane"],
      "--no-plane: the contact variant learns a grasp, which the gripper's plane X = 0 is part of"),
     ("predictor.nn", ["--variant", "gravity-paper", "--out", "{tmp}/x.pt", "--plane", "--no-plane"],
-     "--plane given twice: give each option once"),
+     "--plane and --no-plane both given: give one of them"),
     ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--model", "/etc/hostname"],
      "/etc/hostname: not a softjoint surrogate checkpoint"),
     ("predictor.bench", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
