@@ -105,6 +105,7 @@ _SUMMARY = ("tip_error_mm_max", "tip_error_mm_mean", "tip_angle_error_deg_max",
 #: predictor's variants against the finger FEM, per case and summarised per variant.
 VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger", {
     **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "speedup", "fem_s", "fem_cases"),
+    "targets.refinement_tip_change_mm?": NUM,
     "summary{}.cases": int, **each("summary{}", NUM, *_SUMMARY), "judged_variant": str,
     "joint": str, "repeats": int, "finger.name": str, "finger.base_angle_deg?": NUM, "figures?": list,
     "discretisation?.mesh": str, "discretisation?.formulation": str, "plane?": bool | None,

@@ -161,6 +161,21 @@ def test_report_draws_the_grid_and_judges_it_when_complete(tmp_path):
     text = "\n".join(lines)
     assert checks == [] and "2 of 3 solved pairs converged (1 of 4 still to solve)" in text
     assert "the gripper: the right finger against the mirror finger's contact at X = 0" in text
+    # the predictor's fingertip error joins a pair's cell from a validation of the same mesh and problem
+    entry = lambda variant, mm: {"case": "gravity_-0.3_0.3", "variant": variant, "method": "predictor",  # noqa: E731
+                                 "kinematics": "cap", "joint_weight": "split", "tip_error_mm": mm,
+                                 "tip_angle_error_deg": 0.0, "predictor_s": 0.01, "tip_angle_deg": 0.0, "tip_mm": None}
+    validation = {"discretisation": {"mesh": "hex2:3", "formulation": "mixed"}, "judged_variant": "predictor_cap_split",
+                  "targets": dict.fromkeys(("tip_error_mm", "tip_angle_error_deg", "speedup", "fem_s", "fem_cases"), 1),
+                  "summary": {}, "joint": "analytic", "repeats": 1, "finger": {"name": "paper"},
+                  "fem": [{"case": "gravity_-0.3_0.3", "pressures_MPa": [-0.3, 0.3], "gravity": True, "converged": True,
+                           "fem_s": 120.0, "tip": [0.0, 0.0], "tip_angle_deg": 0.0, "mesh": {"nodes": 60000}}],
+                  "cases": [entry("predictor_cap_split", 0.123), entry("predictor_tangent_lumped", 9.0)]}
+    for plane, cell in ((True, "120 s, 0.12 mm"), (False, "120 s")):   # a lone finger's is another problem
+        (tmp_path / "validation").mkdir(exist_ok=True)
+        (tmp_path / "validation" / "finger.json").write_text(json.dumps({**validation, "plane": plane}))
+        lines, _ = finger_grid_section(tmp_path)
+        assert [ln.split("|")[2].strip() for ln in lines if ln.startswith("| **0.3**")] == [cell]
     FINGER_CASE.write(folder / "gravity_0.3_0.3_hex2s3_plane.json", _record("gravity_0.3_0.3", 0.3, 0.3, True, 300.0))
     FINGER_GRID.write(tmp_path / "fem" / "finger_grid.json",
                       grid_summary(CASES, folder, "_hex2s3_plane", GRID, SOLVER, FINGER))
