@@ -26,7 +26,7 @@ from apps import report as report_app
 from apps.report.__main__ import main as report_main
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
-LINK = re.compile(r"\]\(([^)\s]+)\)")
+LINK = re.compile(r"\]\(([^)#\s][^)\s]*)\)")   # a file link (not an anchor in the report)
 committed = pytest.mark.skipif(not (RESULTS / "validation/finger.json").is_file()
                                or not (RESULTS / "surrogate/metrics.json").is_file(),
                                reason="no committed finger validation / surrogate metrics")
@@ -60,6 +60,8 @@ def test_committed_report_links_tables_and_sources():
         subs = [ln for ln in part.splitlines() if ln.startswith("### ")]
         assert len(subs) == len(set(subs)), subs
     links = LINK.findall(text)
+    headings = {report_app.anchor(ln.lstrip("#").strip()) for ln in text.splitlines() if ln.startswith("#")}
+    assert set(re.findall(r"\]\((#[^)\s]+)\)", text)) <= headings   # each anchor link lands on a heading
     missing = [p for p in links if not (RESULTS / p).is_file()]
     assert not missing, missing
     images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
@@ -296,3 +298,19 @@ def test_dataset_table_lists_every_committed_walk():
     for name in ("train", "heldout"):
         assert any(ln.startswith(f"| {name} | hex2:3 mixed |") for ln in lines)
         assert any(ln.startswith(f"| {name}_h1.8 | 1.8 mm displacement |") for ln in lines)
+
+
+def test_targets_at_a_glance_count_each_sections_misses_and_link_it():
+    """The glance before the sections: per section the targets met, and each missed one's
+    verdict; the link is the anchor GitHub gives the section's heading."""
+    a = report_app.Check("Finger FEM over the pressure box (issue 36)", "pairs converged", ">= 49", (7,), False,
+                         "no, short by 42 pairs")
+    b = report_app.Check("Finger FEM over the pressure box (issue 36)", "slowest", "<= 600 s", (500.0,), True, "yes")
+    c = report_app.Check("Calibration (issue 38)", "gain", "<= 1 %", (0.5,), True, "yes")
+    rows = [ln for ln in report_app.glance([a, b, c]) if ln.startswith("| [")]
+    assert rows == ["| [Finger FEM over the pressure box (issue 36)](#finger-fem-over-the-pressure-box-issue-36) | "
+                    "1 of 2 | pairs converged: short by 42 pairs |",
+                    "| [Calibration (issue 38)](#calibration-issue-38) | 1 of 1 | none |"]
+    assert "2 of 3 met" in report_app.glance([a, b, c])[0] and report_app.glance([]) == []
+    assert report_app.anchor("Contact on the finger's outline, fingers that meet (issue 36)") == \
+        "#contact-on-the-fingers-outline-fingers-that-meet-issue-36"

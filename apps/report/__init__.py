@@ -53,8 +53,8 @@ from apps.report.learning import (CURVE_TITLE, PRODUCTION_TITLE, SURROGATE_TARGE
                                   learning_curve_section, production_surrogate_section, surrogate_section)
 from apps.report.planning import PLANNING_TITLE, planning_section
 
-__all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGATE_TARGETS", "Check", "Target",
-           "build", "cells", "judge", "report"]
+__all__ = ["CAMPAIGN_TARGETS", "FEM_TARGETS", "NOT_JUDGED", "SECTIONS", "SURROGATE_TARGETS", "Check", "Target", "anchor",
+           "build", "cells", "glance", "judge", "report"]
 
 #: (title, section) in the report's order; a section returns (lines, target checks).
 SECTIONS = ((FEM_TITLE, fem_section), (CAMPAIGN_TITLE, campaign_section), (SURROGATE_TITLE, surrogate_section),
@@ -81,12 +81,34 @@ def build(root: Path) -> tuple[str, list[str], list[Check]]:
              "(linked relative to results/, each captioned with the command and joint model that drew it). "
              f"A row shown beside judged ones without a target says \"{NOT_JUDGED}\"; the paper's figures are "
              "in docs/decisions.md §0.", ""]
-    checks = []
+    checks, body = [], []
     for title, section in SECTIONS:
         part, found = _section(title, section, root)
-        lines += part
+        body += part
         checks += found
+    lines += glance(checks) + body
     return "\n".join(lines), [ln[3:] for ln in lines if ln.startswith("## ")], checks
+
+
+def anchor(title: str) -> str:
+    """The link anchor a Markdown renderer (GitHub's) gives a heading: lower case, spaces
+    to hyphens, punctuation other than hyphens and underscores dropped."""
+    return "#" + "".join(ch for ch in title.lower().replace(" ", "-") if ch.isalnum() or ch in "-_")
+
+
+def glance(checks: list[Check]) -> list[str]:
+    """The targets at a glance, before the sections: per section the targets met and each
+    one missed with its verdict; why it is missed is said in the section (linked)."""
+    if not checks:
+        return []
+    out = [f"**Targets at a glance**: {sum(c.met for c in checks)} of {len(checks)} met. Per section, the targets "
+           "missed and by how much; each section (linked) says why.", "",
+           "| section | met | missed |", "|---|---|---|"]
+    for title in dict.fromkeys(c.section for c in checks):
+        mine = [c for c in checks if c.section == title]
+        missed = "; ".join(f"{c.figure}: {c.verdict.removeprefix('no, ')}" for c in mine if not c.met)
+        out.append(f"| [{title}]({anchor(title)}) | {sum(c.met for c in mine)} of {len(mine)} | {missed or 'none'} |")
+    return out + [""]
 
 
 def report(root: Path) -> str:
