@@ -16,8 +16,12 @@ What runs, one subprocess at a time (``sys.executable -m ...``, so at most one F
    one finger alone (no plane X = 0), and so is the predictor here (validate_finger
    matches each case's plane);
 4. and 5. ``predictor.gesture --json --plot``: the same gestures of the gripper, whose
-   fingers meet at X = 0, on the default (production) surrogate -> ``gesture_<P1>_<P2>.png``; no FEM of the gripper is committed,
-   so their rows give the fingertip and the force where the fingers meet;
+   fingers meet at X = 0, on the default (production) surrogate -> ``gesture_<P1>_<P2>.png``,
+   against the committed finger FEM of the gripper at the same pressures where it is solved
+   (``<case>_hex2s3_plane.json``: the production mesh with the plane, the surrogate's own data
+   mesh; ``make finger-grid``), within the production validation's targets
+   (results/validation/finger.json); where it is not solved yet the row gives the fingertip
+   and the force where the fingers meet;
 6. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
    a grasp here: normal force, friction use |f|/N and hold/slip are shown instead);
 7. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
@@ -43,7 +47,8 @@ step 1 runs on that mesh, and the live finger FEM of step 7 on the coarse H mm (
 tetrahedra in the same displacement formulation, and every step compared with a FEM runs on
 the surrogate trained on that mesh's data, the 1.8 mm reference (FEM_SURROGATE; since the
 switch, issue 55 §3, the default surrogate is the production one, which the gripper's
-gestures use). The demo runs no production-mesh FEM. The problem: the
+gestures use, compared with the committed production-mesh FEM of the gripper). The demo
+runs no production-mesh FEM. The problem: the
 committed finger cases are one finger alone, so the gestures of steps 3, 4 and the finger
 FEM of step 6 are solved with ``--no-plane`` too (a comparison of the gripper, the tools'
 default, with a lone finger would measure the difference of problems, issue 56 §1).
@@ -91,6 +96,11 @@ SURROGATE = "results/surrogate/improved.pt"
 #: 1.8 mm reference, so that a FEM row measures the model, not the change of mesh.
 FEM_SURROGATE = "results/surrogate/h1.8/improved.pt"
 COMMITTED_FINGER_FEM = "results/validation/finger_fem"
+#: The gripper's finger FEM cases on the production mesh with the plane X = 0, beside the
+#: lone-finger ones (fem.finger_cases' default file names: hex2:3 mixed, ``_plane``), and the
+#: validation that judges the production predictor against them (its targets, issue 56).
+GRIPPER_SUFFIX, GRIPPER_MESH = "_hex2s3_plane", "hex2:3"
+GRIPPER_VALIDATION = "results/validation/finger.json"
 JOINT_CASE = {"p": 0.2, "f1": 1.0, "f2": -1.0, "m": 20.0}        # MPa, N, N, N·mm
 GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the paper's Figure 5A
 GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
@@ -300,19 +310,32 @@ def gravity_row(fem: dict, validation: dict, fem_file: str) -> dict:
             "figures": [f"{COMMITTED_FIGURES}/finger_{fem['case']}.png"]}
 
 
-def gripper_row(g: dict) -> dict:
-    """A gravity gesture of the gripper (predictor.gesture JSON): no FEM of it is committed,
-    so its fingertip and the force where the fingers meet."""
+def gripper_row(g: dict, fem: dict | None = None, fem_file: str = "", tolerance: dict | None = None) -> dict:
+    """A gravity gesture of the gripper (predictor.gesture JSON, the default surrogate)
+    against the committed finger FEM of the gripper at the same pressures (``fem``, on the
+    production mesh with the plane: the same problem, the model's own data mesh) within
+    ``tolerance``; without that FEM (not solved yet), its fingertip and the force where the
+    fingers meet."""
     p1, p2 = g["pressures_MPa"]
     tip, plane = g["tip"], g.get("plane_force_N")
     meet = "apart" if not plane else f"meet with {plane:.3f} N"
-    return {"case": f"gripper gravity ({_g(p1)}, {_g(p2)}) MPa", "problem": GRIPPER,
-            "fem": "n/a (no FEM of the gripper's gesture)", "model": _predictor_label(g), "errors": None,
-            "error": f"n/a; tip ({tip[0]:.2f}, {tip[1]:.2f}) mm, {g['tip_angle_deg']:.2f} deg, fingers {meet}",
-            "tolerance": None, "within_tolerance": None, "fem_s": None, "model_s": g["time_ms"] / 1000.0,
-            "produced_by": {"error": f"gesture_{gesture_name(p1, p2)}: tip, tip_angle_deg, plane_force_N",
-                            "model_s": f"gesture_{gesture_name(p1, p2)}: time_ms"},
-            "figures": [f"gesture_{gesture_name(p1, p2)}.png"]}
+    name = gesture_name(p1, p2)
+    row = {"case": f"gripper gravity ({_g(p1)}, {_g(p2)}) MPa", "problem": GRIPPER,
+           "fem": "n/a (no FEM of the gripper's gesture)", "model": _predictor_label(g), "errors": None,
+           "error": f"n/a; tip ({tip[0]:.2f}, {tip[1]:.2f}) mm, {g['tip_angle_deg']:.2f} deg, fingers {meet}",
+           "tolerance": None, "within_tolerance": None, "fem_s": None, "model_s": g["time_ms"] / 1000.0,
+           "produced_by": {"error": f"gesture_{name}: tip, tip_angle_deg, plane_force_N",
+                           "model_s": f"gesture_{name}: time_ms"},
+           "figures": [f"gesture_{name}.png"]}
+    if fem is None:
+        return row
+    errors = finger_errors(fem, tip, g["tip_angle_deg"])
+    return {**row, "fem": f"finger FEM, {fem_mesh_label(fem)}, the plane (committed)", "errors": errors,
+            "error": _tip_text(errors) + f"; fingers {meet}", "tolerance": tolerance,
+            "within_tolerance": within(errors, tolerance), "fem_s": fem["fem_s"],
+            "produced_by": {**row["produced_by"], "fem": f"{fem_file}: tip, tip_angle_deg (make finger-grid)",
+                            "errors": "model minus FEM", "fem_s": f"{fem_file}: fem_s",
+                            **({"tolerance": f"{GRIPPER_VALIDATION}: targets"} if tolerance else {})}}
 
 
 def grasp_state(g: dict) -> str:
@@ -375,12 +398,14 @@ def table_rows(data: dict) -> list[dict]:
     """Every row of the demo's table from the steps' JSON: ``data`` holds
     joint {fem, surrogate, surrogate_wall_s}, gravity [{fem, fem_file}, ...] with
     gravity_validation (the lone finger's predictor.validate_finger JSON), gripper
-    [gesture, ...], grasp, finger {fem, validation, committed, committed_file}; without a
-    committed FEM of the finger, no gravity and finger.committed None."""
+    [gesture, ...] with gripper_fem {gesture name: (FEM case, its file)} where the gripper's
+    FEM is committed and gripper_tolerance, grasp, finger {fem, validation, committed,
+    committed_file}; without a committed FEM of the finger, no gravity and finger.committed None."""
     j, f = data["joint"], data["finger"]
     return [joint_row(j["fem"], j["surrogate"], j["surrogate_wall_s"]),
             *(gravity_row(g["fem"], data["gravity_validation"], g["fem_file"]) for g in data.get("gravity", [])),
-            *(gripper_row(g) for g in data["gripper"]),
+            *(gripper_row(g, *data.get("gripper_fem", {}).get(gesture_name(*g["pressures_MPa"]), (None, "")),
+                          data.get("gripper_tolerance")) for g in data["gripper"]),
             grasp_row(data["grasp"]),
             *finger_rows(f["fem"], f["validation"], f["committed"], f["committed_file"])]
 
@@ -524,6 +549,30 @@ def load_committed(name: str) -> tuple[dict, str]:
     return case, rel
 
 
+def load_gripper_fem(name: str) -> tuple[dict, str] | None:
+    """The committed finger FEM of the gripper (production mesh, the plane) of case
+    ``name``: (JSON, its path), None where it is not solved yet (make finger-grid)."""
+    rel = f"{COMMITTED_FINGER_FEM}/{name}{GRIPPER_SUFFIX}.json"
+    if not Path(ROOT, rel).is_file():
+        return None
+    try:
+        case = fem_artefacts.FINGER_CASE.load(Path(ROOT, rel))
+    except (OSError, ValueError) as exc:
+        raise StepFailed(f"{rel}: {exc}") from None
+    if not (case["converged"] and case.get("settings", {}).get("plane") and
+            fem_artefacts.finger_case_mesh(case) == GRIPPER_MESH):
+        raise StepFailed(f"{rel} is not a converged case of the gripper (the plane X = 0) on {GRIPPER_MESH}")
+    return case, rel
+
+
+def gripper_tolerance() -> dict | None:
+    """The targets of the production finger validation (GRIPPER_VALIDATION), None without it."""
+    try:
+        return tip_tolerance(predictor_artefacts.VALIDATION.load(Path(ROOT, GRIPPER_VALIDATION)))
+    except OSError:
+        return None
+
+
 def _relative(path: Path) -> str:
     """``path`` relative to the repository (the steps run there), else absolute."""
     path = path.resolve()
@@ -567,6 +616,8 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False, finger: str |
         committed = {gesture_name(*p): load_committed(f"gravity_{gesture_name(*p)}")
                      for p in GRAVITY_GESTURES} if compare else {}
         finger_committed = load_committed(FINGER_CASE) if compare else (None, None)
+        gripper_fem = {name: found for name in (gesture_name(*p) for p in GRAVITY_GESTURES)
+                       if compare and (found := load_gripper_fem(f"gravity_{name}"))}
         for model in (SURROGATE, FEM_SURROGATE):
             if not Path(ROOT, model).is_file():
                 raise StepFailed(f"no committed surrogate {model}: run `make train` (docs/decisions.md §9 for the "
@@ -584,6 +635,7 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False, finger: str |
                         for p in GRAVITY_GESTURES] if compare else [],
             "gravity_validation": by_key["validate_gravity"].data if compare else None,
             "gripper": [by_key[f"gesture_{gesture_name(*p)}"].data for p in GRAVITY_GESTURES],
+            "gripper_fem": gripper_fem, "gripper_tolerance": gripper_tolerance(),
             "grasp": by_key["grasp"].data,
             "finger": {"fem": by_key["finger_fem"].data, "validation": by_key["validate"].data,
                        "committed": finger_committed[0], "committed_file": finger_committed[1]}})

@@ -133,6 +133,25 @@ def test_rows_beyond_their_tolerance_are_flagged():
     assert "**Beyond tolerance: gravity (0.1, -0.1) MPa.**" in demo.markdown(rows, [], 1.0)
 
 
+def test_gripper_rows_against_the_gripper_fem_where_it_is_committed():
+    """A gripper gesture whose FEM of the gripper (production mesh, the plane) is committed is
+    compared with it, same problem, within the production validation's tolerance; the other
+    keeps its figures, with no FEM."""
+    d = data()
+    fem = {**finger_case("gravity_-0.1_0.1", [40.3 - 0.3, -210.4 - 0.4], -91.25, None, 3600.0),
+           "mesh": {"mesh": "hex2:3", "nodes": 132765}, "formulation": "mixed", "settings": {"plane": True}}
+    d["gripper_fem"] = {"-0.1_0.1": (fem, "c.json")}
+    d["gripper_tolerance"] = {"tip_mm": 1.0, "tip_angle_deg": 0.5}
+    r1, r2 = demo.table_rows(d)[3:5]
+    # a 3-4-5 triangle scaled by 0.1: 0.5 mm; +0.25 deg
+    assert r1["errors"]["tip_mm"] == pytest.approx(0.5) and r1["errors"]["tip_angle_deg"] == pytest.approx(0.25)
+    assert r1["within_tolerance"] is True and r1["problem"] == demo.GRIPPER and r1["fem_s"] == 3600.0
+    assert r1["fem"] == "finger FEM, hex2:3, mixed, the plane (committed)" and "fingers apart" in r1["error"]
+    assert r2["errors"] is None and r2["within_tolerance"] is None
+    d["gripper_tolerance"] = {"tip_mm": 0.4, "tip_angle_deg": 0.5}
+    assert demo.beyond_tolerance(demo.table_rows(d)) == ["gripper gravity (-0.1, 0.1) MPa"]
+
+
 def test_max_and_mean_differ():
     d = data()
     d["joint"]["surrogate"] = surrogate(offset=(0.0, 0.0), last_offset=(6.0, 8.0))
