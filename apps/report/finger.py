@@ -374,5 +374,5 @@ def _reference_lines(root: Path, v: dict, judged: str, j: dict) -> list[str]:
             "the plane solved by the ramp. Its worst case, "
             f"{worst['case']} ({worst['tip_error_mm']:.2f} mm), is where a joint's valley crests carry the plane: the "
             "predictor meets the plane with its outline, whose joint bands are the undeformed outer envelope about the "
-            "centre line (it neglects the cells' ballooning under pressure), so there the two outlines differ "
+            "centre line (it neglects the cells' ballooning and shrinking under pressure), so there the two outlines differ "
             "(docs/decisions.md §9); the lone-finger reference has no plane."]
