@@ -116,9 +116,10 @@ def test_near_pressed_rows_match_the_continuation(free):
     the solver's Newton steps checked by its rule) are the forward equilibria the plane's
     continuation (``Tracker._continue``: the stiff LM, then the homotopy's softer planes)
     finds from the verified centre: the same joint loads (1e-6 N, N·mm) and fingertips
-    (1e-6 mm); every row of the next goal's stencil (0.005 MPa along the path) starts from
-    a kept row, and a row farther than NEAR_MPA from every kept one is left to the
-    continuation (not converged)."""
+    (1e-6 mm). Every row of the next goal's stencil ((+0.005, -0.0025) MPa along the
+    path, every row pressed) converges from a kept row of the first answer's 9, and a row
+    farther than NEAR_MPA from every kept one is left to the continuation (not
+    converged)."""
     from predictor.inversion import REGULATOR, InverseProblem, traced_tip_fn
     from predictor.track import NEAR_MPA
 
