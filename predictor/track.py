@@ -43,9 +43,14 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    must lie within VERIFY_TOL_MM of the search's; the branch is the search's, itself
    continued from the previous verified gesture or a kept forward answer. Where Newton
    fails, the solver's continuation (the LM with the plane's homotopy, full tolerance)
-   from the previous verified gesture (the gripper's history along the track), as for
-   the stencil's pressed rows from the verified centre (0.01 MPa steps; Newton alone
-   fails there, the outline's vertices entering and leaving X = 0: measured). The answer is
+   from the previous verified gesture (the gripper's history along the track). The
+   stencil's pressed rows first by Newton (``Tracker._near``: the solver's Newton steps,
+   checked by its rule) from the tangent predictor x + dx/dP·ΔP of the nearest verified
+   pressed gesture within NEAR_MPA (the last KEEP_PRESSED centres and stencil rows of the
+   answers, and this answer's own centre: the path moves little between goals, and an
+   answer held at a bound repeats its pressures); the rows it leaves by the continuation
+   from the verified centre (Newton from a kept x without the predictor, or from a
+   centre apart from the plane, lands deep in the stiff penalty: measured). The answer is
    ``verified`` when its forward solve converged and its fingertip lies within
    VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
    angle are the forward solve's; an unverified search result is never returned as
@@ -88,6 +93,10 @@ LS_ITER = 8               # Tracker._least_squares: iterations before the search
 LS_DP_MPA = 1e-5          # Tracker._least_squares: a step moving P less than this ends it (~1e-3 mm of tip)
 SAME_TIP_MM = 1e-3        # Tracker.answer: a kept row no closer than the search's by more is taken as is
 START_GRID = 9            # the kept grid of forward answers: START_GRID x START_GRID over the box
+KEEP_PRESSED = 90         # Tracker._near: the last verified gestures pressed on X = 0 kept as starts
+NEAR_MPA = REGULATOR      # Tracker._near: a kept pressed gesture this close (max norm) starts Newton
+NEAR_STEPS = 4            # Tracker._near: Newton steps of one round (newton_iterate)
+NEAR_ROUNDS = 2           # Tracker._near: rounds of NEAR_STEPS
 MAX_GOALS = 100_000       # goals in one track file
 COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
 #: Issue 60's targets (medians, one thread): per goal along a track, a reachable tip goal
@@ -158,6 +167,9 @@ class Tracker:
         self.coarse_kept = False
         self._newton_at = None                  # (x, p, its evaluation) of the last converged _newton
         self.crawled = False                    # the last _newton stopped in a crawl (backtracking failed)
+        # the verified gestures pressed on X = 0 (centres and stencil rows of the last answers):
+        # (P (m, 2), x (m, 6)), starts of the next answers' pressed rows (``_near``)
+        self.pressed = (torch.empty(0, 2, dtype=torch.float64), torch.empty(0, 6, dtype=torch.float64))
         if keep_coarse:
             self._keep_coarse()
 
@@ -446,14 +458,14 @@ class Tracker:
         cont.tol = self.options
         return cont.neighbours(ps)
 
-    def _warm(self, ps: torch.Tensor, x0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _warm(self, ps: torch.Tensor, x0: torch.Tensor, steps: int = WARM_STEPS) -> tuple[torch.Tensor, torch.Tensor]:
         """The forward equilibria at ps (n, 2) by up to WARM_STEPS of the solver's full Newton
         steps (predictor.newton.newton_iterate: the problem's own residual, with the plane's
         penalty) from x0 (n, 6), each checked by the solver's convergence rule at its
         answer (``meets_tolerances``: every joint's residual within the tolerances, tau in
         the box). No LM here: a row Newton leaves is the continuation's (``_continue``).
         Returns (x (n, 6), converged (n,))."""
-        x, its, _ = newton_iterate(self.problem, ps, x0.reshape(-1, 2, 3), self.options, WARM_STEPS)
+        x, its, _ = newton_iterate(self.problem, ps, x0.reshape(-1, 2, 3), self.options, steps)
         ok = torch.isfinite(x).all(-1)
         x = torch.nan_to_num(x)
         g = gesture_result(self.problem, ps, x, ok, its, time.perf_counter(), "newton", None)
@@ -463,7 +475,8 @@ class Tracker:
         """(verifying gesture (one row), verified, robust), or None when the forward solve
         disagrees (unless ``force``: then returned with verified False). Module docstring
         §3: the centre and its 8 neighbours in one batched cold solve without the plane's
-        penalty, the rows pressed on X = 0 by continuation from ``anchor``."""
+        penalty, the rows pressed on X = 0 by Newton from a kept pressed gesture (``_near``)
+        or by continuation from ``anchor`` (the centre) and from the verified centre."""
         prob, opts = self.problem, self.options
         d = REGULATOR * torch.tensor([(0, 0)] + [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
                                      dtype=torch.float64)
@@ -487,6 +500,13 @@ class Tracker:
             rest = pressed.clone()
             rest[0] = False
             if bool(rest.any()):
+                # first by Newton from a kept pressed gesture of the last answers within
+                # NEAR_MPA (``_near``: the path moves little between goals, and an answer
+                # held at a bound repeats its pressures), the others by continuation
+                centre = (ps[:1], x[:1]) if bool(pressed[0] & ok[0]) else None
+                x[rest], ok[rest] = self._near(ps[rest], centre)
+                rest = rest & ~ok
+            if bool(rest.any()):
                 x[rest], ok[rest] = self._continue(ip, (ps[:1], x[:1]) if bool(ok[0]) else anchor, ps[rest])
             # the forward model's own convergence rule at the verified points (residual, box)
             g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
@@ -501,7 +521,54 @@ class Tracker:
         if not agree and not force:
             return None
         centre = dataclasses.replace(centre, converged=ok[:1].clone())
+        if agree and bool(pressed.any()):
+            self._keep_pressed(ps[pressed & ok], x[pressed & ok])
         return centre, agree, agree and bool(ok.all())
+
+    def _keep_pressed(self, ps: torch.Tensor, x: torch.Tensor) -> None:
+        """Keep the verified gestures pressed on X = 0 at ps (n, 2), x (n, 6) as starts
+        (``_near``), the last KEEP_PRESSED of them."""
+        P, X = self.pressed
+        self.pressed = (torch.cat((P, ps))[-KEEP_PRESSED:], torch.cat((X, x))[-KEEP_PRESSED:])
+
+    def _near(self, ps: torch.Tensor, centre=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forward equilibria at ps (n, 2) pressed on X = 0 by the solver's Newton steps
+        (``_warm``, checked by the solver's rule) from the nearest kept pressed gesture of
+        the last answers (``_keep_pressed``) within NEAR_MPA (max norm): the same branch,
+        a step far shorter than the stencil's REGULATOR from its centre, where the tangent
+        of a centre apart from the plane (or pressed with other vertices in the plane)
+        lands deep in the stiff penalty. Rows with none so near, or that Newton leaves,
+        come back not converged (the continuation's, ``_continue``). Returns (x (n, 6),
+        converged (n,))."""
+        x = torch.zeros(len(ps), 6, dtype=torch.float64)
+        ok = torch.zeros(len(ps), dtype=torch.bool)
+        P, X = self.pressed
+        if centre is not None:      # the answer's own verified centre, pressed on X = 0
+            P, X = torch.cat((P, centre[0])), torch.cat((X, centre[1]))
+        if len(P) == 0:
+            return x, ok
+        gap, j = (ps[:, None] - P[None]).abs().amax(-1).min(1)
+        near = gap <= NEAR_MPA
+        if not bool(near.any()):
+            return x, ok
+        # the tangent predictor x + dx/dP·ΔP, dx/dP = -(dr/dx)⁻¹ dr/dP at the kept gesture
+        # (the solver's difference Jacobian, the plane's penalty in r): from the kept x alone
+        # Newton's first step diverges (0.0027 MPa off: |R_F| 0.4 N -> 2e6 N, measured)
+        from predictor.jacobians import jacobian_fn
+
+        pk, xk = P[j[near]], X[j[near]]
+        J, _, Jp = jacobian_fn(self.problem)(xk, pk)
+        dx, info = torch.linalg.solve_ex(J[:, :6], Jp @ (ps[near] - pk)[..., None])
+        x[near] = torch.where((info == 0)[:, None], xk - dx[..., 0], xk)
+        # newton_iterate stops at its one-step gate, which assumes quadratic convergence from
+        # there; pressed on X = 0 the residual first falls only ~4x a step (measured from a
+        # centre's tangent predictor), so a second round goes on from the last iterate
+        for _ in range(NEAR_ROUNDS):
+            todo = near & ~ok
+            if not bool(todo.any()):
+                break
+            x[todo], ok[todo] = self._warm(ps[todo], x[todo], NEAR_STEPS)
+        return x, ok
 
 
 def _scored(evaluation, goal: torch.Tensor):

@@ -110,6 +110,42 @@ def test_pressed_goals_by_newton_match_the_forward_pressures(free):
     assert bool(again.converged.all()) and float(err.max()) <= TIP_TOL_MM
 
 
+def test_near_pressed_rows_match_the_continuation(free):
+    """The stencil's rows pressed on X = 0 by Newton from the last answers' kept pressed
+    gestures (``Tracker._near``: the tangent predictor of the nearest within NEAR_MPA, then
+    the solver's Newton steps checked by its rule) are the forward equilibria the plane's
+    continuation (``Tracker._continue``: the stiff LM, then the homotopy's softer planes)
+    finds from the verified centre: the same joint loads (1e-6 N, N·mm) and fingertips
+    (1e-6 mm). Every row of the next goal's stencil ((+0.005, -0.0025) MPa along the
+    path, every row pressed) converges from a kept row of the first answer's 9, and a row
+    farther than NEAR_MPA from every kept one is left to the continuation (not
+    converged)."""
+    from predictor.inversion import REGULATOR, InverseProblem, traced_tip_fn
+    from predictor.track import NEAR_MPA
+
+    prob = free.problem
+    P = torch.tensor([[0.15, 0.20], [0.155, 0.1975]], dtype=torch.float64)
+    fwd = solve(prob, P)
+    assert bool(fwd.converged.all()) and bool((fwd.plane_force_N > 0).all())
+    tracker = Tracker(prob)
+    first = tracker.answer(tip_goal(*fwd.pose.tip_end[0].tolist()))
+    assert first.status == "reached" and first.robust and len(tracker.pressed[0]) == 9
+    d = REGULATOR * torch.tensor([(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
+                                 dtype=torch.float64)
+    ps = P[1:] + d
+    x, ok = tracker._near(ps)
+    assert bool(ok.all())
+    ip = InverseProblem(prob, tip_goal(*fwd.pose.tip_end[1].tolist()))
+    xc, okc = tracker._continue(ip, (P[1:], fwd.tau.reshape(-1, 6)[1:]), ps)
+    assert bool(okc.all())
+    assert float((x - xc).abs().max()) <= 1e-6
+    with torch.no_grad():
+        t, tc = traced_tip_fn(prob)(x, ps)[:, :2], traced_tip_fn(prob)(xc, ps)[:, :2]
+    assert float((t - tc).norm(dim=-1).max()) <= 1e-6
+    far = P[1:] + torch.tensor([[3 * NEAR_MPA, 0.0]], dtype=torch.float64)
+    assert not bool(tracker._near(far)[1].any())
+
+
 def test_least_squares_newton_ends_where_the_continuation_does(free):
     """A goal beyond the reach next to a verified answer (as on the demo's return leg: the
     closest tip held at P2 = -0.3 MPa): the least-squares Newton in (x, P) (one Jacobian per
