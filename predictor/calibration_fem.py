@@ -51,7 +51,7 @@ import numpy as np
 import torch
 
 from contract.finger import FingerSpec, same_finger
-from fem.artefacts import FINGER_CASE
+from fem.studies.artefacts import FINGER_CASE
 from predictor.calibration import CalibrationModel, design, equilibrium, predict
 from predictor.calibration_fit import CalibrationResult, FitFailed, calibrate
 from predictor.defaults import ROOT

@@ -59,8 +59,8 @@ from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
 from contract.joint import FORMULATIONS, MAX_DIVISIONS, mesh_text
-from fem.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
-from fem.geometry import PAPER_MESH_SIZE
+from fem.studies.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
+from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint

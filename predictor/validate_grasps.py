@@ -66,7 +66,7 @@ from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
 from contract.joint import FORMULATIONS, load_joint as load_joint_file, mesh_text
-from fem.artefacts import GRASP_CASE, finger_case_formulation, finger_case_mesh
+from fem.studies.artefacts import GRASP_CASE, finger_case_formulation, finger_case_mesh
 from predictor.artefacts import GRASP_VALIDATION
 from predictor.gripper import GripperParams
 from predictor.joint import load_joint

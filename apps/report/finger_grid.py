@@ -1,5 +1,5 @@
 """The report's section on the finger FEM over the pressure box (issue 36 §1): the gravity
-grid of results/fem/finger_grid.json (fem.finger_grid) drawn as a table, one cell per
+grid of results/fem/finger_grid.json (fem.studies.finger_grid) drawn as a table, one cell per
 pressure pair with its solve time or its failure, and the targets (every pair converged,
 <= 10 min per gesture on one core). The predictor against these cases is the whole-finger
 section's validation (results/validation/finger.json, make validate-finger)."""
@@ -57,9 +57,9 @@ def finger_grid_section(root: Path) -> tuple[list[str], list[Check]]:
     failed = [c for c in grid["cases"] if not c["converged"]]
     problem = ("the gripper: the right finger against the mirror finger's contact at X = 0" if s.get("plane")
                else "one finger alone, without the plane X = 0")
-    out += [f"`make finger-grid` (results/fem/finger_grid.json, `python -m fem.finger_grid`): the whole-finger FEM "
+    out += [f"`make finger-grid` (results/fem/finger_grid.json, `python -m fem.studies.finger_grid`): the whole-finger FEM "
             f"of {problem}, with gravity at every pressure pair of a {n} x {n} grid over the joints' box, each "
-            f"a fem.finger_cases record solved from the "
+            f"a fem.studies.finger_cases record solved from the "
             f"unloaded state on one rank ({mesh['nodes']:,} P2 nodes, joint mesh {mesh.get('mesh', 'unrecorded')}, "
             f"{s['formulation']} formulation). {grid['converged']} of {grid['solved']} solved pairs converged"
             + ("" if grid["complete"] else f" ({grid['pairs'] - grid['solved']} of {grid['pairs']} still to solve)")
