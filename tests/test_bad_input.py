@@ -563,3 +563,17 @@ def test_every_cli_has_help_and_json():
             rs = _help([tool, sub])
             assert rs.returncode == 0 and "--json" in rs.stdout, f"{tool} {sub}: no --json"
 
+
+@pytest.mark.parametrize("alias,module", [("fem.finger", "fem.cli.finger"), ("fem.solve", "fem.cli.solve")])
+def test_the_old_command_paths_run_the_moved_commands(alias, module):
+    """``python -m fem.finger`` and ``fem.solve`` (issue 61's aliases) run fem.cli's commands
+    and say where they moved: --help is the new command's, and bad input exits 2 with its
+    one error line after the note."""
+    r = _help([alias])
+    assert r.returncode == 0 and f"python -m {module}" in r.stdout, r.stdout[:500]
+    assert r.stderr.strip() == f"note: {alias} moved to {module} (python -m {module})"
+    bad = subprocess.run([PY, "-m", alias, "--mesh-size", "0"], cwd=ROOT, env=ENV, capture_output=True,
+                         text=True, timeout=300)
+    lines = [ln for ln in bad.stderr.splitlines() if ln.strip()]
+    assert bad.returncode == 2 and len(lines) == 2, bad.stderr[-2000:]
+    assert lines[0].startswith(f"note: {alias} moved") and "--mesh-size: 0 is outside [0.3, 10] mm" in lines[1]
