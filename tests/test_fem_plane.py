@@ -185,7 +185,7 @@ def test_apart_the_plane_changes_nothing(plain, meeting):
 
 
 def test_candidate_faces_are_inner_and_end_faces(meeting):
-    from fem.solvers.finger import closed_tags
+    from fem.physics.finger import closed_tags
     from fem.physics.plane_contact import plane_facets
     from dolfinx.cpp.mesh import entities_to_geometry
 

@@ -205,7 +205,8 @@ def test_grasp_names():
 @pytest.mark.fem
 def test_render_extent_maps_the_outline_and_the_finger(tmp_path):
     import matplotlib.pyplot as plt
-    from fem.solvers.finger import FingerSolver, rotation_matrix
+    from fem.solvers.finger import FingerSolver
+    from fem.physics.finger import rotation_matrix
     from fem.studies.finger_cases import render
     from fem.mesh.geometry import FingerGeometry, JointGeometry
 

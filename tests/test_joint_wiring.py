@@ -392,7 +392,7 @@ def test_finger_fem_takes_each_joints_law_and_box(tmp_path):
     another shape is meshed in its own shape with the finger's mesh settings
     (FingerGeometry.joint_at), and a mesh joint of another shape than the first joint's is
     refused (it would be ignored)."""
-    from fem.solvers.finger import joint_laws
+    from fem.physics.finger import joint_laws
     from fem.mesh.geometry import pressure_limits
     from fem.mesh.geometry import FingerGeometry
     from fem.physics.problem import Material

@@ -1,6 +1,6 @@
 """A distributed mesh with its tags: what every mesh builder (fem.mesh.build's gmsh models,
-fem.mesh.hexahedra's structured hexahedra) returns and every problem (fem.physics.problem, fem.solvers.finger)
-is built on. No dolfinx import: the fields hold dolfinx objects, typed loosely."""
+fem.mesh.hexahedra's structured hexahedra) returns and every problem (fem.physics.problem,
+fem.physics.finger) is built on. No dolfinx import: the fields hold dolfinx objects, typed loosely."""
 
 from __future__ import annotations
 

@@ -67,8 +67,8 @@ The physics pieces, written once and shared by the joint, the beam and the finge
   branch cut; the half-model carries half of each resultant;
 * :func:`valley_contact`: penalty self-contact of the valley walls (:mod:`fem.physics.contact`).
 
-Data flow: MeshData (fem.mesh.build), MaterialLaw (contract.joint, a joint file's [material])
--> joint_problem / fem.solvers.finger.finger_problem -> Problem -> fem.solvers.load_path.LoadPathSolver.
+Data flow: MeshData (fem.mesh.data, built by fem.mesh.build), MaterialLaw (contract.joint, a joint file's [material])
+-> joint_problem / fem.physics.finger.finger_problem -> Problem -> fem.solvers.load_path.LoadPathSolver.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 * ``load_path``: ``LoadPathSolver``, the load-path Newton solver of any Problem (stepping,
   cut-back, MUMPS, sensitivities), ``Probes``;
 * ``joint``: ``Load``, ``SolveResult``, ``JointSolver`` (and ``beam_solver``): the joint's driver;
-* ``finger``: the whole finger's problem (``finger_problem``) and its driver ``FingerSolver``;
+* ``finger``: ``FingerSolver``, the whole finger's driver (the plane X = 0 included), ``FingerResult``;
 * ``grasp``: ``GraspSolver``, the finger holding a rigid object along the predictor's history;
 * ``transfer``: a joint solve seeded from another discretisation's answer.
 

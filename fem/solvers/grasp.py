@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 from mpi4py import MPI
 
 from contract.grasp import FRICTION, OBJECT_WEIGHT, ObjectSpec
-from fem.solvers.finger import FingerLoad, FingerResult, FingerSolver, closed_tags
+from fem.solvers.finger import FingerLoad, FingerResult, FingerSolver
+from fem.physics.finger import closed_tags
 from fem.mesh.geometry import FingerGeometry
 from fem.physics.object_contact import ObjectContact
 

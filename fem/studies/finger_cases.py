@@ -74,7 +74,8 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path, json_safe
 from fem.studies.artefacts import FINGER_CASE
-from fem.solvers.finger import FINGER_CONFIG, FingerLoad, FingerSolver, rotation_matrix, same_settings
+from fem.solvers.finger import FINGER_CONFIG, FingerLoad, FingerSolver, same_settings
+from fem.physics.finger import rotation_matrix
 from fem.mesh.geometry import JointGeometry, finger_joints, pressure_limits
 from fem.cli.options import add_finger_mesh, add_plane_flags, finger_discretisation, one_rank
 from fem.solvers.joint import config_for
