@@ -142,8 +142,8 @@ def test_fem_sub_packages_import_downward(path):
     rel = str(path.relative_to(ROOT))
     for node in ast.walk(ast.parse(path.read_text(), rel)):
         assert not (isinstance(node, ast.ImportFrom) and node.level), f"{rel}: a relative import"
-    errors = [fem_import_error(rel, module, names) for module, names in _imports(path)]
-    assert not list(filter(None, errors)), errors
+    errors = [e for module, names in _imports(path) if (e := fem_import_error(rel, module, names))]
+    assert not errors, "\n".join(errors)
 
 
 def test_the_checker_refuses_upward_imports():
