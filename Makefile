@@ -38,7 +38,7 @@ $(TIMES):
 	  touch -d @$$t $@
 endif
 
-# The discretisations (fem/discretisation.py). Every tool defaults to the production one,
+# The discretisations (fem/mesh/discretisation.py). Every tool defaults to the production one,
 # the paper joint file's [mesh]: swept Q2 hexahedra hex2:3 in the mixed u-p formulation
 # (docs/decisions.md §9), and so do the committed datasets results/data/{train,heldout}, the
 # surrogate results/surrogate/ trained on them, the predictor's results/predictor/ and the
@@ -95,14 +95,16 @@ test: $(SETUP) ## the test suite (coarse FEM, small data, Slurm; ~14 min with se
 	$(PY) -m pytest -q -ra -n 2 --dist loadfile --durations=15
 
 # ---------------------------------------------------------------- fem (issue 2)
+# Every module of fem/ and its sub-packages (mesh, physics, solvers, cli, studies; docs/packages.md).
+FEM_CODE := $(wildcard fem/*.py fem/*/*.py)
 bench-fem: results/bench/fem.json ## FEM timings of the production discretisation (hex2:3 mixed) and of PAPER (1.8 mm) -> results/bench/fem.json
-results/bench/fem.json: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.bench_joint --out $@
+results/bench/fem.json: $(TIMES) $(FEM_CODE) | $(SETUP)
+	$(PY) -m fem.studies.bench_joint --out $@
 
 # Checked against the committed finger cases, so on their discretisation (PAPER_MESH).
 bench-finger: results/bench/finger.json ## whole-finger FEM timings on the committed cases' 1.8 mm mesh, 4 gestures on one core (idle machine, ~18 min) -> results/bench/finger.json
-results/bench/finger.json: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.bench_finger $(PAPER_MESH) --out $@
+results/bench/finger.json: $(TIMES) $(FEM_CODE) | $(SETUP)
+	$(PY) -m fem.studies.bench_finger $(PAPER_MESH) --out $@
 
 # The families are solved in the mixed u-p formulation: volumetric locking of displacement P2
 # at nu = 0.49 is the largest single effect (make mesh-causes). The swept hexahedra hex2,
@@ -112,34 +114,34 @@ results/bench/finger.json: $(TIMES) fem/*.py | $(SETUP)
 MESH_STUDY_HOURS ?= 3
 STUDY_PRODUCTION ?= hex2:3
 mesh-study: | $(SETUP) ## 8 loads x (mixed hexahedra hex2, hex3, hex4 + production hex2:3 + paper 1.8 mm) + Richardson (one core, ~13 GB, hours; resumes) -> results/fem/mesh_study.json
-	nice $(PY) -m fem.mesh_study --formulation mixed --meshes hex2 hex3 hex4 --production $(STUDY_PRODUCTION) \
+	nice $(PY) -m fem.studies.mesh_study --formulation mixed --meshes hex2 hex3 hex4 --production $(STUDY_PRODUCTION) \
 	  --production-formulation mixed --seed-from hex2 --out results/fem/mesh_study.json --work results/fem/joint_cases \
 	  --max-hours $(MESH_STUDY_HOURS)
 
 # Its committed study judged the 1.8 mm displacement mesh, the production one then.
 mesh-study-tet: | $(SETUP) ## the same on the mixed sqrt-2 tetrahedral family 3.394:1.697 .. 1.2:0.6, judging PAPER's 1.8 mm (2 ranks, many hours; resumes) -> results/fem/mesh_study_tet.json
-	$(MPIRUN) -n 2 $(PY) -m fem.mesh_study --formulation mixed --production 1.8 --production-formulation displacement \
+	$(MPIRUN) -n 2 $(PY) -m fem.studies.mesh_study --formulation mixed --production 1.8 --production-formulation displacement \
 	  --out results/fem/mesh_study_tet.json --work results/fem/joint_cases --max-hours $(MESH_STUDY_HOURS)
 
 MESH_CAUSES_HOURS ?= 3
 mesh-causes: | $(SETUP) ## what limits the joint's mesh convergence: formulation, quadrature, penalty, wall elements at 8 loads, one factor at a time (one core, hours; resumes) -> results/fem/mesh_causes.{json,md}
-	nice $(PY) -m fem.mesh_causes --work results/fem/joint_cases --out results/fem/mesh_causes.json --max-hours $(MESH_CAUSES_HOURS)
+	nice $(PY) -m fem.studies.mesh_causes --work results/fem/joint_cases --out results/fem/mesh_causes.json --max-hours $(MESH_CAUSES_HOURS)
 
 materials: results/fem/materials.json ## each hyperelastic law's FEM against its closed form on homogeneous deformations (minutes) -> results/fem/materials.json
-results/fem/materials.json: $(TIMES) fem/materials.py fem/materials_check.py contract/joint.py | $(SETUP)
-	$(PY) -m fem.materials_check --out $@
+results/fem/materials.json: $(TIMES) fem/physics/materials.py fem/studies/materials_check.py contract/joint.py | $(SETUP)
+	$(PY) -m fem.studies.materials_check --out $@
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners, on the committed data's 1.8 mm mesh
-results/fem/self_contact.json: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.self_contact $(PAPER_MESH) --out $@
+results/fem/self_contact.json: $(TIMES) $(FEM_CODE) | $(SETUP)
+	$(PY) -m fem.studies.self_contact $(PAPER_MESH) --out $@
 
 validation: results/fem/validation.json ## FEM vs exact elastica: cantilever alpha<=10, roll-up to 2 pi
-results/fem/validation.json: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.validation table --out $@
+results/fem/validation.json: $(TIMES) $(FEM_CODE) | $(SETUP)
+	$(PY) -m fem.studies.validation table --out $@
 
 joint-render: results/fem/joint.png ## pyvista render of the joint, undeformed + deformed, on the committed data's 1.8 mm mesh
-results/fem/joint.png: $(TIMES) fem/*.py | $(SETUP)
-	$(PY) -m fem.render $(PAPER_MESH) --out $@
+results/fem/joint.png: $(TIMES) $(FEM_CODE) | $(SETUP)
+	$(PY) -m fem.cli.render $(PAPER_MESH) --out $@
 
 # ---------------------------------------------------------------- campaign (issue 3)
 # (section owned by workflow/)
@@ -215,7 +217,7 @@ dataset-smoke: | $(SETUP) ## tiny 2-rank campaign on the coarse 4 mm mesh (mixed
 	$(PY) -m workflow.dataset info $(SMOKE_DIR)
 
 bench-campaign: results/bench/campaign.json ## campaign samples/h on 1 and 2 ranks, harvested vs fresh, on the 1.8 mm reference mesh -> results/bench/campaign.json
-results/bench/campaign.json: $(TIMES) workflow/campaign.py workflow/bench_campaign.py fem/solver.py | $(SETUP)
+results/bench/campaign.json: $(TIMES) workflow/campaign.py workflow/bench_campaign.py fem/solvers/joint.py | $(SETUP)
 	nice $(PY) -m workflow.bench_campaign $(PAPER_MESH) --mpirun "$(MPIRUN)" --data $(REF_TRAIN) $(REF_HELDOUT) --out $@
 
 # ---------------------------------------------------------------- surrogate (issue 4)
@@ -380,7 +382,7 @@ CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py
                  predictor/calibrate.py
 
 calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs on the production joint mesh (1 core, niced, ~2-3 h; resumes) -> results/calibration/fem/
-	nice $(PY) -m fem.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane $(CAL_MESH) --out $(CAL_FEM)
+	nice $(PY) -m fem.studies.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane $(CAL_MESH) --out $(CAL_FEM)
 
 # The fit is judged as the observations' fit is (predictor.calibration_fit.judge): an
 # untrusted one exits 1 and writes nothing (no --force here: a demo that stops trusting
@@ -403,28 +405,28 @@ results/bench/calibrate.json: $(TIMES) $(CAL_CODE) predictor/calibration_recover
 # finger-grid's and the free ones (*_hex2s3_plane.json), validated by validate-finger.
 FINGER_FEM := results/validation/finger_fem
 # They are one finger alone (the tools' default is the gripper, the plane X = 0 on: issue 56).
-FINGER_CASES := $(PY) -m fem.finger_cases $(PAPER_MESH) --no-plane --out $(FINGER_FEM)
+FINGER_CASES := $(PY) -m fem.studies.finger_cases $(PAPER_MESH) --no-plane --out $(FINGER_FEM)
 
 finger-fem: | $(SETUP) ## whole-finger FEM, 18 validation cases of one finger alone on the committed 1.8 mm displacement mesh (2 processes, several hours; resumes) -> results/validation/finger_fem/
 	@$(FINGER_CASES) --part 1/2 & a=$$!; $(FINGER_CASES) --part 2/2; b=$$?; wait $$a && exit $$b
 
 # Issue 56 §2: the 49 gravity pairs of the 7 x 7 grid over [-0.3, 0.3]^2 MPa, each a
-# fem.finger_cases record on the production discretisation (the joint file's [mesh], hex2:3
+# fem.studies.finger_cases record on the production discretisation (the joint file's [mesh], hex2:3
 # mixed) with the plane X = 0, $(FINGER_FEM)/gravity_P1_P2_hex2s3_plane.json + .png; a
 # record that stands is skipped (whoever wrote it), so a killed run resumes, and the summary
 # results/fem/finger_grid.json is rewritten after every case (FINGER_GRID_ARGS=--summary-only:
 # rebuild it from the records without solving).
 FINGER_GRID_ARGS ?=
 finger-grid: | $(SETUP) ## whole-finger FEM with the plane X = 0 at the 49 gravity pressure pairs of a 7 x 7 grid over the box, production mesh (one process, niced, hours; resumes; FINGER_GRID_ARGS=--summary-only to only rebuild the summary) -> results/validation/finger_fem/gravity_*_hex2s3_plane.json, results/fem/finger_grid.json
-	nice $(PY) -m fem.finger_grid --cases $(FINGER_FEM) --out results/fem/finger_grid.json $(FINGER_GRID_ARGS)
+	nice $(PY) -m fem.studies.finger_grid --cases $(FINGER_FEM) --out results/fem/finger_grid.json $(FINGER_GRID_ARGS)
 
-# The FEM side of the grasp validation (issue 36 §3, fem/grasp_cases.py, docs/fem-grasps.md):
+# The FEM side of the grasp validation (issue 36 §3, fem/studies/grasp_cases.py, docs/fem-grasps.md):
 # the paper's six grasps and ten atlas cases on the production discretisation (the joint
 # file's [mesh], hex2:3 mixed), the plane X = 0 on; a converged case is skipped, so a killed
 # run resumes. Never part of `make test` (tests/test_grasp_cases.py runs no grasp).
 GRASP_FEM := results/validation/grasps_fem
 grasp-fem: | $(SETUP) ## whole-finger FEM grasps: the paper's six + ten atlas cases on the production mesh, plane X = 0 (one process, niced, hours; resumes) -> results/validation/grasps_fem/
-	nice $(PY) -m fem.grasp_cases --out $(GRASP_FEM)
+	nice $(PY) -m fem.studies.grasp_cases --out $(GRASP_FEM)
 
 # The predictor side (issue 36 §3, predictor/validate_grasps.py): each FEM grasp of
 # grasp-fem on the production discretisation (files <case>_hex2s3.json) against the

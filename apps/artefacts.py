@@ -1,7 +1,7 @@
 """Every JSON artefact under results/: where it lives, its format and the make target that
 writes it.
 
-Each format is defined beside the code that writes the file (fem.artefacts,
+Each format is defined beside the code that writes the file (fem.studies.artefacts,
 workflow.artefacts, surrogate.artefacts, predictor.artefacts, apps.demo); dataset manifests
 have their own strict loader (workflow.shards.Manifest, docs/formats.md §2). This catalogue
 is what the report loads through, and what tests/test_artefacts.py checks every committed
@@ -16,7 +16,7 @@ from pathlib import Path
 
 from apps import demo
 from contract.records import Format
-from fem import artefacts as fem
+from fem.studies import artefacts as fem
 from predictor import artefacts as predictor
 from surrogate import artefacts as surrogate
 from workflow import artefacts as workflow

@@ -4,9 +4,9 @@
 
 What runs, one subprocess at a time (``sys.executable -m ...``, so at most one FEM runs):
 
-1. ``fem.render --json``: the joint FEM of (P, F1, F2, M) = (0.2 MPa, 1 N, -1 N, 20 N·mm)
+1. ``fem.cli.render --json``: the joint FEM of (P, F1, F2, M) = (0.2 MPa, 1 N, -1 N, 20 N·mm)
    on the committed data's discretisation, rendered -> ``joint.png`` (its JSON is
-   ``fem.solve --json``'s);
+   ``fem.cli.solve --json``'s);
 2. ``surrogate.predict --json``: the same case on the surrogate trained on that
    discretisation's data (FEM_SURROGATE, the 1.8 mm reference results/surrogate/h1.8/);
 3. ``predictor.validate_finger --cases``: the predictor (on FEM_SURROGATE) against the committed whole-finger
@@ -24,7 +24,7 @@ What runs, one subprocess at a time (``sys.executable -m ...``, so at most one F
    and the force where the fingers meet;
 6. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
    a grasp here: normal force, friction use |f|/N and hold/slip are shown instead);
-7. ``fem.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
+7. ``fem.studies.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
    on a coarse joint mesh (one finger alone) -> ``finger_fem/<case>.json`` and its render;
 8. ``predictor.validate_finger --mesh-size H``: the predictor (one finger alone, on
    FEM_SURROGATE) against it -> ``finger.json`` and the overlay ``finger_<case>.png``.
@@ -41,7 +41,7 @@ it (``within_tolerance``); the cases beyond it are listed in the table, in
 ``beyond_tolerance`` of summary.json and on stderr (the exit stays 0: the run is complete).
 
 Discretisation: the committed finger cases the demo compares with are on the
-paper-fidelity 1.8 mm P2 displacement mesh (fem.discretisation.PAPER, COMMITTED_MESH_SIZE
+paper-fidelity 1.8 mm P2 displacement mesh (fem.mesh.discretisation.PAPER, COMMITTED_MESH_SIZE
 and COMMITTED_FORMULATION here), not on the production hex2:3 mixed; so the joint FEM of
 step 1 runs on that mesh, and the live finger FEM of step 7 on the coarse H mm (default 4)
 tetrahedra in the same displacement formulation, and every step compared with a FEM runs on
@@ -60,8 +60,8 @@ table, PNGs linked) and the table on stdout. Each step prints ``[demo k/N] what 
 
 Layering: an app (apps -> predictor -> surrogate -> workflow -> fem); it runs the
 packages' command lines, one subprocess each, and reads their JSON, the committed finger
-FEM cases and the files the steps write through their formats (fem.artefacts,
-predictor.artefacts); of the packages it imports only those, fem.geometry and the
+FEM cases and the files the steps write through their formats (fem.studies.artefacts,
+predictor.artefacts); of the packages it imports only those, fem.mesh.geometry and the
 contract (no torch, no dolfinx). Its own summary.json is checked against
 SUMMARY before it is written. Exit 0 when every step succeeded; otherwise one line names the failed
 step and the exit is 1. The summary is written (atomically) only at the end, and the
@@ -86,8 +86,8 @@ from contract import cli
 from contract.files import write_text
 from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
 from contract.records import Format, each
-from fem import artefacts as fem_artefacts
-from fem.geometry import PAPER_MESH_SIZE
+from fem.studies import artefacts as fem_artefacts
+from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor import artefacts as predictor_artefacts
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -97,20 +97,20 @@ SURROGATE = "results/surrogate/improved.pt"
 FEM_SURROGATE = "results/surrogate/h1.8/improved.pt"
 COMMITTED_FINGER_FEM = "results/validation/finger_fem"
 #: The gripper's finger FEM cases on the production mesh with the plane X = 0, beside the
-#: lone-finger ones (fem.finger_cases' default file names: hex2:3 mixed, ``_plane``), and the
+#: lone-finger ones (fem.studies.finger_cases' default file names: hex2:3 mixed, ``_plane``), and the
 #: validation that judges the production predictor against them (its targets, issue 56).
 GRIPPER_SUFFIX, GRIPPER_MESH = "_hex2s3_plane", "hex2:3"
 GRIPPER_VALIDATION = "results/validation/finger.json"
 JOINT_CASE = {"p": 0.2, "f1": 1.0, "f2": -1.0, "m": 20.0}        # MPa, N, N, N·mm
 GRAVITY_GESTURES = [(-0.1, 0.1), (0.1, -0.1)]                     # MPa, the paper's Figure 5A
 GRASP = (0.1, 0.2, "circle")                                       # MPa, MPa, object
-FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.finger_cases name
+FINGER_CASE = "gravity_0.1_-0.1"                                   # a fem.studies.finger_cases name
 #: Subfolder of the overlays on the committed finger FEM (the live case's overlay of the same
 #: gesture, finger_<case>.png, is in the output folder itself).
 COMMITTED_FIGURES = "committed"
 HEARTBEAT_S = 30.0
 #: The discretisation of the committed artefacts the demo compares with (module docstring):
-#: fem.discretisation.PAPER, named without its dolfinx (tests/test_demo.py checks the two).
+#: fem.mesh.discretisation.PAPER, named without its dolfinx (tests/test_demo.py checks the two).
 COMMITTED_MESH_SIZE, COMMITTED_FORMULATION = PAPER_MESH_SIZE, "displacement"
 
 #: results/demo/summary.json: the run's steps and its table rows (docs/formats.md §6.12).
@@ -168,7 +168,7 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
     committed = ["--mesh-size", _g(COMMITTED_MESH_SIZE), "--formulation", COMMITTED_FORMULATION]
     steps = [
         Step("joint_fem", f"joint FEM, the surrogate's data mesh h={_g(COMMITTED_MESH_SIZE)} mm "
-             f"{COMMITTED_FORMULATION}, and its render (fem.render)", "fem.render",
+             f"{COMMITTED_FORMULATION}, and its render (fem.cli.render)", "fem.cli.render",
              [*case, *committed, "--out", f"{out}/joint.png", "--json"]),
         Step("surrogate", "joint surrogate, same case (surrogate.predict)", "surrogate.predict",
              ["--model", FEM_SURROGATE, *case, "--json"]),
@@ -196,8 +196,8 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
                       "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--object", obj, *fing, "--json",
                                             "--plot", f"{out}/grasp.png"]))
     h = _g(finger_mesh_size)
-    steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.finger_cases)",
-                      "fem.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h,
+    steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.studies.finger_cases)",
+                      "fem.studies.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h,
                                            "--formulation", COMMITTED_FORMULATION, "--no-plane", *fing],
                       reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
     steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
@@ -217,7 +217,7 @@ def anchor_errors(fem: list, model: list) -> tuple[float, float]:
 
 
 def joint_row(fem: dict, sur: dict, sur_wall_s: float) -> dict:
-    """The joint FEM (fem.solve JSON) against the surrogate (surrogate.predict JSON, which
+    """The joint FEM (fem.cli.solve JSON) against the surrogate (surrogate.predict JSON, which
     reports no time: its process wall time stands in)."""
     amax, amean = anchor_errors(fem["anchors_mm"], sur["anchors_mm"])
     errors = {"anchor_max_mm": amax, "anchor_mean_mm": amean,
@@ -358,7 +358,7 @@ def grasp_row(g: dict) -> dict:
 
 
 def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: str) -> list[dict]:
-    """The finger FEM solved now (fem.finger_cases JSON, one finger alone) against the
+    """The finger FEM solved now (fem.studies.finger_cases JSON, one finger alone) against the
     predictor (predictor.validate_finger JSON, its judged variant, one finger alone too),
     and the same FEM against the committed FEM of the case (on the committed data's mesh):
     the coarse mesh's own error (no tolerance: it measures the mesh)."""
@@ -622,7 +622,7 @@ def run(out: Path, finger_mesh_size: float, as_json: bool = False, finger: str |
             if not Path(ROOT, model).is_file():
                 raise StepFailed(f"no committed surrogate {model}: run `make train` (docs/decisions.md §9 for the "
                                  "1.8 mm reference's)")
-        # No stale summary may describe this run's figures; and fem.finger_cases skips a case
+        # No stale summary may describe this run's figures; and fem.studies.finger_cases skips a case
         # whose JSON exists, so the live finger FEM removes its own last result first.
         for old in (out / "summary.json", out / "summary.md", out / "finger_fem" / f"{FINGER_CASE}.json"):
             old.unlink(missing_ok=True)

@@ -8,7 +8,7 @@
 Stages, each run as its own command line (``python -m ...``: every stage keeps its
 checks, one-line errors and resume), in DIR (default results/joints/<joint name>/):
 
-    1 render    fem.render --joint           -> render.png, render.json (mesh and one solve)
+    1 render    fem.cli.render --joint           -> render.png, render.json (mesh and one solve)
     2 train-data   workflow.campaign, seed 1, units of 64 -> data/train/ (resumable)
     3 heldout-data workflow.campaign, seed 2, units of 16 -> data/heldout/ (resumable)
     4 train     surrogate.train --config improved -> surrogate.pt (+ surrogate_curve.png)
@@ -155,7 +155,7 @@ def parse_args(argv=None) -> Settings:
     mesh.add_argument("--mesh-size", type=cli.number(0.3, 10, "mm"),
                       help="tetrahedron size of the render and the campaigns (default: the joint file's [mesh])")
     mesh.add_argument("--divisions", type=cli.number(1, MAX_DIVISIONS, integer=True),
-                      help="swept Q2 hexahedra of N divisions instead (fem.mesh_hex; default: the joint file's [mesh])")
+                      help="swept Q2 hexahedra of N divisions instead (fem.mesh.hexahedra; default: the joint file's [mesh])")
     count = cli.number(1, 1_000_000, integer=True)
     ap.add_argument("--samples", type=count, help="training campaign samples (default: the budget's)")
     ap.add_argument("--heldout-samples", type=count, help="held-out campaign samples (default: the budget's)")
@@ -338,11 +338,11 @@ class StageFailed(Exception):
 
 # ---------------------------------------------------------------------- stages
 def render_stage(s: Settings) -> Stage:
-    """fem.render at the paper's render load scaled to the joint's box: P = 2/3 P_max,
+    """fem.cli.render at the paper's render load scaled to the joint's box: P = 2/3 P_max,
     F2 = -1/3 F_max, M = 0.2 M_max (the paper's 0.2 MPa, -1 N, 20 N·mm)."""
     p, f, m = s.joint.pressure_mpa, s.joint.force_n, s.joint.moment_nmm
     load = ["--p", f"{2 * p / 3!r}", "--f2", f"{-f / 3!r}", "--m", f"{0.2 * m!r}"]
-    argv = ["-m", "fem.render", "--joint", str(s.out / "joint.toml"), "--out", str(s.out / "render.png"),
+    argv = ["-m", "fem.cli.render", "--joint", str(s.out / "joint.toml"), "--out", str(s.out / "render.png"),
             *load, *s.mesh_args(), "--json"]
     return Stage("render", argv, ["render.png", "render.json"], key_of(joint=s.digest, argv=argv[2:]),
                  stdout_to="render.json")

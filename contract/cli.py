@@ -17,7 +17,7 @@
 
 Usage::
 
-    ap = cli.Parser(prog="python -m fem.solve", description=...)
+    ap = cli.Parser(prog="python -m fem.cli.solve", description=...)
     ap.add_argument("--p", type=cli.number(-0.3, 0.3, "MPa"), default=0.0)
     ap.add_output("--out", suffix=".json")
     args = ap.parse_args(argv)          # every value and output checked

@@ -234,7 +234,7 @@ class GraspCase:
         return f"{re.sub(r'[^A-Za-z0-9.+-]+', '-', self.spec.strip().replace('=', ''))}_{self.p1:g}_{self.p2:g}"
 
 
-#: The grasp validation's cases (fem.grasp_cases, ``make grasp-fem``; issue 36 §3), the table
+#: The grasp validation's cases (fem.studies.grasp_cases, ``make grasp-fem``; issue 36 §3), the table
 #: the report judges its targets over: the paper's six grasps and ten from the predictor's
 #: atlases with the outline contact and the plane X = 0 (results/predictor/atlas_*.json,
 #: 61 x 61, committed surrogate; the 12-step reference ramp gives the same state and friction

@@ -2,13 +2,13 @@
 
 A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
 
-* ``[geometry]`` (mm): the bellow half-model of fem.geometry.JointGeometry, same names:
+* ``[geometry]`` (mm): the bellow half-model of fem.mesh.geometry.JointGeometry, same names:
   ``length``, ``wall``, ``height``, ``width``, ``spine``, ``n_cells``, ``cap``,
   ``valley_height``, ``valley_width``;
 * ``[material]``: the body's hyperelastic ``law`` and its parameters (MPa), one
   volumetric parameter (``nu`` or the bulk modulus ``K``, MPa), and the stiff distal cap
   (``cap_stiffness`` x the body's small-strain E, Poisson ratio ``cap_nu``; neo-Hookean).
-  Every law is psi(F) = psi_dev(F) + kappa/2 (ln J)^2 (fem.materials), with
+  Every law is psi(F) = psi_dev(F) + kappa/2 (ln J)^2 (fem.physics.materials), with
 
   =================  ==========================  ===========================================
   law                parameters                  psi_dev, small-strain shear modulus mu0
@@ -27,24 +27,24 @@ A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
   the Ogden form is Abaqus's, mu_i of Ogden's own form = 2 mu_i / alpha_i here.) The
   small-strain moduli: K from ``nu`` by K = 2 mu0 (1 + nu) / (3 (1 - 2 nu)); E = 9 K mu0 /
   (3 K + mu0), nu = (3 K - 2 mu0) / (2 (3 K + mu0)). For neo-Hookean, E and nu are the
-  file's (a ``K`` gives nu = (3 K - E) / (6 K)) and mu, lambda = fem.problem.lame(E, nu);
+  file's (a ``K`` gives nu = (3 K - E) / (6 K)) and mu, lambda = fem.physics.problem.lame(E, nu);
 * ``[input_box]``: the training box half-widths ``pressure_mpa`` (|P|), ``force_n``
   (|F1| and |F2|) and ``moment_nmm`` (|M|): contract.spec.INPUT_BOX for this joint;
 * ``[anchors]``: ``count``, the anchor points X_i = (i L / count, 0, 0), i = 1..count;
 * ``[mesh]``: the defaults it is meshed with: tetrahedra of ``size`` (mm) and
   ``wall_size`` (mm, absent: ``size``), or swept hexahedra of ``divisions`` (a whole number
-  in [1, 6]: that many elements through every wall, fem.mesh_hex) instead of the sizes,
+  in [1, 6]: that many elements through every wall, fem.mesh.hexahedra) instead of the sizes,
   optionally graded by ``hex_size`` S (mm: an interval of length d is cut into
   divisions x ceil(d / S) elements); and ``formulation``
   ("displacement" or "mixed").
 
-Shape rules, from fem.geometry's construction of the y >= 0 quarter (a core bar of height
+Shape rules, from fem.mesh.geometry's construction of the y >= 0 quarter (a core bar of height
 valley_height/2, caps and cells raised to height/2, one cavity of the cell pockets joined
 by a channel above the spine), checked before any meshing:
 
 * the channel exists: valley_height/2 - wall - spine/2 > 0;
 * the valleys are lower than the cells: valley_height < height (their faces are the
-  contact surfaces, fem.contact);
+  contact surfaces, fem.physics.contact);
 * every cell holds a pocket: cell_width = (length - 2 cap - (n_cells - 1) valley_width) /
   n_cells > 2 wall;
 * the pocket has a side wall: width/2 > wall;
@@ -58,7 +58,7 @@ contract (every table but ``[mesh]``, and not ``name``). Standard library and nu
 no dolfinx (contract floor).
 
 Data flow: file -> load_joint -> JointSpec -> fem (JointGeometry(**spec.geometry_kwargs()),
-fem.materials energies of spec.material), campaign manifests (joint_to_dict, joint_digest).
+fem.physics.materials energies of spec.material), campaign manifests (joint_to_dict, joint_digest).
 """
 from __future__ import annotations
 
@@ -122,7 +122,7 @@ class JointFileError(ValueError):
 
 @dataclass(frozen=True)
 class BellowShape:
-    """The bellow joint's dimensions (mm), fem.geometry.JointGeometry's names."""
+    """The bellow joint's dimensions (mm), fem.mesh.geometry.JointGeometry's names."""
 
     length: float
     wall: float
@@ -136,7 +136,7 @@ class BellowShape:
 
     @property
     def cell_width(self) -> float:
-        """Outer length of one cell along x (mm), as fem.geometry.JointGeometry."""
+        """Outer length of one cell along x (mm), as fem.mesh.geometry.JointGeometry."""
         return (self.length - 2 * self.cap - (self.n_cells - 1) * self.valley_width) / self.n_cells
 
     @property
@@ -176,7 +176,7 @@ class MaterialLaw:
 
     @property
     def lame(self) -> tuple[float, float]:
-        """Neo-Hookean (mu, lambda) (MPa) of E and nu, fem.problem.lame's arithmetic."""
+        """Neo-Hookean (mu, lambda) (MPa) of E and nu, fem.physics.problem.lame's arithmetic."""
         E, nu = self.params["E"], self.poisson
         return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
 
@@ -253,7 +253,7 @@ class JointSpec:
         return self.shape.length
 
     def geometry_kwargs(self) -> dict:
-        """Keyword arguments of fem.geometry.JointGeometry for this joint (mm): every mesh
+        """Keyword arguments of fem.mesh.geometry.JointGeometry for this joint (mm): every mesh
         field of its kind, and ``divisions=0, hex_size=None`` on tetrahedra (JointGeometry's
         defaults are hexahedra); hexahedra leave the unused tetrahedron size at its default."""
         mesh = ({"divisions": self.divisions, "hex_size": self.hex_size} if self.divisions else

@@ -1,21 +1,20 @@
-"""FEM ground truth of the bellow joint (DOLFINx 0.5, gmsh); see docs/physics.md.
+"""FEM ground truth of the bellow joint and the whole finger (DOLFINx 0.5, gmsh); see
+docs/physics.md, and docs/packages.md for the map of the packages.
 
-Public API (import the modules; this package file stays import-free so that
-``fem.render`` can load VTK before dolfinx):
+Five sub-packages, each importing only those before it (tests/test_layers.py checks):
 
-* ``fem.geometry``: ``JointGeometry``, ``BeamGeometry``, ``build_joint``, ``build_beam``
-* ``fem.mesh``: ``create_mesh`` (collective)
-* ``fem.problem``: the physics as a frozen ``Problem`` (energy, loads, boundary conditions,
-  contact) that ``joint_problem`` and ``fem.finger.finger_problem`` build
-* ``fem.load_path``: ``LoadPathSolver``, the load-path Newton solver of any ``Problem``
-  (stepping, cut-back, MUMPS, sensitivities), and ``SolverConfig``
-* ``fem.solver``: ``Load``, ``Material``, ``SolverConfig``, ``JointSolver``, ``SolveResult``
-* ``fem.xdmf``: the displacement field of a solve to XDMF (atomic)
-* the joint contract, the finger description, the command-line contract and atomic files
-  live on the floor below every package: ``contract`` (dolfinx-free)
-* ``fem.elastica``: exact elastica references; ``fem.validation``: the beam against them
-* command lines (each with ``--help`` and ``--json``; shared options in ``fem.options``):
-  ``fem.solve`` (one load case), ``fem.validation`` (accuracy vs the elastica),
-  ``fem.bench_joint`` (solver timings), ``fem.mesh_study``, ``fem.self_contact``,
-  ``fem.render``
+* ``fem.mesh``: geometries, discretisations (value objects, no dolfinx) and the mesh builders;
+* ``fem.physics``: materials, contact terms and the joint's ``Problem`` (UFL forms);
+* ``fem.solvers``: the load-path Newton solver and the joint, finger and grasp drivers;
+* ``fem.cli``: the command lines a user types (``python -m fem.cli.solve``, ``fem.cli.finger``,
+  ``fem.cli.render``) and their shared options;
+* ``fem.studies``: studies, case tables and benches that write committed artefacts
+  (``python -m fem.studies.mesh_study`` ...), and those artefacts' formats.
+
+The library (mesh, physics, solvers) never imports cli or studies. ``python -m fem.finger``
+and ``python -m fem.solve``, the old paths of the two commands users type most, are thin
+aliases (fem/finger.py, fem/solve.py) that run the new ones. Every package file stays
+import-free so that ``fem.cli.render`` can load VTK before dolfinx. The joint contract, the
+finger description, the command-line contract and atomic files live on the floor below
+every package: ``contract`` (dolfinx-free).
 """

@@ -125,7 +125,7 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
 _GRASP_MET = ("tip", "tip_angle", "normal_force", "contact_location", "state", "fem_time", "speedup")
 
 #: results/validation/grasps.json (make validate-grasps; predictor.validate_grasps): the
-#: predictor against the FEM grasps of fem.grasp_cases on one discretisation, per case (the
+#: predictor against the FEM grasps of fem.studies.grasp_cases on one discretisation, per case (the
 #: issue's keys; figures null where a side did not solve) and summarised; ``met`` per target:
 #: true, false, or null where not judged (the state where the FEM's friction use is near 1).
 GRASP_VALIDATION = Format("predictor-grasp-validation", 1, "predictor.validate_grasps", {

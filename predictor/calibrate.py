@@ -211,7 +211,7 @@ def main_fem(argv) -> int:
     ap = cli.Parser(prog="python -m predictor.calibrate fem",
                     description="calibrate on whole-finger FEM gestures of another finger, predict the others")
     ap.add_argument("--fem", default=str(results_dir() / "calibration" / "fem"),
-                    help="folder of fem.finger_cases JSON of --truth (default: results/calibration/fem)")
+                    help="folder of fem.studies.finger_cases JSON of --truth (default: results/calibration/fem)")
     ap.add_argument("--truth", type=finger_arg, default=str(TRUTH_FINGER),
                     help="the finger file the FEM solved (default: results/calibration/truth/finger.toml)")
     ap.add_argument("--pressures", type=_pairs, default=PRESSURES, metavar="P1,P2;...",

@@ -3,7 +3,7 @@
 
 The truth is a finger file (``TRUTH_FINGER``: the paper's finger with joints of E x 1.15,
 a tip part 20 % heavier and the mount turned by 2 deg) solved by the whole-finger FEM
-(fem.finger_cases) at gravity pressure pairs ``PRESSURES`` (``make calibration-fem``).
+(fem.studies.finger_cases) at gravity pressure pairs ``PRESSURES`` (``make calibration-fem``).
 The model is what a user starts from: the paper's finger file and the committed surrogate
 (predictor.calibration.CalibrationModel).
 
@@ -16,7 +16,7 @@ before it and the proximal centre of the joint after it), with the stated uncert
 max), so the fit is not asked to reproduce the FEM closer than the model can.
 
 What was measured: a case solved with the mirror finger's contact at X = 0
-(fem.finger_cases ``--plane``, its settings ``"plane": true``) is the gripper, every
+(fem.studies.finger_cases ``--plane``, its settings ``"plane": true``) is the gripper, every
 other case (the committed ones among them) a lone finger; the observations say so
 (predictor.observations ``problem``: ``case_problem``), so a lone finger is fitted and
 predicted alone, and cases of both kinds together are refused.
@@ -51,7 +51,7 @@ import numpy as np
 import torch
 
 from contract.finger import FingerSpec, same_finger
-from fem.artefacts import FINGER_CASE
+from fem.studies.artefacts import FINGER_CASE
 from predictor.calibration import CalibrationModel, design, equilibrium, predict
 from predictor.calibration_fit import CalibrationResult, FitFailed, calibrate
 from predictor.defaults import ROOT
@@ -60,7 +60,7 @@ from predictor.observations import FINGER, GRIPPER, Marker, Observation, Observa
 TRUTH_FINGER = ROOT / "results" / "calibration" / "truth" / "finger.toml"
 #: Gravity pressure pairs (P1, P2) MPa of the FEM cases, inside |P| <= 0.2 MPa (chosen when
 #: three validation cases at 0.25-0.3 MPa did not converge; docs/decisions.md §6); the Makefile's
-#: CAL_PRESSURES spells the same list for fem.finger_cases (tests check they agree).
+#: CAL_PRESSURES spells the same list for fem.studies.finger_cases (tests check they agree).
 PRESSURES = ((0.2, 0.2), (-0.2, 0.15), (0.15, -0.2), (-0.15, -0.15),
              (0.0, 0.0), (0.1, 0.05), (-0.1, 0.2), (0.05, -0.1))
 #: The four calibrated on: one near each corner of the box.
@@ -94,7 +94,7 @@ def pairs_arg(text: str) -> tuple[tuple[float, float], ...]:
 
 @dataclass(frozen=True)
 class FemCase:
-    """One converged FEM case: its record (fem.finger_cases JSON), file and sha256."""
+    """One converged FEM case: its record (fem.studies.finger_cases JSON), file and sha256."""
 
     record: dict
     path: Path
@@ -116,7 +116,7 @@ def _read_case(path: Path) -> FemCase:
     try:
         record = FINGER_CASE.check(json.loads(text), str(path))
     except (ValueError, UnicodeDecodeError) as exc:
-        raise FemCaseError(f"{path}: not a case of fem.finger_cases ({' '.join(str(exc).split())})") from None
+        raise FemCaseError(f"{path}: not a case of fem.studies.finger_cases ({' '.join(str(exc).split())})") from None
     return FemCase(record, path, hashlib.sha256(text).hexdigest())
 
 
@@ -278,7 +278,7 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
     check_same_chain(model.finger, truth)
     problems = {case_problem(c) for c in cases}
     if len(problems) > 1:
-        raise ValueError("the FEM cases mix lone fingers and gripper cases (fem.finger_cases --plane): "
+        raise ValueError("the FEM cases mix lone fingers and gripper cases (fem.studies.finger_cases --plane): "
                          "calibrate on one kind")
     obs = Observations(tuple(case_observation(c, model.finger, sigma_mm, sigma_deg) for c in cases),
                        problem=problems.pop())

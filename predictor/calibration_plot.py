@@ -2,7 +2,7 @@
 
 One panel per held-out gesture, global frame (mm): the FEM's centre line (each joint's
 proximal centre and anchors, then the fingertip; orange) over its render when the case
-has one (fem.finger_cases' PNG, coloured by |u|), the uncalibrated predictor's parts
+has one (fem.studies.finger_cases' PNG, coloured by |u|), the uncalibrated predictor's parts
 (red, dashed) and the calibrated one's (black), the FEM fingertip circled; the title gives
 both fingertip errors (mm). matplotlib (Agg), written atomically.
 """

@@ -3,11 +3,11 @@
     python -m predictor.validate_finger --fem results/validation/finger_fem \\
         --model results/surrogate/improved.pt --out results/validation/finger.json [--cases NAME,..]
 
-Data flow: the FEM cases of fem.finger_cases (one JSON and one render per case: tip,
+Data flow: the FEM cases of fem.studies.finger_cases (one JSON and one render per case: tip,
 tip angle, every joint's end and chord angle, global mm/deg; the FEM's solve time) ->
 for each case and each predictor variant, one single-query equilibrium solve
 (predictor.solve, Newton) of the same finger file, pressures, gravity and plane X = 0
-(the mirror finger's; only for a case solved with it, fem.finger_cases' default) -> errors
+(the mirror finger's; only for a case solved with it, fem.studies.finger_cases' default) -> errors
 against the FEM and wall times -> ``finger.json`` and one overlay figure per case
 (the FEM render coloured by |u|, the predictors' centre lines drawn over it).
 
@@ -23,7 +23,7 @@ predictor minus the FEM cap's orientation), ``fem_s`` (the FEM solve, from its J
 Targets (issue 14): cap kinematics within 2 mm and 1 deg of the FEM in every gravity and
 free case; speed-up >= 1000x; the FEM <= 10 min per gesture (600 s, one core).
 The cases validated are those on one discretisation: ``--mesh`` (default the committed
-cases', fem.discretisation.PAPER's "1.8" mm; ``--mesh-size H`` is ``--mesh H``: ``make
+cases', fem.mesh.discretisation.PAPER's "1.8" mm; ``--mesh-size H`` is ``--mesh H``: ``make
 demo`` checks one case it solves live on a coarse mesh) and ``--formulation`` (default
 PAPER's "displacement"; the surrogate is trained on PAPER data). A case's mesh is its
 record's ``mesh.mesh`` in words (contract.joint.mesh_text: "1.8", "1.697:0.849", "hex2",
@@ -32,7 +32,7 @@ displacement), so a case on another discretisation, hexahedra included, only ent
 mesh check.
 
 One problem (issue 56 §1): a case is the gripper's (the mirror finger's contact at X = 0,
-its settings' ``plane``, fem.finger_cases' default) or one finger alone (the committed
+its settings' ``plane``, fem.studies.finger_cases' default) or one finger alone (the committed
 1.8 mm cases), and the predictor solves the same problem as each case (``case_plane``).
 ``--plane`` or ``--no-plane`` validates the cases of that problem only (default: every
 case on the validated discretisation, each against its own problem), and asking for a
@@ -59,8 +59,8 @@ from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
 from contract.joint import FORMULATIONS, MAX_DIVISIONS, mesh_text
-from fem.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
-from fem.geometry import PAPER_MESH_SIZE
+from fem.studies.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
+from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
 from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
 from predictor.joint import load_joint
@@ -71,7 +71,7 @@ from predictor.statics import GripperProblem, apart
 
 REPEATS = 5
 #: The discretisation of the committed finger cases, results/validation/finger_fem
-#: (fem.discretisation.PAPER; named here without its dolfinx).
+#: (fem.mesh.discretisation.PAPER; named here without its dolfinx).
 COMMITTED_MESH, COMMITTED_FORMULATION = mesh_text(PAPER_MESH_SIZE), "displacement"
 VARIANTS = [("predictor", "tangent", "lumped"), ("predictor", "tangent", "split"),
             ("predictor", "cap", "lumped"), ("predictor", "cap", "split"),
@@ -100,7 +100,7 @@ def variant_key(method: str, kinematics: str, joint_weight: str) -> str:
 
 
 def case_plane(case: dict) -> bool:
-    """Whether a fem.finger_cases record was solved with the plane X = 0 where the mirror
+    """Whether a fem.studies.finger_cases record was solved with the plane X = 0 where the mirror
     fingers meet (its settings' ``plane``; absent: a single finger without it)."""
     return bool(case.get("settings", {}).get("plane", False))
 
@@ -188,7 +188,7 @@ def mesh_arg(text: str) -> str:
 
 
 def split_cases(cases: list[dict], validated: tuple[str, str]) -> tuple[list[dict], list[dict]]:
-    """(the fem.finger_cases records on the discretisation ``validated``, (mesh text,
+    """(the fem.studies.finger_cases records on the discretisation ``validated``, (mesh text,
     formulation); the others, for the mesh check)."""
     on = [(finger_case_mesh(c), finger_case_formulation(c)) == tuple(validated) for c in cases]
     return [c for c, o in zip(cases, on) if o], [c for c, o in zip(cases, on) if not o]
@@ -196,12 +196,12 @@ def split_cases(cases: list[dict], validated: tuple[str, str]) -> tuple[list[dic
 
 def one_problem(cases: list[dict], plane: bool | None, where: str,
                 plane_of: Callable[[dict], bool] | None = None) -> tuple[list[dict], bool | None]:
-    """(the cases validated, their problem) among ``cases`` (fem.finger_cases or
-    fem.grasp_cases records): with ``plane`` None all of them, each against the predictor
+    """(the cases validated, their problem) among ``cases`` (fem.studies.finger_cases or
+    fem.studies.grasp_cases records): with ``plane`` None all of them, each against the predictor
     of its own problem, and their problem (True: the plane X = 0; None when they mix both);
     else those of ``plane``. ValueError (one line) when none is of the ``plane`` asked for
     (the comparison asked for would be of different problems); ``where``: the cases in
-    words; ``plane_of``: a case's problem (default ``case_plane``; fem.grasp_cases
+    words; ``plane_of``: a case's problem (default ``case_plane``; fem.studies.grasp_cases
     records: their ``plane``)."""
     plane_of = plane_of or case_plane
     kinds = {bool(plane_of(c)) for c in cases}
@@ -263,7 +263,7 @@ def summarise(entries: list[dict]) -> dict:
 
 def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m predictor.validate_finger", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--fem", default="results/validation/finger_fem", help="folder of fem.finger_cases results")
+    ap.add_argument("--fem", default="results/validation/finger_fem", help="folder of fem.studies.finger_cases results")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
                     "predictor.defaults)")
     ap.add_argument("--finger", default=None, help="finger file the FEM cases used (default: the paper's)")
@@ -306,18 +306,18 @@ def main(argv=None) -> int:
             try:
                 case = json.loads(f.read_text())
             except ValueError:
-                raise ValueError(f"{f} is not a JSON file of fem.finger_cases") from None
+                raise ValueError(f"{f} is not a JSON file of fem.studies.finger_cases") from None
             if not same_finger(case.get("settings", {}).get("geometry", {}).get("finger", {}), finger):
                 raise ValueError(f"{f} was solved for another finger file than {finger.name!r}")
             cases.append(case)
             renders[id(case)] = f.with_suffix(".png")     # its own render (a suffixed case's too)
         # The validation runs on one discretisation; a case solved on another one too
-        # (fem.finger_cases --suffix) gives the FEM's own discretisation change.
+        # (fem.studies.finger_cases --suffix) gives the FEM's own discretisation change.
         validated = (mesh_text(args.mesh_size) if args.mesh_size is not None else args.mesh, args.formulation)
         cases, meshes = split_cases(cases, validated)
         if not cases:
             raise ValueError(f"no FEM cases on mesh {validated[0]} ({validated[1]}) in {args.fem}: "
-                             "run `make finger-fem` (python -m fem.finger_cases)")
+                             "run `make finger-fem` (python -m fem.studies.finger_cases)")
         cases, plane = one_problem(cases, args.plane, f"the FEM cases on mesh {validated[0]} ({validated[1]}) "
                                    f"in {args.fem}")
         entries, figures = [], []

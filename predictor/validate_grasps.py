@@ -4,8 +4,8 @@
         --model results/surrogate/improved.pt --out results/validation/grasps.json \\
         --figures results/validation/grasps [--mesh hex2:3 --formulation mixed] [--finger FILE]
 
-Data flow: the FEM grasp records of fem.grasp_cases in ``--fem`` (one JSON, format
-fem.artefacts.GRASP_CASE, and one render per converged case) -> those on one
+Data flow: the FEM grasp records of fem.studies.grasp_cases in ``--fem`` (one JSON, format
+fem.studies.artefacts.GRASP_CASE, and one render per converged case) -> those on one
 discretisation (``--mesh``, ``--formulation``; default the paper joint file's ``[mesh]``,
 the production hex2:3 mixed; selected as predictor.validate_finger does) -> for each, the
 predictor (predictor.problem.load_problem, predictor.solve, Newton; the default finger
@@ -42,7 +42,7 @@ but the FEM's time. ``summary``: the worst of each figure over the cases both so
 per target how many cases met it of how many were judged.
 
 The problem (issue 56 §1, as predictor.validate_finger): each record is the gripper's (the
-plane X = 0, fem.grasp_cases' default) or one finger alone's, and the predictor solves the
+plane X = 0, fem.studies.grasp_cases' default) or one finger alone's, and the predictor solves the
 record's problem; ``--plane`` or ``--no-plane`` validates the records of that problem only,
 and asking for a problem no record was solved for is refused (one line, exit 2). The JSON
 records ``plane`` (the records' problem; null if they mix both) and ``discretisation``,
@@ -66,7 +66,7 @@ from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
 from contract.joint import FORMULATIONS, load_joint as load_joint_file, mesh_text
-from fem.artefacts import GRASP_CASE, finger_case_formulation, finger_case_mesh
+from fem.studies.artefacts import GRASP_CASE, finger_case_formulation, finger_case_mesh
 from predictor.artefacts import GRASP_VALIDATION
 from predictor.gripper import GripperParams
 from predictor.joint import load_joint
@@ -89,7 +89,7 @@ OUTLINE_COLOURS = {"rigid": "tab:red", "joint": "magenta"}
 
 
 def production_discretisation() -> tuple[str, str]:
-    """(mesh text, formulation) of the paper joint file's ``[mesh]``: what fem.grasp_cases
+    """(mesh text, formulation) of the paper joint file's ``[mesh]``: what fem.studies.grasp_cases
     solves by default (hex2:3, mixed)."""
     joint = load_joint_file()
     return (mesh_text(joint.mesh_size, joint.wall_mesh_size, joint.divisions, joint.hex_size),
@@ -102,7 +102,7 @@ def read_records(folder: str | Path, finger) -> list[tuple[Path, dict]]:
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"--fem {folder}: no such folder (the FEM grasps: run `make grasp-fem`, "
-                         "python -m fem.grasp_cases)")
+                         "python -m fem.studies.grasp_cases)")
     out = []
     for path in sorted(folder.glob("*.json")):
         record = GRASP_CASE.load(path)
@@ -303,7 +303,7 @@ def _contact(ax, point, force, colour: str, marker: str, who: str) -> None:
 def build_parser() -> cli.Parser:
     mesh, formulation = production_discretisation()
     ap = cli.Parser(prog="python -m predictor.validate_grasps", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--fem", default="results/validation/grasps_fem", help="folder of fem.grasp_cases records "
+    ap.add_argument("--fem", default="results/validation/grasps_fem", help="folder of fem.studies.grasp_cases records "
                     "(default results/validation/grasps_fem)")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
                     "predictor.defaults)")
@@ -334,7 +334,7 @@ def chosen_records(folder: str, finger, validated: tuple[str, str]) -> list[tupl
         held = sorted({f"{finger_case_mesh(r)} {finger_case_formulation(r)}" for _, r in pairs})
         raise ValueError(f"no FEM grasp records on mesh {validated[0]} ({validated[1]}) in {folder}"
                          + (f" (it holds {', '.join(held)}: pass --mesh, --formulation)" if held else
-                            ": run `make grasp-fem` (python -m fem.grasp_cases)"))
+                            ": run `make grasp-fem` (python -m fem.studies.grasp_cases)"))
     return chosen
 
 

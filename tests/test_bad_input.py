@@ -38,116 +38,116 @@ ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONF
 
 # (module, args, needle): needle must appear in the one stderr line.
 CASES_FEM = [
-    # fem.solve: loads are finite numbers, checked against the box before any mesh
-    ("fem.solve", ["--p", "nan"], "--p: 'nan' is not a finite number"),
-    ("fem.solve", ["--p", "inf"], "--p: 'inf' is not a finite number"),
-    ("fem.solve", ["--p", "abc"], "--p: 'abc' is not a finite number"),
-    ("fem.solve", ["--p", "0.5"], "P = 0.5 is outside the training box"),
-    ("fem.solve", ["--p", "0.1", "--p", "0.2"], "--p given twice"),
-    ("fem.solve", ["--mesh-size", "nan"], "--mesh-size: 'nan' is not a finite number (allowed [0.3, 10] mm)"),
-    ("fem.solve", ["--mesh-size", "inf"], "--mesh-size: 'inf' is not a finite number"),
-    ("fem.solve", ["--mesh-size", "0"], "--mesh-size: 0 is outside [0.3, 10] mm"),
-    ("fem.solve", ["--divisions", "7"], "--divisions: 7 is outside [1, 6]"),
-    ("fem.solve", ["--divisions", "1.5"], "--divisions"),
-    ("fem.solve", ["--divisions", "2", "--mesh-size", "2"], "--divisions (hexahedra) excludes --mesh-size"),
-    ("fem.solve", ["--hex-size", "2.5"], "--hex-size grades hexahedra: give --divisions too"),
-    ("fem.solve", ["--divisions", "2", "--hex-size", "0.1"], "--hex-size: 0.1 is outside [0.3, 10] mm"),
-    ("fem.bench_joint", ["--mesh", "hex2:x", "--out", "{tmp}/x.json"], "--mesh"),
+    # fem.cli.solve: loads are finite numbers, checked against the box before any mesh
+    ("fem.cli.solve", ["--p", "nan"], "--p: 'nan' is not a finite number"),
+    ("fem.cli.solve", ["--p", "inf"], "--p: 'inf' is not a finite number"),
+    ("fem.cli.solve", ["--p", "abc"], "--p: 'abc' is not a finite number"),
+    ("fem.cli.solve", ["--p", "0.5"], "P = 0.5 is outside the training box"),
+    ("fem.cli.solve", ["--p", "0.1", "--p", "0.2"], "--p given twice"),
+    ("fem.cli.solve", ["--mesh-size", "nan"], "--mesh-size: 'nan' is not a finite number (allowed [0.3, 10] mm)"),
+    ("fem.cli.solve", ["--mesh-size", "inf"], "--mesh-size: 'inf' is not a finite number"),
+    ("fem.cli.solve", ["--mesh-size", "0"], "--mesh-size: 0 is outside [0.3, 10] mm"),
+    ("fem.cli.solve", ["--divisions", "7"], "--divisions: 7 is outside [1, 6]"),
+    ("fem.cli.solve", ["--divisions", "1.5"], "--divisions"),
+    ("fem.cli.solve", ["--divisions", "2", "--mesh-size", "2"], "--divisions (hexahedra) excludes --mesh-size"),
+    ("fem.cli.solve", ["--hex-size", "2.5"], "--hex-size grades hexahedra: give --divisions too"),
+    ("fem.cli.solve", ["--divisions", "2", "--hex-size", "0.1"], "--hex-size: 0.1 is outside [0.3, 10] mm"),
+    ("fem.studies.bench_joint", ["--mesh", "hex2:x", "--out", "{tmp}/x.json"], "--mesh"),
     ("workflow.campaign", ["--out", "{tmp}/c", "--samples", "4", "--seed", "1", "--divisions", "2", "--wall-mesh-size", "0.6"],
      "--divisions (hexahedra) excludes"),
-    ("fem.mesh_study", ["--meshes", "hex9", "--out", "{tmp}/x.json"], "hexN needs N in [1, 6]"),
-    ("fem.mesh_study", ["--meshes", "hex2", "2.4", "--out", "{tmp}/x.json"], "give one kind of mesh"),
-    ("fem.solve", ["--bogus"], "unrecognized arguments: --bogus"),
-    # fem.finger --object (a grasp): the object spec, the approach, the friction, gravity
-    ("fem.finger", ["--object", "bogus"], "unknown object 'bogus' in 'bogus': use circle, ellipse or rectangle"),
-    ("fem.finger", ["--object", "circle:r=-3"], "r=-3 in object 'circle:r=-3': sizes must be positive (mm)"),
-    ("fem.finger", ["--object", "circle", "--approach", "0.5,0"], "--approach: P1 = 0.5 is outside [-0.3, 0.3] MPa"),
-    ("fem.finger", ["--object", "circle", "--approach", "0.1"], "--approach: 1 values for finger 'paper' of 2 joint(s)"),
-    ("fem.finger", ["--approach", "0.1,0"], "--approach needs --object"),
-    ("fem.finger", ["--object", "circle", "--no-gravity"], "a grasp lifts the object's weight; drop --no-gravity"),
-    ("fem.finger", ["--object", "circle", "--mu", "nan"], "--mu: 'nan' is not a finite number (allowed [0, 10])"),
-    ("fem.solve", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
-    ("fem.self_contact", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("fem.self_contact", ["--loads", "0.1,0,0", "--out", "{tmp}/x.json"], "expected 4 comma-separated"),
-    ("fem.self_contact", ["--loads", "0,0,0,0", "0,0,0,120", "--out", "{tmp}/x.json"],
+    ("fem.studies.mesh_study", ["--meshes", "hex9", "--out", "{tmp}/x.json"], "hexN needs N in [1, 6]"),
+    ("fem.studies.mesh_study", ["--meshes", "hex2", "2.4", "--out", "{tmp}/x.json"], "give one kind of mesh"),
+    ("fem.cli.solve", ["--bogus"], "unrecognized arguments: --bogus"),
+    # fem.cli.finger --object (a grasp): the object spec, the approach, the friction, gravity
+    ("fem.cli.finger", ["--object", "bogus"], "unknown object 'bogus' in 'bogus': use circle, ellipse or rectangle"),
+    ("fem.cli.finger", ["--object", "circle:r=-3"], "r=-3 in object 'circle:r=-3': sizes must be positive (mm)"),
+    ("fem.cli.finger", ["--object", "circle", "--approach", "0.5,0"], "--approach: P1 = 0.5 is outside [-0.3, 0.3] MPa"),
+    ("fem.cli.finger", ["--object", "circle", "--approach", "0.1"], "--approach: 1 values for finger 'paper' of 2 joint(s)"),
+    ("fem.cli.finger", ["--approach", "0.1,0"], "--approach needs --object"),
+    ("fem.cli.finger", ["--object", "circle", "--no-gravity"], "a grasp lifts the object's weight; drop --no-gravity"),
+    ("fem.cli.finger", ["--object", "circle", "--mu", "nan"], "--mu: 'nan' is not a finite number (allowed [0, 10])"),
+    ("fem.cli.solve", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
+    ("fem.studies.self_contact", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.studies.self_contact", ["--loads", "0.1,0,0", "--out", "{tmp}/x.json"], "expected 4 comma-separated"),
+    ("fem.studies.self_contact", ["--loads", "0,0,0,0", "0,0,0,120", "--out", "{tmp}/x.json"],
      "M = 120 is outside the training box"),
-    ("fem.mesh_study", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("fem.mesh_study", ["--meshes", "2:1", "2:1", "--out", "{tmp}/x.json"], "give each value once"),
-    ("fem.mesh_study", ["--meshes", "2:x", "--out", "{tmp}/x.json"], "--meshes"),
-    ("fem.mesh_study", ["--loads", "8", "--out", "{tmp}/x.json"], "--loads"),
-    ("fem.mesh_study", ["--seed-from", "hex9", "--out", "{tmp}/x.json"], "--seed-from"),
-    ("fem.mesh_study", ["--loads", "1", "1", "--out", "{tmp}/x.json"], "give each value once"),
-    ("fem.bench_finger", ["--cases", "free_0.1_0.1,nope", "--out", "{tmp}/x.json"], "--cases: 'nope'"),
-    ("fem.bench_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("fem.bench_joint", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("fem.bench_joint", ["--walk", "2.5", "--out", "{tmp}/x.json"], "--walk: '2.5' is not an integer"),
-    ("fem.bench_joint", ["--mesh", "hex0", "--out", "{tmp}/x.json"], "--mesh: 'hex0': hexN needs N in [1, 6]"),
-    ("fem.bench_joint", ["--mesh", "1.8", "--formulation", "plastic", "--out", "{tmp}/x.json"], "--formulation"),
-    ("fem.validation", ["table", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("fem.validation", ["cantilever", "--alpha", "nan"], "--alpha: 'nan' is not a finite number (allowed [0, 10])"),
-    ("fem.validation", ["rollup", "--theta", "7"], "--theta: 7 is outside [0, 6.2832] rad"),
-    ("fem.render", ["--out", "{tmp}/x.txt"], "expected a .png file"),
-    ("fem.render", ["--out", "/etc/passwd/x.png"], "cannot create /etc/passwd/x.png"),
-    ("fem.render", ["--m", "200", "--out", "{tmp}/x.png"], "M = 200 is outside the training box"),
-    # fem.finger / fem.finger_cases (issue 14): pressures per joint of the finger file
-    ("fem.finger", ["--p1", "0.5"], "--p1: 0.5 is outside [-0.3, 0.3] MPa"),
-    ("fem.finger", ["--p1", "nan"], "--p1: 'nan' is not a finite number"),
-    ("fem.finger", ["--p3", "0.1"], "--p3 given, but finger 'paper' has 2 joint(s)"),
-    ("fem.finger", ["--finger", "tests/data/fingers/no_joint.toml"], "a finger needs at least one joint part"),
-    ("fem.finger", ["--rigid-mesh-size", "0"], "--rigid-mesh-size: 0 is outside [0.3, 10] mm"),
-    ("fem.finger", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
-    ("fem.finger", ["--divisions", "7"], "--divisions: 7 is outside [1, 6]"),
-    ("fem.finger", ["--divisions", "1.5"], "--divisions: '1.5' is not an integer"),
-    ("fem.finger", ["--divisions", "2", "--mesh-size", "2"], "--divisions (hexahedra) excludes --mesh-size"),
-    ("fem.finger", ["--divisions", "2", "--wall-mesh-size", "0.6"], "--divisions (hexahedra) excludes"),
-    ("fem.finger_cases", ["--divisions", "2", "--mesh-size", "2", "--out", "{tmp}/f"], "--divisions (hexahedra) excludes"),
-    ("fem.finger_cases", ["--cases", "nope", "--out", "{tmp}/f"], "unknown case 'nope'"),
-    ("fem.finger_cases", ["--part", "3/2", "--out", "{tmp}/f"], "--part '3/2': use K/N with 1 <= K <= N"),
-    ("fem.finger_cases", ["--out", "/etc/passwd/f"], "cannot create /etc/passwd/f"),
+    ("fem.studies.mesh_study", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.studies.mesh_study", ["--meshes", "2:1", "2:1", "--out", "{tmp}/x.json"], "give each value once"),
+    ("fem.studies.mesh_study", ["--meshes", "2:x", "--out", "{tmp}/x.json"], "--meshes"),
+    ("fem.studies.mesh_study", ["--loads", "8", "--out", "{tmp}/x.json"], "--loads"),
+    ("fem.studies.mesh_study", ["--seed-from", "hex9", "--out", "{tmp}/x.json"], "--seed-from"),
+    ("fem.studies.mesh_study", ["--loads", "1", "1", "--out", "{tmp}/x.json"], "give each value once"),
+    ("fem.studies.bench_finger", ["--cases", "free_0.1_0.1,nope", "--out", "{tmp}/x.json"], "--cases: 'nope'"),
+    ("fem.studies.bench_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.studies.bench_joint", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.studies.bench_joint", ["--walk", "2.5", "--out", "{tmp}/x.json"], "--walk: '2.5' is not an integer"),
+    ("fem.studies.bench_joint", ["--mesh", "hex0", "--out", "{tmp}/x.json"], "--mesh: 'hex0': hexN needs N in [1, 6]"),
+    ("fem.studies.bench_joint", ["--mesh", "1.8", "--formulation", "plastic", "--out", "{tmp}/x.json"], "--formulation"),
+    ("fem.studies.validation", ["table", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("fem.studies.validation", ["cantilever", "--alpha", "nan"], "--alpha: 'nan' is not a finite number (allowed [0, 10])"),
+    ("fem.studies.validation", ["rollup", "--theta", "7"], "--theta: 7 is outside [0, 6.2832] rad"),
+    ("fem.cli.render", ["--out", "{tmp}/x.txt"], "expected a .png file"),
+    ("fem.cli.render", ["--out", "/etc/passwd/x.png"], "cannot create /etc/passwd/x.png"),
+    ("fem.cli.render", ["--m", "200", "--out", "{tmp}/x.png"], "M = 200 is outside the training box"),
+    # fem.cli.finger / fem.studies.finger_cases (issue 14): pressures per joint of the finger file
+    ("fem.cli.finger", ["--p1", "0.5"], "--p1: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("fem.cli.finger", ["--p1", "nan"], "--p1: 'nan' is not a finite number"),
+    ("fem.cli.finger", ["--p3", "0.1"], "--p3 given, but finger 'paper' has 2 joint(s)"),
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/no_joint.toml"], "a finger needs at least one joint part"),
+    ("fem.cli.finger", ["--rigid-mesh-size", "0"], "--rigid-mesh-size: 0 is outside [0.3, 10] mm"),
+    ("fem.cli.finger", ["--xdmf", "/etc/passwd/u.xdmf"], "cannot create /etc/passwd/u.xdmf"),
+    ("fem.cli.finger", ["--divisions", "7"], "--divisions: 7 is outside [1, 6]"),
+    ("fem.cli.finger", ["--divisions", "1.5"], "--divisions: '1.5' is not an integer"),
+    ("fem.cli.finger", ["--divisions", "2", "--mesh-size", "2"], "--divisions (hexahedra) excludes --mesh-size"),
+    ("fem.cli.finger", ["--divisions", "2", "--wall-mesh-size", "0.6"], "--divisions (hexahedra) excludes"),
+    ("fem.studies.finger_cases", ["--divisions", "2", "--mesh-size", "2", "--out", "{tmp}/f"], "--divisions (hexahedra) excludes"),
+    ("fem.studies.finger_cases", ["--cases", "nope", "--out", "{tmp}/f"], "unknown case 'nope'"),
+    ("fem.studies.finger_cases", ["--part", "3/2", "--out", "{tmp}/f"], "--part '3/2': use K/N with 1 <= K <= N"),
+    ("fem.studies.finger_cases", ["--out", "/etc/passwd/f"], "cannot create /etc/passwd/f"),
     # issue 33: negative values in comma lists parse (the form --help shows), so the real
     # check answers; outputs are probed for real (root passes os.access on /proc) and no
     # folder is made above what the user named
-    ("fem.self_contact", ["--loads", "-0.1,0,0", "--out", "{tmp}/x.json"], "--loads: '-0.1,0,0': expected 4"),
-    ("fem.self_contact", ["--loads", "-0.1,0,0,-120", "--out", "{tmp}/x.json"], "M = -120 is outside the training box"),
-    ("fem.finger", ["--pressures", "-0.1,0.5"], "--pressures: 0.5 is outside [-0.3, 0.3] MPa"),
-    ("fem.finger", ["--pressures", "-0.1,0.1,0"], "--pressures: 3 values for finger 'paper' of 2 joint(s)"),
-    ("fem.finger", ["--p1", "-0.1", "--pressures", "-0.1,0.1"], "give either --p1..--p4 or --pressures"),
-    ("fem.finger", ["--finger", "tests/data/fingers/five_joints.toml", "--pressures", "0,0,0,-0.1"],
+    ("fem.studies.self_contact", ["--loads", "-0.1,0,0", "--out", "{tmp}/x.json"], "--loads: '-0.1,0,0': expected 4"),
+    ("fem.studies.self_contact", ["--loads", "-0.1,0,0,-120", "--out", "{tmp}/x.json"], "M = -120 is outside the training box"),
+    ("fem.cli.finger", ["--pressures", "-0.1,0.5"], "--pressures: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("fem.cli.finger", ["--pressures", "-0.1,0.1,0"], "--pressures: 3 values for finger 'paper' of 2 joint(s)"),
+    ("fem.cli.finger", ["--p1", "-0.1", "--pressures", "-0.1,0.1"], "give either --p1..--p4 or --pressures"),
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/five_joints.toml", "--pressures", "0,0,0,-0.1"],
      "--pressures: 4 values for finger 'five' of 5 joint(s)"),
-    ("fem.finger", ["--xdmf", "/proc/u.xdmf"], "cannot write /proc/u.xdmf: /proc:"),
-    ("fem.finger", ["--xdmf", "{tmp}/none/u.xdmf"], "cannot create {tmp}/none/u.xdmf: folder {tmp}/none does not exist"),
-    ("fem.solve", ["--xdmf", "{tmp}/a/b/u.xdmf"], "cannot create {tmp}/a/b/u.xdmf: folder {tmp}/a/b does not exist"),
-    ("fem.solve", ["--xdmf", "/proc/u.xdmf", "--json"], "cannot write /proc/u.xdmf"),
-    ("fem.finger_cases", ["--out", "{tmp}/a/b"], "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
-    ("fem.finger_cases", ["--out", "/proc/f"], "cannot write /proc/f: /proc:"),
+    ("fem.cli.finger", ["--xdmf", "/proc/u.xdmf"], "cannot write /proc/u.xdmf: /proc:"),
+    ("fem.cli.finger", ["--xdmf", "{tmp}/none/u.xdmf"], "cannot create {tmp}/none/u.xdmf: folder {tmp}/none does not exist"),
+    ("fem.cli.solve", ["--xdmf", "{tmp}/a/b/u.xdmf"], "cannot create {tmp}/a/b/u.xdmf: folder {tmp}/a/b does not exist"),
+    ("fem.cli.solve", ["--xdmf", "/proc/u.xdmf", "--json"], "cannot write /proc/u.xdmf"),
+    ("fem.studies.finger_cases", ["--out", "{tmp}/a/b"], "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
+    ("fem.studies.finger_cases", ["--out", "/proc/f"], "cannot write /proc/f: /proc:"),
     # issue 33: finger-file values that break meshing, exhaust memory or leave no gesture
     # are refused while parsing; fingers of any joint count solve or are refused up front
-    ("fem.finger", ["--finger", "tests/data/fingers/huge_length.toml"],
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/huge_length.toml"],
      "part 2 (rigid): length = 1000000000.0 is outside [1, 500] mm"),
-    ("fem.finger", ["--finger", "tests/data/fingers/tiny_length.toml"], "part 2 (rigid): length = 1e-09 is outside [1, 500] mm"),
-    ("fem.finger", ["--finger", "tests/data/fingers/flat.toml"], "part 2 (rigid): height = 1e-09 is outside [1, 100] mm"),
-    ("fem.finger", ["--finger", "tests/data/fingers/many_contact_points.toml"],
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/tiny_length.toml"], "part 2 (rigid): length = 1e-09 is outside [1, 500] mm"),
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/flat.toml"], "part 2 (rigid): height = 1e-09 is outside [1, 100] mm"),
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/many_contact_points.toml"],
      "part 2 (rigid): contact_points = 100000000 is outside [0, 1000]"),
-    ("fem.finger", ["--finger", "tests/data/fingers/heavy.toml"], "part 2 (rigid): weight = 1000000000.0 is outside [0, 2] N"),
-    ("fem.finger", ["--finger", "tests/data/fingers/too_long.toml"],
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/heavy.toml"], "part 2 (rigid): weight = 1000000000.0 is outside [0, 2] N"),
+    ("fem.cli.finger", ["--finger", "tests/data/fingers/too_long.toml"],
      "too_long.toml: the parts add up to 1245.45 mm, at most 1000 mm"),
-    ("fem.finger_cases", ["--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/f"],
+    ("fem.studies.finger_cases", ["--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/f"],
      "--finger: finger 'three' has 3 joint(s); the validation cases are pressure pairs for a two-joint finger"),
-    ("fem.finger_cases", ["--finger", "tests/data/fingers/heavy.toml", "--out", "{tmp}/f"], "weight = 1000000000.0 is outside"),
-    # fem.grasp_cases (issue 36 §3): cases, pressures, objects and --out, before any mesh
-    ("fem.grasp_cases", ["--cases", "circle_0.2_0.3,nope", "--out", "{tmp}/g"], "unknown case 'nope'"),
-    ("fem.grasp_cases", ["--grasps", "circle@0.2,0.35", "--out", "{tmp}/g"],
+    ("fem.studies.finger_cases", ["--finger", "tests/data/fingers/heavy.toml", "--out", "{tmp}/f"], "weight = 1000000000.0 is outside"),
+    # fem.studies.grasp_cases (issue 36 §3): cases, pressures, objects and --out, before any mesh
+    ("fem.studies.grasp_cases", ["--cases", "circle_0.2_0.3,nope", "--out", "{tmp}/g"], "unknown case 'nope'"),
+    ("fem.studies.grasp_cases", ["--grasps", "circle@0.2,0.35", "--out", "{tmp}/g"],
      "case circle_0.2_0.35: P2 = 0.35 is outside [-0.3, 0.3] MPa"),
-    ("fem.grasp_cases", ["--grasps", "circle@0.2,nan", "--out", "{tmp}/g"], "'nan' is not a finite number"),
-    ("fem.grasp_cases", ["--grasps", "circle:x=5@0.2,0.3", "--out", "{tmp}/g"], "object centre x = 5 mm"),
-    ("fem.grasp_cases", ["--grasps", "circle", "--out", "{tmp}/g"], "'circle': use SPEC@P1,P2"),
-    ("fem.grasp_cases", ["--grasps", "ellipse@0.1,0.1;ellipse@0.1,0.1", "--out", "{tmp}/g"],
+    ("fem.studies.grasp_cases", ["--grasps", "circle@0.2,nan", "--out", "{tmp}/g"], "'nan' is not a finite number"),
+    ("fem.studies.grasp_cases", ["--grasps", "circle:x=5@0.2,0.3", "--out", "{tmp}/g"], "object centre x = 5 mm"),
+    ("fem.studies.grasp_cases", ["--grasps", "circle", "--out", "{tmp}/g"], "'circle': use SPEC@P1,P2"),
+    ("fem.studies.grasp_cases", ["--grasps", "ellipse@0.1,0.1;ellipse@0.1,0.1", "--out", "{tmp}/g"],
      "ellipse_0.1_0.1 given twice"),
-    ("fem.grasp_cases", ["--part", "2/1", "--out", "{tmp}/g"], "--part '2/1': use K/N with 1 <= K <= N"),
-    ("fem.grasp_cases", ["--out", "/proc/g"], "cannot write /proc/g: /proc:"),
-    ("fem.grasp_cases", ["--out", "{tmp}/a/b"], "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
-    ("fem.grasp_cases", ["--out", "README.md"], "README.md is a file, not a folder"),
-    ("fem.grasp_cases", ["--divisions", "2", "--mesh-size", "4", "--out", "{tmp}/g"], "--divisions (hexahedra) excludes"),
+    ("fem.studies.grasp_cases", ["--part", "2/1", "--out", "{tmp}/g"], "--part '2/1': use K/N with 1 <= K <= N"),
+    ("fem.studies.grasp_cases", ["--out", "/proc/g"], "cannot write /proc/g: /proc:"),
+    ("fem.studies.grasp_cases", ["--out", "{tmp}/a/b"], "cannot create {tmp}/a/b: folder {tmp}/a does not exist"),
+    ("fem.studies.grasp_cases", ["--out", "README.md"], "README.md is a file, not a folder"),
+    ("fem.studies.grasp_cases", ["--divisions", "2", "--mesh-size", "4", "--out", "{tmp}/g"], "--divisions (hexahedra) excludes"),
     # --- fem cases (end)
 ]
 CASES_WORKFLOW = [
@@ -224,10 +224,10 @@ CASES_WORKFLOW = [
     ("workflow.bench_campaign", ["--divisions", "2", "--mesh-size", "1.8", "--out", "{tmp}/x.json"],
      "--divisions (hexahedra) excludes --mesh-size"),
     ("workflow.bench_campaign", ["--formulation", "hybrid", "--out", "{tmp}/x.json"], "invalid choice: 'hybrid'"),
-    ("fem.self_contact", ["--hex-size", "3", "--out", "{tmp}/x.json"], "--hex-size grades hexahedra: give --divisions too"),
-    ("fem.bench_finger", ["--divisions", "2", "--wall-mesh-size", "0.6", "--out", "{tmp}/x.json"],
+    ("fem.studies.self_contact", ["--hex-size", "3", "--out", "{tmp}/x.json"], "--hex-size grades hexahedra: give --divisions too"),
+    ("fem.studies.bench_finger", ["--divisions", "2", "--wall-mesh-size", "0.6", "--out", "{tmp}/x.json"],
      "--divisions (hexahedra) excludes"),
-    ("fem.render", ["--formulation", "hybrid", "--out", "{tmp}/x.png"], "invalid choice: 'hybrid'"),
+    ("fem.cli.render", ["--formulation", "hybrid", "--out", "{tmp}/x.png"], "invalid choice: 'hybrid'"),
     # --- workflow cases (end)
 ]
 CASES_SURROGATE = [
@@ -329,7 +329,7 @@ CASES_PREDICTOR = [
     ("predictor.validate_grasps", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
      "--fem {tmp}/none: no such folder"),
     ("predictor.validate_grasps", ["--fem", "results/validation/finger_fem", "--out", "{tmp}/x.json", "--figures",
-                                   "{tmp}/f"], "region: missing (format fem-grasp-case/1, fem.grasp_cases)"),
+                                   "{tmp}/f"], "region: missing (format fem-grasp-case/1, fem.studies.grasp_cases)"),
     ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
      "no FEM grasp records on mesh hex2:3 (mixed) in tests/data/grasps (it holds 4 mixed"),
     ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "/etc/passwd/x.json"],
@@ -545,9 +545,10 @@ def _help(argv: list[str]):
 def test_every_cli_has_help_and_json():
     """Every ``python -m`` tool of the packages (and the apps) answers --help (exit 0) and offers
     --json (on the tool itself or on each of its subcommands)."""
-    tools = sorted({f"{p.parent.name}.{p.stem}" for p in ROOT.glob("*/*.py")
-                    if p.parent.name in ("fem", "workflow", "surrogate", "predictor", "apps")
-                    and "def main(" in p.read_text()} | {"apps.report"})
+    tools = sorted({".".join(p.relative_to(ROOT).with_suffix("").parts)
+                    for package in ("fem", "workflow", "surrogate", "predictor", "apps")
+                    for p in (ROOT / package).rglob("*.py")
+                    if not p.stem.startswith("__") and "def main(" in p.read_text()} | {"apps.report"})
     assert len(tools) >= 15, tools
     with ThreadPoolExecutor(max_workers=2) as pool:
         helps = dict(zip(tools, pool.map(lambda t: _help([t]), tools)))
@@ -561,3 +562,18 @@ def test_every_cli_has_help_and_json():
         for sub in subs:
             rs = _help([tool, sub])
             assert rs.returncode == 0 and "--json" in rs.stdout, f"{tool} {sub}: no --json"
+
+
+@pytest.mark.parametrize("alias,module", [("fem.finger", "fem.cli.finger"), ("fem.solve", "fem.cli.solve")])
+def test_the_old_command_paths_run_the_moved_commands(alias, module):
+    """``python -m fem.finger`` and ``fem.solve`` (issue 61's aliases) run fem.cli's commands
+    and say where they moved: --help is the new command's, and bad input exits 2 with its
+    one error line after the note."""
+    r = _help([alias])
+    assert r.returncode == 0 and f"python -m {module}" in r.stdout, r.stdout[:500]
+    assert r.stderr.strip() == f"note: {alias} moved to {module} (python -m {module})"
+    bad = subprocess.run([PY, "-m", alias, "--mesh-size", "0"], cwd=ROOT, env=ENV, capture_output=True,
+                         text=True, timeout=300)
+    lines = [ln for ln in bad.stderr.splitlines() if ln.strip()]
+    assert bad.returncode == 2 and len(lines) == 2, bad.stderr[-2000:]
+    assert lines[0].startswith(f"note: {alias} moved") and "--mesh-size: 0 is outside [0.3, 10] mm" in lines[1]

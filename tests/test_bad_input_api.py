@@ -107,7 +107,7 @@ def test_fingers_of_other_joint_counts_load():
 
 
 def _finger_result(converged: bool):
-    from fem.finger import FingerLoad, FingerResult
+    from fem.solvers.finger import FingerLoad, FingerResult
 
     anchors = np.arange(40.0).reshape(2, 10, 2)
     return FingerResult(load=FingerLoad((0.1, -0.1)), converged=converged, tip=np.array([3.0, -200.0]),
@@ -208,14 +208,14 @@ def test_heartbeat_and_filtered_progress(capsys):
 
 @pytest.mark.fem
 def test_fem_solve_progress_on_stderr_json_alone_on_stdout():
-    """fem.solve --json (coarse mesh): stdout is the result alone (strict JSON), stderr the
+    """fem.cli.solve --json (coarse mesh): stdout is the result alone (strict JSON), stderr the
     progress (mesh, every load step); --quiet silences the progress, not the result."""
     import os
     import subprocess
 
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
            "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
-    base = [sys.executable, "-m", "fem.solve", "--p", "0.1", "--m", "50", "--mesh-size", "4", "--formulation",
+    base = [sys.executable, "-m", "fem.cli.solve", "--p", "0.1", "--m", "50", "--mesh-size", "4", "--formulation",
             "displacement", "--json"]
     loud, quiet = (subprocess.run(base + extra, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
                    for extra in ([], ["--quiet"]))
@@ -232,10 +232,10 @@ def test_fem_solve_progress_on_stderr_json_alone_on_stdout():
 
 
 def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys):
-    """fem.finger's command line around a solve that does not converge (a stand-in solver
+    """fem.cli.finger's command line around a solve that does not converge (a stand-in solver
     returns it, so no FEM runs): JSON with null figures on stdout, the same in the text
     output, exit 1 and one reason line on stderr (with --quiet, the only line)."""
-    import fem.finger_cli as finger_cli
+    import fem.cli.finger as finger_cli
 
     class Unconverged:
         def __init__(self, geometry, comm, **settings):
@@ -253,7 +253,7 @@ def test_fem_finger_cli_prints_no_figures_when_not_converged(monkeypatch, capsys
     got = capsys.readouterr()
     out = json.loads(got.out)
     assert out["converged"] is False and out["tip"] is None and out["joints"] is None
-    assert got.err.splitlines() == ["python -m fem.finger: did not converge: no convergence after 10 cut-backs "
+    assert got.err.splitlines() == ["python -m fem.cli.finger: did not converge: no convergence after 10 cut-backs "
                                     "at path 0.4000; no figures reported"]
     assert finger_cli.main(["--p1", "-0.1", "--p2", "0.1", "--quiet"]) == 1
     text = capsys.readouterr().out

@@ -1,4 +1,4 @@
-"""fem.block_krylov.block_gmres against dense solves (numpy and scipy only, < 1 s).
+"""fem.solvers.block_krylov.block_gmres against dense solves (numpy and scipy only, < 1 s).
 
 * a nonsymmetric system with a perturbed LU as preconditioner: every column meets
   ||P^-1 (b - K x)|| <= rtol ||P^-1 b|| (the test of PETSc's left-preconditioned GMRES) and
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from fem.block_krylov import block_gmres
+from fem.solvers.block_krylov import block_gmres
 
 N = 200
 RTOL = 1e-10

@@ -14,7 +14,7 @@ finger's known changes (no FEM solve; seconds):
 - an untrusted fit (the mount alone fitted to a finger whose joints and tip differ too)
   exits 1 with one line naming why and writes nothing; --force writes it, still exit 1,
   the record and the report saying it is not trusted; a trusted fit says so in both;
-- the Makefile's CAL_PRESSURES are the module's PRESSURES, and fem.finger_cases takes
+- the Makefile's CAL_PRESSURES are the module's PRESSURES, and fem.studies.finger_cases takes
   them (--pressures) as named gravity cases, refusing pairs outside the joints' boxes
   before any solve;
 - the report judges (b) from calibration.json, or says it is not run.
@@ -59,7 +59,7 @@ def model():
 
 
 def stand_in_case(model, theta: torch.Tensor, pressures, truth=TRUTH) -> dict:
-    """A fem.finger_cases record of the calibration model's gesture at theta: the
+    """A fem.studies.finger_cases record of the calibration model's gesture at theta: the
     fingertip, its angle, every joint's proximal centre and anchors (measurement frame)."""
     obs = synthetic_observations(model, {}, (pressures,), problem=FINGER)   # the FEM cases: lone fingers
     d = design(obs, model.finger)
@@ -219,7 +219,7 @@ def _foreign(folder: Path):
 
 def _not_a_case(folder: Path):
     (folder / "notes.json").write_text(json.dumps({"tip": [0, 0]}))
-    return "not a case of fem.finger_cases"
+    return "not a case of fem.studies.finger_cases"
 
 
 @pytest.mark.parametrize("spoil", [_drop, _unconverged, _foreign, _not_a_case])
@@ -246,13 +246,13 @@ def test_missing_folder_and_bad_pairs_exit_2(tmp_path, capsys):
 
 
 def test_makefile_pressures_are_the_modules_and_fem_takes_them(tmp_path, capsys):
-    """CAL_PRESSURES (Makefile) = PRESSURES; fem.finger_cases --pressures names them as its
+    """CAL_PRESSURES (Makefile) = PRESSURES; fem.studies.finger_cases --pressures names them as its
     gravity cases and refuses a pair outside the joints' boxes (exit 2, one line) before
     meshing."""
     text = (ROOT / "Makefile").read_text()
     listed = re.search(r"^CAL_PRESSURES\s*:=\s*(\S+)\s*$", text, re.M)[1]
     assert pairs_arg(listed) == PRESSURES
-    from fem.finger_cases import main as cases_main, pressure_cases
+    from fem.studies.finger_cases import main as cases_main, pressure_cases
 
     cases = pressure_cases(listed)
     assert [c[0] for c in cases][:2] == ["gravity_0.2_0.2", "gravity_-0.2_0.15"] and all(c[3] for c in cases)

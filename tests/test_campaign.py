@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COARSE = 4.0
 ARGS = ["--samples", "4", "--seed", "11", "--unit-size", "2", "--mesh-size", str(COARSE),
         "--formulation", "displacement", "--fresh-check-every", "2", "--quiet", "--json"]
-#: the committed datasets' discretisation (fem.discretisation.PAPER; `make dataset` passes it)
+#: the committed datasets' discretisation (fem.mesh.discretisation.PAPER; `make dataset` passes it)
 PAPER_MESH = ["--mesh-size", "1.8", "--formulation", "displacement"]
 ENV = {**os.environ, "OMP_NUM_THREADS": "1", "OMPI_ALLOW_RUN_AS_ROOT": "1",
        "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
@@ -65,8 +65,8 @@ def reference(tmp_path_factory):
 def solver():
     from mpi4py import MPI
 
-    from fem.geometry import JointGeometry
-    from fem.solver import JointSolver
+    from fem.mesh.geometry import JointGeometry
+    from fem.solvers.joint import JointSolver
     return JointSolver(JointGeometry(mesh_size=COARSE, divisions=0, hex_size=None), MPI.COMM_SELF,
                        formulation="displacement")
 
@@ -205,7 +205,7 @@ def test_harvested_sample_equals_fresh_solve(reference, solver):
     """The second sample of each unit, reached by continuation along the walk, equals a
     solve from zero at the same inputs to 1e-6 mm: unit 0 by the campaign's own check
     (--fresh-check-every 2, recorded in the shard meta), unit 1 here."""
-    from fem.solver import Load
+    from fem.solvers.joint import Load
 
     data, _ = shards.load_dataset(reference)
     _, meta = shards.read_shard(reference / store.shard_file(0))
@@ -222,7 +222,7 @@ def test_jacobian_matches_central_differences(reference, solver):
     """The stored Jacobian (20, 4) of sample 3 matches central differences of converged
     solves at x ± h e_k (h = 1e-3 of the box half-width) to 1e-3 relative error, column by
     column (scaled by the column's largest entry)."""
-    from fem.solver import Load
+    from fem.solvers.joint import Load
 
     data, _ = shards.load_dataset(reference)
     i = int(np.flatnonzero(data["sample_id"] == 3)[0])
@@ -293,9 +293,9 @@ def _cli_config(tmp_path, *flags) -> dict:
 
 
 def test_production_is_hex2s3_mixed_and_the_default_campaign_is_its_manifest(tmp_path):
-    """fem.discretisation.PRODUCTION is hex2:3 mixed with quadrature 4 (key
+    """fem.mesh.discretisation.PRODUCTION is hex2:3 mixed with quadrature 4 (key
     hex2s3_mixed_q4_k100), and it is every default: JointGeometry's mesh, JointSolver's
-    formulation and (config_for) quadrature, the paper joint file's [mesh], fem.bench_joint's
+    formulation and (config_for) quadrature, the paper joint file's [mesh], fem.studies.bench_joint's
     --mesh/--formulation. The campaign of the paper's joint without mesh options, and the
     one `make dataset` spells out, both record HEX2S3_CONFIG key for key, and the
     defaults record the committed sets' configs; the PAPER options record the 1.8 mm
@@ -303,9 +303,9 @@ def test_production_is_hex2s3_mixed_and_the_default_campaign_is_its_manifest(tmp
     import inspect
 
     from contract.joint import load_joint
-    from fem.discretisation import FORMULATION, PAPER, PRODUCTION, discretisation
-    from fem.geometry import JointGeometry
-    from fem.solver import JointSolver, config_for
+    from fem.mesh.discretisation import FORMULATION, PAPER, PRODUCTION, discretisation
+    from fem.mesh.geometry import JointGeometry
+    from fem.solvers.joint import JointSolver, config_for
 
     assert (PRODUCTION.mesh, PRODUCTION.formulation, PRODUCTION.quadrature, PRODUCTION.key) == \
         ("hex2:3", "mixed", 4, "hex2s3_mixed_q4_k100")

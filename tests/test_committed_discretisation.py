@@ -1,5 +1,5 @@
 """The committed artefacts stay on their own discretisation: the production one is hex2:3
-mixed (fem.discretisation.PRODUCTION), and the committed lone-finger cases, the 1.8 mm
+mixed (fem.mesh.discretisation.PRODUCTION), and the committed lone-finger cases, the 1.8 mm
 reference datasets and surrogate (results/*/h1.8, finger_h1.8.json) are on PAPER (1.8 mm
 P2 displacement).
 
@@ -9,8 +9,8 @@ P2 displacement).
   nodes) exactly;
   a 1.8 mm case in the mixed formulation is another discretisation (mesh check, named
   with its formulation), and --mesh texts are read in the records' spelling;
-* fem.finger_cases' default file suffix never names the committed cases' files for another
-  discretisation, and fem.bench_finger checks its answers against a committed case only
+* fem.studies.finger_cases' default file suffix never names the committed cases' files for another
+  discretisation, and fem.studies.bench_finger checks its answers against a committed case only
   when that case was solved on its finger, mesh and formulation (PAPER, as `make
   bench-finger` passes it), not on the production mesh.
 """
@@ -67,9 +67,9 @@ def test_validation_selects_the_committed_discretisation_and_reproduces_its_mesh
 def test_finger_case_files_and_the_finger_bench_keep_to_their_discretisation():
     pytest.importorskip("dolfinx")
     from contract.finger import load_finger
-    from fem.bench_finger import same_discretisation
-    from fem.finger_cases import default_suffix
-    from fem.geometry import FingerGeometry, JointGeometry
+    from fem.studies.bench_finger import same_discretisation
+    from fem.studies.finger_cases import default_suffix
+    from fem.mesh.geometry import FingerGeometry, JointGeometry
 
     paper_mesh = JointGeometry(mesh_size=1.8, divisions=0, hex_size=None)
     assert default_suffix(paper_mesh, "displacement") == ""              # the committed cases' names
@@ -88,7 +88,7 @@ def test_validation_meets_the_plane_only_where_the_fem_case_did():
     """The committed cases are one finger alone (no settings.plane): at gravity (0.2, 0.2)
     MPa, a case where that finger crosses X = 0, the judged variant on the 1.8 mm reference
     surrogate reproduces the committed finger_h1.8.json's fingertip (1e-9 mm), which lies across X = 0; the same record marked as
-    solved with the plane (fem.finger_cases --plane) gets the gripper's answer instead,
+    solved with the plane (fem.studies.finger_cases --plane) gets the gripper's answer instead,
     within 0.1 mm of X = 0 (issue 36 §0)."""
     pytest.importorskip("torch")
     from predictor import validate_finger as vf

@@ -195,9 +195,9 @@ def test_demo_runs_the_packages_command_lines_without_importing_them():
 
 def test_a_step_file_is_read_through_its_format(tmp_path):
     """A step whose tool writes a finger FEM case (here ``python -m json.tool`` copying the
-    committed one) is loaded through fem.artefacts.FINGER_CASE: the case as committed is
+    committed one) is loaded through fem.studies.artefacts.FINGER_CASE: the case as committed is
     read; with ``tip_angle_deg`` renamed the step fails in one line naming the file and key."""
-    from fem.artefacts import FINGER_CASE
+    from fem.studies.artefacts import FINGER_CASE
 
     committed = Path(demo.ROOT, demo.COMMITTED_FINGER_FEM, f"{demo.FINGER_CASE}.json")
     case = json.loads(committed.read_text())
@@ -216,17 +216,17 @@ def test_a_step_file_is_read_through_its_format(tmp_path):
     with pytest.raises(demo.StepFailed) as err:
         demo.run_step(step(), 1, 1, 0.0, dict(os.environ), log=io.StringIO())
     assert "\n" not in str(err.value)
-    assert f"{out}: tip_angle_deg: missing (format fem-finger-case/1, fem.finger_cases)" in str(err.value)
+    assert f"{out}: tip_angle_deg: missing (format fem-finger-case/1, fem.studies.finger_cases)" in str(err.value)
 
 
 def test_demo_fem_runs_on_the_committed_discretisation_not_the_production_one():
-    """The committed surrogate and finger cases are on fem.discretisation.PAPER (1.8 mm P2
+    """The committed surrogate and finger cases are on fem.mesh.discretisation.PAPER (1.8 mm P2
     displacement): the demo's joint FEM is solved there, its live finger FEM on the coarse
     mesh in the same formulation and validated in it, so no step runs the production
     hexahedra (the tools' default); each committed case the demo compares with is on PAPER,
     and a case on another discretisation is refused in one line."""
     pytest.importorskip("dolfinx")
-    from fem.discretisation import PAPER
+    from fem.mesh.discretisation import PAPER
 
     assert (demo.COMMITTED_MESH_SIZE, demo.COMMITTED_FORMULATION) == (PAPER.H, PAPER.formulation)
     assert (PAPER.W, PAPER.divisions) == (None, 0)

@@ -18,12 +18,12 @@ pytest.importorskip("dolfinx")
 import dolfinx.fem  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from fem import validation  # noqa: E402
-from fem.contact import ValleyContact  # noqa: E402
-from fem.elastica import cantilever_tip, rollup_tip  # noqa: E402
-from fem.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
-from fem.mesh import create_mesh  # noqa: E402
-from fem.solver import JointSolver, Load, SolverConfig  # noqa: E402
+from fem.studies import validation  # noqa: E402
+from fem.physics.contact import ValleyContact  # noqa: E402
+from fem.studies.elastica import cantilever_tip, rollup_tip  # noqa: E402
+from fem.mesh.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
+from fem.mesh.build import create_mesh  # noqa: E402
+from fem.solvers.joint import JointSolver, Load, SolverConfig  # noqa: E402
 from contract.spec import INPUT_BOX, OutOfBoxError, mirror  # noqa: E402
 
 pytestmark = pytest.mark.fem
@@ -90,7 +90,7 @@ def test_mirror_symmetry(joint):
 
 
 def test_the_matrix_free_tangent_is_the_assembled_tangent(joint):
-    """GMRES's operator, the tangent applied matrix-free (fem.load_path.TangentAction), is
+    """GMRES's operator, the tangent applied matrix-free (fem.solvers.load_path.TangentAction), is
     the assembled tangent K of the P2 displacement form (a blocked space: three dofs a
     node) with its Dirichlet rows and columns: K x agrees to 1e-13 of |K x| for a random x
     that is nonzero on the constrained dofs, at a state with closed valley pairs."""
@@ -157,7 +157,7 @@ def test_out_of_box_load_is_refused(joint):
 
 
 def _cli(args, ranks=1):
-    cmd = [sys.executable, "-m", "fem.solve", *args]
+    cmd = [sys.executable, "-m", "fem.cli.solve", *args]
     if ranks > 1:   # -q: without it mpirun adds its own 9-line banner on a non-zero exit
         cmd = ["mpirun", "-q", "--oversubscribe", "-n", str(ranks), *cmd]
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
@@ -166,7 +166,7 @@ def _cli(args, ranks=1):
 
 
 def test_cli_refuses_out_of_box_with_one_line():
-    """python -m fem.solve --m 150: exit status 2 and a one-line reason on stderr."""
+    """python -m fem.cli.solve --m 150: exit status 2 and a one-line reason on stderr."""
     p = _cli(["--m", "150", "--mesh-size", "4"])
     assert p.returncode == 2
     assert p.stderr.strip().count("\n") == 0 and "M = 150 is outside the training box" in p.stderr
@@ -174,7 +174,7 @@ def test_cli_refuses_out_of_box_with_one_line():
 
 @pytest.mark.mpi
 def test_cli_bad_input_under_mpirun_is_one_line():
-    """mpirun -n 2 python -m fem.solve --p nan / --p 0.5: every rank exits 2 at once (no
+    """mpirun -n 2 python -m fem.cli.solve --p nan / --p 0.5: every rank exits 2 at once (no
     mesh, no hang), and only rank 0 prints the one error line."""
     for args, needle in ((["--p", "nan"], "'nan' is not a finite number"),
                          (["--p", "0.5", "--mesh-size", "4"], "P = 0.5 is outside the training box")):
@@ -231,7 +231,7 @@ def test_richardson_recovers_a_known_order_and_limit():
     the observed order is p and the extrapolated value f*, for a scalar (p = 2) and a vector
     (p = 1.5, every component the same order). Oscillating changes (f2 - f1 and f3 - f2 of
     opposite sign, growing) are not asymptotic: the finest value is returned, no order."""
-    from fem.mesh_study import richardson
+    from fem.studies.mesh_study import richardson
 
     r = math.sqrt(2.0)
     hs = [2.4, 2.4 / r, 2.4 / r ** 2]
@@ -246,11 +246,11 @@ def test_richardson_recovers_a_known_order_and_limit():
 
 
 def test_richardson_on_nested_hexahedra_of_two_three_and_four_divisions():
-    """Exact solution f(h) = f* + C h^p on h = 1/2, 1/3, 1/4 (fem.mesh_hex's nested meshes,
+    """Exact solution f(h) = f* + C h^p on h = 1/2, 1/3, 1/4 (fem.mesh.hexahedra's nested meshes,
     ratios 1.5 and 4/3, not one ratio): the observed order is p (2.5 and 0.7 here) and the
     extrapolated value f*; the constant-ratio formula would give neither. A change that
     grows under refinement has no order in ORDER_RANGE and is not asymptotic."""
-    from fem.mesh_study import richardson
+    from fem.studies.mesh_study import richardson
 
     hs = [1 / 2, 1 / 3, 1 / 4]
     for p in (2.5, 0.7):
@@ -268,7 +268,7 @@ def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
     (a constant 0.5 mm, 1 deg off): the chain is found without the other formulation, both
     triples observe order 2, the extrapolation is f*, the production error is C 2.4^2 in
     anchors and 0.1 2.4^2 deg in both angles, the paper's error its offset."""
-    from fem import mesh_study
+    from fem.studies import mesh_study
 
     X = anchor_points(JointGeometry().length)[:, :2]
     star = X + np.array([5.0, 2.0])
@@ -306,11 +306,11 @@ def test_mesh_study_error_of_the_production_mesh_against_the_extrapolation():
 
 
 def test_mesh_study_finds_the_hexahedral_family_of_the_production_mesh():
-    """Synthetic records f(n) = f* + C n^-3 on hex2, hex3, hex4 (fem.mesh_hex's nested
+    """Synthetic records f(n) = f* + C n^-3 on hex2, hex3, hex4 (fem.mesh.hexahedra's nested
     divisions, h = 1/n) beside a tetrahedral sqrt(2) chain of other values: with hex2 as
     the production mesh the family is the hexahedra (never a chain across the two kinds),
     the order 3 at every load, and hex2's error exactly C / 8 against f*."""
-    from fem import mesh_study
+    from fem.studies import mesh_study
 
     X = anchor_points(JointGeometry().length)[:, :2]
     star, n_loads = X + np.array([5.0, 2.0]), len(mesh_study.LOADS)
@@ -335,15 +335,15 @@ def test_mesh_study_finds_the_hexahedral_family_of_the_production_mesh():
 
 
 def test_a_problem_composed_from_the_pieces_is_solved_by_the_same_solver():
-    """The seam between physics and solver: a problem written here from fem.problem's
+    """The seam between physics and solver: a problem written here from fem.physics.problem's
     pieces, the beam's neo-Hookean body (nu = 0) under a uniform dead transverse load q
     (N/mm, a body force q/A along +y on the half-model, A = b h) that no builder of the
     project declares, handed to LoadPathSolver. In the linear regime (tip deflection 1 %
     of L) the tip deflection is Euler-Bernoulli's w = q L^4 / (8 EI) within 1 %, and the
     solver's sensitivity dw/dq agrees with w/q to 1e-3 (the O(q) nonlinearity)."""
-    from fem.load_path import LoadPathSolver, SolverConfig
-    from fem.problem import (LoadTerm, Problem, clamp_and_symmetry, deformation_gradient,
-                             displacement_space, elastic_work)
+    from fem.solvers.load_path import LoadPathSolver, SolverConfig
+    from fem.physics.problem import (LoadTerm, Problem, clamp_and_symmetry, deformation_gradient,
+                                     displacement_space, elastic_work)
 
     geo = validation.DEFAULT_BEAM
     E, L, A = validation.E_BEAM, geo.length, geo.width * geo.thickness

@@ -1,4 +1,4 @@
-"""The mesh-causes study's measures (fem.mesh_causes) on records with known answers (no
+"""The mesh-causes study's measures (fem.studies.mesh_causes) on records with known answers (no
 solve), and its command line's bad input."""
 
 import json
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 pytest.importorskip("dolfinx")
-from fem import joint_cases  # noqa: E402
-from fem import mesh_causes as mc  # noqa: E402
-from fem.geometry import JointGeometry, anchor_points  # noqa: E402
+from fem.studies import joint_cases  # noqa: E402
+from fem.studies import mesh_causes as mc  # noqa: E402
+from fem.mesh.geometry import JointGeometry, anchor_points  # noqa: E402
 
 X = anchor_points(JointGeometry().length)[:, :2]
 
@@ -100,7 +100,7 @@ def test_resume_reads_only_records_of_the_same_discretisation(tmp_path):
                                            (["--reference", "/nonexistent.json"], "--reference")])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
     out = tmp_path / "t.json"
-    p = subprocess.run([sys.executable, "-m", "fem.mesh_causes", "--work", str(tmp_path / "w"),
+    p = subprocess.run([sys.executable, "-m", "fem.studies.mesh_causes", "--work", str(tmp_path / "w"),
                         "--out", str(out), *args], capture_output=True, text=True)
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and message in p.stderr
     assert not out.exists() and not (tmp_path / "w").exists()

@@ -1,4 +1,4 @@
-"""The finger FEM holding a circle (fem.grasp, fem.object_contact) on a coarse mesh.
+"""The finger FEM holding a circle (fem.solvers.grasp, fem.physics.object_contact) on a coarse mesh.
 
 One grasp along the predictor's history (approach (-0.15, 0) MPa, the default circle,
 ramp to (0.2, 0.25) MPa) on 4 mm tetrahedral joints in the production formulation, mixed
@@ -34,9 +34,9 @@ from dolfinx.fem.petsc import create_matrix  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
 from contract.grasp import parse_object  # noqa: E402
-from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
-from fem.grasp import GraspSolver  # noqa: E402
-from fem.object_contact import MAX_PENETRATION  # noqa: E402
+from fem.mesh.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.solvers.grasp import GraspSolver  # noqa: E402
+from fem.physics.object_contact import MAX_PENETRATION  # noqa: E402
 
 PREDICTOR_TIP = np.array([37.7655, -214.4284])    # mm, the outline law's answer (docstring)
 PREDICTOR_NORMAL = 0.4187                         # N
@@ -120,7 +120,7 @@ def test_object_tangent_matches_differences(grasp):
 
 
 def test_matrix_free_grasp_tangent_is_the_assembled_one(grasp):
-    """GMRES's operator (fem.load_path.TangentAction: the object's facet form along x, the
+    """GMRES's operator (fem.solvers.load_path.TangentAction: the object's facet form along x, the
     valleys' blocks, the friction's rank-one part, the clamp's unit rows) times a random x
     is the assembled tangent's product plus the rank-one part, to round-off."""
     solver, _ = grasp

@@ -1,7 +1,7 @@
-"""The swept hexahedral joint mesh (fem.mesh_hex) against the tetrahedral one and physics.
+"""The swept hexahedral joint mesh (fem.mesh.hexahedra) against the tetrahedral one and physics.
 
 * geometry: the hex mesh's volume per cell tag and area per facet tag equal the OCC
-  tetrahedral mesh's (fem.geometry.build_joint, an independent construction of the same
+  tetrahedral mesh's (fem.mesh.geometry.build_joint, an independent construction of the same
   polyhedral joint) to 1e-6 relative; the node set is its own y-mirror exactly; the meshes
   of n divisions are nested (hex1's vertices are hex2's), which the mesh study's
   Richardson ratios rely on;
@@ -26,12 +26,12 @@ from petsc4py import PETSc  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 from contract.spec import mirror  # noqa: E402
-from fem.discretisation import Discretisation, discretisation  # noqa: E402
-from fem.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
-from fem.joint_cases import difference  # noqa: E402
-from fem.mesh import create_mesh  # noqa: E402
-from fem.mesh_hex import hexahedra, q2_nodes  # noqa: E402
-from fem.solver import JointSolver, Load  # noqa: E402
+from fem.mesh.discretisation import Discretisation, discretisation  # noqa: E402
+from fem.mesh.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
+from fem.studies.joint_cases import difference  # noqa: E402
+from fem.mesh.build import create_mesh  # noqa: E402
+from fem.mesh.hexahedra import hexahedra, q2_nodes  # noqa: E402
+from fem.solvers.joint import JointSolver, Load  # noqa: E402
 
 pytestmark = pytest.mark.fem
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -1,17 +1,17 @@
-"""The whole finger on swept hexahedra (fem.mesh_hex.create_hex_finger_mesh).
+"""The whole finger on swept hexahedra (fem.mesh.hexahedra.create_hex_finger_mesh).
 
 * geometry: every finger tag's volume or area on hex1 equals the OCC tetrahedral finger's
-  (fem.geometry.build_finger, an independent construction of the same polyhedral finger)
+  (fem.mesh.geometry.build_finger, an independent construction of the same polyhedral finger)
   to 1e-6 relative; the node set is its own y-mirror exactly; each joint of the finger is
-  meshed exactly as the joint alone (fem.mesh_hex.create_hex_mesh), so the finger inherits
+  meshed exactly as the joint alone (fem.mesh.hexahedra.create_hex_mesh), so the finger inherits
   the joint's mesh study;
 * a free pressurisation of the paper's finger (Q2-Q1 mixed, hex1 joints, quadrature 4):
   (P1, P2) and (-P1, -P2) give mirror-image fingers about the mount's vertical line, and
   the fingertip agrees with the coarse tetrahedral finger's (4 mm P2-P1, frozen) within
   the tolerance measured below, an independent discretisation of the same problem;
-* the command line: ``python -m fem.finger --divisions 1`` solves the same hexahedral
+* the command line: ``python -m fem.cli.finger --divisions 1`` solves the same hexahedral
   finger as the Python call (same answer to round-off, the hexahedra's quadrature
-  raised by fem.solver.config_for) and records its mesh as ``hex1``.
+  raised by fem.solvers.joint.config_for) and records its mesh as ``hex1``.
 """
 
 import json
@@ -28,11 +28,11 @@ from petsc4py import PETSc  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
-from fem.finger import FINGER_CONFIG, FingerLoad, FingerSolver  # noqa: E402
-from fem.finger_cli import main  # noqa: E402
-from fem.geometry import FingerGeometry, JointGeometry, finger_tags  # noqa: E402
-from fem.mesh import create_mesh  # noqa: E402
-from fem.mesh_hex import QUADRATURE, hexahedra  # noqa: E402
+from fem.solvers.finger import FINGER_CONFIG, FingerLoad, FingerSolver  # noqa: E402
+from fem.cli.finger import main  # noqa: E402
+from fem.mesh.geometry import FingerGeometry, JointGeometry, finger_tags  # noqa: E402
+from fem.mesh.build import create_mesh  # noqa: E402
+from fem.mesh.hexahedra import QUADRATURE, hexahedra  # noqa: E402
 
 pytestmark = pytest.mark.fem
 PAPER = load_finger()
@@ -87,7 +87,7 @@ def test_hex_finger_is_mirrored_node_by_node_and_holds_the_joint_mesh():
 @pytest.fixture(scope="module")
 def hex_free():
     """The paper's finger, hex1 joints, mixed, at FREE and at -FREE; FINGER_CONFIG's
-    quadrature degree 2 is raised to the hexahedra's (fem.solver.config_for)."""
+    quadrature degree 2 is raised to the hexahedra's (fem.solvers.joint.config_for)."""
     assert FINGER_CONFIG.quadrature_degree < QUADRATURE
     solver = FingerSolver(HEX1, MPI.COMM_SELF, formulation="mixed")
     assert solver.config.quadrature_degree == QUADRATURE
@@ -124,7 +124,7 @@ def test_hex_finger_agrees_with_the_tetrahedral_finger(hex_free):
 
 
 def test_cli_divisions_solves_the_python_calls_finger(hex_free, capsys):
-    """``python -m fem.finger --divisions 1 --formulation mixed --no-gravity --no-plane --json``
+    """``python -m fem.cli.finger --divisions 1 --formulation mixed --no-gravity --no-plane --json``
     at FREE (one finger alone, as the fixture's FingerSolver): the fingertip, tip angle and every joint's end angle of the Python call to 1e-8
     (one rank, the same mesh and solver), the same node count, and the record says hex1:
     ``mesh.mesh`` "hex1" and ``mesh.divisions`` 1 with no tetrahedron ``mesh_size``, and

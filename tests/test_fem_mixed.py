@@ -1,8 +1,8 @@
-"""The mixed u-p (Taylor-Hood) formulation of fem.problem against exact answers and the
+"""The mixed u-p (Taylor-Hood) formulation of fem.physics.problem against exact answers and the
 displacement formulation (coarse meshes, one rank, about 2 min).
 
 * a slender beam (L/h = 20) rolled up by a pure couple, whose exact tip is the circular
-  arc of curvature M/EI (fem.elastica; M = EI kappa holds for any nu in pure bending): at
+  arc of curvature M/EI (fem.studies.elastica; M = EI kappa holds for any nu in pure bending): at
   nu = 0.3, where P2 displacements do not lock, both formulations are converged and agree;
   at nu = 0.49 the mixed one is the closer (less volumetric locking);
 * uniform tension of that beam: the pressure is the lambda-part of the hydrostatic stress,
@@ -23,11 +23,11 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from contract.spec import mirror  # noqa: E402
-from fem.elastica import rollup_tip  # noqa: E402
-from fem.geometry import TAGS, BeamGeometry, JointGeometry  # noqa: E402
-from fem.mesh import create_mesh  # noqa: E402
-from fem.problem import lame  # noqa: E402
-from fem.solver import EndLoadedSolver, JointSolver, Load, Material, SolverConfig  # noqa: E402
+from fem.studies.elastica import rollup_tip  # noqa: E402
+from fem.mesh.geometry import TAGS, BeamGeometry, JointGeometry  # noqa: E402
+from fem.mesh.build import create_mesh  # noqa: E402
+from fem.physics.problem import lame  # noqa: E402
+from fem.solvers.joint import EndLoadedSolver, JointSolver, Load, Material, SolverConfig  # noqa: E402
 
 pytestmark = pytest.mark.fem
 BEAM = BeamGeometry(length=40.0, thickness=2.0, width=2.0, cap=1.0, mesh_size=1.0)
@@ -118,7 +118,7 @@ def test_mixed_sensitivities_match_central_differences(mixed_joint):
     """d anchors / d (P, F1, F2, M) of the mixed form (tangent solves through the pressure
     block) against central differences of converged solves, within 1e-3 of each column's
     largest entry. The load leaves the valleys open: the contact tangent omits the normal's
-    rotation (fem.contact), which would blur the comparison by ~0.3 %."""
+    rotation (fem.physics.contact), which would blur the comparison by ~0.3 %."""
     solver = mixed_joint
     load = np.array([0.15, 1.0, -1.0, 30.0])
     assert solver.solve(Load.from_array(load)).converged
@@ -187,7 +187,7 @@ def test_residual_is_lifted_exactly_when_a_dirichlet_value_is_off(mixed_joint):
 
 
 def test_the_matrix_free_tangent_is_the_assembled_tangent(mixed_joint):
-    """GMRES's operator, the tangent applied matrix-free (fem.load_path.TangentAction: the
+    """GMRES's operator, the tangent applied matrix-free (fem.solvers.load_path.TangentAction: the
     vector assembly of dR(u)[x] plus the contact blocks), is the assembled tangent K with
     its Dirichlet rows and columns: K x agrees to 1e-13 of |K x| for a random x that is
     nonzero on the constrained dofs, at a state whose closed valley pairs put contact

@@ -1,4 +1,4 @@
-"""The finger FEM meeting its mirror finger at the plane X = 0 (fem.plane_contact), coarse.
+"""The finger FEM meeting its mirror finger at the plane X = 0 (fem.physics.plane_contact), coarse.
 
 The paper's finger on 4 mm tetrahedral joints, mixed P2-P1 (the production formulation;
 11,159 nodes), one solver with the plane and one without (the module took 83 s wall at
@@ -35,8 +35,8 @@ from dolfinx import fem  # noqa: E402
 from dolfinx.fem.petsc import create_matrix  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
-from fem.finger import FingerLoad, FingerSolver  # noqa: E402
-from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.solvers.finger import FingerLoad, FingerSolver  # noqa: E402
+from fem.mesh.geometry import FingerGeometry, JointGeometry  # noqa: E402
 
 MEET = (0.1, 0.1)                                 # MPa, with gravity: the fingers meet
 APART = (0.05, -0.05)                             # MPa, free: the finger stays 3.0 mm clear
@@ -158,7 +158,7 @@ def test_plane_tangent_matches_differences(meeting):
 
 
 def test_matrix_free_plane_tangent_is_the_assembled_one(meeting):
-    """GMRES's operator (fem.load_path.TangentAction: the plane's facet form along x, the
+    """GMRES's operator (fem.solvers.load_path.TangentAction: the plane's facet form along x, the
     valleys' blocks, the clamp's unit rows) times a random x is the assembled tangent's
     product, to round-off, where the finger presses on the plane."""
     solver, _, state = meeting
@@ -185,8 +185,8 @@ def test_apart_the_plane_changes_nothing(plain, meeting):
 
 
 def test_candidate_faces_are_inner_and_end_faces(meeting):
-    from fem.finger import closed_tags
-    from fem.plane_contact import plane_facets
+    from fem.physics.finger import closed_tags
+    from fem.physics.plane_contact import plane_facets
     from dolfinx.cpp.mesh import entities_to_geometry
 
     solver = meeting[0]
@@ -202,8 +202,8 @@ def test_candidate_faces_are_inner_and_end_faces(meeting):
 
 def test_plane_cases_never_resume_from_cases_without_it(geometry):
     from contract.files import json_safe
-    from fem.finger import same_settings
-    from fem.finger_cases import case_settings, default_suffix
+    from fem.solvers.finger import same_settings
+    from fem.studies.finger_cases import case_settings, default_suffix
 
     finger = geometry.finger
     without = json_safe(case_settings(finger, geometry, "mixed"))

@@ -1,5 +1,5 @@
-"""Seeding a joint solve with another mesh's answer (fem.transfer, LoadPathSolver.converge,
-fem.joint_cases.solve_missing(seed_from=...)).
+"""Seeding a joint solve with another mesh's answer (fem.solvers.transfer, LoadPathSolver.converge,
+fem.studies.joint_cases.solve_missing(seed_from=...)).
 
 * the transfer: a field the meshes represent exactly (linear in-plane rotation by T, a
   quadratic out-of-plane part, an affine pressure) carried from hexahedra to tetrahedra and
@@ -26,13 +26,13 @@ pytest.importorskip("dolfinx")
 from dolfinx.mesh import compute_midpoints  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from fem.artefacts import JOINT_CASE  # noqa: E402
-from fem.discretisation import discretisation  # noqa: E402
-from fem.geometry import JointGeometry  # noqa: E402
-from fem.joint_cases import case_file, read_records, solve_missing  # noqa: E402
-from fem.load_path import Probes, SolverConfig  # noqa: E402
-from fem.solver import JointSolver, Load  # noqa: E402
-from fem.transfer import check_pair, seed, solve_seeded  # noqa: E402
+from fem.studies.artefacts import JOINT_CASE  # noqa: E402
+from fem.mesh.discretisation import discretisation  # noqa: E402
+from fem.mesh.geometry import JointGeometry  # noqa: E402
+from fem.studies.joint_cases import case_file, read_records, solve_missing  # noqa: E402
+from fem.solvers.load_path import Probes, SolverConfig  # noqa: E402
+from fem.solvers.joint import JointSolver, Load  # noqa: E402
+from fem.solvers.transfer import check_pair, seed, solve_seeded  # noqa: E402
 
 pytestmark = pytest.mark.fem
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -1,7 +1,7 @@
-"""Physics tests of the whole-finger FEM (fem.finger) on a coarse mesh, one rank.
+"""Physics tests of the whole-finger FEM (fem.solvers.finger) on a coarse mesh, one rank.
 
 Exact references:
-* a finger of one joint and one rigid part is the single joint (fem.solver.JointSolver)
+* a finger of one joint and one rigid part is the single joint (fem.solvers.joint.JointSolver)
   loaded at its end by the rigid part's weight: a dead axial force W along the finger and
   the couple of that force about r_10, M = -l/2 W sin(phi_c) (the part's centre of mass
   sits l/2 along the cap direction phi_c). Solved by fixed-point iteration on M;
@@ -18,10 +18,10 @@ import pytest
 pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
-from fem.finger import FingerLoad, FingerSolver  # noqa: E402
+from fem.solvers.finger import FingerLoad, FingerSolver  # noqa: E402
 from contract.finger import parse_finger  # noqa: E402
-from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
-from fem.solver import JointSolver, Load  # noqa: E402
+from fem.mesh.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.solvers.joint import JointSolver, Load  # noqa: E402
 from contract.spec import JOINT_LENGTH  # noqa: E402
 
 pytestmark = pytest.mark.fem
@@ -122,7 +122,7 @@ def test_finger_sensitivities_match_finite_differences(finger):
 
 
 def test_committed_finger_cases_are_recognised_by_their_finger_values():
-    """fem.finger_cases skips a case solved for the same finger, mesh and formulation. The
+    """fem.studies.finger_cases skips a case solved for the same finger, mesh and formulation. The
     committed cases (1.8 mm, displacement) were written when the paper's finger file had
     other comments, so another sha256: they are still its cases (by values), while a finger
     of another tip weight, or another joint mesh, is not."""
@@ -132,7 +132,7 @@ def test_committed_finger_cases_are_recognised_by_their_finger_values():
 
     from contract.finger import load_finger
     from contract.files import json_safe
-    from fem.finger import same_settings
+    from fem.solvers.finger import same_settings
 
     case = json.loads((Path(__file__).resolve().parents[1] / "results/validation/finger_fem/"
                        "gravity_0.2_0.2.json").read_text())

@@ -1,10 +1,10 @@
-"""fem.finger_grid and its report section (issue 36 §1, issue 56 §2), on JSON only (no solve).
+"""fem.studies.finger_grid and its report section (issue 36 §1, issue 56 §2), on JSON only (no solve).
 
 - The grid is the 7 x 7 lattice of the box [-0.3, 0.3]^2 MPa: spacing 0.1 MPa, the origin
-  exactly, symmetric under P -> -P; its 49 cases are fem.finger_cases' gravity cases by
+  exactly, symmetric under P -> -P; its 49 cases are fem.studies.finger_cases' gravity cases by
   name (gravity_P1_P2), on the production mesh with the plane ``_hex2s3_plane`` files: the
-  names the running queue (``fem.finger_cases --plane --pressures ...``) writes.
-- The skip rule is fem.finger_cases': a converged record of the same settings stands, a
+  names the running queue (``fem.studies.finger_cases --plane --pressures ...``) writes.
+- The skip rule is fem.studies.finger_cases': a converged record of the same settings stands, a
   failed one only under the same solver controls, none under other settings (the lone
   finger's, another finger); the summary counts only records that stand.
 - The summary from fixture records: pairs 4, solved 3, converged 2, slowest 900 s, median
@@ -27,11 +27,11 @@ from contract.finger import load_finger
 
 pytest.importorskip("dolfinx")
 
-from fem.artefacts import FINGER_CASE, FINGER_GRID  # noqa: E402
-import fem.finger_cases as fc  # noqa: E402
-import fem.finger_grid as fg  # noqa: E402
-from fem.geometry import pressure_limits  # noqa: E402
-from fem.finger_grid import grid_cases, grid_pairs, grid_summary  # noqa: E402
+from fem.studies.artefacts import FINGER_CASE, FINGER_GRID  # noqa: E402
+import fem.studies.finger_cases as fc  # noqa: E402
+import fem.studies.finger_grid as fg  # noqa: E402
+from fem.mesh.geometry import pressure_limits  # noqa: E402
+from fem.studies.finger_grid import grid_cases, grid_pairs, grid_summary  # noqa: E402
 
 FINGER = load_finger()
 QUEUE = ("-0.3,-0.3;-0.2,-0.3;-0.1,-0.3;0,-0.3;0.1,-0.3;0.2,-0.3;0.3,-0.3;-0.3,-0.2;-0.2,-0.2;-0.1,-0.2;"
@@ -55,7 +55,7 @@ def test_grid_is_the_box_lattice_of_the_queues_cases():
 
 
 def test_production_plane_file_names():
-    from fem.geometry import JointGeometry
+    from fem.mesh.geometry import JointGeometry
 
     joint = JointGeometry(mesh_size=None, divisions=2, hex_size=3.0)
     assert fc.default_suffix(joint, "mixed", plane=True) == "_hex2s3_plane"
@@ -68,7 +68,7 @@ SOLVER = {"max_it": 25}
 
 
 def _record(name: str, p1: float, p2: float, converged: bool, wall: float, settings=SETTINGS, solver=SOLVER):
-    """A fem.finger_cases record (FINGER_CASE) as the queue writes it."""
+    """A fem.studies.finger_cases record (FINGER_CASE) as the queue writes it."""
     return {"case": name, "pressures_MPa": [p1, p2], "gravity": True, "converged": converged,
             "tip": [10.5, -215.0] if converged else None, "tip_angle_deg": -95.0 if converged else None,
             "plane_force_N": 0.09 if converged else None, "plane_overlap_mm": 0.03 if converged else None,
@@ -129,7 +129,7 @@ def test_summary_of_the_standing_records(tmp_path):
 
 
 def _main(monkeypatch, folder, out, *extra):
-    """fem.finger_grid.main on a 2 x 2 grid with the fixture's settings and its solve
+    """fem.studies.finger_grid.main on a 2 x 2 grid with the fixture's settings and its solve
     replaced: the cases it would solve."""
     todo = []
     monkeypatch.setattr(fg, "solve_cases", lambda cases, *a, **k: todo.extend(cases))
@@ -191,7 +191,7 @@ def test_report_says_pending_without_the_grid(tmp_path):
 
 
 def test_the_grid_resumes_the_running_queues_records(tmp_path, monkeypatch, capsys):
-    """``make finger-grid`` asks for the very records ``fem.finger_cases --plane --pressures
+    """``make finger-grid`` asks for the very records ``fem.studies.finger_cases --plane --pressures
     QUEUE`` writes: the same files, settings and solver controls (so they stand)."""
     seen = {}
 

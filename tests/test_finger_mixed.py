@@ -3,15 +3,15 @@ meshes, one rank: results/joints/soft4/finger_mixed.toml, the paper's joint (45.
 cells, 1.2 mm walls, NinjaFlex, 10 anchors) at the base and soft4 (50 mm, 4 cells, 2 mm
 walls, Yeoh silicone, 8 anchors) at the tip.
 
-* geometry: every finger tag's volume or area on swept hexahedra (fem.mesh_hex) equals the
-  gmsh tetrahedral finger's (fem.geometry.build_finger), two independent constructions, to
+* geometry: every finger tag's volume or area on swept hexahedra (fem.mesh.hexahedra) equals the
+  gmsh tetrahedral finger's (fem.mesh.geometry.build_finger), two independent constructions, to
   1e-9 relative, and each joint's body, cap and chamber walls are those of its own joint
-  alone (fem.geometry.JointGeometry of its joint file's shape);
+  alone (fem.mesh.geometry.JointGeometry of its joint file's shape);
 * physics: without gravity, P_base = 0 and P_tip = 0.05 MPa (soft4's box edge): the tip
   joint's chamber pressure is self-equilibrated and the rigid tip is free, so the base
   joint and the link carry no load (the base joint stays straight) and the tip joint,
   bonded to a link 6700 times stiffer than itself, deforms as soft4 alone clamped at its
-  proximal face (fem.solver.JointSolver: fem.solve's problem, P = 0.05 MPa, no force or
+  proximal face (fem.solvers.joint.JointSolver: fem.cli.solve's problem, P = 0.05 MPa, no force or
   moment, the same 4 mm P2-P1 mesh settings), up to the two meshes' difference;
 * same shape: a finger whose joints share one shape is meshed, recorded and solved as
   before per-joint shapes (node counts and a coarse solve frozen from the code before them).
@@ -30,14 +30,14 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
 from contract.joint import load_joint  # noqa: E402
-from fem.finger import FingerLoad, FingerSolver  # noqa: E402
-from fem.finger_cli import build_parser  # noqa: E402
-from fem.options import finger_discretisation  # noqa: E402
-from fem.geometry import TAGS, FingerGeometry, JointGeometry, finger_tags, shape_of  # noqa: E402
-from fem.mesh import create_mesh  # noqa: E402
-from fem.mesh_hex import hexahedra, q2_nodes  # noqa: E402
-from fem.problem import contact_penalty_for  # noqa: E402
-from fem.solver import JointSolver, Load  # noqa: E402
+from fem.solvers.finger import FingerLoad, FingerSolver  # noqa: E402
+from fem.cli.finger import build_parser  # noqa: E402
+from fem.cli.options import finger_discretisation  # noqa: E402
+from fem.mesh.geometry import TAGS, FingerGeometry, JointGeometry, finger_tags, shape_of  # noqa: E402
+from fem.mesh.build import create_mesh  # noqa: E402
+from fem.mesh.hexahedra import hexahedra, q2_nodes  # noqa: E402
+from fem.physics.problem import contact_penalty_for  # noqa: E402
+from fem.solvers.joint import JointSolver, Load  # noqa: E402
 
 pytestmark = pytest.mark.fem
 MIXED = load_finger("results/joints/soft4/finger_mixed.toml")
@@ -98,7 +98,7 @@ def test_each_joint_is_meshed_in_its_own_shape():
 
 
 def test_the_command_line_takes_the_mixed_finger_and_refuses_a_foreign_shape():
-    """fem.finger's options on the mixed finger: every joint of its own shape with the
+    """fem.cli.finger's options on the mixed finger: every joint of its own shape with the
     options' mesh (no refusal); FingerGeometry refuses, in one line, a ``joint`` that is not
     the first joint's shape (it would be ignored)."""
     ap = build_parser()
@@ -154,7 +154,7 @@ def test_tip_joint_deforms_as_soft4_alone(tip_only):
 
 def test_valley_contact_is_each_joints_own(tip_only):
     """The contact holds the paper joint's 4 valleys and soft4's 3, numbered along x, each
-    with its joint's penalty (fem.problem.contact_penalty_for: 100 and 4.25 MPa/mm) spread
+    with its joint's penalty (fem.physics.problem.contact_penalty_for: 100 and 4.25 MPa/mm) spread
     over its own valley face ((height - valley_height)/2 x width/2 mm²); none closed here."""
     solver, _, _ = tip_only
     gaps = solver.contact.gaps(solver.u)

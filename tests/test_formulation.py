@@ -1,7 +1,7 @@
-"""The formulation (P2 displacement or Taylor-Hood u-p "mixed", fem.problem) through the
+"""The formulation (P2 displacement or Taylor-Hood u-p "mixed", fem.physics.problem) through the
 FEM tools, on the coarse 4 mm joint, one rank (about 1 min on a shared 2-core machine).
 
-* the ``--formulation`` option: its choices are fem.problem's, a bad value is one line and
+* the ``--formulation`` option: its choices are fem.physics.problem's, a bad value is one line and
   exit 2, and a displacement campaign's config is the committed one, key for key (old
   manifests stay valid); "mixed" adds exactly ``"formulation": "mixed"``;
 * a tiny mixed campaign: its manifest records the formulation, ``dataset verify --mirror``
@@ -31,12 +31,12 @@ pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
 from contract.finger import parse_finger  # noqa: E402
-from fem import finger_cli as fem_finger  # noqa: E402
-from fem import solve as fem_solve  # noqa: E402
-from fem.finger import FingerLoad, FingerSolver  # noqa: E402
-from fem.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.cli import finger as fem_finger  # noqa: E402
+from fem.cli import solve as fem_solve  # noqa: E402
+from fem.solvers.finger import FingerLoad, FingerSolver  # noqa: E402
+from fem.mesh.geometry import FingerGeometry, JointGeometry  # noqa: E402
 from contract.joint import FORMULATIONS  # noqa: E402
-from fem.solver import JointSolver, Load  # noqa: E402
+from fem.solvers.joint import JointSolver, Load  # noqa: E402
 from workflow import campaign, dataset  # noqa: E402
 from workflow.shards import Manifest  # noqa: E402
 from test_finger import ONE_JOINT  # noqa: E402  (one joint + a 65 mm, 0.5 N rigid part)
@@ -52,8 +52,8 @@ CAMPAIGN = ["--samples", "2", "--seed", "5", "--unit-size", "2", "--mesh-size", 
 
 def test_formulation_option(capsys, tmp_path):
     """The choices are contract.joint.FORMULATIONS; none given means the production one
-    (None, resolved by the tool); a bad value exits 2 with one line naming it (fem.solve,
-    fem.finger, workflow.campaign)."""
+    (None, resolved by the tool); a bad value exits 2 with one line naming it (fem.cli.solve,
+    fem.solvers.finger, workflow.campaign)."""
     ap = fem_solve.build_parser()
     assert next(a for a in ap._actions if a.dest == "formulation").choices == FORMULATIONS
     assert ap.parse_args([]).formulation is None

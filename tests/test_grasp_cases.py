@@ -1,4 +1,4 @@
-"""The FEM grasp cases (fem.grasp_cases): the table, the resume rule, the object's outline
+"""The FEM grasp cases (fem.studies.grasp_cases): the table, the resume rule, the object's outline
 and the render's extent.
 
 * the table: the paper's six grasps (each default object of contract.grasp at (0.2, 0.3)
@@ -12,7 +12,7 @@ and the render's extent.
   fails every case): a failed record of the same solver controls is skipped, one of other
   controls is redone, a converged one stands whatever the controls, one of another object
   is redone, a damaged or foreign file is redone and replaced; a run with nothing to do
-  builds no solver. fem.finger_cases' shared rule still skips a committed finger case;
+  builds no solver. fem.studies.finger_cases' shared rule still skips a committed finger case;
 * the render (one coarse FEM: the approach gesture (-0.15, 0) MPa with gravity, 4 mm
   tetrahedra, mixed; 22 s at nice 10 beside two other jobs): the JSON's extent maps mm to
   the PNG's pixels, so that the predictor side can overlay it: the object's outline is
@@ -29,16 +29,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("pyvista")      # before dolfinx (fem.finger_cases: VTK can crash if loaded after it)
+pytest.importorskip("pyvista")      # before dolfinx (fem.studies.finger_cases: VTK can crash if loaded after it)
 pytest.importorskip("dolfinx")
 
 from contract.finger import load_finger  # noqa: E402
 from contract.grasp import approach_for, parse_object  # noqa: E402
-from fem import grasp_cases  # noqa: E402
-from fem.artefacts import GRASP_CASE  # noqa: E402
-from fem.finger import FingerLoad, FingerResult  # noqa: E402
-from fem.geometry import pressure_limits  # noqa: E402
-from fem.grasp import GraspResult  # noqa: E402
+from fem.studies import grasp_cases  # noqa: E402
+from fem.studies.artefacts import GRASP_CASE  # noqa: E402
+from fem.solvers.finger import FingerLoad, FingerResult  # noqa: E402
+from fem.mesh.geometry import pressure_limits  # noqa: E402
+from fem.solvers.grasp import GraspResult  # noqa: E402
 from contract.grasp import GRASP_CASES, GraspCase  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -109,7 +109,7 @@ def test_outline_lies_on_the_object(spec, area):
 
 # ---------------------------------------------------------------------- resume, no FEM
 class StandIn:
-    """fem.grasp.GraspSolver's interface, solving nothing: every grasp fails."""
+    """fem.solvers.grasp.GraspSolver's interface, solving nothing: every grasp fails."""
 
     calls: list = []
 
@@ -131,7 +131,7 @@ class StandIn:
 
 @pytest.fixture
 def run(monkeypatch, tmp_path):
-    """run(case names...) -> the stand-in's calls of one fem.grasp_cases run into tmp_path."""
+    """run(case names...) -> the stand-in's calls of one fem.studies.grasp_cases run into tmp_path."""
     monkeypatch.setattr(grasp_cases, "GraspSolver", StandIn)
 
     def go(*names):
@@ -186,8 +186,8 @@ def test_nothing_to_do_builds_no_solver(run, tmp_path, monkeypatch, capsys):
 
 
 def test_finger_cases_rule_still_skips_a_committed_case():
-    from fem.finger_cases import case_settings, record_stands, solver_settings
-    from fem.geometry import FingerGeometry, JointGeometry
+    from fem.studies.finger_cases import case_settings, record_stands, solver_settings
+    from fem.mesh.geometry import FingerGeometry, JointGeometry
 
     finger = load_finger()
     geometry = FingerGeometry(finger, JointGeometry(mesh_size=1.8, divisions=0, hex_size=None))
@@ -205,9 +205,10 @@ def test_grasp_names():
 @pytest.mark.fem
 def test_render_extent_maps_the_outline_and_the_finger(tmp_path):
     import matplotlib.pyplot as plt
-    from fem.finger import FingerSolver, rotation_matrix
-    from fem.finger_cases import render
-    from fem.geometry import FingerGeometry, JointGeometry
+    from fem.solvers.finger import FingerSolver
+    from fem.physics.finger import rotation_matrix
+    from fem.studies.finger_cases import render
+    from fem.mesh.geometry import FingerGeometry, JointGeometry
 
     finger = load_finger()
     solver = FingerSolver(FingerGeometry(finger, JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)),

@@ -1,10 +1,10 @@
 """The joint description file (contract.joint): the paper's file is today's joint, every
 bad input is refused with one line naming its key and range, the digest identifies the
-joint's physics, and the shape rules admit what fem.geometry can mesh and refuse what it
+joint's physics, and the shape rules admit what fem.mesh.geometry can mesh and refuse what it
 cannot.
 
-References: fem.geometry.JointGeometry(), fem.problem.Material() and lame,
-fem.discretisation.PRODUCTION, contract.spec (INPUT_BOX, N_ANCHORS, JOINT_LENGTH); gmsh
+References: fem.mesh.geometry.JointGeometry(), fem.physics.problem.Material() and lame,
+fem.mesh.discretisation.PRODUCTION, contract.spec (INPUT_BOX, N_ANCHORS, JOINT_LENGTH); gmsh
 itself for the shape rules (a shape at each rule's edge meshes; the ones beyond it fail).
 """
 import json
@@ -53,9 +53,9 @@ def test_paper_file_is_todays_joint():
     the production discretisation (the [mesh] table: hex2:3 mixed, with the hexahedra's
     quadrature), exactly (==, not approximately)."""
     pytest.importorskip("dolfinx")
-    from fem.discretisation import PRODUCTION
-    from fem.geometry import JointGeometry, anchor_points
-    from fem.problem import Material, lame
+    from fem.mesh.discretisation import PRODUCTION
+    from fem.mesh.geometry import JointGeometry, anchor_points
+    from fem.physics.problem import Material, lame
 
     j = load_joint()
     geo = JointGeometry(**j.geometry_kwargs())
@@ -66,7 +66,7 @@ def test_paper_file_is_todays_joint():
         (m.law, Material().E, Material().nu, Material().cap_stiffness, Material().cap_nu)
     assert m.law == "neo-hookean" and m.lame == lame(Material().E, Material().nu)
     assert m.kappa == lame(Material().E, Material().nu)[1]
-    cap = m.cap()   # the cap of fem.problem.bellow_work: cap_stiffness * E, cap_nu
+    cap = m.cap()   # the cap of fem.physics.problem.bellow_work: cap_stiffness * E, cap_nu
     assert cap.lame == lame(Material().cap_stiffness * Material().E, Material().cap_nu)
     assert np.array_equal(j.input_box, INPUT_BOX) and j.anchors == N_ANCHORS
     assert np.array_equal(j.anchor_points(), anchor_points(JOINT_LENGTH))
@@ -119,12 +119,12 @@ def test_a_hexahedral_mesh_default_reaches_the_fem_geometry():
     doc = paper_doc()
     doc["mesh"] = {"divisions": 2, "formulation": "mixed"}
     j = joint_from_dict(doc)
-    from fem.geometry import JointGeometry
+    from fem.mesh.geometry import JointGeometry
 
     geo = JointGeometry(**j.geometry_kwargs())
     assert (geo.divisions, geo.mesh, j.mesh_size) == (2, "hex2", None)
     assert joint_from_dict(json.loads(json.dumps(joint_to_dict(j)))) == j and joint_digest(j) == PAPER_DIGEST
-    doc["mesh"]["hex_size"] = 2.5          # graded in the bending plane (fem.mesh_hex)
+    doc["mesh"]["hex_size"] = 2.5          # graded in the bending plane (fem.mesh.hexahedra)
     j = joint_from_dict(doc)
     assert JointGeometry(**j.geometry_kwargs()).mesh == "hex2:2.5" and joint_digest(j) == PAPER_DIGEST
     assert joint_from_dict(json.loads(json.dumps(joint_to_dict(j)))) == j
@@ -295,12 +295,12 @@ EDGES = {   # one shape at the edge of each rule (0.2 mm inside it), and a four-
 
 @pytest.mark.parametrize("case", EDGES)
 def test_shapes_the_rules_admit_mesh(case):
-    """A shape 0.2 mm inside each rule builds every physical group of fem.geometry (coarse
+    """A shape 0.2 mm inside each rule builds every physical group of fem.mesh.geometry (coarse
     linear mesh, under a second each)."""
     pytest.importorskip("gmsh")
     import gmsh
 
-    from fem.geometry import TAGS, JointGeometry, build_joint
+    from fem.mesh.geometry import TAGS, JointGeometry, build_joint
 
     doc = paper_doc()
     doc["geometry"].update(EDGES[case])
@@ -319,7 +319,7 @@ def test_shapes_the_rules_refuse_do_not_mesh(change, failure):
     """What the file refuses (n_cells < 2, valley_height >= height, width <= 2 wall), gmsh
     cannot build: the rules are needed, not only sufficient."""
     pytest.importorskip("gmsh")
-    from fem.geometry import JointGeometry, build_joint
+    from fem.mesh.geometry import JointGeometry, build_joint
 
     doc = paper_doc()
     doc["geometry"].update(change)

@@ -1,7 +1,7 @@
 """Every stage takes a joint description file (issue 37 §2, and §4's bellow check per law).
 
 * the paper's joint file reproduces today's FEM: its law gives the same UFL forms as the
-  (E, nu) neo-Hookean forms fem.problem wrote before joint files (written out here again,
+  (E, nu) neo-Hookean forms fem.physics.problem wrote before joint files (written out here again,
   independently), and a solve with it equals the solve with those forms to 1e-12 mm on a
   4 mm mesh, in the displacement and the mixed formulation;
 * one bellow solve per law (neo-Hookean, Mooney-Rivlin, Yeoh, Ogden, with the paper's
@@ -78,15 +78,15 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
 from contract.spec import mirror  # noqa: E402
-from fem.geometry import JointGeometry  # noqa: E402
-from fem.load_path import LoadPathSolver  # noqa: E402
-from fem.solver import JointSolver, Load  # noqa: E402
+from fem.mesh.geometry import JointGeometry  # noqa: E402
+from fem.solvers.load_path import LoadPathSolver  # noqa: E402
+from fem.solvers.joint import JointSolver, Load  # noqa: E402
 
 COARSE = 4.0   # mm
 
 
 def todays_internal(problem) -> ufl.Form:
-    """The paper joint's internal virtual work as fem.problem wrote it before joint files:
+    """The paper joint's internal virtual work as fem.physics.problem wrote it before joint files:
     neo-Hookean (E, nu) = (12.2 MPa, 0.49) body, (100 x 12.2 MPa, 0.3) cap, written out
     from psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2 (mixed: the perturbed
     Lagrangian with -p ln J - p^2 / (2 lambda))."""
@@ -114,7 +114,7 @@ def todays_internal(problem) -> ufl.Form:
 @pytest.mark.fem
 @pytest.mark.parametrize("formulation", ["displacement", "mixed"])
 def test_paper_joint_file_reproduces_todays_solve(formulation):
-    """The paper's joint file through fem.materials: the same internal form (UFL
+    """The paper's joint file through fem.physics.materials: the same internal form (UFL
     signature) as today's (E, nu) forms, and the same anchors and cap rotation to 1e-12
     mm / rad at a load that bends the joint by ~17 deg."""
     joint = load_joint()
@@ -156,10 +156,10 @@ def test_bellow_of_every_law_converges_and_keeps_mirror_symmetry(law):
 def test_contact_penalty_scales_with_the_modulus():
     """Neo-Hookean statics are homogeneous in E at fixed nu: a joint of E / 2 under half the
     loads takes the same deformation, provided its valley contact scales with E as well
-    (fem.problem.contact_penalty_for). At a box corner, where valleys close (4 mm mesh), the
+    (fem.physics.problem.contact_penalty_for). At a box corner, where valleys close (4 mm mesh), the
     anchors agree to 1e-8 mm; keeping the paper's 100 MPa/mm on the soft joint
     instead moves them by more than 1e-3 mm."""
-    from fem.load_path import SolverConfig
+    from fem.solvers.load_path import SolverConfig
 
     stiff = parse_joint(joint_text(size=repr(COARSE)))
     soft = parse_joint(joint_text(name="soft", size=repr(COARSE)).replace("\nE = 12.2", "\nE = 6.1", 1))
@@ -186,7 +186,7 @@ from workflow.store import recorded_joint  # noqa: E402
 
 
 def _config(joint=None, **kw):
-    from fem.options import joint_geometry
+    from fem.cli.options import joint_geometry
     from types import SimpleNamespace
 
     # the 1.8 mm reference sets' paper-fidelity mesh, as their campaigns pass it (--mesh-size 1.8)
@@ -387,15 +387,15 @@ def test_predictor_refuses_a_model_of_another_joint(tmp_path):
 
 
 def test_finger_fem_takes_each_joints_law_and_box(tmp_path):
-    """fem.finger's per-joint law and pressure limit (no mesh): a finger mixing the paper's
+    """fem.solvers.finger's per-joint law and pressure limit (no mesh): a finger mixing the paper's
     joint with a Yeoh joint of the same shape gives each joint its own law and box; a joint of
     another shape is meshed in its own shape with the finger's mesh settings
     (FingerGeometry.joint_at), and a mesh joint of another shape than the first joint's is
     refused (it would be ignored)."""
-    from fem.finger import joint_laws
-    from fem.geometry import pressure_limits
-    from fem.geometry import FingerGeometry
-    from fem.problem import Material
+    from fem.physics.finger import joint_laws
+    from fem.mesh.geometry import pressure_limits
+    from fem.mesh.geometry import FingerGeometry
+    from fem.physics.problem import Material
 
     write_joint(tmp_path, "yeoh", joint_text("yeoh", name="yeoh", pressure_mpa="0.05"))
     write_joint(tmp_path, "long", joint_text(name="long", length="60.0"))
@@ -424,20 +424,20 @@ def _rows(tmp: Path) -> list[tuple[str, list[str], str]]:
     E_nan = "material.E = nan is not a finite number (allowed [0.001, 1000] MPa)"
     yeoh_sha = joint_digest(parse_joint(joint_text("yeoh")))[:12]
     return [
-        ("fem.solve", ["--joint", f"{tmp}/bad.toml"], E_nan),
-        ("fem.solve", ["--joint", f"{tmp}/none.toml"], f"cannot read joint file {tmp}/none.toml"),
-        ("fem.solve", ["--joint", f"{tmp}/narrow.toml", "--p", "0.1"],
+        ("fem.cli.solve", ["--joint", f"{tmp}/bad.toml"], E_nan),
+        ("fem.cli.solve", ["--joint", f"{tmp}/none.toml"], f"cannot read joint file {tmp}/none.toml"),
+        ("fem.cli.solve", ["--joint", f"{tmp}/narrow.toml", "--p", "0.1"],
          "P = 0.1 is outside the training box (1 of 1 input(s) affected; allowed |P| <= 0.05 MPa"),
-        ("fem.render", ["--joint", f"{tmp}/bad.toml", "--out", f"{tmp}/x.png"], E_nan),
+        ("fem.cli.render", ["--joint", f"{tmp}/bad.toml", "--out", f"{tmp}/x.png"], E_nan),
         ("workflow.campaign", ["--samples", "4", "--seed", "1", "--joint", f"{tmp}/bad.toml",
                                "--out", f"{tmp}/d"], E_nan),
         ("workflow.campaign", ["--samples", "256", "--unit-size", "16", "--seed", "2", "--joint",
                                f"{tmp}/yeoh.toml", "--out", "results/data/heldout"],
          f"results/data/heldout holds a campaign of the paper's joint, not of --joint 'yeoh' "
          f"(joint sha256 {yeoh_sha}); rerun with the --joint it was made with"),
-        ("fem.finger", ["--finger", str(bad_finger)], f"part 1 (joint): joint = 'bad.toml': {tmp}/bad.toml: {E_nan}"),
-        ("fem.finger", ["--finger", str(narrow_finger), "--p1", "0.1"], "--p1: 0.1 is outside [-0.05, 0.05] MPa"),
-        ("fem.finger_cases", ["--finger", str(bad_finger), "--out", f"{tmp}/f"], E_nan),
+        ("fem.cli.finger", ["--finger", str(bad_finger)], f"part 1 (joint): joint = 'bad.toml': {tmp}/bad.toml: {E_nan}"),
+        ("fem.cli.finger", ["--finger", str(narrow_finger), "--p1", "0.1"], "--p1: 0.1 is outside [-0.05, 0.05] MPa"),
+        ("fem.studies.finger_cases", ["--finger", str(bad_finger), "--out", f"{tmp}/f"], E_nan),
     ]
 
 

@@ -2,7 +2,10 @@
 across modules (issue 34).
 
 Layers, top to bottom: apps (report, demo) -> predictor -> surrogate -> workflow (data) -> fem,
-all on contract.
+all on contract. Inside fem (issue 61), its sub-packages, bottom to top: mesh -> physics ->
+solvers (the library) -> cli -> studies; each imports only those below it and itself, so the
+library never imports a command line or a study, and no fem modules import each other in a
+circle (docs/packages.md).
 The checks read every module's import statements (ast, so imports inside functions count
 too) and import the dolfinx-free layers in a fresh interpreter.
 """
@@ -26,6 +29,14 @@ ALLOWED = {
     "predictor": {"contract", "fem", "workflow", "surrogate", "predictor"},
     "apps": {"contract", "fem", "workflow", "surrogate", "predictor", "apps"},
 }
+#: fem's sub-packages, bottom to top: each may import itself and those before it.
+FEM_FLOORS = ("mesh", "physics", "solvers", "cli", "studies")
+#: The modules at fem's root: the package file (imports nothing) and the old command paths,
+#: thin aliases that run fem.cli's commands (README, changes).
+FEM_ROOT = {"__init__": (), "finger": ("cli",), "solve": ("cli",)}
+#: The fem modules that load no dolfinx, gmsh or MPI (value objects, options, formats).
+FEM_LIGHT = ("fem.mesh.geometry", "fem.mesh.discretisation", "fem.mesh.data", "fem.cli.options",
+             "fem.studies.artefacts", "fem.studies.elastica")
 #: Third-party packages the contract floor may import.
 CONTRACT_THIRD_PARTY = {"numpy"}
 
@@ -76,3 +87,133 @@ print(light, "dolfinx" in sys.modules)
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["[]", "False"], out.stdout
+
+
+def _fem_floor(module: str) -> str | None:
+    """The fem sub-package of an imported module name ("fem.physics.problem" -> "physics"),
+    None outside fem; "fem" alone is the root."""
+    parts = module.split(".")
+    if parts[0] != "fem":
+        return None
+    return parts[1] if len(parts) > 1 else "fem"
+
+
+def fem_import_error(importer: str, module: str, names=()) -> str | None:
+    """Why ``importer`` (a path under fem/, e.g. "fem/solvers/joint.py") may not import
+    ``module`` (with ``names`` from it), or None when it may: sub-packages import only their
+    own and those below them (FEM_FLOORS); the root's aliases only fem.cli."""
+    floor = _fem_floor(module)
+    if floor is None:
+        return None
+    if floor == "fem":    # ``from fem import physics``: the sub-packages named
+        return next(filter(None, (fem_import_error(importer, f"fem.{n}") for n in names)), None)
+    parts = Path(importer).parts
+    if floor not in FEM_FLOORS:
+        return f"{importer} imports {module}: not a module of a fem sub-package {FEM_FLOORS}"
+    if len(parts) == 2:   # fem/finger.py
+        allowed = FEM_ROOT.get(Path(importer).stem, ())
+        return None if floor in allowed else f"{importer} (an alias) imports {module}"
+    own = parts[1]
+    if FEM_FLOORS.index(floor) > FEM_FLOORS.index(own):
+        return f"{importer} imports {module}: fem.{own} may not import fem.{floor} (upward)"
+    return None
+
+
+def _fem_modules():
+    return sorted((ROOT / "fem").rglob("*.py"))
+
+
+def test_fem_is_its_sub_packages_and_their_package_files_import_nothing():
+    root = {p.stem for p in (ROOT / "fem").glob("*.py")}
+    assert root <= set(FEM_ROOT), f"modules at fem's root: {sorted(root - set(FEM_ROOT))}; they belong in {FEM_FLOORS}"
+    folders = {p.parent.name for p in (ROOT / "fem").glob("*/*.py")}
+    assert folders == set(FEM_FLOORS), folders
+    for sub in FEM_FLOORS:
+        init = ROOT / "fem" / sub / "__init__.py"
+        tree = ast.parse(init.read_text())
+        assert ast.get_docstring(tree), f"{init} says what it holds and what it may import"
+        assert "Imports:" in ast.get_docstring(tree), f"{init}: its docstring names what it may import"
+        assert not list(_imports(init)), f"{init} imports (package files stay import-free: pyvista before dolfinx)"
+    assert not list(_imports(ROOT / "fem" / "__init__.py"))
+
+
+@pytest.mark.parametrize("path", _fem_modules(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_fem_sub_packages_import_downward(path):
+    rel = str(path.relative_to(ROOT))
+    for node in ast.walk(ast.parse(path.read_text(), rel)):
+        assert not (isinstance(node, ast.ImportFrom) and node.level), f"{rel}: a relative import"
+    errors = [e for module, names in _imports(path) if (e := fem_import_error(rel, module, names))]
+    assert not errors, "\n".join(errors)
+
+
+def test_the_checker_refuses_upward_imports():
+    """The rule above, on imports nobody has written (yet)."""
+    assert fem_import_error("fem/solvers/joint.py", "fem.studies.artefacts") is not None
+    assert fem_import_error("fem/physics/problem.py", "fem.solvers.load_path") is not None
+    assert fem_import_error("fem/mesh/build.py", "fem.cli.options") is not None
+    assert fem_import_error("fem/cli/solve.py", "fem.studies.joint_cases") is not None
+    assert fem_import_error("fem/solvers/grasp.py", "fem", ["cli"]) is not None
+    assert fem_import_error("fem/solvers/grasp.py", "fem.finger") is not None       # an alias, not a module
+    assert fem_import_error("fem/solve.py", "fem.solvers.joint") is not None        # aliases run fem.cli only
+    assert fem_import_error("fem/studies/mesh_study.py", "fem.solvers.joint") is None
+    assert fem_import_error("fem/solvers/joint.py", "fem.solvers.load_path") is None
+    assert fem_import_error("fem/solvers/joint.py", "dolfinx.fem") is None
+
+
+def _fem_graph() -> dict[str, set[str]]:
+    """fem module -> the fem modules it imports (anywhere in the file)."""
+    modules = {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in _fem_modules()}
+    graph = {}
+    for name, path in modules.items():
+        graph[name] = set()
+        for module, names in _imports(path):
+            for target in (module, *(f"{module}.{n}" for n in names)):
+                if target in modules and target != name and not target.endswith("__init__"):
+                    graph[name].add(target)
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_fem_modules_import_each_other_in_a_circle():
+    graph = _fem_graph()
+    assert "fem.physics.problem" in graph["fem.solvers.load_path"]      # the graph is read
+    assert circles(graph) == []
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_fem_value_modules_load_no_dolfinx():
+    code = f"import sys\nfor m in {FEM_LIGHT!r}: __import__(m)\n" \
+           "print(sorted(m for m in ('dolfinx', 'gmsh', 'mpi4py', 'ufl') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["[]"], out.stdout

@@ -1,12 +1,12 @@
-"""The hyperelastic laws of fem.materials against independent references.
+"""The hyperelastic laws of fem.physics.materials against independent references.
 
 * numpy: each closed form P(F) is the derivative of its energy (central finite
   differences), including F with repeated principal stretches; Ogden with exponents 2 and
   -2 is Mooney-Rivlin (C10 = mu_1 / 2, C01 = mu_2 / 2); a small uniaxial stretch gives
   the law's small-strain E and nu (contract.joint.MaterialLaw);
-* UFL: the neo-Hookean energy, its stress and its mixed form are today's fem.problem
+* UFL: the neo-Hookean energy, its stress and its mixed form are today's fem.physics.problem
   expressions (same form signature, so the same compiled code and the same data);
-* FEM (fem.materials_check, a 2 x 2 x 2 cube): every law's face reactions equal the
+* FEM (fem.studies.materials_check, a 2 x 2 x 2 cube): every law's face reactions equal the
   closed-form P within 1e-6 on uniaxial, equibiaxial and shear states, the displacement
   and mixed formulations agree, the small-strain E and nu hold within 1e-4; the Ogden law
   (eigenvalues in closed form, regularised) is stress-free at F = I and its tangent there
@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 
 from contract.joint import MaterialLaw
-from fem.materials import strain_energy, stress
-from fem.materials_check import CHECK_LAWS, SMALL_STRAIN_TARGET, TARGET_REL, main
+from fem.physics.materials import strain_energy, stress
+from fem.studies.materials_check import CHECK_LAWS, SMALL_STRAIN_TARGET, TARGET_REL, main
 
 RNG = np.random.default_rng(37)
 STATES = {
@@ -72,7 +72,7 @@ def test_small_strain_limit_of_the_closed_form(law):
     """Uniaxial stress at stretch 1 + 1e-6 (lateral stretch from P22 = 0): P11 / strain is
     the reported E and the lateral contraction ratio its nu, within 1e-5 (the O(strain)
     nonlinearity is 1e-6)."""
-    from fem.materials_check import free_stretch
+    from fem.studies.materials_check import free_stretch
 
     m, e = CHECK_LAWS[law], 1e-6
     t = free_stretch(m, lambda t: np.diag([1 + e, t, t]), 1)
@@ -82,12 +82,12 @@ def test_small_strain_limit_of_the_closed_form(law):
 
 
 def test_neo_hookean_is_todays_energy():
-    """fem.problem's neo-Hookean energy, stress and mixed density have the same form
-    signature as fem.materials' for the paper's law (so identical generated code), and a
+    """fem.physics.problem's neo-Hookean energy, stress and mixed density have the same form
+    signature as fem.physics.materials' for the paper's law (so identical generated code), and a
     different one for another nu (the comparison can fail)."""
     ufl = pytest.importorskip("ufl")
-    from fem.materials import energy, first_piola, mixed_energy
-    from fem.problem import lame, mixed_energy_density, neo_hookean_psi
+    from fem.physics.materials import energy, first_piola, mixed_energy
+    from fem.physics.problem import lame, mixed_energy_density, neo_hookean_psi
 
     cell = ufl.tetrahedron
     domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
@@ -115,7 +115,7 @@ def test_neo_hookean_is_todays_energy():
 @pytest.fixture(scope="module", params=list(CHECK_LAWS))
 def checked(request):
     pytest.importorskip("dolfinx")
-    from fem.materials_check import check_law
+    from fem.studies.materials_check import check_law
 
     return request.param, check_law(CHECK_LAWS[request.param])
 
@@ -153,7 +153,7 @@ def test_ogden_at_rest_is_stress_free_with_the_linear_elastic_tangent():
     0/0) the Ogden cube's residual is 0 (to round-off) and its tangent equals a neo-Hookean cube's of the
     same small-strain E and nu: the linear elasticity of (mu0, K), to 1e-8 relative."""
     pytest.importorskip("dolfinx")
-    from fem.materials_check import HomogeneousCube
+    from fem.studies.materials_check import HomogeneousCube
 
     ogden = CHECK_LAWS["ogden"]
     same = MaterialLaw("neo-hookean", (ogden.youngs_modulus,), nu=ogden.poisson)
@@ -190,7 +190,7 @@ def test_command_checks_a_joint_files_law(tmp_path, capsys):
     """--joint FILE checks that file's law only; the document passes its format."""
     pytest.importorskip("dolfinx")
     from contract.joint import DEFAULT_JOINT
-    from fem.artefacts import MATERIALS
+    from fem.studies.artefacts import MATERIALS
 
     out = tmp_path / "m.json"
     assert main(["--joint", str(DEFAULT_JOINT), "--out", str(out), "--quiet"]) == 0

@@ -1,6 +1,6 @@
 """One problem, said (issue 56 §1): the FEM and the predictor default to the same problem.
 
-- fem.finger, fem.finger_cases and fem.finger_grid default to the gripper (the mirror
+- fem.cli.finger, fem.studies.finger_cases and fem.studies.finger_grid default to the gripper (the mirror
   finger's contact at X = 0): ``args.plane`` True, ``--no-plane`` False, ``--plane`` (the
   old flag) still True; predictor.gesture defaults to it too and its JSON says which
   (``"plane": true``; ``--no-plane`` false, and at (0.13, -0.07) MPa with gravity the
@@ -34,8 +34,8 @@ def _make_var(name: str) -> str:
 
 def test_fem_parsers_default_to_the_plane():
     pytest.importorskip("dolfinx")
-    from fem.finger_cli import build_parser
-    from fem.finger_grid import build_parser as grid_parser
+    from fem.cli.finger import build_parser
+    from fem.studies.finger_grid import build_parser as grid_parser
 
     ap = build_parser()
     assert ap.parse_args([]).plane is True
@@ -72,9 +72,9 @@ def test_api_defaults_to_the_plane():
 
 
 def _resume(monkeypatch, capsys, argv: list[str]) -> tuple[list, str]:
-    """fem.finger_cases.main(argv) with its solve replaced: (the cases it would solve, stdout)."""
+    """fem.studies.finger_cases.main(argv) with its solve replaced: (the cases it would solve, stdout)."""
     pytest.importorskip("dolfinx")
-    import fem.finger_cases as fc
+    import fem.studies.finger_cases as fc
 
     todo = []
     monkeypatch.setattr(fc, "solve_cases", lambda cases, *a, **k: todo.extend(cases))
@@ -86,7 +86,7 @@ def test_committed_lone_finger_cases_stand_for_the_makefile(monkeypatch, capsys)
     """make finger-fem and make calibration-fem pass --no-plane, and their committed records
     (settings without ``plane``) stand: the targets solve nothing."""
     finger_cases = shlex.split(_make_var("FINGER_CASES").replace("$(PAPER_MESH)", _make_var("PAPER_MESH")))
-    assert finger_cases[:3] == ["$(PY)", "-m", "fem.finger_cases"] and "--no-plane" in finger_cases
+    assert finger_cases[:3] == ["$(PY)", "-m", "fem.studies.finger_cases"] and "--no-plane" in finger_cases
     args = [a.replace("$(FINGER_FEM)", "results/validation/finger_fem") for a in finger_cases[3:]]
     todo, out = _resume(monkeypatch, capsys, args)
     assert todo == [] and "all 18 cases are up to date" in out

@@ -141,7 +141,7 @@ def test_a_malformed_artefact_is_named_in_one_line(tmp_path):
 
 
 def test_mesh_study_judges_the_production_mesh_only(tmp_path):
-    """A mesh_study.json as fem.mesh_study writes it (figures made up): the production
+    """A mesh_study.json as fem.studies.mesh_study writes it (figures made up): the production
     discretisation 2.4:1.2 mixed, 1.5 % anchors and 0.4 deg cap rotation against the
     Richardson extrapolation, is judged against the recorded 1 %, 0.3 deg and 16,000 nodes
     ("no, over by 0.5 %; over by 0.1 °"); the family's other meshes and the paper's 1.8 mm
@@ -258,7 +258,7 @@ def test_each_figure_is_labelled_with_the_discretisation_that_made_it(tmp_path):
     assert "joint mesh hex2:3 mixed, one rank) against the predictor" in text
     assert (f"| discretisation: finger FEM, joint mesh hex2:3 mixed -> 1.8 mm displacement "
             f"({base['production_nodes']:,} -> {base['nodes']:,} nodes), {base['case']} |") in text
-    assert "`python -m fem.finger_cases --mesh-size 1.8 --formulation displacement` |" in text
+    assert "`python -m fem.studies.finger_cases --mesh-size 1.8 --formulation displacement` |" in text
     assert any("finger FEM per gesture, joint mesh hex2:3 mixed, one core (`make bench-finger`" in c.figure
                for c in checks)
     assert "| heldout | hex2:3 mixed | 2 |" in text

@@ -1,4 +1,4 @@
-"""Stability along a load path: fem.load_path.LoadPathSolver.stiffness_spectrum and
+"""Stability along a load path: fem.solvers.load_path.LoadPathSolver.stiffness_spectrum and
 workflow.stability.
 
 References:
@@ -23,9 +23,9 @@ import pytest
 pytest.importorskip("dolfinx")
 from mpi4py import MPI  # noqa: E402
 
-from fem.geometry import BeamGeometry  # noqa: E402
-from fem.mesh import create_mesh  # noqa: E402
-from fem.solver import EndLoadedSolver, Load, Material, SolverConfig  # noqa: E402
+from fem.mesh.geometry import BeamGeometry  # noqa: E402
+from fem.mesh.build import create_mesh  # noqa: E402
+from fem.solvers.joint import EndLoadedSolver, Load, Material, SolverConfig  # noqa: E402
 from workflow.stability import limit_ahead, path_points, verdict  # noqa: E402
 
 BEAM = BeamGeometry(length=24.0, thickness=2.0, width=2.0, cap=1.0, mesh_size=2.0)

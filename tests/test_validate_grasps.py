@@ -1,5 +1,5 @@
 """predictor.validate_grasps (issue 36 §3): the predictor against FEM grasp records, on two
-frozen coarse records (tests/data/grasps: fem.grasp_cases on 4 mm mixed tetrahedra, plane
+frozen coarse records (tests/data/grasps: fem.studies.grasp_cases on 4 mm mixed tetrahedra, plane
 on; circle at (0.2, 0.3) MPa holds, rectangle at (0.1, 0.1) slips). No FEM solve.
 
 - Each entry's errors agree with an independent computation: the same grasp asked of the
@@ -203,7 +203,7 @@ def test_records_of_another_discretisation_are_refused(tmp_path, capsys):
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and "no FEM grasp records on mesh hex2:3 (mixed)" in err[0] and "it holds 4 mixed" in err[0]
     assert not any(tmp_path.iterdir())
-    assert vg.production_discretisation() == ("hex2:3", "mixed")   # fem.grasp_cases' default, suffix _hex2s3
+    assert vg.production_discretisation() == ("hex2:3", "mixed")   # fem.studies.grasp_cases' default, suffix _hex2s3
 
 
 def test_the_report_states_the_validations_targets():

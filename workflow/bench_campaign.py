@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from contract import cli
-from fem.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.cli.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
 from workflow import campaign, shards
 from workflow.artefacts import BENCH_CAMPAIGN, CAMPAIGN_TARGETS
 from workflow.shards import Manifest, ShardError
@@ -132,7 +132,7 @@ def bench(args) -> dict:
 
     # Imported only now, after the mpirun runs above: MPI started in this process would hand
     # its singleton environment to those child launchers.
-    from fem.solver import Load
+    from fem.solvers.joint import Load
     from workflow.mirror import recorded_solver
     solver = recorded_solver(config)
     pick = np.flatnonzero(~first)[:: max(1, (~first).sum() // args.fresh)][:args.fresh]

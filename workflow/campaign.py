@@ -31,7 +31,7 @@ cut-back); every further sample continues from the previous converged state alon
 short walk step (Euler predictor from the previous sample's sensitivities, then Newton).
 The assembled sparsity, forms and MUMPS symbolic factorisation are reused throughout. The
 Jacobian comes from ``solver.sensitivities()``: one block GMRES solve for the four inputs,
-preconditioned with the sample's factorisation (fem.load_path).
+preconditioned with the sample's factorisation (fem.solvers.load_path).
 
 Failures. A sample whose continuation fails is retried once from zero; if that fails too
 it goes to the shard's failure arrays with its inputs and both reasons (never as data),
@@ -47,16 +47,16 @@ Its shards hold the joint's anchor count (workflow.shards.anchor_count reads it 
 from the config).
 
 Formulation. ``--formulation`` (default the joint file's, for the paper's joint the
-production one, fem.discretisation.FORMULATION) chooses the joint's elements
-(fem.problem: P2 displacement or Taylor-Hood u-p "mixed"). The manifest's config records
+production one, fem.mesh.discretisation.FORMULATION) chooses the joint's elements
+(fem.physics.problem: P2 displacement or Taylor-Hood u-p "mixed"). The manifest's config records
 it only when it is not "displacement", so that every manifest written before the mixed
-formulation existed reads as what it is (fem.discretisation.recorded_formulation);
+formulation existed reads as what it is (fem.mesh.discretisation.recorded_formulation);
 resuming with another formulation is refused like any other config change. Without
 ``--mesh-size``, ``--wall-mesh-size`` or ``--divisions`` the mesh is the joint file's (the
 paper's: the production hex2:3, JointGeometry's default mesh, in the mixed formulation).
 The committed datasets results/data/{train,heldout} are on the production discretisation
 (``make dataset``); the paper-fidelity 1.8 mm displacement reference walks
-results/data/{train,heldout}_h1.8 (fem.discretisation.PAPER) resume with ``--mesh-size 1.8
+results/data/{train,heldout}_h1.8 (fem.mesh.discretisation.PAPER) resume with ``--mesh-size 1.8
 --formulation displacement``, and the production defaults are refused there (another
 config).
 
@@ -99,10 +99,10 @@ from mpi4py import MPI
 from contract import cli
 from contract.joint import JointSpec, is_paper_joint, joint_digest, load_joint, material_dict
 from contract.spec import INPUT_BOX, N_ANCHORS, N_INPUTS
-from fem.discretisation import FORMULATION
-from fem.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
-                         joint_geometry, joint_of)
-from fem.solver import JointSolver, Load, Material, config_for
+from fem.mesh.discretisation import FORMULATION
+from fem.cli.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
+                             joint_geometry, joint_of)
+from fem.solvers.joint import JointSolver, Load, Material, config_for
 from workflow import shards
 from workflow.shards import Manifest, ShardError
 from workflow.store import (ShardScanner, build_manifest, clean_temporaries, joint_record, shard_file,
@@ -168,7 +168,7 @@ def git_commit() -> str:
 def campaign_config(geometry, unit_size: int, step: float, fresh_check_every: int,
                     formulation: str = FORMULATION, joint: JointSpec | None = None) -> dict:
     """The manifest's ``config``: everything that determines the samples (not N, not ranks);
-    ``geometry`` a fem.geometry.JointGeometry (its mesh and wall mesh sizes included);
+    ``geometry`` a fem.mesh.geometry.JointGeometry (its mesh and wall mesh sizes included);
     ``formulation`` recorded only when it is not "displacement", ``joint`` (default the
     paper's) only when it is not the paper's (module docstring)."""
     joint = joint or load_joint()

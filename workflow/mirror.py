@@ -4,7 +4,7 @@ Mirroring y -> -y maps a solution (R, P, F1, F2, M) to (R diag(1, -1), -P, F1, -
 (docs/physics.md); the joint mesh is mirror symmetric, so a dataset's mirrored samples,
 solved from zero on one rank with the dataset's own joint and discretisation (its joint,
 workflow.store.recorded_joint, absent: the paper's; its geometry, solver settings and
-formulation, fem.discretisation.recorded_formulation), must give the mirrored stored
+formulation, fem.mesh.discretisation.recorded_formulation), must give the mirrored stored
 anchors and Jacobians to solver tolerance. ``workflow.dataset verify --mirror N`` hands ``mirror_check`` to
 ``workflow.store.verify``. Needs dolfinx (the data layer sits on the FEM layer).
 """
@@ -15,10 +15,10 @@ import numpy as np
 from mpi4py import MPI
 
 from contract.spec import mirror
-from fem.discretisation import recorded_formulation
-from fem.geometry import JointGeometry
-from fem.problem import Material
-from fem.solver import JointSolver, Load, SolverConfig
+from fem.mesh.discretisation import recorded_formulation
+from fem.mesh.geometry import JointGeometry
+from fem.physics.problem import Material
+from fem.solvers.joint import JointSolver, Load, SolverConfig
 from workflow.shards import Manifest
 from workflow.store import recorded_joint
 

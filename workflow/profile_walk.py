@@ -21,7 +21,7 @@ import time
 
 from contract import cli
 from contract.joint import load_joint
-from fem.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.cli.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
 
 
 def parse_args(argv=None):
@@ -46,11 +46,11 @@ def parse_args(argv=None):
 
 def profile_walk(seed: int, unit: int, samples: int, geometry, top: int, formulation: str | None = None) -> dict:
     """Solve the walk as the campaign does, on the paper joint of ``geometry`` (a
-    fem.geometry.JointGeometry) and ``formulation`` (None: the joint file's); return its
+    fem.mesh.geometry.JointGeometry) and ``formulation`` (None: the joint file's); return its
     figures (times s, counts)."""
     from mpi4py import MPI
 
-    from fem.solver import JointSolver, Load
+    from fem.solvers.joint import JointSolver, Load
     from workflow.campaign import DEFAULT_STEP, unit_walk
 
     solver = JointSolver.for_joint(load_joint(), MPI.COMM_SELF, geometry, formulation=formulation)

@@ -5,7 +5,7 @@
         [--max-hours H] [--out results/fem/resolved_<dataset>.json] [--summary-only] [--json] [--quiet]
 
 Why. A campaign sample is solved by continuation along its walk and, failing that, once
-from zero, each by fem.load_path's cut-back Newton (12 iterations a step, steps halved
+from zero, each by fem.solvers.load_path's cut-back Newton (12 iterations a step, steps halved
 down to 1/256 of the path). Where the valley contact front sweeps over many node pairs
 at once (the production train walk results/data/train, unit 36: P about -0.22 MPa with opposing end forces) that budget
 runs out although the joint is stable there (workflow.stability: no negative eigenvalue
@@ -53,7 +53,7 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.spec import phi_end
-from fem.options import one_rank
+from fem.cli.options import one_rank
 from workflow.campaign import EXIT_INCOMPLETE, git_commit, save_shard
 from workflow.artefacts import RESOLVED
 from workflow.mirror import recorded_solver

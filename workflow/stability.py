@@ -7,15 +7,15 @@ Data flow: the dataset's failed samples (their ids and inputs from the shards, o
 loads given) -> for each, the dataset's own joint solver (workflow.mirror.recorded_solver:
 joint, mesh, formulation, solver settings) from zero along the linear load path
 a(s) = s a_target, in segments s_0 < s_1 < ... (coarse steps of ``--coarse-step`` up to
-``--fine-from``, then ``--fine-step``), each segment solved by fem.load_path's cut-back
+``--fine-from``, then ``--fine-step``), each segment solved by fem.solvers.load_path's cut-back
 Newton -> at every converged s:
 
 * ``unstable_modes``: the negative eigenvalues of the stiffness there
-  (fem.load_path.LoadPathSolver.unstable_modes, Sylvester's inertia of an exact LDL^T): 0
+  (fem.solvers.load_path.LoadPathSolver.unstable_modes, Sylvester's inertia of an exact LDL^T): 0
   while the equilibrium is stable under these loads; it turns 1 where an eigenvalue
   passes through zero, a limit point under load control (past it no nearby equilibrium
   exists, and Newton fails however small the step) or a bifurcation;
-* ``closed_pairs``: the closed valley contact pairs (node-to-node, fem.contact), the
+* ``closed_pairs``: the closed valley contact pairs (node-to-node, fem.physics.contact), the
   contact state; a jump between segments is a change of contact state;
 * the tip (mm), phi_end and the cap rotation (deg);
 
@@ -40,7 +40,7 @@ from mpi4py import MPI
 
 from contract import cli
 from workflow.artefacts import STABILITY
-from fem.options import one_rank
+from fem.cli.options import one_rank
 from workflow.mirror import recorded_solver
 from workflow.shards import Manifest, read_shard
 
@@ -69,7 +69,7 @@ def path_points(coarse_step: float, fine_from: float, fine_step: float) -> list[
 
 def probe_path(solver, target: np.ndarray, points: list[float], say=print) -> dict:
     """Follow s a_target from zero through ``points`` (module docstring) on ``solver`` (a
-    fem.solver.JointSolver); the probe's record: its points, the failure (None if it
+    fem.solvers.joint.JointSolver); the probe's record: its points, the failure (None if it
     reached s = 1) and the verdict."""
     lp = solver.solver
     solver.reset()

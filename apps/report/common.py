@@ -127,7 +127,7 @@ MESH_REFERENCE = {"richardson": "the Richardson extrapolation", "finest mesh": "
 
 
 def mesh_label(h: float, w: float | None) -> str:
-    """A tetrahedral mesh as fem.mesh_study names it: "H" or "H:W" (mm)."""
+    """A tetrahedral mesh as fem.studies.mesh_study names it: "H" or "H:W" (mm)."""
     return mesh_text(h, w)
 
 

@@ -46,7 +46,7 @@ def _words(mesh: str, formulation: str) -> str:
 
 
 def _options(mesh: str, formulation: str) -> str:
-    """The fem.finger_cases options of a mesh text ("H", "H:W", "hexN", "hexN:S") and formulation."""
+    """The fem.studies.finger_cases options of a mesh text ("H", "H:W", "hexN", "hexN:S") and formulation."""
     a, _, b = mesh[3:].partition(":") if mesh.startswith("hex") else mesh.partition(":")
     names = ("--divisions", "--hex-size") if mesh.startswith("hex") else ("--mesh-size", "--wall-mesh-size")
     return " ".join([f"{names[0]} {a}"] + ([f"{names[1]} {b}"] if b else []) + [f"--formulation {formulation}"])
@@ -81,7 +81,7 @@ def _mesh_check_row(m: dict, whose: str) -> str:
     return (f"| discretisation{whose}: finger FEM, joint mesh {_words(base, m.get('production_formulation', 'displacement'))}"
             f" -> {_words(other, formulation)} ({m['production_nodes']:,} -> {m['nodes']:,} nodes), "
             f"{m['case']} | {m['tip_change_mm']:.2f} mm, {m['tip_angle_change_deg']:+.2f}° | "
-            f"`python -m fem.finger_cases {_options(other, formulation)}` |")
+            f"`python -m fem.studies.finger_cases {_options(other, formulation)}` |")
 
 
 def _finger_budget(root: Path, v: dict, judged: str, j: dict) -> list[str]:
@@ -178,7 +178,7 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
     out += figure_grid(root, [(figures[c], c) for c in shown],
                         "`python -m predictor.validate_finger` (joint model "
                         f"{joint_model(root, v.get('joint'))}): the finger FEM render "
-                        "(`python -m fem.finger_cases`, coloured by |u|) with the predictor's centre lines drawn over "
+                        "(`python -m fem.studies.finger_cases`, coloured by |u|) with the predictor's centre lines drawn over "
                         f"it (black: the judged variant, `{v.get('judged_variant')}`; red dashed: the paper's "
                         "chain, tangent kinematics with lumped joint weights); orange circle, the FEM fingertip.",
                         "make validate-finger")
@@ -273,7 +273,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
                   == ("predictor", "tangent", "lumped")), None)
     name = f"{label.get(judged, judged)} (`{judged}`)"
     out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validate_finger`): the "
-            f"finger FEM (`python -m fem.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
+            f"finger FEM (`python -m fem.cli.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
             f"joint mesh {_validated(v) or 'unrecorded'}, one rank{_problem(v)}) against the predictor on the same "
             f"finger file{', the same problem' if 'plane' in v else ''} and the "
             f"joint model {joint_model(root, v['joint'], 'make validate-finger')}; every predictor figure is a "

@@ -1,5 +1,5 @@
 """The report's section on the finger FEM over the pressure box (issue 36 §1): the gravity
-grid of results/fem/finger_grid.json (fem.finger_grid) drawn as a table, one cell per
+grid of results/fem/finger_grid.json (fem.studies.finger_grid) drawn as a table, one cell per
 pressure pair with its solve time or its failure and the predictor's fingertip error
 against it (the judged variant of results/validation/finger.json, make validate-finger,
 when that validation is of the same mesh and problem), and the targets (every pair
@@ -17,7 +17,7 @@ GESTURE_TARGET_S = 600.0     # issue 36: <= 10 min per gesture on one core
 
 def grid_axes(cases: list[dict], points: int) -> tuple[list[float], list[float]]:
     """The grid's P1 and P2 values (MPa), ascending: ``points`` values over [-l, l] per
-    axis, l the largest |P| solved on it (fem.finger_grid.grid_pairs; its first case is
+    axis, l the largest |P| solved on it (fem.studies.finger_grid.grid_pairs; its first case is
     the corner (-l1, -l2), so a grid with any case knows its box)."""
     def axis(values):
         limit = max(abs(v) for v in values)
@@ -90,9 +90,9 @@ def finger_grid_section(root: Path) -> tuple[list[str], list[Check]]:
     failed = [c for c in grid["cases"] if not c["converged"]]
     problem = ("the gripper: the right finger against the mirror finger's contact at X = 0" if s.get("plane")
                else "one finger alone, without the plane X = 0")
-    out += [f"`make finger-grid` (results/fem/finger_grid.json, `python -m fem.finger_grid`): the whole-finger FEM "
+    out += [f"`make finger-grid` (results/fem/finger_grid.json, `python -m fem.studies.finger_grid`): the whole-finger FEM "
             f"of {problem}, with gravity at every pressure pair of a {n} x {n} grid over the joints' box, each "
-            f"a fem.finger_cases record solved from the "
+            f"a fem.studies.finger_cases record solved from the "
             f"unloaded state on one rank ({mesh['nodes']:,} P2 nodes, joint mesh {mesh.get('mesh', 'unrecorded')}, "
             f"{s['formulation']} formulation). {grid['converged']} of {grid['solved']} solved pairs converged"
             + ("" if grid["complete"] else f" ({grid['pairs'] - grid['solved']} of {grid['pairs']} still to solve)")

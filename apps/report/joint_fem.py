@@ -33,7 +33,7 @@ def _mesh_words(m: dict) -> str:
 
 def _config_words(config: dict) -> str:
     """A campaign manifest's discretisation in words: its geometry's mesh and its
-    formulation (absent: displacement, fem.discretisation.recorded_formulation)."""
+    formulation (absent: displacement, fem.mesh.discretisation.recorded_formulation)."""
     return f"{_mesh_words(config['geometry'])} {config.get('formulation', 'displacement')}"
 
 
@@ -42,7 +42,7 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
     out, checks = [f"## {title}", ""], []
     out += ["### The joint (`make joint-render`)", ""]
     out += figure(root, "fem/joint.png", "joint render",
-                   "`make joint-render` (`python -m fem.render --mesh-size 1.8 --formulation displacement --out "
+                   "`make joint-render` (`python -m fem.cli.render --mesh-size 1.8 --formulation displacement --out "
                    "results/fem/joint.png`: the 1.8 mm reference data's paper-fidelity P2 displacement mesh, its "
                    "default load case, written in the picture): left the undeformed half-model cut open at "
                    "z = 0; right the deformed joint coloured by |u| (mm), red dots the anchor points.",
@@ -80,7 +80,7 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
     sc = load(root, "fem/self_contact.json")
     out += ["### Self-contact of the bellows (`make self-contact`)", ""]
     if sc:
-        out += [f"Penalty self-contact ({sc['contact_penalty_MPa_per_mm']} MPa/mm, `fem.contact`). "
+        out += [f"Penalty self-contact ({sc['contact_penalty_MPa_per_mm']} MPa/mm, `fem.physics.contact`). "
                 f"Minimum signed gap between facing outer cell walls over the box corners and "
                 f"their mirrors: **{sc['min_gap_mm']:.3f} mm** (undeformed "
                 f"{sc['undeformed_gap_mm']} mm; negative is overlap); unsolved cases: "
@@ -126,14 +126,14 @@ def fem_section(root: Path) -> tuple[list[str], list[Check]]:
 
 
 def _mesh_causes(mc: dict | None) -> list[str]:
-    """What limits the mesh convergence (fem.mesh_causes, issue 35 §1): each factor changed
+    """What limits the mesh convergence (fem.studies.mesh_causes, issue 35 §1): each factor changed
     alone from the production discretisation, its worst effect over the loads solved, the
     error against the mesh study's finest mesh, the solve time. Shown, not judged."""
     out = ["### What limits the mesh convergence (`make mesh-causes`)", ""]
     if not mc:
         return out + missing("the causes of the mesh error", "make mesh-causes")
     base = mc["base"]
-    out += [f"results/fem/mesh_causes.json (`python -m fem.mesh_causes`{'' if mc['complete'] else ', not complete yet'}):"
+    out += [f"results/fem/mesh_causes.json (`python -m fem.studies.mesh_causes`{'' if mc['complete'] else ', not complete yet'}):"
             f" each factor changed alone from the paper-fidelity discretisation of the 1.8 mm reference data ({base['H']:g} mm, "
             f"{base['formulation']} P2), at the mesh study's four corners and four interior loads; effect = the "
             "largest anchor change in % of the largest anchor displacement, worst over the loads solved; "
@@ -156,7 +156,7 @@ def _mesh_causes(mc: dict | None) -> list[str]:
 
 
 def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
-    """The mesh study (fem.mesh_study): every discretisation's worst error over the eight
+    """The mesh study (fem.studies.mesh_study): every discretisation's worst error over the eight
     loads against the reference (Richardson extrapolation of the refined family, or its
     finest mesh); the production discretisation is judged, the others shown."""
     tol, deg = ms["tolerance_percent"], ms["tolerance_deg"]
@@ -219,7 +219,7 @@ def _mesh_study(ms: dict, title: str, checks: list) -> list[str]:
     shown = (f"{ms['production_mesh']} {prod['formulation']}" if prod else
              f"{ms['production']} (not solved at every load yet)")
     paper = next((f"{m['mesh']} {m['formulation']}" for m in ms["meshes"] if m["key"] == ms["paper"]), ms["paper"])
-    out += ["", f"Production discretisation (the study's `--production`, fem.discretisation.PRODUCTION: what the "
+    out += ["", f"Production discretisation (the study's `--production`, fem.mesh.discretisation.PRODUCTION: what the "
             f"committed datasets results/data/{{train,heldout}} and the default surrogate are on since the switch, "
             f"issue 55 §3; the paper-fidelity {paper} data and models are kept as the reference, results/*/h1.8): "
             f"{shown}; judged against {tol:g} % and {deg:g}° (issue 35; the paper accepted "

@@ -1,0 +1,317 @@
+"""The finger validation cases on the whole-finger FEM: JSON figures and a render per case.
+
+    python -m fem.studies.finger_cases --out results/validation/finger_fem [--mesh-size 1.8 | --divisions N]
+                               [--part 1/2] [--formulation displacement] [--no-plane]
+    python -m fem.studies.finger_cases --finger FILE --pressures "0.2,0.2;-0.1,0.05" --out DIR
+
+Cases (issue 14 §4; pressures MPa, the paper's finger unless --finger):
+* free pressurisation without gravity (the paper's Figure 3): (0.05, 0.05), (0.1, 0.1),
+  (0.05, -0.05), (0.1, -0.1);
+* gravity (Figure 5A): (-0.1, 0.1), (0.1, -0.1);
+* 12 more pairs with gravity spread over the box, among them the grasp region
+  (0.2, 0.2) and (0.3, 0.3), none the mirror image (-P1, -P2) of another: with gravity
+  along the finger at rest the mirror case is the mirror finger (tests/test_finger.py),
+  so it would add no information.
+
+``--pressures "P1,P2;P1,P2;..."`` solves other gravity cases instead (each pair within the
+joints' boxes, named ``gravity_P1_P2`` as above; ``pressure_cases``): the calibration's
+FEM observations of a deliberately different finger (``make calibration-fem``).
+
+Each case is one ``FingerSolver.solve`` (every joint of its own joint file, fem.solvers.finger;
+``--formulation`` and the mesh default to the first joint file's [mesh], for the paper's
+joint the production discretisation, hex2:3 mixed; ``--divisions`` N: the finger on swept
+Q2 hexahedra, fem.mesh.hexahedra, its records' ``mesh.mesh`` "hexN" or "hexN:S") on one mesh
+built once (the mesh build and the form compilation are reported apart from each case's
+solve time, ``fem_s``). The committed cases (results/validation/finger_fem) are on the
+paper-fidelity 1.8 mm displacement, one finger alone: ``make finger-fem`` passes
+``--mesh-size 1.8 --formulation displacement --no-plane`` to resume them. It writes ``<case><suffix>.json``
+(FingerResult.summary plus the run's settings; suffix ``--suffix``, by default ``_hexN``
+or ``_hexNsS`` for hexahedra, no colon in a file name, ``_mixed`` for tetrahedra in the
+mixed formulation, none for tetrahedra in displacement: a default never names another
+kind's file, so a run on another discretisation leaves the committed cases alone) and
+``<case><suffix>.png``: the
+deformed finger (the full model, mirrored about z = 0), seen along -z in the global plane
+with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista with no
+colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
+lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
+and the |u| colour range. Files are written atomically; a case whose JSON exists for
+the same finger (by its values: contract.finger.same_finger), mesh and formulation is
+skipped (``record_stands``, the rule fem.studies.grasp_cases shares), so a killed run resumes (the
+settings record the formulation only when it is not "displacement", and the joints'
+digests, ``joints``, only when some joint is not the paper's, so the cases solved before
+the mixed formulation and joint files existed stand). A solve that does not
+converge is recorded as such (``converged: false``, no figures) with the solver controls
+it ran with (``solver``), and is tried again when they change.
+
+The problem (fem.solvers.finger, issue 56 §1): by default every case is the gripper's, the right
+finger against the mirror finger's contact at X = 0 (fem.physics.plane_contact; the fingers meet
+instead of passing through each other); ``--no-plane`` solves one finger alone (``--plane``,
+the default now, is accepted for one release). A plane case's record carries
+``plane_force_N``, ``plane_overlap_mm`` and ``base_force_N``, its settings ``"plane":
+true`` (absent without it, so the cases solved before the plane stand) and its default
+suffix ends in ``_plane``: a plane case never resumes from, nor replaces, a case without
+it. The committed lone-finger cases (results/validation/finger_fem/<case>.json on 1.8 mm,
+and the calibration's truth cases, results/calibration/fem on the production mesh and
+fem_h1.8 on 1.8 mm) are resumed with ``--no-plane`` (``make finger-fem``, ``make
+calibration-fem``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pyvista  # before dolfinx: VTK crashes (std::bad_alloc) if loaded after it
+from mpi4py import MPI
+
+from contract import cli
+from contract.files import atomic_path, json_safe
+from fem.studies.artefacts import FINGER_CASE
+from fem.solvers.finger import FINGER_CONFIG, FingerLoad, FingerSolver, same_settings
+from fem.physics.finger import rotation_matrix
+from fem.mesh.geometry import JointGeometry, finger_joints, pressure_limits
+from fem.cli.options import add_finger_mesh, add_plane_flags, finger_discretisation, one_rank
+from fem.solvers.joint import config_for
+from contract.finger import finger_arg, load_finger
+from contract.joint import is_paper_joint, joint_digest
+
+#: (name, P1, P2, gravity)
+CASES = [
+    ("free_0.05_0.05", 0.05, 0.05, False), ("free_0.1_0.1", 0.1, 0.1, False),
+    ("free_0.05_-0.05", 0.05, -0.05, False), ("free_0.1_-0.1", 0.1, -0.1, False),
+    ("gravity_-0.1_0.1", -0.1, 0.1, True), ("gravity_0.1_-0.1", 0.1, -0.1, True),
+    ("gravity_0.2_0.2", 0.2, 0.2, True), ("gravity_0.3_0.3", 0.3, 0.3, True),
+    ("gravity_-0.2_0.1", -0.2, 0.1, True), ("gravity_0.3_-0.3", 0.3, -0.3, True),
+    ("gravity_-0.1_-0.25", -0.1, -0.25, True), ("gravity_0.15_0", 0.15, 0.0, True),
+    ("gravity_0_0.25", 0.0, 0.25, True), ("gravity_-0.15_-0.05", -0.15, -0.05, True),
+    ("gravity_0.25_0.1", 0.25, 0.1, True), ("gravity_0.1_0.3", 0.1, 0.3, True),
+    ("gravity_0.05_-0.2", 0.05, -0.2, True), ("gravity_-0.25_0.2", -0.25, 0.2, True),
+]
+WINDOW = (900, 900)   # render size, pixels
+
+
+def case_name(p1: float, p2: float, gravity: bool = True) -> str:
+    """A case's name as CASES spell it: gravity_P1_P2 or free_P1_P2 (MPa, %g)."""
+    return f"{'gravity' if gravity else 'free'}_{p1:g}_{p2:g}"
+
+
+def pressure_cases(text: str) -> list[tuple[str, float, float, bool]]:
+    """argparse type of --pressures: "P1,P2;P1,P2;..." (MPa) -> gravity cases as CASES
+    holds them; a pair given twice, or not two finite numbers, is refused (one line; the
+    joints' boxes are checked once the finger is read)."""
+    pair = cli.numbers(2, unit="MPa")
+    cases = []
+    for item in text.split(";"):
+        p1, p2 = pair(item.strip())
+        cases.append((case_name(p1, p2), p1, p2, True))
+    names = [c[0] for c in cases]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise argparse.ArgumentTypeError(f"{text!r}: {', '.join(twice)} given twice")
+    return cases
+
+
+def default_suffix(joint: JointGeometry, formulation: str, plane: bool = False) -> str:
+    """The default file-name suffix of a finger whose joints are ``joint`` (module
+    docstring): ``_hexN`` or ``_hexNsS`` on hexahedra (fem.mesh.discretisation.Discretisation.key's
+    spelling; a colon is no file name), ``_mixed`` on tetrahedra in the mixed formulation,
+    else none; then ``_plane`` with the plane X = 0."""
+    if joint.divisions:
+        kind = f"_hex{joint.divisions}" + (f"s{joint.hex_size:g}" if joint.hex_size else "")
+    else:
+        kind = "" if formulation == "displacement" else f"_{formulation}"
+    return kind + ("_plane" if plane else "")
+
+
+def case_settings(finger, geometry, formulation: str, plane: bool = False) -> dict:
+    """The settings a case records, by which a later run resumes it (fem.solvers.finger.same_settings;
+    module docstring): the finger's digest and geometry, and only where they differ from
+    the first cases' the formulation (not "displacement"), the plane X = 0 (on) and the
+    joints' digests (some joint not the paper's)."""
+    settings = {"finger_sha256": finger.digest, "geometry": geometry.as_dict()}
+    if formulation != "displacement":
+        settings["formulation"] = formulation
+    if plane:
+        settings["plane"] = True
+    joints = finger_joints(finger)
+    if not all(is_paper_joint(j) for j in joints):
+        settings["joints"] = [joint_digest(j) for j in joints]
+    return settings
+
+
+def solver_settings(geometry) -> dict:
+    """The controls FingerSolver solves with on ``geometry`` (fem.solvers.finger.FINGER_CONFIG,
+    fem.solvers.joint.config_for), as a case records them (``solver``)."""
+    return json_safe(asdict(config_for(geometry, FINGER_CONFIG)))
+
+
+def record_stands(path: Path, settings: dict, solver: dict, finger) -> bool:
+    """Whether the case record at ``path`` stands, so that a run skips the case (module
+    docstring): it is a JSON object of the same ``settings`` (fem.solvers.finger.same_settings: the
+    same finger by its values, mesh, formulation, ...) that converged, or that failed with
+    the same ``solver`` controls. A missing, damaged or foreign file does not stand."""
+    if not path.is_file():
+        return False
+    try:
+        done = json.loads(path.read_text())
+    except ValueError:
+        return False        # a foreign or damaged file: solve again and replace it
+    if not isinstance(done, dict):
+        return False
+    # A converged case stands while the finger and mesh are the same; a failed one is
+    # tried again once the solver's controls change.
+    return same_settings(done.get("settings"), json_safe(settings), finger) and bool(
+        done.get("converged") or done.get("solver") == solver)
+
+
+def pending(cases: list, out: Path, suffix: str, settings: dict, solver: dict, finger) -> list:
+    """The cases [(name, P1, P2, gravity)] whose record ``out/<name><suffix>.json`` does not
+    stand (``record_stands``), each with that path appended: what a run solves."""
+    paths = [(case, Path(out) / f"{case[0]}{suffix}.json") for case in cases]
+    return [(*case, path) for case, path in paths if not record_stands(path, settings, solver, finger)]
+
+
+def part_slice(ap: cli.Parser, text: str) -> slice:
+    """The cases of ``--part K/N``: every N-th starting at the K-th (a usage error unless
+    1 <= K <= N)."""
+    try:
+        k, n = (int(v) for v in text.split("/"))
+        assert 1 <= k <= n
+    except (ValueError, AssertionError):
+        ap.error(f"--part {text!r}: use K/N with 1 <= K <= N")
+    return slice(k - 1, None, n)
+
+
+def render(solver: FingerSolver, path: Path, outline: np.ndarray | None = None) -> dict:
+    """The deformed finger in the global plane, coloured by |u|, to ``path`` (PNG, atomic).
+    ``outline`` (n, 2) mm, global: a closed polyline drawn over it in black (fem.studies.grasp_cases:
+    the object's outline), which the extent then takes in too. Returns {"extent_mm": [X0,
+    X1, Y0, Y1], "u_max_mm": ..., "cmap": ...} for the overlay."""
+    from dolfinx import plot
+
+    finger = solver.finger
+    field = solver.displacement()       # u in its own P2 space (mixed: w's u block)
+    topology, cell_types, x = plot.create_vtk_mesh(field.function_space)
+    u = field.x.array.reshape(-1, 3)
+    grid = pyvista.UnstructuredGrid(topology, cell_types, x)
+    grid.point_data["u"] = u.copy()
+    mirror = grid.copy()
+    mirror.points[:, 2] *= -1
+    mirror.point_data["u"][:, 2] *= -1
+    full = grid.merge(mirror)
+    moved = full.points + full.point_data["u"]
+    turn = rotation_matrix(finger.base_angle)
+    xy = moved[:, :2] @ turn.T + [0.5 * finger.base_gap, 0.0]
+    full.points = np.column_stack([xy, moved[:, 2]])
+    full.point_data["|u|"] = np.linalg.norm(full.point_data["u"], axis=1)
+    shown = xy if outline is None else np.vstack([xy, outline])
+    lo, hi = shown.min(0) - 15.0, shown.max(0) + 15.0
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo).max()
+    extent = [centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half]
+    umax = float(full.point_data["|u|"].max())
+    p = pyvista.Plotter(off_screen=True, window_size=WINDOW, border=False)
+    p.set_background("white")
+    p.add_mesh(full.extract_surface(nonlinear_subdivision=0, algorithm='dataset_surface'), scalars="|u|", cmap="viridis",
+               clim=(0.0, umax), show_scalar_bar=False)
+    if outline is not None:
+        # above the finger (|z| <= width / 2) so that the camera on +z sees it on top
+        line = pyvista.lines_from_points(np.column_stack([outline, np.full(len(outline), 100.0)]), close=True)
+        p.add_mesh(line, color="black", line_width=3)
+    p.enable_parallel_projection()
+    p.camera.focal_point = (centre[0], centre[1], 0.0)
+    p.camera.position = (centre[0], centre[1], 1000.0)
+    p.camera.up = (0.0, 1.0, 0.0)
+    p.camera.parallel_scale = half
+    with atomic_path(path) as tmp:
+        p.screenshot(str(tmp))
+    p.close()
+    return {"extent_mm": extent, "u_max_mm": umax, "cmap": "viridis"}
+
+
+def solve_cases(todo: list, geometry, formulation: str, plane: bool, settings: dict, solver: dict,
+                comm: MPI.Comm = MPI.COMM_WORLD, after: Callable[[Path, dict], None] | None = None) -> None:
+    """Solve the cases ``todo`` [(name, P1, P2, gravity, path)] on one FingerSolver built
+    once (the mesh build and the forms' compilation are ``setup_s``), each written to its
+    ``path`` (FINGER_CASE, atomic; the folder made if needed) with its settings and solver
+    controls (``case_settings``, ``solver_settings``: the resume key) and, if converged,
+    its render beside it (``render``); one line per case on stdout. ``after(path, record)``
+    is called once each record is written (fem.studies.finger_grid: its summary)."""
+    t0 = time.perf_counter()
+    fem_solver = FingerSolver(geometry, comm, formulation=formulation, plane=plane)
+    setup_s = time.perf_counter() - t0
+    for name, p1, p2, gravity, path in todo:
+        res = fem_solver.solve(FingerLoad((p1, p2), gravity))
+        record = {"case": name, **res.summary(), "fem_s": res.wall_time, "fem_cpu_s": res.cpu_time,
+                  "load_average": os.getloadavg()[0], "setup_s": setup_s,
+                  "mesh": fem_solver.mesh_info(), "formulation": formulation, "settings": settings,
+                  "solver": solver,
+                  "ranks": comm.size}
+        if res.converged:
+            record["render"] = render(fem_solver, path.with_suffix(".png"))
+        cli.make_output_folder(path.parent)
+        FINGER_CASE.write(path, record)
+        print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
+                             f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
+                             f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)
+        if after is not None:
+            after(path, record)
+
+
+def main(argv=None) -> int:
+    ap = cli.Parser(prog="python -m fem.studies.finger_cases", description=__doc__.split("\n\n")[0])
+    ap.add_output("--out", folder=True, default="results/validation/finger_fem",
+                  help="folder for <case>.json and <case>.png (default results/validation/finger_fem)")
+    ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
+    add_finger_mesh(ap)
+    ap.add_argument("--cases", help="comma-separated case names (default: all): " + ", ".join(c[0] for c in CASES))
+    ap.add_argument("--pressures", type=pressure_cases, metavar="P1,P2;...",
+                    help="solve these gravity pressure pairs (MPa, ';' between pairs) instead of the validation cases")
+    add_plane_flags(ap, "; file names end in _plane with the plane")
+    ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th (two processes: 1/2 and 2/2)")
+    ap.add_argument("--suffix", default=None, help="appended to each file name (e.g. _h1.2 for a finer mesh; "
+                    "default: _hexN or _hexNsS on hexahedra, _mixed on mixed tetrahedra, so that they never replace "
+                    "the displacement tetrahedral cases, else none)")
+    cli.add_quiet(ap)
+    comm = MPI.COMM_WORLD
+    one_rank(ap, comm)
+    args = ap.parse_args(argv)
+    table = args.pressures or CASES
+    names = [c[0] for c in table]
+    chosen = args.cases.split(",") if args.cases else names
+    for name in chosen:
+        if name not in names:
+            ap.error(f"unknown case {name!r}: use {', '.join(names)}")
+    cases = [c for c in table if c[0] in chosen][part_slice(ap, args.part)]
+    finger = args.finger or load_finger()
+    if finger.n_joints != 2:
+        ap.error(f"--finger: finger {finger.name!r} has {finger.n_joints} joint(s); the validation cases "
+                 "are pressure pairs for a two-joint finger (use python -m fem.cli.finger --pressures for others)")
+    limits = pressure_limits(finger)
+    for name, *pressures, _ in cases:
+        for j, (p, limit) in enumerate(zip(pressures, limits), 1):
+            if abs(p) > limit:
+                ap.error(f"case {name}: P{j} = {p:g} is outside [{-limit:g}, {limit:g}] MPa (its joint's input box)")
+    cli.setup_logging(args.quiet)
+    geometry, formulation = finger_discretisation(ap, args, finger)
+    settings = case_settings(finger, geometry, formulation, args.plane)
+    solver = solver_settings(geometry)
+    suffix = default_suffix(geometry.joint, formulation, args.plane) if args.suffix is None else args.suffix
+    out = Path(args.out)
+    todo = pending(cases, out, suffix, settings, solver, finger)
+    if not todo:
+        print(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
+        return 0
+    with ap.errors(), cli.heartbeat("finger cases"):
+        solve_cases(todo, geometry, formulation, args.plane, settings, solver, comm)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
