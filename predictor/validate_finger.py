@@ -83,12 +83,21 @@ JUDGED = f"predictor_{DEFAULT_KINEMATICS}_{DEFAULT_JOINT_WEIGHT}"
 OVERLAID = {(DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT):
             f"{DEFAULT_KINEMATICS} kinematics, {DEFAULT_JOINT_WEIGHT} joint weights (default)",
             ("tangent", "lumped"): "tangent kinematics, lumped weights (paper)"}
-#: Issue 56's targets on the production mesh, every case with the plane: the 7 x 7 grid with
-#: gravity and the 4 free cases (53), the finger FEM's fingertip change under one further
-#: refinement of the joints' mesh (mesh_check). The 1.8 mm reference (finger_h1.8.json)
-#: records those it was written under (issue 14's: 2 mm, 1 deg, 1000x, 14 cases).
+#: The targets a validation is judged on, by its problem: the gripper's cases (the plane X =
+#: 0, the production mesh) on issue 56's: the 7 x 7 grid with gravity and the 4 free cases
+#: (53), and the finger FEM's fingertip change under one further refinement of the joints'
+#: mesh (mesh_check); one finger alone's (the 1.8 mm reference cases, make demo's coarse
+#: finger) on issue 14's.
 TARGETS = {"tip_error_mm": 1.0, "tip_angle_error_deg": 0.5, "speedup": 1e4, "fem_s": 600.0,
            "fem_cases": 53, "refinement_tip_change_mm": 0.5}
+LONE_TARGETS = {"tip_error_mm": 2.0, "tip_angle_error_deg": 1.0, "speedup": 1000.0, "fem_s": 600.0,
+                "fem_cases": 14}   # 4 free, 2 gravity and at least 8 more pairs with gravity
+
+
+def targets_for(plane: bool | None) -> dict:
+    """The targets of a validation of the gripper (plane True: TARGETS) or of one finger
+    alone (False; None, a mix of both, is judged as the lone finger's: LONE_TARGETS)."""
+    return TARGETS if plane else LONE_TARGETS
 
 
 def _deg(a: torch.Tensor) -> list[float]:
@@ -348,7 +357,7 @@ def main(argv=None) -> int:
                      "plane_force_N": c.get("plane_force_N")} for c in cases],
             "cases": [e for e in entries if "method" in e], "summary": summarise([e for e in entries if "method" in e]),
             "mesh_check": mesh_check(cases, meshes),
-            "targets": TARGETS, "judged_variant": JUDGED, "repeats": REPEATS, "figures": figures,
+            "targets": targets_for(plane), "judged_variant": JUDGED, "repeats": REPEATS, "figures": figures,
         }
         VALIDATION.write(args.out, report)
     if args.json:

@@ -142,6 +142,12 @@ def test_validate_finger_refuses_the_plane_on_lone_cases(tmp_path, capsys):
     assert one_problem([lone, plane], None, "x") == ([lone, plane], None)
     assert one_problem([lone, plane], True, "x") == ([plane], True)
     assert one_problem([lone], None, "x") == ([lone], False)
+    # each problem is judged on its own issue's targets: the gripper's on issue 56's (1 mm, 0.5 deg and
+    # the finger FEM's own refinement), one finger alone's on issue 14's (2 mm, 1 deg)
+    from predictor.validate_finger import targets_for
+    assert (targets_for(True)["tip_error_mm"], targets_for(True)["refinement_tip_change_mm"]) == (1.0, 0.5)
+    assert targets_for(False) == targets_for(None) and targets_for(False)["tip_error_mm"] == 2.0
+    assert "refinement_tip_change_mm" not in targets_for(False)
 
 
 def test_validate_grasps_refuses_a_lone_finger_on_the_grippers_records(tmp_path, capsys):
