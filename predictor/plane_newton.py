@@ -39,10 +39,10 @@ equilibrium it holds is, to ~0.05 mm, that of the outline held ON X = 0. So:
    from zero in a few legs, each KKT from the last one's answer.
 
 Measured on the committed surrogate's 7 x 7 gravity grid over [-0.3, 0.3]² MPa (one
-thread, same run as the ramp before it, two FEM jobs beside, load average ~7): the 25
-pairs pressed on X = 0 take 6-53 iterations (median 9) where the ramp and its homotopy
-took 43-1,862 (median 102), 5,576 -> 407 iterations in all, 11.2 -> 1.2 s CPU; the same
-roots (tips within 3.4e-8 mm, plane forces within 5.7e-8 N).
+thread, the ramp before it in the same minutes, two FEM jobs beside, load average ~7): the
+25 pairs pressed on X = 0 take 6-53 iterations (median 9) where the ramp and its homotopy
+took 43-1,862 (median 102), 5,576 -> 407 iterations in all, 12.5 -> 0.89 s CPU; the same
+roots (tips within 3.4e-8 mm, plane forces within 5.7e-8 N); docs/gripper.md §9.
 
 A sample whose KKT does not converge (or whose polish fails) is reported as not converged:
 the caller falls back to the ramp and its homotopy (predictor.ramp). Units: x (B, 3J) = (F1 N, F2 N,
@@ -151,9 +151,11 @@ def kkt_jacobian(g, x: torch.Tensor, p: torch.Tensor, lam: torch.Tensor, mask: t
     X = X.reshape(B, rows, -1)
     dR = (R[:, 1:1 + n] - R[:, 1 + n:]).transpose(1, 2) / (2 * h)
     dX = (X[:, 1:1 + n] - X[:, 1 + n:]).transpose(1, 2) / (2 * h)
-    eye = torch.eye(lam.shape[1], dtype=x.dtype)
     Y0, ey0 = Y.reshape(B, rows, -1)[:, 0], ey.reshape(B, rows, -1)[:, 0]
-    dlam = torch.stack([plane_loads(eye[k].expand(B, -1), Y0, ey0, mask) for k in range(lam.shape[1])], -1)
+    # plane_loads of a unit force at each vertex, (B, J, 3, Vp) -> (B, 3J, Vp)
+    force = mask.expand(B, -1, -1)
+    moment = force * (Y0[:, None, :] - ey0[:, :, None]) / MOMENT_SCALE
+    dlam = torch.stack((-force, torch.zeros_like(force), moment), 2).reshape(B, n, -1)
     return R[:, 0].clone(), X[:, 0].clone(), dR.clone(), dlam, dX.clone()
 
 
@@ -222,27 +224,25 @@ def kkt_solve(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor, steps: 
     _, mask = plane_vertex_layout(problem.params.layout)
     B, n = x.shape
     x = x.clone()
-    with torch.inference_mode():
-        _, X, _, _ = g(x, p)
-    X = X.clone()
-    lam = torch.zeros_like(X)
+    lam = torch.zeros(B, mask.shape[1], dtype=x.dtype)
     shift = torch.zeros(B, dtype=x.dtype)
-    active, _ = update_active(torch.zeros_like(X, dtype=torch.bool), lam, X, shift)
+    active = torch.zeros(B, mask.shape[1], dtype=torch.bool)
     done = torch.zeros(B, dtype=torch.bool)
     shifted = torch.zeros(B, dtype=torch.bool)
     failed = torch.zeros(B, dtype=torch.bool)
     steps_taken = torch.zeros(B, dtype=torch.long)
-    for _ in range(steps):
+    for k in range(steps + 1):
         on = (~done).nonzero().flatten()
         if not len(on):
             break
         R, Xo, dR, dlam, dX = kkt_jacobian(g, x[on], p[on], lam[on], mask)
-        # converged at the current set (before this step): residual and constraints met
-        act = active[on]
-        met = ((R.abs().amax(-1) <= KKT_TOL[0])
-               & torch.where(act, (Xo + shift[on, None]).abs(), 0.0).le(KKT_TOL[1]).all(-1)
-               & (torch.where(act, 0.0, -(Xo + shift[on, None])) <= ADD_TOL).all(-1)
-               & (torch.where(act, lam[on], 1.0) > 0).all(-1))
+        # the set at this x: the last step's pulling forces released, the deepest free
+        # vertex across added (at the start: the deepest across X = 0)
+        act, changed = update_active(active[on], lam[on], Xo, shift[on])
+        active[on] = act
+        # converged at an unchanged set: residual and constraints met
+        met = (~changed & (R.abs().amax(-1) <= KKT_TOL[0])
+               & torch.where(act, (Xo + shift[on, None]).abs(), 0.0).le(KKT_TOL[1]).all(-1))
         if bool(met.any()):
             # the touching solution found: give the penalty its overlap, once, then go on
             first = met & ~shifted[on]
@@ -258,19 +258,15 @@ def kkt_solve(problem: GripperProblem, x: torch.Tensor, p: torch.Tensor, steps: 
             if not len(on):
                 break
             R, Xo, dR, dlam, dX = (t[keep] for t in (R, Xo, dR, dlam, dX))
+        if k == steps:   # out of steps: not converged
+            break
         dx, lam_new = kkt_step(R, Xo, dR, dlam, dX, lam[on], active[on], shift[on])
         ok = dx.isfinite().all(-1) & lam_new.isfinite().all(-1)
         failed[on[~ok]] = True     # a singular system (an over-constrained set): the caller's fallback
         done[on[~ok]] = True
         steps_taken[on] += 1
-        on = on[ok]
-        if not len(on):
-            continue
-        x[on] = x[on] + dx[ok]
-        lam[on] = lam_new[ok]
-        with torch.inference_mode():
-            _, Xn, _, _ = g(x[on], p[on])
-        active[on], _ = update_active(active[on], lam[on], Xn.clone(), shift[on])
+        x[on[ok]] = x[on[ok]] + dx[ok]
+        lam[on[ok]] = lam_new[ok]
     converged = done & shifted & ~failed & x.isfinite().all(-1)
     return x, lam, shift, converged, steps_taken
 
@@ -334,8 +330,8 @@ def plane_newton(problem: GripperProblem, options: SolverOptions, polish):
     ``penalty_newton`` (full steps: the LM's merit test refuses the step that leaves the
     contact of an edge lying nearly flat on X = 0, and then creeps), then ``polish`` from
     there (a step solver of the stiff plane: predictor.ramp's LM with its checks and depth
-    check, POLISH_ITER iterations, none where the Newton steps converged); converged only where the KKT and the polish are.
-    iterations: the KKT's Newton steps, the penalty's and the polish's."""
+    check, POLISH_ITER iterations, none where the Newton steps converged); converged only
+    where the KKT and the polish are. iterations: the KKT's Newton steps, the penalty's and the polish's."""
 
     def run(x, p, p_prev=None, jac=None, p0=None, legs=1):
         xk, ok, its = kkt_path(problem, x, p if p0 is None else p0, p, legs)
