@@ -447,6 +447,16 @@ def _outline(source: str, doc: dict, shape: BellowShape, count: int) -> tuple | 
     return (tuple(float(p) for p in pressures), *sides)
 
 
+def outline_table(pressures, bulge, other, digits: int = 3) -> str:
+    """The [outline] table (TOML text) of |P| (K,) MPa and the two sides' bulges (K, n) mm,
+    to ``digits`` decimals of a mm (fem.studies.joint_outline prints it for a joint file)."""
+    row = lambda v: "    [" + ", ".join(f"{x:.{digits}f}" for x in v) + "],"  # noqa: E731
+    lines = ["[outline]", "pressures = [" + ", ".join(f"{p:g}" for p in pressures) + "]"]
+    for key, side in (("bulge", bulge), ("other", other)):
+        lines += [f"{key} = [", *(row(r) for r in side), "]"]
+    return "\n".join(lines) + "\n"
+
+
 def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0,
               hex_size: float | None = None) -> str:
     """A mesh in words: ``hexN`` (hexahedra of N divisions), ``hexN:S`` (graded: elements

@@ -59,7 +59,13 @@ def test_a_malformed_outline_is_refused_in_one_line(table, why):
 
 
 def test_the_paper_joints_table_is_the_committed_study():
+    """paper.toml holds, to the character, the table the committed study prints."""
+    from contract.joint import outline_table
+
     record = json.loads((ROOT / "results" / "fem" / "joint_outline.json").read_text())
+    rows = record["bulge_mm"]
+    table = outline_table([r["P_MPa"] for r in rows], [r["pressurised_mm"] for r in rows], [r["other_mm"] for r in rows])
+    assert table in PAPER.read_text()
     pressures, bulge, other = load_joint().outline
     assert pressures == tuple(r["P_MPa"] for r in record["bulge_mm"])
     for row, b, o in zip(record["bulge_mm"], bulge, other):

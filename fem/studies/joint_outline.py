@@ -36,14 +36,22 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from contract.joint import JointSpec, joint_arg, load_joint
+from contract.joint import JointSpec, joint_arg, load_joint, outline_table
+from fem.cli.options import add_divisions, add_mesh_size, joint_geometry
+from fem.mesh.geometry import JointGeometry
 from fem.solvers.joint import JointSolver, Load
 from fem.studies.artefacts import JOINT_OUTLINE
 
 log = logging.getLogger("softjoint.fem")
 
-#: Pressures (MPa) the study solves in turn, up the load path (continuation).
-PRESSURES = (0.025, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3)
+#: The pressures the study solves in turn, up the load path (continuation), as fractions of
+#: the joint's box |P| <= pressure_mpa: the paper's joint's 0.025, 0.05, 0.1, ..., 0.3 MPa.
+FRACTIONS = (1 / 12, 1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6, 1.0)
+
+
+def pressures_of(joint: JointSpec) -> tuple[float, ...]:
+    """The default pressures (MPa) of ``joint``: FRACTIONS of its box, to 1e-6 MPa."""
+    return tuple(round(f * joint.pressure_mpa, 6) for f in FRACTIONS)
 
 
 def centre_line(anchors: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
@@ -90,11 +98,14 @@ def bulges(solver: JointSolver, half_height: float, length: float) -> tuple[np.n
     return both[0] - half_height, both[1] - half_height
 
 
-def run(joint: JointSpec | None = None, pressures=PRESSURES, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
-    """The study's record of ``joint`` (default: the paper's): per pressure the bulge of
-    both sides, the mirror check. RuntimeError if a solve does not converge."""
+def run(joint: JointSpec | None = None, pressures=None, comm: MPI.Comm = MPI.COMM_WORLD,
+        geometry: JointGeometry | None = None) -> dict:
+    """The study's record of ``joint`` (default: the paper's) on ``geometry`` (default:
+    the joint file's [mesh]): per pressure the bulge of both sides, the mirror check.
+    RuntimeError if a solve does not converge."""
     joint = joint or load_joint()
-    solver = JointSolver.for_joint(joint, comm)
+    pressures = pressures or pressures_of(joint)
+    solver = JointSolver.for_joint(joint, comm, geometry=geometry)
     H2, L = joint.shape.height / 2, joint.shape.length
     rows, t0 = [], time.perf_counter()
     for P in pressures:
@@ -118,17 +129,11 @@ def run(joint: JointSpec | None = None, pressures=PRESSURES, comm: MPI.Comm = MP
             "wall_time_s": time.perf_counter() - t0, "ranks": comm.size}
 
 
-def outline_table(record: dict, digits: int = 3) -> str:
-    """The joint file's [outline] table (contract.joint) of a study record, in mm to
-    ``digits`` decimals: what a joint file adds to draw the bulge."""
+def outline_of(record: dict) -> tuple:
+    """The (pressures, bulge, other) of a study record, contract.joint's [outline] order."""
     rows = record["bulge_mm"]
-    fmt = lambda v: "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"  # noqa: E731
-    lines = ["[outline]", "pressures = [" + ", ".join(f"{r['P_MPa']:g}" for r in rows) + "]"]
-    for key, side in (("bulge", "pressurised_mm"), ("other", "other_mm")):
-        lines.append(f"{key} = [")
-        lines += [f"    {fmt(r[side])}," for r in rows]
-        lines.append("]")
-    return "\n".join(lines) + "\n"
+    return (tuple(r["P_MPa"] for r in rows), tuple(tuple(r["pressurised_mm"]) for r in rows),
+            tuple(tuple(r["other_mm"]) for r in rows))
 
 
 def main(argv=None) -> int:
@@ -137,10 +142,24 @@ def main(argv=None) -> int:
                     help="joint description file (default: the paper's, contract/joints/paper.toml)")
     ap.add_output("--out", suffix=".json", default="results/fem/joint_outline.json",
                   help="result file (default results/fem/joint_outline.json)")
+    ap.add_argument("--pressures", type=cli.number_list(0, 10, "MPa"), default=None,
+                    metavar="P1,P2,..", help="|P| (MPa, increasing) of the table's rows (default: the joint's "
+                    "box |P| <= P_max times 1/12, 1/6, 1/3, 1/2, 2/3, 5/6, 1; the paper's 0.025, 0.05, 0.1, .., 0.3)")
+    add_mesh_size(ap, None)
+    add_divisions(ap)
     args = ap.parse_args(argv)
+    with ap.errors():
+        joint = args.joint or load_joint()
+        geometry = joint_geometry(args, joint)
+        pressures = tuple(args.pressures) if args.pressures else pressures_of(joint)
+        if pressures[0] <= 0 or any(b <= a for a, b in zip(pressures, pressures[1:])):
+            raise ValueError(f"--pressures {','.join(f'{p:g}' for p in pressures)}: must increase from above 0 MPa")
+        if pressures[-1] > joint.pressure_mpa:
+            raise ValueError(f"--pressures: {pressures[-1]:g} MPa is beyond the joint's box (|P| <= "
+                             f"{joint.pressure_mpa:g} MPa)")
     logging.basicConfig(level=logging.INFO, format="%(message)s", force=True)
     try:
-        record = run(args.joint)
+        record = run(joint, pressures, geometry=geometry)
     except RuntimeError as exc:          # a pressure that did not converge: nothing is written
         print(f"{ap.prog}: {exc}", file=sys.stderr)
         return 1
@@ -151,7 +170,7 @@ def main(argv=None) -> int:
     if args.json:
         cli.print_json({**record, "out": args.out})
     else:
-        print(f"# add to the joint file ({args.out}):\n" + outline_table(record), end="")
+        print(f"# add to the joint file ({args.out}):\n" + outline_table(*outline_of(record)), end="")
     return 0
 
 
