@@ -235,6 +235,18 @@ def render(solver: FingerSolver, path: Path, outline: np.ndarray | None = None) 
     return {"extent_mm": extent, "u_max_mm": umax, "cmap": "viridis"}
 
 
+def write_case(path: Path, record: dict, fmt, solver: FingerSolver, converged: bool,
+               outline: np.ndarray | None = None) -> None:
+    """Write one solved case: if ``converged``, its ``render`` (the deformed ``solver``,
+    ``outline`` over it: ``render``) beside ``path`` as .png and into ``record``; then
+    ``record`` to ``path`` in ``fmt`` (a fem.studies.artefacts format: atomic), the folder
+    made if needed. Shared by solve_cases and fem.studies.grasp_cases."""
+    if converged:
+        record["render"] = render(solver, path.with_suffix(".png"), outline)
+    cli.make_output_folder(path.parent)
+    fmt.write(path, record)
+
+
 def solve_cases(todo: list, geometry, formulation: str, plane: bool, settings: dict, solver: dict,
                 comm: MPI.Comm = MPI.COMM_WORLD, after: Callable[[Path, dict], None] | None = None) -> None:
     """Solve the cases ``todo`` [(name, P1, P2, gravity, path)] on one FingerSolver built
@@ -253,10 +265,7 @@ def solve_cases(todo: list, geometry, formulation: str, plane: bool, settings: d
                   "mesh": fem_solver.mesh_info(), "formulation": formulation, "settings": settings,
                   "solver": solver,
                   "ranks": comm.size}
-        if res.converged:
-            record["render"] = render(fem_solver, path.with_suffix(".png"))
-        cli.make_output_folder(path.parent)
-        FINGER_CASE.write(path, record)
+        write_case(path, record, FINGER_CASE, fem_solver, res.converged)
         print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
                              f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
                              f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)

@@ -180,8 +180,8 @@ def case_line(record: dict) -> str:
             f"{record['fem_s']:.0f} s")
 
 
-def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: bool, approach, out: Path,
-                 run: dict, say) -> list[dict]:
+def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: bool, approach, run: dict,
+                 say) -> list[dict]:
     """Solve ``todo`` [(case, path, settings)], all holding ``ob``, on one GraspSolver,
     write each record (and render) atomically and ``say`` it; returns the records."""
     comm = MPI.COMM_WORLD
@@ -196,10 +196,8 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
                              {"mu": FRICTION, "object_weight_N": OBJECT_WEIGHT, "plane": plane, "setup_s": setup_s,
                               "mesh": solver.fem.mesh_info(), "formulation": formulation, "settings": settings,
                               **run})
-        if result.finger.converged:
-            record["render"] = finger_cases.render(solver.fem, path.with_suffix(".png"), ob.outline(OUTLINE_POINTS))
-        cli.make_output_folder(out)
-        GRASP_CASE.write(path, record)
+        finger_cases.write_case(path, record, GRASP_CASE, solver.fem, result.finger.converged,
+                                ob.outline(OUTLINE_POINTS))
         say(case_line(record))
         records.append(record)
     return records
@@ -233,7 +231,7 @@ def main(argv=None) -> int:
         say(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
     with ap.errors(), cli.heartbeat("grasp cases"):
         for ob, items in todo.items():
-            records += solve_object(ob, items, geometry, formulation, plane, approach, out,
+            records += solve_object(ob, items, geometry, formulation, plane, approach,
                                     {"solver": solver, "ranks": comm.size}, say)
     if args.json:
         keys = ("case", "state", "converged", "tip", "tip_angle_deg", "contact_force_N", "friction_use", "fem_s")
