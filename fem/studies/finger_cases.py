@@ -235,6 +235,14 @@ def render(solver: FingerSolver, path: Path, outline: np.ndarray | None = None) 
     return {"extent_mm": extent, "u_max_mm": umax, "cmap": "viridis"}
 
 
+def parse_on_one_rank(ap: cli.Parser, argv) -> tuple[argparse.Namespace, MPI.Comm]:
+    """(args, MPI.COMM_WORLD) of a case study's command line (here, fem.studies.finger_grid,
+    grasp_cases): mpirun refused (one_rank) before parsing, so that no output folder is made."""
+    comm = MPI.COMM_WORLD
+    one_rank(ap, comm)
+    return ap.parse_args(argv), comm
+
+
 def write_case(path: Path, record: dict, fmt, solver: FingerSolver, converged: bool,
                outline: np.ndarray | None = None) -> None:
     """Write one solved case: if ``converged``, its ``render`` (the deformed ``solver``,
@@ -288,9 +296,7 @@ def main(argv=None) -> int:
                     "default: _hexN or _hexNsS on hexahedra, _mixed on mixed tetrahedra, so that they never replace "
                     "the displacement tetrahedral cases, else none)")
     cli.add_quiet(ap)
-    comm = MPI.COMM_WORLD
-    one_rank(ap, comm)
-    args = ap.parse_args(argv)
+    args, comm = parse_on_one_rank(ap, argv)
     table = args.pressures or CASES
     names = [c[0] for c in table]
     chosen = args.cases.split(",") if args.cases else names

@@ -77,7 +77,6 @@ from fem.studies.artefacts import GRASP_CASE
 from fem.mesh.geometry import pressure_limits
 from fem.cli.options import add_finger_mesh, finger_discretisation
 from fem.solvers.grasp import GraspSolver
-from fem.cli.options import one_rank
 
 OUTLINE_POINTS = 720        # the render's object outline
 
@@ -205,9 +204,7 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
 
 def main(argv=None) -> int:
     ap = build_parser()
-    comm = MPI.COMM_WORLD
-    one_rank(ap, comm)
-    args = ap.parse_args(argv)
+    args, comm = finger_cases.parse_on_one_rank(ap, argv)
     finger = load_finger()
     cases = chosen_cases(ap, args, pressure_limits(finger))
     approach = approach_for(finger.n_joints)
