@@ -197,7 +197,7 @@ def add_plane_flags(ap: cli.Parser, names: str = "") -> None:
     module docstring); ``names``: what the flag does to a tool's file names, if anything."""
     ap.add_argument("--no-plane", dest="plane", action="store_false",
                     help="one finger alone, which may cross X = 0 (default: the gripper, the right finger against "
-                         "the mirror finger's contact at X = 0, a frictionless penalty, as predictor.gesture)" + names)
+                         "the mirror finger's contact at X = 0, a frictionless penalty, as predictor.cli.gesture)" + names)
     ap.add_argument("--plane", dest="plane", action="store_true",
                     help="the mirror finger's contact at X = 0: the default now (accepted for one release)")
     ap.set_defaults(plane=True)

@@ -28,14 +28,14 @@ import os
 import statistics
 import time
 
-from predictor.calibration import CalibrationModel
-from predictor.calibration_fit import Prior, calibrate
-from predictor.calibration_recovery import PRIOR_STD, TRUTH
+from predictor.calibration.model import CalibrationModel
+from predictor.calibration.fit import Prior, calibrate
+from predictor.calibration.recovery import PRIOR_STD, TRUTH
 from predictor.defaults import ROOT
-from predictor.observations import Observations
+from predictor.calibration.observations import Observations
 
 OBSERVATIONS = ROOT / "docs" / "examples" / "observations.json"
-#: docs/calibration.md §5's fit of that file (groups of predictor.calibration), the weighing prior
+#: docs/calibration.md §5's fit of that file (groups of predictor.calibration.model), the weighing prior
 FIT = ("gain", "offset", "stiffness", "weight_4", "frame")
 STARTS = 3
 REPEATS = 5

@@ -5,7 +5,7 @@ The truth is a finger file (``TRUTH_FINGER``: the paper's finger with joints of 
 a tip part 20 % heavier and the mount turned by 2 deg) solved by the whole-finger FEM
 (fem.studies.finger_cases) at gravity pressure pairs ``PRESSURES`` (``make calibration-fem``).
 The model is what a user starts from: the paper's finger file and the committed surrogate
-(predictor.calibration.CalibrationModel).
+(predictor.calibration.model.CalibrationModel).
 
 Observations, per FEM case (global frame of the right finger, mm, deg): the fingertip
 (x, y), the tip angle, and both ends of every rigid part between two joints (for the
@@ -18,7 +18,7 @@ max), so the fit is not asked to reproduce the FEM closer than the model can.
 What was measured: a case solved with the mirror finger's contact at X = 0
 (fem.studies.finger_cases ``--plane``, its settings ``"plane": true``) is the gripper, every
 other case (the committed ones among them) a lone finger; the observations say so
-(predictor.observations ``problem``: ``case_problem``), so a lone finger is fitted and
+(predictor.calibration.observations ``problem``: ``case_problem``), so a lone finger is fitted and
 predicted alone, and cases of both kinds together are refused.
 
 Split and fit: the cases at ``CALIBRATE_ON`` (four pairs spread over the box) are
@@ -37,7 +37,7 @@ the fitted values are shown beside it.
 Data flow: case JSONs -> ``load_cases`` (FemCaseError, one line: missing, not converged,
 foreign, several meshes) -> ``case_observation`` -> Observations -> ``fem_study`` ->
 FemStudy (the record of calibration.json, and the held-out poses for
-predictor.calibration_plot).
+predictor.calibration.plot).
 """
 from __future__ import annotations
 
@@ -51,11 +51,11 @@ import numpy as np
 import torch
 
 from contract.finger import FingerSpec, same_finger
-from fem.studies.artefacts import FINGER_CASE
-from predictor.calibration import CalibrationModel, design, equilibrium, predict
-from predictor.calibration_fit import CalibrationResult, FitFailed, calibrate
+from fem.artefacts import FINGER_CASE
+from predictor.calibration.model import CalibrationModel, design, equilibrium, predict
+from predictor.calibration.fit import CalibrationResult, FitFailed, calibrate
 from predictor.defaults import ROOT
-from predictor.observations import FINGER, GRIPPER, Marker, Observation, Observations
+from predictor.calibration.observations import FINGER, GRIPPER, Marker, Observation, Observations
 
 TRUTH_FINGER = ROOT / "results" / "calibration" / "truth" / "finger.toml"
 #: Gravity pressure pairs (P1, P2) MPa of the FEM cases, inside |P| <= 0.2 MPa (chosen when
@@ -202,7 +202,7 @@ def case_problem(case: FemCase) -> str:
 
 
 def known_changes(truth: FingerSpec, model: FingerSpec) -> dict:
-    """The parameters (predictor.calibration names) the truth file changes against the
+    """The parameters (predictor.calibration.model names) the truth file changes against the
     model's finger, with their true values: weights that differ, the mount's turn (deg),
     and per joint the stiffness ratio of its modulus (one law and Poisson ratio only)."""
     out = {}
@@ -274,7 +274,7 @@ def fem_study(model: CalibrationModel, cases: list[FemCase], truth: FingerSpec, 
     (module docstring). ValueError (one line) for a split that leaves nothing out or
     names a pair without a case; FitFailed when no start converges or the calibrated
     predictor cannot solve a held-out case. The record's ``fit.trusted`` is the fit's
-    verdict (predictor.calibration_fit.judge); the caller refuses an untrusted one."""
+    verdict (predictor.calibration.fit.judge); the caller refuses an untrusted one."""
     check_same_chain(model.finger, truth)
     problems = {case_problem(c) for c in cases}
     if len(problems) > 1:

@@ -18,8 +18,8 @@ from pathlib import Path
 
 from contract.files import write_text
 from contract.finger import FORMAT, FingerSpec, parse_finger
-from predictor.calibration import CalibrationModel
-from predictor.calibration_fit import CalibrationResult
+from predictor.calibration.model import CalibrationModel
+from predictor.calibration.fit import CalibrationResult
 
 
 def _toml(v) -> str:
@@ -37,7 +37,7 @@ def calibrated_finger_text(model: CalibrationModel, res: CalibrationResult, obse
     """The TOML text of the calibrated finger (module docstring)."""
     f: FingerSpec = model.finger
     th = {p.name: float(res.theta[i]) for i, p in enumerate(model.table)}
-    lines = ["# A calibrated finger: python -m predictor.calibrate (docs/calibration.md).",
+    lines = ["# A calibrated finger: python -m predictor.cli.calibrate (docs/calibration.md).",
              f"format = {_toml(FORMAT)}", f"name = {_toml(f.name + '-calibrated')}",
              f"base_gap = {_toml(f.base_gap + 2.0 * th['mount_x'])}",
              f"base_angle_deg = {_toml(math.degrees(f.base_angle) + th['mount_deg'])}", ""]

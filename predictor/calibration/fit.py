@@ -1,10 +1,10 @@
-"""The calibration's fit (predictor.calibration has the model and its equations).
+"""The calibration's fit (predictor.calibration.model has the model and its equations).
 
 Weighted least squares over the fitted subset of theta: r = (m - y)/sigma for every
 measured scalar plus (theta_k - mu_k)/sigma_k for each prior, minimised by a bounded
 Levenberg-Marquardt in scaled variables (theta = nominal + scale·u, scale a quarter of
 the bounds' width) from several starts, with the exact Jacobian of
-predictor.calibration.sensitivities. The Gauss-Newton covariance C = (J^T J)^+ (sigma as
+predictor.calibration.model.sensitivities. The Gauss-Newton covariance C = (J^T J)^+ (sigma as
 stated, no rescaling by the residual) gives each parameter's std. A pair whose
 |correlation| exceeds CORRELATED is reported. A parameter is unidentifiable from the data
 when its variance inflation VIF_k = C_kk·(J^T J)_kk (its variance over the variance it
@@ -44,9 +44,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from predictor.calibration import (CalibrationModel, DEFAULT_FIT, Design, design, equilibrium, predict, resolve_fit,
+from predictor.calibration.model import (CalibrationModel, DEFAULT_FIT, Design, design, equilibrium, predict, resolve_fit,
                                    sensitivities)
-from predictor.observations import Observations
+from predictor.calibration.observations import Observations
 
 class FitFailed(RuntimeError):
     """No start of the fit reached a point where every observed gesture converges."""

@@ -15,12 +15,12 @@ nominal mount with gravity turned by -delta: the residual below does that, so ev
 parameter enters as a tensor and autograd differentiates it.
 
 Forward model, per observation b: the equilibrium x_b = tau_b (3J) solves
-R(x_b, theta; P_b) = 0 (Equation 1 of predictor.statics: gravity loads, and for the
+R(x_b, theta; P_b) = 0 (Equation 1 of predictor.model.statics: gravity loads, and for the
 gripper the frictionless penalty of the plane X = 0 where the two mirror fingers meet;
 the residual is the statics' scaled one, checked against GripperProblem.residual by the
 tests), found by Newton steps with the autograd Jacobian. The observations say which
-problem was measured (predictor.observations ``problem``): ``gripper`` (the default, the
-plane on, as predictor.gesture solves it) or ``finger`` (a lone finger, statics.apart).
+problem was measured (predictor.calibration.observations ``problem``): ``gripper`` (the default, the
+plane on, as predictor.cli.gesture solves it) or ``finger`` (a lone finger, statics.apart).
 The plane is where the gripper's symmetry puts it, X = 0 of the gripper frame: the
 outline's vertices are mapped by the mount (below, without the camera frame), the
 plane's forces found there (statics.plane_contact) and mapped back, p = B + Rot(-mount)·
@@ -32,9 +32,9 @@ The fit's Jacobian is exact, by the implicit function theorem at the converged
 equilibrium: dx/dtheta = -(dR/dx)^-1 dR/dtheta, dm/dtheta = dm/dtheta|_x + dm/dx ·
 dx/dtheta (no unrolled iterations; ``sensitivities``).
 
-Data flow: finger + joint model -> CalibrationModel; Observations (predictor.observations)
+Data flow: finger + joint model -> CalibrationModel; Observations (predictor.calibration.observations)
 -> ``design`` -> Design; theta -> ``equilibrium`` -> x -> ``predict`` / ``sensitivities``
--> predictor.calibration_fit (the least squares) -> predictor.calibration_file (the
+-> predictor.calibration.fit (the least squares) -> predictor.calibration.file (the
 calibrated finger file every tool reads: weights, mount, joint keys; the measurement
 frame is the camera's, recorded only). Units: mm, N, N·mm, MPa, rad in code; degrees in names ending _deg and in JSON.
 """
@@ -47,10 +47,10 @@ import numpy as np
 import torch
 
 from contract.finger import FingerSpec, JointPart
-from predictor.gripper import GripperParams, finger_pose, outline_vertices, rot
-from predictor.joint import JointModel
-from predictor.observations import GRIPPER, Observations
-from predictor.statics import MOMENT_SCALE, ContactParams, plane_contact
+from predictor.model.gripper import GripperParams, finger_pose, outline_vertices, rot
+from predictor.model.joint import JointModel
+from predictor.calibration.observations import GRIPPER, Observations
+from predictor.model.statics import MOMENT_SCALE, ContactParams, plane_contact
 
 NEWTON_TOL = 1e-10     # N (and N·mm/MOMENT_SCALE): the equilibrium's residual
 
@@ -114,7 +114,7 @@ def identity_joints(finger: FingerSpec) -> FingerSpec:
 
 class ScaledJoint(JointModel):
     """The joint model evaluated at ((g·P + o)/s, F1/s, F2/s, M/s) per joint: g, o, s are
-    (B, J) tensors; inputs (B, J, 4) as predictor.gripper.finger_pose passes them."""
+    (B, J) tensors; inputs (B, J, 4) as predictor.model.gripper.finger_pose passes them."""
 
     def __init__(self, inner: JointModel, gain: torch.Tensor, offset: torch.Tensor, scale: torch.Tensor):
         self.inner, self.name = inner, inner.name
@@ -161,7 +161,7 @@ class CalibrationModel:
         self.load_part, self.load_share = _loads_of_parts(self.params)
         self.J = finger.n_joints
         self.mount = torch.tensor([0.5 * finger.base_gap, 0.0], dtype=torch.float64)
-        self.contact = ContactParams()   # the plane X = 0's penalty, as predictor.gesture's gripper
+        self.contact = ContactParams()   # the plane X = 0's penalty, as predictor.cli.gesture's gripper
 
     def _joint_params(self, th):
         idx = [self.index[f"{g}_J{i}"] for i in range(1, self.J + 1) for g in ("gain", "offset", "stiffness")]
@@ -368,12 +368,12 @@ def finger_at(model: CalibrationModel, theta: torch.Tensor) -> FingerSpec:
 
 
 def solved(model: CalibrationModel, d: Design, th: torch.Tensor) -> torch.Tensor:
-    """Equilibria x (B, 3J) by the predictor's solver (predictor.solve, as predictor.gesture:
+    """Equilibria x (B, 3J) by the predictor's solver (predictor.solvers.solve, as predictor.cli.gesture:
     the plane's ramp where the fingers meet) of ``finger_at`` each row's theta, with or
     without gravity and the plane as ``d`` says; NaN where it does not converge. tau is
     in the joints' own frames, so the mount's turn leaves it unchanged."""
-    from predictor.solve import solve
-    from predictor.statics import GripperProblem, apart
+    from predictor.solvers.solve import solve
+    from predictor.model.statics import GripperProblem, apart
 
     x = torch.full((d.pressures.shape[0], 3 * model.J), float("nan"), dtype=torch.float64)
     keys = [tuple(row) + (g,) for row, g in zip(th.tolist(), d.gravity.tolist())]

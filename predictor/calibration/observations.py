@@ -1,8 +1,8 @@
-"""Measurement files for the calibration (predictor.calibration, docs/calibration.md).
+"""Measurement files for the calibration (predictor.calibration.model, docs/calibration.md).
 
 A JSON file, format tag ``softjoint-observations/1``. Top level: ``problem``, what was
 measured: ``"gripper"`` (the default when absent: the two mirror fingers meeting at the
-plane X = 0, predictor.gesture's problem) or ``"finger"`` (a lone finger, nothing at
+plane X = 0, predictor.cli.gesture's problem) or ``"finger"`` (a lone finger, nothing at
 X = 0: statics.apart; the whole-finger FEM cases are one); and ``observations``, a list
 of observed gestures of the right finger, each with
 

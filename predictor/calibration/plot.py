@@ -1,4 +1,4 @@
-"""The before/after figure of the calibration against the finger FEM (predictor.calibration_fem).
+"""The before/after figure of the calibration against the finger FEM (predictor.calibration.fem).
 
 One panel per held-out gesture, global frame (mm): the FEM's centre line (each joint's
 proximal centre and anchors, then the fingertip; orange) over its render when the case
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from contract.files import atomic_path
-from predictor.calibration_fem import FemCase, FemStudy
+from predictor.calibration.fem import FemCase, FemStudy
 
 
 def fem_centre_line(record: dict) -> np.ndarray:

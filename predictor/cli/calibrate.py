@@ -1,24 +1,24 @@
 """Command line: calibrate a gripper to measured gestures (docs/calibration.md).
 
-    python -m predictor.calibrate --observations FILE [--fit NAME,...] [--finger FILE]
+    python -m predictor.cli.calibrate --observations FILE [--fit NAME,...] [--finger FILE]
         [--model PATH|analytic] [--kinematics cap|tangent] [--joint-weight split|lumped]
         [--prior NAME=MEAN,STD ...] [--starts N] [--no-loo] [--force] --out CALIBRATED.toml [--json]
-    python -m predictor.calibrate recovery --out results/calibration/recovery.json
+    python -m predictor.cli.calibrate recovery --out results/calibration/recovery.json
         [--model PATH|analytic] [--seeds N] [--starts N] [--json]
-    python -m predictor.calibrate fem --fem results/calibration/fem --out results/calibration/calibration.json
+    python -m predictor.cli.calibrate fem --fem results/calibration/fem --out results/calibration/calibration.json
         [--truth FILE] [--pressures "P1,P2;..."] [--calibrate-on "P1,P2;..."] [--fit NAME,...]
         [--recovery results/calibration/recovery.json] [--figure PNG] [--calibrated TOML] [--force] [--json]
-    python -m predictor.calibrate bench --out results/bench/calibrate.json [--repeats N] [--beside TEXT]
+    python -m predictor.cli.calibrate bench --out results/bench/calibrate.json [--repeats N] [--beside TEXT]
 
-The first fits the switchable parameters (names or groups of predictor.calibration:
+The first fits the switchable parameters (names or groups of predictor.calibration.model:
 gain, offset, stiffness, weight, mount, frame; default gain,offset,stiffness) to the
-measurement file (predictor.observations; its ``problem`` says whether the gripper, the
+measurement file (predictor.calibration.observations; its ``problem`` says whether the gripper, the
 fingers meeting at X = 0, or a lone finger was measured, and the fit solves that one) by
 weighted least squares with exact implicit-function gradients
-(predictor.calibration_fit), judges the fit (``trusted``: enough data, every parameter
+(predictor.calibration.fit), judges the fit (``trusted``: enough data, every parameter
 identifiable and off its bounds, a reduced chi-square within its 99.9 % limit) and, when
 trusted (or with ``--force``), writes the calibrated finger file
-(predictor.calibration_file) that predictor.gesture --finger, the atlas, the inverse and
+(predictor.calibration.file) that predictor.cli.gesture --finger, the atlas, the inverse and
 the API read. JSON: ``parameters`` (name -> value, std, identifiable),
 ``rms_before_mm``, ``rms_after_mm``, ``loo_tip_error_mm`` (mean over the observations
 with a tip; also its max and each), ``unidentifiable``, ``correlated``, ``chi2``, ``dof``,
@@ -27,18 +27,18 @@ with a tip; also its max and each), ``unidentifiable``, ``correlated``, ``chi2``
 package's own folders (contract/, predictor/, fem/, surrogate/, workflow/, apps/: the
 default finger files live there), and its folder must exist (contract.cli).
 
-``recovery`` runs the known-truth study (predictor.calibration_recovery) and writes its
+``recovery`` runs the known-truth study (predictor.calibration.recovery) and writes its
 JSON. ``fem`` calibrates the paper's predictor on four whole-finger FEM gestures of a
-deliberately different finger and predicts the held-out ones (predictor.calibration_fem,
+deliberately different finger and predicts the held-out ones (predictor.calibration.fem,
 ``make calibrate-demo``): the JSON (``heldout_tip_error_uncalibrated_mm``,
 ``heldout_tip_error_calibrated_mm``, ``observations_used``, ``time_s``, ``recovery``, ...),
-the before/after figure (predictor.calibration_plot; default ``heldout.png`` beside the
+the before/after figure (predictor.calibration.plot; default ``heldout.png`` beside the
 JSON) and the calibrated finger file (default ``calibrated.toml`` beside it); it refuses
 (exit 2, one line, nothing written) FEM cases that are missing, did not converge, or were
 solved for another finger, and judges its fit as the first does: an untrusted one (the
 JSON's ``fit.trusted``, ``fit.untrusted_because``) exits 1 with one line naming why and
 writes none of the three unless ``--force`` (then all three, and the exit is still 1). ``bench`` times the 8-observation calibration
-(predictor.calibration_bench, ``make bench-calibrate``).
+(predictor.calibration.bench, ``make bench-calibrate``).
 
 Exit codes: 0 trusted and written; 1 not trusted (one line on stderr naming every reason)
 or not converged: nothing written unless ``--force`` (then the file is written and the
@@ -61,9 +61,9 @@ from contract import cli
 from contract.finger import DEFAULT_FINGER, finger_arg
 from predictor.artefacts import RECOVERY
 from predictor.defaults import results_dir
-from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS
-from predictor.joint import load_joint
-from predictor.progress import set_quiet
+from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS
+from predictor.model.joint import load_joint
+from predictor.solvers.progress import set_quiet
 
 LOG = logging.getLogger("softjoint.calibrate")
 def prior_arg(text: str):
@@ -90,7 +90,7 @@ def _model_args(ap) -> None:
 
 
 def _model(args):
-    from predictor.calibration import CalibrationModel
+    from predictor.calibration.model import CalibrationModel
 
     return CalibrationModel(load_joint(args.model, args.finger), args.finger, args.kinematics, args.joint_weight)
 
@@ -98,18 +98,18 @@ def _model(args):
 def _observations_and_model(args):
     """The measurement file (``--observations``, checked against ``--finger``) and the
     calibration model of the options of _model_args."""
-    from predictor.observations import load_observations
+    from predictor.calibration.observations import load_observations
 
     return load_observations(args.observations, args.finger), _model(args)
 
 
 def main_fit(argv) -> int:
-    from predictor.calibration import DEFAULT_FIT, resolve_fit
-    from predictor.calibration_file import write_calibrated
-    from predictor.calibration_fit import FitFailed, Prior, calibrate
-    from predictor.observations import GRIPPER
+    from predictor.calibration.model import DEFAULT_FIT, resolve_fit
+    from predictor.calibration.file import write_calibrated
+    from predictor.calibration.fit import FitFailed, Prior, calibrate
+    from predictor.calibration.observations import GRIPPER
 
-    ap = cli.Parser(prog="python -m predictor.calibrate", description=__doc__.split("\n\n")[0],
+    ap = cli.Parser(prog="python -m predictor.cli.calibrate", description=__doc__.split("\n\n")[0],
                     epilog="subcommands (each with --help): recovery (the known-truth study), fem (calibrate on "
                            "whole-finger FEM gestures), bench (time the 8-observation calibration)")
     ap.add_argument("--observations", required=True, help="measurement file (JSON, docs/calibration.md)")
@@ -121,9 +121,9 @@ def main_fit(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
     with ap.errors():
-        from predictor.calibration_file import outside_package
+        from predictor.calibration.file import outside_package
         outside_package(args.out)
         obs, model = _observations_and_model(args)
         names = [n.strip() for n in args.fit.split(",") if n.strip()]
@@ -138,7 +138,7 @@ def main_fit(argv) -> int:
         try:
             res = calibrate(model, obs, names, priors, starts=args.starts, loo=not args.no_loo)
         except FitFailed as exc:
-            print(f"python -m predictor.calibrate: {exc}; nothing written", file=sys.stderr)
+            print(f"python -m predictor.cli.calibrate: {exc}; nothing written", file=sys.stderr)
             return 1
         written = res.trusted or args.force
         if written:
@@ -156,7 +156,7 @@ def main_fit(argv) -> int:
               f"{'n/a' if loo is None else f'{loo:.3f} mm'}; {out['time_s']:.1f} s; "
               f"{f'wrote {args.out}' if written else 'nothing written'}")
     if not res.trusted:
-        print(f"python -m predictor.calibrate: not trusted: {'; '.join(res.why)}; "
+        print(f"python -m predictor.cli.calibrate: not trusted: {'; '.join(res.why)}; "
               f"{'wrote ' + str(args.out) + ' (--force)' if written else 'nothing written (--force writes it)'}",
               file=sys.stderr)
         return 1
@@ -164,15 +164,15 @@ def main_fit(argv) -> int:
 
 
 def main_recovery(argv) -> int:
-    from predictor.calibration_recovery import SEEDS, recovery_study
+    from predictor.calibration.recovery import SEEDS, recovery_study
 
-    ap = cli.Parser(prog="python -m predictor.calibrate recovery", description="the known-truth recovery study")
+    ap = cli.Parser(prog="python -m predictor.cli.calibrate recovery", description="the known-truth recovery study")
     ap.add_output("--out", required=True, suffix=".json", help="the study's JSON")
     ap.add_argument("--seeds", type=cli.number(1, 200, integer=True), default=SEEDS, help="noisy seeds")
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
     with ap.errors():
         model = _model(args)
         study = recovery_study(model, seeds=args.seeds, starts=args.starts, progress=LOG.info)
@@ -191,7 +191,7 @@ def main_recovery(argv) -> int:
 
 
 def _pairs(text: str):
-    from predictor.calibration_fem import pairs_arg
+    from predictor.calibration.fem import pairs_arg
 
     try:
         return pairs_arg(text)
@@ -201,21 +201,21 @@ def _pairs(text: str):
 
 def main_fem(argv) -> int:
     from predictor.artefacts import CALIBRATION
-    from predictor.calibration import resolve_fit
-    from predictor.calibration_fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, case_problem, fem_study,
+    from predictor.calibration.model import resolve_fit
+    from predictor.calibration.fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, case_problem, fem_study,
                                            load_cases, recovery_summary)
-    from predictor.calibration_file import write_calibrated
-    from predictor.calibration_fit import FitFailed
-    from predictor.calibration_plot import heldout_figure
+    from predictor.calibration.file import write_calibrated
+    from predictor.calibration.fit import FitFailed
+    from predictor.calibration.plot import heldout_figure
 
-    ap = cli.Parser(prog="python -m predictor.calibrate fem",
+    ap = cli.Parser(prog="python -m predictor.cli.calibrate fem",
                     description="calibrate on whole-finger FEM gestures of another finger, predict the others")
     ap.add_argument("--fem", default=str(results_dir() / "calibration" / "fem"),
                     help="folder of fem.studies.finger_cases JSON of --truth (default: results/calibration/fem)")
     ap.add_argument("--truth", type=finger_arg, default=str(TRUTH_FINGER),
                     help="the finger file the FEM solved (default: results/calibration/truth/finger.toml)")
     ap.add_argument("--pressures", type=_pairs, default=PRESSURES, metavar="P1,P2;...",
-                    help="the FEM cases' pressure pairs, MPa (default: the 8 of predictor.calibration_fem)")
+                    help="the FEM cases' pressure pairs, MPa (default: the 8 of predictor.calibration.fem)")
     ap.add_argument("--calibrate-on", type=_pairs, default=CALIBRATE_ON, metavar="P1,P2;...",
                     help="the pairs calibrated on (default: 4 spread over the box); the others are held out")
     ap.add_argument("--fit", default=",".join(FIT), help="parameters or groups to fit, comma separated")
@@ -228,7 +228,7 @@ def main_fem(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_name("heldout.png")
     calibrated = Path(args.calibrated) if args.calibrated else out.with_name("calibrated.toml")
@@ -246,7 +246,7 @@ def main_fem(argv) -> int:
         try:
             study = fem_study(model, cases, args.truth, args.calibrate_on, names, starts=args.starts)
         except FitFailed as exc:
-            print(f"python -m predictor.calibrate fem: {exc}; nothing written", file=sys.stderr)
+            print(f"python -m predictor.cli.calibrate fem: {exc}; nothing written", file=sys.stderr)
             return 1
         held = {tuple(c["pressures_MPa"]) for c in study.record["heldout"]}
         record = {**study.record, "fem_folder": str(args.fem), "recovery": {"source": str(args.recovery), **recovery},
@@ -274,7 +274,7 @@ def main_fem(argv) -> int:
               f"({'lone finger' if record['problem'] == 'finger' else 'gripper'}) in "
               f"{s['time_s']:.1f} s; {f'wrote {wrote}' if written else 'nothing written'}")
     if not study.result.trusted:
-        print(f"python -m predictor.calibrate fem: not trusted: {'; '.join(study.result.why)}; "
+        print(f"python -m predictor.cli.calibrate fem: not trusted: {'; '.join(study.result.why)}; "
               f"{'wrote ' + wrote + ' (--force)' if written else 'nothing written (--force writes it)'}",
               file=sys.stderr)
         return 1
@@ -288,9 +288,9 @@ def _cases_digest(cases) -> str:
 
 def main_bench(argv) -> int:
     from predictor.artefacts import CALIBRATION_BENCH
-    from predictor.calibration_bench import OBSERVATIONS, REPEATS, bench_calibration
+    from predictor.calibration.bench import OBSERVATIONS, REPEATS, bench_calibration
 
-    ap = cli.Parser(prog="python -m predictor.calibrate bench", description="time the 8-observation calibration")
+    ap = cli.Parser(prog="python -m predictor.cli.calibrate bench", description="time the 8-observation calibration")
     ap.add_argument("--observations", default=str(OBSERVATIONS),
                     help="measurement file (default docs/examples/observations.json)")
     ap.add_argument("--repeats", type=cli.number(1, 50, integer=True), default=REPEATS, help="timed runs")
@@ -299,7 +299,7 @@ def main_bench(argv) -> int:
     _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solve, where the fingers meet)
+    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
     with ap.errors():
         obs, model = _observations_and_model(args)
         doc = bench_calibration(model, obs, args.repeats, args.beside, progress=LOG.info)

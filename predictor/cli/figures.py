@@ -10,8 +10,8 @@
   read from the histories of the checkpoints in ``--nn-dir``;
 - gestures.json: the figures' numbers (GestureResult.summary of every case).
 
-Data flow: joint model (--model, default the committed surrogate) -> GripperProblem -> predictor.solve ->
-predictor.plot. Every file is written atomically; ``--json`` prints gestures.json.
+Data flow: joint model (--model, default the committed surrogate) -> GripperProblem -> predictor.solvers.solve ->
+predictor.model.plot. Every file is written atomically; ``--json`` prints gestures.json.
 """
 from __future__ import annotations
 
@@ -27,13 +27,13 @@ import torch  # noqa: E402
 from contract import cli  # noqa: E402
 from contract.files import dumps, json_safe, write_text  # noqa: E402
 from predictor.artefacts import GESTURES  # noqa: E402
-from predictor.gripper import default_finger  # noqa: E402
-from predictor.joint import load_joint  # noqa: E402
-from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
-from predictor.plot import draw_gesture, save_figure  # noqa: E402
-from predictor.progress import set_quiet  # noqa: E402
-from predictor.solve import APPROACH, solve  # noqa: E402
-from predictor.statics import STATES, GripperProblem, parse_object  # noqa: E402
+from predictor.model.gripper import default_finger  # noqa: E402
+from predictor.model.joint import load_joint  # noqa: E402
+from predictor.nn.checkpoint import DEFAULT_DIR, load_predictor, nn_folder  # noqa: E402
+from predictor.model.plot import draw_gesture, save_figure  # noqa: E402
+from predictor.solvers.progress import set_quiet  # noqa: E402
+from predictor.solvers.solve import APPROACH, solve  # noqa: E402
+from predictor.model.statics import STATES, GripperProblem, parse_object  # noqa: E402
 
 GRAVITY_CASES = [(-0.1, 0.1), (0.1, -0.1)]
 FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
@@ -42,7 +42,7 @@ FREE_CASES = [(0.05, 0.05), (0.1, 0.1), (0.05, -0.05), (0.1, -0.1)]
 #: faces, at (0.1, 0.2) MPa the circle and the ellipse hold at the limit (friction use
 #: 0.97, 0.99) and the rectangle slips (1.46); at (0.2, 0.3) and (0.3, 0.2) all three hold
 #: (friction use <= 0.80; gestures.json records it). Check a case with
-#: ``python -m predictor.gesture --p1 0.1 --p2 0.2 --object circle --json``.
+#: ``python -m predictor.cli.gesture --p1 0.1 --p2 0.2 --object circle --json``.
 GRASPS = {kind: [(0.2, 0.3), (0.3, 0.2)] for kind in ("circle", "ellipse", "rectangle")}
 #: The NN checkpoints drawn in nn_training.png: file, label, contact kind.
 NN_CURVES = (("gravity_nn_paper.pt", "gravity, paper MLP", False), ("gravity_nn.pt", "gravity, improved", False),
@@ -92,7 +92,7 @@ def nn_curves(curves: list, path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cli.Parser(prog="python -m predictor.figures", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m predictor.cli.figures", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", folder=True, default="results/predictor", help="output folder")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
                     "predictor.defaults)")

@@ -1,11 +1,11 @@
 """Command line: the gripper's static gesture for pressures (P1, P2).
 
-    python -m predictor.gesture --p1 -0.1 --p2 0.1 [--object circle:r=30,y=-195]
+    python -m predictor.cli.gesture --p1 -0.1 --p2 0.1 [--object circle:r=30,y=-195]
         [--mu MU] [--object-weight N] [--approach -0.15,0|zero] [--method newton|lbfgs|nn
         [--polish]] [--model PATH|analytic] [--nn PATH] [--finger FILE]
         [--kinematics cap|tangent] [--joint-weight split|lumped] [--no-gravity]
         [--no-plane] [--plot out.png] [--json]
-    python -m predictor.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
+    python -m predictor.cli.gesture --finger three.toml --pressures 0.1,0,-0.1 ...
 
 The finger is read from a finger description file (``--finger``, default
 contract/fingers/paper.toml, contract.finger): any chain of J joints and rigid parts. A
@@ -15,18 +15,18 @@ P1,..,PJ`` (MPa, base to tip), and ``--approach`` takes J values too (default: j
 face (cap, the default; needs a joint model with a cap-rotation head) or along the chord
 of its last two anchors (tangent, the paper's). ``--joint-weight``: a joint's weight half
 at each end (split, the default) or at the mean of its anchors (lumped, the paper's)
-(predictor.statics).
+(predictor.model.statics).
 
-The problem (predictor.problem, issue 56 §1): by default the gripper, the right finger
+The problem (predictor.solvers.problem, issue 56 §1): by default the gripper, the right finger
 against the mirror finger's contact at X = 0 (the plane's penalty), the problem
 ``python -m fem.finger`` solves by default; ``--no-plane`` solves one finger alone, which
 may cross X = 0 (the paper's gestures, and fem.finger's ``--no-plane``). The JSON says
 which (``plane``: true or false).
 
-Data flow: pressures (MPa) + finger + object spec -> GripperProblem (predictor.problem:
+Data flow: pressures (MPa) + finger + object spec -> GripperProblem (predictor.solvers.problem:
 joint model from ``--model``, a surrogate checkpoint or ``analytic``; default the
 committed surrogate found from the package, predictor.defaults, an error when missing)
--> predictor.solve (or the NN predictor) -> right-finger figures (GestureResult.summary
+-> predictor.solvers.solve (or the NN predictor) -> right-finger figures (GestureResult.summary
 plus time_ms and the run's settings) as text or as strict JSON: converged, state
 (no_contact, holds, slips or not_converged), tau [[F1 N, F2 N, M N·mm] x J],
 residual_force_mN, residual_moment_Nmm (per joint), tip [x, y] mm (the end of the last
@@ -47,9 +47,9 @@ without one at_plane: the network's own gesture is outside the NN bound where it
 the plane X = 0, so the answer shown is its polish, never the network's (the raw figures
 stay the network's); and nn_problem, the problem the network learned ("finger_alone": a gravity network trained on
 one finger alone, the default, whose gestures may cross X = 0; or "gripper": the plane X = 0's
-equilibrium, ``predictor.nn --plane``).
+equilibrium, ``predictor.cli.nn --plane``).
 
-The gravity NN's answer (predictor.nn_answer.predict_gesture): the network's own tau where
+The gravity NN's answer (predictor.nn.answer.predict_gesture): the network's own tau where
 its residual on the gripper is within the NN bound (2 mN, 1.2 N·mm; method nn), which is
 where its finger stays off the plane X = 0; where it is outside it because its gesture
 presses on the plane or crosses it (within 1 mm of X = 0, nn_answer.PLANE_REACH_MM), whose
@@ -73,7 +73,7 @@ or that intersects the fingers at the approach gesture, a bad --mu or --object-w
 an unwritable --plot, a missing, damaged or other-kind model, cap kinematics on a joint
 model without a cap head, a finger whose weights load a joint beyond the joint model's
 box or whose mounts are too close for the fingers to meet at X = 0
-(predictor.problem.finger_error), an NN checkpoint trained for another finger, options or
+(predictor.solvers.problem.finger_error), an NN checkpoint trained for another finger, options or
 object: the contact NN knows one object) with a one-line reason on stderr, checked before
 the solve; 130 interrupted (Ctrl-C), one line.
 """
@@ -86,11 +86,11 @@ import sys
 import torch
 
 from contract import cli
-from predictor.joint import load_joint
-from predictor.problem import (DEFAULT, OBJECT_HELP, PRESSURE, add_arguments, add_finger_arguments, add_plane,
+from predictor.model.joint import load_joint
+from predictor.solvers.problem import (DEFAULT, OBJECT_HELP, PRESSURE, add_arguments, add_finger_arguments, add_plane,
                                approach_arg, load_problem, object_arg, params_of, pressure_list)
-from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import STATES, Obstacle, parse_object
+from predictor.solvers.solve import APPROACH, SolverOptions, solve
+from predictor.model.statics import STATES, Obstacle, parse_object
 
 
 def pressures_of(args: argparse.Namespace, n_joints: int) -> tuple[float, ...]:
@@ -114,7 +114,7 @@ def prepare(args: argparse.Namespace):
     """Everything a gesture needs, checked before any solve: (problem, pressures (1, J),
     joint, NN predictor or None). ValueError (one line) for any bad input, a missing
     default model, an object the model cannot represent or that cuts through the fingers
-    at the approach gesture (predictor.problem.load_problem)."""
+    at the approach gesture (predictor.solvers.problem.load_problem)."""
     params = params_of(args)
     n_joints = params.n_joints
     pressures = torch.tensor([pressures_of(args, n_joints)], dtype=torch.float64)
@@ -124,7 +124,7 @@ def prepare(args: argparse.Namespace):
     joint = load_joint(args.model, args.finger)
     options = dict(params=params, mu=args.mu, object_weight=args.object_weight, joint=joint)
     if args.method == "nn":
-        from predictor.nn_checkpoint import load_predictor
+        from predictor.nn.checkpoint import load_predictor
 
         predictor = load_predictor(args.nn, joint, contact=args.object is not None, params=params)
         trained = predictor.config.obstacle
@@ -146,7 +146,7 @@ def run(args: argparse.Namespace, prepared=None):
     Returns (json dict, result, problem)."""
     problem, pressures, joint, predictor = prepared or prepare(args)
     if predictor is not None:
-        from predictor.nn_answer import predict_gesture
+        from predictor.nn.answer import predict_gesture
 
         res = predict_gesture(predictor, problem, pressures, polish=True if args.polish else None)
     else:
@@ -169,7 +169,7 @@ def run(args: argparse.Namespace, prepared=None):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cli.Parser(prog="python -m predictor.gesture", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m predictor.cli.gesture", description=__doc__.split("\n\n")[0])
     ap.add_argument("--p1", type=PRESSURE, help="joint-1 pressure, MPa (|P| <= 0.3)")
     ap.add_argument("--p2", type=PRESSURE, help="joint-2 pressure, MPa (|P| <= 0.3)")
     ap.add_argument("--pressures", type=pressure_list, help="P1,..,PJ MPa, one per joint of the finger, base "
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         prepared = prepare(args)  # every input checked before the solve
         out, res, problem = run(args, prepared)
         if args.plot:
-            from predictor.plot import save_gesture
+            from predictor.model.plot import save_gesture
 
             save_gesture(args.plot, res, 0, problem)
     if args.json:
@@ -216,14 +216,14 @@ def main(argv: list[str] | None = None) -> int:
 
 def failure(out: dict, prepared) -> str:
     """Why a gesture has no answer, for the one stderr line (``prepared``: prepare(args)).
-    The raw gravity NN answers only within its bound (predictor.nn_answer), which is not a
+    The raw gravity NN answers only within its bound (predictor.nn.answer), which is not a
     solver failing to converge; where its gesture presses on the plane X = 0 the polish
     was tried already (``at_plane``)."""
     problem, pressures, _, predictor = prepared
     if predictor is None or problem.obstacle is not None or (not out["at_plane"] and (out["polished"] or
                                                                                        out["fallback"])):
         return "the equilibrium solve did not converge"
-    from predictor.nn_answer import NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM
+    from predictor.nn.answer import NN_FORCE_TOL_MN, NN_MOMENT_TOL_NMM
 
     f, m = max(out["raw_residual_force_mN"]), max(out["raw_residual_moment_Nmm"])
     why = (f"the gravity NN's own answer is outside its bound (residual up to {f:.3g} mN and {m:.3g} N·mm; an "

@@ -1,15 +1,15 @@
 """Inverse pressures: which (P1, P2) hold an object, or put the fingertip where asked.
 
-The command line of predictor.inversion, and ``make inverse``'s cases.
+The command line of predictor.planning.inversion, and ``make inverse``'s cases.
 
-    python -m predictor.inverse --goal hold --object SPEC [--min-normal N] [--least-pressure]
+    python -m predictor.cli.inverse --goal hold --object SPEC [--min-normal N] [--least-pressure]
         [--atlas ATLAS.json] [--model PATH|analytic] [--mu MU] [--object-weight N]
         [--no-gravity] [--quiet] [--json] [--plot FILE.png]
-    python -m predictor.inverse --goal tip:X,Y[,DEG] [--object SPEC] ...
-    python -m predictor.inverse --cases [--atlas-dir DIR] [--out FILE.json] [--track-plot FILE.png]
-    python -m predictor.inverse --track FILE|demo [--out FILE.json] [--plot FILE.png] [--finger FILE]
+    python -m predictor.cli.inverse --goal tip:X,Y[,DEG] [--object SPEC] ...
+    python -m predictor.cli.inverse --cases [--atlas-dir DIR] [--out FILE.json] [--track-plot FILE.png]
+    python -m predictor.cli.inverse --track FILE|demo [--out FILE.json] [--plot FILE.png] [--finger FILE]
 
-Goals, gradients, search and answers: predictor.inversion. Exit 0: the goal is met
+Goals, gradients, search and answers: predictor.planning.inversion. Exit 0: the goal is met
 (``feasible``); 1: ``infeasible`` (the closest achievable answer and the limit that stops
 it); 2: bad input, one line on stderr, before any work. ``--plot`` draws the answer's
 gesture (its verifying ramp solve); ``--cases`` (``make inverse``) answers the hold goal
@@ -17,12 +17,12 @@ for the paper's three objects (starting from their committed atlases, and cold) 
 tip targets CASE_TIPS, with median timings of REPEATS identical queries (a tip target
 and a cold hold each as a process's first question, its coarse start grid solved anew;
 the tip targets also ``warm``: the grid kept from the question before,
-predictor.inversion.coarse_atlas); each case also
+predictor.planning.inversion.coarse_atlas); each case also
 records where its answer touches and how far the fingers cross X = 0 (``where_it_touches``),
-and ``--cases`` also tracks the demo path (predictor.track) into the JSON's ``track``.
+and ``--cases`` also tracks the demo path (predictor.planning.track) into the JSON's ``track``.
 ``--track FILE`` answers a list of fingertip goals in order, each warm-started from the
-last answer (predictor.track; exit 1 when a goal is unreachable, all answered). ``--atlas``
-is read strictly (``read_atlas``); ``--finger`` as predictor.gesture's.
+last answer (predictor.planning.track; exit 1 when a goal is unreachable, all answered). ``--atlas``
+is read strictly (``read_atlas``); ``--finger`` as predictor.cli.gesture's.
 """
 from __future__ import annotations
 
@@ -37,14 +37,14 @@ import torch
 
 from contract import cli
 from predictor.artefacts import INVERSE, TRACK
-from predictor.atlas import STATES, Atlas, atlas_from_json
-from predictor.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
+from predictor.planning.atlas import STATES, Atlas, atlas_from_json
+from predictor.planning.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
                                  VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, coarse_atlas, inverse_pressures,
                                  parse_goal)
-from predictor.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
+from predictor.solvers.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
                                approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
-from predictor.progress import Heartbeat, set_quiet
-from predictor.statics import GripperProblem, meets
+from predictor.solvers.progress import Heartbeat, set_quiet
+from predictor.model.statics import GripperProblem, meets
 
 
 def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, GripperProblem]]) -> None:
@@ -52,7 +52,7 @@ def save_inverse_figure(path: str, items: list[tuple[str, InverseResult, Gripper
     (items: (goal text or label, result, problem)); tip targets are marked x."""
     import matplotlib.pyplot as plt
 
-    from predictor.plot import draw_gesture, save_figure
+    from predictor.model.plot import draw_gesture, save_figure
 
     fig, axes = plt.subplots(1, len(items), figsize=(4.4 * len(items), 5.2), squeeze=False)
     for ax, (label, r, prob) in zip(axes[0], items):
@@ -97,7 +97,7 @@ def where_it_touches(res: InverseResult) -> dict:
 
 def _cold(ip: InverseProblem) -> InverseResult:
     """``ip`` answered as a process's first question: its coarse start grid solved anew
-    (predictor.inversion.coarse_atlas forgotten)."""
+    (predictor.planning.inversion.coarse_atlas forgotten)."""
     coarse_atlas.cache_clear()
     return inverse_pressures(ip)
 
@@ -169,7 +169,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
     return doc, figs
 
 
-#: The keys a predictor.atlas --out JSON may carry (Atlas.to_json, the CLI's spec and
+#: The keys a predictor.cli.atlas --out JSON may carry (Atlas.to_json, the CLI's spec and
 #: ramp_steps, and the finger that wrote it); ``read_atlas`` refuses any other.
 ATLAS_KEYS = frozenset((
     "grid", "counts", "best_hold", "time_s", "path", "solved_by", "joint", "mu", "object_weight_N", "gravity",
@@ -181,9 +181,9 @@ ATLAS_OBJECT_KEYS = frozenset(("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_ra
 
 
 def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
-    """The --atlas file, read as strictly as a measurement file (predictor.observations):
+    """The --atlas file, read as strictly as a measurement file (predictor.calibration.observations):
     valid JSON without NaN or Infinity (nor a number that overflows), no key but
-    ATLAS_KEYS (and ATLAS_OBJECT_KEYS in ``object``), then predictor.atlas.atlas_from_json's
+    ATLAS_KEYS (and ATLAS_OBJECT_KEYS in ``object``), then predictor.planning.atlas.atlas_from_json's
     checks (an atlas of this object, joint and settings). ValueError, one line."""
     import math
 
@@ -191,10 +191,10 @@ def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
 
     doc = strict_json(read_text(path, "atlas"), path, "atlas")
     if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a predictor.atlas JSON (an object of keys expected)")
+        raise ValueError(f"{path}: not a predictor.planning.atlas JSON (an object of keys expected)")
     for key in doc:
         if key not in ATLAS_KEYS:
-            raise ValueError(f"{path}: unknown key {key!r} in the atlas (a predictor.atlas --out JSON has "
+            raise ValueError(f"{path}: unknown key {key!r} in the atlas (a predictor.cli.atlas --out JSON has "
                              f"{', '.join(sorted(ATLAS_KEYS))})")
     if isinstance(doc.get("object"), dict):
         for key in doc["object"]:
@@ -214,10 +214,10 @@ def read_atlas(path: str | Path, problem: GripperProblem) -> Atlas:
 
 
 def run_track(problem: GripperProblem, goals: list, label: str) -> tuple[dict, object]:
-    """Answer the goals in order (predictor.track.track); (its JSON document, the result)."""
+    """Answer the goals in order (predictor.planning.track.track); (its JSON document, the result)."""
     import os
 
-    from predictor.track import TARGET_ANY_MS, TARGET_RATE_HZ, TARGET_REACHABLE_MS, track
+    from predictor.planning.track import TARGET_ANY_MS, TARGET_RATE_HZ, TARGET_REACHABLE_MS, track
 
     load_before = list(os.getloadavg())
     res = track(problem, goals)
@@ -241,13 +241,13 @@ BESIDE = __import__("os").environ.get("SOFTJOINT_BESIDE", "not recorded (set SOF
 def track_label(problem: GripperProblem) -> str:
     """What ``make track``'s figure and JSON say produced them: the model and the problem
     the track was run on, read from the problem itself."""
-    return (f"closed-loop tracking (predictor.inverse --track demo): joint model {problem.joint.name}, "
+    return (f"closed-loop tracking (predictor.cli.inverse --track demo): joint model {problem.joint.name}, "
             f"finger {problem.params.finger.name!r}, {'gravity' if problem.gravity else 'no gravity'}, no object, "
             + ("the fingers meeting at the plane X = 0" if meets(problem) else "one finger alone"))
 
 
 def main(argv: list[str] | None = None) -> int:
-    from predictor.atlas import print_figures
+    from predictor.cli.atlas import print_figures
 
     def goal_arg(text):
         try:
@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
             raise argparse.ArgumentTypeError(str(exc)) from None
         return text
 
-    ap = cli.Parser(prog="python -m predictor.inverse", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m predictor.cli.inverse", description=__doc__.split("\n\n")[0])
     ap.add_argument("--goal", type=goal_arg, help="hold | tip:X,Y[,DEG] (mm, degrees)")
     ap.add_argument("--cases", action="store_true", help="make inverse: the paper's three objects (hold) and "
                     f"the tip targets {', '.join(CASE_TIPS)}; starts from ATLAS_DIR/atlas_KIND.json")
@@ -267,15 +267,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--least-pressure", action="store_true",
                     help=f"hold: the least pressure holding with margin {HOLD_MARGIN}")
     ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (bounds)")
-    ap.add_argument("--atlas", help="the object's predictor.atlas --out JSON for the starts (default: "
+    ap.add_argument("--atlas", help="the object's predictor.cli.atlas --out JSON for the starts (default: "
                     f"a {COARSE}x{COARSE} grid solved now)")
     ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
     add_plane(ap)
-    add_finger_arguments(ap)    # predictor.gesture's --finger, --kinematics, --joint-weight; 2 joints
+    add_finger_arguments(ap)    # predictor.cli.gesture's --finger, --kinematics, --joint-weight; 2 joints
     ap.add_argument("--approach", type=approach_arg, help="hold: P1,P2 (MPa) at which the object is brought in "
-                    "(default as predictor.atlas), or 'zero' to ramp from 0 with the object present")
+                    "(default as predictor.planning.atlas), or 'zero' to ramp from 0 with the object present")
     ap.add_argument("--track", help="a file of fingertip goals X,Y[,DEG] (CSV, or JSON: a list of [X, Y(, DEG)]), "
-                    "each answered warm-started from the previous answer (predictor.track); 'demo': make track's "
+                    "each answered warm-started from the previous answer (predictor.planning.track); 'demo': make track's "
                     "100-goal path; --out writes the answers, --plot the closed-loop figure")
     ap.add_output("--track-plot", suffix=".png", help="--cases: also write the demo track's figure here")
     ap.add_output("--track-out", suffix=".json", help="--cases: also write the demo track's answers here")
@@ -290,7 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         with ap.errors():
             doc, figs = run_cases(args.model, Path(args.atlas_dir))
             free = load_problem(args.model, None, params=params_of(args), plane=args.plane)
-            from predictor.track import demo_goals, save_track_figure
+            from predictor.planning.track import demo_goals, save_track_figure
             tdoc, tres = run_track(free, demo_goals(free), track_label(free))
             doc["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
             if args.out:
@@ -310,11 +310,11 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("--track answers fingertip goals without an object: drop --goal, --object and --approach")
         torch.set_num_threads(1)
         with ap.errors():
-            from predictor.track import demo_goals, load_track, save_track_figure
+            from predictor.planning.track import demo_goals, load_track, save_track_figure
             problem = load_problem(args.model, None, gravity=not args.no_gravity, params=params_of(args),
                                    plane=args.plane)
             goals = demo_goals(problem) if args.track == "demo" else load_track(args.track)
-            label = track_label(problem) if args.track == "demo" else f"predictor.inverse --track {args.track}"
+            label = track_label(problem) if args.track == "demo" else f"predictor.cli.inverse --track {args.track}"
             into = INVERSE.load(args.into) if args.into else None    # checked before the run
             tdoc, tres = run_track(problem, goals, label)
             if args.out:

@@ -1,18 +1,18 @@
 """Command line: train an NN gesture predictor and write its checkpoint.
 
-    python -m predictor.nn --variant gravity-paper|gravity-improved|contact --out FILE.pt
+    python -m predictor.cli.nn --variant gravity-paper|gravity-improved|contact --out FILE.pt
         [--model SURROGATE.pt|analytic] [--epochs N] [--finger FILE.toml]
         [--kinematics K] [--joint-weight W] [--plane] [--quiet] [--json]
 
-The variants are predictor.networks.VARIANTS. The gravity variants learn one finger alone
+The variants are predictor.nn.networks.VARIANTS. The gravity variants learn one finger alone
 (a smooth map, as the paper's), the contact variant the grasp, the right finger against the
 plane X = 0 where the mirror finger meets it; every one answers the gripper (the problem
-predictor.gesture and the Newton solver solve by default; predictor.nn_answer). ``--plane``
+predictor.cli.gesture and the Newton solver solve by default; predictor.nn.answer). ``--plane``
 trains a gravity variant on the gripper's equilibrium instead (the checkpoint's config
 records ``plane``; ``--no-plane``, the gravity default, is accepted). For another finger or chain options the
-variant's config is adapted (NNConfig.for_params). Training: predictor.nn_train;
-checkpoint: predictor.nn_checkpoint; answers: predictor.nn_answer; evaluation:
-predictor.nn_eval. The names re-exported below serve code written against the former
+variant's config is adapted (NNConfig.for_params). Training: predictor.nn.train;
+checkpoint: predictor.nn.checkpoint; answers: predictor.nn.answer; evaluation:
+predictor.nn.eval. The names re-exported below serve code written against the former
 single module; the library modules import them from where they are defined.
 """
 from __future__ import annotations
@@ -24,21 +24,21 @@ import torch
 
 from contract import cli
 from contract.finger import finger_arg
-from predictor import progress
-from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
+from predictor.solvers import progress
+from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
                                default_finger)
-from predictor.joint import load_joint
-from predictor.networks import VARIANTS, NNConfig
-from predictor.nn_checkpoint import save_predictor
-from predictor.nn_train import train
-from predictor.ramp import approach_for
+from predictor.model.joint import load_joint
+from predictor.nn.networks import VARIANTS, NNConfig
+from predictor.nn.checkpoint import save_predictor
+from predictor.nn.train import train
+from predictor.solvers.ramp import approach_for
 
-from predictor.networks import (P_SCALE, TAU_SCALE, ContactNet, GestureNet, Predictor,  # noqa: F401
+from predictor.nn.networks import (P_SCALE, TAU_SCALE, ContactNet, GestureNet, Predictor,  # noqa: F401
                                 features, network, sample_pressures)
-from predictor.nn_answer import NNGestureResult, predict_gesture, raw_answer  # noqa: F401
-from predictor.nn_checkpoint import (CONTACT_FORMAT, DEFAULT_DIR, GRAVITY_FORMAT, load_predictor,  # noqa: F401
+from predictor.nn.answer import NNGestureResult, predict_gesture, raw_answer  # noqa: F401
+from predictor.nn.checkpoint import (CONTACT_FORMAT, DEFAULT_DIR, GRAVITY_FORMAT, load_predictor,  # noqa: F401
                                      nn_folder)
-from predictor.nn_eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished  # noqa: F401
+from predictor.nn.eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished  # noqa: F401
 
 __all__ = ["CONTACT_FORMAT", "DEFAULT_DIR", "GRAVITY_FORMAT", "P_SCALE", "TAU_SCALE", "VARIANTS", "ContactNet",
            "GestureNet", "NNConfig", "NNGestureResult", "Predictor", "contact_fraction", "evaluate",
@@ -47,7 +47,7 @@ __all__ = ["CONTACT_FORMAT", "DEFAULT_DIR", "GRAVITY_FORMAT", "P_SCALE", "TAU_SC
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cli.Parser(prog="python -m predictor.nn", description="train an NN gesture predictor")
+    ap = cli.Parser(prog="python -m predictor.cli.nn", description="train an NN gesture predictor")
     ap.add_argument("--variant", choices=sorted(VARIANTS), required=True)
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
                     "predictor.defaults)")

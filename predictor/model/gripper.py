@@ -23,13 +23,13 @@ and then O <- r_10,i (its distal end) and a <- phi_i, the joint's exit angle:
 A rigid part of length l goes from O to O + l·(cos a, sin a) and leaves a unchanged, so
 theta_{i+1} = phi_i when a rigid part (or nothing) lies between two joints. For the right
 finger, a joint's local +y is global +X at rest, so P > 0 (bending to -y) closes the finger
-and P < 0 opens it. A calibrated finger file (predictor.calibrate) gives joint i a pressure
+and P < 0 opens it. A calibrated finger file (predictor.cli.calibrate) gives joint i a pressure
 gain g_i, offset o_i (MPa) and stiffness scale s_i: the joint model is evaluated at
 ((g_i P_i + o_i)/s_i, tau_i/s_i), the exact similarity of a joint of modulus s_i E.
 
 Weights (N): a rigid part's at its midpoint; a joint's, with ``joint_weight``
 ``lumped`` (the paper's), at the mean of its 10 anchors, or ``split`` (the default): half at
-its proximal centre O_i, half at its distal end r_10,i (predictor.statics says which joint
+its proximal centre O_i, half at its distal end r_10,i (predictor.model.statics says which joint
 balances each enters).
 
 The finger's outline (``outline_vertices``, the surfaces that touch, ``surface = faces``):
@@ -69,7 +69,7 @@ import torch
 from contract.finger import DEFAULT_FINGER, FingerSpec, load_finger
 from contract.grasp import OBJECT_WEIGHT
 from contract.spec import PRESSURE_LIMIT, check_box, phi_end
-from predictor.joint import JointModel
+from predictor.model.joint import JointModel
 
 KINEMATICS = ("tangent", "cap")
 JOINT_WEIGHTS = ("lumped", "split")
@@ -80,7 +80,7 @@ DEFAULT_SURFACE = "faces"
 #: Outline edge faces (ChainLayout.edge_face codes): -nu side, +nu side, the fingertip's end.
 FACES = ("inner", "outer", "end")
 #: Gauss-Legendre points per outline edge: a contact's penalty is integrated over each
-#: edge's penetrated interval by this rule (predictor.statics), exact for the polynomial
+#: edge's penetrated interval by this rule (predictor.model.statics), exact for the polynomial
 #: penetration profiles of a straight edge against a line or a circle.
 EDGE_GAUSS = 6
 #: Gauss points per edge of the symmetry-plane contact: X is linear along an edge, so its
@@ -553,7 +553,7 @@ class FingerPose:
 
 def joint_calibration(finger: FingerSpec) -> tuple[tuple[float, ...], ...] | None:
     """(gains, offsets MPa, stiffness scales), one per joint, of a calibrated finger file
-    (contract.finger; predictor.calibrate writes them), or None when every joint is the
+    (contract.finger; predictor.cli.calibrate writes them), or None when every joint is the
     joint model as it is."""
     joints = [p for p in finger.parts if p.kind == "joint"]
     if not any(p.calibrated for p in joints):

@@ -33,7 +33,7 @@ Stand-in stiffnesses (chosen, not measured; documented here so reports can quote
   degrees a pneumatic bellow joint reaches. Gravity (≈0.2 N at ≈100 mm) droops ≈ 10°.
 - EA = 300 N: the bellow is axially soft, 3 N stretches it by 1 % (0.45 mm).
 
-Cap kinematics (issue 14, predictor.gripper): ``anchors_and_cap(inputs)`` also returns the
+Cap kinematics (issue 14, predictor.model.gripper): ``anchors_and_cap(inputs)`` also returns the
 rotation (rad) of the joint's distal cap face, the section the next rigid part is bonded
 to. AnalyticJoint: the exact end-section angle of its beam, a_10 + kappa_10·h (the start
 angle of the last segment plus its turn). SurrogateJoint: the surrogate's cap-rotation

@@ -3,7 +3,7 @@
 Rigid parts red, joints blue, object green, the unloaded (tau = 0) shape dashed, each
 named in the panel's legend; the title names the pressures, the grasp state and the joint
 model. Both fingers are drawn: the right one solved, the left one its mirror. Each part is
-drawn as its outline (predictor.gripper.outline_vertices: a rigid part's rectangle of its
+drawn as its outline (predictor.model.gripper.outline_vertices: a rigid part's rectangle of its
 height, a joint's band of the joint's outer height about its centre line), the surfaces
 that touch, over its centre line (FingerPose.part_polylines); where the object presses
 on the finger a black dot marks each part face's contact point (GestureResult.sites), and
@@ -21,8 +21,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from contract.files import atomic_path  # noqa: E402
-from predictor.gripper import FingerPose, band_size, chain_layout, outline_vertices  # noqa: E402
-from predictor.statics import STATES, GripperProblem  # noqa: E402
+from predictor.model.gripper import FingerPose, band_size, chain_layout, outline_vertices  # noqa: E402
+from predictor.model.statics import STATES, GripperProblem  # noqa: E402
 
 
 COLOURS = {"joint": "tab:blue", "rigid": "tab:red"}
@@ -46,7 +46,7 @@ def draw_fem_render(fig, ax, render: dict, png, label: str) -> None:
 def part_outlines(pose: FingerPose, index: int) -> list[tuple[str, np.ndarray]]:
     """[(kind, closed polygon (n, 2) mm)] of every part of sample ``index``, chain order:
     a joint's band (inner vertices base to tip, then the outer ones back), a rigid part's
-    rectangle (predictor.gripper.outline_vertices' order)."""
+    rectangle (predictor.model.gripper.outline_vertices' order)."""
     V = outline_vertices(pose.rows(slice(index, index + 1)), chain_layout(pose.finger))[0].detach().numpy()
     out, j, r, J, size = [], 0, 0, pose.finger.n_joints, band_size(pose.finger)
     for part in pose.finger.parts:

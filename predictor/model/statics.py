@@ -17,13 +17,13 @@ parts distal to it:
     R_M,i = M_i - sum_k (p_k - r_10,i) × F_k                          [N·mm]
 
 A load on part k enters joint i's balance when part k is distal to joint i (k after it in
-the finger's chain, predictor.gripper.ChainLayout): the paper's finger gives joint 1 the
+the finger's chain, predictor.model.gripper.ChainLayout): the paper's finger gives joint 1 the
 link, joint 2 and the tip, and joint 2 the tip. Weights act at the rigid parts' midpoints;
 a joint's own weight (GripperParams.joint_weight):
 - ``lumped`` (the paper's): at the mean of its anchors; it enters only the balances of
   the joints proximal to it, as loads on a joint's body do, since the surrogate takes
   end loads only (as in the paper);
-- ``split`` (the default, predictor.gripper.DEFAULT_JOINT_WEIGHT): half at its proximal
+- ``split`` (the default, predictor.model.gripper.DEFAULT_JOINT_WEIGHT): half at its proximal
   centre O_i (the joints proximal to it) and half at its distal end r_10,i, which also
   enters its own balance, with zero moment arm there.
 A load distal to no joint (joint 1's own weight when lumped) is carried by the base mount.
@@ -31,7 +31,7 @@ The scalar loss is alpha·R_Fx² + beta·R_Fy² + gamma·R_M² with alpha = beta
 1 N⁻², gamma = 1e-4 (N·mm)⁻² (moments scaled by a 100 mm lever, the finger's size).
 
 Contact (object fixed in the plane, signed distance d < 0 inside, outward normal n):
-- where: the finger's outline (predictor.gripper.outline_vertices: each rigid part's
+- where: the finger's outline (predictor.model.gripper.outline_vertices: each rigid part's
   rectangle of its height, each joint's band of the joint's outer height about its
   centre line, the last part's end face; GripperParams.surface ``faces``), edge by edge:
   the interval of the edge inside the object is exact (Obstacle.segment_interval) and
@@ -71,9 +71,9 @@ import torch
 from contract import grasp
 from contract.grasp import ObjectSpec
 from contract.spec import INPUT_BOX
-from predictor.gripper import (EDGE_GAUSS, PLANE_GAUSS, FingerPose, GripperParams, check_pressures, edge_ends,
+from predictor.model.gripper import (EDGE_GAUSS, PLANE_GAUSS, FingerPose, GripperParams, check_pressures, edge_ends,
                                edge_points, finger_pose, gauss_rule, outline_vertices, rot)
-from predictor.joint import JointModel, no_cap_message
+from predictor.model.joint import JointModel, no_cap_message
 
 MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss
 PENALTY_WEIGHT = 10.0  # weight of the out-of-box residuals relative to the equilibrium ones
@@ -219,7 +219,7 @@ class ContactParams:
     plane_stiffness: float = grasp.PLANE_STIFFNESS
 
 
-#: Grasp states of an equilibrium with an object, and their codes (predictor.atlas adds
+#: Grasp states of an equilibrium with an object, and their codes (predictor.planning.atlas adds
 #: NOT_CONVERGED for a solve that did not converge).
 STATES = ("no_contact", "holds", "slips", "not_converged")
 NO_CONTACT, HOLDS, SLIPS, NOT_CONVERGED = range(4)
@@ -266,7 +266,7 @@ def meets(problem: "GripperProblem") -> bool:
 
 def apart(problem: "GripperProblem") -> "GripperProblem":
     """``problem`` without the plane X = 0's penalty: the same residual wherever no vertex
-    of the outline lies at X < 0 (the broad phase of predictor.graphs.gated)."""
+    of the outline lies at X < 0 (the broad phase of predictor.solvers.graphs.gated)."""
     return dataclasses.replace(problem, contact=dataclasses.replace(problem.contact, plane_stiffness=0.0))
 
 
@@ -277,7 +277,7 @@ class PlaneContact:
     at X < 0 and the force on the finger there (+X), both zero on a row whose outline does
     not cross X = 0; force (B,) N their sum; overlap (B,)
     mm, how far the outline crosses X = 0 (max(0, -min X of its vertices)). A Statics
-    rebuilt from a recorded graph (predictor.graphs.as_statics) has the figures force and
+    rebuilt from a recorded graph (predictor.solvers.graphs.as_statics) has the figures force and
     overlap only (points and forces None)."""
 
     points: torch.Tensor
@@ -382,7 +382,7 @@ def plane_contact(pose: FingerPose, params: GripperParams, contact: ContactParam
     V = outline_vertices(pose, layout) if vertices is None else vertices
     overlap = plane_overlap(V)
     start, end = edge_ends(V, layout, layout.plane_edges)
-    # Broad phase, eager only (a recorded graph keeps one branch; predictor.graphs.gated
+    # Broad phase, eager only (a recorded graph keeps one branch; predictor.solvers.graphs.gated
     # gates its calls instead): a row with no vertex at X < 0 has no interval and zero
     # force, so the quadrature runs on the rows that cross, and the others get zero forces
     # at zero points, which add exactly nothing to the residual's sums.
@@ -420,7 +420,7 @@ class GripperProblem:
     contact: penalty and friction law. gravity: False drops all weights (the gravity-free
     gesture). approach: (P1, .., PJ) MPa of a grasp's history: the gripper first settles
     there without the object, the object is then brought in and the pressures ramp to the
-    target; None ramps from zero with the object present (predictor.solve).
+    target; None ramps from zero with the object present (predictor.solvers.solve).
 
     Refused with a one-line ValueError: an approach of the wrong length or beyond the box,
     and cap kinematics on a joint model without a cap-rotation head.

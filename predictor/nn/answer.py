@@ -14,7 +14,7 @@ pressures (B, J) MPa:
 - gravity raw (``polish`` False): the network's own answer only, NaN outside the bound
   (the float32 throughput mode is this: the polish is a float64 solver);
 - gravity with ``polish`` True: every sample's tau finished by one Newton step
-  (predictor.solve.newton_polish; the LM where its check fails, the full pressure ramp
+  (predictor.solvers.solve.newton_polish; the LM where its check fails, the full pressure ramp
   where that does not converge); method "nn+newton" (joined with "lm" where the LM
   answered rows);
 - contact: full Newton steps from the network's tau (``newton_on_branch``), kept where they
@@ -24,7 +24,7 @@ pressures (B, J) MPa:
   a small step cap (POLISH_STEP) that keeps the iterates on the network's branch, and where
   that does not converge by the full pressure ramp (``fallback``). Method "nn+newton"
   where Newton steps answered rows, joined with "lm" where the LM answered rows
-  (predictor.solve.joined): "nn+newton", "nn+newton+lm" or "nn+lm".
+  (predictor.solvers.solve.joined): "nn+newton", "nn+newton+lm" or "nn+lm".
 """
 from __future__ import annotations
 
@@ -34,12 +34,12 @@ from dataclasses import dataclass, fields, replace
 import torch
 from torch import nn
 
-from predictor.gripper import check_pressures, nan_unless, outline_vertices, with_rows
-from predictor.networks import ContactNet, Predictor
-from predictor.options import SolverOptions
-from predictor.result import GestureResult, contact_fields, result_labels
-from predictor.solve import gesture_result, joined, meets_tolerances, newton_iterate, newton_polish, solve, statics_at
-from predictor.statics import GripperProblem, Statics, grasp_state, meets, residual_norms
+from predictor.model.gripper import check_pressures, nan_unless, outline_vertices, with_rows
+from predictor.nn.networks import ContactNet, Predictor
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.result import GestureResult, contact_fields, result_labels
+from predictor.solvers.solve import gesture_result, joined, meets_tolerances, newton_iterate, newton_polish, solve, statics_at
+from predictor.model.statics import GripperProblem, Statics, grasp_state, meets, residual_norms
 
 
 # LM step cap (scaled units) when polishing a contact NN prediction: small enough that the
@@ -120,7 +120,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     where its check fails, ``fallback``; the full ramp where the LM does not converge) to
     the iterative solver's tolerances. Contact
     (``polish`` ignored): full Newton steps
-    from the NN tau (predictor.newton.newton_iterate), kept where they converge on the network's
+    from the NN tau (predictor.solvers.newton.newton_iterate), kept where they converge on the network's
     branch (``stepped``, ``newton_on_branch``); the other samples start again from the NN
     tau with the LM under a small step cap (POLISH_STEP) so the iterates stay on the NN's
     branch, with the Jacobian by differences and then, for the samples that did not
@@ -171,7 +171,7 @@ def predict_gesture(pred: Predictor, problem: GripperProblem, pressures: torch.T
     fallback, method = torch.zeros_like(stepped), "nn+newton" if bool(stepped.any()) else "nn"
     if bool(rest.any()):
         # The capped LM from the NN's tau (Jacobian by differences, and the exact one where
-        # that stalls at a kink of the contact law: predictor.ramp.attempts), then the full ramp.
+        # that stalls at a kink of the contact law: predictor.solvers.ramp.attempts), then the full ramp.
         lm = solve(problem, pressures[rest], replace(options, contact_max_step=POLISH_STEP), x0=tau[rest])
         fallback[rest] = ~lm.converged
         if bool((~lm.converged).any()):
@@ -220,7 +220,7 @@ def at_plane(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor
 def newton_on_branch(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Tensor, raw: Statics,
                      raw_state: torch.Tensor, t0: float,
                      options: SolverOptions = SolverOptions()) -> tuple[GestureResult, torch.Tensor]:
-    """Full Newton steps from the contact network's tau (predictor.newton.newton_iterate) and which of
+    """Full Newton steps from the contact network's tau (predictor.solvers.newton.newton_iterate) and which of
     their answers to keep: (GestureResult, stepped (B,) bool).
 
     From the network's tau undamped steps converge for most pressures, but some land on

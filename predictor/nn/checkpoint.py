@@ -5,7 +5,7 @@ weights), ``joint`` (the joint model's name), ``normalisation`` {p_scale_MPa: 0.
 tau_scale: TAU_SCALE}, ``metrics`` and ``history`` (per logged epoch). ``load_predictor``
 needs only the file, and refuses a damaged, foreign or other-kind file, another joint or
 another finger with one line, and a joint model whose joint description is not the one
-the finger's joint parts name (predictor.joint.check_finger).
+the finger's joint parts name (predictor.model.joint.check_finger).
 """
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from dataclasses import asdict
 from pathlib import Path
 
 from predictor.defaults import default_nn_dir
-from predictor.gripper import GripperParams
-from predictor.joint import JointModel, check_finger
-from predictor.networks import P_SCALE, TAU_SCALE, NNConfig, Predictor, network
+from predictor.model.gripper import GripperParams
+from predictor.model.joint import JointModel, check_finger
+from predictor.nn.networks import P_SCALE, TAU_SCALE, NNConfig, Predictor, network
 from surrogate import checkpoint
 
 
@@ -74,7 +74,7 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
     if params is not None and params != trained_params:
         raise ValueError(f"{path} was trained for {trained_params.describe()}, not {params.describe()}: an NN "
                          "predictor answers only its own finger and options (train one for these with python -m "
-                         "predictor.nn --finger FILE, or solve with the iterative solvers)")
+                         "predictor.cli.nn --finger FILE, or solve with the iterative solvers)")
     if joint is not None and joint_name != joint.name:
         raise ValueError(f"{path} was trained with joint {joint_name!r}, not {joint.name!r}")
     if joint is not None and params is not None:

@@ -11,12 +11,12 @@ import time
 import torch
 from torch import nn
 
-from predictor.joint import JointModel
-from predictor.networks import ContactNet, Predictor
-from predictor.nn_answer import BRANCH_TIP_MM, newton_on_branch, predict_gesture, raw_answer
-from predictor.options import SolverOptions
-from predictor.solve import meets_tolerances, newton_step, solve
-from predictor.statics import GripperProblem, grasp_state, residual_norms
+from predictor.model.joint import JointModel
+from predictor.nn.networks import ContactNet, Predictor
+from predictor.nn.answer import BRANCH_TIP_MM, newton_on_branch, predict_gesture, raw_answer
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.solve import meets_tolerances, newton_step, solve
+from predictor.model.statics import GripperProblem, grasp_state, residual_norms
 
 
 def residual_stats(res: torch.Tensor) -> dict:
@@ -103,7 +103,7 @@ def evaluate_contact(pred: "Predictor", joint: JointModel, pressures: torch.Tens
             "newton_from_raw": branch_figures(conv, kept & ok, on_ref, shift),
             "n": len(ok), "reference_converged": int(ok.sum()), "reference_in_contact": int((ok & touch).sum()),
             "domain_MPa": {"P1": list(cfg.p1_range), "P2": list(cfg.p2_range)},
-            "reference": "predictor.solve along the pressure ramp from the approach gesture"}
+            "reference": "predictor.solvers.solve along the pressure ramp from the approach gesture"}
 
 
 def branch_figures(conv: torch.Tensor, kept: torch.Tensor, on_ref: torch.Tensor, shift: torch.Tensor) -> dict:

@@ -5,10 +5,10 @@ Scaling: the input is P / P_SCALE (P_SCALE = 0.3 MPa, so [-1, 1] over the box), 
 ``abs_pressure`` |P| / 0.3 beside it (``features``); the output is multiplied by TAU_SCALE
 = (1 N, 1 N, 30 N·mm) per joint.
 
-Variants (VARIANTS, ``python -m predictor.nn --variant ...``):
+Variants (VARIANTS, ``python -m predictor.cli.nn --variant ...``):
 - ``gravity-paper``: the paper's 2 -> 32 -> 64 -> 64 -> 32 -> 6 ReLU MLP, 4000 training and
   800 validation pairs uniform in [-0.3, 0.3]², Adam, batch 20, lr 3e-4 decayed ×0.94 per
-  epoch, 75 epochs, equilibrium loss only (predictor.nn_train).
+  epoch, 75 epochs, equilibrium loss only (predictor.nn.train).
 - ``gravity-improved``: 2 -> 128 -> 128 -> 128 -> 6 with SiLU (smooth, so the residual can
   go to zero instead of stalling on ReLU's kinks), supervised by the Newton solver's
   equilibria at 20,000 pressures, Adam (batch 200, lr 3e-3 decayed ×0.95, 60 epochs), then
@@ -19,8 +19,8 @@ Variants (VARIANTS, ``python -m predictor.nn --variant ...``):
   finger meets it): where the finger stays at X >= 0 the two problems are the same and the
   network's own tau is the answer; where it presses on the plane, whose stiff penalty turns
   a tau error of 1e-6 N into a residual over 10 mN, no network's tau meets the NN bound and
-  the delivered path polishes it (predictor.nn_answer). ``plane=True``
-  (``predictor.nn --plane``) learns the gripper itself instead: measured on the production
+  the delivered path polishes it (predictor.nn.answer). ``plane=True``
+  (``predictor.cli.nn --plane``) learns the gripper itself instead: measured on the production
   surrogate, that network is about 6x less accurate away from the plane (1.29 mN against
   0.21 mN mean, 400 random pressures) and leaves 89 of 400 pressures unanswered, the lone
   finger's 1 (docs/gripper.md §11).
@@ -41,9 +41,9 @@ Fingers: a network is (P_1 .. P_J) -> tau (J, 3) for the finger of its config (`
 contract.finger.finger_to_dict, None = the paper's finger) with its ``kinematics`` and
 ``joint_weight`` options (``NNConfig.for_params``); a predictor answers only for those.
 
-Data flow: NNConfig -> ``network`` (untrained) -> predictor.nn_train.train -> Predictor
-(network, config, joint name, metrics, history) -> predictor.nn_answer.predict_gesture, or
-predictor.nn_checkpoint.save_predictor.
+Data flow: NNConfig -> ``network`` (untrained) -> predictor.nn.train.train -> Predictor
+(network, config, joint name, metrics, history) -> predictor.nn.answer.predict_gesture, or
+predictor.nn.checkpoint.save_predictor.
 """
 from __future__ import annotations
 
@@ -55,10 +55,10 @@ from torch import nn
 
 from contract.finger import finger_from_dict, finger_to_dict
 from contract.spec import PRESSURE_LIMIT
-from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
-from predictor.joint import JointModel
-from predictor.ramp import APPROACH
-from predictor.statics import HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, apart
+from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
+from predictor.model.joint import JointModel
+from predictor.solvers.ramp import APPROACH
+from predictor.model.statics import HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, apart
 
 
 TAU_SCALE = (1.0, 1.0, 30.0, 1.0, 1.0, 30.0)
@@ -107,8 +107,8 @@ class NNConfig:
     # judged on (``training_problem``): one finger alone (False, statics.apart: the gravity
     # variants), or the gripper, the right finger against the plane X = 0 where the mirror
     # finger meets it (True, the Newton solver's default problem: the contact variant; a
-    # gravity variant with ``predictor.nn --plane``). A checkpoint without the key was
-    # trained before it was recorded, on one finger alone (predictor.nn_checkpoint).
+    # gravity variant with ``predictor.cli.nn --plane``). A checkpoint without the key was
+    # trained before it was recorded, on one finger alone (predictor.nn.checkpoint).
     plane: bool = False
 
     def params(self) -> GripperParams:
@@ -119,7 +119,7 @@ class NNConfig:
     def problem(self, joint: JointModel) -> GripperProblem:
         """The gesture problem this predictor answers, on ``joint``: the gripper (its finger
         and options; default contact law, the plane X = 0 included, and gravity). The
-        delivered answers are checked, and polished, on it (predictor.nn_answer)."""
+        delivered answers are checked, and polished, on it (predictor.nn.answer)."""
         return GripperProblem(joint, self.params(), obstacle=Obstacle(**self.obstacle) if self.obstacle else None,
                               approach=self.approach)
 
@@ -129,7 +129,7 @@ class NNConfig:
         without the plane (statics.apart), a smooth map of the pressures whose gestures
         may cross X = 0 as the paper's do, whose own tau answers the gripper where its
         finger stays at X >= 0 (where it presses on the plane the answer is its polish,
-        predictor.nn_answer); else ``problem`` itself, the gripper with the plane X = 0. A
+        predictor.nn.answer); else ``problem`` itself, the gripper with the plane X = 0. A
         contact network's is always the grasp with the plane."""
         problem = self.problem(joint)
         return problem if self.obstacle or self.plane else apart(problem)

@@ -1,11 +1,11 @@
-"""Training of the NN gesture predictors (predictor.networks), over pressures P (B, J) MPa
+"""Training of the NN gesture predictors (predictor.nn.networks), over pressures P (B, J) MPa
 with tau = net(P) (B, J, 3) [N, N, N·mm]:
 
 - equilibrium loss (unsupervised; gravity-paper): mean_b [|R_F|² + (|R_M| / 100 mm)²] of
   Equation 1 at tau plus the out-of-box penalty (statics.loss): no FEM labels needed;
 - supervised (the other variants): the scaled squared error sum ((tau - tau*) /
   TAU_SCALE)² (``tau_error``) to the iterative solver's equilibria tau* (labels: one
-  batched predictor.solve.solve of all training pressures; with an object, along the
+  batched predictor.solvers.solve.solve of all training pressures; with an object, along the
   pressure ramp from the approach gesture);
 - ContactNet (``state_heads``): the classifier by cross-entropy on the labels' grasp states
   (Adam only); each head on its own state's labels, the holding and slipping heads plus
@@ -17,7 +17,7 @@ with tau = net(P) (B, J, 3) [N, N, N·mm]:
 Optimisation (``fit``): epochs of Adam over shuffled mini-batches, lr decayed per epoch,
 then full-batch L-BFGS (strong Wolfe). The history holds, per logged epoch, the train and
 validation losses and the raw network's mean validation residual (mN, N·mm); the metrics
-the validation residual statistics (predictor.nn_eval) and, with an object, the delivered
+the validation residual statistics (predictor.nn.eval) and, with an object, the delivered
 path's.
 """
 from __future__ import annotations
@@ -30,12 +30,12 @@ from dataclasses import replace
 import torch
 from torch import nn
 
-from predictor import progress
-from predictor.joint import JointModel
-from predictor.networks import TAU_SCALE, ContactNet, NNConfig, Predictor, network, sample_pressures
-from predictor.nn_eval import contact_fraction, evaluate, evaluate_polished
-from predictor.solve import solve
-from predictor.statics import NO_CONTACT, GripperProblem, grasp_state, loss
+from predictor.solvers import progress
+from predictor.model.joint import JointModel
+from predictor.nn.networks import TAU_SCALE, ContactNet, NNConfig, Predictor, network, sample_pressures
+from predictor.nn.eval import contact_fraction, evaluate, evaluate_polished
+from predictor.solvers.solve import solve
+from predictor.model.statics import NO_CONTACT, GripperProblem, grasp_state, loss
 
 
 def _labels(joint: JointModel, pressures: torch.Tensor, cfg: NNConfig) -> tuple[torch.Tensor, ...]:

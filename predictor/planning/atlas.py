@@ -1,18 +1,13 @@
 """Grasp atlas: where the gripper holds, slips or misses an object over its pressure plane.
 
-    python -m predictor.atlas --object SPEC --grid N [--box P1LO,P1HI,P2LO,P2HI]
-        [--path sweep|ramp] [--model PATH|analytic] [--mu MU] [--object-weight N]
-        [--finger FILE] [--kinematics cap|tangent] [--joint-weight split|lumped]
-        [--approach P1,P2|zero] [--no-gravity] [--no-plane] [--quiet] [--json] [--plot FILE.png] [--out FILE.json]
-
-The finger, approach and gravity options are predictor.gesture's (a finger of two joints:
+The finger, approach and gravity options are predictor.cli.gesture's (a finger of two joints:
 the atlas spans (P1, P2)); the JSON records the finger (name, sha256 of its file,
 kinematics, joint weights) beside the settings below.
 
 Every (P1, P2) of an N x N grid over the pressure box (MPa, default the full |P| <= 0.3
-box) is solved along the same history as ``predictor.gesture --object``: the gripper
+box) is solved along the same history as ``predictor.cli.gesture --object``: the gripper
 settles at the approach gesture APPROACH = (-0.15, 0) MPa without the object, the object
-is brought in, and the pressures ramp straight to the target (predictor.solve). Two
+is brought in, and the pressures ramp straight to the target (predictor.solvers.solve). Two
 ways to walk that path (``--path``):
 
 - ``sweep`` (default, ``sweep_solve``): by continuation outward from the approach, ring
@@ -45,7 +40,7 @@ max_plane_overlap_mm). The friction
 margin is 1 - u (> 0 where the grasp holds). The summary and JSON name what was solved:
 joint, mu, object_weight_N, gravity, approach_MPa and plane (true: the gripper, the mirror
 finger's contact at X = 0, the default; false: one finger alone, ``--no-plane``,
-predictor.problem); ``atlas_from_json`` reads an atlas
+predictor.solvers.problem); ``atlas_from_json`` reads an atlas
 back for the same problem and refuses (one line) one of another object, joint or settings.
 A run longer than ~10 s prints progress lines on stderr (``--quiet``: none).
 
@@ -53,18 +48,11 @@ Data flow: GripperProblem (joint, object, approach) + grid -> ``grasp_atlas`` ->
 (arrays (N, N[, 2]) indexed [i, j] = (P1 = p1[i], P2 = p2[j]), plus the GestureResult of
 the flattened grid) -> ``Atlas.to_json()`` / ``save_atlas_figure``; JSON + GripperProblem ->
 ``atlas_from_json`` -> Atlas (the stored equilibria re-evaluated, no solve).
-
-Exit codes: 0 atlas written; 2 bad input (a bad number, grid, box, object spec, an
-object the model cannot represent, unwritable output, a missing default model, an object
-that intersects the fingers at the approach gesture, a finger of other than two joints or
-one no gesture can be solved for, predictor.problem.finger_error), one line on stderr,
-before the grid solve; 130 interrupted (Ctrl-C): one line, no traceback, no file. The API (``grasp_atlas``) applies the same checks (predictor.problem).
 """
 from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,20 +60,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from contract import cli
 from predictor.artefacts import ATLAS
-from predictor.problem import (DEFAULT, FULL_BOX, GRID, OBJECT_HELP, add_arguments, add_finger_arguments, add_plane,
-                               approach_arg, box_arg, check_box, finger_record, load_problem, object_arg, params_of,
-                               placement_error)
-from predictor.progress import Heartbeat, set_quiet
-from predictor.jacobians import jacobian_fn
-from predictor.options import SolverOptions
-from predictor.ramp import advance, attempts, plane_first, plane_ramp, ramp_method, runner
-from predictor.ramp import ramp as ramp_between
-from predictor.result import GestureResult, contact_fields, result_labels
-from predictor.solve import APPROACH, gesture_result, solve
-from predictor.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle, grasp_state,
-                               meets, out_of_reach)
+from predictor.solvers.problem import FULL_BOX, GRID, box_arg, check_box, load_problem, object_arg, placement_error
+from predictor.solvers.progress import Heartbeat
+from predictor.solvers.jacobians import jacobian_fn
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.ramp import advance, attempts, plane_first, plane_ramp, ramp_method, runner
+from predictor.solvers.ramp import ramp as ramp_between
+from predictor.solvers.result import GestureResult, contact_fields, result_labels
+from predictor.solvers.solve import gesture_result, solve
+from predictor.model.statics import (HOLDS, NO_CONTACT, NOT_CONVERGED, SLIPS, STATES, GripperProblem, Obstacle,
+                                     grasp_state, meets, out_of_reach)
 
 __all__ = ["FULL_BOX", "Atlas", "box_arg", "classify", "free_sweep_solve", "grasp_atlas", "load_problem",
            "object_arg", "placement_error", "sweep_solve"]
@@ -250,8 +235,8 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
 
     Ring s holds the points s grid steps from p0 (Chebyshev distance, rounded up); rings
     are solved in order, each as one batch. A point q of ring s continues (one ramp step
-    of predictor.solve: tangent predictor from its predecessor's Jacobians, LM with the
-    solve's Jacobians in turn (predictor.ramp.attempts), depth check, cut-backs) from the converged
+    of predictor.solvers.solve: tangent predictor from its predecessor's Jacobians, LM with the
+    solve's Jacobians in turn (predictor.solvers.ramp.attempts), depth check, cut-backs) from the converged
     point nearest to p0 + (q - p0)(s - 1)/s, the ray's point one ring back, if that lies
     within one grid step of it. So each point's
     path follows its own straight ray from p0 within half a grid step (exactly on it
@@ -296,7 +281,7 @@ def sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: np.nd
         rows = np.nonzero(ring == s)[0]
         pred[rows] = _predecessors(Q, rows, s, p0, spacing, ring, ok.numpy())
         cont = rows[pred[rows] >= 0]
-        for run in runs:                            # the solve's Jacobians in turn (predictor.ramp.attempts)
+        for run in runs:                            # the solve's Jacobians in turn (predictor.solvers.ramp.attempts)
             if len(cont) == 0:
                 break
             pc = pred[cont]
@@ -322,7 +307,7 @@ def free_sweep_solve(problem: GripperProblem, pressures: torch.Tensor, spacing: 
                      options: SolverOptions = SolverOptions()) -> tuple[GestureResult, np.ndarray]:
     """Every grid point of pressures (M, 2) MPa (grid spacing (2,) MPa) of an object-free
     problem whose fingers meet at X = 0: the points whose load-free pose lies clear of
-    the plane (not ``predictor.ramp.plane_first``) by one batched ``solve`` (the
+    the plane (not ``predictor.solvers.ramp.plane_first``) by one batched ``solve`` (the
     reference's rows); the others, which ``solve`` ramps from zero pressure
     (``plane_ramp``, 12 sub-steps each), by continuation from a converged grid
     neighbour instead (a ramp of FREE_SUB_STEPS sub-steps, ``_continue``), wave by wave:
@@ -381,8 +366,8 @@ FREE_SUB_STEPS = 2
 def _continue(problem: GripperProblem, x: torch.Tensor, pa: torch.Tensor, pb: torch.Tensor,
               options: SolverOptions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The object-free equilibria x (B, 3J) at pa (B, J) MPa continued to pb by a ramp of
-    FREE_SUB_STEPS sub-steps (predictor.ramp.ramp: the plane's homotopy, depth check,
-    cut-backs), each Jacobian of predictor.ramp.attempts in turn for the samples the
+    FREE_SUB_STEPS sub-steps (predictor.solvers.ramp.ramp: the plane's homotopy, depth check,
+    cut-backs), each Jacobian of predictor.solvers.ramp.attempts in turn for the samples the
     previous one failed. Returns (x, converged (B,), iterations (B,))."""
     B = len(x)
     out, ok, its = x.clone(), torch.zeros(B, dtype=torch.bool), torch.zeros(B, dtype=torch.long)
@@ -426,14 +411,14 @@ def _first_contacts(first: np.ndarray, Q: np.ndarray, ring: np.ndarray, pred: np
 
 
 def atlas_from_json(path: str | Path, problem: GripperProblem) -> Atlas:
-    """An Atlas (with a GestureResult of its converged tau) from predictor.atlas --out
+    """An Atlas (with a GestureResult of its converged tau) from predictor.cli.atlas --out
     JSON; ValueError (one line) for a file that is not an atlas of this object."""
     doc = ATLAS.load(path)      # its format (predictor.artefacts): one line when it is not an atlas
     try:
         p1, p2 = np.array(doc["p1_MPa"], float), np.array(doc["p2_MPa"], float)
         tau = torch.tensor(np.array(doc["tau"], dtype=float), dtype=torch.float64).reshape(-1, 2, 3)
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"{path}: not a predictor.atlas JSON ({type(exc).__name__})") from None
+        raise ValueError(f"{path}: not a predictor.planning.atlas JSON ({type(exc).__name__})") from None
     ob = problem.obstacle
     keys = ("kind", "a_mm", "b_mm", "x_mm", "y_mm", "angle_rad")
     want = None if ob is None else [ob.kind, ob.a, ob.b, ob.x, ob.y, ob.angle]
@@ -509,7 +494,7 @@ def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
     import matplotlib.colors as mcolors
     import matplotlib.pyplot as plt
 
-    from predictor.plot import draw_gesture, save_figure
+    from predictor.model.plot import draw_gesture, save_figure
 
     marks = marked_points(atlas)
     fig, axes = plt.subplots(1, 2 + len(marks), figsize=(4.6 * (2 + len(marks)), 4.8))
@@ -542,59 +527,3 @@ def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
         draw_gesture(axes[2 + k], atlas.result, row, problem, f"{k + 1}: {label}, P = ({p1:+.2f}, {p2:+.2f}) MPa")
     fig.tight_layout()
     save_figure(fig, path, 110)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = cli.Parser(prog="python -m predictor.atlas", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--object", type=object_arg, required=True, help=OBJECT_HELP)
-    ap.add_argument("--grid", type=GRID.arg, default=61, help="N: N x N grid (default 61)")
-    ap.add_argument("--box", type=box_arg, default=FULL_BOX, help="P1LO,P1HI,P2LO,P2HI MPa (default the full box)")
-    ap.add_argument("--path", choices=PATHS, default="sweep",
-                    help="sweep: continuation outward from the approach (default); ramp: every point "
-                    "ramped on its own (the reference)")
-    ap.add_argument("--ramp-steps", type=cli.number(1, 1000, integer=True), default=SolverOptions.ramp_steps,
-                    help=f"pressure sub-steps of a ramped point (default {SolverOptions.ramp_steps}; --path ramp "
-                    "with more steps checks the reference's own path resolution)")
-    add_plane(ap)
-    add_finger_arguments(ap)
-    ap.add_argument("--approach", type=approach_arg, help="P1,P2 (MPa) at which the object is brought in (default "
-                    f"{APPROACH[0]},{APPROACH[1]}), or 'zero' to ramp from 0 with the object present")
-    ap.add_argument("--no-gravity", action="store_true", help="drop all weights")
-    add_arguments(ap)
-    ap.add_output("--plot", suffix=".png", help="write the atlas figure here")
-    ap.add_output("--out", suffix=".json", help="write the full atlas JSON here")
-    args = ap.parse_args(argv)
-    torch.set_num_threads(1)
-    set_quiet(args.quiet)
-    params = params_of(args)
-    if params.n_joints != 2:   # before any model is loaded
-        ap.error(f"the grasp atlas spans (P1, P2): finger {params.finger.name!r} has {params.n_joints} joints")
-    if args.approach not in (None, "zero") and len(args.approach) != 2:
-        ap.error(f"--approach: {len(args.approach)} values for the atlas's two joints (P1,P2 MPa, or 'zero')")
-    approach = None if args.approach == "zero" else args.approach or DEFAULT
-    with ap.errors():
-        problem = load_problem(args.model, args.object, gravity=not args.no_gravity, params=params, mu=args.mu,
-                               object_weight=args.object_weight, approach=approach, plane=args.plane)
-        atlas = grasp_atlas(problem, args.grid, args.box, SolverOptions(ramp_steps=args.ramp_steps), args.path)
-        finger = finger_record(params)
-        doc = {**atlas.to_json(), "spec": args.object, "ramp_steps": args.ramp_steps, "finger": finger}
-        if args.out:
-            ATLAS.write(args.out, doc)
-        if args.plot:
-            save_atlas_figure(args.plot, atlas, problem)
-    print_figures({**atlas.summary(), "spec": args.object, "finger": finger}, args.json)
-    return 0
-
-
-def print_figures(out: dict, as_json: bool) -> None:
-    """A planning tool's figures: strict JSON, or one ``key: value`` line each."""
-    if as_json:
-        cli.print_json(out)
-        return
-    width = max(map(len, out))
-    for key, value in out.items():
-        print(f"{key:>{width}}: {value}")
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,5 +1,5 @@
 """Inverse pressures: which (P1, P2) hold an object, or put the fingertip where asked (the
-library; the command line is predictor.inverse).
+library; the command line is predictor.cli.inverse).
 
 Goals (right finger; lengths mm in the global frame of docs/gripper.md, pressures MPa):
 
@@ -11,7 +11,7 @@ Every goal is a least-squares one, f = |e|² with a goal residual e:
   e = (P1/0.3, P2/0.3, √1000·max(0, u - (1 - HOLD_MARGIN))) (+ the normal term): the
   least pressure that holds with a friction margin of HOLD_MARGIN.
 - ``tip:X,Y[,DEG]``: the fingertip at (X, Y) mm, and its tip angle at DEG degrees (the
-  ``tip_angle_deg`` of ``predictor.gesture --json``, the direction of the rigid tip):
+  ``tip_angle_deg`` of ``predictor.cli.gesture --json``, the direction of the rigid tip):
   e = (x_tip - X, y_tip - Y[, l_tip·wrap(phi_2 - DEG)]) mm, the angles' difference wrapped
   to (-180, 180] deg (a goal farther than FAR_GOAL_MM is searched for that far in its
   direction, ``search_tip``). The answer reports the position error (tip_error_mm, mm)
@@ -21,26 +21,26 @@ Every goal is a least-squares one, f = |e|² with a goal residual e:
   closest gesture.
 
 Gradients go through the equilibrium itself. At a converged gesture the scaled residual
-r(tau, P) = 0 (predictor.solve, 6 equilibrium rows; the range penalties are inactive),
+r(tau, P) = 0 (predictor.solvers.solve, 6 equilibrium rows; the range penalties are inactive),
 so by the implicit function theorem
 
     d tau/dP = -(dr/dtau)⁻¹ dr/dP                                    (6 x 2)
     de/dP    = ∂e/∂P + ∂e/∂tau · d tau/dP                              (k x 2)
     df/dP    = 2 eᵀ de/dP                                            (2)
-with dr/dtau and dr/dP from the solver's Jacobian (predictor.jacobians.jacobian_fn: exact with an
+with dr/dtau and dr/dP from the solver's Jacobian (predictor.solvers.jacobians.jacobian_fn: exact with an
 object, central differences to ~1e-10 relative without) at the converged point, and
 ∂e/∂(tau, P) the same way (``_goal_derivatives``): no unrolled iterations.
 Moving P moves the equilibrium by continuation (solve's tangent predictor + LM, cut back
 when a step fails), which keeps the grasp on its branch.
 
-Search: multi-start from the best points of a coarse atlas (predictor.atlas; the
+Search: multi-start from the best points of a coarse atlas (predictor.planning.atlas; the
 object's committed atlas with ``--atlas``, else a COARSE x COARSE grid solved on the
 spot and kept for the process's later questions of the same problem, box and options,
 ``coarse_atlas``: it does not depend on the goal), the pressure box as bounds, a
 projected Gauss-Newton on the goal residual e (Levenberg-damped, steps capped at 0.1
 MPa, 0.05 with an object, backtracking); the starts stop early once one meets the goal
 exactly (``_exact``). Candidates are verified, best first, by a forward solve along the
-ramp from the approach gesture (predictor.solve, the history of ``predictor.gesture``)
+ramp from the approach gesture (predictor.solvers.solve, the history of ``predictor.cli.gesture``)
 and refused if that solve disagrees (state, or tip farther than VERIFY_TOL_MM); the
 first robust one is the answer. A tip goal that no candidate can meet verifies them all
 in one batched solve (``_verifications``). Robustness: the 8 neighbours at ±REGULATOR
@@ -73,17 +73,17 @@ import torch
 
 from contract import cli
 from contract.spec import INPUT_BOX
-from predictor.atlas import HOLDS, NOT_CONVERGED, STATES, Atlas, classify, grasp_atlas
-from predictor.problem import FULL_BOX, MIN_NORMAL, check_box
-from predictor.progress import Heartbeat
-from predictor.graphs import graph_cache, touch, traced
-from predictor.jacobians import jacobian_fn
-from predictor.lm import SHORTENINGS, levenberg_marquardt
-from predictor.options import SolverOptions
-from predictor.ramp import advance, attempts, homotopy, in_turn
-from predictor.result import GestureResult
-from predictor.solve import solve
-from predictor.statics import GripperProblem, apart, box_scale, meets
+from predictor.planning.atlas import HOLDS, NOT_CONVERGED, STATES, Atlas, classify, grasp_atlas
+from predictor.solvers.problem import FULL_BOX, MIN_NORMAL, check_box
+from predictor.solvers.progress import Heartbeat
+from predictor.solvers.graphs import graph_cache, touch, traced
+from predictor.solvers.jacobians import jacobian_fn
+from predictor.solvers.lm import SHORTENINGS, levenberg_marquardt
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.ramp import advance, attempts, homotopy, in_turn
+from predictor.solvers.result import GestureResult
+from predictor.solvers.solve import solve
+from predictor.model.statics import GripperProblem, apart, box_scale, meets
 
 REGULATOR = 0.01  # MPa: the paper's pressure regulators' resolution
 HOLD_MARGIN = 0.2  # friction margin 1 - u required by --least-pressure
@@ -250,7 +250,7 @@ class Branch:
 
     def _step_solver(self, kind: str):
         """run(x, p, p_prev=None, jac=None) of one continuation step by the LM with Jacobian
-        ``kind`` (predictor.jacobians.jacobian_fn); where the fingers meet at X = 0, a step
+        ``kind`` (predictor.solvers.jacobians.jacobian_fn); where the fingers meet at X = 0, a step
         pressed on the plane goes through softer planes when the stiff one stalls (as the
         solver's ramp does); with an object, the solver's tunnelling guard."""
         prob, opts = self.problem, self.opts
@@ -343,7 +343,7 @@ def gradient(ip: InverseProblem, branch: Branch):
 
 def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
     """(e (k,), ∂e/∂x (k, 6), ∂e/∂P (k, 2)) at x (1, 6), p (1, 2). As the solver's
-    Jacobian (predictor.jacobians.jacobian_fn): without an object, central differences of the traced
+    Jacobian (predictor.solvers.jacobians.jacobian_fn): without an object, central differences of the traced
     goal residual in one pass (the pose is smooth; steps 1e-6 of (1 N, 1 N, 100 N·mm) and
     of 0.3 MPa); with one, exact, by one reverse pass over k copies of the point (copy i
     feeds row i only: the contact law has kinks)."""
@@ -396,7 +396,7 @@ def traced_tip_fn(problem: GripperProblem):
 
 @graph_cache
 def _traced_goal_fn(ip: InverseProblem):
-    """e(x (B, 6), p (B, 2)) -> (B, k), recorded by predictor.graphs.traced."""
+    """e(x (B, 6), p (B, 2)) -> (B, k), recorded by predictor.solvers.graphs.traced."""
     return traced(lambda x, p: _goal_terms(ip, p, x)[1], 6, 2)
 
 
@@ -558,7 +558,7 @@ def _stencil(ip: InverseProblem, ver: GestureResult, cand: dict) -> dict:
 @functools.lru_cache(maxsize=8)
 def coarse_atlas(problem: GripperProblem, box: tuple[float, float, float, float],
                  options: SolverOptions) -> Atlas:
-    """The COARSE x COARSE start grid (predictor.atlas.grasp_atlas) of ``problem`` over
+    """The COARSE x COARSE start grid (predictor.planning.atlas.grasp_atlas) of ``problem`` over
     box (P1lo, P1hi, P2lo, P2hi) MPa, solved once per process for each problem, box and
     options (the grid does not depend on the goal): later questions of a planner (tip
     targets of one gripper, cold holds of one object) start at once.

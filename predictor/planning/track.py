@@ -5,7 +5,7 @@ A closed-loop controller asks, many times a second, which pressures (P1, P2) put
 fingertip at its next goal (X, Y[, DEG]) mm, deg (right finger, no object, the fingers
 meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the other:
 
-1. Search: the projected Gauss-Newton of predictor.inversion (``gauss_newton``: the
+1. Search: the projected Gauss-Newton of predictor.planning.inversion (``gauss_newton``: the
    goal residual's gradient through the equilibrium by the implicit function theorem,
    continuation steps with the plane's homotopy, steps capped, bounds) from the previous
    answer's equilibrium; the first goal starts from the best points of the kept grid.
@@ -15,13 +15,13 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    backtracked), which needs the steps inside the box and a quadratic descent; where it
    leaves the box or its step is too long (beyond the reach, a bound; not where it
    crawls) the same system with the goal in the least-squares sense (``Tracker.
-   _least_squares``: the reduced Gauss-Newton of predictor.inversion on one Jacobian per
+   _least_squares``: the reduced Gauss-Newton of predictor.planning.inversion on one Jacobian per
    step, no continuation, to gauss_newton's stall); otherwise the Gauss-Newton. The last
    converged point's Jacobian and tip rows (they do not depend on the goal) start the
    next goal's Newton.
 2. Unreachable goals: the search stops at the locally closest tip. The kept grid (a
    START_GRID x START_GRID cold grid of forward answers and the coarse COARSE x COARSE
-   one of predictor.inversion with the gestures pressed on X = 0, solved once per
+   one of predictor.planning.inversion with the gestures pressed on X = 0, solved once per
    process, refined by every verified answer) is looked up (no solve): when one of its
    tips is closer to the goal than the local answer, the search restarts from the
    N_STARTS best of them and the closest verified answer is kept; when the kept grid's
@@ -31,10 +31,10 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    wrapped angle error), never farther from the goal than the kept grid's best.
 3. Verification (every answer): the forward equilibrium at the answer's pressures and at
    its 8 ±REGULATOR neighbours (the regulators' resolution), solved anew: in one batched
-   cold solve of the predictor (predictor.solve from tau = 0, without the plane's
+   cold solve of the predictor (predictor.solvers.solve from tau = 0, without the plane's
    penalty, whose answer is the gripper's wherever the outline stays at X >= 0 — the
    broad phase ``solve`` itself uses), and where the finger presses on X = 0: the centre
-   by up to WARM_STEPS of the solver's Newton steps (predictor.newton.newton_iterate, the
+   by up to WARM_STEPS of the solver's Newton steps (predictor.solvers.newton.newton_iterate, the
    problem's residual with the plane's penalty) from the search's own equilibrium at the
    same pressures, checked by the solver's rule (``meets_tolerances``) — still a check of
    the forward equilibrium, not of the search: the search's iterate is only the start
@@ -75,14 +75,14 @@ import torch
 
 from contract.files import read_text, strict_json
 
-from predictor.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_MM, VERIFY_TOL_MM, Goal,
+from predictor.planning.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_MM, VERIFY_TOL_MM, Goal,
                                  InverseProblem, Branch, clip_to_box, gauss_newton, search_tip, tip_errors,
                                  tip_met, wrap_deg)
-from predictor.options import SolverOptions
-from predictor.problem import FULL_BOX, check_box
-from predictor.result import GestureResult
-from predictor.solve import gesture_result, meets_tolerances, newton_iterate, solve
-from predictor.statics import GripperProblem, apart
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.problem import FULL_BOX, check_box
+from predictor.solvers.result import GestureResult
+from predictor.solvers.solve import gesture_result, meets_tolerances, newton_iterate, solve
+from predictor.model.statics import GripperProblem, apart
 
 NEWTON_ITER = 8           # Tracker._newton: iterations before the search takes over
 NEWTON_HALVINGS = 4       # Tracker._newton: step halvings of its backtracking
@@ -174,10 +174,10 @@ class Tracker:
             self._keep_coarse()
 
     def _keep_coarse(self) -> None:
-        """Add predictor.inversion.coarse_atlas (COARSE x COARSE, solved by continuation with
+        """Add predictor.planning.inversion.coarse_atlas (COARSE x COARSE, solved by continuation with
         the plane X = 0, once per process) to the kept grid: it holds the gestures pressed on
         X = 0 that the cold grid leaves out; solved at the first goal that is not met."""
-        from predictor.inversion import coarse_atlas
+        from predictor.planning.inversion import coarse_atlas
 
         res = coarse_atlas(self.problem, self.box, self.options).result
         ok = res.converged
@@ -211,12 +211,12 @@ class Tracker:
 
     def _evaluate(self, x: torch.Tensor, p: torch.Tensor):
         """(J, r, dr/dP, tip rows T (17, 2)) at (x (1, 6), p (1, 2)): the solver's difference
-        Jacobian of the problem itself (predictor.jacobians; where the outline crosses X = 0
+        Jacobian of the problem itself (predictor.solvers.jacobians; where the outline crosses X = 0
         the plane's penalty is in r) and the fingertip at the point and at its central
-        differences in x (12 rows) and P (4 rows) (predictor.inversion.traced_tip_fn):
+        differences in x (12 rows) and P (4 rows) (predictor.planning.inversion.traced_tip_fn):
         neither depends on the goal."""
-        from predictor.inversion import traced_tip_fn
-        from predictor.jacobians import difference_offsets, jacobian_fn
+        from predictor.planning.inversion import traced_tip_fn
+        from predictor.solvers.jacobians import difference_offsets, jacobian_fn
 
         _, offsets = difference_offsets(6, 1e-6)
         dP = TIP_DP * torch.eye(2, dtype=torch.float64)
@@ -229,7 +229,7 @@ class Tracker:
     @staticmethod
     def _tip_derivatives(T: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(d tip/dx (2, 6), d tip/dP (2, 2)) from ``_evaluate``'s tip rows (central differences)."""
-        from predictor.jacobians import difference_offsets
+        from predictor.solvers.jacobians import difference_offsets
 
         hx, _ = difference_offsets(6, 1e-6)
         return ((T[1:7] - T[7:13]) / (2 * hx[:, None])).T, ((T[13:15] - T[15:17]) / (2 * TIP_DP)).T
@@ -238,9 +238,9 @@ class Tracker:
         """The fast path of a position goal near the last answer: Newton on the square
         system of the equilibrium and the goal, r(x, P) = 0 (6 scaled rows) and
         tip(x, P) = (X, Y) (2), in the 8 unknowns (x, P) at once, from the branch's point,
-        with the solver's difference Jacobian of the problem itself (predictor.jacobians;
+        with the solver's difference Jacobian of the problem itself (predictor.solvers.jacobians;
         where the outline crosses X = 0 the plane's penalty is in r, the broad phase
-        ``gated`` leaves it out elsewhere) and the pose's (predictor.inversion.traced_tip_fn).
+        ``gated`` leaves it out elsewhere) and the pose's (predictor.planning.inversion.traced_tip_fn).
         Steps backtrack on |r|² + |e|² (NEWTON_HALVINGS: where the finger meets X = 0
         within a step, the full step lands deep in the plane's stiff penalty, which the
         Jacobian at the start did not see); it needs the steps inside the box and under
@@ -249,7 +249,7 @@ class Tracker:
         LM of the search does better there). f when it converged (the solver's tolerances,
         ``_converged``, the tip within 0.1 TIP_TOL_MM), the branch moved there; else None,
         the branch unchanged (the search goes on by continuation)."""
-        from predictor.inversion import MAX_STEP
+        from predictor.planning.inversion import MAX_STEP
 
         goal = torch.tensor(search_tip(ip.goal), dtype=torch.float64)
         lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
@@ -299,21 +299,21 @@ class Tracker:
         the tip rows per iteration, no continuation). Eliminating dx from the linearised
         equilibrium J dx + dr/dP dP = -r leaves the tip's e + ex dx + ep dP = e' + G dP with
         G = ep - ex J⁻¹ dr/dP (the implicit function theorem's de/dP, module
-        predictor.inversion) and e' = e - ex J⁻¹ r; dP minimises |e' + G dP|² (Levenberg-
-        damped as predictor.inversion.gauss_newton, a component at a bound whose step points
+        predictor.planning.inversion) and e' = e - ex J⁻¹ r; dP minimises |e' + G dP|² (Levenberg-
+        damped as predictor.planning.inversion.gauss_newton, a component at a bound whose step points
         out held there, capped at MAX_STEP, clipped to the box), dx follows. Steps backtrack
         on |r|² + |e|² (NEWTON_HALVINGS), or on |r| alone where |e|² stays within the
         model's |e'|² (near a far goal's minimum |e|² is mm², |r|² far below its rounding).
         It stops where the solver's tolerances hold (``_converged``) and the step moves P
         less than LS_DP_MPA or its linear model
-        gains less than STALL of f (predictor.inversion.gauss_newton's stall, on the model:
+        gains less than STALL of f (predictor.planning.inversion.gauss_newton's stall, on the model:
         stationary, Gᵀe' ~ 0, or held at the bounds; a crawl where the outline's vertices
         enter X = 0, whose model promises more than the steps gain, runs out): f, the
         branch moved there; else (LS_ITER steps, a failed backtracking) None, the branch
         unchanged (the search goes on by continuation). The answer's f is the stationary
         value gauss_newton's continuation would reach from here (same objective, same
         stall), reached without a continuation LM per step."""
-        from predictor.inversion import MAX_STEP, STALL
+        from predictor.planning.inversion import MAX_STEP, STALL
 
         goal = torch.tensor(search_tip(ip.goal), dtype=torch.float64)
         lo = torch.tensor([self.box[0], self.box[2]], dtype=torch.float64)
@@ -363,10 +363,10 @@ class Tracker:
 
     def _search(self, ip: InverseProblem, branch: Branch) -> float:
         """Gauss-Newton from the branch (the search's iterates at the solver's 100x looser
-        tolerance, as predictor.inversion's: the verification's forward solve converges the
+        tolerance, as predictor.planning.inversion's: the verification's forward solve converges the
         answer fully and its tip is the one reported); f."""
         gauss_newton(ip, branch)
-        from predictor.inversion import traced_tip_fn
+        from predictor.planning.inversion import traced_tip_fn
 
         with torch.inference_mode():
             T = traced_tip_fn(self.problem)(branch.x, branch.p)[0].clone()
@@ -460,7 +460,7 @@ class Tracker:
 
     def _warm(self, ps: torch.Tensor, x0: torch.Tensor, steps: int = WARM_STEPS) -> tuple[torch.Tensor, torch.Tensor]:
         """The forward equilibria at ps (n, 2) by up to WARM_STEPS of the solver's full Newton
-        steps (predictor.newton.newton_iterate: the problem's own residual, with the plane's
+        steps (predictor.solvers.newton.newton_iterate: the problem's own residual, with the plane's
         penalty) from x0 (n, 6), each checked by the solver's convergence rule at its
         answer (``meets_tolerances``: every joint's residual within the tolerances, tau in
         the box). No LM here: a row Newton leaves is the continuation's (``_continue``).
@@ -513,7 +513,7 @@ class Tracker:
                                "track-verify", None)
             ok = ok & meets_tolerances(g, torch.nan_to_num(x), opts)
         centre = g.rows([0])
-        from predictor.inversion import traced_tip_fn
+        from predictor.planning.inversion import traced_tip_fn
 
         with torch.inference_mode():
             searched = traced_tip_fn(prob)(branch.x, branch.p)[0, :2].clone()   # the search's fingertip
@@ -554,7 +554,7 @@ class Tracker:
         # the tangent predictor x + dx/dP·ΔP, dx/dP = -(dr/dx)⁻¹ dr/dP at the kept gesture
         # (the solver's difference Jacobian, the plane's penalty in r): from the kept x alone
         # Newton's first step diverges (0.0027 MPa off: |R_F| 0.4 N -> 2e6 N, measured)
-        from predictor.jacobians import jacobian_fn
+        from predictor.solvers.jacobians import jacobian_fn
 
         pk, xk = P[j[near]], X[j[near]]
         J, _, Jp = jacobian_fn(self.problem)(xk, pk)
@@ -580,10 +580,10 @@ def _scored(evaluation, goal: torch.Tensor):
 
 
 def _converged(r: torch.Tensor, options: SolverOptions) -> bool:
-    """The solver's convergence rule (predictor.lm.within) on one residual row r (1, 12):
+    """The solver's convergence rule (predictor.solvers.lm.within) on one residual row r (1, 12):
     each joint's |R_F| <= tol_force N, |R_M| <= tol_moment N·mm, no out-of-box penalty."""
-    from predictor.lm import within
-    from predictor.statics import MOMENT_SCALE
+    from predictor.solvers.lm import within
+    from predictor.model.statics import MOMENT_SCALE
 
     eq = r[:, :6].reshape(-1, 2, 3)
     return bool(within(eq[..., :2].norm(dim=-1), eq[..., 2].abs() * MOMENT_SCALE, r[:, 6:].abs().amax(-1) == 0,
@@ -730,7 +730,7 @@ def save_track_figure(path: str, result: TrackResult, problem: GripperProblem, l
     position error, and the pressures against goal index (time)."""
     import matplotlib.pyplot as plt
 
-    from predictor.plot import save_figure
+    from predictor.model.plot import save_figure
 
     a = result.answers
     k = np.arange(len(a))

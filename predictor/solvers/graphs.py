@@ -22,8 +22,8 @@ import warnings
 import torch
 
 from contract.spec import INPUT_BOX
-from predictor.gripper import FingerPose, outline_vertices
-from predictor.statics import (ContactState, GripperProblem, PlaneContact, Statics, apart, box_scale, contact_loads,
+from predictor.model.gripper import FingerPose, outline_vertices
+from predictor.model.statics import (ContactState, GripperProblem, PlaneContact, Statics, apart, box_scale, contact_loads,
                               meets, plane_overlap, range_penalty, scaled)
 
 

@@ -1,4 +1,4 @@
-"""Batched Jacobians of the gesture residual r(x; P) (predictor.graphs.residual_fn):
+"""Batched Jacobians of the gesture residual r(x; P) (predictor.solvers.graphs.residual_fn):
 J = dr/dx (B, 2n, n) and dr/dP (B, n, J) for n = 3J unknowns, by central differences of
 the recorded residual or exactly by one reverse-mode pass (``jacobian_fn`` picks).
 """
@@ -9,8 +9,8 @@ import functools
 import torch
 
 from contract.spec import INPUT_BOX
-from predictor.graphs import residual_fn, traced_residual_fn
-from predictor.statics import PENALTY_WEIGHT, GripperProblem, box_scale
+from predictor.solvers.graphs import residual_fn, traced_residual_fn
+from predictor.model.statics import PENALTY_WEIGHT, GripperProblem, box_scale
 
 
 def jacobian_fn(problem: GripperProblem, pressure: bool = True, kind: str = "auto"):

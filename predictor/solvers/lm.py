@@ -1,5 +1,5 @@
 """Levenberg-Marquardt and L-BFGS on the gesture residual r(x; P) (2n rows: the scaled
-equilibrium of n = 3J unknowns and the out-of-box penalties, predictor.graphs.residual_fn),
+equilibrium of n = 3J unknowns and the out-of-box penalties, predictor.solvers.graphs.residual_fn),
 batched over samples, and the convergence rule they share (``within``).
 
 LM step (JᵀJ + mu·I) δ = -Jᵀr, kept where it lowers |r|² (else, with an object, first
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import torch
 
-from predictor.options import SolverOptions
-from predictor.statics import MOMENT_SCALE, box_scale
+from predictor.solvers.options import SolverOptions
+from predictor.model.statics import MOMENT_SCALE, box_scale
 
 
 def _done(r: torch.Tensor, opts: SolverOptions) -> torch.Tensor:
@@ -57,7 +57,7 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
 
     hand_over (k, test): after k iterations the unfinished samples for which test(rows (b,),
     x (b, n), p (b, J)) -> (b,) bool holds (rows: their indices in the batch) stop there,
-    not converged, for another solver to take over (predictor.ramp's plane homotopy); the
+    not converged, for another solver to take over (predictor.solvers.ramp's plane homotopy); the
     others go on as without it.
 
     shortenings: how many times a failed step is tried shortened (SHORTENINGS with an
@@ -108,7 +108,7 @@ def levenberg_marquardt(jac_fn, x, p, opts, max_step=None, p_prev=None, prev_jac
 #: on the object, where growing mu instead turns the step toward the gradient and creeps
 #: (the paper's circle grasp: 194 LM iterations and two cut-backs without, 63 with).
 #: Without an object they only cost residuals: the plane X = 0 has its own homotopy
-#: (predictor.ramp), whose stiff tries they slow by ~12 % (an inverse tip goal).
+#: (predictor.solvers.ramp), whose stiff tries they slow by ~12 % (an inverse tip goal).
 SHORTENINGS, SHORTEN = 3, 0.25
 
 

@@ -3,7 +3,7 @@ smooth), as recorded graphs: one step x_next = x - (dR/dx)⁻¹ R(x) (``_newton_
 Picard step from tau = 0 (``_picard_fn``), the cold solve (Picard and two Newton steps and
 the answer's statics, ``traced_cold_fn``) and the warm one (a step from a network's tau,
 ``traced_warm_fn``); ``newton_iterate`` takes steps until the one-step gate. Nothing here
-checks an answer: predictor.solve does.
+checks an answer: predictor.solvers.solve does.
 
 Unknowns x (B, 3J) = (F1 N, F2 N, M N·mm) per joint; pressures p (B, J) MPa; tolerances
 (N, N·mm).
@@ -14,12 +14,12 @@ import math
 
 import torch
 
-from predictor.graphs import graph_cache, residual_fn, statics_fn, traced
-from predictor.gripper import rot
-from predictor.jacobians import autograd_jacobian, difference_offsets
-from predictor.lm import lm_step
-from predictor.options import SolverOptions
-from predictor.statics import GripperProblem
+from predictor.solvers.graphs import graph_cache, residual_fn, statics_fn, traced
+from predictor.model.gripper import rot
+from predictor.solvers.jacobians import autograd_jacobian, difference_offsets
+from predictor.solvers.lm import lm_step
+from predictor.solvers.options import SolverOptions
+from predictor.model.statics import GripperProblem
 
 
 #: Quadratic convergence of Newton under gravity, |R_k+1| <= |R_k|² / QUADRATIC (N, N·mm):
@@ -151,7 +151,7 @@ def newton_iterate(problem: GripperProblem, pressures: torch.Tensor, x0: torch.T
     """Full Newton steps from x0, x_k+1 = x_k - (dR/dx)⁻¹ R(x_k) (``_traced_newton_fn``),
     each sample until R(x_k) is within the one-step gate sqrt(tol × QUADRATIC), at most
     min(steps (default NEWTON_STEPS), options.max_iter) steps; nothing is checked here: the
-    caller checks the last iterate (``_newton_then_lm``; with an object, predictor.nn_answer's
+    caller checks the last iterate (``_newton_then_lm``; with an object, predictor.nn.answer's
     branch check, since undamped steps can land on another equilibrium).
 
     pressures (B, J) MPa; x0 (B, J, 3) [N, N, N·mm]. Returns (x (B, 3J), Newton steps taken
@@ -183,7 +183,7 @@ def newton_step(problem: GripperProblem, pressures: torch.Tensor, tau: torch.Ten
     """One full Gauss-Newton step tau - (JᵀJ)⁻¹Jᵀr with the exact Jacobian
     (``autograd_jacobian``), no damping, cap or check: pressures (B, J) MPa, tau (B, J, 3)
     -> (B, J, 3). For measuring what a closed-form step does to a network's tau
-    (predictor.nn_eval.evaluate_contact), not an answer."""
+    (predictor.nn.eval.evaluate_contact), not an answer."""
     B, n_joints = pressures.shape
     J, r, _ = autograd_jacobian(residual_fn(problem))(tau.reshape(B, -1), pressures)
     return (tau.reshape(B, -1) + lm_step(J, r, 1e-12)).reshape(B, n_joints, 3).detach()

@@ -1,4 +1,4 @@
-"""The gesture solver's options (predictor.solve): method, tolerances and limits."""
+"""The gesture solver's options (predictor.solvers.solve): method, tolerances and limits."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -3,7 +3,7 @@
 Each input has one check (a ``Check``: bounds and units), used as the argparse type of
 its flag (``Check.arg``: "--mu: 'nan' is not a finite number (allowed (0, 5])") and by
 the API (``Check.value``: "mu: ..."), so a value refused by one is refused by the other
-with the same reason. ``load_problem`` builds the GripperProblem of predictor.gesture's
+with the same reason. ``load_problem`` builds the GripperProblem of predictor.cli.gesture's
 defaults (joint from predictor.defaults, object from a spec, approach gesture APPROACH)
 and refuses an object the model cannot represent (contract.grasp.object_error) or that cuts
 through the fingers where it is brought in (``placement_error``), and a finger that no
@@ -15,9 +15,9 @@ would start the grasp inside the fingers.
 
 One problem, said (issue 56 §1): every tool and the API solve the gripper by default, the
 right finger with the mirror finger's contact at X = 0 (``plane=True``, the penalty of
-predictor.statics.ContactParams.plane_stiffness), as fem.finger does; ``--no-plane``
+predictor.model.statics.ContactParams.plane_stiffness), as fem.finger does; ``--no-plane``
 (``add_plane``; the API's ``plane=False``) solves one finger alone, which may cross X = 0
-as the paper's do (predictor.statics.apart). Every result names its problem (``"plane":
+as the paper's do (predictor.model.statics.apart). Every result names its problem (``"plane":
 true|false``, ``problem_words``), and a comparison of two results refuses two problems
 (``same_problem``).
 
@@ -38,11 +38,11 @@ import torch
 from contract import cli
 from contract.finger import DEFAULT_FINGER, finger_arg
 from contract.spec import INPUT_BOX, PRESSURE_LIMIT
-from predictor.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
+from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
                                check_pressures, outline_vertices, rot)
-from predictor.joint import check_finger, load_joint
-from predictor.solve import APPROACH, approach_for, solve
-from predictor.statics import ContactParams, GripperProblem, apart, meets, parse_object, plane_overlap
+from predictor.model.joint import check_finger, load_joint
+from predictor.solvers.solve import APPROACH, approach_for, solve
+from predictor.model.statics import ContactParams, GripperProblem, apart, meets, parse_object, plane_overlap
 
 FULL_BOX = (-PRESSURE_LIMIT, PRESSURE_LIMIT, -PRESSURE_LIMIT, PRESSURE_LIMIT)
 
@@ -205,7 +205,7 @@ def approach_arg(text: str):
 
 def add_finger_arguments(ap) -> None:
     """The finger's flags, the same on every tool that solves gestures: --finger,
-    --kinematics, --joint-weight (predictor.gripper.GripperParams)."""
+    --kinematics, --joint-weight (predictor.model.gripper.GripperParams)."""
     ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
                     help="finger description file (TOML, contract.finger; default contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
@@ -232,7 +232,7 @@ def add_arguments(ap, model_help: str = "") -> None:
 
 def finger_record(params: GripperParams) -> dict:
     """The finger a tool answered for, as its JSON records it (name, file digest, chain
-    options): predictor.atlas's and predictor.inverse's "finger"."""
+    options): predictor.planning.atlas's and predictor.cli.inverse's "finger"."""
     return {"name": params.finger.name, "sha256": params.finger.digest, "kinematics": params.kinematics,
             "joint_weight": params.joint_weight}
 
@@ -266,7 +266,7 @@ DEFAULT = "default"
 def load_problem(model: str | None, spec: str | None, gravity: bool = True, params: GripperParams | None = None,
                  mu: float | None = None, object_weight: float | None = None,
                  approach=DEFAULT, joint=None, plane: bool = True) -> GripperProblem:
-    """The GripperProblem of ``predictor.gesture``'s defaults. model: a checkpoint path,
+    """The GripperProblem of ``predictor.cli.gesture``'s defaults. model: a checkpoint path,
     "analytic", or None (the committed surrogate, predictor.defaults); joint: an already
     loaded JointModel instead; spec: an object spec (None: no object); params: finger and
     chain options (None: the paper's finger, default options); mu, object_weight (N):
@@ -274,9 +274,9 @@ def load_problem(model: str | None, spec: str | None, gravity: bool = True, para
     0.3 and GripperParams.object_weight); approach: DEFAULT (APPROACH, or approach_for(J),
     with an object; none without), None (ramp from zero) or J pressures MPa; plane: the
     gripper, the right finger against the mirror finger's contact at X = 0 (True, the
-    default), or one finger alone (False: predictor.statics.apart). ValueError
+    default), or one finger alone (False: predictor.model.statics.apart). ValueError
     (one line) for any bad value, for a model of another joint than the finger's joint
-    parts name (predictor.joint.check_finger), for a finger no gesture can be solved for
+    parts name (predictor.model.joint.check_finger), for a finger no gesture can be solved for
     (``finger_error``: joints loaded beyond the model's box by the parts' weights, fingers
     overlapping at their mounts) and for an object badly placed (``placement_error``)."""
     params = params or GripperParams()

@@ -22,13 +22,13 @@ import dataclasses
 import torch
 
 from contract.grasp import APPROACH_P1
-from predictor.graphs import graph_cache, residual_fn, traced
-from predictor.gripper import outline_vertices
-from predictor.jacobians import jacobian_fn
-from predictor.lm import SHORTENINGS, lbfgs, levenberg_marquardt
-from predictor.options import SolverOptions
-from predictor.progress import Heartbeat
-from predictor.statics import GripperProblem, contact_loads, meets, plane_overlap
+from predictor.solvers.graphs import graph_cache, residual_fn, traced
+from predictor.model.gripper import outline_vertices
+from predictor.solvers.jacobians import jacobian_fn
+from predictor.solvers.lm import SHORTENINGS, lbfgs, levenberg_marquardt
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.progress import Heartbeat
+from predictor.model.statics import GripperProblem, contact_loads, meets, plane_overlap
 
 
 # Default grasp approach gesture (MPa): open joint 1, bring the object in (statics.Obstacle).
@@ -43,7 +43,7 @@ def approach_for(n_joints: int) -> tuple[float, ...]:
 
 def ramp_method(options: SolverOptions) -> str:
     """The method that answers on this path (the ``method`` of its results): "lm" for
-    options.method newton or lm (Newton's own steps are predictor.newton's, without an
+    options.method newton or lm (Newton's own steps are predictor.solvers.newton's, without an
     object), "lbfgs" for lbfgs."""
     return "lbfgs" if options.method == "lbfgs" else "lm"
 
@@ -71,7 +71,7 @@ def homotopy(prob: GripperProblem, step_of):
     """The step solver run(x, p, p_prev=None, jac=None) -> (x, converged (B,), iterations
     (B,), Jacobians or None) of ``prob`` where the fingers meet at X = 0, from
     step_of(problem, hand_over) -> that problem's step solver (the LM's hand_over,
-    predictor.lm.levenberg_marquardt). The stiff plane's LM runs first; after STIFF_TRY
+    predictor.solvers.lm.levenberg_marquardt). The stiff plane's LM runs first; after STIFF_TRY
     iterations its unfinished samples that touch the plane (their start, at p_prev, or
     their iterate crosses X = 0) stop there, and they and the samples that fail touching
     it start again from x through softer planes (PLANE_HOMOTOPY, then the stiff one), each
@@ -401,7 +401,7 @@ def solve_path(problem: GripperProblem, pressures: torch.Tensor, options: Solver
 
     def record_contact(x, p):
         # One contact evaluation per ramp step (no iterate changes): the first pressures
-        # at which the finger touches the object, for grasp planning (predictor.atlas).
+        # at which the finger touches the object, for grasp planning (predictor.planning.atlas).
         new = (contact_depth(problem, x, p)[0] > 0) & first_contact[:, 0].isnan()
         first_contact[new] = p[new]
 

@@ -1,5 +1,5 @@
 """The gesture solvers' result type: GestureResult, a batch of solved gestures with their
-residuals, contact figures and pose (built once by predictor.solve.gesture_result; a result
+residuals, contact figures and pose (built once by predictor.solvers.solve.gesture_result; a result
 derived from another is a ``dataclasses.replace`` of it), and its JSON summary."""
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from dataclasses import dataclass, field, fields
 
 import torch
 
-from predictor.gripper import FACES, FingerPose, part_names, with_rows
-from predictor.statics import NOT_CONVERGED, STATES, GripperProblem, Statics, grasp_state, meets, plane_contact
+from predictor.model.gripper import FACES, FingerPose, part_names, with_rows
+from predictor.model.statics import NOT_CONVERGED, STATES, GripperProblem, Statics, grasp_state, meets, plane_contact
 
 #: The faces a contact site names (gripper.FACES, then the paper's centre-line points).
 SITE_FACES = FACES + ("centre_line",)
@@ -31,14 +31,14 @@ class GestureResult:
     friction_ratio (B,) |f|/N demanded by the object; slip (B,) bool; iterations (B,)
     (summed over ramp steps); time_ms: wall time of the whole batch, up to its residual and
     pose; pose: FingerPose, NaN where not converged (the load-free shape, tau = 0, is
-    ``problem.pose(pressures, 0)``: predictor.plot draws it);
+    ``problem.pose(pressures, 0)``: predictor.model.plot draws it);
     first_contact (B, J) MPa: the pressures of the first ramp step (or the approach, when
     the object is brought in) after which the finger touches the object, NaN when it never
     does (without the ramp, x0 given: the target pressures if the final gesture touches);
     None without an object. joint: the joint model's name; mu: the contact law's friction
     coefficient and object_weight_N: the object's weight (N, 0 without gravity), both None
-    without an object. method: what produced the answers (predictor.solve: "newton", "lm",
-    "lbfgs", "newton+lm" where the LM finished rows; predictor.nn_answer: "nn",
+    without an object. method: what produced the answers (predictor.solvers.solve: "newton", "lm",
+    "lbfgs", "newton+lm" where the LM finished rows; predictor.nn.answer: "nn",
     "nn+newton", "nn+lm", "nn+newton+lm").
 
     friction_ratio is the signed lambda of the contact law (statics.contact_loads; ±1e3

@@ -2,7 +2,7 @@
 
 Unknowns x = (F1, F2, M)_1, .., (F1, F2, M)_J per sample (J joints of the finger, 2 for the
 paper's), (B, n = 3J) in N, N, N·mm. The residual vector is r(x) = [R_F,1, R_M,1/100, ..,
-R_F,J, R_M,J/100, out-of-box penalties] (2n numbers, see predictor.statics); the
+R_F,J, R_M,J/100, out-of-box penalties] (2n numbers, see predictor.model.statics); the
 equilibrium is r = 0 with the penalties inactive.
 
 Methods, all batched over B pressure pairs and starting from tau = 0:
@@ -20,11 +20,11 @@ Methods, all batched over B pressure pairs and starting from tau = 0:
   there), and only its rows that fail or cross X = 0 go on with the plane; the answer
   then depends on how the fingers closed: rows whose load-free pose already lies across
   the plane, and rows that fail or end across it deeper than max_penetration, are ramped
-  from zero pressure instead (predictor.ramp.plane_ramp).
-  With an object: the LM below (predictor.nn_answer starts the same Newton steps,
+  from zero pressure instead (predictor.solvers.ramp.plane_ramp).
+  With an object: the LM below (predictor.nn.answer starts the same Newton steps,
   ``newton_iterate``, from the contact network's tau and checks their branch itself).
 - ``lm``: Levenberg-Marquardt on r with the Jacobian J = dr/dx
-  (B, 2n, n) in one batched pass (predictor.jacobians.jacobian_fn): central differences of the traced
+  (B, 2n, n) in one batched pass (predictor.solvers.jacobians.jacobian_fn): central differences of the traced
   residual (~1e-10 relative: Newton's quadratic convergence is kept); with an object the
   samples that fail so are solved again with the exact reverse-mode Jacobian (the
   contact law has kinks; ``attempts``).
@@ -51,9 +51,9 @@ A result's ``method`` names what produced its answers: "newton", "lm" (also for
 method="newton" with an object, which the LM answers), "lbfgs", or "newton+lm" where the
 LM finished rows the Newton steps' check refused (``joined``).
 
-Where each part lives: the result type predictor.result, the options predictor.options,
-recorded graphs predictor.graphs, Jacobians predictor.jacobians, Newton predictor.newton,
-LM and L-BFGS predictor.lm, the pressure ramp predictor.ramp; this module checks answers
+Where each part lives: the result type predictor.solvers.result, the options predictor.solvers.options,
+recorded graphs predictor.solvers.graphs, Jacobians predictor.solvers.jacobians, Newton predictor.solvers.newton,
+LM and L-BFGS predictor.solvers.lm, the pressure ramp predictor.solvers.ramp; this module checks answers
 and chooses the path.
 
 Data flow: ``solve(problem, pressures, options)`` with a statics.GripperProblem (joint,
@@ -68,16 +68,16 @@ import time
 
 import torch
 
-from predictor.graphs import GRAPHS, as_statics, graph_mode, statics_at, touch, use_graphs
-from predictor.gripper import check_pressures, nan_unless
-from predictor.lm import within
-from predictor.newton import (COLD_STEPS, NEWTON_STEPS, bounds, newton_iterate, newton_step, traced_cold_fn,
+from predictor.solvers.graphs import GRAPHS, as_statics, graph_mode, statics_at, touch, use_graphs
+from predictor.model.gripper import check_pressures, nan_unless
+from predictor.solvers.lm import within
+from predictor.solvers.newton import (COLD_STEPS, NEWTON_STEPS, bounds, newton_iterate, newton_step, traced_cold_fn,
                               traced_warm_fn)
-from predictor.options import SolverOptions
-from predictor.ramp import (APPROACH, approach_for, attempts, plane_first, plane_ramp, plane_rows, ramp_method,
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.ramp import (APPROACH, approach_for, attempts, plane_first, plane_ramp, plane_rows, ramp_method,
                             solve_path)
-from predictor.result import GestureResult, contact_fields, result_labels
-from predictor.statics import GripperProblem, Statics, apart, box_scale, meets, out_of_reach, residual_norms
+from predictor.solvers.result import GestureResult, contact_fields, result_labels
+from predictor.model.statics import GripperProblem, Statics, apart, box_scale, meets, out_of_reach, residual_norms
 
 __all__ = ["APPROACH", "GRAPHS", "GestureResult", "SolverOptions", "approach_for", "gesture_result", "graph_mode",
            "meets_tolerances", "newton_iterate", "newton_polish", "newton_step", "result_labels", "solve",
@@ -184,7 +184,7 @@ def _fingers_meet(problem: GripperProblem, pressures: torch.Tensor, options: Sol
                   t0: float) -> GestureResult:
     """An object-free result whose rows failed, or ended with the finger across X = 0
     deeper than max_penetration (Newton from tau = 0, whose load-free pose can lie far
-    across), solved again by the ramp from zero pressure (predictor.ramp.plane_ramp); the
+    across), solved again by the ramp from zero pressure (predictor.solvers.ramp.plane_ramp); the
     other rows as they are."""
     B = len(pressures)
     again = plane_rows(problem, res.tau.reshape(B, -1), pressures, res.converged, options)

@@ -18,7 +18,7 @@ Newton steps on its branch, converged to the issue's 0.1 mN and 0.01 N·mm per s
 one batch of 2,000 pressures on every core in float64; ``details.contact_throughput`` has
 it at the solver's own tolerance too, and ``contact_ramp_batched_per_s`` the ramp solve's
 batch), ``gravity_batched_per_s`` and ``nn_single_query_ms`` (the
-raw NN path, predictor.nn_answer.predict_gesture with ``polish=False``: network,
+raw NN path, predictor.nn.answer.predict_gesture with ``polish=False``: network,
 kinematics and its residual check; the default path also polishes the gestures of a
 gripper-trained network that press on the plane X = 0, a solver's time, which
 ``gravity_fast_median_ms`` measures). The NN throughputs (``nn_batched_per_s``, ``gravity_batched_per_s``) are measured
@@ -26,7 +26,7 @@ in float32 on every core (``batched_dtype``, ``batched_threads``; the network an
 joint model cast by ``astype``, answers within 1e-4 mN and 1e-4 mm of float64's), with
 float64 on one thread and on every core beside them in the details; every other figure
 on one thread in float64. ``gravity_newton_median_ms`` is the default solve from tau = 0
-(a Picard step and Newton steps in one recorded graph, predictor.solve's cold path, predictor.newton.traced_cold_fn);
+(a Picard step and Newton steps in one recorded graph, predictor.solvers.solve's cold path, predictor.solvers.newton.traced_cold_fn);
 ``gravity_lm_median_ms`` the LM it replaced,
 over the same pressures in the same run.
 
@@ -48,7 +48,7 @@ tau after one closed-form Gauss-Newton step (no iteration or check), the fixed s
 issue allows beside the raw network. The paper's numbers are recorded beside ours.
 
 ``--graphs compile`` records the solver's graphs by torch.compile instead of
-torch.jit.trace (predictor.solve.use_graphs; ``graphs`` in the JSON): the figures are then
+torch.jit.trace (predictor.solvers.solve.use_graphs; ``graphs`` in the JSON): the figures are then
 of that mode, and every graph compiles on its first use (in the warm-ups, not timed).
 
 The JSON file is written atomically (strict JSON); ``--json`` prints its top-level figures.
@@ -67,15 +67,15 @@ import torch
 from contract import cli
 from contract.spec import PRESSURE_LIMIT
 from predictor.artefacts import BENCH
-from predictor.gripper import default_finger
-from predictor.joint import load_joint
-from predictor.networks import sample_pressures
-from predictor.nn_answer import predict_gesture
-from predictor.nn_checkpoint import DEFAULT_DIR, load_predictor, nn_folder
-from predictor.nn_eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished
-from predictor.progress import set_quiet
-from predictor.solve import APPROACH, GRAPHS, SolverOptions, solve, use_graphs
-from predictor.statics import GripperProblem, Obstacle, meets
+from predictor.model.gripper import default_finger
+from predictor.model.joint import load_joint
+from predictor.nn.networks import sample_pressures
+from predictor.nn.answer import predict_gesture
+from predictor.nn.checkpoint import DEFAULT_DIR, load_predictor, nn_folder
+from predictor.nn.eval import contact_fraction, evaluate, evaluate_contact, evaluate_polished
+from predictor.solvers.progress import set_quiet
+from predictor.solvers.solve import APPROACH, GRAPHS, SolverOptions, solve, use_graphs
+from predictor.model.statics import GripperProblem, Obstacle, meets
 
 
 #: samples per figure: the committed bench, and ``--quick`` (tests: every key, no timing)
@@ -113,7 +113,7 @@ def _median_solve_ms(problem, pressures, options=SolverOptions()):
 
 def _fast_path(pred, problem, pressures, method: str, tol_force_mN: float, tol_moment_Nmm: float,
                polish: bool = False) -> dict:
-    """Median single-query time (ms) of predictor.nn_answer.predict_gesture over ``pressures``
+    """Median single-query time (ms) of predictor.nn.answer.predict_gesture over ``pressures``
     (n, J), a network's tau finished by a solver (contact: Newton steps kept on the
     network's branch, else the capped LM polish, the ramp where it fails; gravity with
     ``polish``: one Newton step, the LM where its check fails), and its worst residuals. A
@@ -247,7 +247,7 @@ def _gravity_throughputs(grav_pred, joint, n: dict) -> SimpleNamespace:
     network needs no solver graph."""
     # NN throughput: pressures -> tau -> full gesture (forward kinematics), no autograd, on
     # one thread and on every core (best of 3 each: the machine is shared, and the best
-    # run is the one least disturbed). The delivered path (predictor.nn_answer.predict_gesture)
+    # run is the one least disturbed). The delivered path (predictor.nn.answer.predict_gesture)
     # adds the residual check that refuses an answer outside the NN bound.
     problem = grav_pred.config.problem(joint)
     p_big = torch.rand(n["throughput"], 2, dtype=torch.float64) * (2 * PRESSURE_LIMIT) - PRESSURE_LIMIT
@@ -336,8 +336,8 @@ def _record(args, n: dict, joint, load, preds: tuple, s: SimpleNamespace, m: Sim
 
 
 def _parser() -> cli.Parser:
-    """The command line of ``python -m predictor.bench``."""
-    ap = cli.Parser(prog="python -m predictor.bench", description=__doc__.split("\n\n")[0])
+    """The command line of ``python -m predictor.validation.bench``."""
+    ap = cli.Parser(prog="python -m predictor.validation.bench", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".json", default="results/bench/predictor.json")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
                     "predictor.defaults)")
@@ -346,7 +346,7 @@ def _parser() -> cli.Parser:
                     help="every figure on a few samples (seconds; for tests, not for quoting)")
     ap.add_argument("--graphs", choices=GRAPHS, default="trace",
                     help="record the solver's graphs by torch.jit.trace (default) or torch.compile (inductor's C++: "
-                    "faster, but every graph compiles on first use, minutes in all; predictor.solve.use_graphs)")
+                    "faster, but every graph compiles on first use, minutes in all; predictor.solvers.solve.use_graphs)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return ap
 

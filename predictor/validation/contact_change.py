@@ -2,7 +2,7 @@
 grasp states, the reference ramps' failures and the paper's gestures, before against after
 (issue 36: the contact on the finger's outline and the plane X = 0 where the fingers meet).
 
-    python -m predictor.contact_change --before DIR --label TEXT [--after results/predictor]
+    python -m predictor.validation.contact_change --before DIR --label TEXT [--after results/predictor]
         [--out results/predictor/contact_change.json] [--json]
 
 DIR and --after each hold a predictor results folder: atlas_<object>.json (the sweep),
@@ -107,7 +107,7 @@ def compare(before: Path, after: Path, label: str) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cli.Parser(prog="python -m predictor.contact_change", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m predictor.validation.contact_change", description=__doc__.split("\n\n")[0])
     ap.add_argument("--before", required=True, help="the predictor results folder of the model before")
     ap.add_argument("--label", required=True, help="what the model before is (its commit and model)")
     ap.add_argument("--after", default="results/predictor", help="the predictor results folder of today's model")

@@ -1,17 +1,17 @@
 """The gesture predictor against the whole-finger FEM: ``make validate-finger``.
 
-    python -m predictor.validate_finger --fem results/validation/finger_fem \\
+    python -m predictor.validation.finger --fem results/validation/finger_fem \\
         --model results/surrogate/improved.pt --out results/validation/finger.json [--cases NAME,..]
 
 Data flow: the FEM cases of fem.studies.finger_cases (one JSON and one render per case: tip,
 tip angle, every joint's end and chord angle, global mm/deg; the FEM's solve time) ->
 for each case and each predictor variant, one single-query equilibrium solve
-(predictor.solve, Newton) of the same finger file, pressures, gravity and plane X = 0
+(predictor.solvers.solve, Newton) of the same finger file, pressures, gravity and plane X = 0
 (the mirror finger's; only for a case solved with it, fem.studies.finger_cases' default) -> errors
 against the FEM and wall times -> ``finger.json`` and one overlay figure per case
 (the FEM render coloured by |u|, the predictors' centre lines drawn over it).
 
-Variants (the ``kinematics`` and ``joint_weight`` of predictor.gripper): tangent
+Variants (the ``kinematics`` and ``joint_weight`` of predictor.model.gripper): tangent
 (the paper's chord connection) and cap (the part leaves at the distal cap's rotation),
 each with the joint weights lumped (the paper's) or split between the joint's ends, and
 the gravity-free surrogate chain (tau = 0, method ``chain``) in both kinematics.
@@ -59,15 +59,15 @@ from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
 from contract.joint import FORMULATIONS, MAX_DIVISIONS, mesh_text
-from fem.studies.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
+from fem.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
 from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
-from predictor.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
-from predictor.joint import load_joint
-from predictor.problem import problem_words, same_problem
-from predictor.progress import set_quiet
-from predictor.solve import SolverOptions, solve
-from predictor.statics import GripperProblem, apart
+from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
+from predictor.model.joint import load_joint
+from predictor.solvers.problem import problem_words, same_problem
+from predictor.solvers.progress import set_quiet
+from predictor.solvers.solve import SolverOptions, solve
+from predictor.model.statics import GripperProblem, apart
 
 REPEATS = 5
 #: The discretisation of the committed finger cases, results/validation/finger_fem
@@ -157,7 +157,7 @@ def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_w
 
 def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "") -> None:
     """The FEM render (|u|) with the predictors' centre lines over it (matplotlib, atomic)."""
-    from predictor.plot import draw_fem_render     # first: it puts matplotlib on Agg
+    from predictor.model.plot import draw_fem_render     # first: it puts matplotlib on Agg
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=110)
@@ -271,7 +271,7 @@ def summarise(entries: list[dict]) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = cli.Parser(prog="python -m predictor.validate_finger", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m predictor.validation.finger", description=__doc__.split("\n\n")[0])
     ap.add_argument("--fem", default="results/validation/finger_fem", help="folder of fem.studies.finger_cases results")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
                     "predictor.defaults)")

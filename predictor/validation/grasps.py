@@ -1,14 +1,14 @@
 """The gesture predictor against the whole-finger FEM grasps: ``make validate-grasps`` (issue 36 §3).
 
-    python -m predictor.validate_grasps --fem results/validation/grasps_fem \\
+    python -m predictor.validation.grasps --fem results/validation/grasps_fem \\
         --model results/surrogate/improved.pt --out results/validation/grasps.json \\
         --figures results/validation/grasps [--mesh hex2:3 --formulation mixed] [--finger FILE]
 
 Data flow: the FEM grasp records of fem.studies.grasp_cases in ``--fem`` (one JSON, format
-fem.studies.artefacts.GRASP_CASE, and one render per converged case) -> those on one
+fem.artefacts.GRASP_CASE, and one render per converged case) -> those on one
 discretisation (``--mesh``, ``--formulation``; default the paper joint file's ``[mesh]``,
-the production hex2:3 mixed; selected as predictor.validate_finger does) -> for each, the
-predictor (predictor.problem.load_problem, predictor.solve, Newton; the default finger
+the production hex2:3 mixed; selected as predictor.validation.finger does) -> for each, the
+predictor (predictor.solvers.problem.load_problem, predictor.solvers.solve, Newton; the default finger
 model) with the record's finger file, object, approach, mu, W and gravity, and the plane
 X = 0 only where the record had it; timed as the median of REPEATS single-query solves in
 this run -> differences, targets judged -> ``grasps.json`` (format
@@ -41,7 +41,7 @@ its state not_converged and meets nothing; one the predictor did not solve meets
 but the FEM's time. ``summary``: the worst of each figure over the cases both solved, and
 per target how many cases met it of how many were judged.
 
-The problem (issue 56 §1, as predictor.validate_finger): each record is the gripper's (the
+The problem (issue 56 §1, as predictor.validation.finger): each record is the gripper's (the
 plane X = 0, fem.studies.grasp_cases' default) or one finger alone's, and the predictor solves the
 record's problem; ``--plane`` or ``--no-plane`` validates the records of that problem only,
 and asking for a problem no record was solved for is refused (one line, exit 2). The JSON
@@ -66,15 +66,15 @@ from contract import cli
 from contract.files import atomic_path
 from contract.finger import load_finger, same_finger
 from contract.joint import FORMULATIONS, load_joint as load_joint_file, mesh_text
-from fem.studies.artefacts import GRASP_CASE, finger_case_formulation, finger_case_mesh
+from fem.artefacts import GRASP_CASE, finger_case_formulation, finger_case_mesh
 from predictor.artefacts import GRASP_VALIDATION
-from predictor.gripper import GripperParams
-from predictor.joint import load_joint
-from predictor.problem import load_problem
-from predictor.progress import set_quiet
-from predictor.solve import SolverOptions, solve
-from predictor.statics import GripperProblem, apart
-from predictor.validate_finger import mesh_arg, one_problem, split_cases
+from predictor.model.gripper import GripperParams
+from predictor.model.joint import load_joint
+from predictor.solvers.problem import load_problem
+from predictor.solvers.progress import set_quiet
+from predictor.solvers.solve import SolverOptions, solve
+from predictor.model.statics import GripperProblem, apart
+from predictor.validation.finger import mesh_arg, one_problem, split_cases
 
 REPEATS = 5
 #: issue 36's targets: fingertip (mm), tip angle (deg), normal force (fraction of the FEM's,
@@ -264,7 +264,7 @@ def overlay(path: Path, record: dict, fem_png: Path, pose, pred: dict, fem_label
     """The FEM render (|u|, the object's outline in black) with the predictor's part
     outlines, its contact point and the object's force on the finger, and the FEM's
     contact point and force (matplotlib, atomic)."""
-    from predictor.plot import draw_fem_render, part_outlines     # first: it puts matplotlib on Agg
+    from predictor.model.plot import draw_fem_render, part_outlines     # first: it puts matplotlib on Agg
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 7.2), dpi=110)
@@ -302,7 +302,7 @@ def _contact(ax, point, force, colour: str, marker: str, who: str) -> None:
 
 def build_parser() -> cli.Parser:
     mesh, formulation = production_discretisation()
-    ap = cli.Parser(prog="python -m predictor.validate_grasps", description=__doc__.split("\n\n")[0])
+    ap = cli.Parser(prog="python -m predictor.validation.grasps", description=__doc__.split("\n\n")[0])
     ap.add_argument("--fem", default="results/validation/grasps_fem", help="folder of fem.studies.grasp_cases records "
                     "(default results/validation/grasps_fem)")
     ap.add_argument("--model", help="joint surrogate checkpoint, or 'analytic' (default: the committed surrogate, "
