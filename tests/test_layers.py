@@ -276,8 +276,8 @@ def _pred_floor(module: str) -> str | None:
 def predictor_import_error(importer: str, module: str, names=()) -> str | None:
     """Why ``importer`` (a path under predictor/) may not import ``module``, or None when it
     may: sub-packages import their own and those below them (PRED_FLOORS) and the neutral
-    root modules; the API every sub-package but cli; an alias (root, or a sub-package's
-    ``__main__``) only the command it runs; nobody imports an alias."""
+    root modules; the API every sub-package but cli; an alias at the root only the command
+    it runs; nobody imports an alias."""
     floor = _pred_floor(module)
     if floor is None:
         return None
@@ -291,8 +291,6 @@ def predictor_import_error(importer: str, module: str, names=()) -> str | None:
         return None if floor in allowed else f"{importer} imports {module} (allowed: {allowed})"
     if floor not in PRED_FLOORS:
         return f"{importer} imports {module}: not a module of a predictor sub-package {PRED_FLOORS}"
-    if Path(importer).stem == "__main__":
-        return None if floor == "cli" else f"{importer} (an alias) imports {module}"
     own = parts[1]
     if PRED_FLOORS.index(floor) > PRED_FLOORS.index(own):
         return f"{importer} imports {module}: predictor.{own} may not import predictor.{floor} (upward)"
@@ -329,7 +327,7 @@ def test_the_predictor_checker_refuses_upward_imports():
     assert predictor_import_error("predictor/api.py", "predictor.cli.atlas") is not None
     assert predictor_import_error("predictor/nn/train.py", "predictor", ["cli"]) is not None
     assert predictor_import_error("predictor/gesture.py", "predictor.solvers.solve") is not None  # aliases run a command
-    assert predictor_import_error("predictor/nn/__main__.py", "predictor.cli.nn") is None
+    assert predictor_import_error("predictor/nn/__main__.py", "predictor.cli.nn") is not None  # runs it (runpy)
     assert predictor_import_error("predictor/nn/train.py", "predictor.solvers", ["progress"]) is None
     assert predictor_import_error("predictor/model/joint.py", "predictor.defaults") is None
     assert predictor_import_error("predictor/cli/inverse.py", "predictor.planning.inversion") is None

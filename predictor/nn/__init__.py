@@ -6,9 +6,8 @@
 * ``answer``: a network's answers in the solvers' result format (``NNGestureResult``);
 * ``checkpoint``: integrity-checked checkpoint files (``load_predictor``).
 
-``python -m predictor.nn`` (``__main__``, an alias) runs the training command,
-predictor.cli.nn.
+``python -m predictor.nn`` (``__main__``, the old path of the training command) runs
+predictor.cli.nn without importing it (runpy).
 
-Imports: contract, surrogate, predictor.defaults, predictor.model, predictor.solvers
-(``__main__`` only predictor.cli.nn).
+Imports: contract, surrogate, predictor.defaults, predictor.model, predictor.solvers.
 """
