@@ -6,8 +6,8 @@ y in the bending plane, proximal centre at the origin). Both implementations are
 float64, batched over any leading shape and differentiable in every input, so the
 equilibrium solver can take exact autograd Jacobians through them.
 
-``AnalyticJoint`` is the stand-in (``--model analytic``), used before the FEM-trained
-surrogate existed, and the test oracle (its anchors have a closed form). It is a planar
+``AnalyticJoint`` is the stand-in (``--model analytic``) and the test oracle (its anchors
+have a closed form). It is a planar
 beam of length L = 45.45 mm cut into 10 segments (one per anchor interval, h = L/10);
 ``AnalyticJoint.for_joint(spec)`` is the same beam with another joint description's
 length L and anchor count n (h = L/n), standing for that joint.

@@ -232,9 +232,8 @@ def statics_fn(problem: GripperProblem):
 
 @graph_cache
 def _traced_statics_fn(problem: GripperProblem):
-    """``statics_fn`` recorded by ``traced``: the answer's statics (``gesture_result``) in a
-    third of the eager time (0.43 against 1.21 ms for one query on this machine), bit for
-    bit the same; where the fingers meet, ``gated`` by the plane's overlap."""
+    """``statics_fn`` recorded by ``traced``: the answer's statics (``gesture_result``),
+    faster than eager (docs/decisions.md §11) and bit for bit the same; where the fingers meet, ``gated`` by the plane's overlap."""
     n, J = 3 * problem.n_joints, problem.n_joints
     if not meets(problem):
         return traced(statics_fn(problem), n, J)

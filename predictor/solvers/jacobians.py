@@ -37,7 +37,7 @@ def autograd_jacobian(r_fn):
 
     Copy k of sample b only feeds output row k, so the gradient of sum_k r[b, k, k]
     with respect to copy k is row k of dr/dx: J (B, n, n) of the equilibrium rows in
-    one forward + one backward of an nB batch (vmap(jacfwd) was 7x slower here). The
+    one forward + one backward of an nB batch (docs/decisions.md §11: not vmap(jacfwd)). The
     penalty rows are elementwise in x, so their Jacobian is diagonal and written out.
     The same pass gives dr/dP (B, n, J) for the ramp's tangent predictor.
     """

@@ -106,8 +106,8 @@ def _picard_fn(problem: GripperProblem, tol: tuple[float, float]):
 
 @graph_cache
 def _traced_newton_fn(problem: GripperProblem, tol: tuple[float, float], gate: tuple[float, float]):
-    """``_newton_fn`` recorded by ``traced``: Jacobian, solve and update in one call (0.5
-    ms for one query on this machine, the residual's dispatch being most of it)."""
+    """``_newton_fn`` recorded by ``traced``: Jacobian, solve and update in one call (the
+    residual's dispatch is most of its cost; docs/decisions.md §11)."""
     return traced(_newton_fn(problem, tol, gate), 3 * problem.n_joints, problem.n_joints)
 
 

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class SolverOptions:
     """method: newton | lm | lbfgs (module docstring). Newton and LM tolerances in N and
-    N·mm (1e-4 mN, 1e-5 N·mm: 1000x below the issue's 0.1 mN / 0.01 N·mm target; one
-    extra Newton step costs ~0.5 ms).
+    N·mm (1e-4 mN, 1e-5 N·mm: 1000x below the issue's 0.1 mN / 0.01 N·mm target; an
+    extra Newton step is cheap, docs/decisions.md §11).
     L-BFGS (the paper's reference) runs to its own stall (lbfgs_max_iter iterations per
     ramp step at most) and is accepted at the issue's target (lbfgs_tol_*): on stiff
     contact steps it stalls near 0.02 mN, short of the Newton tolerance. max_iter: LM

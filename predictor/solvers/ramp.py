@@ -195,9 +195,8 @@ _LAST_DEPTH: list = [None]
 def attempts(problem: GripperProblem, options: SolverOptions) -> tuple[str, ...]:
     """The Jacobians a Newton solve tries in turn (``jacobian_fn`` kinds). ``auto`` with
     an object: central differences of the traced residual first (cheaper per call for a
-    few samples: the bench's contact gesture went from 693 to 208 ms), then the exact one
-    for the samples that failed (a difference that straddles a kink of the contact law can
-    stall LM: a three-joint grasp did). Both end at the same equilibria (tested on the
+    few samples), then the exact one for the samples that failed (a difference that
+    straddles a kink of the contact law can stall LM; docs/decisions.md §11). Both end at the same equilibria (tested on the
     three objects' holds, slips and misses)."""
     if options.method in ("newton", "lm") and options.jacobian == "auto" and ramped(problem):
         return ("differences", "exact")

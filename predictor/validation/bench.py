@@ -242,9 +242,7 @@ def _gravity_throughputs(grav_pred, joint, n: dict) -> SimpleNamespace:
     """Batched throughputs of the gravity NN path on one thread and on every core, and its
     single queries. main measures them first, before any solver graph is recorded: once
     torch.compile's graphs have run in a process, the same eager float32 batch runs slower
-    in it (the delivered path 8.6e4 gestures/s measured after the solver figures, 1.13e5
-    before them, two quiet runs of this bench on the same code); a batch job of the
-    network needs no solver graph."""
+    in it (docs/decisions.md §11); a batch job of the network needs no solver graph."""
     # NN throughput: pressures -> tau -> full gesture (forward kinematics), no autograd, on
     # one thread and on every core (best of 3 each: the machine is shared, and the best
     # run is the one least disturbed). The delivered path (predictor.nn.answer.predict_gesture)
