@@ -23,7 +23,7 @@ from predictor.solvers.jacobians import autograd_jacobian
 from predictor.solvers.problem import load_problem
 from predictor.solvers.solve import SolverOptions, solve
 from predictor.model.statics import (ContactParams, GripperProblem, Obstacle, contact_loads, parse_object, plane_contact,
-                               scaled, smooth_penetration)
+                                     scaled, smooth_penetration)
 
 from test_predictor_common import ROOT, SURROGATE, J, t
 

@@ -19,7 +19,7 @@ import torch
 
 from predictor import load_gripper
 from predictor.planning.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, coarse_atlas, search_tip, tip_errors,
-                                 unreachable_reason, wrap_deg)
+                                          unreachable_reason, wrap_deg)
 from predictor.solvers.options import SolverOptions
 from predictor.solvers.problem import FULL_BOX
 from predictor.solvers.solve import solve

@@ -37,7 +37,7 @@ from fem.mesh.discretisation import FORMULATION
 from fem.mesh.geometry import JointGeometry
 from fem.studies.mesh_study import CORNERS
 from fem.options import (add_divisions, add_extrapolation, add_formulation, add_mesh_size, add_wall_mesh_size,
-                             checked_loads, joint_geometry, one_rank)
+                         checked_loads, joint_geometry, one_rank)
 from fem.solvers.joint import JointSolver, Load, SolverConfig
 from contract.spec import INPUT_MIRROR
 

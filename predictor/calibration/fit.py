@@ -45,7 +45,7 @@ import numpy as np
 import torch
 
 from predictor.calibration.model import (CalibrationModel, DEFAULT_FIT, Design, design, equilibrium, predict, resolve_fit,
-                                   sensitivities)
+                                         sensitivities)
 from predictor.calibration.observations import Observations
 
 class FitFailed(RuntimeError):

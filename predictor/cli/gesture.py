@@ -88,7 +88,7 @@ import torch
 from contract import cli
 from predictor.model.joint import load_joint
 from predictor.solvers.problem import (DEFAULT, OBJECT_HELP, PRESSURE, add_arguments, add_finger_arguments, add_plane,
-                               approach_arg, load_problem, object_arg, params_of, pressure_list)
+                                       approach_arg, load_problem, object_arg, params_of, pressure_list)
 from predictor.solvers.solve import APPROACH, SolverOptions, solve
 from predictor.model.statics import STATES, Obstacle, parse_object
 

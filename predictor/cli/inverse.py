@@ -39,10 +39,10 @@ from contract import cli
 from predictor.artefacts import INVERSE, TRACK
 from predictor.planning.atlas import STATES, Atlas, atlas_from_json
 from predictor.planning.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET_HOLD_MS, TARGET_TIP_MS, TIP_TOL_MM,
-                                 VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, coarse_atlas, inverse_pressures,
-                                 parse_goal)
+                                          VERIFY_TOL_MM, Goal, InverseProblem, InverseResult, coarse_atlas,
+                                          inverse_pressures, parse_goal)
 from predictor.solvers.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
-                               approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
+                                       approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
 from predictor.solvers.progress import Heartbeat, set_quiet
 from predictor.model.statics import GripperProblem, meets
 

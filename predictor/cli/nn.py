@@ -26,7 +26,7 @@ from contract import cli
 from contract.finger import finger_arg
 from predictor.solvers import progress
 from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
-                               default_finger)
+                                     default_finger)
 from predictor.model.joint import load_joint
 from predictor.nn.networks import VARIANTS, NNConfig
 from predictor.nn.checkpoint import save_predictor
@@ -34,7 +34,7 @@ from predictor.nn.train import train
 from predictor.solvers.ramp import approach_for
 
 from predictor.nn.networks import (P_SCALE, TAU_SCALE, ContactNet, GestureNet, Predictor,  # noqa: F401
-                                features, network, sample_pressures)
+                                   features, network, sample_pressures)
 from predictor.nn.answer import NNGestureResult, predict_gesture, raw_answer  # noqa: F401
 from predictor.nn.checkpoint import (CONTACT_FORMAT, DEFAULT_DIR, GRAVITY_FORMAT, load_predictor,  # noqa: F401
                                      nn_folder)

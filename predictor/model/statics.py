@@ -72,7 +72,7 @@ from contract import grasp
 from contract.grasp import ObjectSpec
 from contract.spec import INPUT_BOX
 from predictor.model.gripper import (EDGE_GAUSS, PLANE_GAUSS, FingerPose, GripperParams, check_pressures, edge_ends,
-                               edge_points, finger_pose, gauss_rule, outline_vertices, rot)
+                                     edge_points, finger_pose, gauss_rule, outline_vertices, rot)
 from predictor.model.joint import JointModel, no_cap_message
 
 MOMENT_SCALE = 100.0  # mm: moment residuals are divided by this in the loss

@@ -76,8 +76,8 @@ import torch
 from contract.files import read_text, strict_json
 
 from predictor.planning.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_MM, VERIFY_TOL_MM, Goal,
-                                 InverseProblem, Branch, clip_to_box, gauss_newton, search_tip, tip_errors,
-                                 tip_met, wrap_deg)
+                                          InverseProblem, Branch, clip_to_box, gauss_newton, search_tip, tip_errors,
+                                          tip_met, wrap_deg)
 from predictor.solvers.options import SolverOptions
 from predictor.solvers.problem import FULL_BOX, check_box
 from predictor.solvers.result import GestureResult

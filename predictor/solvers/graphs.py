@@ -24,7 +24,7 @@ import torch
 from contract.spec import INPUT_BOX
 from predictor.model.gripper import FingerPose, outline_vertices
 from predictor.model.statics import (ContactState, GripperProblem, PlaneContact, Statics, apart, box_scale, contact_loads,
-                              meets, plane_overlap, range_penalty, scaled)
+                                     meets, plane_overlap, range_penalty, scaled)
 
 
 #: How ``traced`` records a graph (``use_graphs``): "trace", torch.jit.trace (the default:

@@ -39,7 +39,7 @@ from contract import cli
 from contract.finger import DEFAULT_FINGER, finger_arg
 from contract.spec import INPUT_BOX, PRESSURE_LIMIT
 from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
-                               check_pressures, outline_vertices, rot)
+                                     check_pressures, outline_vertices, rot)
 from predictor.model.joint import check_finger, load_joint
 from predictor.solvers.solve import APPROACH, approach_for, solve
 from predictor.model.statics import ContactParams, GripperProblem, apart, meets, parse_object, plane_overlap

@@ -72,10 +72,10 @@ from predictor.solvers.graphs import GRAPHS, as_statics, graph_mode, statics_at,
 from predictor.model.gripper import check_pressures, nan_unless
 from predictor.solvers.lm import within
 from predictor.solvers.newton import (COLD_STEPS, NEWTON_STEPS, bounds, newton_iterate, newton_step, traced_cold_fn,
-                              traced_warm_fn)
+                                      traced_warm_fn)
 from predictor.solvers.options import SolverOptions
 from predictor.solvers.ramp import (APPROACH, approach_for, attempts, plane_first, plane_ramp, plane_rows, ramp_method,
-                            solve_path)
+                                    solve_path)
 from predictor.solvers.result import GestureResult, contact_fields, result_labels
 from predictor.model.statics import GripperProblem, Statics, apart, box_scale, meets, out_of_reach, residual_norms
 
