@@ -22,6 +22,8 @@ Rows are grouped by package; ``{tmp}`` in an argument is replaced by the row's f
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import re
@@ -527,8 +529,6 @@ def runs(tmp_path_factory):
     return list(zip(results, outs))
 
 
-@pytest.mark.parametrize("index", range(len(CASES)),
-                         ids=[f"{m}:{' '.join(a)}"[:80] for m, a, _ in CASES])
 def error_lines(stderr: str) -> list[str]:
     """The non-blank stderr lines that are not progress lines: predictor.solvers.progress's
     heartbeat, ``[label N s] text``, prints one every 10 s of a long run (an atlas on a loaded
@@ -542,15 +542,14 @@ def test_error_lines_skip_the_heartbeat_only():
     assert error_lines("[atlas 12 s] ring 3 of 30\n[inverse --cases 130 s] case 2\n\nprog: error: x\n") == \
         ["prog: error: x"]
     assert error_lines("[atlas] 12 s\n[x 1.5 s] y\n") == ["[atlas] 12 s", "[x 1.5 s] y"]
-    import contextlib
-    import io
-
     buf = io.StringIO()
     with contextlib.redirect_stderr(buf):
         Heartbeat("atlas", every=0.0)("ring 1")     # the format the rule skips, as printed
     assert buf.getvalue().startswith("[atlas ") and error_lines(buf.getvalue()) == []
 
 
+@pytest.mark.parametrize("index", range(len(CASES)),
+                         ids=[f"{m}:{' '.join(a)}"[:80] for m, a, _ in CASES])
 def test_bad_input_exits_2_with_one_line(index, runs):
     (module, args, needle), (r, out) = CASES[index], runs[index]
     stdout, stderr = r["stdout"], r["stderr"]
