@@ -1,4 +1,6 @@
-"""Command-line pieces shared by the fem tools, on top of :mod:`contract.cli` (no dolfinx).
+"""Command-line pieces shared by the fem tools (fem.cli, fem.studies) and workflow's campaign
+commands, on top of :mod:`contract.cli` (no dolfinx; a neutral module at fem's root, so
+that no package imports a command line for them).
 
 * ``--mesh-size`` h (mm) in fem.mesh.discretisation.MESH_SIZE_RANGE, [0.3, 10];
 * the load x = (P MPa, F1 N, F2 N, M N·mm): each option a finite number; the joint's box
