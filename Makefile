@@ -53,7 +53,7 @@ PAPER_MESH := --mesh-size 1.8 --formulation displacement
 PROD_MESH  := --divisions 2 --hex-size 3 --formulation mixed
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact validation \
+.PHONY: help setup demo test bench-fem bench-finger mesh-study mesh-study-tet mesh-causes materials joint-render self-contact joint-outline validation \
         dataset dataset-fine fine-compare production-compare dataset-smoke bench-campaign train sweep learning-curve bench-surrogate failed-samples resolve-samples multifidelity gestures bench-predictor atlas atlas-reference atlas-reference-fine inverse track calibrate-recovery calibration-fem calibrate-demo bench-calibrate finger-fem finger-grid grasp-fem validate-grasps validate-finger validate-finger-h1.8 report clean
 
 help: ## show this help
@@ -130,6 +130,10 @@ mesh-causes: | $(SETUP) ## what limits the joint's mesh convergence: formulation
 materials: results/fem/materials.json ## each hyperelastic law's FEM against its closed form on homogeneous deformations (minutes) -> results/fem/materials.json
 results/fem/materials.json: $(TIMES) fem/physics/materials.py fem/studies/materials_check.py contract/joint.py | $(SETUP)
 	$(PY) -m fem.studies.materials_check --out $@
+
+joint-outline: results/fem/joint_outline.json ## how far the pressurised cells bulge beyond the predictor's outline band (free joint, production mesh, ~3 min); prints the joint file's [outline] table
+results/fem/joint_outline.json: $(TIMES) $(FEM_CODE) | $(SETUP)
+	$(PY) -m fem.studies.joint_outline --out $@
 
 self-contact: results/fem/self_contact.json ## min wall gap over the box corners, on the committed data's 1.8 mm mesh
 results/fem/self_contact.json: $(TIMES) $(FEM_CODE) | $(SETUP)

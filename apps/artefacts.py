@@ -54,6 +54,7 @@ ARTEFACTS = (
     Artefact("fem/mesh_causes.json", "make mesh-causes", fem.MESH_CAUSES),
     Artefact("fem/self_contact.json", "make self-contact", fem.SELF_CONTACT),
     Artefact("fem/materials.json", "make materials", fem.MATERIALS),
+    Artefact("fem/joint_outline.json", "make joint-outline", fem.JOINT_OUTLINE),
     Artefact("fem/heldout_mesh.json", "make fine-compare", workflow.MESH_COMPARISON),
     Artefact("fem/heldout_production.json", "make production-compare", workflow.MESH_COMPARISON),
     Artefact("bench/fem.json", "make bench-fem", fem.BENCH_JOINT),

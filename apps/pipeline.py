@@ -9,17 +9,21 @@ Stages, each run as its own command line (``python -m ...``: every stage keeps i
 checks, one-line errors and resume), in DIR (default results/joints/<joint name>/):
 
     1 render    fem.cli.render --joint           -> render.png, render.json (mesh and one solve)
-    2 train-data   workflow.campaign, seed 1, units of 64 -> data/train/ (resumable)
-    3 heldout-data workflow.campaign, seed 2, units of 16 -> data/heldout/ (resumable)
-    4 train     surrogate.train --config improved -> surrogate.pt (+ surrogate_curve.png)
-    5 evaluate  surrogate.evaluate on the held-out walk -> heldout.json, and on the
+    2 outline   fem.studies.joint_outline        -> joint_outline.json: how far the pressurised
+                cells bulge beyond the predictor's outline band; a joint file without an
+                [outline] table gets the measured one in DIR/joint.toml (not in the digest:
+                nothing before or after it is redone), so the gesture draws it
+    3 train-data   workflow.campaign, seed 1, units of 64 -> data/train/ (resumable)
+    4 heldout-data workflow.campaign, seed 2, units of 16 -> data/heldout/ (resumable)
+    5 train     surrogate.train --config improved -> surrogate.pt (+ surrogate_curve.png)
+    6 evaluate  surrogate.evaluate on the held-out walk -> heldout.json, and on the
                 training split -> train_fit.json
-    6 gesture   predictor.cli.gesture with finger.toml (three joints of the joint, the paper
+    7 gesture   predictor.cli.gesture with finger.toml (three joints of the joint, the paper
                 finger's 60 mm link between them and its 65 mm tip) at pressures (-p, p, p),
                 p = 0.5 min(P_max, 0.3 MPa): the base joint opens, the other two close (a
                 grasp-like pose that keeps the two fingers apart), gravity -> gesture.png,
                 gesture.json
-    7 summary   metrics.json (``heldout`` -> mean_anchor_error_mm, cap_rotation_error_deg,
+    8 summary   metrics.json (``heldout`` -> mean_anchor_error_mm, cap_rotation_error_deg,
                 samples), summary.json and summary.txt: errors, sample counts, wall time
                 per stage
 
@@ -71,7 +75,7 @@ from typing import Callable
 from contract import cli
 from contract.files import sha256_file, write_json, write_text
 from contract.finger import load_finger, parse_finger
-from contract.joint import MAX_DIVISIONS, JointSpec, joint_digest, load_joint
+from contract.joint import MAX_DIVISIONS, JointSpec, joint_digest, load_joint, outline_table
 from contract.spec import PRESSURE_LIMIT
 from workflow.shards import Manifest, ShardError, dataset_digest, load_dataset, split_of
 from workflow.store import recorded_joint
@@ -348,6 +352,26 @@ def render_stage(s: Settings) -> Stage:
                  stdout_to="render.json")
 
 
+def outline_stage(s: Settings) -> Stage:
+    """fem.studies.joint_outline on the pipeline's mesh, the joint's default pressures."""
+    argv = ["-m", "fem.studies.joint_outline", "--joint", str(s.out / "joint.toml"),
+            "--out", str(s.out / "joint_outline.json"), *s.mesh_args(), "--json"]
+    return Stage("outline", argv, ["joint_outline.json"], key_of(joint=s.digest, mesh=s.mesh_args()))
+
+
+def joint_text(s: Settings) -> str:
+    """DIR/joint.toml: the joint file as given, and, when it has no [outline] table and the
+    outline stage has measured one (DIR/joint_outline.json), that table appended."""
+    text = s.joint_file.read_text()
+    measured = s.out / "joint_outline.json"
+    if s.joint.outline is not None or not measured.is_file():
+        return text
+    rows = json.loads(measured.read_text())["bulge_mm"]
+    table = outline_table([r["P_MPa"] for r in rows], [r["pressurised_mm"] for r in rows], [r["other_mm"] for r in rows])
+    return (text.rstrip("\n") + "\n\n# Measured by python -m apps.pipeline's outline stage "
+            "(fem.studies.joint_outline, joint_outline.json).\n" + table)
+
+
 def campaign_stage(s: Settings, name: str, samples: int, seed: int, unit: int) -> Stage:
     root = s.out / "data" / name
     argv = ["-m", "workflow.campaign", "--joint", str(s.out / "joint.toml"), "--samples", str(samples),
@@ -457,8 +481,8 @@ def gesture_stage(s: Settings) -> Stage:
     pressures = ",".join(f"{p!r}" for p in gesture_pressures(s))
     argv = ["-m", "predictor.cli.gesture", "--finger", str(s.out / "finger.toml"), "--model", str(s.out / "surrogate.pt"),
             f"--pressures={pressures}", "--plot", str(s.out / "gesture.png"), "--json", "--quiet"]
-    key = key_of(joint=s.digest, model=sha256_file(s.out / "surrogate.pt"),
-                 finger=sha256_file(s.out / "finger.toml"), argv=argv[6:7])
+    key = key_of(joint=s.digest, model=sha256_file(s.out / "surrogate.pt"), finger=sha256_file(s.out / "finger.toml"),
+                 outline=sha256_file(s.out / "joint.toml"), argv=argv[6:7])
     return Stage("gesture", argv, ["gesture.png", "gesture.json"], key, stdout_to="gesture.json")
 
 
@@ -477,6 +501,7 @@ def summary(s: Settings, pipe: Pipeline, wall_s: float) -> dict:
     """The run's figures (module docstring), from the stages' files."""
     load = lambda name: json.loads((s.out / name).read_text())   # noqa: E731
     heldout, fit, gesture = load("heldout.json"), load("train_fit.json"), load("gesture.json")
+    top = load("joint_outline.json")["bulge_mm"][-1]
     data = {name: dataset_figures(s.out / "data" / name) for name in ("train", "heldout")}
     stages = [{"stage": name, "wall_s": entry["wall_s"], "ran": pipe.ran.get(name, False),
                "finished": entry["finished"]} for name, entry in pipe.record["stages"].items()]
@@ -486,6 +511,9 @@ def summary(s: Settings, pipe: Pipeline, wall_s: float) -> dict:
         "settings": {"train_samples": s.train_samples, "heldout_samples": s.heldout_samples,
                      "mesh_size_mm": s.mesh_size, "divisions": s.divisions, "epochs": train_epochs(s), "ranks": s.ranks},
         "samples": data,
+        "outline": {"P_MPa": top["P_MPa"], "bulge_max_mm": max(top["pressurised_mm"]),
+                    "other_min_mm": min(top["other_mm"]),
+                    "table": "the joint file's" if s.joint.outline is not None else "measured (joint.toml)"},
         "heldout": {k: heldout.get(k) for k in ERROR_KEYS} | {"samples": heldout.get("n")},
         "train_fit": {k: fit.get(k) for k in ERROR_KEYS} | {"samples": fit.get("n")},
         "gesture": {k: gesture.get(k) for k in ("converged", "state", "tip", "tip_angle_deg",
@@ -507,6 +535,9 @@ def summary_text(d: dict) -> str:
     for name, f in d["samples"].items():
         lines.append(f"{name} campaign: {f['samples']} samples, {f['failures']} failures, "
                      f"{f['cpu_hours']:.3f} CPU h of FEM")
+    o = d["outline"]
+    lines.append(f"outline at {o['P_MPa']:g} MPa: the pressurised cells up to {o['bulge_max_mm']:.2f} mm beyond "
+                 f"the band, the other side {o['other_min_mm']:.2f} mm; the predictor draws {o['table']} table")
     for what, e in (("held-out", h), ("training split", t)):
         lines.append(f"surrogate on its {what} ({e['samples']} samples): mean anchor error "
                      f"{e['mean_anchor_error_mm']:.4f} mm, tip {e['tip_error_mm']:.4f} mm, p95 "
@@ -524,10 +555,11 @@ def _deg(v) -> str:
 
 # ---------------------------------------------------------------------- main
 def prepare(s: Settings) -> None:
-    """DIR, its copy of the joint file and its finger file (rewritten only when changed)."""
+    """DIR, its copy of the joint file (joint_text) and its finger file (rewritten only
+    when changed)."""
     s.out.mkdir(parents=True, exist_ok=True)   # its parent exists (--out) or is results/joints
     (s.out / "data").mkdir(exist_ok=True)
-    for name, text in (("joint.toml", s.joint_file.read_text()), ("finger.toml", finger_text(s))):
+    for name, text in (("joint.toml", joint_text(s)), ("finger.toml", finger_text(s))):
         path = s.out / name
         if not path.is_file() or path.read_text() != text:
             write_text(path, text)
@@ -538,8 +570,10 @@ def run(s: Settings) -> dict:
     """Every stage in order; the summary's dict. Raises StageFailed."""
     t0 = time.perf_counter()
     prepare(s)
-    pipe = Pipeline(s, total=8)
+    pipe = Pipeline(s, total=9)
     pipe.run(render_stage(s))
+    pipe.run(outline_stage(s))
+    prepare(s)                                  # joint.toml with the measured [outline], if it lacked one
     pipe.run(campaign_stage(s, "train", s.train_samples, s.seed, TRAIN_UNIT))
     pipe.run(campaign_stage(s, "heldout", s.heldout_samples, s.seed + 1, HELDOUT_UNIT))
     pipe.run(train_stage(s))

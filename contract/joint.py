@@ -31,6 +31,13 @@ A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
 * ``[input_box]``: the training box half-widths ``pressure_mpa`` (|P|), ``force_n``
   (|F1| and |F2|) and ``moment_nmm`` (|M|): contract.spec.INPUT_BOX for this joint;
 * ``[anchors]``: ``count``, the anchor points X_i = (i L / count, 0, 0), i = 1..count;
+* ``[outline]`` (optional): how far a pressurised chamber's cells bulge beyond the band of
+  half-height ``height``/2 that the predictor draws the joint as (predictor.model.gripper), mm,
+  at |P| = ``pressures`` (MPa, increasing, > 0): ``bulge`` on the pressurised side and
+  ``other`` on the opposite one, each one list per pressure of one value per anchor chord
+  (``count`` values: chord k from anchor k to k + 1, chord 0 from the proximal face);
+  measured by fem.studies.joint_outline (``make joint-outline``). Absent: no bulge. Not
+  part of the digest (the FEM never reads it);
 * ``[mesh]``: the defaults it is meshed with: tetrahedra of ``size`` (mm) and
   ``wall_size`` (mm, absent: ``size``), or swept hexahedra of ``divisions`` (a whole number
   in [1, 6]: that many elements through every wall, fem.mesh.hexahedra) instead of the sizes,
@@ -54,7 +61,7 @@ by a channel above the spine), checked before any meshing:
 Every error is a JointFileError (a ValueError), one line naming the file, the table and
 key, and the allowed range; unknown keys, a key given twice, a non-number, NaN or inf and
 a value outside RANGES are refused. ``joint_digest`` identifies the joint's physics and
-contract (every table but ``[mesh]``, and not ``name``). Standard library and numpy only:
+contract (every table but ``[mesh]`` and ``[outline]``, and not ``name``). Standard library and numpy only:
 no dolfinx (contract floor).
 
 Data flow: file -> load_joint -> JointSpec -> fem (JointGeometry(**spec.geometry_kwargs()),
@@ -111,7 +118,9 @@ MIN_ABS_ALPHA = 0.1
 MU0_RANGE = (1e-4, 1e3)
 _TABLES = {"geometry": GEOMETRY_KEYS, "input_box": ("pressure_mpa", "force_n", "moment_nmm"),
            "anchors": ("count",), "mesh": ("size", "wall_size", "divisions", "hex_size", "formulation")}
-_TOP_KEYS = ("format", "name", "geometry", "material", "input_box", "anchors", "mesh")
+_TOP_KEYS = ("format", "name", "geometry", "material", "input_box", "anchors", "mesh", "outline")
+#: The [outline] table's lists: |P| (MPa) and the two sides' bulges (mm) at each.
+OUTLINE_KEYS = ("pressures", "bulge", "other")
 _MATERIAL_COMMON = ("law", "nu", "K", "cap_stiffness", "cap_nu")
 _OPTIONAL = {"size", "wall_size", "divisions", "hex_size", "formulation", "cap_stiffness", "cap_nu", "nu", "K"}
 
@@ -242,6 +251,9 @@ class JointSpec:
     divisions: int = 0
     name: str = "joint"
     hex_size: float | None = None
+    #: ([outline]) |P| (K,) MPa, the pressurised and the other side's bulge (K, anchors) mm per
+    #: anchor chord; None: no bulge.
+    outline: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] | None = None
 
     @property
     def input_box(self) -> np.ndarray:
@@ -408,6 +420,43 @@ def _mesh(source: str, doc: dict, shape: BellowShape, material: MaterialLaw) -> 
     return size, wall, formulation, 0, None
 
 
+def _outline(source: str, doc: dict, shape: BellowShape, count: int) -> tuple | None:
+    """The [outline] table as (pressures (K,), bulge (K, count), other (K, count)) tuples,
+    or None when absent (module docstring)."""
+    if "outline" not in doc:
+        return None
+    where, t = _table(source, doc, "outline", OUTLINE_KEYS)
+    finite = lambda v: all(not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)  # noqa: E731
+                           for x in v)
+    pressures = t["pressures"]
+    if not isinstance(pressures, list) or not pressures or not finite(pressures):
+        raise JointFileError(f"{where}.pressures = {pressures!r} must be a non-empty list of finite numbers")
+    if pressures[0] <= 0 or any(b <= a for a, b in zip(pressures, pressures[1:])):
+        raise JointFileError(f"{where}.pressures = {pressures} must increase from above 0 MPa")
+    half, sides = shape.height / 2, []
+    for key in OUTLINE_KEYS[1:]:
+        rows = t[key]
+        if (not isinstance(rows, list) or len(rows) != len(pressures)
+                or any(not isinstance(r, list) or len(r) != count or not finite(r) for r in rows)):
+            raise JointFileError(f"{where}.{key} must be {len(pressures)} lists (one per pressure) of "
+                                 f"{count} finite numbers (one per anchor chord), mm: remeasure it with "
+                                 f"`make joint-outline` or remove [outline]")
+        if any(abs(x) >= half for r in rows for x in r):
+            raise JointFileError(f"{where}.{key} must lie within +/- height/2 = {half:g} mm")
+        sides.append(tuple(tuple(float(x) for x in r) for r in rows))
+    return (tuple(float(p) for p in pressures), *sides)
+
+
+def outline_table(pressures, bulge, other, digits: int = 3) -> str:
+    """The [outline] table (TOML text) of |P| (K,) MPa and the two sides' bulges (K, n) mm,
+    to ``digits`` decimals of a mm (fem.studies.joint_outline prints it for a joint file)."""
+    row = lambda v: "    [" + ", ".join(f"{x:.{digits}f}" for x in v) + "],"  # noqa: E731
+    lines = ["[outline]", "pressures = [" + ", ".join(f"{p:g}" for p in pressures) + "]"]
+    for key, side in (("bulge", bulge), ("other", other)):
+        lines += [f"{key} = [", *(row(r) for r in side), "]"]
+    return "\n".join(lines) + "\n"
+
+
 def mesh_text(size: float | None, wall_size: float | None = None, divisions: int = 0,
               hex_size: float | None = None) -> str:
     """A mesh in words: ``hexN`` (hexahedra of N divisions), ``hexN:S`` (graded: elements
@@ -438,7 +487,8 @@ def joint_from_dict(doc: dict, source: str = "<joint>") -> JointSpec:
     count = _number(where, "count", anchors["count"], integer=True)
     size, wall, formulation, divisions, hex_size = _mesh(source, doc, shape, material)
     return JointSpec(shape, material, **box, anchors=count, mesh_size=size, wall_mesh_size=wall,
-                     formulation=formulation, divisions=divisions, name=name, hex_size=hex_size)
+                     formulation=formulation, divisions=divisions, name=name, hex_size=hex_size,
+                     outline=_outline(source, doc, shape, count))
 
 
 def parse_joint(text: str, source: str = "<joint>") -> JointSpec:
@@ -486,17 +536,23 @@ def joint_to_dict(joint: JointSpec) -> dict:
     mesh["formulation"] = joint.formulation
     if joint.wall_mesh_size is not None:
         mesh["wall_size"] = joint.wall_mesh_size
-    return {"format": FORMAT, "name": joint.name,
-            "geometry": {k: getattr(joint.shape, k) for k in GEOMETRY_KEYS},
-            "material": material_dict(joint.material),
-            "input_box": {"pressure_mpa": joint.pressure_mpa, "force_n": joint.force_n,
-                          "moment_nmm": joint.moment_nmm},
-            "anchors": {"count": joint.anchors}, "mesh": mesh}
+    d = {"format": FORMAT, "name": joint.name,
+         "geometry": {k: getattr(joint.shape, k) for k in GEOMETRY_KEYS},
+         "material": material_dict(joint.material),
+         "input_box": {"pressure_mpa": joint.pressure_mpa, "force_n": joint.force_n,
+                       "moment_nmm": joint.moment_nmm},
+         "anchors": {"count": joint.anchors}, "mesh": mesh}
+    if joint.outline is not None:
+        pressures, bulge, other = joint.outline
+        d["outline"] = {"pressures": list(pressures), "bulge": [list(r) for r in bulge],
+                        "other": [list(r) for r in other]}
+    return d
 
 
 def joint_digest(joint: JointSpec) -> str:
     """sha256 of the joint's physics and contract: the canonical JSON of every table but
-    ``[mesh]`` (a discretisation, recorded on its own by the stages), without ``name``.
+    ``[mesh]`` (a discretisation, recorded on its own by the stages) and ``[outline]`` (the
+    predictor's drawing of it, which no FEM reads), without ``name``.
     Comments, key order, number spelling (45 or 45.0) and renaming do not change it."""
     d = joint_to_dict(joint)
     body = {k: d[k] for k in ("format", "geometry", "material", "input_box", "anchors")}

@@ -42,6 +42,12 @@ SELF_CONTACT = Format("fem-self-contact", 1, "fem.studies.self_contact", {
     "unsolved_cases": int, "cases[].load": list, "cases[].phi_end_deg": NUM,
     "cases[].min_gap_mm": MAYBE, "cases[].converged?": bool})
 
+#: results/fem/joint_outline.json (make joint-outline): how far the pressurised cells bulge
+#: beyond the outline's band, per |P| and anchor chord (fem.studies.joint_outline).
+JOINT_OUTLINE = Format("fem-joint-outline", 1, "fem.studies.joint_outline", {
+    "joint": str, "half_height_mm": NUM, "bulge_mm[].P_MPa": NUM, "bulge_mm[].pressurised_mm": list,
+    "bulge_mm[].other_mm": list, "mirror.pressurised_mm": list, "mirror.other_mm": list, "wall_time_s": NUM})
+
 #: results/bench/fem.json (make bench-fem): joint FEM timings on one core, the production
 #: discretisation's under plain keys and the paper's 1.8 mm mesh's, from the same run, under
 #: keys ending in ``_1.8`` (``continuation_sample_s_1.8``; not listed here: a key path cannot

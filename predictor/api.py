@@ -29,7 +29,7 @@ import torch
 from contract.finger import FingerSpec, load_finger
 from predictor.planning import atlas as _atlas
 from predictor.planning import inversion as _inverse
-from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
+from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, DEFAULT_OUTLINE, GripperParams, default_finger
 from predictor.solvers.problem import FULL_BOX, load_problem
 from predictor.solvers.solve import GestureResult, SolverOptions, solve
 from predictor.model.statics import STATES
@@ -62,7 +62,7 @@ class Gesture:
 def load_gripper(model: str | None = None, object: str | None = None, gravity: bool = True,
                  finger: str | Path | FingerSpec | None = None, kinematics: str = DEFAULT_KINEMATICS,
                  joint_weight: str = DEFAULT_JOINT_WEIGHT, mu: float | None = None,
-                 object_weight: float | None = None, plane: bool = True) -> Gripper:
+                 object_weight: float | None = None, plane: bool = True, outline: str = DEFAULT_OUTLINE) -> Gripper:
     """model: a surrogate checkpoint path, "analytic", or None (the committed surrogate,
     results/surrogate/improved.pt of this package or $SOFTJOINT_RESULTS; ValueError when
     missing); object: a spec such as "circle" or "ellipse:a=35,b=25,y=-200" (None: no
@@ -70,13 +70,14 @@ def load_gripper(model: str | None = None, object: str | None = None, gravity: b
     contract/fingers/paper.toml); kinematics "tangent" | "cap"; joint_weight "lumped" | "split";
     mu: friction coefficient, object_weight: N (None: the defaults 0.3 and 0.2 N)
     plane: the gripper, the mirror finger's contact at X = 0 (True), or one finger alone
-    (False) (predictor.cli.gesture's --finger, --kinematics, --joint-weight, --mu,
-    --object-weight, --no-plane).
+    (False); outline "band" | "bulged" (predictor.cli.gesture's --finger, --kinematics,
+    --joint-weight, --mu, --object-weight, --no-plane, --outline).
     ValueError (one line) for a bad spec, finger file, model, option, an object the model
     cannot represent or one cutting through the fingers at the approach gesture."""
     if finger is not None and not isinstance(finger, FingerSpec):
         finger = load_finger(finger)
-    params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight)
+    params = GripperParams(finger or default_finger(), kinematics=kinematics, joint_weight=joint_weight,
+                           outline=outline)
     return Gripper(load_problem(model, object, gravity, params, mu=mu, object_weight=object_weight, plane=plane),
                    object)
 

@@ -58,6 +58,8 @@ def joint_text(law: str = "neo-hookean", name: str = "paper", **replace) -> str:
         text, n = re.subn(r"^divisions = [^\n]*\nhex_size = [^\n]*$", "size = 0", text, flags=re.M)
         assert n == 1
     text = text.replace('name = "paper"', f'name = "{name}"')
+    if "count" in replace:     # the bulge table is one value per chord of the paper's 10 anchors
+        text = text[:text.index("[outline]")]
     for key, value in replace.items():
         text, n = re.subn(rf"^{key} = [^\n]*$", f"{key} = {value}", text, flags=re.M)
         assert n == 1, key

@@ -58,7 +58,7 @@ def test_pipeline_end_to_end(run):
 
     out, res = run
     lines = res.stdout.splitlines()
-    assert len(lines) == 8 and all(line.startswith(f"[pipeline] {k + 1}/8 ") for k, line in enumerate(lines))
+    assert len(lines) == 9 and all(line.startswith(f"[pipeline] {k + 1}/9 ") for k, line in enumerate(lines))
     summary = json.loads((out / "summary.json").read_text())
     for name, n in (("train", 48), ("heldout", 16)):
         manifest = Manifest.load(out / "data" / name)
@@ -68,6 +68,13 @@ def test_pipeline_end_to_end(run):
     assert metrics["heldout"]["cap_rotation_error_deg"] is not None
     for name in ("render.png", "surrogate.pt", "gesture.png", "summary.txt", "finger.toml", "joint.toml"):
         assert (out / name).stat().st_size > 0, name
+    # the outline stage: the pressurised side bulges (measured 3.2 mm at 0.3 MPa on this 6 mm mesh), the
+    # paper's joint file has its own table, so DIR/joint.toml is the file as given
+    outline = json.loads((out / "joint_outline.json").read_text())
+    assert [r["P_MPa"] for r in outline["bulge_mm"]] == [0.025, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3]
+    assert 1.0 < summary["outline"]["bulge_max_mm"] < 5.0 and summary["outline"]["table"] == "the joint file's"
+    assert np.allclose(outline["mirror"]["pressurised_mm"], outline["bulge_mm"][-1]["pressurised_mm"], atol=1e-8)
+    assert (out / "joint.toml").read_text() == PAPER.read_text()
 
     model = load_surrogate(out / "surrogate.pt")
     assert joint_digest(model.joint) == joint_digest(load_joint(PAPER)) == summary["joint"]["sha256"]
@@ -104,7 +111,7 @@ def test_resume_skips_every_stage(run):
     again = pipeline("--joint", str(PAPER), "--out", str(out), *TINY, timeout=300)
     assert again.returncode == 0, again.stderr[-3000:]
     lines = again.stdout.splitlines()
-    assert len(lines) == 8 and all("skipped, up to date" in line for line in lines[:7]), again.stdout
+    assert len(lines) == 9 and all("skipped, up to date" in line for line in lines[:8]), again.stdout
     assert _fem_files(out) == before and len(before) == 4       # 2 manifests, 2 shards
     second = json.loads((out / "summary.json").read_text())
     assert not any(stage["ran"] for stage in second["stages"])
@@ -129,6 +136,29 @@ def test_bad_input_exits_2_with_one_line(run, tmp_path):
         assert res.stdout == ""
     assert not (tmp_path / "a").exists()
     assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == held
+
+
+def test_a_joint_without_an_outline_gets_the_measured_one(tmp_path):
+    """joint_text: a joint file without [outline] gets the outline stage's table appended
+    (contract.joint.outline_table of its record), which parses back to the record's values
+    and leaves the digest; a file with its own table is copied as it is."""
+    from apps.pipeline import Settings, joint_text
+    from contract.joint import joint_digest, load_joint
+
+    text = PAPER.read_text()
+    bare = tmp_path / "bare.toml"
+    bare.write_text(text[: text.index("[outline]")])
+    s = Settings(load_joint(bare), bare, tmp_path, "small", 1, 1, None, None, None, 1, "", None)
+    assert joint_text(s) == bare.read_text()                  # nothing measured yet
+    rows = [{"P_MPa": p, "pressurised_mm": [0.1 * k + p] * 10, "other_mm": [-p] * 10}
+            for k, p in enumerate((0.1, 0.3))]
+    (tmp_path / "joint_outline.json").write_text(json.dumps({"bulge_mm": rows}))
+    (tmp_path / "joint.toml").write_text(joint_text(s))
+    joint = load_joint(tmp_path / "joint.toml")
+    assert joint.outline == ((0.1, 0.3), ((0.1,) * 10, (0.4,) * 10), ((-0.1,) * 10, (-0.3,) * 10))
+    assert joint_digest(joint) == s.digest
+    s = Settings(load_joint(PAPER), PAPER, tmp_path, "small", 1, 1, None, None, None, 1, "", None)
+    assert joint_text(s) == text
 
 
 def test_generated_finger_and_gesture_pressure(tmp_path):

@@ -238,7 +238,9 @@ def test_finger_pose_mirrored_and_masked():
     p = t([[-0.1, 0.1], [0.2, 0.05], [0.05, -0.2]])
     pose = solve(GRAVITY, p).pose
     names = [f.name for f in dataclasses.fields(FingerPose) if not f.metadata.get("static")]
-    assert names == ["joints", "segments", "theta", "phi", "points"]
+    assert names == ["joints", "segments", "theta", "phi", "points", "band"]
+    assert pose.band is None          # the band outline (a bulged one's heights: tests/test_joint_outline.py)
+    names.remove("band")
     assert pose.joints.shape == (3, 2, 11, 2) and pose.segments.shape == (3, 2, 2, 2)
     assert pose.points.shape == (3, 25 * EDGE_GAUSS, 2)   # joint 2's 20 chords, link 2, tip 3 faces
     mirror, hand = pose.mirrored(), _hand_mirrored(pose)

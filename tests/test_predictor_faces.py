@@ -66,6 +66,7 @@ def _joint_finger(folder, counts):
     from contract.finger import load_finger
 
     joint = (ROOT / "contract/joints/paper.toml").read_text()
+    joint = joint[:joint.index("[outline]")]     # its bulge table is one value per chord of 10 anchors
     parts = PAPER.split("[[part]]")
     for i, n in zip((1, 3), counts):
         (folder / f"j{n}.toml").write_text(joint.replace('name = "paper"', f'name = "j{n}"').replace(

@@ -38,7 +38,8 @@ def _variant_label(e: dict) -> str:
     """A finger.json variant in words, from its entry's own fields."""
     if e["method"] == "chain":
         return f"surrogate chain (tau = 0), {e['kinematics']} kinematics"
-    return f"{e['kinematics']} kinematics, {e['joint_weight']} joint weights"
+    outline = ", the bulged joint outline" if e.get("outline") == "bulged" else ""
+    return f"{e['kinematics']} kinematics, {e['joint_weight']} joint weights{outline}"
 
 def _words(mesh: str, formulation: str) -> str:
     """A discretisation in the report's words: "1.8 mm displacement", "hex2:3 mixed"."""
@@ -179,8 +180,11 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
                         "`python -m predictor.validation.finger` (joint model "
                         f"{joint_model(root, v.get('joint'))}): the finger FEM render "
                         "(`python -m fem.studies.finger_cases`, coloured by |u|) with the predictor's centre lines drawn over "
-                        f"it (black: the judged variant, `{v.get('judged_variant')}`; red dashed: the paper's "
-                        "chain, tangent kinematics with lumped joint weights); orange circle, the FEM fingertip.",
+                        f"it (black: the judged variant, `{v.get('judged_variant')}`; "
+                        + ("blue dotted: the same with the other joint outline; "
+                           if any(e.get("outline") == "bulged" for e in v["cases"]) else "")
+                        + "red dashed: the paper's chain, tangent kinematics with lumped joint weights); orange "
+                        "circle, the FEM fingertip.",
                         "make validate-finger")
     rest = [c for c in figures if c not in shown]
     links = [f"[{c}]({figures[c]})" if (root / figures[c]).is_file() else f"{c} (not generated yet: "
@@ -266,11 +270,11 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
     # the judged variant first, the rest in finger.json's order
     variants = [judged] + [k for k in s if k != judged and k in kinds]
     label = {k: _variant_label(kinds[k]) for k in variants if k in kinds}
-    short = {k: ("chain / " + e["kinematics"] if e["method"] == "chain" else f"{e['kinematics']} / {e['joint_weight']}")
-             for k, e in kinds.items()}
+    short = {k: ("chain / " + e["kinematics"] if e["method"] == "chain" else f"{e['kinematics']} / {e['joint_weight']}"
+                 + (" / bulged" if e.get("outline") == "bulged" else "")) for k, e in kinds.items()}
     # the paper's finger model: tangent kinematics, lumped weights, equilibrium solved
-    paper = next((k for k, e in kinds.items() if (e["method"], e["kinematics"], e["joint_weight"])
-                  == ("predictor", "tangent", "lumped")), None)
+    paper = next((k for k, e in kinds.items() if (e["method"], e["kinematics"], e["joint_weight"], e.get("outline", "band"))
+                  == ("predictor", "tangent", "lumped", "band")), None)
     name = f"{label.get(judged, judged)} (`{judged}`)"
     out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validation.finger`): the "
             f"finger FEM (`python -m fem.cli.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
@@ -280,7 +284,8 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
             f"single-query Newton solve (median of {v['repeats']}), timed in this validation run. Angle errors are "
             f"predictor minus FEM. The variant finger.json judges is **{name}**; the others are shown beside it"
             + (f", the paper's being {label[paper]} (`{paper}`)." if paper else "."), "",
-            "Per case, each variant's fingertip error / tip angle error (columns: kinematics / joint weights; "
+            "Per case, each variant's fingertip error / tip angle error (columns: kinematics / joint weights, "
+            "/ bulged: the joint outline with its pressurised cells' bulge, `make joint-outline`; "
             "chain: the surrogate chain with tau = 0, no equilibrium solve), the FEM's wall time and the judged "
             "variant's time (both from finger.json):", "",
             "| case | FEM tip (X, Y) mm, angle | " + " | ".join(
@@ -371,8 +376,27 @@ def _reference_lines(root: Path, v: dict, judged: str, j: dict) -> list[str]:
             f"validation is the production-mesh cases{_problem(v)} solved so far ({j['cases']}; `make finger-grid` adds "
             f"the grid's as they finish), so a count short of the target is the FEM still running; its predictor "
             "times are single queries timed while two FEM jobs shared the machine's two cores, the cases pressing on "
-            "the plane solved by the ramp. Its worst case, "
-            f"{worst['case']} ({worst['tip_error_mm']:.2f} mm), is where a joint's valley crests carry the plane: the "
-            "predictor meets the plane with its outline, whose joint bands are the undeformed outer envelope about the "
-            "centre line (it neglects the cells' ballooning and shrinking under pressure), so there the two outlines differ "
-            "(docs/decisions.md §9); the lone-finger reference has no plane."]
+            "the plane solved by the ramp. " + _outline_lines(v, judged, worst)]
+
+
+def _outline_lines(v: dict, judged: str, worst: dict) -> str:
+    """The judged variant's worst case, and what the other joint outline (band or bulged,
+    predictor.model.gripper.OUTLINES) gives there and at its own worst, where finger.json has it."""
+    other = judged.removesuffix("_bulged") if judged.endswith("_bulged") else judged + "_bulged"
+    rows = {e["case"]: e for e in v["cases"] if e["variant"] == other}
+    text = f"Its worst case is {worst['case']} ({worst['tip_error_mm']:.2f} mm)"
+    if not rows:
+        return text + "; the lone-finger reference has no plane."
+    o_worst = max(rows.values(), key=lambda e: e["tip_error_mm"])
+    there = rows[worst["case"]]["tip_error_mm"] if worst["case"] in rows else float("nan")
+    band = ("the band outline (each joint the undeformed outer envelope about its centre line) misses the bulge "
+            "of a pressurised chamber's cells, which carry the plane where P2 < 0 presses joint 2 on it")
+    bulged = ("the bulged outline (the free joint FEM's bulge per anchor chord and pressure, `make joint-outline`, "
+              "the joint file's [outline])")
+    if other.endswith("_bulged"):
+        return (f"{text}: {band}. With {bulged} that case is {there:.2f} mm and the worst of all "
+                f"{o_worst['tip_error_mm']:.2f} mm ({o_worst['case']}; docs/decisions.md §9); the lone-finger "
+                "reference has no plane.")
+    return (f"{text}, with {bulged}. The band outline, which misses the bulge of a pressurised chamber's cells "
+            f"where they carry the plane, gave {there:.2f} mm there and {o_worst['tip_error_mm']:.2f} mm at worst "
+            f"({o_worst['case']}; docs/decisions.md §9); the lone-finger reference has no plane.")

@@ -87,6 +87,10 @@ EDGE_GAUSS = 6
 #: penalty profile is piecewise quadratic (exact where it lies within the C1 ramp, or
 #: beyond it).
 PLANE_GAUSS = 3
+#: A joint's outline across its chambers: ``band`` (half-height H/2 at every anchor) or
+#: ``bulged`` (and the bulge of a pressurised chamber's cells, its joint file's [outline]).
+OUTLINES = ("band", "bulged")
+DEFAULT_OUTLINE = "band"
 #: The defaults: the chain that matches the whole-finger FEM (results/validation/finger_h1.8.json:
 #: fingertip within 0.5 mm, against 5 mm for the paper's tangent kinematics).
 DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT = "cap", "split"
@@ -354,7 +358,9 @@ class GripperParams:
     two anchors) or ``cap`` (along the distal cap face, the joint model's cap rotation);
     joint_weight: ``lumped`` (at the mean of the anchors) or ``split`` (half at each end);
     surface: where the object touches, ``faces`` (the outline, the default) or
-    ``centre_line`` (the paper's sample points on the parts' centre lines).
+    ``centre_line`` (the paper's sample points on the parts' centre lines);
+    outline: a joint's outline, ``band`` or ``bulged`` (its pressurised cells' bulge,
+    ``joint_bulge``).
 
     Paper defaults (docs/gripper.md, contract/fingers/paper.toml; Figure S4 is unavailable): link
     60 mm, tip 65 mm, base mounts 50 mm apart, which give the paper's 50 mm free tip
@@ -367,6 +373,7 @@ class GripperParams:
     kinematics: str = DEFAULT_KINEMATICS
     joint_weight: str = DEFAULT_JOINT_WEIGHT
     surface: str = DEFAULT_SURFACE
+    outline: str = DEFAULT_OUTLINE
 
     def __post_init__(self):
         if self.kinematics not in KINEMATICS:
@@ -377,6 +384,9 @@ class GripperParams:
         # it on every evaluation.
         object.__setattr__(self, "_layout", chain_layout(self.finger, self.joint_weight, self.surface))
         object.__setattr__(self, "_calibration", joint_calibration(self.finger))
+        if self.outline not in OUTLINES:
+            raise ValueError(f"outline {self.outline!r}: use {' or '.join(OUTLINES)}")
+        object.__setattr__(self, "_bulge", joint_bulge(self.finger) if self.outline == "bulged" else None)
 
     @property
     def n_joints(self) -> int:
@@ -390,6 +400,11 @@ class GripperParams:
     def calibration(self) -> tuple[tuple[float, ...], ...] | None:
         """The finger file's joint calibration (joint_calibration), read once."""
         return self._calibration
+
+    @property
+    def bulge(self) -> tuple | None:
+        """The joints' bulge tables (joint_bulge) with outline ``bulged``, else None."""
+        return self._bulge
 
     @property
     def base_gap(self) -> float:
@@ -428,6 +443,7 @@ def _segment_midpoints(start: torch.Tensor, direction: torch.Tensor, length: flo
 
 ANGLE = {"angle": True}  # FingerPose field metadata: an angle (rad), not points (mm)
 STATIC = {"static": True}  # FingerPose field metadata: the same for every sample (not a tensor)
+SIZE = {"size": True}  # FingerPose field metadata: lengths (mm) a mirror keeps, or None
 
 
 @dataclass
@@ -453,17 +469,24 @@ class FingerPose:
     phi: torch.Tensor = field(metadata=ANGLE)
     points: torch.Tensor
     finger: FingerSpec = field(metadata=STATIC)
+    band: torch.Tensor | None = field(default=None, metadata=SIZE)
 
-    def _map(self, points, angles=None) -> "FingerPose":
-        """Apply points(v) to every point field and angles(v) (default: points) to the angles."""
-        angles = angles or points
-        return FingerPose(**{f.name: getattr(self, f.name) if f.metadata.get("static") else
-                             (angles if f.metadata.get("angle") else points)(getattr(self, f.name))
-                             for f in fields(self)})
+    def _fields(self, fn) -> "FingerPose":
+        """A FingerPose of fn(field, value) over every field but the static ones and a
+        missing band."""
+        return FingerPose(**{f.name: v if f.metadata.get("static") or v is None else fn(f, v)
+                             for f in fields(self) for v in (getattr(self, f.name),)})
+
+    def _map(self, points, angles=None, sizes=None) -> "FingerPose":
+        """Apply points(v) to every point field, angles(v) (default: points) to the angles
+        and sizes(v) (default: points) to the band."""
+        angles, sizes = angles or points, sizes or points
+        return self._fields(lambda f, v: (angles if f.metadata.get("angle") else
+                                          sizes if f.metadata.get("size") else points)(v))
 
     def mirrored(self) -> "FingerPose":
-        """The left finger: X -> -X for points, angle a -> pi - a."""
-        return self._map(lambda v: v * v.new_tensor([-1.0, 1.0]), lambda a: math.pi - a)
+        """The left finger: X -> -X for points, angle a -> pi - a (the band as it is)."""
+        return self._map(lambda v: v * v.new_tensor([-1.0, 1.0]), lambda a: math.pi - a, lambda v: v)
 
     def masked(self, ok: torch.Tensor) -> "FingerPose":
         """NaN in every field where ok (B,) bool is False (a non-converged gesture)."""
@@ -471,13 +494,11 @@ class FingerPose:
 
     def with_rows(self, rows: torch.Tensor, other: "FingerPose") -> "FingerPose":
         """A copy whose ``rows`` (B,) bool come from other (a pose of rows.sum() samples)."""
-        return FingerPose(**{f.name: getattr(self, f.name) if f.metadata.get("static") else
-                             with_rows(getattr(self, f.name), rows, getattr(other, f.name)) for f in fields(self)})
+        return self._fields(lambda f, v: with_rows(v, rows, getattr(other, f.name)))
 
     def rows(self, index) -> "FingerPose":
         """The pose of samples ``index`` (a bool mask or indices over B)."""
-        return FingerPose(**{f.name: getattr(self, f.name) if f.metadata.get("static") else getattr(self, f.name)[index]
-                             for f in fields(self)})
+        return self._fields(lambda f, v: v[index])
 
     # ---- chain-generic views
     def part_polylines(self) -> list[tuple[str, torch.Tensor]]:
@@ -551,6 +572,50 @@ class FingerPose:
         return self._points_of(3)
 
 
+def joint_bulge(finger: FingerSpec) -> tuple[tuple[torch.Tensor, torch.Tensor], ...]:
+    """Per joint of ``finger``, its [outline] table (contract.joint) as the hinges of a
+    piecewise-linear law in |P|: (knots (K + 1,) MPa, slope changes (2, K + 1, n + 1)
+    mm/MPa) over the band's n + 1 vertices, side 0 the pressurised chamber's, side 1 the
+    other's, such that shift(|P|) = sum_k relu(|P| - knot_k) slope_k is the table's value
+    at every tabled pressure, 0 at P = 0 and linear beyond the last (joints without a table:
+    zero). Vertex m takes the larger bulge of the chords on either side of it, m - 1 and m
+    (the ends: their one chord), so the band's edge over chord k lies beyond its material."""
+    out = []
+    for part in finger.parts:
+        if part.kind != "joint":
+            continue
+        n = part.spec.anchors
+        table = part.spec.outline
+        if table is None:
+            out.append((torch.zeros(1, dtype=torch.float64), torch.zeros(2, 1, n + 1, dtype=torch.float64)))
+            continue
+        pressures, *sides = table
+        x = torch.tensor((0.0,) + pressures, dtype=torch.float64)
+        chords = torch.tensor(sides, dtype=torch.float64)                     # (2, K, n)
+        wide = torch.cat((chords[..., :1], chords), -1)
+        vertex = torch.maximum(wide, torch.cat((chords, chords[..., -1:]), -1))   # (2, K, n + 1)
+        y = torch.cat((torch.zeros(2, 1, n + 1, dtype=torch.float64), vertex), 1)
+        slope = (y[:, 1:] - y[:, :-1]) / (x[1:] - x[:-1])[:, None]            # (2, K, n + 1)
+        change = slope - torch.cat((torch.zeros_like(slope[:, :1]), slope[:, :-1]), 1)
+        out.append((x[:-1], change))
+    return tuple(out)
+
+
+def band_half_heights(pressures: torch.Tensor, bulge, half_height: float) -> torch.Tensor:
+    """The joints' band half-heights (B, J, 2, n + 1) mm at effective pressures (B, J) MPa:
+    side 0 the inner (-nu) face, side 1 the outer (+nu), H/2 plus the bulge of ``bulge``
+    (joint_bulge). P > 0 pressurises the chamber on the +nu side (predictor.model.joint), so the
+    outer face takes the pressurised bulge where P > 0, the inner face where P < 0."""
+    rows = []
+    for j, (knots, change) in enumerate(bulge):
+        p = pressures[:, j]
+        hinge = torch.relu(p.abs()[:, None] - knots.to(p.dtype))              # (B, K)
+        press, other = torch.einsum("bk,skv->sbv", hinge, change.to(p.dtype))  # (B, n + 1) each
+        opened = (p < 0)[:, None]
+        rows.append(torch.stack((torch.where(opened, press, other), torch.where(opened, other, press)), 1))
+    return half_height + torch.stack(rows, 1)
+
+
 def joint_calibration(finger: FingerSpec) -> tuple[tuple[float, ...], ...] | None:
     """(gains, offsets MPa, stiffness scales), one per joint, of a calibrated finger file
     (contract.finger; predictor.cli.calibrate writes them), or None when every joint is the
@@ -611,6 +676,8 @@ def finger_pose(joint: JointModel, params: GripperParams, pressures: torch.Tenso
         phi=torch.stack(phi, -1),
         points=torch.cat(points, 1) if points else torch.zeros(B, 0, 2, dtype=tau.dtype),
         finger=finger,
+        band=None if params.bulge is None else band_half_heights(inputs[..., 0], params.bulge,
+                                                                 params.layout.joint_half_height),
     )
     if params.surface == "faces" and face_points:
         pose.points = edge_points(outline_vertices(pose, params.layout), params.layout)
@@ -628,15 +695,21 @@ def edge_points(vertices: torch.Tensor, layout: ChainLayout) -> torch.Tensor:
 def outline_vertices(pose: FingerPose, layout: ChainLayout) -> torch.Tensor:
     """The outline's vertices (B, V, 2) mm of a pose (module docstring; ChainLayout's
     order: per joint its n + 1 inner then n + 1 outer band vertices (band_size), then per
-    rigid part its corners S-, E-, S+, E+, where - is the inner (-nu) side)."""
+    rigid part its corners S-, E-, S+, E+, where - is the inner (-nu) side). A joint's band
+    is H/2 wide on both faces, or the pose's ``band`` (B, J, 2, n + 1) half-heights where it
+    has one (outline ``bulged``)."""
     P = pose.joints                                     # (B, J, n + 1, 2) O_i and the anchors
     chord = P[:, :, 1:] - P[:, :, :-1]
     chord = chord / chord.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     bisector = chord[:, :, :-1] + chord[:, :, 1:]
     bisector = bisector / bisector.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     d = torch.cat((_unit(pose.theta)[:, :, None], bisector, _unit(pose.phi)[:, :, None]), 2)
-    nu = layout.joint_half_height * torch.stack((-d[..., 1], d[..., 0]), -1)
-    joints = torch.cat((P - nu, P + nu), 2).flatten(1, 2)
+    nu = torch.stack((-d[..., 1], d[..., 0]), -1)
+    if pose.band is None:
+        inner = outer = layout.joint_half_height
+    else:
+        inner, outer = pose.band[:, :, 0, :, None], pose.band[:, :, 1, :, None]
+    joints = torch.cat((P - inner * nu, P + outer * nu), 2).flatten(1, 2)
     S, E = pose.segments[:, :, 0], pose.segments[:, :, 1]        # (B, R, 2)
     u = (E - S) / (E - S).norm(dim=-1, keepdim=True).clamp_min(1e-12)
     nr = layout.rigid_half_height.to(S.dtype)[:, None] * torch.stack((-u[..., 1], u[..., 0]), -1)

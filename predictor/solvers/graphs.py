@@ -214,7 +214,7 @@ def _tensors(out) -> tuple:
 
 def statics_fn(problem: GripperProblem):
     """s(x (B, 3J), p (B, J)) -> (residual (B, J, 3), then the FingerPose's tensor fields
-    joints, segments, theta, phi, points, then with an object the ContactState's forces,
+    joints, segments, theta, phi, points (and band, with outline ``bulged``), then with an object the ContactState's forces,
     normal, friction, ratio, slip, penetration, then the plane X = 0's force (B,) N (0 when
     its penalty is off) and the outline's overlap across it (B,) mm)."""
     n_joints, contact = problem.n_joints, problem.obstacle is not None
@@ -222,7 +222,7 @@ def statics_fn(problem: GripperProblem):
     def s(x: torch.Tensor, p: torch.Tensor):
         st = problem.residual(p, x.reshape(-1, n_joints, 3))
         q, c = st.pose, st.contact
-        out = (st.residual, q.joints, q.segments, q.theta, q.phi, q.points)
+        out = (st.residual, q.joints, q.segments, q.theta, q.phi, q.points) + (() if q.band is None else (q.band,))
         out = out + (c.forces, c.normal, c.friction, c.ratio, c.slip, c.penetration) if contact else out
         overlap = _overlap(problem, st)
         return out + (torch.zeros_like(overlap) if st.plane is None else st.plane.force, overlap)
@@ -253,8 +253,9 @@ def _keyed(s):
 def as_statics(problem: GripperProblem, out) -> Statics:
     """The Statics of ``statics_fn``'s tuple (cloned: out of inference mode)."""
     res, joints, segments, theta, phi, points, *contact, force, overlap = (v.clone() for v in out)
+    band = None if problem.params.bulge is None else contact.pop(0)
     pose = FingerPose(joints=joints, segments=segments, theta=theta, phi=phi, points=points,
-                      finger=problem.params.finger)
+                      finger=problem.params.finger, band=band)
     plane = PlaneContact(None, None, force, overlap)   # the figures only (its loads are in res)
     if not contact:
         return Statics(res, pose, ContactState.none(len(res), res.dtype), plane)

@@ -38,7 +38,8 @@ import torch
 from contract import cli
 from contract.finger import DEFAULT_FINGER, finger_arg
 from contract.spec import INPUT_BOX, PRESSURE_LIMIT
-from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
+from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, DEFAULT_OUTLINE, JOINT_WEIGHTS, KINEMATICS,
+                                     OUTLINES, GripperParams,
                                      check_pressures, outline_vertices, rot)
 from predictor.model.joint import check_finger, load_joint
 from predictor.solvers.solve import APPROACH, approach_for, solve
@@ -205,7 +206,7 @@ def approach_arg(text: str):
 
 def add_finger_arguments(ap) -> None:
     """The finger's flags, the same on every tool that solves gestures: --finger,
-    --kinematics, --joint-weight (predictor.model.gripper.GripperParams)."""
+    --kinematics, --joint-weight, --outline (predictor.model.gripper.GripperParams)."""
     ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER),
                     help="finger description file (TOML, contract.finger; default contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS,
@@ -213,11 +214,15 @@ def add_finger_arguments(ap) -> None:
                     "or its cap face (cap)")
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT,
                     help="a joint's weight at its anchors' mean (lumped) or half at each end (split)")
+    ap.add_argument("--outline", choices=OUTLINES, default=DEFAULT_OUTLINE,
+                    help="a joint's outline: a band of its height (band) or with its pressurised cells' "
+                    "bulge, its joint file's [outline] (bulged)")
 
 
 def params_of(args) -> GripperParams:
     """The GripperParams of add_finger_arguments' flags."""
-    return GripperParams(args.finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
+    return GripperParams(args.finger, kinematics=args.kinematics, joint_weight=args.joint_weight,
+                         outline=args.outline)
 
 
 def add_arguments(ap, model_help: str = "") -> None:

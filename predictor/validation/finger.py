@@ -13,8 +13,10 @@ against the FEM and wall times -> ``finger.json`` and one overlay figure per cas
 
 Variants (the ``kinematics`` and ``joint_weight`` of predictor.model.gripper): tangent
 (the paper's chord connection) and cap (the part leaves at the distal cap's rotation),
-each with the joint weights lumped (the paper's) or split between the joint's ends, and
-the gravity-free surrogate chain (tau = 0, method ``chain``) in both kinematics.
+each with the joint weights lumped (the paper's) or split between the joint's ends; cap
+and split with each joint ``outline`` (a band of the joint's height, or bulged by its
+pressurised cells: issue 56, fem.studies.joint_outline); and the gravity-free surrogate
+chain (tau = 0, method ``chain``) in both kinematics.
 
 Per entry: ``tip_error_mm`` = |tip_pred - tip_FEM|, ``tip_angle_error_deg`` (predictor
 minus FEM, signed), ``joint_end_angle_error_deg`` (per joint, the exit angle of the
@@ -62,7 +64,7 @@ from contract.joint import FORMULATIONS, MAX_DIVISIONS, mesh_text
 from fem.artefacts import finger_case_formulation, finger_case_mesh, finger_case_wall
 from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
-from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams
+from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, DEFAULT_OUTLINE, OUTLINES, GripperParams
 from predictor.model.joint import load_joint
 from predictor.solvers.problem import problem_words, same_problem
 from predictor.solvers.progress import set_quiet
@@ -73,16 +75,21 @@ REPEATS = 5
 #: The discretisation of the committed finger cases, results/validation/finger_fem
 #: (fem.mesh.discretisation.PAPER; named here without its dolfinx).
 COMMITTED_MESH, COMMITTED_FORMULATION = mesh_text(PAPER_MESH_SIZE), "displacement"
-VARIANTS = [("predictor", "tangent", "lumped"), ("predictor", "tangent", "split"),
-            ("predictor", "cap", "lumped"), ("predictor", "cap", "split"),
-            ("chain", "tangent", "lumped"), ("chain", "cap", "lumped")]
+#: (method, kinematics, joint weight, outline): the paper's and our chains, and the cap/split
+#: predictor with each joint outline (predictor.model.gripper.OUTLINES).
+VARIANTS = [("predictor", "tangent", "lumped", "band"), ("predictor", "tangent", "split", "band"),
+            ("predictor", "cap", "lumped", "band"), ("predictor", "cap", "split", "band"),
+            ("predictor", "cap", "split", "bulged"),
+            ("chain", "tangent", "lumped", "band"), ("chain", "cap", "lumped", "band")]
 #: The variant the targets judge: the predictor's default finger model (chosen on this
 #: validation; the others are shown beside it).
-JUDGED = f"predictor_{DEFAULT_KINEMATICS}_{DEFAULT_JOINT_WEIGHT}"
-#: drawn over each FEM render: the judged variant and the paper's chain
-OVERLAID = {(DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT):
-            f"{DEFAULT_KINEMATICS} kinematics, {DEFAULT_JOINT_WEIGHT} joint weights (default)",
-            ("tangent", "lumped"): "tangent kinematics, lumped weights (paper)"}
+JUDGED = f"predictor_{DEFAULT_KINEMATICS}_{DEFAULT_JOINT_WEIGHT}" + ("_bulged" if DEFAULT_OUTLINE == "bulged" else "")
+#: drawn over each FEM render: the judged variant, the other outline and the paper's chain
+OVERLAID = {(DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT, DEFAULT_OUTLINE):
+            f"{DEFAULT_KINEMATICS} kinematics, {DEFAULT_JOINT_WEIGHT} joint weights, {DEFAULT_OUTLINE} outline (default)",
+            **{(DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT, o): f"{DEFAULT_KINEMATICS} kinematics, "
+               f"{DEFAULT_JOINT_WEIGHT} joint weights, {o} outline" for o in OUTLINES if o != DEFAULT_OUTLINE},
+            ("tangent", "lumped", "band"): "tangent kinematics, lumped weights (paper)"}
 #: The targets a validation is judged on, by its problem: the gripper's cases (the plane X =
 #: 0, the production mesh) on issue 56's: the 7 x 7 grid with gravity and the 4 free cases
 #: (53), and the finger FEM's fingertip change under one further refinement of the joints'
@@ -104,8 +111,9 @@ def _deg(a: torch.Tensor) -> list[float]:
     return [math.degrees(float(v)) for v in a.reshape(-1)]
 
 
-def variant_key(method: str, kinematics: str, joint_weight: str) -> str:
-    return f"{method}_{kinematics}" + (f"_{joint_weight}" if method == "predictor" else "")
+def variant_key(method: str, kinematics: str, joint_weight: str, outline: str = "band") -> str:
+    return (f"{method}_{kinematics}" + (f"_{joint_weight}" if method == "predictor" else "")
+            + ("_bulged" if outline == "bulged" else ""))
 
 
 def case_plane(case: dict) -> bool:
@@ -115,14 +123,14 @@ def case_plane(case: dict) -> bool:
 
 
 def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_weight: str,
-                plane: bool | None = None):
+                outline: str = "band", plane: bool | None = None):
     """One predictor variant on one FEM case: (entry dict, pose). The predictor meets the
     plane X = 0 only where the FEM case did (``case_plane``): the committed cases are one
     finger alone, and at (0.2, 0.2) MPa with gravity it crosses X = 0. ``plane``: the
     problem asked for (None: the case's); ValueError (one line) when it is not the case's."""
     if plane is not None:
         same_problem(case_plane(case), plane, f"case {case['case']}")
-    params = GripperParams(finger=finger, kinematics=kinematics, joint_weight=joint_weight)
+    params = GripperParams(finger=finger, kinematics=kinematics, joint_weight=joint_weight, outline=outline)
     gravity = bool(case["gravity"]) and method == "predictor"
     problem = GripperProblem(joint, params, gravity=gravity)
     if not case_plane(case):
@@ -142,9 +150,10 @@ def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_w
     fem_tip, fem_angle = case["tip"], case["tip_angle_deg"]
     end = _deg(pose.phi[0])
     entry = {
-        "case": case["case"], "variant": variant_key(method, kinematics, joint_weight), "p1": case["pressures_MPa"][0], "p2": case["pressures_MPa"][1],
+        "case": case["case"], "variant": variant_key(method, kinematics, joint_weight, outline),
+        "p1": case["pressures_MPa"][0], "p2": case["pressures_MPa"][1],
         "gravity": bool(case["gravity"]), "plane": case_plane(case), "method": method, "kinematics": kinematics,
-        "joint_weight": joint_weight if method == "predictor" else None, "converged": converged,
+        "joint_weight": joint_weight if method == "predictor" else None, "outline": outline, "converged": converged,
         "tip_mm": tip, "tip_angle_deg": math.degrees(float(pose.tip_angle[0])),
         "tip_error_mm": math.hypot(tip[0] - fem_tip[0], tip[1] - fem_tip[1]),
         "tip_angle_error_deg": math.degrees(float(pose.tip_angle[0])) - fem_angle,
@@ -162,7 +171,8 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "")
 
     fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=110)
     draw_fem_render(fig, ax, case["render"], fem_png, "FEM |u| (mm)")
-    styles = dict(zip(OVERLAID.values(), (dict(color="black", ls="-"), dict(color="tab:red", ls="--"))))
+    styles = dict(zip(OVERLAID.values(), (dict(color="black", ls="-"), dict(color="tab:blue", ls=":"),
+                                          dict(color="tab:red", ls="--"))))
     for label, pose in poses.items():
         style = styles[label]
         for kind, line in pose.part_polylines():
@@ -253,12 +263,12 @@ def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:
 def summarise(entries: list[dict]) -> dict:
     """Worst and mean errors per variant, and the targets met or short."""
     out = {}
-    for method, kin, jw in VARIANTS:
-        rows = [e for e in entries if (e["method"], e["kinematics"]) == (method, kin)
-                and (method == "chain" or e["joint_weight"] == jw)]
+    for variant in VARIANTS:
+        key = variant_key(*variant)
+        rows = [e for e in entries if e["variant"] == key]
         if not rows:
             continue
-        out[variant_key(method, kin, jw)] = {
+        out[key] = {
             "cases": len(rows),
             "tip_error_mm_max": max(r["tip_error_mm"] for r in rows),
             "tip_error_mm_mean": statistics.fmean(r["tip_error_mm"] for r in rows),
@@ -335,18 +345,18 @@ def main(argv=None) -> int:
                 entries.append({"case": case["case"], "converged_fem": False})
                 continue
             poses = {}
-            for method, kin, jw in VARIANTS:
-                entry, pose = run_variant(joint, finger, case, method, kin, jw, plane)
+            for method, kin, jw, outline in VARIANTS:
+                entry, pose = run_variant(joint, finger, case, method, kin, jw, outline, plane)
                 entries.append(entry)
-                if method == "predictor" and (kin, jw) in OVERLAID:
-                    poses[OVERLAID[kin, jw]] = pose
+                if method == "predictor" and (kin, jw, outline) in OVERLAID:
+                    poses[OVERLAID[kin, jw, outline]] = pose
             png = renders[id(case)]
             if png.is_file():
                 fig = Path(args.figures) / f"finger_{case['case']}.png"
                 overlay(fig, case, png, poses, joint.name)
                 figures.append(str(fig))
             print(f"{case['case']}: " + ", ".join(
-                f"{e['kinematics']}/{e['joint_weight']}: {e['tip_error_mm']:.2f} mm"
+                f"{e['variant'].removeprefix('predictor_')}: {e['tip_error_mm']:.2f} mm"
                 for e in entries[-len(VARIANTS):] if e["method"] == "predictor"), flush=True)
         report = {
             "finger": finger.summary(), "joint": joint.name, "fem_folder": args.fem,
