@@ -55,6 +55,8 @@ ARTEFACTS = (
     Artefact("fem/self_contact.json", "make self-contact", fem.SELF_CONTACT),
     Artefact("fem/materials.json", "make materials", fem.MATERIALS),
     Artefact("fem/joint_outline.json", "make joint-outline", fem.JOINT_OUTLINE),
+    Artefact("joints/*/joint_outline.json", "make pipeline JOINT=results/joints/<name>/joint.toml (its outline stage)",
+             fem.JOINT_OUTLINE),
     Artefact("fem/heldout_mesh.json", "make fine-compare", workflow.MESH_COMPARISON),
     Artefact("fem/heldout_production.json", "make production-compare", workflow.MESH_COMPARISON),
     Artefact("bench/fem.json", "make bench-fem", fem.BENCH_JOINT),

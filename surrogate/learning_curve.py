@@ -324,14 +324,20 @@ def main(argv=None) -> int:
     else:
         for p in points:
             print(row(p))
-    if stopped:
-        say(f"stopped by --max-hours {args.max_hours:g}: re-run the same command to resume")
-        return EXIT_STOPPED
-    return 0
+    return exit_code(stopped, args.max_hours)
 
 
 def say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
+
+
+def exit_code(stopped: bool, max_hours: float) -> int:
+    """A resumable run's exit code (here and surrogate.multifidelity): EXIT_STOPPED, with the
+    line that says how to resume on stderr, when --max-hours stopped it, else 0."""
+    if stopped:
+        say(f"stopped by --max-hours {max_hours:g}: re-run the same command to resume")
+        return EXIT_STOPPED
+    return 0
 
 
 def progress(text: str) -> None:

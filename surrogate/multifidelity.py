@@ -81,8 +81,8 @@ from contract.spec import N_INPUTS
 from surrogate.artefacts import LEARNING_CURVE, MULTIFIDELITY
 from surrogate.data import Samples, load_samples, load_splits
 from surrogate.evaluate import evaluate
-from surrogate.learning_curve import (MIN_STEPS, load_points, nested_subsets, point_configs, progress,
-                                      run_point, say, sizes_arg)
+from surrogate.learning_curve import (EXIT_STOPPED, MIN_STEPS, exit_code, load_points, nested_subsets,
+                                      point_configs, progress, run_point, say, sizes_arg)
 from surrogate.model import (JointSurrogate, ModelError, build_model, config_record, load_checkpoint,
                              save_checkpoint, wrap)
 from surrogate.train import CONFIGS, parse_override, train
@@ -111,7 +111,6 @@ FORM = "rho (R_C - R_C(0)) + network"
 SAME_JOINT = ("source", "input_box", "material", "joint_sha256")
 SAME_DISCRETISATION = ("source", "input_box", "material", "geometry", "solver", "formulation")
 MESH_KEYS = ("mesh_size", "wall_mesh_size")
-EXIT_STOPPED = 3
 
 
 class ScaledCoarse(nn.Module):
@@ -713,10 +712,7 @@ def main(argv=None) -> int:
               f"{c['heldout_tip_error_mm']:.4f} mm, cap {_deg(c['heldout_cap_rotation_error_deg'])}")
         for r in rows:
             print(row(r))
-    if stopped:
-        say(f"stopped by --max-hours {args.max_hours:g}: re-run the same command to resume")
-        return EXIT_STOPPED
-    return 0
+    return exit_code(stopped, args.max_hours)
 
 
 if __name__ == "__main__":

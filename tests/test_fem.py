@@ -24,11 +24,12 @@ from fem.studies.elastica import cantilever_tip, rollup_tip  # noqa: E402
 from fem.mesh.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
 from fem.mesh.build import create_mesh  # noqa: E402
 from fem.solvers.joint import JointSolver, Load, SolverConfig  # noqa: E402
-from contract.spec import INPUT_BOX, OutOfBoxError, mirror  # noqa: E402
+from contract.spec import INPUT_BOX, OutOfBoxError  # noqa: E402
+from fem_checks import COARSE_TET, assert_matrix_free_tangent, assert_mirror_symmetric  # noqa: E402
 
 pytestmark = pytest.mark.fem
 #: a coarse tetrahedral joint in P2 displacement (JointGeometry's default mesh is the production hexahedra)
-COARSE = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)
+COARSE = COARSE_TET
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -77,16 +78,7 @@ def test_mirror_symmetry(joint):
     """(R, P, F1, F2, M) -> (R diag(1,-1), -P, F1, -F2, -M) on a mirror-symmetric mesh:
     anchors agree to solver tolerance (1e-6 mm), and so do the sensitivities. The load
     bends the joint by ~60 deg, so the valley contact is active on one side."""
-    load = np.array([0.1, 1.5, 2.0, 100.0])
-    r1 = joint.solve(Load.from_array(load))
-    J1 = joint.sensitivities()
-    r2 = joint.solve(Load.from_array(load * [-1, 1, -1, -1]))
-    J2 = joint.sensitivities()
-    assert r1.converged and r2.converged
-    _, a_m, J_m = mirror(load[None], r1.anchors[None], J1[None])
-    np.testing.assert_allclose(r2.anchors, a_m[0], atol=1e-6)
-    assert r2.phi_end == pytest.approx(-r1.phi_end, abs=1e-8)
-    np.testing.assert_allclose(J2, J_m[0], atol=1e-6 * np.abs(J1).max())
+    assert_mirror_symmetric(joint, np.array([0.1, 1.5, 2.0, 100.0]))
 
 
 def test_the_matrix_free_tangent_is_the_assembled_tangent(joint):
@@ -94,17 +86,7 @@ def test_the_matrix_free_tangent_is_the_assembled_tangent(joint):
     the assembled tangent K of the P2 displacement form (a blocked space: three dofs a
     node) with its Dirichlet rows and columns: K x agrees to 1e-13 of |K x| for a random x
     that is nonzero on the constrained dofs, at a state with closed valley pairs."""
-    path = joint.solver
-    try:
-        assert joint.solve(Load(M=100.0)).converged
-        assert min(g.min() for g in path.contact.gaps(path.u).values()) < 0.0
-        x = np.random.default_rng(5).standard_normal(path.u.vector.getLocalSize())
-        assembled, free = path.tangent_products(x)
-        assert np.linalg.norm(assembled - free) <= 1e-13 * np.linalg.norm(assembled)
-        fixed = path.constrained_dofs()
-        np.testing.assert_array_equal(free[fixed], x[fixed])
-    finally:
-        joint.reset()
+    assert_matrix_free_tangent(joint, Load(M=100.0))
 
 
 def test_contact_keeps_valley_walls_apart(joint):

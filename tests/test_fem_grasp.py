@@ -28,22 +28,19 @@ import pytest
 
 pytest.importorskip("dolfinx")
 
-import ufl  # noqa: E402
 from dolfinx import fem  # noqa: E402
-from dolfinx.fem.petsc import create_matrix  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
 from contract.grasp import parse_object  # noqa: E402
-from fem.mesh.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.mesh.geometry import FingerGeometry  # noqa: E402
 from fem.solvers.grasp import GraspSolver  # noqa: E402
 from fem.physics.object_contact import MAX_PENETRATION  # noqa: E402
+from fem_checks import COARSE_TET, FINGER_WEIGHT, NEWTON_ATOL, central_difference, term_tangent  # noqa: E402
 
 PREDICTOR_TIP = np.array([37.7655, -214.4284])    # mm, the outline law's answer (docstring)
 PREDICTOR_NORMAL = 0.4187                         # N
 PREDICTOR_FRICTION_USE = 0.382
 FEM_TIP = np.array([37.7383, -214.3886])          # mm, this coarse mesh's answer (measured)
-FINGER_WEIGHT = 0.28                              # N: 2 joints 0.09, link 0.04, tip 0.06
-NEWTON_ATOL = 1e-8                                # N, SolverConfig.atol
 # the margins around the measured coarse figures (docstring): tip 0.048 mm, N +0.4 %,
 # friction use -0.012; P2 displacement on this mesh (locking) measured 0.60 mm, +0.8 %, +0.078
 TIP_MARGIN, NORMAL_REL, FRICTION_USE_MARGIN = 0.2, 0.01, 0.03
@@ -51,8 +48,7 @@ TIP_MARGIN, NORMAL_REL, FRICTION_USE_MARGIN = 0.2, 0.01, 0.03
 
 @pytest.fixture(scope="module")
 def grasp():
-    joint = JointGeometry(mesh_size=4.0, divisions=0, hex_size=None)     # tetrahedra
-    geometry = FingerGeometry(load_finger(), joint)
+    geometry = FingerGeometry(load_finger(), COARSE_TET)
     solver = GraspSolver(geometry, parse_object("circle"), formulation="mixed")
     result = solver.solve((0.2, 0.25), (-0.15, 0.0))
     assert result.finger.converged, result.finger.reason
@@ -80,39 +76,22 @@ def test_grasp_agrees_with_predictor(grasp):
     assert abs(out["friction_use"] - PREDICTOR_FRICTION_USE) < FRICTION_USE_MARGIN
 
 
-def _residual(term, u) -> np.ndarray:
-    b = u.vector.duplicate()
-    b.set(0.0)
-    term.add_residual(b, u)
-    return b.array.copy()
-
-
 def test_object_tangent_matches_differences(grasp):
     solver, _ = grasp
     term, u = solver.object, solver.fem.u
     lam = term.ratio()
     assert 0 < abs(lam) < term.mu                      # holds: the rank-one part acts
-    V = u.function_space
-    A = create_matrix(fem.form(ufl.derivative(solver.fem.problem.residual(), u, ufl.TrialFunction(V))))
-    A.zeroEntries()
-    term.add_tangent(A, u)
-    A.assemble()
+    A = term_tangent(solver.fem.problem, u, term)
     pairs = term.low_rank(u)
     assert len(pairs) == 1
     dofs = term.candidate_dofs
-    du = fem.Function(V)
+    du = fem.Function(u.function_space)
     du.x.array[dofs] = np.random.default_rng(3).standard_normal(len(dofs)) * 1e-2   # mm
     Adu = A.createVecLeft()
     A.mult(du.vector, Adu)
     G, dlam = pairs[0]
     rank_one = G.array * dlam.dot(du.vector)
-    u0, eps = u.x.array.copy(), 1e-4
-    u.x.array[:] = u0 + eps * du.x.array
-    rp = _residual(term, u)
-    u.x.array[:] = u0 - eps * du.x.array
-    rm = _residual(term, u)
-    u.x.array[:] = u0
-    fd = (rp - rm) / (2 * eps)
+    fd = central_difference(term, u, du, eps=1e-4)
     scale = np.abs(fd).max()
     assert scale > 1e-4
     assert np.abs(Adu.array + rank_one - fd).max() < 1e-6 * scale

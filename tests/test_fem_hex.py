@@ -25,13 +25,13 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
-from contract.spec import mirror  # noqa: E402
 from fem.mesh.discretisation import Discretisation, discretisation  # noqa: E402
 from fem.mesh.geometry import TAGS, JointGeometry, anchor_points  # noqa: E402
 from fem.studies.joint_cases import difference  # noqa: E402
 from fem.mesh.build import create_mesh  # noqa: E402
 from fem.mesh.hexahedra import hexahedra, q2_nodes  # noqa: E402
 from fem.solvers.joint import JointSolver, Load  # noqa: E402
+from fem_checks import COARSE_TET, assert_mirror_symmetric  # noqa: E402
 
 pytestmark = pytest.mark.fem
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -55,7 +55,7 @@ def measures(mesh_data) -> dict:
 def test_hex_mesh_has_the_tet_meshs_volumes_and_tag_areas():
     """Every tag's volume or area: hex2 = the gmsh tetrahedra (4 mm) to 1e-6 relative."""
     hexes = measures(create_mesh(HEX2, MPI.COMM_SELF))
-    tets = measures(create_mesh(JointGeometry(mesh_size=4.0, divisions=0, hex_size=None), MPI.COMM_SELF))
+    tets = measures(create_mesh(COARSE_TET, MPI.COMM_SELF))
     for name in TAGS:
         assert hexes[name] == pytest.approx(tets[name], rel=1e-6), name
     assert hexes["top_chamber"] > 0 and hexes["valley_faces"] > 0
@@ -120,16 +120,7 @@ def hex_joint():
 def test_hex_joint_solve_is_mirror_symmetric(hex_joint):
     """(P, F1, F2, M) and its mirror (-P, F1, -F2, -M) on hex1: mirrored anchors
     (1e-6 mm), phi_end (1e-8 rad) and sensitivities (1e-6 of the largest)."""
-    load = np.array([0.1, 1.0, 1.5, 40.0])
-    r1 = hex_joint.solve(Load.from_array(load))
-    J1 = hex_joint.sensitivities()
-    r2 = hex_joint.solve(Load.from_array(load * [-1, 1, -1, -1]))
-    J2 = hex_joint.sensitivities()
-    assert r1.converged and r2.converged
-    _, a_m, J_m = mirror(load[None], r1.anchors[None], J1[None])
-    np.testing.assert_allclose(r2.anchors, a_m[0], atol=1e-6)
-    assert r2.phi_end == pytest.approx(-r1.phi_end, abs=1e-8)
-    np.testing.assert_allclose(J2, J_m[0], atol=1e-6 * np.abs(J1).max())
+    assert_mirror_symmetric(hex_joint, np.array([0.1, 1.0, 1.5, 40.0]))
 
 
 def test_hex_joint_tangent_is_symmetric_and_factorised_as_ldlt(hex_joint):

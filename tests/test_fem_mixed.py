@@ -22,12 +22,12 @@ from dolfinx import fem  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from contract.spec import mirror  # noqa: E402
 from fem.studies.elastica import rollup_tip  # noqa: E402
-from fem.mesh.geometry import TAGS, BeamGeometry, JointGeometry  # noqa: E402
+from fem.mesh.geometry import TAGS, BeamGeometry  # noqa: E402
 from fem.mesh.build import create_mesh  # noqa: E402
 from fem.physics.problem import lame  # noqa: E402
 from fem.solvers.joint import EndLoadedSolver, JointSolver, Load, Material, SolverConfig  # noqa: E402
+from fem_checks import COARSE_TET, assert_matrix_free_tangent, assert_mirror_symmetric  # noqa: E402
 
 pytestmark = pytest.mark.fem
 BEAM = BeamGeometry(length=40.0, thickness=2.0, width=2.0, cap=1.0, mesh_size=1.0)
@@ -90,7 +90,7 @@ def test_pressure_is_the_volumetric_stress_in_uniform_tension():
 
 @pytest.fixture(scope="module")
 def mixed_joint():
-    return JointSolver(JointGeometry(mesh_size=4.0, divisions=0, hex_size=None), MPI.COMM_SELF, formulation="mixed")
+    return JointSolver(COARSE_TET, MPI.COMM_SELF, formulation="mixed")
 
 
 def test_mixed_joint_keeps_mirror_symmetry_and_contact(mixed_joint):
@@ -99,18 +99,9 @@ def test_mixed_joint_keeps_mirror_symmetry_and_contact(mixed_joint):
     load bends the joint ~55 deg and the contact holds the closing valley walls within
     0.02 mm of touching (without contact they overlap by ~0.3 mm, tests/test_fem.py)."""
     solver = mixed_joint
-    load = np.array([0.1, 1.5, 2.0, 100.0])
-    r1 = solver.solve(Load.from_array(load))
-    J1 = solver.sensitivities()
-    gaps = solver.contact.gaps(solver.u)
-    r2 = solver.solve(Load.from_array(load * [-1, 1, -1, -1]))
-    J2 = solver.sensitivities()
-    assert r1.converged and r2.converged
+    gaps = assert_mirror_symmetric(solver, np.array([0.1, 1.5, 2.0, 100.0]),
+                                   at_load=lambda: solver.contact.gaps(solver.u))
     assert -0.02 < min(g.min() for g in gaps.values()) < 0.05
-    _, a_m, J_m = mirror(load[None], r1.anchors[None], J1[None])
-    np.testing.assert_allclose(r2.anchors, a_m[0], atol=1e-6)
-    assert r2.phi_end == pytest.approx(-r1.phi_end, abs=1e-8)
-    np.testing.assert_allclose(J2, J_m[0], atol=1e-6 * np.abs(J1).max())
     assert solver.mesh_info()["formulation"] == "mixed"
 
 
@@ -192,17 +183,7 @@ def test_the_matrix_free_tangent_is_the_assembled_tangent(mixed_joint):
     its Dirichlet rows and columns: K x agrees to 1e-13 of |K x| for a random x that is
     nonzero on the constrained dofs, at a state whose closed valley pairs put contact
     blocks into K."""
-    path = mixed_joint.solver
-    try:
-        assert mixed_joint.solve(Load(0.1, 1.5, 2.0, 100.0)).converged
-        assert min(g.min() for g in path.contact.gaps(path.u).values()) < 0.0
-        x = np.random.default_rng(5).standard_normal(path.u.vector.getLocalSize())
-        assembled, free = path.tangent_products(x)
-        assert np.linalg.norm(assembled - free) <= 1e-13 * np.linalg.norm(assembled)
-        fixed = path.constrained_dofs()
-        np.testing.assert_array_equal(free[fixed], x[fixed])
-    finally:
-        mixed_joint.reset()
+    assert_matrix_free_tangent(mixed_joint, Load(0.1, 1.5, 2.0, 100.0))
 
 
 

@@ -30,21 +30,19 @@ import pytest
 
 pytest.importorskip("dolfinx")
 
-import ufl  # noqa: E402
 from dolfinx import fem  # noqa: E402
-from dolfinx.fem.petsc import create_matrix  # noqa: E402
 
 from contract.finger import load_finger  # noqa: E402
 from fem.solvers.finger import FingerLoad, FingerSolver  # noqa: E402
-from fem.mesh.geometry import FingerGeometry, JointGeometry  # noqa: E402
+from fem.mesh.geometry import FingerGeometry  # noqa: E402
+from fem_checks import (COARSE_TET, FINGER_WEIGHT, NEWTON_ATOL, central_difference, term_residual,  # noqa: E402
+                        term_tangent)
 
 MEET = (0.1, 0.1)                                 # MPa, with gravity: the fingers meet
 APART = (0.05, -0.05)                             # MPa, free: the finger stays 3.0 mm clear
 PREDICTOR_TIP = np.array([9.8487, -215.4137])     # mm, the outline law's answer (docstring)
 PREDICTOR_FORCE = 0.1013                          # N
 FEM_TIP = np.array([9.8204, -215.4305])           # mm, this coarse mesh's answer (measured)
-FINGER_WEIGHT = 0.28                              # N: 2 joints 0.09, link 0.04, tip 0.06
-NEWTON_ATOL = 1e-8                                # N, SolverConfig.atol
 # margins around the measured figures (docstring): overlap 0.060 mm (the law keeps it within
 # 0.1 mm), tip 0.033 mm from the predictor's, force -1.7 %
 OVERLAP_BOUND, TIP_MARGIN, FORCE_REL = 0.1, 0.2, 0.1
@@ -52,7 +50,7 @@ OVERLAP_BOUND, TIP_MARGIN, FORCE_REL = 0.1, 0.2, 0.1
 
 @pytest.fixture(scope="module")
 def geometry():
-    return FingerGeometry(load_finger(), JointGeometry(mesh_size=4.0, divisions=0, hex_size=None))
+    return FingerGeometry(load_finger(), COARSE_TET)
 
 
 @pytest.fixture(scope="module")
@@ -119,39 +117,17 @@ def test_plane_agrees_with_predictor(meeting):
     assert out["plane_force_N"] == pytest.approx(PREDICTOR_FORCE, rel=FORCE_REL)
 
 
-def _residual(term, u) -> np.ndarray:
-    b = u.vector.duplicate()
-    b.set(0.0)
-    term.add_residual(b, u)
-    return b.array.copy()
-
-
-def _tangent(solver, term):
-    u = solver.u
-    A = create_matrix(fem.form(ufl.derivative(solver.problem.residual(), u, ufl.TrialFunction(u.function_space))))
-    A.zeroEntries()
-    term.add_tangent(A, u)
-    A.assemble()
-    return A
-
-
 def test_plane_tangent_matches_differences(meeting):
     solver, _, state = meeting
     term, u = solver.plane_term, solver.u
     u.x.array[:] = state
-    A = _tangent(solver, term)
+    A = term_tangent(solver.problem, u, term)
     du = fem.Function(u.function_space)
     for dofs in term.surface_dofs:
         du.x.array[dofs] = np.random.default_rng(5).standard_normal(len(dofs)) * 1e-2     # mm
     Adu = A.createVecLeft()
     A.mult(du.vector, Adu)
-    eps = 1e-4
-    u.x.array[:] = state + eps * du.x.array
-    rp = _residual(term, u)
-    u.x.array[:] = state - eps * du.x.array
-    rm = _residual(term, u)
-    u.x.array[:] = state
-    fd = (rp - rm) / (2 * eps)
+    fd = central_difference(term, u, du, eps=1e-4)             # from u = state, left there
     scale = np.abs(fd).max()
     assert scale > 1e-3
     assert np.abs(Adu.array - fd).max() < 1e-6 * scale
@@ -180,8 +156,8 @@ def test_apart_the_plane_changes_nothing(plain, meeting):
     assert 0.5 < term.surface_x(solver.u).min() < 10.0            # near, but clear (3.0 mm)
     assert with_plane.summary()["plane_force_N"] == 0.0
     assert with_plane.summary()["plane_overlap_mm"] == 0.0
-    assert not _residual(term, solver.u).any()     # the term itself is exactly zero there
-    assert _tangent(solver, term).norm() == 0.0
+    assert not term_residual(term, solver.u).any()     # the term itself is exactly zero there
+    assert term_tangent(solver.problem, solver.u, term).norm() == 0.0
 
 
 def test_candidate_faces_are_inner_and_end_faces(meeting):

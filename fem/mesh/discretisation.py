@@ -29,11 +29,11 @@ fem.solvers.load_path) all build on it.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 from contract import cli
 from contract.joint import FORMULATIONS
-from fem.mesh.geometry import MAX_DIVISIONS, PAPER_MESH_SIZE, JointGeometry
+from fem.mesh.geometry import MAX_DIVISIONS, PAPER_MESH_SIZE, JointGeometry, mesh_record
 
 #: the formulation new data is generated on (PRODUCTION's)
 FORMULATION = "mixed"
@@ -134,12 +134,7 @@ class Discretisation:
     def as_dict(self) -> dict:
         """The fields; ``divisions`` only on hexahedra and ``hex_size`` only when set, so
         records written before them read as what they are."""
-        out = asdict(self)
-        if not self.divisions:
-            del out["divisions"]
-        if self.hex_size is None:
-            del out["hex_size"]
-        return out
+        return mesh_record(self)
 
     @property
     def element(self) -> str:

@@ -64,6 +64,19 @@ _GMSH_READY = False
 PAPER_MESH_SIZE = 1.8
 
 
+def mesh_record(value) -> dict:
+    """A dataclass's fields as a record (dict), without ``divisions`` on a tetrahedral mesh
+    (0) and ``hex_size`` when unset (None): the keys records written before the hexahedra
+    lack, so that they read as what they are (JointGeometry, fem.mesh.discretisation's
+    Discretisation)."""
+    out = asdict(value)
+    if not value.divisions:
+        del out["divisions"]
+    if value.hex_size is None:
+        del out["hex_size"]
+    return out
+
+
 @dataclass(frozen=True)
 class JointGeometry:
     """Dimensions of the bellow joint half-model (mm). Defaults: docs/physics.md.
@@ -124,12 +137,7 @@ class JointGeometry:
     def as_dict(self) -> dict:
         """The fields; ``divisions`` only for a hexahedral mesh and ``hex_size`` only when
         set, so records written before them read as what they are (from_record)."""
-        out = asdict(self)
-        if not self.divisions:
-            del out["divisions"]
-        if self.hex_size is None:
-            del out["hex_size"]
-        return out
+        return mesh_record(self)
 
     @classmethod
     def from_record(cls, record: dict) -> JointGeometry:

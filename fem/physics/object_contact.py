@@ -197,8 +197,85 @@ def owned_xy_dofs(w: fem.Function, U, facets: np.ndarray) -> tuple[np.ndarray, n
     return to_parent[bs * nodes], to_parent[bs * nodes + 1], U.tabulate_dof_coordinates()[nodes]
 
 
-class ObjectContact:
-    """The object's penalty and friction on the finger (module docstring).
+def assembled(form) -> PETSc.Vec:
+    """The vector of a linear form, ghost contributions summed into their owners (collective)."""
+    vec = assemble_vector(form)
+    vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    return vec
+
+
+class FacetTerm:
+    """A contact term whose residual R is one UFL facet form of the unknown w, and whose
+    tangent is its derivative dR/dw assembled into the tangent's matrix (the object's,
+    ObjectContact, and the plane's, fem.physics.plane_contact.PlaneContact): the part of the
+    interface fem.physics.contact.ContactTerms calls that both share. A subclass passes its
+    candidate facets to ``__init__`` and its form to ``set_residual``; ``refresh`` updates
+    what the form holds fixed (nothing here) before either is assembled."""
+
+    def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, facets: np.ndarray, parts: np.ndarray):
+        """The set-up both terms share: ``finger``, ``w``, ``active`` (True), ``comm``, the
+        displacement space ``U`` and W's test function ``test`` (split_unknown), the
+        candidate facets' measure ``ds`` (``ds(k + 1)`` over part k's: part_measure), and the
+        deformed point and test function in the global plane ``xg``, ``vg`` (global_frame)."""
+        self.finger, self.w, self.active = finger, w, True
+        mesh = mesh_data.mesh
+        self.comm = mesh.comm
+        self.U, u, v, self.test = split_unknown(w)
+        self.ds = part_measure(mesh, facets, parts)
+        self.xg, self.vg = global_frame(finger, mesh, u, v)
+
+    def set_residual(self, residual) -> None:
+        """Compile R (``residual``, a UFL form linear in w's test function) and dR/dw."""
+        self._residual = residual
+        self._R = fem.form(residual)
+        self._K = fem.form(ufl.derivative(residual, self.w, ufl.TrialFunction(self.w.function_space)))
+
+    def refresh(self) -> None:
+        """Update the form's lagged values from the current state (none here)."""
+
+    def linearise(self, u: fem.Function) -> None:
+        """Fix the lagged values at the current state, as add_tangent does (nothing when
+        inactive)."""
+        if self.active:
+            self.refresh()
+
+    def coupled_dofs(self) -> list[np.ndarray]:
+        """None: the facet form couples only dofs that share a cell (already in the tangent's
+        pattern)."""
+        return []
+
+    def add_residual(self, b: PETSc.Vec, u: fem.Function) -> None:
+        """b += R(u) (collective; nothing when inactive)."""
+        if not self.active:
+            return
+        self.refresh()
+        vec = assembled(self._R)
+        b.axpy(1.0, vec)
+        vec.destroy()
+
+    def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
+        """A += dR/du (collective; A is left flush-assembled, call A.assemble() after;
+        nothing when inactive)."""
+        if not self.active:
+            return
+        self.refresh()
+        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
+        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+        assemble_matrix(A, self._K)
+        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
+        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+
+    def action_form(self, x: fem.Function) -> fem.FormMetaClass:
+        """The linear form (dR/du) x, for a tangent applied matrix-free
+        (fem.solvers.load_path.TangentAction): the form add_tangent assembles, along x."""
+        return fem.form(ufl.derivative(self._residual, self.w, x))
+
+
+class ObjectContact(FacetTerm):
+    """The object's penalty and friction on the finger (module docstring): a FacetTerm
+    whose residual R_o is assembled at the current lambda_c (``refresh``), and whose tangent
+    add_tangent assembles at fixed lambda_c, the friction's rank-one part staying out of
+    the matrix (``low_rank``).
 
     w: the unknown (displacement, or the mixed (u, p)); finger, joint_width (mm): the
     finger description and its joints' full width; obstacle: the object. stiffness k_c
@@ -209,15 +286,11 @@ class ObjectContact:
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float, obstacle: ObjectSpec,
                  excluded_tags: list[int], *, stiffness: float = CONTACT_STIFFNESS,
                  smoothing: float = CONTACT_SMOOTHING, mu: float = FRICTION, weight: float = OBJECT_WEIGHT):
-        self.obstacle, self.mu, self.weight, self.active = obstacle, mu, weight, True
-        self.finger, self.w = finger, w
+        self.obstacle, self.mu, self.weight = obstacle, mu, weight
         mesh = mesh_data.mesh
-        self.comm = mesh.comm
-        W = w.function_space
-        self.U, u, v, test = split_unknown(w)
         facets, parts = candidate_facets(mesh, mesh_data.facet_tags, finger, excluded_tags)
-        ds = part_measure(mesh, facets, parts)
-        xg, vg = global_frame(finger, mesh, u, v)
+        super().__init__(w, mesh_data, finger, facets, parts)
+        ds, xg, vg, test = self.ds, self.xg, self.vg, self.test
         d, n = signed_distance(obstacle, xg)
         t = upward_tangent(n)
         s = smooth_penetration(-d, smoothing)
@@ -227,12 +300,9 @@ class ObjectContact:
         def over(expr_of):
             return sum(expr_of(N) * dA for N, dA in N_parts)
         self.lam = fem.Constant(mesh, PETSc.ScalarType(0.0))
-        trial = ufl.TrialFunction(W)
         residual = over(lambda N: -N * ufl.dot(n, vg) + self.lam * N * ufl.dot(t, vg))
         num, den = over(lambda N: N * n[1]), over(lambda N: N * t[1])
-        self._residual = residual
-        self._R = fem.form(residual)
-        self._K = fem.form(ufl.derivative(residual, w, trial))
+        self.set_residual(residual)
         self._G = fem.form(over(lambda N: N * ufl.dot(t, vg)))
         self._dnum = fem.form(ufl.derivative(num, w, test))
         self._dden = fem.form(ufl.derivative(den, w, test))
@@ -250,11 +320,6 @@ class ObjectContact:
         self.candidate_dofs = np.sort(np.concatenate([xdofs, ydofs])).astype(np.int32)
         self.xy_dofs = (xdofs, ydofs)
 
-    def coupled_dofs(self) -> list[np.ndarray]:
-        """None: the facet form couples only dofs that share a cell (already in the tangent's
-        pattern), and the friction's rank-one part stays out of the matrix (low_rank)."""
-        return []
-
     # ------------------------------------------------------------------ law
     def _sum(self, name: str) -> float:
         return self.comm.allreduce(fem.assemble_scalar(self._sums[name]), op=MPI.SUM)
@@ -269,42 +334,10 @@ class ObjectContact:
         self.lam.value = float(np.clip(lam, -self.mu, self.mu))
         return lam, abs(lam) <= self.mu
 
-    @staticmethod
-    def _assembled(form) -> PETSc.Vec:
-        vec = assemble_vector(form)
-        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        return vec
-
-    def add_residual(self, b: PETSc.Vec, u: fem.Function) -> None:
-        """b += R_o(u) (collective; nothing when inactive)."""
-        if not self.active:
-            return
+    def refresh(self) -> None:
+        """Set lambda_c from the current state before the residual or tangent is assembled
+        (FacetTerm: add_residual, add_tangent at fixed lambda_c; the rest: low_rank)."""
         self._update()
-        vec = self._assembled(self._R)
-        b.axpy(1.0, vec)
-        vec.destroy()
-
-    def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
-        """A += dR_o/du at fixed lambda_c (collective; A is left flush-assembled, call
-        A.assemble() after; nothing when inactive). The rest of the tangent: low_rank."""
-        if not self.active:
-            return
-        self._update()
-        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
-        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
-        assemble_matrix(A, self._K)
-        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
-        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
-
-    def action_form(self, x: fem.Function) -> fem.FormMetaClass:
-        """The linear form (dR_o/du at fixed lambda_c) x, for a tangent applied matrix-free
-        (fem.solvers.load_path.TangentAction): the form add_tangent assembles, along x."""
-        return fem.form(ufl.derivative(self._residual, self.w, x))
-
-    def linearise(self, u: fem.Function) -> None:
-        """Fix lambda_c at the current state, as add_tangent does (nothing when inactive)."""
-        if self.active:
-            self._update()
 
     def low_rank(self, u: fem.Function) -> list[tuple[PETSc.Vec, PETSc.Vec]]:
         """The tangent's part that add_tangent leaves out: [(G, dlambda)], dR_o += G dlambdaᵀ
@@ -317,7 +350,7 @@ class ObjectContact:
         den = 2.0 * self._sum("den")
         if not (free and den > 1e-9):
             return []
-        G, dlam, dden = (self._assembled(f) for f in (self._G, self._dnum, self._dden))
+        G, dlam, dden = (assembled(f) for f in (self._G, self._dnum, self._dden))
         dlam.axpy(-lam, dden)               # dlambda = (2 d num - lambda 2 d den) / den
         dlam.scale(2.0 / den)
         dden.destroy()

@@ -44,17 +44,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import ufl
 from dolfinx import fem
-from dolfinx.fem.petsc import assemble_matrix, assemble_vector
 from dolfinx.mesh import exterior_facet_indices
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from contract.finger import FingerSpec
 from contract.grasp import CONTACT_SMOOTHING, PLANE_STIFFNESS
-from fem.physics.object_contact import (bending_facets, global_frame, owned_xy_dofs, part_measure, part_width,
-                                        smooth_penetration, split_unknown)
+from fem.physics.object_contact import FacetTerm, bending_facets, owned_xy_dofs, part_width, smooth_penetration
 
 
 def plane_facets(mesh, facet_tags, finger: FingerSpec, excluded: list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -72,8 +68,9 @@ def plane_facets(mesh, facet_tags, finger: FingerSpec, excluded: list[int]) -> t
     return facets[keep], part[keep]
 
 
-class PlaneContact:
-    """The plane X = 0's frictionless penalty on the finger (module docstring).
+class PlaneContact(FacetTerm):
+    """The plane X = 0's frictionless penalty on the finger (module docstring): a FacetTerm
+    of residual R_p, with nothing lagged.
 
     w: the unknown (displacement, or the mixed (u, p)); finger, joint_width (mm): the
     finger description and its joints' full width; excluded_tags: facet tags that never
@@ -84,22 +81,17 @@ class PlaneContact:
     def __init__(self, w: fem.Function, mesh_data, finger: FingerSpec, joint_width: float,
                  excluded_tags: list[int], *, stiffness: float = PLANE_STIFFNESS,
                  smoothing: float = CONTACT_SMOOTHING):
-        self.finger, self.w, self.active = finger, w, True
         mesh = mesh_data.mesh
-        self.comm = mesh.comm
-        self.U, u, v, _ = split_unknown(w)
         facets, parts = plane_facets(mesh, mesh_data.facet_tags, finger, excluded_tags)
-        ds = part_measure(mesh, facets, parts)
-        xg, vg = global_frame(finger, mesh, u, v)
+        super().__init__(w, mesh_data, finger, facets, parts)
+        ds, xg, vg = self.ds, self.xg, self.vg
         s = smooth_penetration(-xg[0], smoothing)
         # N per part: k_p / width of that part, over its own facet tag
         normal = sum((stiffness / part_width(finger, k, joint_width)) * s * ds(k + 1)
                      for k in range(len(finger.parts)))
         residual = sum(-(stiffness / part_width(finger, k, joint_width)) * s * vg[0] * ds(k + 1)
                        for k in range(len(finger.parts)))
-        self._residual = residual
-        self._R = fem.form(residual)
-        self._K = fem.form(ufl.derivative(residual, w, ufl.TrialFunction(w.function_space)))
+        self.set_residual(residual)
         self._normal = fem.form(normal)
         self.n_facets = self.comm.allreduce(len(facets), op=MPI.SUM)
         self._surface_dofs(mesh)
@@ -110,39 +102,6 @@ class PlaneContact:
         mesh.topology.create_connectivity(mesh.topology.dim - 1, mesh.topology.dim)
         xd, yd, ref = owned_xy_dofs(self.w, self.U, exterior_facet_indices(mesh.topology))
         self.surface_dofs, self._ref = (xd, yd), ref
-
-    def coupled_dofs(self) -> list[np.ndarray]:
-        """None: the facet form couples only dofs that share a cell (already in the tangent's
-        pattern)."""
-        return []
-
-    def add_residual(self, b: PETSc.Vec, u: fem.Function) -> None:
-        """b += R_p(u) (collective; nothing when inactive)."""
-        if not self.active:
-            return
-        vec = assemble_vector(self._R)
-        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        b.axpy(1.0, vec)
-        vec.destroy()
-
-    def add_tangent(self, A: PETSc.Mat, u: fem.Function) -> None:
-        """A += dR_p/du (collective; A is left flush-assembled, call A.assemble() after;
-        nothing when inactive)."""
-        if not self.active:
-            return
-        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
-        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
-        assemble_matrix(A, self._K)
-        A.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
-        A.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
-
-    def action_form(self, x: fem.Function) -> fem.FormMetaClass:
-        """The linear form (dR_p/du) x, for a tangent applied matrix-free
-        (fem.solvers.load_path.TangentAction): the form add_tangent assembles, along x."""
-        return fem.form(ufl.derivative(self._residual, self.w, x))
-
-    def linearise(self, u: fem.Function) -> None:
-        """Nothing: the plane's law has no lagged value."""
 
     def surface_x(self, u: fem.Function) -> np.ndarray:
         """Global X (n,) mm of the surface nodes this rank owns at the state u."""

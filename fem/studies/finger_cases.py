@@ -235,6 +235,26 @@ def render(solver: FingerSolver, path: Path, outline: np.ndarray | None = None) 
     return {"extent_mm": extent, "u_max_mm": umax, "cmap": "viridis"}
 
 
+def parse_on_one_rank(ap: cli.Parser, argv) -> tuple[argparse.Namespace, MPI.Comm]:
+    """(args, MPI.COMM_WORLD) of a case study's command line (here, fem.studies.finger_grid,
+    grasp_cases): mpirun refused (one_rank) before parsing, so that no output folder is made."""
+    comm = MPI.COMM_WORLD
+    one_rank(ap, comm)
+    return ap.parse_args(argv), comm
+
+
+def write_case(path: Path, record: dict, fmt, solver: FingerSolver, converged: bool,
+               outline: np.ndarray | None = None) -> None:
+    """Write one solved case: if ``converged``, its ``render`` (the deformed ``solver``,
+    ``outline`` over it: ``render``) beside ``path`` as .png and into ``record``; then
+    ``record`` to ``path`` in ``fmt`` (a fem.artefacts format: atomic), the folder
+    made if needed. Shared by solve_cases and fem.studies.grasp_cases."""
+    if converged:
+        record["render"] = render(solver, path.with_suffix(".png"), outline)
+    cli.make_output_folder(path.parent)
+    fmt.write(path, record)
+
+
 def solve_cases(todo: list, geometry, formulation: str, plane: bool, settings: dict, solver: dict,
                 comm: MPI.Comm = MPI.COMM_WORLD, after: Callable[[Path, dict], None] | None = None) -> None:
     """Solve the cases ``todo`` [(name, P1, P2, gravity, path)] on one FingerSolver built
@@ -253,10 +273,7 @@ def solve_cases(todo: list, geometry, formulation: str, plane: bool, settings: d
                   "mesh": fem_solver.mesh_info(), "formulation": formulation, "settings": settings,
                   "solver": solver,
                   "ranks": comm.size}
-        if res.converged:
-            record["render"] = render(fem_solver, path.with_suffix(".png"))
-        cli.make_output_folder(path.parent)
-        FINGER_CASE.write(path, record)
+        write_case(path, record, FINGER_CASE, fem_solver, res.converged)
         print(f"{name}: " + (f"converged, tip ({res.tip[0]:.3f}, {res.tip[1]:.3f}) mm, "
                              f"{math.degrees(res.tip_angle):.2f} deg" if res.converged else
                              f"did not converge ({res.reason}), no figures") + f", {res.wall_time:.0f} s", flush=True)
@@ -279,9 +296,7 @@ def main(argv=None) -> int:
                     "default: _hexN or _hexNsS on hexahedra, _mixed on mixed tetrahedra, so that they never replace "
                     "the displacement tetrahedral cases, else none)")
     cli.add_quiet(ap)
-    comm = MPI.COMM_WORLD
-    one_rank(ap, comm)
-    args = ap.parse_args(argv)
+    args, comm = parse_on_one_rank(ap, argv)
     table = args.pressures or CASES
     names = [c[0] for c in table]
     chosen = args.cases.split(",") if args.cases else names

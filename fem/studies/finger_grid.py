@@ -36,7 +36,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from mpi4py import MPI
 
 from contract import cli
 from contract.files import json_safe
@@ -44,8 +43,8 @@ from contract.finger import FingerSpec, finger_arg, load_finger
 from fem.artefacts import FINGER_CASE, FINGER_GRID
 from fem.mesh.geometry import pressure_limits
 from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation
-from fem.studies.finger_cases import case_name, case_settings, default_suffix, pending, solve_cases, solver_settings
-from fem.options import one_rank
+from fem.studies.finger_cases import (case_name, case_settings, default_suffix, parse_on_one_rank, pending, solve_cases,
+                                      solver_settings)
 
 
 def grid_pairs(limits: np.ndarray, points: int) -> list[tuple[float, float]]:
@@ -128,9 +127,7 @@ def build_parser() -> cli.Parser:
 
 def main(argv=None) -> int:
     ap = build_parser()
-    comm = MPI.COMM_WORLD
-    one_rank(ap, comm)
-    args = ap.parse_args(argv)
+    args, comm = parse_on_one_rank(ap, argv)
     finger = args.finger or load_finger()
     if finger.n_joints != 2:
         ap.error(f"--finger: finger {finger.name!r} has {finger.n_joints} joint(s); the grid is over "

@@ -77,7 +77,6 @@ from fem.artefacts import GRASP_CASE
 from fem.mesh.geometry import pressure_limits
 from fem.options import add_finger_mesh, finger_discretisation
 from fem.solvers.grasp import GraspSolver
-from fem.options import one_rank
 
 OUTLINE_POINTS = 720        # the render's object outline
 
@@ -180,8 +179,8 @@ def case_line(record: dict) -> str:
             f"{record['fem_s']:.0f} s")
 
 
-def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: bool, approach, out: Path,
-                 run: dict, say) -> list[dict]:
+def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: bool, approach, run: dict,
+                 say) -> list[dict]:
     """Solve ``todo`` [(case, path, settings)], all holding ``ob``, on one GraspSolver,
     write each record (and render) atomically and ``say`` it; returns the records."""
     comm = MPI.COMM_WORLD
@@ -196,10 +195,8 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
                              {"mu": FRICTION, "object_weight_N": OBJECT_WEIGHT, "plane": plane, "setup_s": setup_s,
                               "mesh": solver.fem.mesh_info(), "formulation": formulation, "settings": settings,
                               **run})
-        if result.finger.converged:
-            record["render"] = finger_cases.render(solver.fem, path.with_suffix(".png"), ob.outline(OUTLINE_POINTS))
-        cli.make_output_folder(out)
-        GRASP_CASE.write(path, record)
+        finger_cases.write_case(path, record, GRASP_CASE, solver.fem, result.finger.converged,
+                                ob.outline(OUTLINE_POINTS))
         say(case_line(record))
         records.append(record)
     return records
@@ -207,9 +204,7 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
 
 def main(argv=None) -> int:
     ap = build_parser()
-    comm = MPI.COMM_WORLD
-    one_rank(ap, comm)
-    args = ap.parse_args(argv)
+    args, comm = finger_cases.parse_on_one_rank(ap, argv)
     finger = load_finger()
     cases = chosen_cases(ap, args, pressure_limits(finger))
     approach = approach_for(finger.n_joints)
@@ -233,7 +228,7 @@ def main(argv=None) -> int:
         say(f"{ap.prog}: all {len(cases)} cases are up to date in {out}")
     with ap.errors(), cli.heartbeat("grasp cases"):
         for ob, items in todo.items():
-            records += solve_object(ob, items, geometry, formulation, plane, approach, out,
+            records += solve_object(ob, items, geometry, formulation, plane, approach,
                                     {"solver": solver, "ranks": comm.size}, say)
     if args.json:
         keys = ("case", "state", "converged", "tip", "tip_angle_deg", "contact_force_N", "friction_use", "fem_s")

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from contract import cli
 from contract.files import json_safe
 from fem.artefacts import JOINT_CASE
 from fem.mesh.discretisation import Discretisation
@@ -154,6 +155,25 @@ class Seeder:
             return None
         return {**result_record(solver, disc, r, self.comm), "seeded_from": self.disc.key,
                 "seed_wall_time_s": rs.wall_time}
+
+
+def add_work_arguments(ap: cli.Parser) -> None:
+    """The options of a study that solves its missing records here (fem.studies.mesh_study,
+    mesh_causes): ``--work``, the records' folder it resumes from, and ``--max-hours``,
+    solve_missing's budget."""
+    ap.add_output("--work", folder=True, default="results/fem/joint_cases",
+                  help="folder of the per-(discretisation, load) records (resumes from it; "
+                  "default results/fem/joint_cases)")
+    ap.add_argument("--max-hours", type=cli.number(0, 1000, "h"), default=1000.0,
+                    help="start no new solve after this many hours (default 1000)")
+
+
+def work_folder(work: str, comm=MPI.COMM_WORLD) -> Path:
+    """The records' folder ``work``, made by rank 0 while the others wait (collective)."""
+    if comm.rank == 0:
+        Path(work).mkdir(parents=True, exist_ok=True)
+    comm.barrier()
+    return Path(work)
 
 
 def solve_missing(work: Path, plan, loads=LOADS, max_hours: float = 1000.0,

@@ -22,8 +22,9 @@ it at the largest pressure. The maximum runs over every node of the displacement
 Data flow: the joint description (contract.joint) -> JointSolver (production discretisation
 by default) -> one load path over the pressures (continuation), bulges per pressure ->
 results/fem/joint_outline.json (``bulge_mm``: per |P| the pressurised and the other side's
-profile), which the joint file's [outline] table holds for predictor.model.gripper's outline. Only rank 0 writes; the file is written atomically.
-End loads and contact change the bulge a little; the study says nothing of them.
+profile), which the joint file's [outline] table holds for predictor.model.gripper's outline
+(contract.joint.outline_table prints it). Only rank 0 writes, atomically. End loads and
+contact change the bulge a little; the study says nothing of them.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ def pressures_of(joint: JointSpec) -> tuple[float, ...]:
     return tuple(round(f * joint.pressure_mpa, 6) for f in FRACTIONS)
 
 
-def centre_line(anchors: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
+def centre_line(anchors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(points (n + 1, 2), chord normals (n, 2)) of the deformed centre line: the proximal
     centre (0, 0) then the anchors (n, 2) mm; the unit normal of each chord, its +y side."""
     P = np.vstack([[0.0, 0.0], anchors])
@@ -67,7 +68,7 @@ def normal_offsets(X: np.ndarray, x: np.ndarray, anchors: np.ndarray, length: fl
     """(offset (N,) mm, chord (N,)) of material points X (N, 3) at deformed positions x
     (N, 3): the distance of x from the centre line point of its axial coordinate, along
     that chord's +y normal, and the chord's index (module docstring)."""
-    P, nrm = centre_line(anchors, length)
+    P, nrm = centre_line(anchors)
     n = len(anchors)
     s = np.clip(X[:, 0] / (length / n), 0.0, n - 1e-9)
     k = s.astype(int)

@@ -46,7 +46,8 @@ from contract.files import write_text
 from fem.artefacts import MESH_CAUSES
 from fem.mesh.geometry import JointGeometry, anchor_points
 from fem.mesh.discretisation import PAPER
-from fem.studies.joint_cases import INTERIOR, LOADS, difference, load_key, read_records, solve_missing
+from fem.studies.joint_cases import (INTERIOR, LOADS, add_work_arguments, difference, load_key, read_records,
+                                     solve_missing, work_folder)
 from fem.options import on_root
 
 BASE = PAPER
@@ -203,10 +204,7 @@ def main(argv=None) -> int:
     ap = cli.Parser(prog="python -m fem.studies.mesh_causes", description=__doc__.split("\n\n")[0])
     ap.add_output("--out", suffix=".json", default="results/fem/mesh_causes.json",
                   help="table (default results/fem/mesh_causes.json; a .md summary beside it)")
-    ap.add_output("--work", folder=True, default="results/fem/joint_cases",
-                  help="folder of the per-(discretisation, load) records (resumes from it)")
-    ap.add_argument("--max-hours", type=cli.number(0, 1000, "h"), default=1000.0,
-                    help="start no new solve after this many hours (default 1000)")
+    add_work_arguments(ap)
     ap.add_argument("--reference", default="results/fem/mesh_study.json",
                     help="mesh study JSON whose finest mesh is the reference (default "
                     "results/fem/mesh_study.json)")
@@ -218,10 +216,7 @@ def main(argv=None) -> int:
             study = json.loads(Path(args.reference).read_text())
         except (OSError, ValueError) as exc:
             ap.error(f"--reference {args.reference}: {exc}")
-        if comm.rank == 0:
-            Path(args.work).mkdir(parents=True, exist_ok=True)
-        comm.barrier()
-        complete = solve_missing(Path(args.work), PLAN, LOADS, args.max_hours, comm)
+        complete = solve_missing(work_folder(args.work, comm), PLAN, LOADS, args.max_hours, comm)
         table = {**analyse(read_records(Path(args.work), PLAN), study), "complete": complete}
 
         def write():

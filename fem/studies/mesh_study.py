@@ -58,7 +58,8 @@ from contract import cli
 from fem.artefacts import MESH_STUDY
 from fem.mesh.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation
 from fem.mesh.geometry import MAX_DIVISIONS, JointGeometry, anchor_points
-from fem.studies.joint_cases import CORNERS, LOADS, difference, load_key, node_estimate, read_records, solve_missing
+from fem.studies.joint_cases import (CORNERS, LOADS, add_work_arguments, difference, load_key, node_estimate,
+                                     read_records, solve_missing, work_folder)
 from fem.options import MESH_SIZE_TEXT, mesh_text, on_root
 
 __all__ = ["CORNERS", "LOADS", "analyse", "family", "richardson", "run"]
@@ -273,11 +274,7 @@ def main(argv=None) -> int:
                     help="study only these of the eight loads, by index: " + ", ".join(
                         f"{i} ({', '.join(f'{v:g}' for v in load.as_array())})" for i, load in enumerate(LOADS))
                     + " (default all)")
-    ap.add_output("--work", folder=True, default="results/fem/joint_cases",
-                  help="folder of the per-(discretisation, load) records (resumes from it; "
-                  "default results/fem/joint_cases)")
-    ap.add_argument("--max-hours", type=cli.number(0, 1000, "h"), default=1000.0,
-                    help="start no new solve after this many hours (default 1000)")
+    add_work_arguments(ap)
     ap.add_argument("--seed-from", type=mesh_text, default=None, metavar="MESH",
                     help="start every mesh with more nodes than MESH (e.g. hex2) from MESH's answer at the same "
                     "load, in --formulation, instead of from zero (one rank; default: all from zero)")
@@ -289,10 +286,7 @@ def main(argv=None) -> int:
             raise ValueError("--meshes: give one kind of mesh, tetrahedra H[:W] or hexahedra hexN")
         if args.seed_from and comm.size > 1:
             raise ValueError(f"--seed-from runs on one rank (fem.solvers.transfer), not {comm.size}")
-        if comm.rank == 0:
-            Path(args.work).mkdir(parents=True, exist_ok=True)
-        comm.barrier()
-        study = run(args.meshes, args.formulation, args.production, Path(args.work), args.max_hours, comm,
+        study = run(args.meshes, args.formulation, args.production, work_folder(args.work, comm), args.max_hours, comm,
                     [LOADS[i] for i in args.loads], args.production_formulation, args.seed_from)
         on_root(comm, lambda: MESH_STUDY.write(args.out, study))
     if comm.rank == 0:

@@ -574,8 +574,8 @@ class FingerPose:
 
 def joint_bulge(finger: FingerSpec) -> tuple[tuple[torch.Tensor, torch.Tensor], ...]:
     """Per joint of ``finger``, its [outline] table (contract.joint) as the hinges of a
-    piecewise-linear law in |P|: (knots (K + 1,) MPa, slope changes (2, K + 1, n + 1)
-    mm/MPa) over the band's n + 1 vertices, side 0 the pressurised chamber's, side 1 the
+    piecewise-linear law in |P|: (knots (K,) MPa: 0 and the table's pressures but the last,
+    slope changes (2, K, n + 1) mm/MPa) over the band's n + 1 vertices, side 0 the pressurised chamber's, side 1 the
     other's, such that shift(|P|) = sum_k relu(|P| - knot_k) slope_k is the table's value
     at every tabled pressure, 0 at P = 0 and linear beyond the last (joints without a table:
     zero). Vertex m takes the larger bulge of the chords on either side of it, m - 1 and m
@@ -592,8 +592,9 @@ def joint_bulge(finger: FingerSpec) -> tuple[tuple[torch.Tensor, torch.Tensor], 
         pressures, *sides = table
         x = torch.tensor((0.0,) + pressures, dtype=torch.float64)
         chords = torch.tensor(sides, dtype=torch.float64)                     # (2, K, n)
-        wide = torch.cat((chords[..., :1], chords), -1)
-        vertex = torch.maximum(wide, torch.cat((chords, chords[..., -1:]), -1))   # (2, K, n + 1)
+        before = torch.cat((chords[..., :1], chords), -1)                     # chord m - 1 of vertex m
+        after = torch.cat((chords, chords[..., -1:]), -1)                     # chord m
+        vertex = torch.maximum(before, after)                                 # (2, K, n + 1)
         y = torch.cat((torch.zeros(2, 1, n + 1, dtype=torch.float64), vertex), 1)
         slope = (y[:, 1:] - y[:, :-1]) / (x[1:] - x[:-1])[:, None]            # (2, K, n + 1)
         change = slope - torch.cat((torch.zeros_like(slope[:, :1]), slope[:, :-1]), 1)
