@@ -293,84 +293,82 @@ multifidelity: | $(SETUP) ## coarse surrogate + a learned fine-minus-coarse corr
 PRED_JOINT ?= results/surrogate/improved.pt
 PRED_DIR   ?= results/predictor
 PRED_BENCH ?= results/bench/predictor.json
-PRED_CORE  := predictor/joint.py predictor/gripper.py predictor/statics.py predictor/solve.py predictor/nn.py \
-              predictor/defaults.py predictor/problem.py predictor/progress.py predictor/result.py \
-              predictor/options.py predictor/graphs.py predictor/jacobians.py predictor/lm.py predictor/newton.py \
-              predictor/ramp.py predictor/networks.py predictor/nn_train.py predictor/nn_answer.py \
-              predictor/nn_eval.py predictor/nn_checkpoint.py contract/grasp.py \
-              $(filter-out analytic,$(PRED_JOINT))
+# The code every predictor artefact depends on: the model, the solvers, the networks and the
+# training command (predictor's sub-packages, docs/packages.md).
+PRED_CORE  := $(wildcard predictor/model/*.py predictor/solvers/*.py predictor/nn/*.py) predictor/cli/nn.py \
+              predictor/defaults.py contract/grasp.py $(filter-out analytic,$(PRED_JOINT))
 
 gestures: $(PRED_DIR)/gestures.json ## paper's gesture cases, grasps and NN curves -> results/predictor/
-$(PRED_DIR)/gestures.json: $(TIMES) $(PRED_CORE) predictor/plot.py predictor/figures.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
-	nice $(PY) -m predictor.figures --out $(PRED_DIR) --nn-dir $(PRED_DIR) --model $(PRED_JOINT)
+$(PRED_DIR)/gestures.json: $(TIMES) $(PRED_CORE) predictor/cli/figures.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
+	nice $(PY) -m predictor.cli.figures --out $(PRED_DIR) --nn-dir $(PRED_DIR) --model $(PRED_JOINT)
 
 $(PRED_DIR)/gravity_nn_paper.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the paper's gravity NN on one finger's equilibrium loss (75 epochs, ~1 min)
 	@mkdir -p $(@D)
-	nice $(PY) -m predictor.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
+	nice $(PY) -m predictor.cli.nn --variant gravity-paper --model $(PRED_JOINT) --out $@
 
 $(PRED_DIR)/gravity_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the improved gravity NN on Newton labels of one finger alone (SiLU + L-BFGS; ~2 min: 20,000 labels 6 s, training 92 s)
 	@mkdir -p $(@D)
-	nice $(PY) -m predictor.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
+	nice $(PY) -m predictor.cli.nn --variant gravity-improved --model $(PRED_JOINT) --out $@
 
 $(PRED_DIR)/contact_nn.pt: $(TIMES) $(PRED_CORE) | $(SETUP) ## train the contact NN (state classifier, one head per state, two correction stages each) on 20,000 ramp-solver labels (~50 min)
 	@mkdir -p $(@D)
-	nice $(PY) -m predictor.nn --variant contact --model $(PRED_JOINT) --out $@
+	nice $(PY) -m predictor.cli.nn --variant contact --model $(PRED_JOINT) --out $@
 
 bench-predictor: $(PRED_BENCH) ## predictor timings and residuals, torch.compile graphs (~10 min) -> results/bench/predictor.json
-$(PRED_BENCH): $(TIMES) $(PRED_CORE) predictor/bench.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
-	$(PY) -m predictor.bench --model $(PRED_JOINT) --nn-dir $(PRED_DIR) --graphs compile --out $@
+$(PRED_BENCH): $(TIMES) $(PRED_CORE) predictor/validation/bench.py $(PRED_DIR)/gravity_nn_paper.pt $(PRED_DIR)/gravity_nn.pt $(PRED_DIR)/contact_nn.pt | $(SETUP)
+	$(PY) -m predictor.validation.bench --model $(PRED_JOINT) --nn-dir $(PRED_DIR) --graphs compile --out $@
 
 # ---------------------------------------------------------------- grasp planning (issue 16)
 # (section owned by predictor/)
 ATLAS_OBJECTS := circle ellipse rectangle
 ATLAS_JSON    := $(foreach o,$(ATLAS_OBJECTS),$(PRED_DIR)/atlas_$(o).json)
-PLAN_CODE     := $(PRED_CORE) predictor/atlas.py predictor/plot.py
+PLAN_CODE     := $(PRED_CORE) $(wildcard predictor/planning/*.py) predictor/cli/atlas.py predictor/artefacts.py
 
 atlas: $(ATLAS_JSON) ## grasp atlas 61x61 of the three objects -> results/predictor/atlas_{circle,ellipse,rectangle}.{png,json}
 $(PRED_DIR)/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
-	nice $(PY) -m predictor.atlas --object $* --grid 61 --model $(PRED_JOINT) \
+	nice $(PY) -m predictor.cli.atlas --object $* --grid 61 --model $(PRED_JOINT) \
 	  --plot $(PRED_DIR)/atlas_$*.png --out $@ --json
 
 ATLAS_RAMP    := $(foreach o,$(ATLAS_OBJECTS),$(PRED_DIR)/ramp/atlas_$(o).json)
 atlas-reference: $(ATLAS_RAMP) ## the atlases with every point ramped on its own (the sweep's reference, ~10 min) -> results/predictor/ramp/
 $(PRED_DIR)/ramp/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
-	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --model $(PRED_JOINT) --out $@ --json
+	nice $(PY) -m predictor.cli.atlas --object $* --grid 61 --path ramp --model $(PRED_JOINT) --out $@ --json
 
 atlas-reference-fine: $(PRED_DIR)/ramp_fine/atlas_rectangle.json ## the rectangle's reference ramp with 48 sub-steps instead of 12: its path resolution (~9 min) -> results/predictor/ramp_fine/
 $(PRED_DIR)/ramp_fine/atlas_%.json: $(TIMES) $(PLAN_CODE) | $(SETUP)
 	@mkdir -p $(@D)
-	nice $(PY) -m predictor.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
+	nice $(PY) -m predictor.cli.atlas --object $* --grid 61 --path ramp --ramp-steps 48 --model $(PRED_JOINT) --out $@ --json
 
 # A benchmark, not a test: medians of wall times on this machine, with its load recorded
 # (inverse.json's track.load_average_*); the tip cases and the track at one thread.
 inverse: $(PRED_DIR)/inverse.json ## inverse pressures: hold the three objects, three tip targets, the 100-goal track -> results/predictor/inverse.{json,png}, track.png
-$(PRED_DIR)/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/inverse.py predictor/inversion.py \
-    predictor/track.py | $(SETUP)
-	nice $(PY) -m predictor.inverse --cases --model $(PRED_JOINT) --atlas-dir $(PRED_DIR) \
+$(PRED_DIR)/inverse.json: $(TIMES) $(ATLAS_JSON) $(PLAN_CODE) predictor/cli/inverse.py | $(SETUP)
+	nice $(PY) -m predictor.cli.inverse --cases --model $(PRED_JOINT) --atlas-dir $(PRED_DIR) \
 	  --out $@ --plot $(PRED_DIR)/inverse.png --track-plot $(PRED_DIR)/track.png \
 	  --track-out $(PRED_DIR)/track.json --json
 
 # Issue 60's closed loop alone (a benchmark): the fingertip along the 100-goal demo path
 # across the reachable region and out of it, each goal warm-started from the last answer and
-# verified through the forward equilibrium (predictor.track) -> $(PRED_DIR)/track.{json,png},
+# verified through the forward equilibrium (predictor.planning.track) -> $(PRED_DIR)/track.{json,png},
 # and inverse.json's `track` replaced by this run's (the three from one run, as make inverse's).
 # Exit 1 (some goals unreachable, by design of the path) is its normal end.
 track: $(PRED_DIR)/inverse.json | $(SETUP) ## closed-loop tip tracking, 100 goals in and out of reach, timed and verified -> results/predictor/track.{json,png}, inverse.json's track
-	nice $(PY) -m predictor.inverse --track demo --model $(PRED_JOINT) --out $(PRED_DIR)/track.json \
+	nice $(PY) -m predictor.cli.inverse --track demo --model $(PRED_JOINT) --out $(PRED_DIR)/track.json \
 	  --plot $(PRED_DIR)/track.png --into $(PRED_DIR)/inverse.json; test $$? -le 1
 
 # ---------------------------------------------------------------- calibration (issue 38)
+# The calibration's code: the predictor's core and predictor/calibration/ (docs/packages.md).
+CAL_CODE      := $(PRED_CORE) $(wildcard predictor/calibration/*.py) predictor/cli/calibrate.py
 calibrate-recovery: results/calibration/recovery.json ## calibration on known truth: the fit recovers parameters from predictor observations, noise-free and 20 noisy seeds (~1 min) -> results/calibration/recovery.json
-results/calibration/recovery.json: $(TIMES) $(PRED_CORE) predictor/observations.py predictor/calibration.py \
-    predictor/calibration_fit.py predictor/calibration_recovery.py predictor/calibrate.py | $(SETUP)
+results/calibration/recovery.json: $(TIMES) $(CAL_CODE) | $(SETUP)
 	@mkdir -p $(@D)
-	$(PY) -m predictor.calibrate recovery --out $@
+	$(PY) -m predictor.cli.calibrate recovery --out $@
 
 # Issue 38 §3(b): the whole-finger FEM of a deliberately different finger (CAL_TRUTH: joints
 # E x 1.15, the tip 20 % heavier, the mount turned 2 deg) at CAL_PRESSURES with gravity, all
-# inside |P| <= 0.2 MPa; predictor.calibration_fem.PRESSURES is the same list
+# inside |P| <= 0.2 MPa; predictor.calibration.fem.PRESSURES is the same list
 # (tests/test_calibration_fem.py checks). One core, niced, on the production joint mesh
 # (CAL_MESH, hex2:3 mixed, the surrogate's data's): 168-1,360 s a case, about 25 min a case
 # on half a core beside another FEM job; a converged case is skipped, so a killed run
@@ -381,27 +379,23 @@ CAL_TRUTH     := results/calibration/truth/finger.toml
 CAL_FEM       ?= results/calibration/fem
 CAL_MESH      ?= $(PROD_MESH)
 CAL_PRESSURES := 0.2,0.2;-0.2,0.15;0.15,-0.2;-0.15,-0.15;0,0;0.1,0.05;-0.1,0.2;0.05,-0.1
-CAL_CODE      := $(PRED_CORE) predictor/observations.py predictor/calibration.py predictor/calibration_fit.py \
-                 predictor/calibration_file.py predictor/calibration_fem.py predictor/calibration_plot.py \
-                 predictor/calibrate.py
 
 calibration-fem: | $(SETUP) ## whole-finger FEM of the calibration's true finger at 8 gravity pressure pairs on the production joint mesh (1 core, niced, ~2-3 h; resumes) -> results/calibration/fem/
 	nice $(PY) -m fem.studies.finger_cases --finger $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" --no-plane $(CAL_MESH) --out $(CAL_FEM)
 
-# The fit is judged as the observations' fit is (predictor.calibration_fit.judge): an
+# The fit is judged as the observations' fit is (predictor.calibration.fit.judge): an
 # untrusted one exits 1 and writes nothing (no --force here: a demo that stops trusting
 # its fit should fail, not commit it). The committed cases' fit is trusted: reduced
 # chi-square 0.004 for 24 degrees of freedom (rms 0.016 mm against the stated 0.3 mm).
 calibrate-demo: results/calibration/calibration.json ## calibrate the paper's predictor on 4 FEM gestures of the true finger, predict the other 4 (~1 min; needs make calibration-fem) -> results/calibration/{calibration.json,heldout.png,calibrated.toml}
 results/calibration/calibration.json: $(TIMES) $(CAL_CODE) $(CAL_TRUTH) $(wildcard $(CAL_FEM)/*.json) \
     results/calibration/recovery.json | $(SETUP)
-	$(PY) -m predictor.calibrate fem --fem $(CAL_FEM) --truth $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" \
+	$(PY) -m predictor.cli.calibrate fem --fem $(CAL_FEM) --truth $(CAL_TRUTH) --pressures "$(CAL_PRESSURES)" \
 	  --model $(PRED_JOINT) --recovery results/calibration/recovery.json --out $@
 
 bench-calibrate: results/bench/calibrate.json ## median wall time of the 8-observation calibration, 5 runs (~1 min) -> results/bench/calibrate.json
-results/bench/calibrate.json: $(TIMES) $(CAL_CODE) predictor/calibration_recovery.py predictor/calibration_bench.py \
-    docs/examples/observations.json | $(SETUP)
-	$(PY) -m predictor.calibrate bench --observations docs/examples/observations.json --model $(PRED_JOINT) --out $@
+results/bench/calibrate.json: $(TIMES) $(CAL_CODE) docs/examples/observations.json | $(SETUP)
+	$(PY) -m predictor.cli.calibrate bench --observations docs/examples/observations.json --model $(PRED_JOINT) --out $@
 
 # ---------------------------------------------------------------- finger validation (issue 14)
 # The lone-finger cases of finger-fem are on PAPER_MESH, as the 1.8 mm reference surrogate
@@ -432,34 +426,34 @@ GRASP_FEM := results/validation/grasps_fem
 grasp-fem: | $(SETUP) ## whole-finger FEM grasps: the paper's six + ten atlas cases on the production mesh, plane X = 0 (one process, niced, hours; resumes) -> results/validation/grasps_fem/
 	nice $(PY) -m fem.studies.grasp_cases --out $(GRASP_FEM)
 
-# The predictor side (issue 36 §3, predictor/validate_grasps.py): each FEM grasp of
+# The predictor side (issue 36 §3, predictor/validation/grasps.py): each FEM grasp of
 # grasp-fem on the production discretisation (files <case>_hex2s3.json) against the
 # predictor with the same finger, object, history, mu, W and plane; it never runs the FEM
 # itself (hours): run `make grasp-fem` first.
 GRASP_FIGURES := results/validation/grasps
 validate-grasps: results/validation/grasps.json ## predictor against the FEM grasps of make grasp-fem (production mesh, ~1 min) -> results/validation/grasps.json + overlays in results/validation/grasps/
-results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) predictor/validate_grasps.py \
-    predictor/plot.py $(PRED_CORE) | $(SETUP)
-	$(PY) -m predictor.validate_grasps --fem $(GRASP_FEM) --mesh hex2:3 --formulation mixed --model $(PRED_JOINT) \
+results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) predictor/validation/grasps.py \
+    predictor/model/plot.py $(PRED_CORE) | $(SETUP)
+	$(PY) -m predictor.validation.grasps --fem $(GRASP_FEM) --mesh hex2:3 --formulation mixed --model $(PRED_JOINT) \
 	  --out $@ --figures $(GRASP_FIGURES)
 
 # The predictor against the production-mesh finger cases with the plane X = 0 (issue 56 §3;
 # the files *_hex2s3_plane.json of make finger-grid and the free cases), on the production
 # surrogate; it never runs the FEM itself.
 validate-finger: results/validation/finger.json ## predictor against the production-mesh finger FEM cases, plane X = 0 (8 cases: 36 CPU s, 2.7 min at load 4) -> results/validation/finger.json + overlays finger_*.png
-results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validate_finger.py \
+results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validation/finger.py \
     $(PRED_CORE) | $(SETUP)
-	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh hex2:3 --formulation mixed --plane \
+	$(PY) -m predictor.validation.finger --fem $(FINGER_FEM) --mesh hex2:3 --formulation mixed --plane \
 	  --model $(PRED_JOINT) --out $@ --figures results/validation
 
 # The 1.8 mm reference: the lone-finger cases of finger-fem (solved first if missing) against
 # the predictor on the 1.8 mm reference surrogate.
 validate-finger-h1.8: results/validation/finger_h1.8.json ## predictor (tangent/cap kinematics) on the 1.8 mm reference surrogate against the 1.8 mm lone-finger FEM -> results/validation/finger_h1.8.json + overlays in finger_h1.8/
-results/validation/finger_h1.8.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validate_finger.py $(PRED_CORE) \
+results/validation/finger_h1.8.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validation/finger.py $(PRED_CORE) \
     $(REF_SURROGATE)/improved.pt | $(SETUP)
 	$(MAKE) --no-print-directory finger-fem
 	@mkdir -p results/validation/finger_h1.8
-	$(PY) -m predictor.validate_finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement \
+	$(PY) -m predictor.validation.finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement \
 	  --model $(REF_SURROGATE)/improved.pt --out $@ --figures results/validation/finger_h1.8
 
 # ---------------------------------------------------------------- one joint file to a predictor (issue 37)

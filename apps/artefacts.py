@@ -1,7 +1,7 @@
 """Every JSON artefact under results/: where it lives, its format and the make target that
 writes it.
 
-Each format is defined beside the code that writes the file (fem.studies.artefacts,
+Each format is defined beside the code that writes the file (fem.artefacts,
 workflow.artefacts, surrogate.artefacts, predictor.artefacts, apps.demo); dataset manifests
 have their own strict loader (workflow.shards.Manifest, docs/formats.md §2). This catalogue
 is what the report loads through, and what tests/test_artefacts.py checks every committed
@@ -16,7 +16,7 @@ from pathlib import Path
 
 from apps import demo
 from contract.records import Format
-from fem.studies import artefacts as fem
+from fem import artefacts as fem
 from predictor import artefacts as predictor
 from surrogate import artefacts as surrogate
 from workflow import artefacts as workflow
@@ -93,7 +93,7 @@ ARTEFACTS = (
     Artefact("predictor/h1.8/ramp_fine/atlas_*.json", f"make atlas-reference-fine {REF_PREDICTOR}", predictor.ATLAS),
     Artefact("predictor/h1.8/inverse.json", f"make inverse {REF_PREDICTOR}", predictor.INVERSE),
     Artefact("predictor/h1.8/track.json", f"make track {REF_PREDICTOR}", predictor.TRACK),
-    Artefact("predictor/h1.8/contact_change.json", "python -m predictor.contact_change --before DIR --label TEXT "
+    Artefact("predictor/h1.8/contact_change.json", "python -m predictor.validation.contact_change --before DIR --label TEXT "
              "--after results/predictor/h1.8 --out results/predictor/h1.8/contact_change.json",
              predictor.CONTACT_CHANGE),
     Artefact("calibration/recovery.json", "make calibrate-recovery", predictor.RECOVERY),

@@ -9,24 +9,24 @@ What runs, one subprocess at a time (``sys.executable -m ...``, so at most one F
    ``fem.cli.solve --json``'s);
 2. ``surrogate.predict --json``: the same case on the surrogate trained on that
    discretisation's data (FEM_SURROGATE, the 1.8 mm reference results/surrogate/h1.8/);
-3. ``predictor.validate_finger --cases``: the predictor (on FEM_SURROGATE) against the committed whole-finger
+3. ``predictor.validation.finger --cases``: the predictor (on FEM_SURROGATE) against the committed whole-finger
    FEM of the paper's gravity gestures (-0.1, 0.1) and (0.1, -0.1) MPa
    (results/validation/finger_fem, made by ``make finger-fem``; not solved now) ->
    ``gravity.json`` and the overlays ``committed/finger_gravity_<P1>_<P2>.png``. Those FEM cases are
    one finger alone (no plane X = 0), and so is the predictor here (validate_finger
    matches each case's plane);
-4. and 5. ``predictor.gesture --json --plot``: the same gestures of the gripper, whose
+4. and 5. ``predictor.cli.gesture --json --plot``: the same gestures of the gripper, whose
    fingers meet at X = 0, on the default (production) surrogate -> ``gesture_<P1>_<P2>.png``,
    against the committed finger FEM of the gripper at the same pressures where it is solved
    (``<case>_hex2s3_plane.json``: the production mesh with the plane, the surrogate's own data
    mesh; ``make finger-grid``), within the production validation's targets
    (results/validation/finger.json); where it is not solved yet the row gives the fingertip
    and the force where the fingers meet;
-6. ``predictor.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
+6. ``predictor.cli.gesture --object circle``: one grasp -> ``grasp.png`` (there is no FEM of
    a grasp here: normal force, friction use |f|/N and hold/slip are shown instead);
 7. ``fem.studies.finger_cases --mesh-size H``: the whole-finger FEM of (0.1, -0.1) MPa solved now
    on a coarse joint mesh (one finger alone) -> ``finger_fem/<case>.json`` and its render;
-8. ``predictor.validate_finger --mesh-size H``: the predictor (one finger alone, on
+8. ``predictor.validation.finger --mesh-size H``: the predictor (one finger alone, on
    FEM_SURROGATE) against it -> ``finger.json`` and the overlay ``finger_<case>.png``.
 
 ``--finger FILE`` (a finger of two joints) runs every gesture and the live finger FEM for
@@ -61,7 +61,7 @@ table, PNGs linked) and the table on stdout. Each step prints ``[demo k/N] what 
 
 Layering: an app (apps -> predictor -> surrogate -> workflow -> fem); it runs the
 packages' command lines, one subprocess each, and reads their JSON, the committed finger
-FEM cases and the files the steps write through their formats (fem.studies.artefacts,
+FEM cases and the files the steps write through their formats (fem.artefacts,
 predictor.artefacts); of the packages it imports only those, fem.mesh.geometry and the
 contract (no torch, no dolfinx). Its own summary.json is checked against
 SUMMARY before it is written. Exit 0 when every step succeeded; otherwise one line names the failed
@@ -87,7 +87,7 @@ from contract import cli
 from contract.files import write_text
 from contract.finger import FingerSpec, finger_arg, load_finger, same_finger
 from contract.records import Format, each
-from fem.studies import artefacts as fem_artefacts
+from fem import artefacts as fem_artefacts
 from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor import artefacts as predictor_artefacts
 
@@ -175,11 +175,11 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
              ["--model", FEM_SURROGATE, *case, "--json"]),
     ]
     # The committed finger FEM cases are one finger alone (no plane X = 0): the predictor is
-    # compared with them as one finger alone too (predictor.validate_finger matches the
+    # compared with them as one finger alone too (predictor.validation.finger matches the
     # case's plane), and the gripper's gestures (the fingers meet at X = 0) are shown apart.
     if committed_fem:
         steps.append(Step("validate_gravity", "predictor, one finger alone, against the committed finger FEM of "
-                          "the paper's gravity gestures (predictor.validate_finger)", "predictor.validate_finger",
+                          "the paper's gravity gestures (predictor.validation.finger)", "predictor.validation.finger",
                           ["--fem", COMMITTED_FINGER_FEM, "--cases", ",".join(f"gravity_{gesture_name(*p)}"
                                                                               for p in GRAVITY_GESTURES),
                            *committed, "--model", FEM_SURROGATE, *fing, "--out", f"{out}/gravity.json",
@@ -189,20 +189,20 @@ def build_steps(out: str, finger_mesh_size: float, finger: str | None = None,
     for p1, p2 in GRAVITY_GESTURES:
         name = gesture_name(p1, p2)
         steps.append(Step(f"gesture_{name}", f"gripper gesture ({_g(p1)}, {_g(p2)}) MPa, the fingers meeting at "
-                          "X = 0 (predictor.gesture)",
-                          "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), *fing, "--json",
+                          "X = 0 (predictor.cli.gesture)",
+                          "predictor.cli.gesture", ["--p1", _g(p1), "--p2", _g(p2), *fing, "--json",
                                                 "--plot", f"{out}/gesture_{name}.png"]))
     p1, p2, obj = GRASP
-    steps.append(Step("grasp", f"grasp of a {obj} at ({_g(p1)}, {_g(p2)}) MPa (predictor.gesture)",
-                      "predictor.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--object", obj, *fing, "--json",
+    steps.append(Step("grasp", f"grasp of a {obj} at ({_g(p1)}, {_g(p2)}) MPa (predictor.cli.gesture)",
+                      "predictor.cli.gesture", ["--p1", _g(p1), "--p2", _g(p2), "--object", obj, *fing, "--json",
                                             "--plot", f"{out}/grasp.png"]))
     h = _g(finger_mesh_size)
     steps.append(Step("finger_fem", f"finger FEM {FINGER_CASE}, joint mesh h={h} mm (fem.studies.finger_cases)",
                       "fem.studies.finger_cases", ["--out", f"{out}/finger_fem", "--cases", FINGER_CASE, "--mesh-size", h,
                                            "--formulation", COMMITTED_FORMULATION, "--no-plane", *fing],
                       reads=f"{out}/finger_fem/{FINGER_CASE}.json", format=fem_artefacts.FINGER_CASE))
-    steps.append(Step("validate", "predictor against that finger FEM (predictor.validate_finger)",
-                      "predictor.validate_finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h, *fing,
+    steps.append(Step("validate", "predictor against that finger FEM (predictor.validation.finger)",
+                      "predictor.validation.finger", ["--fem", f"{out}/finger_fem", "--mesh-size", h, *fing,
                                                     "--formulation", COMMITTED_FORMULATION, "--model", FEM_SURROGATE,
                                                     "--out", f"{out}/finger.json", "--figures", out, "--json"],
                       reads=f"{out}/finger.json", format=predictor_artefacts.VALIDATION))
@@ -270,16 +270,16 @@ def fem_mesh_label(case: dict) -> str:
 
 
 def judged_entry(validation: dict, case: str) -> dict:
-    """The judged variant's entry of ``case`` in a predictor.validate_finger JSON."""
+    """The judged variant's entry of ``case`` in a predictor.validation.finger JSON."""
     judged = validation["judged_variant"]
     entry = next((e for e in validation["cases"] if e["case"] == case and e["variant"] == judged), None)
     if entry is None:
-        raise ValueError(f"predictor.validate_finger has no {judged} entry for {case}")
+        raise ValueError(f"predictor.validation.finger has no {judged} entry for {case}")
     return entry
 
 
 def tip_tolerance(validation: dict) -> dict:
-    """The finger validation's fingertip targets, from its JSON (predictor.validate_finger:
+    """The finger validation's fingertip targets, from its JSON (predictor.validation.finger:
     one finger alone's, issue 14: 2 mm and 1 deg; the gripper's, issue 56: 1 mm and 0.5 deg)."""
     t = validation["targets"]
     return {"tip_mm": t["tip_error_mm"], "tip_angle_deg": t["tip_angle_error_deg"]}
@@ -293,7 +293,7 @@ def within(errors: dict | None, tolerance: dict | None) -> bool | None:
 
 
 def gravity_row(fem: dict, validation: dict, fem_file: str) -> dict:
-    """A gravity gesture of one finger alone: the predictor (predictor.validate_finger JSON,
+    """A gravity gesture of one finger alone: the predictor (predictor.validation.finger JSON,
     its judged variant) against the committed finger FEM of the case, which has no plane."""
     p1, p2 = fem["pressures_MPa"]
     entry = judged_entry(validation, fem["case"])
@@ -313,7 +313,7 @@ def gravity_row(fem: dict, validation: dict, fem_file: str) -> dict:
 
 
 def gripper_row(g: dict, fem: dict | None = None, fem_file: str = "", tolerance: dict | None = None) -> dict:
-    """A gravity gesture of the gripper (predictor.gesture JSON, the default surrogate)
+    """A gravity gesture of the gripper (predictor.cli.gesture JSON, the default surrogate)
     against the committed finger FEM of the gripper at the same pressures (``fem``, on the
     production mesh with the plane: the same problem, the model's own data mesh) within
     ``tolerance``; without that FEM (not solved yet), its fingertip and the force where the
@@ -341,12 +341,12 @@ def gripper_row(g: dict, fem: dict | None = None, fem_file: str = "", tolerance:
 
 
 def grasp_state(g: dict) -> str:
-    """The gesture's own state (predictor.gesture --json ``state``) in words."""
+    """The gesture's own state (predictor.cli.gesture --json ``state``) in words."""
     return g["state"].replace("_", " ")
 
 
 def grasp_row(g: dict) -> dict:
-    """A grasp (predictor.gesture --object JSON): no FEM, so the contact figures."""
+    """A grasp (predictor.cli.gesture --object JSON): no FEM, so the contact figures."""
     p1, p2 = g["pressures_MPa"]
     figures = {"normal_force_N": g["contact_force_N"], "friction_use": g["friction_use"],
                "state": grasp_state(g)}
@@ -361,7 +361,7 @@ def grasp_row(g: dict) -> dict:
 
 def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: str) -> list[dict]:
     """The finger FEM solved now (fem.studies.finger_cases JSON, one finger alone) against the
-    predictor (predictor.validate_finger JSON, its judged variant, one finger alone too),
+    predictor (predictor.validation.finger JSON, its judged variant, one finger alone too),
     and the same FEM against the committed FEM of the case (on the committed data's mesh):
     the coarse mesh's own error (no tolerance: it measures the mesh)."""
     h = fem_mesh_label(fem)
@@ -399,7 +399,7 @@ def finger_rows(fem: dict, validation: dict, committed: dict, committed_file: st
 def table_rows(data: dict) -> list[dict]:
     """Every row of the demo's table from the steps' JSON: ``data`` holds
     joint {fem, surrogate, surrogate_wall_s}, gravity [{fem, fem_file}, ...] with
-    gravity_validation (the lone finger's predictor.validate_finger JSON), gripper
+    gravity_validation (the lone finger's predictor.validation.finger JSON), gripper
     [gesture, ...] with gripper_fem {gesture name: (FEM case, its file)} where the gripper's
     FEM is committed and gripper_tolerance, grasp, finger {fem, validation, committed,
     committed_file}; without a committed FEM of the finger, no gravity and finger.committed None."""

@@ -18,7 +18,7 @@ checks, one-line errors and resume), in DIR (default results/joints/<joint name>
     5 train     surrogate.train --config improved -> surrogate.pt (+ surrogate_curve.png)
     6 evaluate  surrogate.evaluate on the held-out walk -> heldout.json, and on the
                 training split -> train_fit.json
-    7 gesture   predictor.gesture with finger.toml (three joints of the joint, the paper
+    7 gesture   predictor.cli.gesture with finger.toml (three joints of the joint, the paper
                 finger's 60 mm link between them and its 65 mm tip) at pressures (-p, p, p),
                 p = 0.5 min(P_max, 0.3 MPa): the base joint opens, the other two close (a
                 grasp-like pose that keeps the two fingers apart), gravity -> gesture.png,
@@ -479,7 +479,7 @@ def gesture_pressures(s: Settings) -> list[float]:
 
 def gesture_stage(s: Settings) -> Stage:
     pressures = ",".join(f"{p!r}" for p in gesture_pressures(s))
-    argv = ["-m", "predictor.gesture", "--finger", str(s.out / "finger.toml"), "--model", str(s.out / "surrogate.pt"),
+    argv = ["-m", "predictor.cli.gesture", "--finger", str(s.out / "finger.toml"), "--model", str(s.out / "surrogate.pt"),
             f"--pressures={pressures}", "--plot", str(s.out / "gesture.png"), "--json", "--quiet"]
     key = key_of(joint=s.digest, model=sha256_file(s.out / "surrogate.pt"), finger=sha256_file(s.out / "finger.toml"),
                  outline=sha256_file(s.out / "joint.toml"), argv=argv[6:7])

@@ -20,7 +20,7 @@ along that direction.
 The file is TOML (format tag ``softjoint-finger/1``); ``contract/fingers/paper.toml`` is the
 paper's gripper and the default.
 
-A calibrated finger (predictor.calibrate, docs/calibration.md) adds optional keys, absent
+A calibrated finger (predictor.cli.calibrate, docs/calibration.md) adds optional keys, absent
 from uncalibrated files (which load exactly as before): per joint ``pressure_gain`` g,
 ``pressure_offset`` o (MPa) and ``stiffness_scale`` s, under which joint i sees
 P_eff = (g·P + o)/s and loads tau/s (a joint of modulus s·E), and a top-level

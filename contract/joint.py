@@ -32,7 +32,7 @@ A joint file (format tag ``softjoint-joint/1``; docs/joints.md) has five tables:
   (|F1| and |F2|) and ``moment_nmm`` (|M|): contract.spec.INPUT_BOX for this joint;
 * ``[anchors]``: ``count``, the anchor points X_i = (i L / count, 0, 0), i = 1..count;
 * ``[outline]`` (optional): how far a pressurised chamber's cells bulge beyond the band of
-  half-height ``height``/2 that the predictor draws the joint as (predictor.gripper), mm,
+  half-height ``height``/2 that the predictor draws the joint as (predictor.model.gripper), mm,
   at |P| = ``pressures`` (MPa, increasing, > 0): ``bulge`` on the pressurised side and
   ``other`` on the opposite one, each one list per pressure of one value per anchor chord
   (``count`` values: chord k from anchor k to k + 1, chord 0 from the proximal face);

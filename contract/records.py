@@ -2,7 +2,7 @@
 
 An artefact's format is a ``Format``: a name, a version and the key paths its readers rely
 on, each with its JSON type. The module that writes the artefact defines its format
-(``fem/studies/artefacts.py``, ``workflow/artefacts.py``, ``surrogate/artefacts.py``,
+(``fem/artefacts.py``, ``workflow/artefacts.py``, ``surrogate/artefacts.py``,
 ``predictor/artefacts.py``); the writer calls ``Format.write`` (check, then an atomic
 write), and a reader calls ``Format.load`` (read, then check). A renamed or retyped key so
 fails the writer's tests instead of a reader's run. Keys beyond those listed are allowed:

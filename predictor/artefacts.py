@@ -1,8 +1,8 @@
 """The formats of the JSON artefacts the predictor package writes (contract.records).
 
 Each names the key paths the report and the demo read with their JSON types; the writer
-in ``owner`` checks its document before writing it (predictor.bench, atlas, inverse,
-validate_finger, validate_grasps; predictor.figures checks gestures.json, which it writes
+in ``owner`` checks its document before writing it (predictor.validation.bench, atlas, inverse,
+validate_finger, validate_grasps; predictor.cli.figures checks gestures.json, which it writes
 without a final newline) and readers load the file through it (docs/formats.md §6). Units as in the key names: MPa, mm, N, mN, N·mm, deg, ms, s.
 Optional paths (``?``) are figures a writer records only in some runs (a path it did not
 bench, a file from before a figure was added).
@@ -19,7 +19,7 @@ _RESIDUALS = ("force_mN_mean", "moment_Nmm_mean", "force_mN_p95", "moment_Nmm_p9
 _THROUGHPUT = {"per_s": NUM, "newton_from_nn": int, "ramp_fallback": int}
 
 #: results/bench/predictor.json (make bench-predictor): timings, residuals and throughputs.
-BENCH = Format("predictor-bench", 1, "predictor.bench", {
+BENCH = Format("predictor-bench", 1, "predictor.validation.bench", {
     **each("", NUM, "gravity_newton_median_ms", "gravity_lbfgs_median_ms", "contact_median_ms",
            "gravity_nn_residual_force_mN", "gravity_nn_residual_moment_Nmm",
            "contact_nn_raw_residual_force_mN", "contact_nn_raw_residual_moment_Nmm",
@@ -61,7 +61,7 @@ BENCH = Format("predictor-bench", 1, "predictor.bench", {
 _WHERE = {"contact_part?": str | None, "contact_face?": str | None, "contact_point_mm?": list | None,
           "plane_force_N?": MAYBE, "plane_overlap_mm?": MAYBE}
 
-#: One gesture summary (predictor.gesture --json, and each case of gestures.json): the
+#: One gesture summary (predictor.cli.gesture --json, and each case of gestures.json): the
 #: fingertip and angles are null unless converged; files from before the gesture said its
 #: state carry ``slip`` and a signed ``friction_ratio`` instead of ``state``, ``friction_use``.
 _GESTURE = {"pressures_MPa": list, "converged": bool, "tip": list | None, "tip_angle_deg": MAYBE,
@@ -69,13 +69,13 @@ _GESTURE = {"pressures_MPa": list, "converged": bool, "tip": list | None, "tip_a
             "friction_ratio?": MAYBE, **_WHERE}
 
 #: results/predictor/gestures.json (make gestures): the paper's gesture cases and grasps.
-GESTURES = Format("predictor-gestures", 1, "predictor.figures", {
+GESTURES = Format("predictor-gestures", 1, "predictor.cli.figures", {
     "joint": str, "approach_MPa": list, "mu?": NUM,
     **{f"{group}.{k}": kind for group in ("gravity[]", "free[]", "grasps{}[]") for k, kind in _GESTURE.items()}})
 
 #: results/predictor/atlas_<object>.json and its ramp/, ramp_fine/ references (make atlas):
 #: the grasp state over a (P1, P2) grid; ``state`` holds codes into ``states``.
-ATLAS = Format("predictor-atlas", 1, "predictor.atlas", {
+ATLAS = Format("predictor-atlas", 1, "predictor.cli.atlas", {
     "grid": int, "approach_MPa": list | None, "mu": NUM, "joint?": str, "states": list, "state[]": list,
     **each("counts", int, "no_contact", "holds", "slips", "not_converged"),
     "best_hold?.pressures_MPa": list, "best_hold?.friction_use": MAYBE,
@@ -84,7 +84,7 @@ ATLAS = Format("predictor-atlas", 1, "predictor.atlas", {
     "object?.corner_mm?": NUM, "finger?.name": str, "finger?.sha256": str})
 
 #: results/predictor/inverse.json (make inverse): each goal's pressures, verified forward.
-INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
+INVERSE = Format("predictor-inverse", 1, "predictor.cli.inverse", {
     "joint?": str, **each("targets", NUM, "inverse_tip_ms", "inverse_hold_ms"),
     **each("measured", NUM, "inverse_tip_ms", "inverse_hold_ms", "inverse_hold_cold_ms"),
     "tolerances.regulator_MPa": NUM,
@@ -92,7 +92,7 @@ INVERSE = Format("predictor-inverse", 1, "predictor.inverse", {
     "cases[].friction_use": MAYBE, "cases[].tip_error_mm?": MAYBE, "cases[].verified": bool | None,
     "cases[].robust": bool | None, "cases[].time_ms_median": NUM, "cases[].angle_error_deg?": MAYBE,
     **{f"cases[].{k}": kind for k, kind in _WHERE.items()},
-    # issue 60: the demo track (predictor.track), timed beside what the load averages say
+    # issue 60: the demo track (predictor.planning.track), timed beside what the load averages say
     "track?.goals": int, **each("track?", NUM, "median_ms", "p95_ms", "rate_hz", "setup_ms", "first_ms"),
     "track?.max_tip_error_mm": MAYBE, "track?.verified": bool, **each("track?", int, "reached", "unreachable"),
     "track?.reached_warm_median_ms": MAYBE, "track?.unreachable_median_ms": MAYBE,
@@ -103,7 +103,7 @@ _SUMMARY = ("tip_error_mm_max", "tip_error_mm_mean", "tip_angle_error_deg_max",
 
 #: results/validation/finger.json, results/demo/finger.json (make validate-finger): the
 #: predictor's variants against the finger FEM, per case and summarised per variant.
-VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger", {
+VALIDATION = Format("predictor-finger-validation", 1, "predictor.validation.finger", {
     **each("targets", NUM, "tip_error_mm", "tip_angle_error_deg", "speedup", "fem_s", "fem_cases"),
     "targets.refinement_tip_change_mm?": NUM,
     "summary{}.cases": int, **each("summary{}", NUM, *_SUMMARY), "judged_variant": str,
@@ -124,11 +124,11 @@ VALIDATION = Format("predictor-finger-validation", 1, "predictor.validate_finger
 
 _GRASP_MET = ("tip", "tip_angle", "normal_force", "contact_location", "state", "fem_time", "speedup")
 
-#: results/validation/grasps.json (make validate-grasps; predictor.validate_grasps): the
+#: results/validation/grasps.json (make validate-grasps; predictor.validation.grasps): the
 #: predictor against the FEM grasps of fem.studies.grasp_cases on one discretisation, per case (the
 #: issue's keys; figures null where a side did not solve) and summarised; ``met`` per target:
 #: true, false, or null where not judged (the state where the FEM's friction use is near 1).
-GRASP_VALIDATION = Format("predictor-grasp-validation", 1, "predictor.validate_grasps", {
+GRASP_VALIDATION = Format("predictor-grasp-validation", 1, "predictor.validation.grasps", {
     "joint": str, "finger.name": str, "fem_folder": str, "repeats": int, "figures": list, "judged": list,
     "plane?": bool | None,
     **each("discretisation", str, "mesh", "formulation"),
@@ -150,9 +150,9 @@ GRASP_VALIDATION = Format("predictor-grasp-validation", 1, "predictor.validate_g
            "predictor_s_median"),
     **{f"summary.met.{k}.{f}": int for k in _GRASP_MET for f in ("met", "judged")}, "summary.all_met": bool})
 
-#: results/calibration/recovery.json (make calibrate-recovery; predictor.calibrate recovery):
+#: results/calibration/recovery.json (make calibrate-recovery; predictor.cli.calibrate recovery):
 #: the calibration fit on observations made from a known truth, noise-free and noisy seeds.
-RECOVERY = Format("predictor-calibration-recovery", 1, "predictor.calibrate", {
+RECOVERY = Format("predictor-calibration-recovery", 1, "predictor.cli.calibrate", {
     "truth{}": NUM, "pressures_MPa": list, "joint_model": str, **each("noise", NUM, "mm", "deg"),
     "seeds": int, "starts": int, "targets": dict, "time_s": NUM,
     **each("noise_free", list, "parameters", "identifiable", "unidentifiable"),
@@ -161,9 +161,9 @@ RECOVERY = Format("predictor-calibration-recovery", 1, "predictor.calibrate", {
     "noisy.coverage_95": NUM, "noisy.coverage_95_per_parameter{}": MAYBE,
     "noisy.runs[].seed": int, "noisy.runs[].rms_after_mm": NUM, "noisy.runs[].parameters": dict})
 
-#: results/predictor/h1.8/contact_change.json (python -m predictor.contact_change): what the
+#: results/predictor/h1.8/contact_change.json (python -m predictor.validation.contact_change): what the
 #: contact on the finger's outline and the plane X = 0 changed, before against after.
-CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change", {
+CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.validation.contact_change", {
     "before": str,
     **each("atlas{}", int, "points", "changed"), "atlas{}.transitions{}": int,
     **{f"{key}{{}}.{k}": int for key in ("reference", "reference_fine")
@@ -172,11 +172,11 @@ CONTACT_CHANGE = Format("predictor-contact-change", 1, "predictor.contact_change
     **each("gestures[]", str, "state_before", "state_after"), "gestures[].tip_shift_mm": MAYBE,
     "gestures[].plane_overlap_mm": MAYBE})
 
-#: results/calibration/calibration.json (make calibrate-demo; predictor.calibrate fem): the
+#: results/calibration/calibration.json (make calibrate-demo; predictor.cli.calibrate fem): the
 #: predictor calibrated on four whole-finger FEM gestures of a deliberately different finger
 #: and its fingertip errors on the held-out ones, uncalibrated and calibrated; the recovery
 #: study's figures copied beside them.
-CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
+CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.cli.calibrate", {
     "joint_model": str, "truth_finger.name": str, "model_finger.name": str,
     "fem.mesh": str, "fem.nodes": int, "fem.cases[].sha256": str, "fem.cases[].role": str,
     "fit.parameters": list, "fit.why": str, "fit.trusted?": bool, **each("parameters{}", NUM, "value", "std", "nominal", "true"),
@@ -189,16 +189,16 @@ CALIBRATION = Format("predictor-calibration-fem", 1, "predictor.calibrate", {
     "recovery.coverage_95": NUM, "recovery.all_identifiable_within_2pct": bool,
     "recovery.time_s_8_observations": NUM, "figure?": str})
 
-#: results/bench/calibrate.json (make bench-calibrate; predictor.calibrate bench): wall times
+#: results/bench/calibrate.json (make bench-calibrate; predictor.cli.calibrate bench): wall times
 #: of the 8-observation calibration, with the machine's load and what ran beside it.
-CALIBRATION_BENCH = Format("predictor-calibration-bench", 1, "predictor.calibrate", {
+CALIBRATION_BENCH = Format("predictor-calibration-bench", 1, "predictor.cli.calibrate", {
     "observations": int, "observations_sha256": str, "observations_file": str, "parameters": list, "trusted": bool,
     "starts": int, "repeats": int, "joint": str,
     **each("", NUM, "fit_median_s", "fit_cpu_median_s", "with_loo_median_s", "with_loo_cpu_median_s", "target_s"),
     "fit_s": list, "with_loo_s": list, "load_average_before": list, "load_average_after": list, "beside": str})
 
-#: results/predictor/track.json (make track, make inverse; predictor.inverse --track): every
+#: results/predictor/track.json (make track, make inverse; predictor.cli.inverse --track): every
 #: goal of a trajectory answered warm from the previous answer, verified; times in ms.
-TRACK = Format("predictor-track", 1, "predictor.inverse", {
+TRACK = Format("predictor-track", 1, "predictor.cli.inverse", {
     "goals": int, **each("", NUM, "median_ms", "p95_ms", "rate_hz"), "max_tip_error_mm": MAYBE,
     "verified": bool, **each("", int, "reached", "unreachable"), "answers": list, "label": str})

@@ -148,7 +148,7 @@ def test_a_writer_command_refuses_a_renamed_key_and_writes_nothing(tmp_path, mon
 def test_bench_fem_format_takes_a_hexahedral_discretisation():
     """fem.studies.bench_joint --mesh hexN writes mesh_info's keys of a hexahedral mesh (divisions,
     no mesh_size): the format accepts them, and still needs one of the timings."""
-    from fem.studies.artefacts import BENCH_JOINT
+    from fem.artefacts import BENCH_JOINT
 
     doc = json.loads((RESULTS / "bench/fem.json").read_text())
     hexdoc = {k: v for k, v in doc.items() if k != "mesh_size"} | {

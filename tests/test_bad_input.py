@@ -22,8 +22,11 @@ Rows are grouped by package; ``{tmp}`` in an argument is replaced by the row's f
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
+import re
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -32,6 +35,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+#: A progress line of predictor.solvers.progress.Heartbeat: "[label N s] text".
+HEARTBEAT = re.compile(r"\[[^\]]* \d+ s\] ")
 PY = sys.executable
 ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
        "OMP_NUM_THREADS": "1", "PYVISTA_OFF_SCREEN": "true"}
@@ -272,200 +277,199 @@ CASES_SURROGATE = [
     # --- surrogate cases (end)
 ]
 CASES_PREDICTOR = [
-    # predictor.gesture: pressures, approach and object are checked while parsing, the
+    # predictor.cli.gesture: pressures, approach and object are checked while parsing, the
     # plot's folder before the solve, the models on load
-    ("predictor.gesture", ["--p1", "nan", "--p2", "0"], "--p1: 'nan' is not a finite number (allowed [-0.3, 0.3] MPa)"),
-    ("predictor.gesture", ["--p1", "0.5", "--p2", "0"], "--p1: 0.5 is outside [-0.3, 0.3] MPa"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "inf"], "--p2: 'inf' is not a finite number"),
-    ("predictor.gesture", ["--p1", "abc", "--p2", "0"], "--p1: 'abc' is not a finite number"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--approach", "nan,0", "--json"],
+    ("predictor.cli.gesture", ["--p1", "nan", "--p2", "0"], "--p1: 'nan' is not a finite number (allowed [-0.3, 0.3] MPa)"),
+    ("predictor.cli.gesture", ["--p1", "0.5", "--p2", "0"], "--p1: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "inf"], "--p2: 'inf' is not a finite number"),
+    ("predictor.cli.gesture", ["--p1", "abc", "--p2", "0"], "--p1: 'abc' is not a finite number"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--approach", "nan,0", "--json"],
      "--approach: 'nan' is not a finite number"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--approach", "1,2"], "--approach: 1 is outside [-0.3, 0.3] MPa"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=30,r=40"], "'r' given twice"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=nan"], "r=nan in object"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=-5"], "r=-5 in object"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "blob"], "unknown object 'blob'"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--plot", "/etc/passwd/x.png", "--json"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--approach", "1,2"], "--approach: 1 is outside [-0.3, 0.3] MPa"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=30,r=40"], "'r' given twice"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=nan"], "r=nan in object"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "circle:r=-5"], "r=-5 in object"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "blob"], "unknown object 'blob'"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--plot", "/etc/passwd/x.png", "--json"],
      "cannot create /etc/passwd/x.png"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--plot", "{tmp}/x.svg"], "expected a .png file"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--model", "/etc/hostname"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--plot", "{tmp}/x.svg"], "expected a .png file"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--model", "/etc/hostname"],
      "/etc/hostname: not a softjoint surrogate checkpoint"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--nn", "/etc/hostname", "--plot", "{tmp}/x.png"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--nn", "/etc/hostname", "--plot", "{tmp}/x.png"],
      "/etc/hostname: not a softjoint NN predictor checkpoint"),
-    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--nn", "results/predictor/gravity_nn.pt",
+    ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--nn", "results/predictor/gravity_nn.pt",
                            "--object", "circle"], "a 'softjoint-gravity-nn/1' file, expected a 'softjoint-contact-nn/1'"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--approach", "zero"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--approach", "zero"],
      "--method nn predicts the trained case only"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--no-plane"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--no-plane"],
      "the gripper with gravity on, its own approach): drop --no-gravity, --approach and --no-plane"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--polish"], "--polish finishes an NN prediction"),
-    ("predictor.gesture", ["--p1", "0", "--p1", "0.1", "--p2", "0"], "--p1 given twice"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--polish"], "--polish finishes an NN prediction"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p1", "0.1", "--p2", "0"], "--p1 given twice"),
     # issue 33: objects the mirrored model cannot represent, refused before any solve
-    ("predictor.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:x=15,r=20", "--json"],
+    ("predictor.cli.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:x=15,r=20", "--json"],
      "object centre x = 15 mm: the model mirrors the right finger"),
-    ("predictor.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:x=40,y=-80"], "object centre x = 40 mm"),
-    ("predictor.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:r=1e9"],
+    ("predictor.cli.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:x=40,y=-80"], "object centre x = 40 mm"),
+    ("predictor.cli.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:r=1e9"],
      "outside the model's [0.1, 500] mm half-size range"),
-    ("predictor.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "ellipse:deg=20"],
+    ("predictor.cli.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "ellipse:deg=20"],
      "an ellipse must stay symmetric about X = 0"),
-    ("predictor.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:y=2000"], "y = 2000 mm is outside"),
-    ("predictor.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "rectangle:w=1000,h=2,y=-195", "--plot",
+    ("predictor.cli.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "circle:y=2000"], "y = 2000 mm is outside"),
+    ("predictor.cli.gesture", ["--p1", "0.2", "--p2", "0.2", "--object", "rectangle:w=1000,h=2,y=-195", "--plot",
                            "{tmp}/x.png"], "the object intersects the fingers at the approach gesture"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--mu", "nan"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--mu", "nan"],
      "--mu: 'nan' is not a finite number (allowed (0, 5])"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--object-weight", "-1"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--object-weight", "-1"],
      "--object-weight: -1 is outside [0, 10] N"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
-    # predictor.validate_finger (issue 14): an empty FEM folder, an unwritable output
-    ("predictor.validate_finger", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--bogus"], "unrecognized arguments: --bogus"),
+    # predictor.validation.finger (issue 14): an empty FEM folder, an unwritable output
+    ("predictor.validation.finger", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
      "no FEM cases on mesh 1.8 (displacement) in {tmp}/none"),
-    ("predictor.validate_finger", ["--mesh", "hex9", "--out", "{tmp}/x.json"], "--mesh: 'hex9': 9 is outside [1, 6]"),
-    ("predictor.validate_finger", ["--mesh", "1.8:nan", "--out", "{tmp}/x.json"], "--mesh: '1.8:nan'"),
-    ("predictor.validate_finger", ["--mesh", "1.8", "--mesh-size", "2", "--out", "{tmp}/x.json"],
+    ("predictor.validation.finger", ["--mesh", "hex9", "--out", "{tmp}/x.json"], "--mesh: 'hex9': 9 is outside [1, 6]"),
+    ("predictor.validation.finger", ["--mesh", "1.8:nan", "--out", "{tmp}/x.json"], "--mesh: '1.8:nan'"),
+    ("predictor.validation.finger", ["--mesh", "1.8", "--mesh-size", "2", "--out", "{tmp}/x.json"],
      "not allowed with argument --mesh"),
-    ("predictor.validate_finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    # predictor.validate_grasps (issue 36 §3): no folder, a file that is not a grasp record,
+    ("predictor.validation.finger", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    # predictor.validation.grasps (issue 36 §3): no folder, a file that is not a grasp record,
     # records of another discretisation, unwritable outputs; all before the model is loaded
-    ("predictor.validate_grasps", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
+    ("predictor.validation.grasps", ["--fem", "{tmp}/none", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
      "--fem {tmp}/none: no such folder"),
-    ("predictor.validate_grasps", ["--fem", "results/validation/finger_fem", "--out", "{tmp}/x.json", "--figures",
+    ("predictor.validation.grasps", ["--fem", "results/validation/finger_fem", "--out", "{tmp}/x.json", "--figures",
                                    "{tmp}/f"], "region: missing (format fem-grasp-case/1, fem.studies.grasp_cases)"),
-    ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
+    ("predictor.validation.grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "{tmp}/f"],
      "no FEM grasp records on mesh hex2:3 (mixed) in tests/data/grasps (it holds 4 mixed"),
-    ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "/etc/passwd/x.json"],
+    ("predictor.validation.grasps", ["--fem", "tests/data/grasps", "--out", "/etc/passwd/x.json"],
      "cannot create /etc/passwd/x.json"),
-    ("predictor.validate_grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "/proc/g"],
+    ("predictor.validation.grasps", ["--fem", "tests/data/grasps", "--out", "{tmp}/x.json", "--figures", "/proc/g"],
      "cannot write /proc/g: /proc:"),
-    ("predictor.validate_grasps", ["--mesh", "hex9", "--out", "{tmp}/x.json"], "--mesh: 'hex9': 9 is outside [1, 6]"),
-    # predictor.gesture --finger (issue 14): the finger file is read and checked while
+    ("predictor.validation.grasps", ["--mesh", "hex9", "--out", "{tmp}/x.json"], "--mesh: 'hex9': 9 is outside [1, 6]"),
+    # predictor.cli.gesture --finger (issue 14): the finger file is read and checked while
     # parsing (tests/data/fingers/ holds the bad files), the pressures against its joints
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "{tmp}/none.toml"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--finger", "{tmp}/none.toml"],
      "cannot read finger file {tmp}/none.toml: No such file or directory"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/bad_toml.toml"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/bad_toml.toml"],
      "tests/data/fingers/bad_toml.toml: not a valid TOML finger file"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/duplicate_key.toml"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/duplicate_key.toml"],
      "tests/data/fingers/duplicate_key.toml: not a valid TOML finger file (Cannot overwrite a value"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/unknown_key.toml", "--json"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/unknown_key.toml", "--json"],
      "part 2 (rigid): unknown key 'colour'"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/negative_length.toml"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/negative_length.toml"],
      "part 2 (rigid): length = -60.0 must be > 0.0"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/no_joint.toml"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--finger", "tests/data/fingers/no_joint.toml"],
      "a finger needs at least one joint part"),
-    ("predictor.gesture", ["--pressures", "0.1,0,0.1"], "--pressures: 3 values for finger 'paper' of 2 joints"),
-    ("predictor.gesture", ["--pressures", "0.1,0.5"], "--pressures: 0.5 is outside [-0.3, 0.3] MPa"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--pressures", "0,0"], "give either --p1/--p2 or --pressures"),
-    ("predictor.gesture", ["--p1", "0"], "give --p1 and --p2 (MPa), or --pressures P1,P2"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--approach", "0,0,0"],
+    ("predictor.cli.gesture", ["--pressures", "0.1,0,0.1"], "--pressures: 3 values for finger 'paper' of 2 joints"),
+    ("predictor.cli.gesture", ["--pressures", "0.1,0.5"], "--pressures: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--pressures", "0,0"], "give either --p1/--p2 or --pressures"),
+    ("predictor.cli.gesture", ["--p1", "0"], "give --p1 and --p2 (MPa), or --pressures P1,P2"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--object", "circle", "--approach", "0,0,0"],
      "--approach: 3 values for finger 'paper' of 2 joints"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--kinematics", "chord"], "invalid choice: 'chord'"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--joint-weight", "half"], "invalid choice: 'half'"),
-    ("predictor.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "lumped"],
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--kinematics", "chord"], "invalid choice: 'chord'"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--joint-weight", "half"], "invalid choice: 'half'"),
+    ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "lumped"],
      "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'paper', "
      "cap kinematics, lumped joint weights"),
     # issue 57: a finger no gesture can be solved for is refused where the problem is built
-    # (predictor.problem.finger_error), naming the cause, by every tool
-    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/heavy_parts.toml", "--json"],
+    # (predictor.solvers.problem.finger_error), naming the cause, by every tool
+    ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/heavy_parts.toml", "--json"],
      "finger 'heavy_parts' is too heavy for its joints: hanging at zero pressure under the parts' weights, "
      "joint 1 F1 = 7.00 N, beyond the joint model's box |F1|, |F2| <= 3 N, |M| <= 100 N·mm"),
-    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/no_gap.toml",
+    ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/no_gap.toml",
                            "--plot", "{tmp}/x.png"],
      "finger 'no_gap': base_gap = 0 mm puts the two fingers across each other (the right one crosses X = 0 by "
      "10.0 mm hanging at zero pressure): the fingers meet at X = 0, so base_gap must be at least 20.0 mm"),
-    ("predictor.atlas", ["--object", "circle", "--grid", "3", "--finger", "tests/data/fingers/heavy_parts.toml",
+    ("predictor.cli.atlas", ["--object", "circle", "--grid", "3", "--finger", "tests/data/fingers/heavy_parts.toml",
                          "--out", "{tmp}/x.json"], "finger 'heavy_parts' is too heavy for its joints"),
-    ("predictor.atlas", ["--object", "circle", "--grid", "3", "--finger", "tests/data/fingers/no_gap.toml",
+    ("predictor.cli.atlas", ["--object", "circle", "--grid", "3", "--finger", "tests/data/fingers/no_gap.toml",
                          "--out", "{tmp}/x.json"], "base_gap must be at least 20.0 mm"),
-    # the atlas takes the finger, approach and gravity options of predictor.gesture
-    ("predictor.atlas", ["--object", "circle", "--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/x.json"],
+    # the atlas takes the finger, approach and gravity options of predictor.cli.gesture
+    ("predictor.cli.atlas", ["--object", "circle", "--finger", "tests/data/fingers/three.toml", "--out", "{tmp}/x.json"],
      "the grasp atlas spans (P1, P2): finger 'three' has 3 joints"),
-    ("predictor.atlas", ["--object", "circle", "--approach", "0.1", "--out", "{tmp}/x.json"],
+    ("predictor.cli.atlas", ["--object", "circle", "--approach", "0.1", "--out", "{tmp}/x.json"],
      "--approach: 1 values for the atlas's two joints"),
-    ("predictor.atlas", ["--object", "circle", "--approach", "0.5,0"], "--approach: 0.5 is outside [-0.3, 0.3] MPa"),
-    ("predictor.atlas", ["--object", "circle", "--kinematics", "chord"], "invalid choice: 'chord'"),
-    ("predictor.validate_finger", ["--cases", "gravity_0.1_-0.1,nope", "--out", "{tmp}/x.json", "--figures", "{tmp}"],
+    ("predictor.cli.atlas", ["--object", "circle", "--approach", "0.5,0"], "--approach: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.cli.atlas", ["--object", "circle", "--kinematics", "chord"], "invalid choice: 'chord'"),
+    ("predictor.validation.finger", ["--cases", "gravity_0.1_-0.1,nope", "--out", "{tmp}/x.json", "--figures", "{tmp}"],
      "--cases: no case nope in results/validation/finger_fem"),
     # the NN predictors answer the problem they were trained for: one object, one finger
-    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "rectangle", "--json"],
+    ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "rectangle", "--json"],
      "--method nn: the contact NN (results/predictor/contact_nn.pt) was trained for one object, the circle "
      "r=30 mm at y=-195 mm, not the rectangle w=60, h=50, rc=1 mm at y=-195 mm: use --method newton for it"),
-    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "circle:r=25",
+    ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--object", "circle:r=25",
                            "--plot", "{tmp}/x.png"],
      "trained for one object, the circle r=30 mm at y=-195 mm, not the circle r=25 mm at y=-195 mm"),
-    ("predictor.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--finger",
+    ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--finger",
                            "tests/data/fingers/long_tip.toml", "--json"],
      "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'long_tip', cap kinematics, "
      "split joint weights: an NN predictor answers only its own finger and options"),
-    # predictor.nn / bench / figures: outputs and inputs refused before any training or solve
-    ("predictor.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
-    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],
+    # predictor.cli.nn / bench / figures: outputs and inputs refused before any training or solve
+    ("predictor.cli.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
+    ("predictor.cli.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],
      "--epochs: 'nan' is not an integer"),
-    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "0"], "--epochs: 0 is outside [1, inf]"),
-    ("predictor.nn", ["--variant", "bogus", "--out", "{tmp}/x.pt"], "invalid choice: 'bogus'"),
-    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--no-plane"],
+    ("predictor.cli.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "0"], "--epochs: 0 is outside [1, inf]"),
+    ("predictor.cli.nn", ["--variant", "bogus", "--out", "{tmp}/x.pt"], "invalid choice: 'bogus'"),
+    ("predictor.cli.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--no-plane"],
      "--no-plane: the contact variant learns a grasp, which the gripper's plane X = 0 is part of"),
-    ("predictor.nn", ["--variant", "gravity-paper", "--out", "{tmp}/x.pt", "--plane", "--no-plane"],
+    ("predictor.cli.nn", ["--variant", "gravity-paper", "--out", "{tmp}/x.pt", "--plane", "--no-plane"],
      "--plane and --no-plane both given: give one of them"),
-    ("predictor.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--model", "/etc/hostname"],
+    ("predictor.cli.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--model", "/etc/hostname"],
      "/etc/hostname: not a softjoint surrogate checkpoint"),
-    ("predictor.bench", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("predictor.bench", ["--out", "{tmp}/x.json", "--nn-dir", "/etc"], "/etc/gravity_nn.pt: NN predictor checkpoint not found"),
-    ("predictor.bench", ["--out", "{tmp}/x.json", "--nn-dir", "{tmp}/none"], "--nn-dir: {tmp}/none is not a folder"),
-    ("predictor.figures", ["--out", "/etc/passwd"], "/etc/passwd is a file, not a folder"),
-    ("predictor.figures", ["--out", "/etc/passwd/figs"], "cannot create /etc/passwd/figs"),
-    ("predictor.figures", ["--out", "{tmp}", "--model", "/etc/hostname"], "/etc/hostname: not a softjoint surrogate"),
-    # predictor.atlas / inverse (issue 16): numbers, box, goal, object and outputs refused
+    ("predictor.validation.bench", ["--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("predictor.validation.bench", ["--out", "{tmp}/x.json", "--nn-dir", "/etc"], "/etc/gravity_nn.pt: NN predictor checkpoint not found"),
+    ("predictor.validation.bench", ["--out", "{tmp}/x.json", "--nn-dir", "{tmp}/none"], "--nn-dir: {tmp}/none is not a folder"),
+    ("predictor.cli.figures", ["--out", "/etc/passwd"], "/etc/passwd is a file, not a folder"),
+    ("predictor.cli.figures", ["--out", "/etc/passwd/figs"], "cannot create /etc/passwd/figs"),
+    ("predictor.cli.figures", ["--out", "{tmp}", "--model", "/etc/hostname"], "/etc/hostname: not a softjoint surrogate"),
+    # predictor.planning.atlas / inverse (issue 16): numbers, box, goal, object and outputs refused
     # while parsing; an object intersecting the fingers where it is brought in, before the grid
-    ("predictor.atlas", ["--object", "circle", "--grid", "nan"], "--grid: 'nan' is not an integer"),
-    ("predictor.atlas", ["--object", "circle", "--grid", "1"], "--grid: 1 is outside [2, 201]"),
-    ("predictor.atlas", ["--object", "circle", "--box", "0.2,0.1,0,0.3"], "expected P1LO < P1HI"),
-    ("predictor.atlas", ["--object", "circle", "--box", "0,0.5,0,0.3"], "--box: 0.5 is outside [-0.3, 0.3] MPa"),
-    ("predictor.atlas", ["--object", "circle", "--box", "0,inf,0,0.3"], "--box: 'inf' is not a finite number"),
-    ("predictor.atlas", ["--object", "blob"], "unknown object 'blob'"),
-    ("predictor.atlas", ["--object", "circle", "--path", "zigzag"], "--path: invalid choice: 'zigzag'"),
-    ("predictor.atlas", ["--object", "circle", "--ramp-steps", "0"], "--ramp-steps: 0 is outside [1, 1000]"),
-    ("predictor.atlas", ["--object", "circle:q=1"], "bad object field 'q=1'"),
-    ("predictor.atlas", ["--object", "circle", "--plot", "{tmp}/x.svg"], "expected a .png file"),
-    ("predictor.atlas", ["--object", "circle", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
-    ("predictor.atlas", ["--object", "circle:x=40,y=-80", "--out", "{tmp}/x.json"], "object centre x = 40 mm"),
-    ("predictor.atlas", ["--object", "rectangle:w=1000,h=2,y=-195", "--out", "{tmp}/x.json"],
+    ("predictor.cli.atlas", ["--object", "circle", "--grid", "nan"], "--grid: 'nan' is not an integer"),
+    ("predictor.cli.atlas", ["--object", "circle", "--grid", "1"], "--grid: 1 is outside [2, 201]"),
+    ("predictor.cli.atlas", ["--object", "circle", "--box", "0.2,0.1,0,0.3"], "expected P1LO < P1HI"),
+    ("predictor.cli.atlas", ["--object", "circle", "--box", "0,0.5,0,0.3"], "--box: 0.5 is outside [-0.3, 0.3] MPa"),
+    ("predictor.cli.atlas", ["--object", "circle", "--box", "0,inf,0,0.3"], "--box: 'inf' is not a finite number"),
+    ("predictor.cli.atlas", ["--object", "blob"], "unknown object 'blob'"),
+    ("predictor.cli.atlas", ["--object", "circle", "--path", "zigzag"], "--path: invalid choice: 'zigzag'"),
+    ("predictor.cli.atlas", ["--object", "circle", "--ramp-steps", "0"], "--ramp-steps: 0 is outside [1, 1000]"),
+    ("predictor.cli.atlas", ["--object", "circle:q=1"], "bad object field 'q=1'"),
+    ("predictor.cli.atlas", ["--object", "circle", "--plot", "{tmp}/x.svg"], "expected a .png file"),
+    ("predictor.cli.atlas", ["--object", "circle", "--out", "/etc/passwd/x.json"], "cannot create /etc/passwd/x.json"),
+    ("predictor.cli.atlas", ["--object", "circle:x=40,y=-80", "--out", "{tmp}/x.json"], "object centre x = 40 mm"),
+    ("predictor.cli.atlas", ["--object", "rectangle:w=1000,h=2,y=-195", "--out", "{tmp}/x.json"],
      "the object intersects the fingers at the approach gesture"),
-    ("predictor.atlas", ["--object", "circle:x=15,r=20", "--plot", "{tmp}/x.png"], "object centre x = 15 mm"),
-    ("predictor.atlas", ["--object", "circle:r=1e9"], "outside the model's [0.1, 500] mm half-size range"),
-    ("predictor.atlas", ["--object", "circle", "--mu", "nan"], "--mu: 'nan' is not a finite number"),
-    ("predictor.atlas", ["--object", "circle", "--object-weight", "1e9"], "--object-weight: 1e9 is outside [0, 10] N"),
-    ("predictor.atlas", ["--object", "circle", "--model", "/etc/hostname"],
+    ("predictor.cli.atlas", ["--object", "circle:x=15,r=20", "--plot", "{tmp}/x.png"], "object centre x = 15 mm"),
+    ("predictor.cli.atlas", ["--object", "circle:r=1e9"], "outside the model's [0.1, 500] mm half-size range"),
+    ("predictor.cli.atlas", ["--object", "circle", "--mu", "nan"], "--mu: 'nan' is not a finite number"),
+    ("predictor.cli.atlas", ["--object", "circle", "--object-weight", "1e9"], "--object-weight: 1e9 is outside [0, 10] N"),
+    ("predictor.cli.atlas", ["--object", "circle", "--model", "/etc/hostname"],
      "/etc/hostname: not a softjoint surrogate checkpoint"),
-    ("predictor.atlas", ["--grid", "3"], "the following arguments are required: --object"),
-    ("predictor.inverse", ["--goal", "grab"], "goal 'grab': use hold or tip:X,Y[,DEG]"),
-    ("predictor.inverse", ["--goal", "tip:1"], "goal 'tip:1': use hold or tip:X,Y[,DEG]"),
-    ("predictor.inverse", ["--goal", "tip:nan,-200"], "'nan' is not a finite number"),
-    ("predictor.inverse", ["--goal", "hold"], "--goal hold needs an --object"),
-    ("predictor.inverse", ["--goal", "tip:0,-200", "--least-pressure"], "apply to --goal hold only"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--min-normal", "-1"],
+    ("predictor.cli.atlas", ["--grid", "3"], "the following arguments are required: --object"),
+    ("predictor.cli.inverse", ["--goal", "grab"], "goal 'grab': use hold or tip:X,Y[,DEG]"),
+    ("predictor.cli.inverse", ["--goal", "tip:1"], "goal 'tip:1': use hold or tip:X,Y[,DEG]"),
+    ("predictor.cli.inverse", ["--goal", "tip:nan,-200"], "'nan' is not a finite number"),
+    ("predictor.cli.inverse", ["--goal", "hold"], "--goal hold needs an --object"),
+    ("predictor.cli.inverse", ["--goal", "tip:0,-200", "--least-pressure"], "apply to --goal hold only"),
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle", "--min-normal", "-1"],
      "--min-normal: -1 is outside [0, 10] N"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle:x=40,y=-80", "--plot", "{tmp}/x.png"],
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle:x=40,y=-80", "--plot", "{tmp}/x.png"],
      "object centre x = 40 mm"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "rectangle:w=1000,h=2,y=-195", "--plot", "{tmp}/x.png"],
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "rectangle:w=1000,h=2,y=-195", "--plot", "{tmp}/x.png"],
      "the object intersects the fingers at the approach gesture"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle:x=15,r=20"], "object centre x = 15 mm"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--min-normal", "nan"],
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle:x=15,r=20"], "object centre x = 15 mm"),
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle", "--min-normal", "nan"],
      "--min-normal: 'nan' is not a finite number"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--mu", "0"], "--mu: 0 is outside (0, 5]"),
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle", "--mu", "0"], "--mu: 0 is outside (0, 5]"),
     # an object nothing touches: the starts converged, none touches it (not "no converged start");
     # below the fingertips (at Y = -195 mm even r = 1 is pinched where the fingers meet at X = 0);
-    # --quiet: its atlas prints a progress line past 10 s on a loaded machine (predictor.progress)
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle:r=1,y=-240", "--plot", "{tmp}/x.png", "--json",
-                           "--quiet"],
+    # its atlas may print progress lines on a loaded machine (the one-line rule skips them)
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle:r=1,y=-240", "--plot", "{tmp}/x.png", "--json"],
      "nothing touches the object at any pressure of the box"),
     # an atlas records its settings: one computed with gravity is refused for --no-gravity
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--atlas", "results/predictor/atlas_circle.json",
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle", "--atlas", "results/predictor/atlas_circle.json",
                            "--no-gravity", "--plot", "{tmp}/x.png"],
      "an atlas computed with gravity = True, this question has False (--no-gravity)"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--atlas", "/etc/hostname"],
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle", "--atlas", "/etc/hostname"],
      "/etc/hostname: not JSON"),
-    ("predictor.inverse", ["--goal", "hold", "--object", "circle", "--plot", "/etc/passwd/x.png"],
+    ("predictor.cli.inverse", ["--goal", "hold", "--object", "circle", "--plot", "/etc/passwd/x.png"],
      "cannot create /etc/passwd/x.png"),
-    ("predictor.inverse", ["--goal", "hold", "--goal", "hold", "--object", "circle"], "--goal given twice"),
+    ("predictor.cli.inverse", ["--goal", "hold", "--goal", "hold", "--object", "circle"], "--goal given twice"),
     # --- predictor cases (end)
 ]
 CASES = CASES_FEM + CASES_WORKFLOW + CASES_SURROGATE + CASES_PREDICTOR
@@ -525,12 +529,31 @@ def runs(tmp_path_factory):
     return list(zip(results, outs))
 
 
+def error_lines(stderr: str) -> list[str]:
+    """The non-blank stderr lines that are not progress lines: predictor.solvers.progress's
+    heartbeat, ``[label N s] text``, prints one every 10 s of a long run (an atlas on a loaded
+    machine), before the run reaches its refusal."""
+    return [ln for ln in stderr.splitlines() if ln.strip() and not HEARTBEAT.match(ln)]
+
+
+def test_error_lines_skip_the_heartbeat_only():
+    from predictor.solvers.progress import Heartbeat
+
+    assert error_lines("[atlas 12 s] ring 3 of 30\n[inverse --cases 130 s] case 2\n\nprog: error: x\n") == \
+        ["prog: error: x"]
+    assert error_lines("[atlas] 12 s\n[x 1.5 s] y\n") == ["[atlas] 12 s", "[x 1.5 s] y"]
+    buf = io.StringIO()
+    with contextlib.redirect_stderr(buf):
+        Heartbeat("atlas", every=0.0)("ring 1")     # the format the rule skips, as printed
+    assert buf.getvalue().startswith("[atlas ") and error_lines(buf.getvalue()) == []
+
+
 @pytest.mark.parametrize("index", range(len(CASES)),
                          ids=[f"{m}:{' '.join(a)}"[:80] for m, a, _ in CASES])
 def test_bad_input_exits_2_with_one_line(index, runs):
     (module, args, needle), (r, out) = CASES[index], runs[index]
     stdout, stderr = r["stdout"], r["stderr"]
-    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    lines = error_lines(stderr)
     assert r["returncode"] == 2, f"exit {r['returncode']}; stderr:\n{stderr[-2000:]}"
     assert len(lines) == 1, f"{len(lines)} stderr lines:\n{stderr[-2000:]}"
     assert needle.replace("{tmp}", str(out)) in lines[0], lines[0]
@@ -579,3 +602,31 @@ def test_the_old_command_paths_run_the_moved_commands(alias, module):
     lines = [ln for ln in bad.stderr.splitlines() if ln.strip()]
     assert bad.returncode == 2 and len(lines) == 2, bad.stderr[-2000:]
     assert lines[0].startswith(f"note: {alias} moved") and "--mesh-size: 0 is outside [0.3, 10] mm" in lines[1]
+
+
+#: predictor's old command paths (issue 61, README changes) and where the commands moved.
+PREDICTOR_ALIASES = {"predictor.gesture": "predictor.cli.gesture", "predictor.atlas": "predictor.cli.atlas",
+                     "predictor.inverse": "predictor.cli.inverse", "predictor.calibrate": "predictor.cli.calibrate",
+                     "predictor.figures": "predictor.cli.figures", "predictor.nn": "predictor.cli.nn",
+                     "predictor.validate_finger": "predictor.validation.finger",
+                     "predictor.validate_grasps": "predictor.validation.grasps",
+                     "predictor.bench": "predictor.validation.bench",
+                     "predictor.contact_change": "predictor.validation.contact_change"}
+
+
+@pytest.mark.parametrize("alias,module", sorted(PREDICTOR_ALIASES.items()))
+def test_the_old_predictor_command_paths_run_the_moved_commands(alias, module):
+    """Every old ``python -m predictor.<tool>`` runs the moved command: its --help (the
+    parser names the new path), after one note on stderr saying where it went."""
+    r = _help([alias])
+    assert r.returncode == 0 and f"python -m {module}" in r.stdout, r.stdout[:500] + r.stderr[-1000:]
+    name = "the command predictor.nn" if alias == "predictor.nn" else alias
+    assert r.stderr.strip() == f"note: {name} moved to {module} (python -m {module})", r.stderr
+
+
+def test_an_old_predictor_command_path_refuses_bad_input_as_the_new_one():
+    bad = subprocess.run([PY, "-m", "predictor.gesture", "--p1", "0.5", "--p2", "0"], cwd=ROOT, env=ENV,
+                         capture_output=True, text=True, timeout=300)
+    lines = error_lines(bad.stderr)
+    assert bad.returncode == 2 and len(lines) == 2, bad.stderr[-2000:]
+    assert lines[0].startswith("note: predictor.gesture moved") and "--p1: 0.5 is outside [-0.3, 0.3] MPa" in lines[1]

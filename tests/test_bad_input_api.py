@@ -308,8 +308,8 @@ def test_a_finger_no_gesture_can_be_solved_for_is_refused_where_the_problem_is_b
     distal weights: joint 1 carries half its own 2 N (split weights) and the 6 N beyond it
     along its axis, joint 2 half its own and the 2 N tip."""
     from predictor.api import load_gripper
-    from predictor.gripper import GripperParams
-    from predictor.problem import hanging_loads, load_problem
+    from predictor.model.gripper import GripperParams
+    from predictor.solvers.problem import hanging_loads, load_problem
 
     heavy = GripperParams(load_finger(FINGERS / "heavy_parts.toml"))
     with pytest.raises(ValueError) as exc:

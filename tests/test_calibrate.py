@@ -1,9 +1,9 @@
-"""The calibration (predictor.calibration, calibration_fit, calibration_file, observations,
-the predictor.calibrate CLI) on the analytic joint: its residual against the statics', the
+"""The calibration (predictor.calibration.model, calibration_fit, calibration_file, observations,
+the predictor.cli.calibrate CLI) on the analytic joint: its residual against the statics', the
 stiffness similarity against a stiffer analytic beam, its equilibrium against the solver,
 the fit's Jacobian against finite differences, exact recovery of a known truth, the
 detection of an exact degeneracy, bad measurement files (exit 2, one line, nothing
-written) and the calibrated finger file read back by predictor.gesture.
+written) and the calibrated finger file read back by predictor.cli.gesture.
 """
 from __future__ import annotations
 
@@ -19,15 +19,15 @@ import pytest
 import torch
 
 from contract.finger import FingerFileError, load_finger, parse_finger
-from predictor.calibrate import main as calibrate_main
-from predictor.calibration import CalibrationModel, ScaledJoint, design, equilibrium, predict
-from predictor.calibration_fit import Prior, Problem, calibrate
-from predictor.calibration_recovery import synthetic_observations
-from predictor.gripper import GripperParams, default_finger, rot
-from predictor.joint import AnalyticJoint
-from predictor.observations import FINGER, GRIPPER, ObservationError, observations_to_json, parse_observations
-from predictor.solve import solve
-from predictor.statics import ContactParams, GripperProblem, scaled
+from predictor.cli.calibrate import main as calibrate_main
+from predictor.calibration.model import CalibrationModel, ScaledJoint, design, equilibrium, predict
+from predictor.calibration.fit import Prior, Problem, calibrate
+from predictor.calibration.recovery import synthetic_observations
+from predictor.model.gripper import GripperParams, default_finger, rot
+from predictor.model.joint import AnalyticJoint
+from predictor.calibration.observations import FINGER, GRIPPER, ObservationError, observations_to_json, parse_observations
+from predictor.solvers.solve import solve
+from predictor.model.statics import ContactParams, GripperProblem, scaled
 
 from test_predictor_common import ROOT
 
@@ -97,7 +97,7 @@ def test_scaled_joint_is_a_stiffer_beam():
 
 
 def test_equilibrium_is_the_solvers(model):
-    """Newton on the calibration's residual lands on predictor.solve's gravity gesture
+    """Newton on the calibration's residual lands on predictor.solvers.solve's gravity gesture
     (tau within 1e-6 N, N·mm: the solver stops at 1e-7 N, 1e-5 N·mm): of the gripper (the
     fingers meet at X = 0 at some of these pressures) for gripper observations, of the
     finger alone for lone-finger ones, with and without gravity."""
@@ -203,7 +203,7 @@ def test_bad_measurement_file_exits_2_with_one_line(tmp_path, capsys, doc, why):
 def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
     """The CLI (a subprocess, --json) fits a heavier tip and a turned, shifted mount to
     observations of that truth (frame untouched), exits 0 with the issue's keys, and
-    writes a finger file: predictor.gesture --finger reads it and its tip at a new
+    writes a finger file: predictor.cli.gesture --finger reads it and its tip at a new
     pressure pair, where the fingers do not meet at X = 0 (the calibration models the
     finger alone), equals the truth's prediction (1e-6 mm); the file records the
     measurements' sha256. A bad --fit name exits 2 with one line."""
@@ -211,7 +211,7 @@ def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
     obs = synthetic_observations(model, truth, P)
     path, out = tmp_path / "obs.json", tmp_path / "cal.toml"
     path.write_text(json.dumps(observations_to_json(obs)))
-    run = [sys.executable, "-m", "predictor.calibrate", "--observations", str(path), "--model", "analytic"]
+    run = [sys.executable, "-m", "predictor.cli.calibrate", "--observations", str(path), "--model", "analytic"]
     r = subprocess.run(run + ["--fit", "weight_4,mount", "--out", str(out), "--json"], cwd=ROOT, capture_output=True,
                        text=True, timeout=300)
     assert r.returncode == 0, r.stderr
@@ -220,7 +220,7 @@ def test_cli_writes_a_finger_that_predictor_gesture_reads(tmp_path, model):
     assert abs(s["parameters"]["mount_deg"]["value"] - 2.0) <= 1e-6 and s["loo_tip_error_mm"] < 1e-5
     finger = load_finger(out)
     assert finger.calibration["observations_sha256"] == parse_observations(path.read_text(), PAPER).sha256
-    g = subprocess.run([sys.executable, "-m", "predictor.gesture", "--finger", str(out), "--model", "analytic",
+    g = subprocess.run([sys.executable, "-m", "predictor.cli.gesture", "--finger", str(out), "--model", "analytic",
                         "--p1", "-0.03", "--p2", "0.07", "--json"], cwd=ROOT, capture_output=True, text=True,
                        timeout=120)
     assert g.returncode == 0, g.stderr
@@ -342,19 +342,19 @@ def test_observations_say_what_was_measured(tmp_path):
 def test_hidden_truth_gripper_is_recovered_and_the_readme_example_is_trusted(tmp_path, capsys):
     """Issue 57's hidden truth: the README's example file is the gripper (fingers meeting at
     X = 0) of a finger with gains 0.93/1.06, offsets 0.012/-0.008 MPa and stiffness
-    0.88/1.12, solved by predictor.solve at 8 pressure pairs, noise 0.3 mm / 0.3 deg
+    0.88/1.12, solved by predictor.solvers.solve at 8 pressure pairs, noise 0.3 mm / 0.3 deg
     (regenerated here: the same values to 1e-9). The README's command (committed surrogate,
     gain,offset,stiffness; --no-loo to keep the test short) exits 0 trusted in one start:
     reduced chi-square within [its 0.05 %, 99.95 %] quantiles (0.44 measured for 18 dof),
     nothing on a bound, every parameter within 3 std of the truth. The written finger file,
-    solved by predictor.solve at 6 held-out pairs, puts the fingertip <= 1 mm from the
+    solved by predictor.solvers.solve at 6 held-out pairs, puts the fingertip <= 1 mm from the
     truth's (0.54 mm max measured), >= 5x closer than the uncalibrated finger (9.8x)."""
     from scipy.stats import chi2
 
-    from predictor.calibration_fit import chi2_limit
-    from predictor.calibration_recovery import (HELDOUT_PRESSURES, HIDDEN_PRESSURES, HIDDEN_TRUTH,
+    from predictor.calibration.fit import chi2_limit
+    from predictor.calibration.recovery import (HELDOUT_PRESSURES, HIDDEN_PRESSURES, HIDDEN_TRUTH,
                                                 gesture_observations, truth_theta)
-    from predictor.joint import load_joint
+    from predictor.model.joint import load_joint
 
     joint = load_joint(None, PAPER)
     model = CalibrationModel(joint, PAPER)
@@ -379,7 +379,7 @@ def test_hidden_truth_gripper_is_recovered_and_the_readme_example_is_trusted(tmp
         assert bool(res.converged.all())
         return res.pose.tip_end.numpy()
 
-    from predictor.calibration import finger_at
+    from predictor.calibration.model import finger_at
 
     truth = tips(finger_at(model, truth_theta(model, HIDDEN_TRUTH)))
     before = np.linalg.norm(tips(PAPER) - truth, axis=1)
@@ -389,7 +389,7 @@ def test_hidden_truth_gripper_is_recovered_and_the_readme_example_is_trusted(tmp
 
 def _gripper_observations(model, pressures, seed=1):
     """Noisy gripper observations (tip, angle) of HIDDEN_TRUTH on ``model``'s joint."""
-    from predictor.calibration_recovery import HIDDEN_TRUTH, gesture_observations
+    from predictor.calibration.recovery import HIDDEN_TRUTH, gesture_observations
 
     return gesture_observations(model, HIDDEN_TRUTH, pressures, seed=seed)
 
@@ -399,7 +399,7 @@ def test_a_poor_fit_is_refused_and_nothing_is_written(tmp_path, capsys, model):
     finger -- issue 57's first case -- cannot be fitted: exit 1, one stderr line naming the
     reduced chi-square beyond its limit, "trusted": false, nothing written; with --force
     the file is written (exit 1 still). The same file declared a gripper is trusted (exit 0)."""
-    from predictor.calibration_recovery import HIDDEN_PRESSURES
+    from predictor.calibration.recovery import HIDDEN_PRESSURES
 
     obs = _gripper_observations(model, HIDDEN_PRESSURES[:7])
     wrong = _write(tmp_path, obs, "wrong.json", problem="finger")
@@ -458,7 +458,7 @@ def test_committed_bench_timed_the_current_example():
     (a changed example needs the bench rerun; the Makefile's rule depends on it); its fit
     was trusted, so its leave-one-out ran and was timed."""
     from predictor.artefacts import CALIBRATION_BENCH
-    from predictor.calibration_bench import OBSERVATIONS
+    from predictor.calibration.bench import OBSERVATIONS
 
     bench = CALIBRATION_BENCH.load(ROOT / "results/bench/calibrate.json")
     assert ROOT / bench["observations_file"] == OBSERVATIONS
@@ -471,7 +471,7 @@ def test_committed_bench_timed_the_current_example():
 
 
 def test_bench_refuses_to_time_an_untrusted_fit(tmp_path, capsys, model):
-    """predictor.calibrate bench on one observation (3 measured values for the bench's 10
+    """predictor.cli.calibrate bench on one observation (3 measured values for the bench's 10
     parameters and a prior: dof -6) refuses after the first fit: exit 2, one stderr line
     naming the file and why the fit is not trusted, no JSON written."""
     path = _write(tmp_path, _gripper_observations(model, ((0.1, 0.05),)))

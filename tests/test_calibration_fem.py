@@ -1,5 +1,5 @@
 """The calibration against the whole-finger FEM of a different finger (issue 38 §3(b):
-predictor.calibration_fem, ``python -m predictor.calibrate fem``, its report section), on
+predictor.calibration.fem, ``python -m predictor.cli.calibrate fem``, its report section), on
 stand-in "FEM" cases made by the calibration's model on the analytic joint at the true
 finger's known changes (no FEM solve; seconds):
 
@@ -34,16 +34,16 @@ import torch
 from apps import report as report_app
 from contract.finger import load_finger
 from predictor.artefacts import CALIBRATION
-from predictor.calibrate import main as calibrate_main
-from predictor.calibration import CalibrationModel, design, equilibrium
-from predictor.calibration_fem import (CALIBRATE_ON, PRESSURES, TRUTH_FINGER, FemCase, case_observation,
+from predictor.cli.calibrate import main as calibrate_main
+from predictor.calibration.model import CalibrationModel, design, equilibrium
+from predictor.calibration.fem import (CALIBRATE_ON, PRESSURES, TRUTH_FINGER, FemCase, case_observation,
                                        known_changes, pairs_arg)
-from predictor.calibration_recovery import synthetic_observations, truth_theta
-from predictor.observations import FINGER
-from predictor.gripper import GripperParams, default_finger
-from predictor.joint import AnalyticJoint
-from predictor.solve import solve
-from predictor.statics import GripperProblem, apart
+from predictor.calibration.recovery import synthetic_observations, truth_theta
+from predictor.calibration.observations import FINGER
+from predictor.model.gripper import GripperParams, default_finger
+from predictor.model.joint import AnalyticJoint
+from predictor.solvers.solve import solve
+from predictor.model.statics import GripperProblem, apart
 
 from test_predictor_common import ROOT
 

@@ -12,7 +12,7 @@ Exact claims checked here:
   ``torch.save`` file (the pre-integrity format) is refused.
 - in a fresh clone make takes the committed checkpoints and figures as up to date (the
   Makefile gives every tracked file one time per clone): ``make -n`` of the predictor's
-  targets trains nothing, and an edit of predictor/nn.py makes the NNs stale again.
+  targets trains nothing, and an edit of predictor/cli/nn.py makes the NNs stale again.
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ PREDICTORS = {"gravity_nn.pt": False, "gravity_nn_paper.pt": False, "contact_nn.
 
 
 def _predictor_loader():
-    from predictor.joint import load_joint
-    from predictor.nn import load_predictor
+    from predictor.model.joint import load_joint
+    from predictor.cli.nn import load_predictor
 
     joint = load_joint(str(ROOT / "results/surrogate/improved.pt"))
     return lambda path, contact: load_predictor(path, joint, contact=contact)
@@ -108,9 +108,9 @@ def test_a_checkpoint_of_another_kind_is_refused(tmp_path):
 @pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(), reason="not a git checkout")
 def test_fresh_clone_takes_the_committed_artefacts_as_up_to_date(tmp_path):
     """A clone of HEAD: ``make -n`` of bench-predictor, gestures and train lists no
-    surrogate.train and no predictor.nn training (git writes the files in path order, so
+    surrogate.train and no predictor.cli.nn training (git writes the files in path order, so
     without the Makefile's one time per clone results/ would be older than the code);
-    after predictor/nn.py is edited it lists the three NN trainings. ``make help`` alone
+    after predictor/cli/nn.py is edited it lists the three NN trainings. ``make help`` alone
     changes no file time (the stamping is a prerequisite of the artefacts, not parse-time)."""
     clone = tmp_path / "clone"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
@@ -123,7 +123,7 @@ def test_fresh_clone_takes_the_committed_artefacts_as_up_to_date(tmp_path):
                               capture_output=True, text=True).stdout
 
     first = planned()
-    assert "surrogate.train" not in first and "predictor.nn" not in first, first
-    assert "predictor.nn" not in planned()
-    (clone / "predictor/nn.py").write_text((clone / "predictor/nn.py").read_text() + "\n")
-    assert planned().count("-m predictor.nn --variant") == 3
+    assert "surrogate.train" not in first and "predictor.cli.nn" not in first, first
+    assert "predictor.cli.nn" not in planned()
+    (clone / "predictor/cli/nn.py").write_text((clone / "predictor/cli/nn.py").read_text() + "\n")
+    assert planned().count("-m predictor.cli.nn --variant") == 3

@@ -3,7 +3,7 @@ mixed (fem.mesh.discretisation.PRODUCTION), and the committed lone-finger cases,
 reference datasets and surrogate (results/*/h1.8, finger_h1.8.json) are on PAPER (1.8 mm
 P2 displacement).
 
-* predictor.validate_finger picks the cases of one (mesh, formulation): on the committed
+* predictor.validation.finger picks the cases of one (mesh, formulation): on the committed
   cases its default (PAPER's) selects the 1.8 mm displacement cases the committed
   finger_h1.8.json validated, and its mesh check reproduces that file's rows (fingertip change,
   nodes) exactly;
@@ -32,7 +32,7 @@ def committed_cases() -> list[dict]:
 
 def test_validation_selects_the_committed_discretisation_and_reproduces_its_mesh_check():
     pytest.importorskip("torch")
-    from predictor import validate_finger as vf
+    from predictor.validation import finger as vf
 
     cases, others = vf.split_cases(committed_cases(), (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION))
     assert (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION) == ("1.8", "displacement")
@@ -91,9 +91,9 @@ def test_validation_meets_the_plane_only_where_the_fem_case_did():
     solved with the plane (fem.studies.finger_cases --plane) gets the gripper's answer instead,
     within 0.1 mm of X = 0 (issue 36 §0)."""
     pytest.importorskip("torch")
-    from predictor import validate_finger as vf
-    from predictor.gripper import GripperParams, outline_vertices
-    from predictor.joint import load_joint
+    from predictor.validation import finger as vf
+    from predictor.model.gripper import GripperParams, outline_vertices
+    from predictor.model.joint import load_joint
 
     case = json.loads((CASES / "gravity_0.2_0.2.json").read_text())
     validation = json.loads((ROOT / "results/validation/finger_h1.8.json").read_text())

@@ -1,4 +1,4 @@
-"""predictor.contact_change and the report's contact section (issue 36) on small hand-made
+"""predictor.validation.contact_change and the report's contact section (issue 36) on small hand-made
 artefacts whose answers are known: the atlas points whose state changed and how, the
 reference ramps' failures, the gestures' tip shifts (a 3-4-5 triangle), the worst overlap
 across X = 0 judged against 0.1 mm, what the section says the model costs from the bench's
@@ -14,7 +14,7 @@ import pytest
 
 from apps.report import contact
 from apps.report.contact import contact_section
-from predictor.contact_change import compare
+from predictor.validation.contact_change import compare
 
 ROOT = Path(__file__).resolve().parents[1]
 STATES = ["no_contact", "holds", "slips", "not_converged"]
@@ -101,7 +101,7 @@ def test_report_judges_the_worst_overlap(folders, tmp_path):
     root = after.parent
     out = tmp_path / "after" / "predictor" / "h1.8" / "contact_change.json"   # where the report reads it
     out.parent.mkdir(parents=True)
-    run = subprocess.run([sys.executable, "-m", "predictor.contact_change", "--before", str(folders[0]),
+    run = subprocess.run([sys.executable, "-m", "predictor.validation.contact_change", "--before", str(folders[0]),
                           "--after", str(after), "--label", "test", "--out", str(out)], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
@@ -140,7 +140,7 @@ def test_bad_input_exits_2_and_writes_nothing(tmp_path):
     """A folder without predictor results, or two atlases of different grids: one line on
     stderr, exit 2, no output file."""
     out = tmp_path / "c.json"
-    run = [sys.executable, "-m", "predictor.contact_change", "--label", "x", "--out", str(out)]
+    run = [sys.executable, "-m", "predictor.validation.contact_change", "--label", "x", "--out", str(out)]
     r = subprocess.run(run + ["--before", str(tmp_path), "--after", str(tmp_path)], cwd=ROOT, capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "no predictor results" in r.stderr

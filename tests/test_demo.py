@@ -48,7 +48,7 @@ def finger_case(name, tip, angle, h, fem_s):
 
 
 def validation(*cases):
-    """A predictor.validate_finger JSON: (case, tip, angle) per case, the judged variant's."""
+    """A predictor.validation.finger JSON: (case, tip, angle) per case, the judged variant's."""
     entries = []
     for case, tip, angle in cases:
         entry = {"case": case, "variant": "predictor_cap_split", "tip_mm": tip, "tip_angle_deg": angle,
@@ -195,9 +195,9 @@ def test_demo_runs_the_packages_command_lines_without_importing_them():
 
 def test_a_step_file_is_read_through_its_format(tmp_path):
     """A step whose tool writes a finger FEM case (here ``python -m json.tool`` copying the
-    committed one) is loaded through fem.studies.artefacts.FINGER_CASE: the case as committed is
+    committed one) is loaded through fem.artefacts.FINGER_CASE: the case as committed is
     read; with ``tip_angle_deg`` renamed the step fails in one line naming the file and key."""
-    from fem.studies.artefacts import FINGER_CASE
+    from fem.artefacts import FINGER_CASE
 
     committed = Path(demo.ROOT, demo.COMMITTED_FINGER_FEM, f"{demo.FINGER_CASE}.json")
     case = json.loads(committed.read_text())

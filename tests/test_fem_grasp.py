@@ -9,7 +9,7 @@ shared by the tests:
   and the object's force, whose vertical part is the object's half weight (holds);
   measured to 1.3e-8 N (Newton stops at |R| <= 1e-8 N, and the net force of the free rows'
   residual is bounded by sqrt(rows) |R|, not |R|), asserted at 5x that tolerance;
-* agreement with the predictor's outline law (contact36's predictor.gesture --object
+* agreement with the predictor's outline law (contact36's predictor.cli.gesture --object
   circle --p1 0.2 --p2 0.25: holds, tip (37.7655, -214.4284) mm, N 0.4187 N, friction
   use 0.382, contact on the tip). Measured on this mesh: tip (37.7383, -214.3886) mm,
   0.048 mm away; N 0.4203 N (+0.4 %); friction use 0.370; asserted with the margins named

@@ -9,7 +9,7 @@ nice 10 on a loaded two-core machine, 37 s of it the plane's gesture):
   (every node of the mesh, not only the surface the overlap is taken over), the plane
   pushes with 0.0995 N, and the clamp's reaction balances the plane's push and the
   finger's weight (measured to 3e-13 N, asserted to Newton's tolerance 1e-8 N);
-* the same gesture by the predictor's outline law (contact36's ``predictor.gesture --p1 0.1
+* the same gesture by the predictor's outline law (contact36's ``predictor.cli.gesture --p1 0.1
   --p2 0.1 --json`` on the committed production surrogate: tip (9.8487, -215.4137) mm, plane
   force 0.1013 N, overlap 0.027 mm; its default problem, the plane's, checked live: issue
   56; on the 1.8 mm reference surrogate it was (9.8572, -215.4171) mm, 0.0959 N).
@@ -191,12 +191,12 @@ def test_plane_cases_never_resume_from_cases_without_it(geometry):
 
 
 def test_the_predictors_default_is_the_problem_compared(capsys):
-    """predictor.gesture's default problem is this one (issue 56 §1): at MEET, without
+    """predictor.cli.gesture's default problem is this one (issue 56 §1): at MEET, without
     --no-plane, it answers the figures the FEM is compared with above (the committed
     surrogate), and says so."""
     import json
 
-    from predictor.gesture import main
+    from predictor.cli.gesture import main
 
     assert main(["--p1", str(MEET[0]), "--p2", str(MEET[1]), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

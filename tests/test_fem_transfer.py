@@ -26,7 +26,7 @@ pytest.importorskip("dolfinx")
 from dolfinx.mesh import compute_midpoints  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from fem.studies.artefacts import JOINT_CASE  # noqa: E402
+from fem.artefacts import JOINT_CASE  # noqa: E402
 from fem.mesh.discretisation import discretisation  # noqa: E402
 from fem.mesh.geometry import JointGeometry  # noqa: E402
 from fem.studies.joint_cases import case_file, read_records, solve_missing  # noqa: E402

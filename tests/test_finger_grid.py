@@ -27,7 +27,7 @@ from contract.finger import load_finger
 
 pytest.importorskip("dolfinx")
 
-from fem.studies.artefacts import FINGER_CASE, FINGER_GRID  # noqa: E402
+from fem.artefacts import FINGER_CASE, FINGER_GRID  # noqa: E402
 import fem.studies.finger_cases as fc  # noqa: E402
 import fem.studies.finger_grid as fg  # noqa: E402
 from fem.mesh.geometry import pressure_limits  # noqa: E402

@@ -32,7 +32,7 @@ from contract.finger import load_finger  # noqa: E402
 from contract.joint import load_joint  # noqa: E402
 from fem.solvers.finger import FingerLoad, FingerSolver  # noqa: E402
 from fem.cli.finger import build_parser  # noqa: E402
-from fem.cli.options import finger_discretisation  # noqa: E402
+from fem.options import finger_discretisation  # noqa: E402
 from fem.mesh.geometry import TAGS, FingerGeometry, JointGeometry, finger_tags, shape_of  # noqa: E402
 from fem.mesh.build import create_mesh  # noqa: E402
 from fem.mesh.hexahedra import hexahedra, q2_nodes  # noqa: E402

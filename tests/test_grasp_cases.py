@@ -35,7 +35,7 @@ pytest.importorskip("dolfinx")
 from contract.finger import load_finger  # noqa: E402
 from contract.grasp import approach_for, parse_object  # noqa: E402
 from fem.studies import grasp_cases  # noqa: E402
-from fem.studies.artefacts import GRASP_CASE  # noqa: E402
+from fem.artefacts import GRASP_CASE  # noqa: E402
 from fem.solvers.finger import FingerLoad, FingerResult  # noqa: E402
 from fem.mesh.geometry import pressure_limits  # noqa: E402
 from fem.solvers.grasp import GraspResult  # noqa: E402

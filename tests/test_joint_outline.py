@@ -1,5 +1,5 @@
 """The bulge of a pressurised joint's cells, from the joint FEM to the predictor's outline
-(issue 56: fem.studies.joint_outline, the joint file's [outline], predictor.gripper).
+(issue 56: fem.studies.joint_outline, the joint file's [outline], predictor.model.gripper).
 
 * the joint file's [outline] round-trips, is refused with one line when malformed, and
   leaves the joint's digest as it is (no dataset or checkpoint goes stale);
@@ -82,7 +82,7 @@ def _vertex_table(chords):
 
 
 def test_half_heights_are_the_table_at_its_pressures_and_linear_between():
-    from predictor.gripper import GripperParams, band_half_heights
+    from predictor.model.gripper import GripperParams, band_half_heights
 
     params = GripperParams(outline="bulged")
     pressures, bulge, other = load_joint().outline
@@ -104,8 +104,8 @@ def test_half_heights_are_the_table_at_its_pressures_and_linear_between():
 
 
 def test_bulged_outline_is_the_band_moved_along_each_normal():
-    from predictor.gripper import GripperParams, band_size, finger_pose, outline_vertices
-    from predictor.joint import AnalyticJoint
+    from predictor.model.gripper import GripperParams, band_size, finger_pose, outline_vertices
+    from predictor.model.joint import AnalyticJoint
 
     p = torch.tensor([[0.2, -0.25]], dtype=torch.float64)
     tau = torch.tensor([[[0.1, -0.2, 5.0], [0.0, 0.3, -4.0]]], dtype=torch.float64)
@@ -126,8 +126,8 @@ def test_bulged_outline_is_the_band_moved_along_each_normal():
 def test_a_bulged_poses_heights_follow_its_rows_and_survive_the_mirror():
     """The band heights are sizes: the mirror keeps them, masked() NaNs the failed rows,
     rows() and with_rows() take them with their samples."""
-    from predictor.gripper import GripperParams, finger_pose
-    from predictor.joint import AnalyticJoint
+    from predictor.model.gripper import GripperParams, finger_pose
+    from predictor.model.joint import AnalyticJoint
 
     p = torch.tensor([[0.2, -0.25], [-0.1, 0.3], [0.0, 0.05]], dtype=torch.float64)
     pose = finger_pose(AnalyticJoint(), GripperParams(outline="bulged"), p, torch.zeros(3, 2, 3, dtype=torch.float64))

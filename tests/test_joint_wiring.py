@@ -188,7 +188,7 @@ from workflow.store import recorded_joint  # noqa: E402
 
 
 def _config(joint=None, **kw):
-    from fem.cli.options import joint_geometry
+    from fem.options import joint_geometry
     from types import SimpleNamespace
 
     # the 1.8 mm reference sets' paper-fidelity mesh, as their campaigns pass it (--mesh-size 1.8)
@@ -351,12 +351,12 @@ def test_finger_joint_parts_name_their_joint_files(tmp_path):
 
 def test_predictor_refuses_a_model_of_another_joint(tmp_path):
     """A surrogate checkpoint carries its joint (surrogate.model.checkpoint_joint); the
-    committed checkpoint, written before, is the paper's; predictor.joint.load_joint with
+    committed checkpoint, written before, is the paper's; predictor.model.joint.load_joint with
     a finger refuses, in one line naming both joints, a model whose joint is not the one
     every joint part names, and accepts the matching pair."""
     torch = pytest.importorskip("torch")
-    from predictor.joint import AnalyticJoint, check_finger
-    from predictor.joint import load_joint as load_model
+    from predictor.model.joint import AnalyticJoint, check_finger
+    from predictor.model.joint import load_joint as load_model
     from surrogate.model import JointSurrogate, ModelConfig, load_surrogate, save_checkpoint
 
     soft = parse_joint(joint_text("yeoh", name="soft"))

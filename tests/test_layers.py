@@ -4,8 +4,13 @@ across modules (issue 34).
 Layers, top to bottom: apps (report, demo) -> predictor -> surrogate -> workflow (data) -> fem,
 all on contract. Inside fem (issue 61), its sub-packages, bottom to top: mesh -> physics ->
 solvers (the library) -> cli -> studies; each imports only those below it and itself, so the
-library never imports a command line or a study, and no fem modules import each other in a
-circle (docs/packages.md).
+library never imports a command line or a study; fem's root holds neutral modules (the
+studies' formats ``fem.artefacts``, the shared options ``fem.options``) and aliases. Nothing
+outside fem.cli and fem.studies imports them (apps run them as subprocesses). Inside
+predictor likewise: model -> solvers -> nn -> planning -> calibration -> validation -> cli,
+with ``api`` (the front door), the neutral ``defaults`` and ``artefacts`` and the old command
+paths (aliases) at its root. Neither package's modules import each other in a circle
+(docs/packages.md).
 The checks read every module's import statements (ast, so imports inside functions count
 too) and import the dolfinx-free layers in a fresh interpreter.
 """
@@ -33,10 +38,24 @@ ALLOWED = {
 FEM_FLOORS = ("mesh", "physics", "solvers", "cli", "studies")
 #: The modules at fem's root: the package file (imports nothing) and the old command paths,
 #: thin aliases that run fem.cli's commands (README, changes).
-FEM_ROOT = {"__init__": (), "finger": ("cli",), "solve": ("cli",)}
+FEM_ROOT = {"__init__": (), "finger": ("cli",), "solve": ("cli",), "artefacts": (), "options": ("mesh",)}
+#: fem's neutral root modules (no dolfinx) and the lowest sub-package that may import each:
+#: the studies' JSON formats (imported by predictor and apps too), the command-line options
+#: shared by fem.cli, fem.studies and workflow's commands (built on fem.mesh's value objects).
+FEM_NEUTRAL = {"artefacts": "mesh", "options": "physics"}
 #: The fem modules that load no dolfinx, gmsh or MPI (value objects, options, formats).
-FEM_LIGHT = ("fem.mesh.geometry", "fem.mesh.discretisation", "fem.mesh.data", "fem.cli.options",
-             "fem.studies.artefacts", "fem.studies.elastica")
+FEM_LIGHT = ("fem.mesh.geometry", "fem.mesh.discretisation", "fem.mesh.data", "fem.options",
+             "fem.artefacts", "fem.studies.elastica")
+#: predictor's sub-packages, bottom to top: each may import itself and those before it.
+PRED_FLOORS = ("model", "solvers", "nn", "planning", "calibration", "validation", "cli")
+#: predictor's neutral root modules: import no predictor module, any module may import them.
+PRED_NEUTRAL = ("defaults", "artefacts")
+#: The other modules at predictor's root and what each may import: the package file (the
+#: API, lazily), the API (every sub-package but the command lines), the old command paths
+#: (aliases that run the command where it moved; README, changes).
+PRED_ROOT = {"__init__": ("api",), "api": PRED_FLOORS[:-1],
+             **dict.fromkeys(("gesture", "inverse", "atlas", "calibrate", "figures"), ("cli",)),
+             **dict.fromkeys(("validate_finger", "validate_grasps", "bench", "contact_change"), ("validation",))}
 #: Third-party packages the contract floor may import.
 CONTRACT_THIRD_PARTY = {"numpy"}
 
@@ -80,8 +99,8 @@ for pkg in ("contract",):
         importlib.import_module(f"{pkg}.{m.name}")
 light = sorted(m for m in ("torch", "dolfinx", "gmsh") if m in sys.modules)
 for pkg in ("surrogate", "predictor", "apps"):
-    for m in pkgutil.iter_modules([pkg]):
-        importlib.import_module(f"{pkg}.{m.name}")
+    for m in pkgutil.walk_packages([pkg], prefix=f"{pkg}."):
+        importlib.import_module(m.name)
 print(light, "dolfinx" in sys.modules)
 """
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
@@ -108,6 +127,11 @@ def fem_import_error(importer: str, module: str, names=()) -> str | None:
     if floor == "fem":    # ``from fem import physics``: the sub-packages named
         return next(filter(None, (fem_import_error(importer, f"fem.{n}") for n in names)), None)
     parts = Path(importer).parts
+    if floor in FEM_NEUTRAL:
+        lowest = FEM_NEUTRAL[floor]
+        if len(parts) == 2 or FEM_FLOORS.index(parts[1]) >= FEM_FLOORS.index(lowest):
+            return None
+        return f"{importer} imports {module}: only fem.{lowest} and above may"
     if floor not in FEM_FLOORS:
         return f"{importer} imports {module}: not a module of a fem sub-package {FEM_FLOORS}"
     if len(parts) == 2:   # fem/finger.py
@@ -158,11 +182,15 @@ def test_the_checker_refuses_upward_imports():
     assert fem_import_error("fem/studies/mesh_study.py", "fem.solvers.joint") is None
     assert fem_import_error("fem/solvers/joint.py", "fem.solvers.load_path") is None
     assert fem_import_error("fem/solvers/joint.py", "dolfinx.fem") is None
+    assert fem_import_error("fem/studies/finger_grid.py", "fem.artefacts") is None
+    assert fem_import_error("fem/mesh/build.py", "fem.artefacts") is None
+    assert fem_import_error("fem/mesh/build.py", "fem.options") is not None     # options is built on fem.mesh
+    assert fem_import_error("fem/cli/solve.py", "fem", ["options"]) is None
 
 
-def _fem_graph() -> dict[str, set[str]]:
-    """fem module -> the fem modules it imports (anywhere in the file)."""
-    modules = {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in _fem_modules()}
+def _graph(package: str) -> dict[str, set[str]]:
+    """module of ``package`` -> the modules of it that it imports (anywhere in the file)."""
+    modules = {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in sorted((ROOT / package).rglob("*.py"))}
     graph = {}
     for name, path in modules.items():
         graph[name] = set()
@@ -205,7 +233,7 @@ def circles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def test_no_fem_modules_import_each_other_in_a_circle():
-    graph = _fem_graph()
+    graph = _graph("fem")
     assert "fem.physics.problem" in graph["fem.solvers.load_path"]      # the graph is read
     assert circles(graph) == []
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
@@ -217,3 +245,95 @@ def test_fem_value_modules_load_no_dolfinx():
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["[]"], out.stdout
+
+
+def test_nothing_outside_fem_cli_and_studies_imports_them():
+    """A command line or a study is run, never imported, by the library and the other
+    packages (issue 61): their formats are fem.artefacts, their options fem.options. fem's
+    root aliases run fem.cli; tests may import anything."""
+    aliases = {f"fem/{m}.py" for m, allowed in FEM_ROOT.items() if "cli" in allowed}
+    errors = []
+    for package, path in _modules():
+        rel = str(path.relative_to(ROOT))
+        if rel.startswith(("fem/cli/", "fem/studies/")) or rel in aliases:
+            continue
+        for module, names in _imports(path):
+            targets = [module] + [f"{module}.{n}" for n in names if module == "fem"]
+            errors += [f"{rel} imports {t}" for t in targets if t.startswith(("fem.cli", "fem.studies"))]
+    assert errors == []
+
+
+def _pred_floor(module: str) -> str | None:
+    """The predictor sub-package or root module of an imported module name
+    ("predictor.solvers.lm" -> "solvers", "predictor.api" -> "api"), "predictor" alone for
+    the package, None outside predictor."""
+    parts = module.split(".")
+    if parts[0] != "predictor":
+        return None
+    return parts[1] if len(parts) > 1 else "predictor"
+
+
+def predictor_import_error(importer: str, module: str, names=()) -> str | None:
+    """Why ``importer`` (a path under predictor/) may not import ``module``, or None when it
+    may: sub-packages import their own and those below them (PRED_FLOORS) and the neutral
+    root modules; the API every sub-package but cli; an alias at the root only the command
+    it runs; nobody imports an alias."""
+    floor = _pred_floor(module)
+    if floor is None:
+        return None
+    if floor == "predictor":   # ``from predictor import api``
+        return next(filter(None, (predictor_import_error(importer, f"predictor.{n}") for n in names)), None)
+    if floor in PRED_NEUTRAL:
+        return None
+    parts = Path(importer).parts
+    if len(parts) == 2:
+        allowed = PRED_ROOT.get(Path(importer).stem, ())
+        return None if floor in allowed else f"{importer} imports {module} (allowed: {allowed})"
+    if floor not in PRED_FLOORS:
+        return f"{importer} imports {module}: not a module of a predictor sub-package {PRED_FLOORS}"
+    own = parts[1]
+    if PRED_FLOORS.index(floor) > PRED_FLOORS.index(own):
+        return f"{importer} imports {module}: predictor.{own} may not import predictor.{floor} (upward)"
+    return None
+
+
+def test_predictor_is_its_sub_packages_and_their_package_files_import_nothing():
+    root = {p.stem for p in (ROOT / "predictor").glob("*.py")}
+    assert root == set(PRED_ROOT) | set(PRED_NEUTRAL), sorted(root ^ (set(PRED_ROOT) | set(PRED_NEUTRAL)))
+    folders = {p.parent.name for p in (ROOT / "predictor").glob("*/*.py")}
+    assert folders == set(PRED_FLOORS), folders
+    for sub in PRED_FLOORS:
+        init = ROOT / "predictor" / sub / "__init__.py"
+        doc = ast.get_docstring(ast.parse(init.read_text()))
+        assert doc and "Imports:" in doc, f"{init} says what it holds and what it may import"
+        assert not list(_imports(init)), f"{init} imports (package files stay import-free)"
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "predictor").rglob("*.py")), ids=lambda p: str(p.relative_to(ROOT)))
+def test_predictor_sub_packages_import_downward(path):
+    rel = str(path.relative_to(ROOT))
+    for node in ast.walk(ast.parse(path.read_text(), rel)):
+        assert not (isinstance(node, ast.ImportFrom) and node.level), f"{rel}: a relative import"
+    errors = [e for module, names in _imports(path) if (e := predictor_import_error(rel, module, names))]
+    assert not errors, "\n".join(errors)
+
+
+def test_the_predictor_checker_refuses_upward_imports():
+    assert predictor_import_error("predictor/model/statics.py", "predictor.solvers.solve") is not None
+    assert predictor_import_error("predictor/solvers/ramp.py", "predictor.planning.atlas") is not None
+    assert predictor_import_error("predictor/planning/atlas.py", "predictor.cli.gesture") is not None
+    assert predictor_import_error("predictor/planning/atlas.py", "predictor.api") is not None
+    assert predictor_import_error("predictor/cli/gesture.py", "predictor.gesture") is not None   # an alias
+    assert predictor_import_error("predictor/api.py", "predictor.cli.atlas") is not None
+    assert predictor_import_error("predictor/nn/train.py", "predictor", ["cli"]) is not None
+    assert predictor_import_error("predictor/gesture.py", "predictor.solvers.solve") is not None  # aliases run a command
+    assert predictor_import_error("predictor/nn/__main__.py", "predictor.cli.nn") is not None  # runs it (runpy)
+    assert predictor_import_error("predictor/nn/train.py", "predictor.solvers", ["progress"]) is None
+    assert predictor_import_error("predictor/model/joint.py", "predictor.defaults") is None
+    assert predictor_import_error("predictor/cli/inverse.py", "predictor.planning.inversion") is None
+
+
+def test_no_predictor_modules_import_each_other_in_a_circle():
+    graph = _graph("predictor")
+    assert "predictor.model.statics" in graph["predictor.solvers.solve"]      # the graph is read
+    assert circles(graph) == []

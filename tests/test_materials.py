@@ -190,7 +190,7 @@ def test_command_checks_a_joint_files_law(tmp_path, capsys):
     """--joint FILE checks that file's law only; the document passes its format."""
     pytest.importorskip("dolfinx")
     from contract.joint import DEFAULT_JOINT
-    from fem.studies.artefacts import MATERIALS
+    from fem.artefacts import MATERIALS
 
     out = tmp_path / "m.json"
     assert main(["--joint", str(DEFAULT_JOINT), "--out", str(out), "--quiet"]) == 0

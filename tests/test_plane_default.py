@@ -2,15 +2,15 @@
 
 - fem.cli.finger, fem.studies.finger_cases and fem.studies.finger_grid default to the gripper (the mirror
   finger's contact at X = 0): ``args.plane`` True, ``--no-plane`` False, ``--plane`` (the
-  old flag) still True; predictor.gesture defaults to it too and its JSON says which
+  old flag) still True; predictor.cli.gesture defaults to it too and its JSON says which
   (``"plane": true``; ``--no-plane`` false, and at (0.13, -0.07) MPa with gravity the
   finger alone crosses X = 0 by 10 mm where the gripper's stays on its side, pushing on
   the plane); the Python API (load_gripper(plane=...)) likewise.
 - The committed lone-finger records stand for the Makefile's commands that resume them
   (``make finger-fem``, ``make calibration-fem``: ``--no-plane``), so those targets solve
   nothing; without ``--no-plane`` the same command would solve all 18 anew.
-- A comparison refuses two problems in one line: predictor.problem.same_problem, the
-  demo's gesture against a committed FEM case, predictor.validate_finger asked for the
+- A comparison refuses two problems in one line: predictor.solvers.problem.same_problem, the
+  demo's gesture against a committed FEM case, predictor.validation.finger asked for the
   plane on the committed lone-finger cases (exit 2).
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from predictor.problem import same_problem
+from predictor.solvers.problem import same_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 MAKEFILE = (ROOT / "Makefile").read_text()
@@ -47,7 +47,7 @@ def test_fem_parsers_default_to_the_plane():
 
 def test_gesture_defaults_to_the_plane_and_says_so(capsys):
     """The issue's example: (0.13, -0.07) MPa with gravity on the analytic joint."""
-    from predictor.gesture import main
+    from predictor.cli.gesture import main
 
     out = {}
     for flags in ((), ("--no-plane",)):
@@ -61,7 +61,7 @@ def test_gesture_defaults_to_the_plane_and_says_so(capsys):
 
 def test_api_defaults_to_the_plane():
     from predictor.api import load_gripper, solve_gesture
-    from predictor.statics import meets
+    from predictor.model.statics import meets
 
     g, lone = load_gripper("analytic"), load_gripper("analytic", plane=False)
     assert meets(g.problem) and not meets(lone.problem)
@@ -115,7 +115,7 @@ def test_same_problem_refuses_two_problems_in_one_line():
 
 def test_demo_rows_each_solve_one_problem():
     """The demo's rows against an FEM compare like with like: the committed lone-finger cases
-    through predictor.validate_finger (each case against the predictor of its own problem),
+    through predictor.validation.finger (each case against the predictor of its own problem),
     and its live finger FEM is a lone finger as its row says; its gesture rows are the
     gripper's (the default), with no FEM beside them."""
     from apps import demo
@@ -129,7 +129,7 @@ def test_demo_rows_each_solve_one_problem():
 def test_validate_finger_refuses_the_plane_on_lone_cases(tmp_path, capsys):
     """The committed cases are one finger alone: --no-plane is their problem, --plane is
     refused (one line, exit 2) before any solve, and nothing is written."""
-    from predictor.validate_finger import main, one_problem
+    from predictor.validation.finger import main, one_problem
 
     with pytest.raises(SystemExit) as exc:
         main(["--plane", "--model", "analytic", "--out", str(tmp_path / "f.json"), "--figures", str(tmp_path)])
@@ -144,14 +144,14 @@ def test_validate_finger_refuses_the_plane_on_lone_cases(tmp_path, capsys):
     assert one_problem([lone], None, "x") == ([lone], False)
     # each problem is judged on its own issue's targets: the gripper's on issue 56's (1 mm, 0.5 deg and
     # the finger FEM's own refinement), one finger alone's on issue 14's (2 mm, 1 deg)
-    from predictor.validate_finger import targets_for
+    from predictor.validation.finger import targets_for
     assert (targets_for(True)["tip_error_mm"], targets_for(True)["refinement_tip_change_mm"]) == (1.0, 0.5)
     assert targets_for(False) == targets_for(None) and targets_for(False)["tip_error_mm"] == 2.0
     assert "refinement_tip_change_mm" not in targets_for(False)
 
 
 def test_validate_grasps_refuses_a_lone_finger_on_the_grippers_records(tmp_path, capsys):
-    from predictor.validate_grasps import main
+    from predictor.validation.grasps import main
 
     with pytest.raises(SystemExit) as exc:
         main(["--fem", "tests/data/grasps", "--mesh", "4", "--formulation", "mixed", "--no-plane",

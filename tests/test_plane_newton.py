@@ -1,5 +1,5 @@
 """The contact-constrained Newton of the fingers pressed on each other at X = 0
-(predictor.plane_newton): its loads are the statics' own, its Jacobian the exact one, it
+(predictor.solvers.plane_newton): its loads are the statics' own, its Jacobian the exact one, it
 converges from a start far across X = 0 in a handful of steps, and the solve through it
 lands on the penalty's root that the ramp and its homotopy reached before it (frozen from
 that solve on the committed surrogate: tips within 1e-3 mm, plane force within 1e-4 N).
@@ -11,14 +11,14 @@ from pathlib import Path
 import pytest
 import torch
 
-from predictor.gripper import outline_vertices
-from predictor.options import SolverOptions
-from predictor.plane_newton import (constrained_fn, kkt_jacobian, kkt_residual, kkt_solve, penalty_shift,
+from predictor.model.gripper import outline_vertices
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.plane_newton import (constrained_fn, kkt_jacobian, kkt_residual, kkt_solve, penalty_shift,
                                     plane_loads, plane_vertex_layout)
-from predictor.problem import load_problem
-from predictor.ramp import contact_newton
-from predictor.solve import solve
-from predictor.statics import apart, plane_contact, scaled
+from predictor.solvers.problem import load_problem
+from predictor.solvers.ramp import contact_newton
+from predictor.solvers.solve import solve
+from predictor.model.statics import apart, plane_contact, scaled
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = str(ROOT / "results/surrogate/improved.pt")

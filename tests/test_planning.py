@@ -19,10 +19,10 @@ import torch
 
 from contract.files import dumps
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
-from predictor.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify, grasp_atlas as atlas_of
-from predictor.inverse import where_it_touches
-from predictor.inversion import TIP_TOL_MM, Goal, InverseProblem, Branch, coarse_atlas, gradient
-from predictor.solve import solve
+from predictor.planning.atlas import HOLDS, NO_CONTACT, RAMPED, STATES, classify, grasp_atlas as atlas_of
+from predictor.cli.inverse import where_it_touches
+from predictor.planning.inversion import TIP_TOL_MM, Goal, InverseProblem, Branch, coarse_atlas, gradient
+from predictor.solvers.solve import solve
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = str(ROOT / "results/surrogate/improved.pt")
@@ -269,7 +269,7 @@ def test_hold_search_with_jacobians_in_turn_is_the_exact_ones(circle, atlas, mon
     """With an object the search's continuation steps try the difference Jacobian first
     and the exact one where it fails (ramp.attempts, in_turn); the hold answer is the one
     of the exact Jacobian alone (pressures within 1e-9 MPa, friction use within 1e-9)."""
-    import predictor.inversion as inversion
+    import predictor.planning.inversion as inversion
 
     fast = inverse_pressures(circle, goal="hold", atlas=atlas, box=BOX)
     monkeypatch.setattr(inversion, "attempts", lambda problem, options: ("exact",))
@@ -282,12 +282,12 @@ def test_hold_search_with_jacobians_in_turn_is_the_exact_ones(circle, atlas, mon
 def test_bad_placement_and_cli_exit_codes(tmp_path):
     with pytest.raises(ValueError, match="intersects the fingers"):
         load_gripper(MODEL, "rectangle:w=1000,h=2,y=-195")
-    r = subprocess.run([sys.executable, "-m", "predictor.inverse", "--goal", "tip:0,-400", "--json"], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "predictor.cli.inverse", "--goal", "tip:0,-400", "--json"], cwd=ROOT,
                        env=ENV, capture_output=True, text=True, timeout=300)
     assert r.returncode == 1, r.stderr
     assert json.loads(r.stdout)["status"] == "infeasible"
     out = tmp_path / "a.json"
-    r = subprocess.run([sys.executable, "-m", "predictor.atlas", "--object", "circle", "--grid", "2", "--box",
+    r = subprocess.run([sys.executable, "-m", "predictor.cli.atlas", "--object", "circle", "--grid", "2", "--box",
                         "0.2,0.3,0.2,0.3", "--out", str(out), "--json"], cwd=ROOT, env=ENV, capture_output=True,
                        text=True, timeout=300)
     assert r.returncode == 0, r.stderr

@@ -22,14 +22,14 @@ import pytest
 import torch
 
 from predictor import grasp_atlas, inverse_pressures, load_gripper, solve_gesture
-from predictor import progress
+from predictor.solvers import progress
 from predictor.defaults import RESULTS_ENV
-from predictor.atlas import atlas_from_json
-from predictor.inversion import parse_goal
-from predictor.joint import AnalyticJoint, load_joint
-from predictor.problem import load_problem
-from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import ContactParams, GripperProblem, Obstacle, finger_reach, out_of_reach
+from predictor.planning.atlas import atlas_from_json
+from predictor.planning.inversion import parse_goal
+from predictor.model.joint import AnalyticJoint, load_joint
+from predictor.solvers.problem import load_problem
+from predictor.solvers.solve import APPROACH, SolverOptions, solve
+from predictor.model.statics import ContactParams, GripperProblem, Obstacle, finger_reach, out_of_reach
 
 ROOT = Path(__file__).resolve().parents[1]
 SURROGATE = ROOT / "results/surrogate/improved.pt"
@@ -45,16 +45,16 @@ def t(x):
 
 # ------------------------------------------------------------ default model, any cwd
 def _outside(tmp_path: Path, *args: str, env: dict | None = None, code: str | None = None):
-    """Run ``python -m predictor.gesture ARGS`` (or ``python -c code``) from tmp_path, a
+    """Run ``python -m predictor.cli.gesture ARGS`` (or ``python -c code``) from tmp_path, a
     folder outside the repository, with this worktree on PYTHONPATH."""
     env = {**ENV, "PYTHONPATH": str(ROOT), **(env or {})}
-    argv = [sys.executable, "-c", code] if code else [sys.executable, "-m", "predictor.gesture", *args]
+    argv = [sys.executable, "-c", code] if code else [sys.executable, "-m", "predictor.cli.gesture", *args]
     return subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
 
 
 @needs_surrogate
 def test_default_model_from_outside_the_repository(tmp_path):
-    """From a folder outside the repository, predictor.gesture and the API use the
+    """From a folder outside the repository, predictor.cli.gesture and the API use the
     committed surrogate: the tip at (-0.1, 0.1) MPa is the in-process answer of
     results/surrogate/improved.pt, (43.80, -214.42) mm since the switch to the production
     surrogate ((42.6, -214.7) on the 1.8 mm one; the analytic joint's is (61.6, -207.7)),
@@ -191,7 +191,7 @@ def test_state_and_friction_use_follow_the_contact_law():
 
 
 def test_no_contact_gesture_has_no_friction_sentinel():
-    """predictor.gesture --p1 -0.02 --p2 -0.02 --object circle: nothing touches, so state
+    """predictor.cli.gesture --p1 -0.02 --p2 -0.02 --object circle: nothing touches, so state
     no_contact with friction_use and slip null (it printed slip true and 1000.0). (At
     (-0.02, 0) MPa the tip's inner face, 10 mm nearer the circle than its centre line,
     touches it.)"""
@@ -288,7 +288,7 @@ def test_gesture_figure_has_legend_and_joint_title():
     says so without figures."""
     import matplotlib.pyplot as plt
 
-    from predictor.plot import draw_gesture
+    from predictor.model.plot import draw_gesture
 
     problem = load_problem("analytic", "circle")
     res = solve(problem, t([[0.2, 0.3], [0.3, 0.3]]))
@@ -310,10 +310,10 @@ def test_gesture_figure_has_legend_and_joint_title():
 #: Refused by contract.cli.Parser's write probe and negative comma lists once that change
 #: merges (contract/cli.py is not this branch's): these fail until then.
 PENDING_ROWS = [
-    (["predictor.gesture", "--p1", "0", "--p2", "0", "--plot", "/proc/x.png"], "/proc/x.png"),
-    (["predictor.gesture", "--p1", "0", "--p2", "0", "--plot", "{tmp}/missing/dir/x.png"], "{tmp}/missing/dir/x.png"),
-    (["predictor.atlas", "--object", "circle", "--grid", "2", "--out", "/proc/x.json"], "/proc/x.json"),
-    (["predictor.inverse", "--cases", "--out", "/proc/x.json"], "/proc/x.json"),
+    (["predictor.cli.gesture", "--p1", "0", "--p2", "0", "--plot", "/proc/x.png"], "/proc/x.png"),
+    (["predictor.cli.gesture", "--p1", "0", "--p2", "0", "--plot", "{tmp}/missing/dir/x.png"], "{tmp}/missing/dir/x.png"),
+    (["predictor.planning.atlas", "--object", "circle", "--grid", "2", "--out", "/proc/x.json"], "/proc/x.json"),
+    (["predictor.cli.inverse", "--cases", "--out", "/proc/x.json"], "/proc/x.json"),
 ]
 
 
@@ -334,7 +334,7 @@ def test_unwritable_outputs_refused_before_work(argv, needle, tmp_path):
 def test_negative_values_in_comma_lists():
     """--pressures -0.1,0.1 and --approach -0.15,0, as --help shows them: the committed
     surrogate's gesture (pending contract.cli's negative comma lists)."""
-    r = subprocess.run([sys.executable, "-m", "predictor.gesture", "--pressures", "-0.1,0.1", "--approach",
+    r = subprocess.run([sys.executable, "-m", "predictor.cli.gesture", "--pressures", "-0.1,0.1", "--approach",
                         "-0.15,0", "--json"], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert np.allclose(json.loads(r.stdout)["tip"], [43.80, -214.42], atol=0.05)

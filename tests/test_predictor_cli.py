@@ -1,4 +1,4 @@
-"""The predictor's command lines (predictor.gesture) and joint loading: JSON keys, one-line
+"""The predictor's command lines (predictor.cli.gesture) and joint loading: JSON keys, one-line
 errors with exit 2, the real surrogate, the surrogate wrapper, finger options on the
 command line, and that importing the predictor imports no dolfinx.
 
@@ -16,10 +16,10 @@ import pytest
 import torch
 
 from contract.spec import INPUT_BOX
-from predictor.gripper import GripperParams
-from predictor.joint import load_joint
-from predictor.solve import solve
-from predictor.statics import GripperProblem
+from predictor.model.gripper import GripperParams
+from predictor.model.joint import load_joint
+from predictor.solvers.solve import solve
+from predictor.model.statics import GripperProblem
 
 from test_predictor_common import DT, PAPER_CHAIN, ROOT, SURROGATE, THREE, THREE_FINGER, THREE_P, J, run_gesture_cli, t
 
@@ -41,7 +41,7 @@ def test_cli_json_and_errors():
                  ("--p1", "0", "--p2", "0", "--model", "/nonexistent.pt")):
         bad = run_gesture_cli(*args)
         assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
-        assert bad.stderr.startswith("python -m predictor.gesture: error:"), bad.stderr
+        assert bad.stderr.startswith("python -m predictor.cli.gesture: error:"), bad.stderr
 
 
 @pytest.mark.skipif(not SURROGATE.is_file(), reason="no committed surrogate checkpoint yet")
@@ -61,7 +61,7 @@ def test_surrogate_joint_wrapper_with_a_fitted_surrogate(tmp_path):
     converges to the solver tolerance and its tip lies within 3 mm of the analytic one;
     a corrupt file is a one-line ValueError."""
     model_mod = pytest.importorskip("surrogate.model")
-    from predictor.joint import SurrogateJoint
+    from predictor.model.joint import SurrogateJoint
 
     torch.manual_seed(0)
     box = t(INPUT_BOX)
@@ -89,16 +89,17 @@ def test_surrogate_joint_wrapper_with_a_fitted_surrogate(tmp_path):
 
 def test_import_predictor_does_not_import_dolfinx():
     """Dependencies run downward and the predictor is FEM-free: importing every predictor
-    module (each file of predictor/) leaves 'dolfinx' out of sys.modules."""
-    modules = sorted(f"predictor.{f.stem}" for f in (ROOT / "predictor").glob("*.py") if f.stem != "__init__")
-    assert {"predictor.solve", "predictor.newton", "predictor.nn", "predictor.nn_answer"} <= set(modules)
+    module (each file of predictor/ and its sub-packages) leaves 'dolfinx' out of sys.modules."""
+    modules = sorted(".".join(f.relative_to(ROOT).with_suffix("").parts) for f in (ROOT / "predictor").rglob("*.py")
+                     if not f.stem.startswith("__"))
+    assert {"predictor.solvers.solve", "predictor.solvers.newton", "predictor.cli.nn", "predictor.nn.answer"} <= set(modules)
     code = f"import sys, {', '.join(modules)}; print('dolfinx' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr
 
 
 def test_cli_finger_kinematics_and_joint_weight(tmp_path):
-    """predictor.gesture --finger FILE --pressures P1,P2,P3 on the three-joint finger (and
+    """predictor.cli.gesture --finger FILE --pressures P1,P2,P3 on the three-joint finger (and
     --kinematics cap --joint-weight split) exits 0; its JSON names the finger (name, sha256
     of the file), the kinematics and the joint weight, has tau 3x3, three
     joint_end_angle_deg whose last is tip_angle_deg, and the tip equals the Python solve's;
@@ -131,35 +132,41 @@ def test_cli_finger_kinematics_and_joint_weight(tmp_path):
 
 def _predictor_imports():
     """(importer, imported module, name) of every ``from predictor.x import name`` in
-    predictor/ (top level and inside functions), and the set of command-line modules (a
-    ``main`` function)."""
+    predictor/ and its sub-packages (top level and inside functions; not the old command
+    paths' ``if __name__ == "__main__":`` blocks, aliases that run a command), and the set of
+    command-line modules (a ``main`` function)."""
     found, clis = [], set()
-    for path in sorted((ROOT / "predictor").glob("*.py")):
+    for path in sorted((ROOT / "predictor").rglob("*.py")):
+        name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
         tree = ast.parse(path.read_text())
         if any(isinstance(n, ast.FunctionDef) and n.name == "main" for n in tree.body):
-            clis.add(f"predictor.{path.stem}")
+            clis.add(name)
+        runs = [n for n in tree.body if isinstance(n, ast.If) and "__main__" in ast.unparse(n.test)]
+        skipped = {id(m) for n in runs for m in ast.walk(n)}
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("predictor"):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("predictor") and id(node) not in skipped:
                 for alias in node.names:
-                    module = node.module if node.module != "predictor" else f"predictor.{alias.name}"
-                    found.append((f"predictor.{path.stem}", module, alias.name))
+                    sub = ROOT.joinpath(*node.module.split("."), f"{alias.name}.py")
+                    module = f"{node.module}.{alias.name}" if sub.exists() else node.module
+                    found.append((name, module, alias.name))
     return found, clis
 
 
 def test_no_private_imports_and_no_library_imports_a_command_line():
     """Issue 34: no predictor module imports another's private (``_name``) names, and no
-    library module (one without ``main``) imports a command-line-only module (one with
-    ``main`` other than predictor.atlas and predictor.inverse, libraries that carry their
-    command line, whose library names predictor.api imports). The check finds what it
-    looks for: gesture and nn are command-line-only modules, and the solver's parts are
-    imported by name (predictor.ramp's advance by atlas)."""
+    library module (one without ``main``) imports a command-line module (one with ``main``:
+    predictor.cli's, predictor.validation's; issue 61 split predictor.planning.atlas's
+    command line off to predictor.cli.atlas). The check finds what it looks for: gesture,
+    atlas and nn are command-line modules, and the solver's parts are imported by name
+    (predictor.solvers.ramp's advance by atlas)."""
     found, clis = _predictor_imports()
-    assert {"predictor.gesture", "predictor.nn", "predictor.atlas", "predictor.inverse"} <= clis
-    assert ("predictor.atlas", "predictor.ramp", "advance") in found
+    assert {"predictor.cli.gesture", "predictor.cli.nn", "predictor.cli.atlas", "predictor.cli.inverse"} <= clis
+    assert "predictor.planning.atlas" not in clis
+    assert ("predictor.planning.atlas", "predictor.solvers.ramp", "advance") in found
+    assert ("predictor.cli.nn", "predictor.solvers.progress", "progress") in found     # a module by name
     private = [f for f in found if f[2].startswith("_")]
     assert private == []
-    cli_only = clis - {"predictor.atlas", "predictor.inverse"}
-    upward = [f for f in found if f[0] not in clis and f[1] in cli_only]
+    upward = [f for f in found if f[0] not in clis and f[1] in clis]
     assert upward == []
 
 
@@ -198,9 +205,9 @@ def test_finger_of_a_30mm_joint_has_its_own_chain(tmp_path):
     mm down (to 1e-6 mm). Each contact anchor of a joint carries 30/10 = 3 mm of length,
     not the paper joint's 4.545 mm. The paper's joint model is refused for this finger
     (one line naming both joints)."""
-    from predictor.gripper import chain_layout
-    from predictor.joint import AnalyticJoint
-    from predictor.problem import load_problem
+    from predictor.model.gripper import chain_layout
+    from predictor.model.joint import AnalyticJoint
+    from predictor.solvers.problem import load_problem
 
     _, finger = j30_finger(tmp_path)
     assert [round(p.length, 12) for p in finger.parts] == [30.0, 60.0, 30.0, 60.0, 30.0, 65.0]
@@ -223,15 +230,15 @@ def test_finger_of_a_30mm_joint_has_its_own_chain(tmp_path):
 
 
 def test_commands_refuse_a_model_of_another_joint_than_the_fingers(tmp_path):
-    """Every command with a model and a finger checks them together (predictor.joint.
-    load_joint(model, finger)): predictor.gesture and predictor.nn with the paper's
+    """Every command with a model and a finger checks them together (predictor.model.joint.
+    load_joint(model, finger)): predictor.cli.gesture and predictor.cli.nn with the paper's
     analytic joint and the 30 mm joint's finger exit 2 with one line naming the finger's
     joint, before any solve or training; predictor.api.load_gripper refuses the pair too."""
     from predictor import api
 
     path, _ = j30_finger(tmp_path)
     gesture = run_gesture_cli("--finger", str(path), "--pressures", "0,0,0", "--model", "analytic")
-    nn = subprocess.run([sys.executable, "-m", "predictor.nn", "--variant", "gravity-improved", "--model", "analytic",
+    nn = subprocess.run([sys.executable, "-m", "predictor.cli.nn", "--variant", "gravity-improved", "--model", "analytic",
                          "--finger", str(path), "--epochs", "1", "--out", str(tmp_path / "nn.pt")],
                         cwd=ROOT, capture_output=True, text=True, timeout=60)
     for bad in (gesture, nn):
@@ -248,8 +255,8 @@ FINGERS = ROOT / "tests" / "data" / "fingers"
 
 
 def test_atlas_takes_the_finger_approach_and_gravity_options(tmp_path):
-    """predictor.atlas --finger --kinematics --approach zero --no-gravity (the options of
-    predictor.gesture) exits 0 and its JSON records them: the finger's name and sha256 of
+    """predictor.cli.atlas --finger --kinematics --approach zero --no-gravity (the options of
+    predictor.cli.gesture) exits 0 and its JSON records them: the finger's name and sha256 of
     the file, its kinematics, approach_MPa null (ramped from zero with the object present),
     gravity false and the object's weight 0 N; the help advertises no ``x=`` for the object
     (an object is centred on X = 0)."""
@@ -257,7 +264,7 @@ def test_atlas_takes_the_finger_approach_and_gravity_options(tmp_path):
 
     out = tmp_path / "atlas.json"
     paper = ROOT / "contract" / "fingers" / "paper.toml"
-    r = subprocess.run([sys.executable, "-m", "predictor.atlas", "--object", "circle:y=-260", "--grid", "2",
+    r = subprocess.run([sys.executable, "-m", "predictor.cli.atlas", "--object", "circle:y=-260", "--grid", "2",
                         "--finger", str(paper), "--kinematics", "tangent", "--approach", "zero", "--no-gravity",
                         "--out", str(out), "--quiet", "--json"], cwd=ROOT, capture_output=True, text=True,
                        timeout=300)
@@ -268,26 +275,26 @@ def test_atlas_takes_the_finger_approach_and_gravity_options(tmp_path):
     assert doc["approach_MPa"] is None and doc["gravity"] is False and doc["object_weight_N"] == 0.0
     assert json.loads(r.stdout)["finger"] == doc["finger"]
     helps = [subprocess.run([sys.executable, "-m", m, "--help"], cwd=ROOT, capture_output=True, text=True).stdout
-             for m in ("predictor.atlas", "predictor.gesture")]
+             for m in ("predictor.cli.atlas", "predictor.cli.gesture")]
     for text in helps:
         assert "--finger" in text and "--approach" in text and "--no-gravity" in text
         assert "x=" not in text.replace("\n", " "), text
 
 
 def test_atlas_solves_the_finger_approach_and_gravity_it_is_given(tmp_path):
-    """predictor.atlas --finger tests/data/fingers/long_tip.toml (a 5 mm longer tip)
+    """predictor.cli.atlas --finger tests/data/fingers/long_tip.toml (a 5 mm longer tip)
     --no-gravity --approach -0.1,0.05 --path ramp on a 2 x 2 grid: each point's tip is
-    predictor.solve's for that finger without gravity ramped from that approach (the
-    problem predictor.gesture builds from the same options) to 1e-6 mm (measured: 0),
+    predictor.solvers.solve's for that finger without gravity ramped from that approach (the
+    problem predictor.cli.gesture builds from the same options) to 1e-6 mm (measured: 0),
     where the same finger with gravity is 0.02-0.06 mm away and the default problem (the
     paper's finger, gravity) 4.94-5.00 mm: more than 4 mm at every point. The object is
     not touched on this grid, so the approach is checked as recorded, not by its path."""
     from contract.finger import load_finger
-    from predictor.problem import load_problem
+    from predictor.solvers.problem import load_problem
 
     out, spec = tmp_path / "atlas.json", "circle:y=-260"
     finger = ROOT / "tests/data/fingers/long_tip.toml"
-    r = subprocess.run([sys.executable, "-m", "predictor.atlas", "--object", spec, "--grid", "2", "--box",
+    r = subprocess.run([sys.executable, "-m", "predictor.cli.atlas", "--object", spec, "--grid", "2", "--box",
                         "0,0.1,0,0.1", "--path", "ramp", "--finger", str(finger), "--no-gravity", "--approach",
                         "-0.1,0.05", "--out", str(out), "--quiet"], cwd=ROOT, capture_output=True, text=True,
                        timeout=300)
@@ -311,14 +318,14 @@ def test_atlas_solves_the_finger_approach_and_gravity_it_is_given(tmp_path):
 
 def test_ctrl_c_during_the_atlas_ends_with_one_line_and_exit_130(tmp_path):
     """SIGINT while the atlas's grid is solved: exit 130 (128 + SIGINT), the last stderr
-    line 'python -m predictor.atlas: interrupted (Ctrl-C)', no traceback, nothing on
+    line 'python -m predictor.cli.atlas: interrupted (Ctrl-C)', no traceback, nothing on
     stdout and no atlas written. The signal is sent once the grid solve has printed its
     first progress line (before that, the imports are running)."""
     import signal
     import time
 
     out = tmp_path / "atlas.json"
-    p = subprocess.Popen([sys.executable, "-m", "predictor.atlas", "--object", "circle", "--grid", "61",
+    p = subprocess.Popen([sys.executable, "-m", "predictor.cli.atlas", "--object", "circle", "--grid", "61",
                           "--path", "ramp", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     first = ""
@@ -331,7 +338,7 @@ def test_ctrl_c_during_the_atlas_ends_with_one_line_and_exit_130(tmp_path):
     stdout, rest = p.communicate(timeout=120)
     lines = (first + rest).splitlines()
     assert p.returncode == 130, rest
-    assert lines[-1] == "python -m predictor.atlas: interrupted (Ctrl-C)"
+    assert lines[-1] == "python -m predictor.cli.atlas: interrupted (Ctrl-C)"
     assert "Traceback" not in rest and "KeyboardInterrupt" not in rest
     assert stdout == "" and not out.exists()
 
@@ -339,9 +346,9 @@ def test_ctrl_c_during_the_atlas_ends_with_one_line_and_exit_130(tmp_path):
 def test_nn_predictor_message_names_the_problem_it_was_trained_for():
     """predict_gesture on another problem than the network's: one line naming the object
     in the spec's own words (no Obstacle(...) repr)."""
-    from predictor.nn_answer import predict_gesture
-    from predictor.nn_checkpoint import load_predictor
-    from predictor.problem import load_problem
+    from predictor.nn.answer import predict_gesture
+    from predictor.nn.checkpoint import load_predictor
+    from predictor.solvers.problem import load_problem
 
     joint = load_joint(None)
     pred = load_predictor(None, joint, contact=True, params=GripperParams())
@@ -362,7 +369,7 @@ def test_gravity_nn_at_the_plane_answers_polished_and_says_so():
     of a raw answer outside the bound away from the plane: test_predictor_nn's
     test_gravity_nn_cli_answers_at_the_plane_polished."""
     def gesture(*args):   # run_gesture_cli's 60 s is too short for a polish beside other jobs
-        return subprocess.run([sys.executable, "-m", "predictor.gesture", "--p1", "0.1", "--p2", "0.1", "--method",
+        return subprocess.run([sys.executable, "-m", "predictor.cli.gesture", "--p1", "0.1", "--p2", "0.1", "--method",
                                "nn", "--json", *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
 
     out = gesture()

@@ -10,10 +10,10 @@ from pathlib import Path
 import torch
 
 from contract.finger import parse_finger
-from predictor.gripper import GripperParams
-from predictor.joint import AnalyticJoint, JointModel
-from predictor.solve import APPROACH
-from predictor.statics import GripperProblem, Obstacle
+from predictor.model.gripper import GripperParams
+from predictor.model.joint import AnalyticJoint, JointModel
+from predictor.solvers.solve import APPROACH
+from predictor.model.statics import GripperProblem, Obstacle
 
 ROOT = Path(__file__).resolve().parents[1]
 J = AnalyticJoint()
@@ -91,5 +91,5 @@ class LeftJoint(JointModel):
 
 
 def run_gesture_cli(*args):
-    return subprocess.run([sys.executable, "-m", "predictor.gesture", *args], cwd=ROOT,
+    return subprocess.run([sys.executable, "-m", "predictor.cli.gesture", *args], cwd=ROOT,
                           capture_output=True, text=True, timeout=60)

@@ -16,9 +16,9 @@ import torch
 
 from contract import grasp
 from contract.spec import OutOfBoxError
-from predictor.gripper import EDGE_GAUSS, FingerPose, GripperParams, finger_pose
-from predictor.solve import APPROACH, GestureResult, SolverOptions, solve
-from predictor.statics import ContactParams, GripperProblem, Obstacle, parse_object
+from predictor.model.gripper import EDGE_GAUSS, FingerPose, GripperParams, finger_pose
+from predictor.solvers.solve import APPROACH, GestureResult, SolverOptions, solve
+from predictor.model.statics import ContactParams, GripperProblem, Obstacle, parse_object
 
 from test_predictor_common import GRASP, GRAVITY, ROOT, SURROGATE, J, t
 
@@ -129,7 +129,7 @@ def test_default_jacobian_gives_the_exact_jacobians_grasps(kind):
     Jacobian alone, on the committed surrogate: three pressure pairs that hold, slip and
     miss, the same grasp state and tau to 1e-6 N / N·mm (the solver's 1e-7 N tolerance).
     Both are the LM's answers along the ramp, and say so (method "lm", asked for "newton")."""
-    from predictor.atlas import classify, load_problem
+    from predictor.planning.atlas import classify, load_problem
 
     problem = load_problem(str(ROOT / "results/surrogate/improved.pt"), kind)
     p = t([[0.25, 0.3], [0.12, -0.04], [-0.1, 0.0]])
@@ -161,7 +161,7 @@ def test_object_below_tips_is_not_reached():
     model) the fingers cross, the right tip 80 mm past X = 0, and curl over it: on the way
     the tip's corner touches the circle's top at the ramp's third step (0.025 MPa) and,
     pressed on, slides off it beyond 0.045 MPa (the contact branch ends in a fold; the
-    ramp snaps off, predictor.ramp.snap_off)."""
+    ramp snaps off, predictor.solvers.ramp.snap_off)."""
     below = GripperProblem(J, obstacle=parse_object("circle:y=-245"))
     assert float(solve(below, t([0.0, 0.0])).normal_force_N[0]) == 0.0
     s = solve(below, t([0.1, 0.1])).summary(0)
@@ -183,12 +183,12 @@ REFERENCE_SURROGATE = ROOT / "results/surrogate/h1.8/improved.pt"
 def test_shortened_lm_steps_reach_the_same_grasp_sooner(monkeypatch):
     """The paper's circle grasp at (0.2, 0.3) MPa on the 1.8 mm reference surrogate: where
     the ramp's tangent predictor leaves the object, the LM's Gauss-Newton step overshoots
-    into its penalty. Retrying it shortened (predictor.lm.SHORTENINGS) reaches the plain LM's
+    into its penalty. Retrying it shortened (predictor.solvers.lm.SHORTENINGS) reaches the plain LM's
     equilibrium (tau within 1e-8) in under half its iterations (63 against 194: two
     steps that stalled 30 iterations and were cut back). On the production surrogate the
     same case takes 68 against 134 (just over half)."""
-    import predictor.ramp as ramp
-    from predictor.joint import load_joint
+    import predictor.solvers.ramp as ramp
+    from predictor.model.joint import load_joint
 
     problem = dataclasses.replace(GRASP, joint=load_joint(str(REFERENCE_SURROGATE)))
     now = solve(problem, t([0.2, 0.3]))

@@ -17,13 +17,13 @@ import pytest
 import torch
 
 from contract.finger import parse_finger
-from predictor.graphs import residual_fn
-from predictor.gripper import GripperParams, edge_ends, finger_pose, joint_height, outline_vertices
-from predictor.jacobians import autograd_jacobian
-from predictor.problem import load_problem
-from predictor.solve import SolverOptions, solve
-from predictor.statics import (ContactParams, GripperProblem, Obstacle, contact_loads, parse_object, plane_contact,
-                               scaled, smooth_penetration)
+from predictor.solvers.graphs import residual_fn
+from predictor.model.gripper import GripperParams, edge_ends, finger_pose, joint_height, outline_vertices
+from predictor.solvers.jacobians import autograd_jacobian
+from predictor.solvers.problem import load_problem
+from predictor.solvers.solve import SolverOptions, solve
+from predictor.model.statics import (ContactParams, GripperProblem, Obstacle, contact_loads, parse_object, plane_contact,
+                                     scaled, smooth_penetration)
 
 from test_predictor_common import ROOT, SURROGATE, J, t
 
@@ -84,9 +84,9 @@ def test_outline_of_a_joint_of_twelve_anchors(tmp_path):
     outer ones at 35 mm, the links' faces and the tip's end face where they are with the
     paper's 10 (same lengths); the figures' polygons close each band over its 26 points.
     A finger whose joints differ in their counts is refused (one line)."""
-    from predictor.gripper import band_size
-    from predictor.joint import AnalyticJoint
-    from predictor.plot import part_outlines
+    from predictor.model.gripper import band_size
+    from predictor.model.joint import AnalyticJoint
+    from predictor.model.plot import part_outlines
 
     finger = _joint_finger(tmp_path, (12, 12))
     params = GripperParams(finger)
@@ -325,9 +325,9 @@ def test_plane_homotopy_step_lands_on_the_cut_back_root():
     STIFF_TRY iterations; the ramp's runner (stiff try, then the planes of PLANE_HOMOTOPY)
     converges in one step, to the root that the stiff LM reaches by halving the step
     (ramp.advance's cut-backs): unknowns within 1e-6 (N, N·mm), tip within 1e-6 mm."""
-    from predictor.jacobians import jacobian_fn
-    from predictor.lm import levenberg_marquardt
-    from predictor.ramp import STIFF_TRY, advance, runner
+    from predictor.solvers.jacobians import jacobian_fn
+    from predictor.solvers.lm import levenberg_marquardt
+    from predictor.solvers.ramp import STIFF_TRY, advance, runner
 
     problem, opts = GripperProblem(J), SolverOptions()
     pa, pb = t([[0.2, 0.2]]), t([[0.1, 0.3]])
@@ -355,10 +355,10 @@ def test_plane_homotopy_only_where_the_finger_meets_the_plane():
     (the rectangle's (0.15, 0.15) has a step that fails apart from the plane and is cut
     back as without it, 60 iterations, not sent through the softer planes: 180). The LM's
     hand_over stops after k iterations exactly the unfinished samples its test names."""
-    from predictor.jacobians import jacobian_fn
-    from predictor.lm import levenberg_marquardt
-    from predictor.solve import APPROACH
-    from predictor.statics import apart
+    from predictor.solvers.jacobians import jacobian_fn
+    from predictor.solvers.lm import levenberg_marquardt
+    from predictor.solvers.solve import APPROACH
+    from predictor.model.statics import apart
 
     for ob, p in ((Obstacle(), (0.15, 0.15)), (Obstacle(kind="rectangle", a=30, b=25), (0.05, 0.05)),
                   (Obstacle(kind="rectangle", a=30, b=25), (0.15, 0.15))):
@@ -383,7 +383,7 @@ def test_plane_test_and_kept_depth_are_the_definitions():
     tau = 0 at four pressures: two across, two clear); contact_depth answers a repeated
     question from the kept last answer, equal to a fresh evaluation, and a changed x or
     another problem evaluates anew; without the plane nothing crosses."""
-    import predictor.ramp as ramp
+    import predictor.solvers.ramp as ramp
 
     problem = GripperProblem(J, obstacle=Obstacle(), approach=(-0.15, 0.0))
     free = dataclasses.replace(problem, obstacle=None)

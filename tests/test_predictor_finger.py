@@ -16,10 +16,10 @@ import pytest
 import torch
 
 from contract.spec import INPUT_BOX, phi_end
-from predictor.gripper import EDGE_GAUSS, GripperParams, default_finger, finger_pose
-from predictor.joint import JointModel, load_joint
-from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import ContactParams, GripperProblem, Obstacle, parse_object
+from predictor.model.gripper import EDGE_GAUSS, GripperParams, default_finger, finger_pose
+from predictor.model.joint import JointModel, load_joint
+from predictor.solvers.solve import APPROACH, SolverOptions, solve
+from predictor.model.statics import ContactParams, GripperProblem, Obstacle, parse_object
 
 from test_predictor_common import DT, PAPER_CHAIN, REFERENCE, ROOT, SURROGATE, THREE_FINGER, THREE_P, J, t
 
@@ -41,7 +41,7 @@ def _reference_problem(joint, case: str) -> GripperProblem:
 
 
 #: Frozen iteration counts that changed since: the LM retries a failed step shortened
-#: (predictor.lm.SHORTENINGS), (model, case) -> (frozen, now); the same equilibria.
+#: (predictor.solvers.lm.SHORTENINGS), (model, case) -> (frozen, now); the same equilibria.
 SHORTENED = {("results/surrogate/h1.8/paper.pt", "circle"): (110, 66)}
 
 
@@ -97,7 +97,7 @@ def test_committed_gestures_unchanged():
     the same convergence, iterations and slip flag, and tau, tip (mm) and tip angle (deg)
     within 1e-9 of the committed figures (skipped for a file from before issue 36's
     contact model, which lacks its plane_overlap_mm)."""
-    from predictor.figures import GRASPS
+    from predictor.cli.figures import GRASPS
 
     doc = json.loads(GESTURES.read_text())
     if "plane_overlap_mm" not in doc["gravity"][0]:
@@ -296,7 +296,7 @@ def test_cap_kinematics_needs_a_cap_head():
     module has no ``has_cap_rotation``) refuses cap kinematics with one line naming the
     option to use, when the problem is built (before any solve); a SurrogateJoint whose
     module has the head returns ``module.with_cap(inputs)``."""
-    from predictor.joint import SurrogateJoint
+    from predictor.model.joint import SurrogateJoint
 
     class NoHead(JointModel):
         name = "nohead"
@@ -408,7 +408,7 @@ def test_surrogate_cap_head_drives_cap_kinematics(tmp_path):
     model_mod = pytest.importorskip("surrogate.model")
     if "cap_rotation" not in {f.name for f in dataclasses.fields(model_mod.ModelConfig)}:
         pytest.skip("surrogate.model has no cap-rotation head yet")
-    from predictor.joint import SurrogateJoint
+    from predictor.model.joint import SurrogateJoint
 
     torch.manual_seed(1)
     box = t(INPUT_BOX)

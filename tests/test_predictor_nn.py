@@ -1,5 +1,5 @@
-"""NN gesture predictors (predictor.networks, nn_train, nn_answer, nn_eval, nn_checkpoint
-and the predictor.nn command line): training, correction stages, checkpoints, the
+"""NN gesture predictors (predictor.nn.networks, nn_train, nn_answer, nn_eval, nn_checkpoint
+and the predictor.cli.nn command line): training, correction stages, checkpoints, the
 delivered gravity and contact paths against the solver, and the benchmark's record.
 
 Every test states the exact or expected answer it checks.
@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 import torch
 
-from predictor.gripper import GripperParams
-from predictor.joint import AnalyticJoint, load_joint
-from predictor.solve import solve
-from predictor.statics import GripperProblem
+from predictor.model.gripper import GripperParams
+from predictor.model.joint import AnalyticJoint, load_joint
+from predictor.solvers.solve import solve
+from predictor.model.statics import GripperProblem
 
 from test_predictor_common import (CONTACT_NN, DT, GRASP, GRAVITY, GRAVITY_NN, PAPER_CHAIN, ROOT, SURROGATE,
                                    THREE_FINGER, THREE_P, J, LeftJoint, run_gesture_cli, t)
@@ -32,9 +32,9 @@ torch.set_num_threads(1)
 def test_nn_training_reduces_equilibrium_residual():
     """Two epochs of the paper's gravity NN on 400 pairs (equilibrium loss, no labels) cut
     the mean validation force residual below 1/3 of the untrained network's."""
-    from predictor.networks import GestureNet, NNConfig
-    from predictor.nn_eval import evaluate
-    from predictor.nn_train import train
+    from predictor.nn.networks import GestureNet, NNConfig
+    from predictor.nn.eval import evaluate
+    from predictor.nn.train import train
 
     cfg = NNConfig(n_train=400, n_val=100, epochs=2, lr=3e-3)
     torch.manual_seed(cfg.seed)
@@ -44,14 +44,14 @@ def test_nn_training_reduces_equilibrium_residual():
 
 
 def test_correction_stage_cuts_a_fitted_heads_error_fourfold():
-    """Multi-stage training (predictor.nn_train.fit_stage) on labels with an exact solution,
+    """Multi-stage training (predictor.nn.train.fit_stage) on labels with an exact solution,
     tau(P) = (sin 3P1 cos 2P2, P1 P2, 20 tanh(P1 - P2)) per joint (the second joint's
     halved): a small head fitted by Adam and L-BFGS leaves an error e; the correction
     stage's tau_scale is e's RMS per output, and head + stage leave less than a quarter
     of e's RMS in every output, on the training pressures and on 300 others (0.11-0.17
     on the others when written)."""
-    from predictor.networks import VARIANTS, network
-    from predictor.nn_train import fit, fit_stage
+    from predictor.nn.networks import VARIANTS, network
+    from predictor.nn.train import fit, fit_stage
 
     def exact(p):
         one = torch.stack((torch.sin(3 * p[:, 0] / 0.3) * torch.cos(2 * p[:, 1] / 0.3), p[:, 0] * p[:, 1] / 0.09,
@@ -83,10 +83,10 @@ def test_nn_checkpoint_round_trip_and_refusals(tmp_path):
     contact predictor is refused by name, as are a flipped byte, a plain torch.save file,
     a joint other than the one it was trained on, and a query with an object: each a
     one-line ValueError."""
-    from predictor.networks import NNConfig
-    from predictor.nn_answer import predict_gesture
-    from predictor.nn_checkpoint import GRAVITY_FORMAT, load_predictor, save_predictor
-    from predictor.nn_train import train
+    from predictor.nn.networks import NNConfig
+    from predictor.nn.answer import predict_gesture
+    from predictor.nn.checkpoint import GRAVITY_FORMAT, load_predictor, save_predictor
+    from predictor.nn.train import train
 
     pred = train(NNConfig(n_train=100, n_val=20, epochs=1), J)
     path = tmp_path / "g.pt"
@@ -122,7 +122,7 @@ def test_nn_predictor_cli_matches_solver():
     its residual (no solver); with the contact NN at (0.1, 0.2) on the circle the answer is
     the solver's polish (or the ramp's) within 1e-4 mN, and the raw network's larger
     residual is reported beside it."""
-    from predictor.nn_checkpoint import load_predictor
+    from predictor.nn.checkpoint import load_predictor
 
     trained_on = load_predictor(GRAVITY_NN).joint_name
     model = "analytic" if trained_on == "analytic" else str(SURROGATE)
@@ -169,12 +169,12 @@ def test_gravity_nn_learns_one_finger_and_the_gripper_adds_the_plane():
     (Newton steps, the LM where the check fails, the ramp where that stalls), so at least
     99 % of the box is answered; the polish finishes on the gripper's equilibrium, the
     solver's (tau within 1e-5 N, N·mm), the outline within 0.1 mm of X = 0."""
-    from predictor.gripper import outline_vertices
-    from predictor.networks import VARIANTS, sample_pressures
-    from predictor.nn_answer import predict_gesture
-    from predictor.nn_checkpoint import load_predictor
-    from predictor.nn_eval import evaluate
-    from predictor.statics import meets
+    from predictor.model.gripper import outline_vertices
+    from predictor.nn.networks import VARIANTS, sample_pressures
+    from predictor.nn.answer import predict_gesture
+    from predictor.nn.checkpoint import load_predictor
+    from predictor.nn.eval import evaluate
+    from predictor.model.statics import meets
 
     for name in ("gravity-improved", "gravity-paper"):
         alone = dataclasses.replace(VARIANTS[name], plane=False)
@@ -217,9 +217,9 @@ def test_float32_batched_gravity_nn_agrees_with_float64():
     2,000; where its finger crosses X = 0 the plane's penalty puts the residual far over
     the bound, docs/gripper.md §11), so the refused samples' residuals are compared only
     through the verdict."""
-    from predictor.networks import sample_pressures
-    from predictor.nn_answer import predict_gesture
-    from predictor.nn_checkpoint import load_predictor
+    from predictor.nn.networks import sample_pressures
+    from predictor.nn.answer import predict_gesture
+    from predictor.nn.checkpoint import load_predictor
 
     pred = load_predictor(GRAVITY_NN, load_joint(SURROGATE))
     if pred.joint_name != load_joint(SURROGATE).name:
@@ -246,9 +246,9 @@ def test_nn_for_another_finger(tmp_path):
     network; its checkpoint records the finger and options and loads back with them, and
     loading it for the paper finger (or other options) is refused with one line; an old
     checkpoint without the fields means the paper finger and chain (tangent, lumped)."""
-    from predictor.networks import NNConfig
-    from predictor.nn_checkpoint import load_predictor, save_predictor
-    from predictor.nn_train import train
+    from predictor.nn.networks import NNConfig
+    from predictor.nn.checkpoint import load_predictor, save_predictor
+    from predictor.nn.train import train
 
     params = GripperParams(THREE_FINGER, kinematics="tangent", joint_weight="split")
     cfg = NNConfig(n_train=60, n_val=20, epochs=1).for_params(params)
@@ -266,7 +266,7 @@ def test_nn_for_another_finger(tmp_path):
     # a checkpoint written before the chain options were recorded: the paper's chain
     from dataclasses import asdict
 
-    from predictor.nn_checkpoint import checkpoint_kind
+    from predictor.nn.checkpoint import checkpoint_kind
     from surrogate import checkpoint
 
     old = train(NNConfig(n_train=60, n_val=20, epochs=1), J)
@@ -283,17 +283,17 @@ def test_nn_for_another_finger(tmp_path):
 @pytest.mark.skipif(not (SURROGATE.is_file() and (ROOT / "results/predictor/contact_nn.pt").is_file()),
                     reason="no committed surrogate or NN checkpoints")
 def test_bench_writes_every_required_key(tmp_path):
-    """``python -m predictor.bench --quick`` (a few samples per figure, the committed models)
+    """``python -m predictor.validation.bench --quick`` (a few samples per figure, the committed models)
     writes every top-level figure issues 5 and 15 require as a finite number, and figures
     that agree with their details: the batched rates are converged gestures over measured seconds, and
     the fast contact path's misses and times add up to its cases. Physics: every gravity
     Newton solve converged to the solver's 1e-4 mN / 1e-5 N·mm, the polished contact NN (a
     solver result) to the issue's 0.1 mN / 0.01 N·mm, and no answer of the Newton steps
     from the contact NN that the branch check kept is another equilibrium than the ramp's."""
-    from predictor import bench
+    from predictor.validation import bench
 
     out = tmp_path / "bench.json"
-    run = subprocess.run([sys.executable, "-m", "predictor.bench", "--quick", "--model", str(SURROGATE),
+    run = subprocess.run([sys.executable, "-m", "predictor.validation.bench", "--quick", "--model", str(SURROGATE),
                           "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     b = json.loads(out.read_text())
@@ -331,8 +331,8 @@ def test_contact_net_answers_from_the_head_of_its_state(tmp_path):
     """ContactNet's tau for each pressure is exactly the output of the head its classifier
     picks plus that head's correction stages (random weights, so every state occurs on 200
     pressures and every stage adds something), and its checkpoint round-trips bit for bit."""
-    from predictor.networks import VARIANTS, ContactNet, features, network, Predictor
-    from predictor.nn_checkpoint import load_predictor, save_predictor
+    from predictor.nn.networks import VARIANTS, ContactNet, features, network, Predictor
+    from predictor.nn.checkpoint import load_predictor, save_predictor
 
     cfg = VARIANTS["contact"]
     torch.manual_seed(5)   # a seed whose random classifier picks all three states
@@ -369,9 +369,9 @@ def test_contact_nn_raw_residual_and_state_on_a_fixed_set():
     1e-3 mN at every contact-free one, and its fingertip is within 2 µm of the solver's on
     average. One closed-form Gauss-Newton step (exact Jacobian, no iteration or check)
     from it cuts the mean force residual at least tenfold."""
-    from predictor.networks import sample_pressures
-    from predictor.nn_checkpoint import load_predictor
-    from predictor.nn_eval import evaluate_contact
+    from predictor.nn.networks import sample_pressures
+    from predictor.nn.checkpoint import load_predictor
+    from predictor.nn.eval import evaluate_contact
 
     joint = load_joint(SURROGATE)
     pred = load_predictor(CONTACT_NN, joint, contact=True)
@@ -395,9 +395,9 @@ def test_contact_nn_newton_answers_are_the_ramps_equilibria(monkeypatch):
     the ramp solver's equilibria (tau within 1e-4 N, 1e-4 N·mm), not another branch's.
     With the branch check made impossible (BRANCH_TIP_MM = -1) nothing is stepped and
     the capped LM answers the same equilibria."""
-    import predictor.nn_answer as answer
-    from predictor.nn_checkpoint import load_predictor
-    from predictor.networks import sample_pressures
+    import predictor.nn.answer as answer
+    from predictor.nn.checkpoint import load_predictor
+    from predictor.nn.networks import sample_pressures
 
     joint = load_joint(SURROGATE)
     pred = load_predictor(CONTACT_NN, joint, contact=True)
@@ -424,16 +424,16 @@ def test_gravity_nn_learns_the_problem_its_config_records(tmp_path):
     """NNConfig.plane (default False) is the problem a gravity network's labels are of:
     every gravity variant learns one finger alone (statics.apart, as the paper's), and
     answers the gripper (its ``problem``, the plane X = 0 on); plane=True
-    (``predictor.nn --plane``) learns the gripper itself; a contact network learns the
+    (``predictor.cli.nn --plane``) learns the gripper itself; a contact network learns the
     grasp with the plane either way. The checkpoint records it; one written before it was
     recorded reads as what it was trained on: a gravity checkpoint one finger alone, a
     contact checkpoint the grasp with the plane."""
     from dataclasses import asdict
 
-    from predictor.networks import VARIANTS, NNConfig
-    from predictor.nn_checkpoint import checkpoint_kind, load_predictor, save_predictor
-    from predictor.nn_train import train
-    from predictor.statics import apart, meets
+    from predictor.nn.networks import VARIANTS, NNConfig
+    from predictor.nn.checkpoint import checkpoint_kind, load_predictor, save_predictor
+    from predictor.nn.train import train
+    from predictor.model.statics import apart, meets
     from surrogate import checkpoint
 
     for name in ("gravity-improved", "gravity-paper"):
@@ -471,7 +471,7 @@ def test_committed_nn_checkpoints_read_as_the_problem_they_learned():
     """The committed checkpoints were written before the config recorded ``plane``: the
     gravity networks read as one finger alone (their labels and equilibrium loss had the
     plane off), the contact network as the grasp with the plane (its labels had it on)."""
-    from predictor.nn_checkpoint import load_predictor
+    from predictor.nn.checkpoint import load_predictor
 
     for name in ("gravity_nn.pt", "gravity_nn_paper.pt"):
         cfg = load_predictor(GRAVITY_NN.parent / name).config
@@ -491,15 +491,15 @@ def test_gravity_nn_trained_on_the_gripper_stays_on_its_side_of_the_plane():
     residual's Jacobian dR/dtau has a singular value over 1e4 (the stiff plane pressed by
     the finger; one finger alone: all below 10), so a tau error of 1e-6 N is a residual
     over 10 mN."""
-    from predictor.networks import VARIANTS
-    from predictor.nn_train import train
-    from predictor.statics import apart, plane_overlap
+    from predictor.nn.networks import VARIANTS
+    from predictor.nn.train import train
+    from predictor.model.statics import apart, plane_overlap
 
     gripper = GripperProblem(J)
     q = t([[0.1, -0.1], [0.1, 0.1], [0.15, 0.0], [0.2, 0.2], [0.0, 0.25], [0.25, -0.05]])
     ref, lone = solve(gripper, q), solve(apart(gripper), q)
     assert bool(ref.converged.all()) and bool(lone.converged.all())
-    from predictor.gripper import outline_vertices
+    from predictor.model.gripper import outline_vertices
 
     assert float(plane_overlap(outline_vertices(lone.pose, gripper.params.layout)).min()) >= 25.0
     assert float(plane_overlap(outline_vertices(ref.pose, gripper.params.layout)).max()) <= 0.1
@@ -549,8 +549,8 @@ def test_gravity_nn_gesture_at_the_plane_is_its_polish():
     the raw network alone (no answer on the plane); the answer depends on the network's tau
     only, not on the problem it learned (the same table configured to have learned one
     finger alone gives the same answer); polish=True finishes every row."""
-    from predictor.networks import VARIANTS, Predictor
-    from predictor.nn_answer import NN_FORCE_TOL_MN, predict_gesture
+    from predictor.nn.networks import VARIANTS, Predictor
+    from predictor.nn.answer import NN_FORCE_TOL_MN, predict_gesture
 
     q = t([[-0.1, 0.1], [0.0, 0.0], [-0.3, -0.3], [0.1, -0.1], [0.1, 0.1], [0.2, 0.2], [0.15, 0.0], [0.0, 0.25]])
     free, plane = torch.arange(8) < 3, torch.arange(8) >= 3
@@ -581,17 +581,17 @@ def test_gravity_nn_gesture_at_the_plane_is_its_polish():
 
 
 def test_gravity_nn_cli_answers_at_the_plane_polished(tmp_path):
-    """predictor.gesture --method nn with a small gravity network trained on the gripper
-    (plane=True, ``predictor.nn --plane``; analytic joint, 120 labels, widths 2-64-64-6;
-    written by predictor.nn's save): at
+    """predictor.cli.gesture --method nn with a small gravity network trained on the gripper
+    (plane=True, ``predictor.cli.nn --plane``; analytic joint, 120 labels, widths 2-64-64-6;
+    written by predictor.cli.nn's save): at
     (0.1, 0.1) MPa its own gesture crosses X = 0 (raw residual thousands of mN), so the
     answer is its tau polished, exit 0, the JSON says polished and at_plane with the raw
     residual beside the answer's, and tau is the Newton solver's to 1e-6; at (0, 0) its
     gesture is 15 mm from X = 0 and its residual (~6 mN) outside the bound: no answer,
     exit 1, and the stderr line names --polish."""
-    from predictor.networks import VARIANTS
-    from predictor.nn_checkpoint import save_predictor
-    from predictor.nn_train import train
+    from predictor.nn.networks import VARIANTS
+    from predictor.nn.checkpoint import save_predictor
+    from predictor.nn.train import train
 
     small = dataclasses.replace(VARIANTS["gravity-improved"], widths=(2, 64, 64, 6), n_train=120, n_val=20,
                                 epochs=30, batch=40, lbfgs_iters=200, plane=True)
@@ -599,7 +599,7 @@ def test_gravity_nn_cli_answers_at_the_plane_polished(tmp_path):
     save_predictor(train(small, J), path)
 
     def gesture(*args):   # a polish beside other jobs can outlast run_gesture_cli's 60 s
-        return subprocess.run([sys.executable, "-m", "predictor.gesture", *args, "--model", "analytic", "--method",
+        return subprocess.run([sys.executable, "-m", "predictor.cli.gesture", *args, "--model", "analytic", "--method",
                                "nn", "--nn", str(path), "--json"], cwd=ROOT, capture_output=True, text=True,
                               timeout=600)
 
@@ -616,6 +616,6 @@ def test_gravity_nn_cli_answers_at_the_plane_polished(tmp_path):
     got = json.loads(bad.stdout)
     assert not got["converged"] and not got["at_plane"] and not got["polished"] and got["tau"] is None
     line = bad.stderr.strip()
-    assert "\n" not in line and line.startswith("python -m predictor.gesture: the gravity NN's own answer is outside "
+    assert "\n" not in line and line.startswith("python -m predictor.cli.gesture: the gravity NN's own answer is outside "
                                                 "its bound"), line
     assert line.endswith("; --polish finishes it with a Newton step; no gesture returned"), line

@@ -1,4 +1,4 @@
-"""Gesture predictor, joint models and the solvers without an object (predictor.joint,
+"""Gesture predictor, joint models and the solvers without an object (predictor.model.joint,
 statics, solve and its parts: graphs, jacobians, newton, lm): closed forms, an independent
 scipy solution, symmetry, finite differences, and the solvers against each other.
 
@@ -18,12 +18,12 @@ import torch
 from scipy.optimize import fsolve
 
 from contract.spec import phi_end
-from predictor.gripper import GripperParams, default_finger
-from predictor.joint import AnalyticJoint, load_joint
-from predictor.graphs import residual_fn
-from predictor.jacobians import jacobian_fn
-from predictor.solve import APPROACH, SolverOptions, solve
-from predictor.statics import ContactParams, GripperProblem, Obstacle, range_penalty
+from predictor.model.gripper import GripperParams, default_finger
+from predictor.model.joint import AnalyticJoint, load_joint
+from predictor.solvers.graphs import residual_fn
+from predictor.solvers.jacobians import jacobian_fn
+from predictor.solvers.solve import APPROACH, SolverOptions, solve
+from predictor.model.statics import ContactParams, GripperProblem, Obstacle, range_penalty
 
 from test_predictor_common import DT, PAPER_CHAIN, ROOT, THREE_FINGER, J, LeftJoint, t
 
@@ -102,11 +102,11 @@ def test_newton_polish_finishes_a_near_start_in_one_step(monkeypatch):
     on the cold solve's tau to 1e-6 N and 1e-4 N·mm (that solve's own accuracy at its
     1e-4 mN / 1e-5 N·mm), and the start's residual it returns is Equation 1
     recomputed at the start; the answer's residual and pose, from the same recorded graph
-    as the step (predictor.newton.traced_warm_fn), are Equation 1 and the kinematics recomputed at
+    as the step (predictor.solvers.newton.traced_warm_fn), are Equation 1 and the kinematics recomputed at
     its tau. Allowed one step only (NEWTON_STEPS = 1), from tau = 0 at (0.3, -0.3) the
     check refuses it and the LM goes on (iterations > 1) to the same equilibrium. With an
     object it refuses to run (the contact law is not smooth)."""
-    from predictor.solve import newton_polish
+    from predictor.solvers.solve import newton_polish
 
     p = torch.rand(32, 2, generator=torch.Generator().manual_seed(8), dtype=DT) * 0.6 - 0.3
     cold = solve(GRAVITY, p)
@@ -121,7 +121,7 @@ def test_newton_polish_finishes_a_near_start_in_one_step(monkeypatch):
     torch.testing.assert_close(res.residual_force_mN, 1e3 * again.residual[..., :2].norm(dim=-1), rtol=0, atol=1e-12)
     torch.testing.assert_close(res.residual_moment_Nmm, again.residual[..., 2].abs(), rtol=0, atol=1e-12)
     torch.testing.assert_close(res.pose.points, again.pose.points, rtol=0, atol=1e-12)
-    monkeypatch.setattr("predictor.solve.NEWTON_STEPS", 1)
+    monkeypatch.setattr("predictor.solvers.solve.NEWTON_STEPS", 1)
     far, _ = newton_polish(GRAVITY, t([[0.3, -0.3]]), torch.zeros(1, 2, 3, dtype=DT))
     assert bool(far.converged[0]) and int(far.iterations[0]) > 1 and far.method == "newton+lm"   # the LM answered
     assert float((far.tau - solve(GRAVITY, t([0.3, -0.3])).tau).abs().max()) <= 1e-4
@@ -131,7 +131,7 @@ def test_newton_polish_finishes_a_near_start_in_one_step(monkeypatch):
 
 def test_newton_steps_reach_the_lm_equilibria():
     """Without an object the default solve from tau = 0 is a Picard step and Newton steps
-    (predictor.solve's cold path): on 64 random pressures of the paper's finger it converges in at
+    (predictor.solvers.solve's cold path): on 64 random pressures of the paper's finger it converges in at
     most 3 iterations (Picard and two Newton steps, the one-graph path), on 16 of a
     three-joint finger in at most 4 (a third Newton step by newton_polish where the check
     refused), to the LM's equilibria (method="lm") within the two solves' accuracy at the
@@ -159,7 +159,7 @@ def test_traced_statics_is_the_eager_statics_bit_for_bit():
     residual and pose on 50 random (P, tau) in the box (the record was checked on 3), for
     the paper's finger and a three-joint one, and with an object its contact state too;
     float32 takes the eager path."""
-    from predictor.solve import statics_at
+    from predictor.solvers.solve import statics_at
 
     gen = torch.Generator().manual_seed(12)
     for problem in (GRAVITY, GripperProblem(J, GripperParams(THREE_FINGER))):
@@ -179,9 +179,9 @@ def test_traced_statics_is_the_eager_statics_bit_for_bit():
 
 COMPILED_VS_TRACED = """
 import json, torch
-from predictor import newton, solve as S
-from predictor.joint import AnalyticJoint
-from predictor.statics import GripperProblem, Obstacle
+from predictor.solvers import newton, solve as S
+from predictor.model.joint import AnalyticJoint
+from predictor.model.statics import GripperProblem, Obstacle
 gravity = GripperProblem(AnalyticJoint())
 grasp = GripperProblem(AnalyticJoint(), obstacle=Obstacle(), approach=S.APPROACH)
 p = torch.tensor([[0.1, -0.1]], dtype=torch.float64)

@@ -1,7 +1,7 @@
 """Fingertip goals along a trajectory (issue 60) and the inverse's inputs and errors (issue 57).
 
 Physical assertions on a short trajectory of the committed surrogate without an object (the
-fingers meeting at X = 0): each verified answer's forward fingertip (predictor.solve, the
+fingers meeting at X = 0): each verified answer's forward fingertip (predictor.solvers.solve, the
 gesture's own history) within the tolerance of its goal where it is reached, and an
 unreachable goal's answer no farther than the best point of the inverse's coarse grid.
 """
@@ -18,12 +18,12 @@ import pytest
 import torch
 
 from predictor import load_gripper
-from predictor.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, coarse_atlas, search_tip, tip_errors,
-                                 unreachable_reason, wrap_deg)
-from predictor.options import SolverOptions
-from predictor.problem import FULL_BOX
-from predictor.solve import solve
-from predictor.track import Tracker, load_track, tip_goal, track
+from predictor.planning.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM, Goal, coarse_atlas, search_tip, tip_errors,
+                                          unreachable_reason, wrap_deg)
+from predictor.solvers.options import SolverOptions
+from predictor.solvers.problem import FULL_BOX
+from predictor.solvers.solve import solve
+from predictor.planning.track import Tracker, load_track, tip_goal, track
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = str(ROOT / "results/surrogate/improved.pt")
@@ -38,7 +38,7 @@ def free():
 
 
 def _cli(*args, timeout=600):
-    return subprocess.run([sys.executable, "-m", "predictor.inverse", *args], cwd=ROOT, env=ENV,
+    return subprocess.run([sys.executable, "-m", "predictor.cli.inverse", *args], cwd=ROOT, env=ENV,
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -91,7 +91,7 @@ def test_short_trajectory_reaches_and_flags(free):
 
 def test_pressed_goals_by_newton_match_the_forward_pressures(free):
     """Goals along a pressure path pressed on X = 0 (the fingers meet: plane force > 0),
-    their fingertips the gripper's own forward solves (predictor.solve, the ramp from zero
+    their fingertips the gripper's own forward solves (predictor.solvers.solve, the ramp from zero
     pressure): each answered reached and verified, its forward tip (a new solve at the
     answer's pressures) within TIP_TOL_MM of the goal, and the pressures those of the path
     (the tip map is one to one there: 1e-3 MPa), the square Newton of the track answering
@@ -120,8 +120,8 @@ def test_near_pressed_rows_match_the_continuation(free):
     path, every row pressed) converges from a kept row of the first answer's 9, and a row
     farther than NEAR_MPA from every kept one is left to the continuation (not
     converged)."""
-    from predictor.inversion import REGULATOR, InverseProblem, traced_tip_fn
-    from predictor.track import NEAR_MPA
+    from predictor.planning.inversion import REGULATOR, InverseProblem, traced_tip_fn
+    from predictor.planning.track import NEAR_MPA
 
     prob = free.problem
     P = torch.tensor([[0.15, 0.20], [0.155, 0.1975]], dtype=torch.float64)
@@ -153,7 +153,7 @@ def test_least_squares_newton_ends_where_the_continuation_does(free):
     forward solve at its pressures puts the tip within VERIFY_TOL_MM of its tip) and as
     close to the goal as the single inverse's Gauss-Newton by continuation from the same
     point (0.01 mm), and no closer than the reach allows (farther than TIP_TOL_MM)."""
-    from predictor.inversion import Branch, InverseProblem, gauss_newton, traced_tip_fn
+    from predictor.planning.inversion import Branch, InverseProblem, gauss_newton, traced_tip_fn
 
     prob = free.problem
     tracker = Tracker(prob)
@@ -223,7 +223,7 @@ def test_atlas_reader_is_strict(tmp_path):
 
 
 def test_tip_goal_at_900_deg_reports_its_errors_apart():
-    """Issue 57's case predictor.inverse --goal tip:40,-212,900 (900 deg is 180): exit 1
+    """Issue 57's case predictor.cli.inverse --goal tip:40,-212,900 (900 deg is 180): exit 1
     and one stderr line naming the closest tip's position error (mm, its distance to
     (40, -212), not the 256.89 mm that added tip length x unwrapped angle) and its angle
     error (deg, achieved minus 180 wrapped to (-180, 180]), the JSON's figures. Frozen
@@ -236,14 +236,14 @@ def test_tip_goal_at_900_deg_reports_its_errors_apart():
     pos, ang = out["tip_error_mm"], out["angle_error_deg"]
     assert pos == pytest.approx(math.hypot(out["tip"][0] - 40.0, out["tip"][1] + 212.0), rel=1e-12)
     assert ang == pytest.approx(wrap_deg(out["tip_angle_deg"] - 180.0), abs=1e-9) and -180.0 < ang <= 180.0
-    assert r.stderr == f"python -m predictor.inverse: infeasible: {unreachable_reason(pos, ang)}\n"
+    assert r.stderr == f"python -m predictor.cli.inverse: infeasible: {unreachable_reason(pos, ang)}\n"
     assert (pos, ang) == (pytest.approx(25.66, abs=0.01), pytest.approx(58.77, abs=0.01))
     assert out["pressures"] == pytest.approx([-0.1532, 0.3], abs=1e-3)
 
 
 def test_far_goal_is_unreachable_with_finger_flag():
     """tip:1e308,-212 is an unreachable goal: exit 1 with the closest answer (not exit 2);
-    --finger is accepted (the paper's file, as predictor.gesture)."""
+    --finger is accepted (the paper's file, as predictor.cli.gesture)."""
     r = _cli("--goal", "tip:1e308,-212", "--finger", str(ROOT / "contract/fingers/paper.toml"), "--json", "--quiet")
     assert r.returncode == 1, r.stderr
     out = json.loads(r.stdout)
@@ -253,14 +253,14 @@ def test_far_goal_is_unreachable_with_finger_flag():
 
 
 def test_inverse_answers_for_the_finger_it_is_given():
-    """predictor.inverse --finger tests/data/fingers/long_tip.toml (the paper's finger with a
+    """predictor.cli.inverse --finger tests/data/fingers/long_tip.toml (the paper's finger with a
     70 mm tip, 5 mm longer): the goal is that finger's forward fingertip at (0.1, 0.05) MPa;
     the answer meets it (exit 0, verified, within TIP_TOL_MM), and a new forward solve of
     that finger at the answer's pressures puts its tip there, where the paper's finger at
     the same pressures is more than 4 mm away (5.02 mm): the file reached the search."""
     from contract.finger import load_finger
-    from predictor.gripper import GripperParams
-    from predictor.problem import load_problem
+    from predictor.model.gripper import GripperParams
+    from predictor.solvers.problem import load_problem
 
     finger = ROOT / "tests/data/fingers/long_tip.toml"
     long_tip = load_problem(MODEL, None, params=GripperParams(load_finger(finger)))
@@ -279,7 +279,7 @@ def test_inverse_answers_for_the_finger_it_is_given():
 
 
 def test_inverse_takes_the_plane_chain_and_approach_options():
-    """predictor.inverse takes predictor.gesture's --no-plane, --kinematics, --joint-weight
+    """predictor.cli.inverse takes predictor.cli.gesture's --no-plane, --kinematics, --joint-weight
     (issue 57: every tool every finger option). The goal is the forward fingertip of one
     finger alone, tangent kinematics, lumped joint weights, at (0.1, 0.05) MPa: (-14.9,
     -212.1) mm, across X = 0, where the default gripper's tip is at X = +9.9 mm. The
@@ -287,8 +287,8 @@ def test_inverse_takes_the_plane_chain_and_approach_options():
     pressures puts the tip there, while the default problem's tip there is > 4 mm away.
     --approach is for hold goals only, and needs two values: exit 2, one line, before a solve."""
     from contract.finger import DEFAULT_FINGER, load_finger
-    from predictor.gripper import GripperParams
-    from predictor.problem import load_problem
+    from predictor.model.gripper import GripperParams
+    from predictor.solvers.problem import load_problem
 
     params = GripperParams(load_finger(DEFAULT_FINGER), kinematics="tangent", joint_weight="lumped")
     alone = load_problem(MODEL, None, params=params, plane=False)

@@ -1,9 +1,9 @@
-"""predictor.validate_grasps (issue 36 §3): the predictor against FEM grasp records, on two
+"""predictor.validation.grasps (issue 36 §3): the predictor against FEM grasp records, on two
 frozen coarse records (tests/data/grasps: fem.studies.grasp_cases on 4 mm mixed tetrahedra, plane
 on; circle at (0.2, 0.3) MPa holds, rectangle at (0.1, 0.1) slips). No FEM solve.
 
 - Each entry's errors agree with an independent computation: the same grasp asked of the
-  command line ``predictor.gesture --object`` and the errors taken from its JSON with
+  command line ``predictor.cli.gesture --object`` and the errors taken from its JSON with
   numpy (fingertip distance, signed angle, normal force, the normal-force-weighted mean of
   its contact points); the verdicts follow the issue's bounds from those numbers; where
   the grasp holds, the object's force on the finger carries exactly W/2 downwards on both
@@ -31,7 +31,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from contract.grasp import GraspCase  # noqa: E402
-from predictor import validate_grasps as vg  # noqa: E402
+from predictor.validation import grasps as vg  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "grasps"
@@ -60,8 +60,8 @@ def _validate(folder: Path, tmp: Path, monkeypatch, records: dict, png: bool = F
 
 
 def _gesture(record: dict, capsys) -> dict:
-    """The same grasp from predictor.gesture's command line (its JSON)."""
-    from predictor import gesture
+    """The same grasp from predictor.cli.gesture's command line (its JSON)."""
+    from predictor.cli import gesture
 
     capsys.readouterr()
     approach = ",".join(f"{p:g}" for p in record["approach_MPa"])

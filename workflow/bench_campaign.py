@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from contract import cli
-from fem.cli.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
 from workflow import campaign, shards
 from workflow.artefacts import BENCH_CAMPAIGN, CAMPAIGN_TARGETS
 from workflow.shards import Manifest, ShardError

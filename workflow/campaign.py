@@ -100,8 +100,8 @@ from contract import cli
 from contract.joint import JointSpec, is_paper_joint, joint_digest, load_joint, material_dict
 from contract.spec import INPUT_BOX, N_ANCHORS, N_INPUTS
 from fem.mesh.discretisation import FORMULATION
-from fem.cli.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
-                             joint_geometry, joint_of)
+from fem.options import (add_divisions, add_formulation, add_joint, add_mesh_size, add_wall_mesh_size, formulation_of,
+                         joint_geometry, joint_of)
 from fem.solvers.joint import JointSolver, Load, Material, config_for
 from workflow import shards
 from workflow.shards import Manifest, ShardError

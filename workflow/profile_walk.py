@@ -21,7 +21,7 @@ import time
 
 from contract import cli
 from contract.joint import load_joint
-from fem.cli.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
+from fem.options import add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, joint_geometry
 
 
 def parse_args(argv=None):

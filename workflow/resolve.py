@@ -53,7 +53,7 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.spec import phi_end
-from fem.cli.options import one_rank
+from fem.options import one_rank
 from workflow.campaign import EXIT_INCOMPLETE, git_commit, save_shard
 from workflow.artefacts import RESOLVED
 from workflow.mirror import recorded_solver

@@ -40,7 +40,7 @@ from mpi4py import MPI
 
 from contract import cli
 from workflow.artefacts import STABILITY
-from fem.cli.options import one_rank
+from fem.options import one_rank
 from workflow.mirror import recorded_solver
 from workflow.shards import Manifest, read_shard
 

@@ -96,7 +96,7 @@ def _pairs(pairs: list) -> str:
 
 
 def _trust(fit: dict) -> str:
-    """The fit's verdict in words (predictor.calibration_fit.judge): an untrusted fit
+    """The fit's verdict in words (predictor.calibration.fit.judge): an untrusted fit
     written with --force says so and why."""
     if "trusted" not in fit:
         return "the fit's trust not recorded (a record older than the verdict: rerun `make calibrate-demo`)"
@@ -139,6 +139,6 @@ def _fem(root: Path, cal: dict | None) -> tuple[list[str], list[Check]]:
         out.append(f"| {name} | {p['nominal']:.4g} | {p['true']:.4g} | {p['value']:.4g} ± {p['std']:.2g} |")
     out.append("")
     out += figure(root, "calibration/heldout.png", "held-out gestures before and after the calibration",
-                  "`make calibrate-demo` (`python -m predictor.calibrate fem`): each held-out gesture, the FEM's centre "
+                  "`make calibrate-demo` (`python -m predictor.cli.calibrate fem`): each held-out gesture, the FEM's centre "
                   "line (orange), the predictor uncalibrated (red, dashed) and calibrated (black).", "make calibrate-demo")
     return out, checks

@@ -31,7 +31,7 @@ COSTS = (
     "The gravity networks learn one finger alone, whose gestures may cross X = 0, and their raw residual is "
     "judged there (Gesture predictor section, docs/gripper.md §11); the gripper's answers add the plane: the raw "
     "answer stands only where the fingers stay apart (there the two residuals are the same), and where they meet "
-    "`predictor.gesture --method nn` and the fastest path answer with the network's tau polished on the gripper's "
+    "`predictor.cli.gesture --method nn` and the fastest path answer with the network's tau polished on the gripper's "
     "equilibrium, reported as polished: the Newton step from it misses its check, so the LM finishes it{lm}.",
     "Contact gestures, the atlases and the inverse: every solve with an object integrates the penalty over the "
     "outline's edges instead of summing it at fixed centre-line points; the inverse's tip goals start from a "
@@ -138,9 +138,9 @@ def _overlap(root: Path, checks: list[Check]) -> list[str]:
 def _changes(root: Path) -> list[str]:
     c = load(root, "predictor/h1.8/contact_change.json")
     if not c:
-        return missing("what the outline contact changed", "python -m predictor.contact_change")
+        return missing("what the outline contact changed", "python -m predictor.validation.contact_change")
     out = [f"Against the model before ({c['before']}), from results/predictor/h1.8/contact_change.json "
-           "(`python -m predictor.contact_change`, the two models' committed artefacts compared, both on the 1.8 mm "
+           "(`python -m predictor.validation.contact_change`, the two models' committed artefacts compared, both on the 1.8 mm "
            "reference surrogate: the change was measured before the switch).", "",
            "| object | atlas points whose state changed | how | 12-step reference: not converged before -> after "
            "| 48-step reference: not converged before -> after |", "|---|---|---|---|---|"]

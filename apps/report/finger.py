@@ -75,7 +75,7 @@ def _problem(v: dict) -> str:
 
 
 def _mesh_check_row(m: dict, whose: str) -> str:
-    """The error-budget row of one finger FEM mesh check (predictor.validate_finger.mesh_check)."""
+    """The error-budget row of one finger FEM mesh check (predictor.validation.finger.mesh_check)."""
     other = m.get("mesh") or mesh_label(m["mesh_size"], m.get("wall_mesh_size"))
     base = m.get("production_mesh") or mesh_label(m["production_mesh_size"], None)
     formulation = m.get("formulation", "displacement")
@@ -177,7 +177,7 @@ def _finger_overlays(root: Path, v: dict) -> list[str]:
         "the paper's validation cases with gravity and its most bent free case" if paper else "the first cases")
         + ".", ""]
     out += figure_grid(root, [(figures[c], c) for c in shown],
-                        "`python -m predictor.validate_finger` (joint model "
+                        "`python -m predictor.validation.finger` (joint model "
                         f"{joint_model(root, v.get('joint'))}): the finger FEM render "
                         "(`python -m fem.studies.finger_cases`, coloured by |u|) with the predictor's centre lines drawn over "
                         f"it (black: the judged variant, `{v.get('judged_variant')}`; "
@@ -276,7 +276,7 @@ def finger_section(root: Path) -> tuple[list[str], list[Check]]:
     paper = next((k for k, e in kinds.items() if (e["method"], e["kinematics"], e["joint_weight"], e.get("outline", "band"))
                   == ("predictor", "tangent", "lumped", "band")), None)
     name = f"{label.get(judged, judged)} (`{judged}`)"
-    out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validate_finger`): the "
+    out += [f"`make validate-finger` (results/validation/finger.json, `python -m predictor.validation.finger`): the "
             f"finger FEM (`python -m fem.cli.finger`, finger file {v['finger']['name']!r}, {mesh['nodes']:,} P2 nodes, "
             f"joint mesh {_validated(v) or 'unrecorded'}, one rank{_problem(v)}) against the predictor on the same "
             f"finger file{', the same problem' if 'plane' in v else ''} and the "
@@ -381,7 +381,7 @@ def _reference_lines(root: Path, v: dict, judged: str, j: dict) -> list[str]:
 
 def _outline_lines(v: dict, judged: str, worst: dict) -> str:
     """The judged variant's worst case, and what the other joint outline (band or bulged,
-    predictor.gripper.OUTLINES) gives there and at its own worst, where finger.json has it."""
+    predictor.model.gripper.OUTLINES) gives there and at its own worst, where finger.json has it."""
     other = judged.removesuffix("_bulged") if judged.endswith("_bulged") else judged + "_bulged"
     rows = {e["case"]: e for e in v["cases"] if e["variant"] == other}
     text = f"Its worst case is {worst['case']} ({worst['tip_error_mm']:.2f} mm)"

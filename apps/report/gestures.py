@@ -65,7 +65,7 @@ def _nn_problem(b: dict) -> str:
 
 
 def _p95_max(r: dict | None) -> str:
-    """ "; p95 F mN, M N·mm; max F, M" of a residual record (predictor.nn.evaluate)."""
+    """ "; p95 F mN, M N·mm; max F, M" of a residual record (predictor.nn.eval.evaluate)."""
     if not r:
         return ""
     return (f"; p95 {r['force_mN_p95']:.3g} mN, {r['moment_Nmm_p95']:.3g} N·mm; "
@@ -183,7 +183,7 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                 "n/a", raw_nn + raw_p95, [step1["force_mN_mean"], step1["moment_Nmm_mean"], step1["force_mN_p95"],
                                           step1["moment_Nmm_p95"]])]
               if (step1 := vs.get("newton_step_from_raw")) else []),
-            *([("contact NN + full Newton steps from its tau (predictor.solve.newton_iterate: the delivered path's "
+            *([("contact NN + full Newton steps from its tau (predictor.solvers.solve.newton_iterate: the delivered path's "
                 "first stage, a solver): where they converge", f"{steps['converged']} of {vs['reference_converged']}: "
                 f"{steps['converged_to_ramp_equilibrium']} at the ramp's equilibrium (fingertip within "
                 f"{num(steps['tip_shift_mm_max_at_ramp_equilibrium'], '.3g')} mm of the network's), "
@@ -212,7 +212,7 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
              for a, _, _, targets, values in rows]
     checks += [c for c in found if c]
     graphs = {"compile": "; the solver's graphs by torch.compile (`--graphs compile`)"}.get(b.get("graphs"), "")
-    out = [f"results/bench/predictor.json (`python -m predictor.bench`, {b.get('threads', '?')} thread(s){graphs}); "
+    out = [f"results/bench/predictor.json (`python -m predictor.validation.bench`, {b.get('threads', '?')} thread(s){graphs}); "
            f"joint model: {joint_model(root, b.get('joint'), 'make bench-predictor')}.", "",
            "| figure | ours | paper | target | met |", "|---|---|---|---|---|"]
     out += [f"| {a} | {c} | {d} |" + cells(check) for (a, c, d, _, _), check in zip(rows, found)]
@@ -224,22 +224,22 @@ def _predictor_bench(root: Path, title: str, b: dict, checks: list) -> list[str]
                    if "gravity_lm_median_ms" in b else "")
                 + f"contact fastest path / ramp = {b['contact_fast_median_ms'] / b['contact_median_ms']:.2f}."]
     if b["details"].get("gravity_nn_problem") == "gripper":
-        out += ["", "The gravity networks learn the gripper (predictor.networks.NNConfig.training_problem), the "
+        out += ["", "The gravity networks learn the gripper (predictor.nn.networks.NNConfig.training_problem), the "
                 "plane X = 0 where the fingers meet included, and their raw residual is judged there. Where the "
                 "finger presses on the plane, its stiff penalty puts any network's raw residual outside the NN "
-                "bound, so `predictor.gesture --method nn` answers there with the network's tau polished by the "
+                "bound, so `predictor.cli.gesture --method nn` answers there with the network's tau polished by the "
                 "Newton step (the LM where its check fails), reported as polished with the raw residual beside it "
-                "(predictor.nn_answer.at_plane); the single query and the throughputs above are the raw network's "
+                "(predictor.nn.answer.at_plane); the single query and the throughputs above are the raw network's "
                 "path (no polish), the fastest path polishes every query."]
     else:
-        out += ["", "The gravity networks learn one finger alone (predictor.networks.NNConfig.training_problem): a "
+        out += ["", "The gravity networks learn one finger alone (predictor.nn.networks.NNConfig.training_problem): a "
                 "smooth map of the pressures whose gestures may cross X = 0, as the paper's do; their raw residual "
                 "is judged there. The gripper's answers add the plane X = 0 where the fingers meet: the fastest "
                 "path, the single query and the throughputs above check the network's tau on the gripper's "
-                "equilibrium; where its gesture presses on the plane or crosses it, `predictor.gesture --method nn` "
+                "equilibrium; where its gesture presses on the plane or crosses it, `predictor.cli.gesture --method nn` "
                 "and the fastest path answer with its tau finished by Newton steps (the LM where the check fails, "
                 "the ramp where the LM stalls), reported as polished with the raw residual beside it "
-                "(predictor.nn_answer.at_plane)."]
+                "(predictor.nn.answer.at_plane)."]
     imp, mlp = b["details"].get("gravity_nn_improved"), b["details"].get("gravity_nn_paper_mlp")
     if imp and mlp:
         worse = [k for k in ("force_mN_mean", "moment_Nmm_mean") if imp[k] > mlp[k]]
@@ -265,13 +265,13 @@ def _grasp_figures(c: dict, mu: float) -> tuple[str, str]:
 
 def _gestures(root: Path) -> list[str]:
     """The paper's gesture cases (make gestures): their figures from gestures.json and the
-    pictures predictor.figures draws."""
+    pictures predictor.cli.figures draws."""
     g = load(root, "predictor/gestures.json")
     out = ["### The paper's gesture cases (`make gestures`)", ""]
     if not g:
         out += missing("gesture cases, grasps and NN curves", "make gestures")
     else:
-        out += [f"results/predictor/gestures.json (`python -m predictor.figures --out results/predictor`), joint "
+        out += [f"results/predictor/gestures.json (`python -m predictor.cli.figures --out results/predictor`), joint "
                 f"model {joint_model(root, g.get('joint'), 'make gestures')}; grasps from the approach gesture "
                 f"({', '.join(f'{v:g}' for v in g.get('approach_MPa', []))} MPa). Fingertip: the end of the "
                 "last part; friction use: |f|/(mu N), the share of the friction cone the grasp needs.", "",
@@ -289,7 +289,7 @@ def _gestures(root: Path) -> list[str]:
             out.append(f"| {label} | {p} | yes | ({c['tip'][0]:.2f}, {c['tip'][1]:.2f}) | {c['tip_angle_deg']:.2f}° | "
                        f"{c['contact_force_N']:.3f} N | {use} | {state} |")
         out.append("")
-    made = f"`make gestures` (`python -m predictor.figures`, joint model {joint_model(root, (g or {}).get('joint'))})"
+    made = f"`make gestures` (`python -m predictor.cli.figures`, joint model {joint_model(root, (g or {}).get('joint'))})"
     count = lambda key: f" {len(g[key])}" if g and key in g else ""
     out += figure(root, "predictor/gravity.png", "gravity gestures",
                    f"{made}: the paper's{count('gravity')} gravity cases, the gravity-free shape dashed.",
@@ -302,9 +302,9 @@ def _gestures(root: Path) -> list[str]:
                    "in each title.", "make gestures")
     out += ["### NN predictors (`make gestures`, from the NN checkpoints)", ""]
     out += figure(root, "predictor/nn_training.png", "NN predictor training curves",
-                   "`make gestures` (`python -m predictor.figures`, read from the histories in "
+                   "`make gestures` (`python -m predictor.cli.figures`, read from the histories in "
                    "results/predictor/gravity_nn_paper.pt, gravity_nn.pt and contact_nn.pt, trained by "
-                   "`python -m predictor.nn`): mean validation force and moment residual per epoch, the paper's "
+                   "`python -m predictor.cli.nn`): mean validation force and moment residual per epoch, the paper's "
                    "gravity NN dotted; the star, the contact NN after its polish (Newton steps or the capped LM).",
                    "make gestures")
     return out

@@ -1,5 +1,5 @@
 """The report's grasp-validation section (issue 36 §3): the predictor against the FEM grasps
-(results/validation/grasps.json, predictor.validate_grasps): one row per case with both
+(results/validation/grasps.json, predictor.validation.grasps): one row per case with both
 states and the differences, the targets judged over every case compared and every case of
 the planned table (contract.grasp.GRASP_CASES, ``make grasp-fem``) not compared yet (a case
 the FEM did not solve or has not run counts as a miss), and the overlays. Before
@@ -124,7 +124,7 @@ def grasps_section(root: Path) -> tuple[list[str], list[Check]]:
         return out + _not_run(root), []
     d, s = v["discretisation"], v["summary"]
     nodes = sorted({e["nodes"] for e in v["cases"]})
-    out += [f"`{MAKE}` (results/validation/grasps.json, `python -m predictor.validate_grasps`): each FEM grasp of "
+    out += [f"`{MAKE}` (results/validation/grasps.json, `python -m predictor.validation.grasps`): each FEM grasp of "
             f"`make grasp-fem` on joint mesh {d['mesh']} {d['formulation']} "
             f"({', '.join(f'{n:,}' for n in nodes)} P2 nodes) against the predictor with the same finger file, object, "
             "approach, mu, W, gravity and plane X = 0, joint model "

@@ -36,7 +36,7 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
                 "whose continuation fails, is ramped on its own), checked against the reference that ramps "
                 "every point on its own (`--path ramp`, `make atlas-reference`): the 'same state' column. "
                 f"Friction use = |f|/(mu N), mu = {first['mu']}. Joint model: "
-                f"{joint_model(root, first.get('joint'), 'make atlas')}. The time is predictor.atlas's own wall time "
+                f"{joint_model(root, first.get('joint'), 'make atlas')}. The time is predictor.planning.atlas's own wall time "
                 "for the whole grid (atlas_<object>.json, not a benchmark); the paper's column is its contact "
                 f"gesture time ({paper.get('contact_lbfgs_s', 'n/a')} s, bench/predictor.json) times the grid.", "",
                 "| object | no contact | holds | slips | not converged | best hold (P1, P2) MPa "
@@ -76,7 +76,7 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
     for kind in kinds:
         a = next((a for k, a in atlases if k == kind), {})
         out += figure(root, f"predictor/atlas_{kind}.png", f"grasp atlas, {kind}",
-                       f"`make atlas` (`python -m predictor.atlas --object {kind} --grid {a.get('grid', '?')}`, joint "
+                       f"`make atlas` (`python -m predictor.cli.atlas --object {kind} --grid {a.get('grid', '?')}`, joint "
                        f"model {joint_model(root, a.get('joint'))}): the state and the friction use over "
                        "(P1, P2), normal-force contours; right, the best hold, a slip and a no-contact gesture.",
                        "make atlas")
@@ -87,7 +87,7 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
         out += ["Gradients by the implicit function theorem on the converged equilibrium; every answer "
                 "verified by a forward solve along the ramp, and its robustness checked at the "
                 f"regulators' +/-{inv['tolerances']['regulator_MPa']} MPa. Joint model: "
-                f"{joint_model(root, inv.get('joint'), 'make inverse')}. Times are predictor.inverse's own wall times "
+                f"{joint_model(root, inv.get('joint'), 'make inverse')}. Times are predictor.cli.inverse's own wall times "
                 "(inverse.json, not a benchmark), taken on the machine the track's load averages below describe "
                 "(make inverse's run records the track too; make track replaces that part). A tip goal's error "
                 "is its position error, and its angle error (wrapped) apart.", "",
@@ -115,11 +115,11 @@ def planning_section(root: Path) -> tuple[list[str], list[Check]]:
     else:
         out += missing("inverse pressures", "make inverse")
     out += figure(root, "predictor/inverse.png", "inverse answers",
-                   f"`make inverse` (`python -m predictor.inverse --cases`, joint model "
+                   f"`make inverse` (`python -m predictor.cli.inverse --cases`, joint model "
                    f"{joint_model(root, (inv or {}).get('joint'))}): each case's answer drawn, its goal "
                    "and status in the title (x: a fingertip target).", "make inverse")
     out += figure(root, "predictor/track.png", "closed-loop tracking",
-                  "`make inverse` (`python -m predictor.inverse --cases --track-plot`; alone: `make track`), "
+                  "`make inverse` (`python -m predictor.cli.inverse --cases --track-plot`; alone: `make track`), "
                   f"joint model {joint_model(root, ((inv or {}).get('track') or {}).get('joint'))}, no object, the "
                   "fingers meeting at X = 0: the 100 goals across the reachable region and out of it, the verified "
                   "forward fingertip at each answer, the time per goal, the tip error and the pressures against "
@@ -182,7 +182,7 @@ def _track(tr: dict | None, title: str, checks: list) -> list[str]:
         return missing("the closed-loop track (inverse.json track)", "make inverse")
     load = ", ".join(f"{v:.1f}" for v in tr.get("load_average_before", []))
     out = ["#### Fingertip goals along a trajectory (issue 60)", "",
-           f"{tr['goals']} goals across the reachable region and out of it (`predictor.track`), each warm-started "
+           f"{tr['goals']} goals across the reachable region and out of it (`predictor.planning.track`), each warm-started "
            f"from the previous answer and verified through the forward equilibrium (with the ±0.01 MPa stencil): "
            f"{tr['reached']} reached, {tr['unreachable']} unreachable (answered with the closest reachable tip, "
            f"flagged), {tr['restarts'] if 'restarts' in tr else '?'} restarts from the kept grid. A benchmark: "

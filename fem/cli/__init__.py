@@ -3,9 +3,11 @@
 * ``solve``: one joint load case (``python -m fem.cli.solve``; old path ``fem.solve``);
 * ``finger``: one whole-finger gesture or grasp (``python -m fem.cli.finger``; old path ``fem.finger``);
 * ``render``: the off-screen pyvista render of the joint (pyvista before dolfinx);
-* ``options``: the options the fem commands and studies share (no dolfinx), ``on_root``,
-  ``one_rank``;
 * ``xdmf``: a solve's displacement field to XDMF (+ HDF5), published atomically.
 
-Imports: contract, fem.mesh, fem.physics, fem.solvers (never fem.studies).
+Their shared options are fem.options (a neutral module at fem's root, shared with the
+studies and workflow's commands).
+
+Imports: contract, fem.mesh, fem.physics, fem.solvers, fem.artefacts, fem.options (never
+fem.studies).
 """

@@ -29,7 +29,7 @@ from contract.joint import joint_digest
 from fem.solvers.finger import FingerLoad, FingerResult, FingerSolver
 from fem.mesh.geometry import FingerGeometry, finger_joints, pressure_limits
 from fem.solvers.grasp import GraspSolver, ObjectCutsFinger
-from fem.cli.options import add_finger_mesh, add_plane_flags, finger_discretisation
+from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation
 from fem.cli.xdmf import write_xdmf
 
 log = logging.getLogger("softjoint.fem")
@@ -105,7 +105,7 @@ def _print_text(out: dict, result: FingerResult, finger: FingerSpec, ranks: int)
 def add_grasp_arguments(ap: cli.Parser) -> None:
     """--object, --approach, --mu, --object-weight: a grasp (fem.solvers.grasp)."""
     ap.add_argument("--object", type=object_arg, default=None,
-                    help="hold a rigid object, kind[:key=value,...] as predictor.gesture --object "
+                    help="hold a rigid object, kind[:key=value,...] as predictor.cli.gesture --object "
                          "(circle, ellipse, rectangle; mm, deg): the approach, the object, the pressure ramp")
     ap.add_argument("--approach", type=cli.number_list(unit="MPa"), metavar="P1,P2", default=None,
                     help="with --object: the approach pressures, one per joint (default joint 1 at "

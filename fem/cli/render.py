@@ -29,8 +29,8 @@ from mpi4py import MPI
 from contract import cli
 from contract.files import atomic_path
 from contract.joint import joint_digest
-from fem.cli.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, add_wall_mesh_size,
-                             formulation_of, joint_geometry, joint_of, one_rank, parsed_load)
+from fem.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, add_wall_mesh_size,
+                         formulation_of, joint_geometry, joint_of, one_rank, parsed_load)
 from fem.solvers.joint import JointSolver, Load
 
 

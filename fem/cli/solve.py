@@ -34,8 +34,8 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.joint import joint_digest
-from fem.cli.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, add_wall_mesh_size, formulation_of,
-                             joint_geometry, joint_of, parsed_load)
+from fem.options import (add_divisions, add_formulation, add_joint, add_load, add_mesh_size, add_wall_mesh_size, formulation_of,
+                         joint_geometry, joint_of, parsed_load)
 from fem.solvers.joint import JointSolver, Load
 from fem.cli.xdmf import write_xdmf
 

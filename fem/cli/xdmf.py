@@ -15,7 +15,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from fem.cli.options import on_root
+from fem.options import on_root
 
 
 def write_xdmf(path: str | Path, solver) -> None:

@@ -23,7 +23,7 @@ discretisation's keywords and the Newton / load-stepping controls of fem.solvers
 formulation only when it is not "displacement" (a manifest without it is a displacement one).
 
 Value objects only: this module imports no dolfinx, so the command-line pieces
-(fem.cli.options) and the dolfinx modules (fem.mesh.hexahedra, fem.physics.problem,
+(fem.options) and the dolfinx modules (fem.mesh.hexahedra, fem.physics.problem,
 fem.solvers.load_path) all build on it.
 """
 

@@ -22,7 +22,7 @@ of the (stiff) parts are volume averages of atan2(F_yx - F_xy, F_xx + F_yy).
 The problem (issue 56 §1): by default the gripper, the right finger where it meets the
 mirror finger (FingerSolver(plane=True)): the mirror finger's contact at X = 0, the
 predictor's frictionless penalty k_p s(max(0, -X)) on the inner and end faces
-(fem.physics.plane_contact), the problem ``python -m predictor.gesture`` solves by default.
+(fem.physics.plane_contact), the problem ``python -m predictor.cli.gesture`` solves by default.
 ``--no-plane`` (FingerSolver(plane=False), the class's default) solves one finger alone,
 which passes through X = 0 as in the paper (``--plane``, the default now, is accepted for
 one release). The record says which (``"plane": true|false``); with the plane it gains
@@ -106,7 +106,7 @@ class FingerResult:
 
     def summary(self) -> dict:
         """JSON-ready figures (degrees for angles); ``tip`` and ``tip_angle_deg`` mean
-        what they mean in ``predictor.gesture --json``. A solve that did not converge has
+        what they mean in ``predictor.cli.gesture --json``. A solve that did not converge has
         no figures: tip, angles and joints are null (the state it stopped in is not an
         answer), ``reason`` says why. ``plane_force_N``, ``plane_overlap_mm`` and
         ``base_force_N``: the plane X = 0's figures (plane_figures), null without it."""

@@ -31,13 +31,13 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import json_safe
-from fem.studies.artefacts import BENCH_FINGER
+from fem.artefacts import BENCH_FINGER
 from fem.solvers.finger import FingerLoad, FingerSolver
 from fem.studies.finger_cases import CASES
 from contract.finger import load_finger
 from fem.mesh.geometry import FingerGeometry
-from fem.cli.options import (add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, finger_discretisation,
-                             one_rank)
+from fem.options import (add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, finger_discretisation,
+                         one_rank)
 
 #: the paper's gravity case, a free case and one in the grasp region
 #: a free case, the paper's gravity case, the grasp region, and the slowest validated case

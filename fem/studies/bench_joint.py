@@ -41,9 +41,9 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from fem.studies.artefacts import BENCH_JOINT
+from fem.artefacts import BENCH_JOINT
 from fem.mesh.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation
-from fem.cli.options import mesh_text, one_rank
+from fem.options import mesh_text, one_rank
 from fem.solvers.joint import JointSolver, Load
 from contract.spec import INPUT_BOX
 

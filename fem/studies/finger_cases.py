@@ -32,7 +32,7 @@ kind's file, so a run on another discretisation leaves the committed cases alone
 ``<case><suffix>.png``: the
 deformed finger (the full model, mirrored about z = 0), seen along -z in the global plane
 with a parallel projection, coloured by |u| (mm), rendered off-screen by pyvista with no
-colour bar or axes, so that predictor.validate_finger can draw the predictor's centre
+colour bar or axes, so that predictor.validation.finger can draw the predictor's centre
 lines over it: the JSON's ``render`` gives the image's global extent [X0, X1, Y0, Y1] mm
 and the |u| colour range. Files are written atomically; a case whose JSON exists for
 the same finger (by its values: contract.finger.same_finger), mesh and formulation is
@@ -73,11 +73,11 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import atomic_path, json_safe
-from fem.studies.artefacts import FINGER_CASE
+from fem.artefacts import FINGER_CASE
 from fem.solvers.finger import FINGER_CONFIG, FingerLoad, FingerSolver, same_settings
 from fem.physics.finger import rotation_matrix
 from fem.mesh.geometry import JointGeometry, finger_joints, pressure_limits
-from fem.cli.options import add_finger_mesh, add_plane_flags, finger_discretisation, one_rank
+from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation, one_rank
 from fem.solvers.joint import config_for
 from contract.finger import finger_arg, load_finger
 from contract.joint import is_paper_joint, joint_digest
@@ -247,7 +247,7 @@ def write_case(path: Path, record: dict, fmt, solver: FingerSolver, converged: b
                outline: np.ndarray | None = None) -> None:
     """Write one solved case: if ``converged``, its ``render`` (the deformed ``solver``,
     ``outline`` over it: ``render``) beside ``path`` as .png and into ``record``; then
-    ``record`` to ``path`` in ``fmt`` (a fem.studies.artefacts format: atomic), the folder
+    ``record`` to ``path`` in ``fmt`` (a fem.artefacts format: atomic), the folder
     made if needed. Shared by solve_cases and fem.studies.grasp_cases."""
     if converged:
         record["render"] = render(solver, path.with_suffix(".png"), outline)

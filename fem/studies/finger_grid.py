@@ -16,7 +16,7 @@ under the same solver controls, stands and is skipped, whoever wrote it, e.g.
 default, the gripper (the mirror finger's contact at X = 0); ``--no-plane`` solves one
 finger alone (suffix without ``_plane``).
 
-``--out`` (format fem.studies.artefacts.FINGER_GRID) is the summary of those records, rewritten
+``--out`` (format fem.artefacts.FINGER_GRID) is the summary of those records, rewritten
 (atomically) after every case and rebuilt from the committed records without solving
 when every pair stands or with ``--summary-only`` (pairs without a standing record are
 pending): the run's ``settings`` (finger digest and geometry, formulation, points, gravity,
@@ -40,9 +40,9 @@ import numpy as np
 from contract import cli
 from contract.files import json_safe
 from contract.finger import FingerSpec, finger_arg, load_finger
-from fem.studies.artefacts import FINGER_CASE, FINGER_GRID
+from fem.artefacts import FINGER_CASE, FINGER_GRID
 from fem.mesh.geometry import pressure_limits
-from fem.cli.options import add_finger_mesh, add_plane_flags, finger_discretisation
+from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation
 from fem.studies.finger_cases import (case_name, case_settings, default_suffix, parse_on_one_rank, pending, solve_cases,
                                       solver_settings)
 

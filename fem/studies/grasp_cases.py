@@ -16,7 +16,7 @@ characters than letters, digits, '.', '+' and '-' turned into '-' (``circle_0.2_
 ``circle-r25_0.2_0.3``).
 
 Each case is one ``fem.solvers.grasp.GraspSolver.solve`` along the predictor's history (that of
-``predictor.gesture --object``): the approach gesture ``contract.grasp.approach_for`` (joint 1
+``predictor.cli.gesture --object``): the approach gesture ``contract.grasp.approach_for`` (joint 1
 at -0.15 MPa) with gravity and without the object, the object brought in, the straight
 pressure ramp to (P1, P2); contact law of contract.grasp (normal penalty k_c per area / width,
 one friction ratio lambda = (W/2 + Σ N n_y) / Σ N t_y carrying the object's half weight W/2,
@@ -29,7 +29,7 @@ balances the finger's weight, the object's force and the plane's push:
 One solver (mesh and forms) per object; the discretisation defaults to the joint file's
 [mesh] (the paper's joint: hex2:3 mixed u-p), as fem.studies.finger_cases.
 
-Records (``<case><suffix>.json``, format fem.studies.artefacts.GRASP_CASE): the case (``case``,
+Records (``<case><suffix>.json``, format fem.artefacts.GRASP_CASE): the case (``case``,
 ``region``, ``object`` spec, ``object_geometry`` as the predictor's atlas spells it, ``p1``,
 ``p2``), GraspResult.summary (``state``, ``tip``, ``tip_angle_deg``, ``contact_force_N``,
 ``friction_use``, ``contact_point_mm``, ``contact_patch``, ``object_force_N``,
@@ -73,9 +73,9 @@ from contract import cli
 from contract.finger import load_finger
 from contract.grasp import (FRICTION, GRASP_CASES, OBJECT_WEIGHT, GraspCase, ObjectSpec, approach_for,
                             parse_object)
-from fem.studies.artefacts import GRASP_CASE
+from fem.artefacts import GRASP_CASE
 from fem.mesh.geometry import pressure_limits
-from fem.cli.options import add_finger_mesh, finger_discretisation
+from fem.options import add_finger_mesh, finger_discretisation
 from fem.solvers.grasp import GraspSolver
 
 OUTLINE_POINTS = 720        # the render's object outline

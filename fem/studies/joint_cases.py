@@ -36,10 +36,10 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import json_safe
-from fem.studies.artefacts import JOINT_CASE
+from fem.artefacts import JOINT_CASE
 from fem.mesh.discretisation import Discretisation
 from fem.mesh.hexahedra import q2_nodes
-from fem.cli.options import on_root
+from fem.options import on_root
 from fem.solvers.joint import JointSolver, Load
 from fem.solvers.transfer import solve_seeded
 

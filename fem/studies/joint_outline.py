@@ -1,7 +1,7 @@
 """How far a pressurised joint's cells bulge beyond the band of its outline (issue 56).
 
 The predictor draws a joint as a band of half-height H/2 about its centre line
-(predictor.gripper.outline_vertices: P_m -/+ (H/2) nu_m at the anchors P_m). A pressurised
+(predictor.model.gripper.outline_vertices: P_m -/+ (H/2) nu_m at the anchors P_m). A pressurised
 chamber's cells balloon, so the material on that side lies beyond the band; where the
 gripper's fingers meet at X = 0 with P2 < 0 (the plane-facing chamber pressurised), that
 bulge carries the plane. This study measures it on the joint FEM, free of end loads:
@@ -22,7 +22,7 @@ it at the largest pressure. The maximum runs over every node of the displacement
 Data flow: the joint description (contract.joint) -> JointSolver (production discretisation
 by default) -> one load path over the pressures (continuation), bulges per pressure ->
 results/fem/joint_outline.json (``bulge_mm``: per |P| the pressurised and the other side's
-profile), which the joint file's [outline] table holds for predictor.gripper's outline
+profile), which the joint file's [outline] table holds for predictor.model.gripper's outline
 (contract.joint.outline_table prints it). Only rank 0 writes, atomically. End loads and
 contact change the bulge a little; the study says nothing of them.
 """
@@ -38,10 +38,10 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.joint import JointSpec, joint_arg, load_joint, outline_table
-from fem.cli.options import add_divisions, add_mesh_size, joint_geometry
+from fem.options import add_divisions, add_mesh_size, joint_geometry
 from fem.mesh.geometry import JointGeometry
 from fem.solvers.joint import JointSolver, Load
-from fem.studies.artefacts import JOINT_OUTLINE
+from fem.artefacts import JOINT_OUTLINE
 
 log = logging.getLogger("softjoint.fem")
 

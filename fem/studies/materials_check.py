@@ -24,7 +24,7 @@ diag(1 + 1e-6, t, t) with P22 = 0, where the FEM's R_11 / 1e-6 is the small-stra
     python -m fem.studies.materials_check --out results/fem/materials.json
     python -m fem.studies.materials_check --joint my_joint.toml --json     # that joint's law only
 
-Writes fem.studies.artefacts.MATERIALS: per law its small-strain figures and per test the
+Writes fem.artefacts.MATERIALS: per law its small-strain figures and per test the
 deformation, the closed-form P, each formulation's relative difference and Newton
 iterations, and ``max_rel_diff``; ``worst_rel_diff`` over all laws and tests.
 """
@@ -258,7 +258,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
     laws = CHECK_LAWS if args.joint is None else {args.joint.material.law: args.joint.material}
-    from fem.studies.artefacts import MATERIALS
+    from fem.artefacts import MATERIALS
 
     with ap.errors():
         doc = run(laws)

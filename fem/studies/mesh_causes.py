@@ -43,12 +43,12 @@ from mpi4py import MPI
 
 from contract import cli
 from contract.files import write_text
-from fem.studies.artefacts import MESH_CAUSES
+from fem.artefacts import MESH_CAUSES
 from fem.mesh.geometry import JointGeometry, anchor_points
 from fem.mesh.discretisation import PAPER
 from fem.studies.joint_cases import (INTERIOR, LOADS, add_work_arguments, difference, load_key, read_records,
                                      solve_missing, work_folder)
-from fem.cli.options import on_root
+from fem.options import on_root
 
 BASE = PAPER
 MIXED = replace(BASE, formulation="mixed")

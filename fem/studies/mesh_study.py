@@ -55,12 +55,12 @@ import numpy as np
 from mpi4py import MPI
 
 from contract import cli
-from fem.studies.artefacts import MESH_STUDY
+from fem.artefacts import MESH_STUDY
 from fem.mesh.discretisation import FORMULATIONS, PAPER, PRODUCTION, Discretisation, discretisation
 from fem.mesh.geometry import MAX_DIVISIONS, JointGeometry, anchor_points
 from fem.studies.joint_cases import (CORNERS, LOADS, add_work_arguments, difference, load_key, node_estimate,
                                      read_records, solve_missing, work_folder)
-from fem.cli.options import MESH_SIZE_TEXT, mesh_text, on_root
+from fem.options import MESH_SIZE_TEXT, mesh_text, on_root
 
 __all__ = ["CORNERS", "LOADS", "analyse", "family", "richardson", "run"]
 

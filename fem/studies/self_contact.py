@@ -14,7 +14,7 @@ over the node pairs of the two periodic faces (:mod:`fem.physics.contact`; n the
 normal of the valley). g < 0 is overlap. The production solver carries penalty contact
 (SolverConfig.contact_penalty), so g stays near 0; ``--penalty 0`` switches it off and
 shows how far the walls would interpenetrate without it. The mesh options
-(fem.cli.options.joint_geometry) and ``--formulation`` default to the production
+(fem.options.joint_geometry) and ``--formulation`` default to the production
 discretisation (fem.mesh.discretisation.PRODUCTION, hex2:3 mixed); ``make self-contact`` passes
 the committed result's paper-fidelity 1.8 mm displacement. The JSON records the mesh
 (``mesh``, contract.joint.mesh_text; ``mesh_size`` on tetrahedra) and the formulation.
@@ -32,12 +32,12 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.physics.contact import ValleyContact
-from fem.studies.artefacts import SELF_CONTACT
+from fem.artefacts import SELF_CONTACT
 from fem.mesh.discretisation import FORMULATION
 from fem.mesh.geometry import JointGeometry
 from fem.studies.mesh_study import CORNERS
-from fem.cli.options import (add_divisions, add_extrapolation, add_formulation, add_mesh_size, add_wall_mesh_size,
-                             checked_loads, joint_geometry, one_rank)
+from fem.options import (add_divisions, add_extrapolation, add_formulation, add_mesh_size, add_wall_mesh_size,
+                         checked_loads, joint_geometry, one_rank)
 from fem.solvers.joint import JointSolver, Load, SolverConfig
 from contract.spec import INPUT_MIRROR
 

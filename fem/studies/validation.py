@@ -30,9 +30,9 @@ from mpi4py import MPI
 
 from contract import cli
 from fem.studies.elastica import cantilever_tip, rollup_tip
-from fem.studies.artefacts import VALIDATION
+from fem.artefacts import VALIDATION
 from fem.mesh.geometry import BeamGeometry
-from fem.cli.options import add_mesh_size, on_root
+from fem.options import add_mesh_size, on_root
 
 #: Defaults validated in tests/test_fem.py: L/h = 50, two P2 layers per h.
 DEFAULT_BEAM = BeamGeometry(length=100.0, thickness=2.0, width=2.0, cap=1.0, mesh_size=1.0)
