@@ -80,7 +80,7 @@ from predictor.solvers.graphs import graph_cache, touch, traced
 from predictor.solvers.jacobians import jacobian_fn
 from predictor.solvers.lm import SHORTENINGS, levenberg_marquardt
 from predictor.solvers.options import SolverOptions
-from predictor.solvers.ramp import advance, attempts, homotopy, in_turn
+from predictor.solvers.ramp import advance, attempts, contact_newton, homotopy, in_turn
 from predictor.solvers.result import GestureResult
 from predictor.solvers.solve import solve
 from predictor.model.statics import GripperProblem, apart, box_scale, meets
@@ -251,8 +251,9 @@ class Branch:
     def _step_solver(self, kind: str):
         """run(x, p, p_prev=None, jac=None) of one continuation step by the LM with Jacobian
         ``kind`` (predictor.solvers.jacobians.jacobian_fn); where the fingers meet at X = 0, a step
-        pressed on the plane goes through softer planes when the stiff one stalls (as the
-        solver's ramp does); with an object, the solver's tunnelling guard."""
+        pressed on the plane goes through the contact-constrained Newton, then softer
+        planes, when the stiff one stalls (as the solver's ramp does); with an object, the
+        solver's tunnelling guard."""
         prob, opts = self.problem, self.opts
         cap, shorten = (None, 0) if prob.obstacle is None else (opts.contact_max_step, SHORTENINGS)
 
@@ -264,7 +265,10 @@ class Branch:
 
             return step
 
-        solver = lm(prob) if not meets(prob) else homotopy(prob, lm)
+        def kkt(x, p, p_prev=None, jac=None):   # the contact-constrained Newton, at the current tolerance
+            return contact_newton(prob, self.tol)(x, p)
+
+        solver = lm(prob) if not meets(prob) else homotopy(prob, lm, kkt)
 
         def run(x, p, p_prev=None, jac=None):
             x, ok, its, jac = solver(x, p, p_prev, jac)

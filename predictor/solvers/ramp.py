@@ -10,8 +10,12 @@ Two contacts make a history: the object (every solve with one ramps), and the sy
 plane X = 0 where the two fingers meet (statics.plane_contact). Without an object the
 gesture is first solved directly (``free_path``), and only where that fails or ends with
 the outline across X = 0 deeper than max_penetration (it started from tau = 0, whose
-load-free pose can lie far across the plane) the pressures are ramped from zero, so that
-the fingers close until they meet (``plane_ramp``).
+load-free pose can lie far across the plane) the plane's path takes over (``plane_ramp``):
+the contact-constrained Newton (predictor.solvers.plane_newton: the outline held on X = 0 by
+forces, then the penalty's own root) at the target, then along its own short ramp, and only
+where both fail the pressures are ramped from zero with the stiff LM and the homotopy, so
+that the fingers close until they meet. Within a ramp step the same Newton comes between
+the stiff LM and the softer planes (``homotopy``).
 
 Unknowns x (B, 3J) = (F1 N, F2 N, M N·mm) per joint; pressures (B, J) MPa.
 """
@@ -27,6 +31,7 @@ from predictor.model.gripper import outline_vertices
 from predictor.solvers.jacobians import jacobian_fn
 from predictor.solvers.lm import SHORTENINGS, lbfgs, levenberg_marquardt
 from predictor.solvers.options import SolverOptions
+from predictor.solvers.plane_newton import POLISH_ITER, plane_newton
 from predictor.solvers.progress import Heartbeat
 from predictor.model.statics import GripperProblem, contact_loads, meets, plane_overlap
 
@@ -59,6 +64,9 @@ PLANE_HOMOTOPY = (0.001, 0.01, 0.1)
 #: ~5-10; one that has not by then stalls in the penalty's narrow valley. A sample apart
 #: from the plane goes on (the plane adds nothing there).
 STIFF_TRY = 10
+#: Legs of the KKT's own ramp from zero pressure (predictor.solvers.plane_newton.kkt_path) where
+#: its solve at the target from tau = 0 fails (a start far across X = 0).
+KKT_LEGS = 4
 
 
 def softened(problem: GripperProblem, factor: float) -> GripperProblem:
@@ -67,15 +75,17 @@ def softened(problem: GripperProblem, factor: float) -> GripperProblem:
         problem.contact, plane_stiffness=problem.contact.plane_stiffness * factor))
 
 
-def homotopy(prob: GripperProblem, step_of):
+def homotopy(prob: GripperProblem, step_of, kkt=None):
     """The step solver run(x, p, p_prev=None, jac=None) -> (x, converged (B,), iterations
     (B,), Jacobians or None) of ``prob`` where the fingers meet at X = 0, from
     step_of(problem, hand_over) -> that problem's step solver (the LM's hand_over,
     predictor.solvers.lm.levenberg_marquardt). The stiff plane's LM runs first; after STIFF_TRY
     iterations its unfinished samples that touch the plane (their start, at p_prev, or
     their iterate crosses X = 0) stop there, and they and the samples that fail touching
-    it start again from x through softer planes (PLANE_HOMOTOPY, then the stiff one), each
-    from the previous one's equilibrium: the stiff penalty makes the LM's merit |r|² a
+    it start again from x by ``kkt`` (a step solver of the same signature:
+    predictor.solvers.plane_newton's contact-constrained Newton, ``contact_newton``; None: none),
+    and those it does not converge through softer planes (PLANE_HOMOTOPY, then the stiff
+    one), each from the previous one's equilibrium: the stiff penalty makes the LM's merit |r|² a
     narrow valley, where from a predictor across X = 0 (the fingers met within the step)
     it can stall short of the root. A sample apart from the plane at its start, after
     STIFF_TRY iterations and at its end solves and fails as without the plane (the ramp
@@ -91,6 +101,11 @@ def homotopy(prob: GripperProblem, step_of):
             bad[bad.clone()] = pressed[bad] | crosses_plane(prob, x_new[bad], p[bad])
         if not bool(bad.any()):
             return x_new, conv, its, jac_new
+        if kkt is not None:   # the contact-constrained Newton first (predictor.solvers.plane_newton)
+            x_new, conv, its, jac_new = _take_rows((x_new, conv, its, jac_new), bad, kkt(x[bad], p[bad]))
+            bad = bad & ~conv
+            if not bool(bad.any()):
+                return x_new, conv, its, jac_new
         xb, pb = x[bad], p[bad]
         prev = None if p_prev is None else p_prev[bad]
         sub = None if jac is None else tuple(a[bad] for a in jac)
@@ -261,7 +276,16 @@ def runner(prob: GripperProblem, opts: SolverOptions, history: bool | None = Non
 
     if not (soften and meets(prob)):
         return with_depth_check
-    return homotopy(prob, lambda problem, hand_over: runner(problem, opts, True, False, hand_over))
+    return homotopy(prob, lambda problem, hand_over: runner(problem, opts, True, False, hand_over),
+                    None if opts.method == "lbfgs" else contact_newton(prob, opts))
+
+
+def contact_newton(prob: GripperProblem, opts: SolverOptions):
+    """The step solver of predictor.solvers.plane_newton for ``prob`` where the fingers meet: the
+    KKT Newton, the penalty's Newton steps, then the stiff plane's LM (POLISH_ITER
+    iterations, the depth check). Not for L-BFGS (``opts.method`` lbfgs keeps the paper's
+    path)."""
+    return plane_newton(prob, opts, runner(prob, dataclasses.replace(opts, max_iter=POLISH_ITER), True, False))
 
 
 def snap_off(problem: GripperProblem, options: SolverOptions):
@@ -325,16 +349,26 @@ def ramp(problem: GripperProblem, x: torch.Tensor, p0: torch.Tensor, pressures: 
 
 
 def plane_ramp(problem: GripperProblem, pressures: torch.Tensor, options: SolverOptions):
-    """The object-free gesture at pressures (B, J) MPa by a ramp from zero pressure, where
-    the finger hangs clear of X = 0, so that the fingers close until they meet (module
+    """The object-free gesture at pressures (B, J) MPa where the fingers meet: the
+    contact-constrained Newton (``contact_newton``) from tau = 0 at the target, then along
+    its own ramp of KKT_LEGS legs from zero pressure (predictor.solvers.plane_newton.kkt_path) for
+    the samples that failed; those that fail both by the ramp from zero pressure, where the
+    finger hangs clear of X = 0, so that the fingers close until they meet (module
     docstring), each Jacobian of ``attempts`` in turn for the samples the previous failed.
-    Returns (x (B, 3J), converged (B,), iterations (B,))."""
+    Returns (x (B, 3J), converged (B,), iterations (B,): every path's that the sample took)."""
     B, n_joints = pressures.shape
     x = torch.zeros(B, 3 * n_joints, dtype=torch.float64)
-    ok = torch.zeros(B, dtype=torch.bool)
-    iterations = torch.zeros(B, dtype=torch.long)
-    rows = torch.arange(B)
-    for kind in attempts(problem, options):
+    ok, iterations = torch.zeros(B, dtype=torch.bool), torch.zeros(B, dtype=torch.long)
+    kkt = None if options.method == "lbfgs" else contact_newton(problem, options)   # L-BFGS: the paper's path
+    if kkt is not None:
+        x, ok, iterations, _ = kkt(x, pressures)
+    if kkt is not None and not bool(ok.all()):   # its own ramp from zero pressure, from tau = 0
+        bad = ~ok
+        zero = torch.zeros(int(bad.sum()), 3 * n_joints, dtype=torch.float64)
+        x[bad], ok[bad], its, _ = kkt(zero, pressures[bad], p0=torch.zeros_like(pressures[bad]), legs=KKT_LEGS)
+        iterations[bad] += its
+    rows = (~ok).nonzero().flatten()
+    for kind in attempts(problem, options) if len(rows) else ():
         opts = dataclasses.replace(options, jacobian=kind)
         p = pressures[rows]
         x0, ok0, its, _ = runner(problem, opts)(torch.zeros(len(rows), 3 * n_joints, dtype=torch.float64),
