@@ -343,7 +343,9 @@ def test_hidden_truth_gripper_is_recovered_and_the_readme_example_is_trusted(tmp
     """Issue 57's hidden truth: the README's example file is the gripper (fingers meeting at
     X = 0) of a finger with gains 0.93/1.06, offsets 0.012/-0.008 MPa and stiffness
     0.88/1.12, solved by predictor.solvers.solve at 8 pressure pairs, noise 0.3 mm / 0.3 deg
-    (regenerated here: the same values to 1e-9). The README's command (committed surrogate,
+    (regenerated here: the same values to 1e-6 mm, the equilibria's own tolerance: the example
+    was written by the plane's ramp, today's contact-constrained Newton lands on the same roots
+    within ~1e-7 mm). The README's command (committed surrogate,
     gain,offset,stiffness; --no-loo to keep the test short) exits 0 trusted in one start:
     reduced chi-square within [its 0.05 %, 99.95 %] quantiles (0.44 measured for 18 dof),
     nothing on a bound, every parameter within 3 std of the truth. The written finger file,
@@ -360,7 +362,7 @@ def test_hidden_truth_gripper_is_recovered_and_the_readme_example_is_trusted(tmp
     model = CalibrationModel(joint, PAPER)
     made = gesture_observations(model, HIDDEN_TRUTH, HIDDEN_PRESSURES, seed=1)
     example = parse_observations(EXAMPLE.read_text(), PAPER)
-    assert np.allclose(_points(example), _points(made), atol=1e-9, rtol=0)
+    assert np.allclose(_points(example), _points(made), atol=1e-6, rtol=0)
     assert "mkdir -p build" in (ROOT / "README.md").read_text() and str(EXAMPLE.relative_to(ROOT)) in (
         ROOT / "README.md").read_text()
     out = tmp_path / "calibrated.toml"

@@ -312,7 +312,7 @@ def test_gesture_figure_has_legend_and_joint_title():
 PENDING_ROWS = [
     (["predictor.cli.gesture", "--p1", "0", "--p2", "0", "--plot", "/proc/x.png"], "/proc/x.png"),
     (["predictor.cli.gesture", "--p1", "0", "--p2", "0", "--plot", "{tmp}/missing/dir/x.png"], "{tmp}/missing/dir/x.png"),
-    (["predictor.planning.atlas", "--object", "circle", "--grid", "2", "--out", "/proc/x.json"], "/proc/x.json"),
+    (["predictor.cli.atlas", "--object", "circle", "--grid", "2", "--out", "/proc/x.json"], "/proc/x.json"),
     (["predictor.cli.inverse", "--cases", "--out", "/proc/x.json"], "/proc/x.json"),
 ]
 
