@@ -77,6 +77,7 @@ from contract.files import sha256_file, write_json, write_text
 from contract.finger import load_finger, parse_finger
 from contract.joint import MAX_DIVISIONS, JointSpec, joint_digest, load_joint, outline_table
 from contract.spec import PRESSURE_LIMIT
+from fem.artefacts import outline_of
 from workflow.shards import Manifest, ShardError, dataset_digest, load_dataset, split_of
 from workflow.store import recorded_joint
 
@@ -366,8 +367,7 @@ def joint_text(s: Settings) -> str:
     measured = s.out / "joint_outline.json"
     if s.joint.outline is not None or not measured.is_file():
         return text
-    rows = json.loads(measured.read_text())["bulge_mm"]
-    table = outline_table([r["P_MPa"] for r in rows], [r["pressurised_mm"] for r in rows], [r["other_mm"] for r in rows])
+    table = outline_table(*outline_of(json.loads(measured.read_text())))
     return (text.rstrip("\n") + "\n\n# Measured by python -m apps.pipeline's outline stage "
             "(fem.studies.joint_outline, joint_outline.json).\n" + table)
 

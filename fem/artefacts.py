@@ -48,6 +48,14 @@ JOINT_OUTLINE = Format("fem-joint-outline", 1, "fem.studies.joint_outline", {
     "joint": str, "half_height_mm": NUM, "bulge_mm[].P_MPa": NUM, "bulge_mm[].pressurised_mm": list,
     "bulge_mm[].other_mm": list, "mirror.pressurised_mm": list, "mirror.other_mm": list, "wall_time_s": NUM})
 
+
+def outline_of(record: dict) -> tuple:
+    """(pressures, bulge, other) of a JOINT_OUTLINE record, in contract.joint's [outline]
+    order (contract.joint.outline_table prints them)."""
+    rows = record["bulge_mm"]
+    return (tuple(r["P_MPa"] for r in rows), tuple(tuple(r["pressurised_mm"]) for r in rows),
+            tuple(tuple(r["other_mm"]) for r in rows))
+
 #: results/bench/fem.json (make bench-fem): joint FEM timings on one core, the production
 #: discretisation's under plain keys and the paper's 1.8 mm mesh's, from the same run, under
 #: keys ending in ``_1.8`` (``continuation_sample_s_1.8``; not listed here: a key path cannot

@@ -61,10 +61,10 @@ def test_a_malformed_outline_is_refused_in_one_line(table, why):
 def test_the_paper_joints_table_is_the_committed_study():
     """paper.toml holds, to the character, the table the committed study prints."""
     from contract.joint import outline_table
+    from fem.artefacts import outline_of
 
     record = json.loads((ROOT / "results" / "fem" / "joint_outline.json").read_text())
-    rows = record["bulge_mm"]
-    table = outline_table([r["P_MPa"] for r in rows], [r["pressurised_mm"] for r in rows], [r["other_mm"] for r in rows])
+    table = outline_table(*outline_of(record))
     assert table in PAPER.read_text()
     pressures, bulge, other = load_joint().outline
     assert pressures == tuple(r["P_MPa"] for r in record["bulge_mm"])

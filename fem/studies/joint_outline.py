@@ -41,7 +41,7 @@ from contract.joint import JointSpec, joint_arg, load_joint, outline_table
 from fem.options import add_divisions, add_mesh_size, joint_geometry
 from fem.mesh.geometry import JointGeometry
 from fem.solvers.joint import JointSolver, Load
-from fem.artefacts import JOINT_OUTLINE
+from fem.artefacts import JOINT_OUTLINE, outline_of
 
 log = logging.getLogger("softjoint.fem")
 
@@ -128,13 +128,6 @@ def run(joint: JointSpec | None = None, pressures=None, comm: MPI.Comm = MPI.COM
             "bulge_mm": rows,
             "mirror": {"P_MPa": -top, "pressurised_mm": minus.tolist(), "other_mm": plus.tolist()},
             "wall_time_s": time.perf_counter() - t0, "ranks": comm.size}
-
-
-def outline_of(record: dict) -> tuple:
-    """The (pressures, bulge, other) of a study record, contract.joint's [outline] order."""
-    rows = record["bulge_mm"]
-    return (tuple(r["P_MPa"] for r in rows), tuple(tuple(r["pressurised_mm"]) for r in rows),
-            tuple(tuple(r["other_mm"]) for r in rows))
 
 
 def main(argv=None) -> int:
