@@ -34,6 +34,8 @@ from pathlib import Path
 
 import pytest
 
+from predictor.model.gripper import DEFAULT_OUTLINE
+
 ROOT = Path(__file__).resolve().parents[1]
 #: A progress line of predictor.solvers.progress.Heartbeat: "[label N s] text".
 HEARTBEAT = re.compile(r"\[[^\]]* \d+ s\] ")
@@ -365,8 +367,8 @@ CASES_PREDICTOR = [
     ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--kinematics", "chord"], "invalid choice: 'chord'"),
     ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--joint-weight", "half"], "invalid choice: 'half'"),
     ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "lumped"],
-     "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'paper', "
-     "cap kinematics, lumped joint weights"),
+     f"was trained for finger 'paper', cap kinematics, split joint weights, {DEFAULT_OUTLINE} outline, not finger "
+     f"'paper', cap kinematics, lumped joint weights, {DEFAULT_OUTLINE} outline"),
     # issue 57: a finger no gesture can be solved for is refused where the problem is built
     # (predictor.solvers.problem.finger_error), naming the cause, by every tool
     ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/heavy_parts.toml", "--json"],
@@ -398,8 +400,9 @@ CASES_PREDICTOR = [
      "trained for one object, the circle r=30 mm at y=-195 mm, not the circle r=25 mm at y=-195 mm"),
     ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--finger",
                            "tests/data/fingers/long_tip.toml", "--json"],
-     "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'long_tip', cap kinematics, "
-     "split joint weights: an NN predictor answers only its own finger and options"),
+     f"was trained for finger 'paper', cap kinematics, split joint weights, {DEFAULT_OUTLINE} outline, not finger "
+     f"'long_tip', cap kinematics, split joint weights, {DEFAULT_OUTLINE} outline: an NN predictor answers only its "
+     "own finger and options"),
     # predictor.cli.nn / bench / figures: outputs and inputs refused before any training or solve
     ("predictor.cli.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
     ("predictor.cli.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],

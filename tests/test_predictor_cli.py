@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from contract.spec import INPUT_BOX
-from predictor.model.gripper import GripperParams
+from predictor.model.gripper import DEFAULT_OUTLINE, GripperParams
 from predictor.model.joint import load_joint
 from predictor.solvers.solve import solve
 from predictor.model.statics import GripperProblem
@@ -271,7 +271,7 @@ def test_atlas_takes_the_finger_approach_and_gravity_options(tmp_path):
     assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
     assert doc["finger"] == {"name": "paper", "sha256": hashlib.sha256(paper.read_bytes()).hexdigest(),
-                             "kinematics": "tangent", "joint_weight": "split"}
+                             "kinematics": "tangent", "joint_weight": "split", "outline": DEFAULT_OUTLINE}
     assert doc["approach_MPa"] is None and doc["gravity"] is False and doc["object_weight_N"] == 0.0
     assert json.loads(r.stdout)["finger"] == doc["finger"]
     helps = [subprocess.run([sys.executable, "-m", m, "--help"], cwd=ROOT, capture_output=True, text=True).stdout
