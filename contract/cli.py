@@ -301,12 +301,14 @@ def print_json(obj) -> None:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
-def print_fields(doc: dict, as_json: bool, width: int, value=str, sep: str = ": ") -> None:
+def print_fields(doc: dict, as_json: bool, width: int | None = None, value=str, sep: str = ": ") -> None:
     """A tool's answer: ``doc`` as strict JSON (``--json``, print_json), else one line a key,
-    the key right-aligned in ``width`` characters, then ``sep`` and ``value(v)``."""
+    the key right-aligned in ``width`` characters (None: the longest key's), then ``sep``
+    and ``value(v)``."""
     if as_json:
         print_json(doc)
         return
+    width = max(map(len, doc)) if width is None else width
     for key, v in doc.items():
         print(f"{key:>{width}}{sep}{value(v)}")
 
