@@ -11,7 +11,8 @@
 - Negative numbers are values, also in comma lists: ``--pressures -0.1,0.1``.
 - Progress: tools that run longer than ~10 s log on the "softjoint" loggers at INFO to
   stderr (``add_quiet`` and ``setup_logging``); ``--quiet`` keeps only warnings. stdout
-  stays the result alone (strict JSON with ``--json``).
+  stays the result alone (strict JSON with ``--json``; ``print_fields``: that, or one
+  ``key: value`` line a key).
 - Under mpirun, srun or Slurm only the launcher's rank 0 prints the error line.
 - Ctrl-C inside ``errors()`` ends with one line and exit 130 (EXIT_INTERRUPTED).
 - A library module run as ``python -m`` (it has no command line) says in one line which

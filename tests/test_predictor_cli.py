@@ -58,6 +58,13 @@ def test_cli_text_is_the_json_one_key_a_line(capsys):
     assert [ln.split(": ", 1)[0] for ln in lines] == [f"{k:>20}" for k in doc]
     assert lines[list(doc).index("converged")] == f"{'converged':>20}: True"
     assert lines[list(doc).index("state")] == f"{'state':>20}: {doc['state']}"
+    from contract.cli import print_fields
+
+    print_fields({"a": 1.5, "long_key": None}, False)                  # width: the longest key's
+    print_fields({"x": 0.123456}, False, 4, lambda v: f"{v:.2f}", sep="  ")
+    print_fields({"y": float("nan")}, True)                            # strict JSON: NaN is null
+    text, _, strict = capsys.readouterr().out.partition("{")
+    assert text == "       a: 1.5\nlong_key: None\n   x  0.12\n" and json.loads("{" + strict) == {"y": None}
 
 
 @pytest.mark.skipif(not SURROGATE.is_file(), reason="no committed surrogate checkpoint yet")

@@ -79,7 +79,11 @@ def prior_arg(text: str):
     return name.strip(), mean, std
 
 
-def _model_args(ap) -> None:
+def _parse(ap, argv):
+    """Add the options every calibrate command shares (the model: joint model, finger,
+    kinematics, joint weight; LM starts; --quiet) to ``ap``, parse ``argv``, and set the
+    logging and the solver's heartbeat (predictor.solvers.solve, where the fingers meet)
+    quiet or not."""
     ap.add_argument("--model", help="joint surrogate checkpoint or 'analytic' (default: the committed surrogate)")
     ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER), help="finger description file")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
@@ -87,12 +91,6 @@ def _model_args(ap) -> None:
     ap.add_argument("--starts", type=cli.number(1, 20, integer=True), default=3,
                     help="at most this many LM starts; after the first, only while the fit is poor (default 3)")
     cli.add_quiet(ap)
-
-
-def _parse(ap, argv):
-    """Add the model options (_model_args) to ``ap``, parse ``argv``, and set the logging and
-    the solver's heartbeat (predictor.solvers.solve, where the fingers meet) quiet or not."""
-    _model_args(ap)
     args = ap.parse_args(argv)
     cli.setup_logging(args.quiet)
     set_quiet(args.quiet)
@@ -126,7 +124,7 @@ def _model(args):
 
 def _observations_and_model(args):
     """The measurement file (``--observations``, checked against ``--finger``) and the
-    calibration model of the options of _model_args."""
+    calibration model of the options of _parse."""
     from predictor.calibration.observations import load_observations
 
     return load_observations(args.observations, args.finger), _model(args)
