@@ -645,7 +645,7 @@ LIBRARY_COMMANDS = {
     "fem.solvers.joint": "fem.cli.solve", "fem.solvers.finger": "fem.cli.finger",
     "fem.solvers.grasp": "fem.cli.finger --object SPEC",
     "fem.studies.joint_cases": "fem.studies.mesh_study", "fem.studies.elastica": "fem.studies.validation",
-    "fem.studies.finger_records": "fem.studies.finger_cases",
+    "fem.studies.finger_records": "fem.studies.finger_cases", "fem.cli.xdmf": "fem.cli.solve --xdmf OUT.xdmf",
 }
 NOT_A_COMMAND = re.compile(r'\n    not_a_command\("([^"]+)"\)\n')
 
