@@ -204,11 +204,7 @@ def main(argv: list[str] | None = None) -> int:
             from predictor.model.plot import save_gesture
 
             save_gesture(args.plot, res, 0, problem)
-    if args.json:
-        cli.print_json(out)
-    else:
-        for key, value in out.items():
-            print(f"{key:>20}: {value}")
+    cli.print_fields(out, args.json, 20)
     if not out["converged"]:
         print(f"{ap.prog}: {failure(out, prepared)}; no gesture returned", file=sys.stderr)
         return 1
