@@ -433,7 +433,7 @@ grasp-fem: | $(SETUP) ## whole-finger FEM grasps: the paper's six + ten atlas ca
 GRASP_FIGURES := results/validation/grasps
 validate-grasps: results/validation/grasps.json ## predictor against the FEM grasps of make grasp-fem (production mesh, ~1 min) -> results/validation/grasps.json + overlays in results/validation/grasps/
 results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) predictor/validation/grasps.py \
-    predictor/model/plot.py $(PRED_CORE) | $(SETUP)
+    predictor/validation/cases.py predictor/model/plot.py $(PRED_CORE) | $(SETUP)
 	$(PY) -m predictor.validation.grasps --fem $(GRASP_FEM) --mesh hex2:3 --formulation mixed --model $(PRED_JOINT) \
 	  --out $@ --figures $(GRASP_FIGURES)
 
@@ -442,7 +442,7 @@ results/validation/grasps.json: $(TIMES) $(wildcard $(GRASP_FEM)/*_hex2s3.json) 
 # surrogate; it never runs the FEM itself.
 validate-finger: results/validation/finger.json ## predictor against the production-mesh finger FEM cases, plane X = 0 (8 cases: 36 CPU s, 2.7 min at load 4) -> results/validation/finger.json + overlays finger_*.png
 results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane.json) predictor/validation/finger.py \
-    $(PRED_CORE) | $(SETUP)
+    predictor/validation/cases.py $(PRED_CORE) | $(SETUP)
 	$(PY) -m predictor.validation.finger --fem $(FINGER_FEM) --mesh hex2:3 --formulation mixed --plane \
 	  --model $(PRED_JOINT) --out $@ --figures results/validation
 
@@ -450,7 +450,7 @@ results/validation/finger.json: $(TIMES) $(wildcard $(FINGER_FEM)/*_hex2s3_plane
 # the predictor on the 1.8 mm reference surrogate.
 validate-finger-h1.8: results/validation/finger_h1.8.json ## predictor (tangent/cap kinematics) on the 1.8 mm reference surrogate against the 1.8 mm lone-finger FEM -> results/validation/finger_h1.8.json + overlays in finger_h1.8/
 results/validation/finger_h1.8.json: $(TIMES) $(wildcard $(FINGER_FEM)/*.json) predictor/validation/finger.py $(PRED_CORE) \
-    $(REF_SURROGATE)/improved.pt | $(SETUP)
+    predictor/validation/cases.py $(REF_SURROGATE)/improved.pt | $(SETUP)
 	$(MAKE) --no-print-directory finger-fem
 	@mkdir -p results/validation/finger_h1.8
 	$(PY) -m predictor.validation.finger --fem $(FINGER_FEM) --mesh 1.8 --formulation displacement \

@@ -11,9 +11,13 @@
 - Negative numbers are values, also in comma lists: ``--pressures -0.1,0.1``.
 - Progress: tools that run longer than ~10 s log on the "softjoint" loggers at INFO to
   stderr (``add_quiet`` and ``setup_logging``); ``--quiet`` keeps only warnings. stdout
-  stays the result alone (strict JSON with ``--json``).
+  stays the result alone (strict JSON with ``--json``; ``print_fields``: that, or one
+  ``key: value`` line a key).
 - Under mpirun, srun or Slurm only the launcher's rank 0 prints the error line.
 - Ctrl-C inside ``errors()`` ends with one line and exit 130 (EXIT_INTERRUPTED).
+- A library module run as ``python -m`` (it has no command line) says in one line which
+  command does its work and exits 2 (``not_a_command``), instead of running nothing and
+  exiting 0.
 
 Usage::
 
@@ -296,3 +300,25 @@ def print_json(obj) -> None:
         print(dumps(obj), flush=True)
     except BrokenPipeError:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+def print_fields(doc: dict, as_json: bool, width: int | None = None, value=str, sep: str = ": ") -> None:
+    """A tool's answer: ``doc`` as strict JSON (``--json``, print_json), else one line a key,
+    the key right-aligned in ``width`` characters (None: the longest key's), then ``sep``
+    and ``value(v)``."""
+    if as_json:
+        print_json(doc)
+        return
+    width = max(map(len, doc)) if width is None else width
+    for key, v in doc.items():
+        print(f"{key:>{width}}{sep}{value(v)}")
+
+
+def not_a_command(command: str) -> None:
+    """Refuse ``python -m LIBRARY``: one line on stderr naming the command that does the
+    library's work (``command``, a module path, optionally with its subcommand) and exit 2.
+    Called under a library module's ``if __name__ == "__main__":``."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    module = spec.name if spec is not None else "this module"
+    print(f"python -m {module}: a library, not a command; the command is python -m {command}", file=sys.stderr)
+    raise SystemExit(2)

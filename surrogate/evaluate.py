@@ -301,11 +301,7 @@ def main(argv=None) -> int:
         result = evaluate(model, samples) | {"split": args.split, "extrapolated_samples": outside}
         if args.out:
             EVALUATION.write(args.out, result | {"model": args.model, "data": args.data})
-    if args.json:
-        cli.print_json(result)
-    else:
-        for k, v in result.items():
-            print(f"{k:>24s}  {_fmt(v, 4)}")
+    cli.print_fields(result, args.json, 24, lambda v: _fmt(v, 4), sep="  ")
     return 0
 
 

@@ -34,6 +34,8 @@ from pathlib import Path
 
 import pytest
 
+from predictor.model.gripper import DEFAULT_OUTLINE
+
 ROOT = Path(__file__).resolve().parents[1]
 #: A progress line of predictor.solvers.progress.Heartbeat: "[label N s] text".
 HEARTBEAT = re.compile(r"\[[^\]]* \d+ s\] ")
@@ -365,8 +367,8 @@ CASES_PREDICTOR = [
     ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--kinematics", "chord"], "invalid choice: 'chord'"),
     ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--joint-weight", "half"], "invalid choice: 'half'"),
     ("predictor.cli.gesture", ["--p1", "0", "--p2", "0", "--method", "nn", "--joint-weight", "lumped"],
-     "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'paper', "
-     "cap kinematics, lumped joint weights"),
+     f"was trained for finger 'paper', cap kinematics, split joint weights, {DEFAULT_OUTLINE} outline, not finger "
+     f"'paper', cap kinematics, lumped joint weights, {DEFAULT_OUTLINE} outline"),
     # issue 57: a finger no gesture can be solved for is refused where the problem is built
     # (predictor.solvers.problem.finger_error), naming the cause, by every tool
     ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--finger", "tests/data/fingers/heavy_parts.toml", "--json"],
@@ -398,8 +400,9 @@ CASES_PREDICTOR = [
      "trained for one object, the circle r=30 mm at y=-195 mm, not the circle r=25 mm at y=-195 mm"),
     ("predictor.cli.gesture", ["--p1", "0.1", "--p2", "0.1", "--method", "nn", "--finger",
                            "tests/data/fingers/long_tip.toml", "--json"],
-     "was trained for finger 'paper', cap kinematics, split joint weights, not finger 'long_tip', cap kinematics, "
-     "split joint weights: an NN predictor answers only its own finger and options"),
+     f"was trained for finger 'paper', cap kinematics, split joint weights, {DEFAULT_OUTLINE} outline, not finger "
+     f"'long_tip', cap kinematics, split joint weights, {DEFAULT_OUTLINE} outline: an NN predictor answers only its "
+     "own finger and options"),
     # predictor.cli.nn / bench / figures: outputs and inputs refused before any training or solve
     ("predictor.cli.nn", ["--variant", "contact", "--out", "/etc/passwd/x.pt"], "cannot create /etc/passwd/x.pt"),
     ("predictor.cli.nn", ["--variant", "contact", "--out", "{tmp}/x.pt", "--epochs", "nan"],
@@ -630,3 +633,48 @@ def test_an_old_predictor_command_path_refuses_bad_input_as_the_new_one():
     lines = error_lines(bad.stderr)
     assert bad.returncode == 2 and len(lines) == 2, bad.stderr[-2000:]
     assert lines[0].startswith("note: predictor.gesture moved") and "--p1: 0.5 is outside [-0.3, 0.3] MPa" in lines[1]
+
+
+#: library modules whose names invite ``python -m`` (a command's name, an old command path, the
+#: library of a command) and the command that does their work (contract.cli.not_a_command).
+LIBRARY_COMMANDS = {
+    "predictor.planning.atlas": "predictor.cli.atlas", "predictor.planning.inversion": "predictor.cli.inverse",
+    "predictor.planning.track": "predictor.cli.inverse --track FILE",
+    "predictor.calibration.model": "predictor.cli.calibrate", "predictor.calibration.fit": "predictor.cli.calibrate",
+    "predictor.calibration.bench": "predictor.cli.calibrate bench",
+    "predictor.calibration.fem": "predictor.cli.calibrate fem",
+    "predictor.calibration.recovery": "predictor.cli.calibrate recovery",
+    "predictor.nn.train": "predictor.cli.nn", "predictor.solvers.solve": "predictor.cli.gesture",
+    "fem.solvers.joint": "fem.cli.solve", "fem.solvers.finger": "fem.cli.finger",
+    "fem.solvers.grasp": "fem.cli.finger --object SPEC",
+    "fem.studies.joint_cases": "fem.studies.mesh_study", "fem.studies.elastica": "fem.studies.validation",
+    "fem.studies.finger_records": "fem.studies.finger_cases", "fem.cli.xdmf": "fem.cli.solve --xdmf OUT.xdmf",
+}
+NOT_A_COMMAND = re.compile(r'\n    not_a_command\("([^"]+)"\)\n')
+
+
+def test_library_modules_name_the_command_that_does_their_work():
+    """Every library module with the refusal (contract.cli.not_a_command under its __main__
+    guard) is one of LIBRARY_COMMANDS and names its command, whose module is a command line
+    (a ``main``, run by its own guard), and the module itself has no command line."""
+    guarded = {}
+    for p in sorted((ROOT / "fem").rglob("*.py")) + sorted((ROOT / "predictor").rglob("*.py")):
+        text = p.read_text()
+        m = NOT_A_COMMAND.search(text)
+        if m:
+            assert "def main(" not in text, p
+            guarded[".".join(p.relative_to(ROOT).with_suffix("").parts)] = m.group(1)
+    assert guarded == LIBRARY_COMMANDS
+    for command in set(guarded.values()):
+        text = (ROOT / (command.split()[0].replace(".", "/") + ".py")).read_text()
+        assert "def main(" in text and 'if __name__ == "__main__":' in text, command
+
+
+@pytest.mark.parametrize("module", ["predictor.planning.atlas", "predictor.calibration.bench", "fem.solvers.grasp"])
+def test_a_library_module_run_as_a_command_refuses_in_one_line(module):
+    """``python -m predictor.planning.atlas`` (the library; the command is predictor.cli.atlas)
+    exits 2 with one line naming the command, instead of exiting 0 having done nothing."""
+    r = subprocess.run([PY, "-m", module, "--help"], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and r.stdout == "", r.stdout + r.stderr[-2000:]
+    assert error_lines(r.stderr) == [f"python -m {module}: a library, not a command; "
+                                     f"the command is python -m {LIBRARY_COMMANDS[module]}"]

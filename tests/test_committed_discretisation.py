@@ -32,15 +32,15 @@ def committed_cases() -> list[dict]:
 
 def test_validation_selects_the_committed_discretisation_and_reproduces_its_mesh_check():
     pytest.importorskip("torch")
-    from predictor.validation import finger as vf
+    from predictor.validation import cases as vc, finger as vf
 
-    cases, others = vf.split_cases(committed_cases(), (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION))
+    cases, others = vc.split_cases(committed_cases(), (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION))
     assert (vf.COMMITTED_MESH, vf.COMMITTED_FORMULATION) == ("1.8", "displacement")
     validation = json.loads((ROOT / "results/validation/finger_h1.8.json").read_text())
     assert [c["case"] for c in cases] == [c["case"] for c in validation["fem"]]
     assert all(c["mesh"]["mesh_size"] == 1.8 for c in cases)
     # the lone-finger refinements; the production cases with the plane X = 0 (issue 56) pair with none
-    assert {vf.finger_case_mesh(o) for o in others if not vf.case_plane(o)} == {"1.35", "1.697:0.849"}
+    assert {vf.finger_case_mesh(o) for o in others if not vc.case_plane(o)} == {"1.35", "1.697:0.849"}
     committed = validation["mesh_check"]
     rows = vf.mesh_check(cases, others)
     assert [(r["case"], r["mesh_size"], r["wall_mesh_size"]) for r in rows] == \
@@ -51,24 +51,24 @@ def test_validation_selects_the_committed_discretisation_and_reproduces_its_mesh
             (theirs["nodes"], theirs["production_nodes"], theirs["production_mesh_size"])
         assert (mine["formulation"], mine["production_formulation"]) == ("displacement", "displacement")
     mixed = {**cases[0], "formulation": "mixed", "tip": [cases[0]["tip"][0] + 3.0, cases[0]["tip"][1] + 4.0]}
-    kept, other = vf.split_cases([*cases, mixed], ("1.8", "displacement"))
+    kept, other = vc.split_cases([*cases, mixed], ("1.8", "displacement"))
     assert kept == cases and other == [mixed]
     (row,) = vf.mesh_check(kept, other)
     assert (row["mesh"], row["formulation"], row["production_mesh"]) == ("1.8", "mixed", "1.8")
     assert row["tip_change_mm"] == pytest.approx(5.0, abs=1e-12)          # the 3-4-5 offset
-    assert vf.split_cases([*cases, mixed], ("1.8", "mixed")) == ([mixed], cases)
-    assert [vf.mesh_arg(t) for t in ("1.80", "1.697:0.849", "hex2", "hex2:3.0")] == \
+    assert vc.split_cases([*cases, mixed], ("1.8", "mixed")) == ([mixed], cases)
+    assert [vc.mesh_arg(t) for t in ("1.80", "1.697:0.849", "hex2", "hex2:3.0")] == \
         ["1.8", "1.697:0.849", "hex2", "hex2:3"]
     for bad in ("hex7", "hex2:x", "1.8:0", "abc"):
         with pytest.raises(argparse.ArgumentTypeError):
-            vf.mesh_arg(bad)
+            vc.mesh_arg(bad)
 
 
 def test_finger_case_files_and_the_finger_bench_keep_to_their_discretisation():
     pytest.importorskip("dolfinx")
     from contract.finger import load_finger
     from fem.studies.bench_finger import same_discretisation
-    from fem.studies.finger_cases import default_suffix
+    from fem.studies.finger_records import default_suffix
     from fem.mesh.geometry import FingerGeometry, JointGeometry
 
     paper_mesh = JointGeometry(mesh_size=1.8, divisions=0, hex_size=None)
@@ -91,7 +91,7 @@ def test_validation_meets_the_plane_only_where_the_fem_case_did():
     solved with the plane (fem.studies.finger_cases --plane) gets the gripper's answer instead,
     within 0.1 mm of X = 0 (issue 36 §0)."""
     pytest.importorskip("torch")
-    from predictor.validation import finger as vf
+    from predictor.validation import cases as vc, finger as vf
     from predictor.model.gripper import GripperParams, outline_vertices
     from predictor.model.joint import load_joint
 
@@ -103,11 +103,11 @@ def test_validation_meets_the_plane_only_where_the_fem_case_did():
     finger = load_finger_of(case)
     kin, weight = judged["kinematics"], judged["joint_weight"]
     alone, _ = vf.run_variant(joint, finger, case, "predictor", kin, weight)
-    assert not vf.case_plane(case) and alone["tip_mm"][0] < -10.0
+    assert not vc.case_plane(case) and alone["tip_mm"][0] < -10.0
     assert max(abs(a - b) for a, b in zip(alone["tip_mm"], judged["tip_mm"])) < 1e-9
     planed = {**case, "settings": {**case["settings"], "plane": True}}
     met, pose = vf.run_variant(joint, finger, planed, "predictor", kin, weight)
-    assert vf.case_plane(planed) and met["converged"]
+    assert vc.case_plane(planed) and met["converged"]
     layout = GripperParams(finger=finger, kinematics=kin, joint_weight=weight).layout
     assert -0.1 <= met["tip_mm"][0] < 20.0 and float(outline_vertices(pose, layout)[..., 0].min()) >= -0.1
 

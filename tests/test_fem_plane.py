@@ -179,7 +179,7 @@ def test_candidate_faces_are_inner_and_end_faces(meeting):
 def test_plane_cases_never_resume_from_cases_without_it(geometry):
     from contract.files import json_safe
     from fem.solvers.finger import same_settings
-    from fem.studies.finger_cases import case_settings, default_suffix
+    from fem.studies.finger_records import case_settings, default_suffix
 
     finger = geometry.finger
     without = json_safe(case_settings(finger, geometry, "mixed"))

@@ -29,6 +29,7 @@ pytest.importorskip("dolfinx")
 
 from fem.artefacts import FINGER_CASE, FINGER_GRID  # noqa: E402
 import fem.studies.finger_cases as fc  # noqa: E402
+import fem.studies.finger_records as fr  # noqa: E402
 import fem.studies.finger_grid as fg  # noqa: E402
 from fem.mesh.geometry import pressure_limits  # noqa: E402
 from fem.studies.finger_grid import grid_cases, grid_pairs, grid_summary  # noqa: E402
@@ -58,8 +59,8 @@ def test_production_plane_file_names():
     from fem.mesh.geometry import JointGeometry
 
     joint = JointGeometry(mesh_size=None, divisions=2, hex_size=3.0)
-    assert fc.default_suffix(joint, "mixed", plane=True) == "_hex2s3_plane"
-    assert fc.default_suffix(joint, "mixed", plane=False) == "_hex2s3"
+    assert fr.default_suffix(joint, "mixed", plane=True) == "_hex2s3_plane"
+    assert fr.default_suffix(joint, "mixed", plane=False) == "_hex2s3"
 
 
 SETTINGS = json_safe({"finger_sha256": FINGER.digest, "formulation": "mixed", "plane": True,

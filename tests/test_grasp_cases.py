@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("pyvista")      # before dolfinx (fem.studies.finger_cases: VTK can crash if loaded after it)
+pytest.importorskip("pyvista")      # before dolfinx (fem.studies.finger_records: VTK can crash if loaded after it)
 pytest.importorskip("dolfinx")
 
 from contract.finger import load_finger  # noqa: E402
@@ -186,7 +186,7 @@ def test_nothing_to_do_builds_no_solver(run, tmp_path, monkeypatch, capsys):
 
 
 def test_finger_cases_rule_still_skips_a_committed_case():
-    from fem.studies.finger_cases import case_settings, record_stands, solver_settings
+    from fem.studies.finger_records import case_settings, record_stands, solver_settings
     from fem.mesh.geometry import FingerGeometry, JointGeometry
 
     finger = load_finger()
@@ -207,7 +207,7 @@ def test_render_extent_maps_the_outline_and_the_finger(tmp_path):
     import matplotlib.pyplot as plt
     from fem.solvers.finger import FingerSolver
     from fem.physics.finger import rotation_matrix
-    from fem.studies.finger_cases import render
+    from fem.studies.finger_records import render
     from fem.mesh.geometry import FingerGeometry, JointGeometry
 
     finger = load_finger()

@@ -263,6 +263,59 @@ def test_nothing_outside_fem_cli_and_studies_imports_them():
     assert errors == []
 
 
+def _commands(package: str) -> dict[str, Path]:
+    """The command lines of ``package`` (a ``main`` run by a ``__main__`` guard), by module
+    name, its root aliases (modules of one statement, the guard that runs a moved command)
+    left out."""
+    out = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        text = path.read_text()
+        if "def main(" in text and 'if __name__ == "__main__":' in text:
+            out[".".join(path.relative_to(ROOT).with_suffix("").parts)] = path
+    return out
+
+
+def _commands_imported(source: str, commands) -> list[str]:
+    """The modules of ``commands`` that the Python ``source`` imports (inside functions too):
+    ``import a.b``, ``from a.b import x`` and ``from a import b`` alike."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names if a.name in commands]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            found += [t for t in [node.module] + [f"{node.module}.{a.name}" for a in node.names] if t in commands]
+    return found
+
+
+@pytest.mark.parametrize("package", ["fem", "predictor"])
+def test_no_module_imports_a_command_or_a_study(package):
+    """Issue 61's target: inside fem and predictor no module imports a command line or a
+    study (a module with a ``main``): what two commands share lives in a module without one
+    (fem.studies.joint_cases, fem.studies.finger_records, predictor.validation.cases). Only
+    the old command paths at the package root import the command they run."""
+    commands = _commands(package)
+    assert len(commands) >= 10, commands
+    aliases = {p for p in (ROOT / package).glob("*.py") if len(ast.parse(p.read_text()).body) <= 2}
+    errors = [f"{path.relative_to(ROOT)} imports {c}" for path in sorted((ROOT / package).rglob("*.py"))
+              if path not in aliases for c in _commands_imported(path.read_text(), commands)]
+    assert errors == []
+
+
+def test_the_command_import_check_finds_a_study_importing_a_study():
+    """The check above sees both spellings, ``from fem.studies import finger_cases`` and
+    ``import fem.studies.finger_cases``, and knows the studies and command lines."""
+    fem, pred = _commands("fem"), _commands("predictor")
+    assert {"fem.studies.finger_cases", "fem.studies.mesh_study", "fem.cli.finger"} <= set(fem)
+    assert "fem.studies.finger_records" not in fem and "fem.studies.joint_cases" not in fem
+    assert {"predictor.cli.atlas", "predictor.validation.finger"} <= set(pred)
+    assert "predictor.planning.atlas" not in pred and "predictor.validation.cases" not in pred
+    for code in ("from fem.studies import finger_cases", "import fem.studies.finger_cases as fc",
+                 "def f():\n    from fem.studies.finger_cases import CASES"):
+        assert _commands_imported(code, fem) == ["fem.studies.finger_cases"], code
+    assert _commands_imported("from fem.studies.finger_records import CASES", fem) == []
+    assert _commands_imported("from predictor.cli.atlas import main", pred) == ["predictor.cli.atlas"]
+
+
 def _pred_floor(module: str) -> str | None:
     """The predictor sub-package or root module of an imported module name
     ("predictor.solvers.lm" -> "solvers", "predictor.api" -> "api"), "predictor" alone for

@@ -129,7 +129,8 @@ def test_demo_rows_each_solve_one_problem():
 def test_validate_finger_refuses_the_plane_on_lone_cases(tmp_path, capsys):
     """The committed cases are one finger alone: --no-plane is their problem, --plane is
     refused (one line, exit 2) before any solve, and nothing is written."""
-    from predictor.validation.finger import main, one_problem
+    from predictor.validation.cases import one_problem
+    from predictor.validation.finger import main
 
     with pytest.raises(SystemExit) as exc:
         main(["--plane", "--model", "analytic", "--out", str(tmp_path / "f.json"), "--figures", str(tmp_path)])

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from contract.spec import INPUT_BOX
-from predictor.model.gripper import GripperParams
+from predictor.model.gripper import DEFAULT_OUTLINE, GripperParams
 from predictor.model.joint import load_joint
 from predictor.solvers.solve import solve
 from predictor.model.statics import GripperProblem
@@ -42,6 +42,29 @@ def test_cli_json_and_errors():
         bad = run_gesture_cli(*args)
         assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
         assert bad.stderr.startswith("python -m predictor.cli.gesture: error:"), bad.stderr
+
+
+def test_cli_text_is_the_json_one_key_a_line(capsys):
+    """Without --json the gesture prints the --json answer's keys one a line, right-aligned
+    in 20 characters, ``key: value`` (contract.cli.print_fields, the table bench and
+    surrogate.evaluate print too)."""
+    from predictor.cli.gesture import main
+
+    argv = ["--p1", "-0.1", "--p2", "0.1", "--model", "analytic", "--quiet"]
+    assert main(argv + ["--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split(": ", 1)[0] for ln in lines] == [f"{k:>20}" for k in doc]
+    assert lines[list(doc).index("converged")] == f"{'converged':>20}: True"
+    assert lines[list(doc).index("state")] == f"{'state':>20}: {doc['state']}"
+    from contract.cli import print_fields
+
+    print_fields({"a": 1.5, "long_key": None}, False)                  # width: the longest key's
+    print_fields({"x": 0.123456}, False, 4, lambda v: f"{v:.2f}", sep="  ")
+    print_fields({"y": float("nan")}, True)                            # strict JSON: NaN is null
+    text, _, strict = capsys.readouterr().out.partition("{")
+    assert text == "       a: 1.5\nlong_key: None\n   x  0.12\n" and json.loads("{" + strict) == {"y": None}
 
 
 @pytest.mark.skipif(not SURROGATE.is_file(), reason="no committed surrogate checkpoint yet")
@@ -271,7 +294,7 @@ def test_atlas_takes_the_finger_approach_and_gravity_options(tmp_path):
     assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
     assert doc["finger"] == {"name": "paper", "sha256": hashlib.sha256(paper.read_bytes()).hexdigest(),
-                             "kinematics": "tangent", "joint_weight": "split"}
+                             "kinematics": "tangent", "joint_weight": "split", "outline": DEFAULT_OUTLINE}
     assert doc["approach_MPa"] is None and doc["gravity"] is False and doc["object_weight_N"] == 0.0
     assert json.loads(r.stdout)["finger"] == doc["finger"]
     helps = [subprocess.run([sys.executable, "-m", m, "--help"], cwd=ROOT, capture_output=True, text=True).stdout

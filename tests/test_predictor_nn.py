@@ -260,7 +260,7 @@ def test_nn_for_another_finger(tmp_path):
     back = load_predictor(path, J, params=params)
     assert back.config.params() == params
     with pytest.raises(ValueError, match="was trained for finger 'three', tangent kinematics, split joint weights, "
-                                         "not finger 'paper', cap kinematics, split joint weights"):
+                                         "band outline, not finger 'paper', cap kinematics, split joint weights"):
         load_predictor(path, J, params=GripperParams())
     assert NNConfig().params() == GripperParams()
     # a checkpoint written before the chain options were recorded: the paper's chain
@@ -463,6 +463,38 @@ def test_gravity_nn_learns_the_problem_its_config_records(tmp_path):
     checkpoint.save(old, checkpoint_kind(True), {**payload, "config": {**payload["config"],
                                                                         "obstacle": VARIANTS["contact"].obstacle}})
     assert load_predictor(old, J, contact=True).config.plane is True
+
+
+def test_nn_outline_enters_only_a_network_that_learned_the_gripper(tmp_path):
+    """The joints' outline (band or bulged) is part of the problem only where the plane or
+    an object touches the finger: a gravity network learned one finger alone loads for
+    either outline and answers (is polished on) the one asked for; a network that learned
+    the gripper is refused for another outline with one line naming both; a checkpoint
+    written before the outline was recorded learned the band."""
+    from dataclasses import asdict
+
+    from predictor.nn.checkpoint import checkpoint_kind, load_predictor, save_predictor
+    from predictor.nn.networks import NNConfig
+    from predictor.nn.train import train
+    from surrogate import checkpoint
+
+    band, bulged = GripperParams(outline="band"), GripperParams(outline="bulged")
+    apart_path, gripper_path = tmp_path / "apart.pt", tmp_path / "gripper.pt"
+    save_predictor(train(NNConfig(n_train=60, n_val=20, epochs=1).for_params(band), J), apart_path)
+    for params in (band, bulged):
+        cfg = load_predictor(apart_path, J, params=params).config
+        assert cfg.params() == params and cfg.problem(J).params.outline == params.outline
+    gripper = train(NNConfig(n_train=60, n_val=20, epochs=1, plane=True).for_params(bulged), J)
+    save_predictor(gripper, gripper_path)
+    assert load_predictor(gripper_path, J, params=bulged).config.params() == bulged
+    with pytest.raises(ValueError, match="split joint weights, bulged outline, not finger 'paper', cap kinematics, "
+                                         "split joint weights, band outline"):
+        load_predictor(gripper_path, J, params=band)
+    payload = {"config": {k: v for k, v in asdict(gripper.config).items() if k != "outline"},
+               "state_dict": gripper.net.state_dict(), "joint": gripper.joint_name, "metrics": gripper.metrics,
+               "history": gripper.history}
+    checkpoint.save(gripper_path, checkpoint_kind(False), payload)
+    assert load_predictor(gripper_path, J).config.outline == "band"
 
 
 @pytest.mark.skipif(not (GRAVITY_NN.is_file() and (ROOT / "results/predictor/contact_nn.pt").is_file()),

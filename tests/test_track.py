@@ -22,6 +22,7 @@ from predictor.planning.inversion import (FAR_GOAL_MM, TIP_TOL_MM, VERIFY_TOL_MM
                                           unreachable_reason, wrap_deg)
 from predictor.solvers.options import SolverOptions
 from predictor.solvers.problem import FULL_BOX
+from predictor.model.gripper import DEFAULT_OUTLINE
 from predictor.solvers.solve import solve
 from predictor.planning.track import Tracker, load_track, tip_goal, track
 
@@ -301,7 +302,7 @@ def test_inverse_takes_the_plane_chain_and_approach_options():
     out = json.loads(r.stdout)
     assert out["status"] == "feasible" and out["verified"] and out["tip_error_mm"] <= TIP_TOL_MM
     assert out["finger"] == {"name": "paper", "sha256": params.finger.digest, "kinematics": "tangent",
-                             "joint_weight": "lumped"} and out["plane"] is False    # what it answered for
+                             "joint_weight": "lumped", "outline": DEFAULT_OUTLINE} and out["plane"] is False    # what it answered for
     p = torch.tensor([out["pressures"]], dtype=torch.float64)
     for prob, near in ((alone, True), (default, False)):
         fwd = solve(prob, p)

@@ -44,3 +44,9 @@ def write_xdmf(path: str | Path, solver) -> None:
     finally:
         if comm.rank == 0:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("fem.cli.solve --xdmf OUT.xdmf")

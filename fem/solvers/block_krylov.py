@@ -20,10 +20,9 @@ left-preconditioned GMRES (KSPConvergedDefault with a zero initial guess). A new
 that Gram-Schmidt reduces to below 1e-12 of its length lies in the basis already and is
 dropped (deflation: the block shrinks).
 
-Why: with a direct solver's P one pass over the factors serves every column (MUMPS: four
-right-hand sides in 1.4x the time of one on the production joint), and the block space
-is at least as rich as each column's own Krylov space, so m systems cost about what one
-costs with single-vector GMRES.
+Why: with a direct solver's P one pass over the factors serves every column, and the block
+space is at least as rich as each column's own Krylov space, so m systems cost about what
+one costs with single-vector GMRES (its measured cost: docs/decisions.md §1).
 
 Data flow: fem.solvers.load_path.LoadPathSolver.sensitivities -> block_gmres(K products, P^-1 of
 a block, dR/da columns) -> du/da columns.

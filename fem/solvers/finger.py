@@ -320,3 +320,9 @@ def same_settings(recorded: dict | None, settings: dict, finger: FingerSpec) -> 
                        "geometry": {k: v for k, v in d["geometry"].items() if k != "finger"}}
     return (strip(recorded) == strip(settings) and isinstance(recorded["geometry"].get("finger"), dict)
             and same_finger(recorded["geometry"]["finger"], finger))
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("fem.cli.finger")

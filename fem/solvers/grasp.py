@@ -127,3 +127,9 @@ class GraspSolver:
         contact = self.object.state(self.fem.u) if result.converged else {}
         base = self.base_force() if result.converged else None
         return GraspResult(result, tuple(approach), contact, base, gap, time.perf_counter() - t0)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("fem.cli.finger --object SPEC")

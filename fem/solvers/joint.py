@@ -259,3 +259,9 @@ def beam_solver(geometry: BeamGeometry = BeamGeometry(), comm: MPI.Comm = MPI.CO
     tip = np.array([geometry.length, 0.0, 0.0])
     return EndLoadedSolver(create_mesh(geometry, comm), ref_point=tip, probe_points=tip[None, :],
                            material=Material(E=E, nu=0.0), config=config, formulation="displacement")
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("fem.cli.solve")

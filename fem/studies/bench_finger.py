@@ -3,7 +3,7 @@
     python -m fem.studies.bench_finger --out results/bench/finger.json [--cases free_0.1_0.1,...]
         [--mesh-size H [--wall-mesh-size W] | --divisions N [--hex-size S]] [--formulation F]
 
-Solves a few of fem.studies.finger_cases.CASES from the unloaded state on one rank, one after the
+Solves a few of fem.studies.finger_records.CASES from the unloaded state on one rank, one after the
 other on one mesh (the paper's finger; its joints' discretisation as fem.studies.finger_cases
 chooses it: the joint file's [mesh], the production hex2:3 mixed, unless the options give
 another; ``make bench-finger`` passes the committed cases' paper-fidelity 1.8 mm
@@ -33,7 +33,7 @@ from contract import cli
 from contract.files import json_safe
 from fem.artefacts import BENCH_FINGER
 from fem.solvers.finger import FingerLoad, FingerSolver
-from fem.studies.finger_cases import CASES
+from fem.studies.finger_records import CASES
 from contract.finger import load_finger
 from fem.mesh.geometry import FingerGeometry
 from fem.options import (add_divisions, add_formulation, add_mesh_size, add_wall_mesh_size, finger_discretisation,

@@ -59,3 +59,9 @@ def rollup_tip(T: float) -> dict:
     if abs(T) < 1e-12:
         return {"x_over_L": 1.0, "y_over_L": 0.0, "theta": 0.0}
     return {"x_over_L": math.sin(T) / T, "y_over_L": (1 - math.cos(T)) / T, "theta": T}
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("fem.studies.validation")

@@ -8,7 +8,7 @@ Every pair (P1, P2) of the grid p_i = -P_max + 2 P_max i / (N - 1), i = 0 .. N-1
 joint's box [-P_max, P_max] MPa (the paper's finger: [-0.3, 0.3]^2, 7 x 7 = 49 pairs), with
 gravity, is one case of fem.studies.finger_cases: the same solve (FingerSolver.solve from the
 unloaded state on one mesh built once: load path, cut-back, Newton), the same record,
-render and file, ``<cases>/gravity_P1_P2<suffix>.json`` and ``.png`` (fem.studies.finger_cases.
+render and file, ``<cases>/gravity_P1_P2<suffix>.json`` and ``.png`` (fem.studies.finger_records.
 case_name, default_suffix: on the production mesh with the plane ``_hex2s3_plane``), the
 same resume rule (record_stands: a record of the same settings that converged, or failed
 under the same solver controls, stands and is skipped, whoever wrote it, e.g.
@@ -43,14 +43,14 @@ from contract.finger import FingerSpec, finger_arg, load_finger
 from fem.artefacts import FINGER_CASE, FINGER_GRID
 from fem.mesh.geometry import pressure_limits
 from fem.options import add_finger_mesh, add_plane_flags, finger_discretisation
-from fem.studies.finger_cases import (case_name, case_settings, default_suffix, parse_on_one_rank, pending, solve_cases,
-                                      solver_settings)
+from fem.studies.finger_records import (case_name, case_settings, default_suffix, parse_on_one_rank, pending, solve_cases,
+                                        solver_settings)
 
 
 def grid_pairs(limits: np.ndarray, points: int) -> list[tuple[float, float]]:
     """The (P1, P2) pairs (MPa) of the points x points grid over [-l1, l1] x [-l2, l2],
     P1 varying fastest; values rounded to 1e-12 so that 0 is 0 (and 0.1 is 0.1: the case
-    names of fem.studies.finger_cases.case_name)."""
+    names of fem.studies.finger_records.case_name)."""
     axes = [np.round(np.linspace(-limit, limit, points), 12) + 0.0 for limit in limits]
     return [(float(p1), float(p2)) for p2 in axes[1] for p1 in axes[0]]
 
@@ -86,8 +86,8 @@ def summary(cases: list[dict], n_pairs: int) -> dict:
 def grid_summary(cases: list, folder: Path, suffix: str, settings: dict, solver: dict,
                  finger: FingerSpec) -> dict | None:
     """The summary document (module docstring) of the standing records of ``cases``
-    [(name, P1, P2, gravity)] in ``folder`` (fem.studies.finger_cases.pending's rule), None when
-    none stands. ``settings``: fem.studies.finger_cases.case_settings of the run, completed with
+    [(name, P1, P2, gravity)] in ``folder`` (fem.studies.finger_records.pending's rule), None when
+    none stands. ``settings``: fem.studies.finger_records.case_settings of the run, completed with
     the grid's own (points, gravity, plane, formulation)."""
     waiting = {c[0] for c in pending(cases, folder, suffix, settings["case"], solver, finger)}
     rows, mesh = [], None
@@ -117,7 +117,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--finger", type=finger_arg, default=None, help="finger file (default: the paper's)")
     add_finger_mesh(ap)
     add_plane_flags(ap, "; file names end in _plane with the plane")
-    ap.add_argument("--suffix", default=None, help="appended to each case's file name (default fem.studies.finger_cases': "
+    ap.add_argument("--suffix", default=None, help="appended to each case's file name (default fem.studies.finger_records': "
                     "_hex2s3_plane on the production mesh with the plane)")
     ap.add_argument("--summary-only", action="store_true",
                     help="solve nothing: rebuild --out from the records that stand (the others pending)")

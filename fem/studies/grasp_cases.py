@@ -37,14 +37,14 @@ Records (``<case><suffix>.json``, format fem.artefacts.GRASP_CASE): the case (``
 ``object_weight_N``, ``plane``, ``fem_s`` and ``fem_cpu_s`` (the whole history, s; CPU of
 this process), ``load_average``, ``setup_s`` (the object's mesh and forms), ``mesh``,
 ``formulation``, ``settings``, ``solver`` (the controls) and ``ranks``. A converged case also
-gets ``<case><suffix>.png``: fem.studies.finger_cases.render's deformed finger (global plane, seen
+gets ``<case><suffix>.png``: fem.studies.finger_records.render's deformed finger (global plane, seen
 along -z, parallel projection, coloured by |u|) with the object's outline in black, and
 ``render`` (``extent_mm`` [X0, X1, Y0, Y1] of the image, ``u_max_mm``, ``cmap``) to overlay it.
 
-Resume and suffix as fem.studies.finger_cases (record_stands, its code): a record of the same settings
+Resume and suffix as fem.studies.finger_cases (fem.studies.finger_records.record_stands, its code): a record of the same settings
 (finger, mesh, formulation, plane, and the grasp's object, approach, mu and W) that converged
 is skipped, a failed one is solved again once the solver controls change, a damaged or
-foreign file is solved again and replaced. Default suffix: fem.studies.finger_cases.default_suffix of
+foreign file is solved again and replaced. Default suffix: fem.studies.finger_records.default_suffix of
 the discretisation (``_hex2s3`` on the production mesh, ``_mixed`` on mixed tetrahedra), then
 ``_noplane`` with ``--no-plane``. Files are written atomically.
 
@@ -68,7 +68,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-import fem.studies.finger_cases as finger_cases     # pyvista before dolfinx (its import order)
+import fem.studies.finger_records as finger_records     # pyvista before dolfinx (its import order)
 from contract import cli
 from contract.finger import load_finger
 from contract.grasp import (FRICTION, GRASP_CASES, OBJECT_WEIGHT, GraspCase, ObjectSpec, approach_for,
@@ -113,16 +113,16 @@ def object_geometry(ob: ObjectSpec) -> dict:
 
 
 def grasp_settings(base: dict, ob: ObjectSpec, approach, mu: float, weight: float) -> dict:
-    """A case's settings (the resume key): fem.studies.finger_cases.case_settings ``base`` and the
+    """A case's settings (the resume key): fem.studies.finger_records.case_settings ``base`` and the
     grasp's object, approach (MPa), mu and W (N)."""
     return {**base, "grasp": {"object": object_geometry(ob), "approach_MPa": [float(p) for p in approach],
                               "mu": mu, "object_weight_N": weight}}
 
 
 def default_suffix(joint, formulation: str, plane: bool) -> str:
-    """fem.studies.finger_cases.default_suffix of the discretisation, then ``_noplane`` without the
+    """fem.studies.finger_records.default_suffix of the discretisation, then ``_noplane`` without the
     plane X = 0 (the grasps' default has it)."""
-    return finger_cases.default_suffix(joint, formulation) + ("" if plane else "_noplane")
+    return finger_records.default_suffix(joint, formulation) + ("" if plane else "_noplane")
 
 
 def build_parser() -> cli.Parser:
@@ -137,7 +137,7 @@ def build_parser() -> cli.Parser:
     ap.add_argument("--no-plane", action="store_true",
                     help="without the mirror finger's contact at X = 0 (file names end in _noplane)")
     ap.add_argument("--part", default="1/1", help="K/N: run every N-th case starting at the K-th")
-    ap.add_argument("--suffix", default=None, help="appended to each file name (default: fem.studies.finger_cases' "
+    ap.add_argument("--suffix", default=None, help="appended to each file name (default: fem.studies.finger_records' "
                     "for the discretisation, _hex2s3 on the production mesh, then _noplane without the plane)")
     cli.add_quiet(ap)
     return ap
@@ -152,7 +152,7 @@ def chosen_cases(ap: cli.Parser, args: argparse.Namespace, limits: np.ndarray) -
     for name in chosen:
         if name not in names:
             ap.error(f"unknown case {name!r}: use {', '.join(names)}")
-    cases = [c for c in table if c.name in chosen][finger_cases.part_slice(ap, args.part)]
+    cases = [c for c in table if c.name in chosen][finger_records.part_slice(ap, args.part)]
     for case in cases:
         for j, (p, limit) in enumerate(zip((case.p1, case.p2), limits), 1):
             if abs(p) > limit:
@@ -195,7 +195,7 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
                              {"mu": FRICTION, "object_weight_N": OBJECT_WEIGHT, "plane": plane, "setup_s": setup_s,
                               "mesh": solver.fem.mesh_info(), "formulation": formulation, "settings": settings,
                               **run})
-        finger_cases.write_case(path, record, GRASP_CASE, solver.fem, result.finger.converged,
+        finger_records.write_case(path, record, GRASP_CASE, solver.fem, result.finger.converged,
                                 ob.outline(OUTLINE_POINTS))
         say(case_line(record))
         records.append(record)
@@ -204,15 +204,15 @@ def solve_object(ob: ObjectSpec, todo: list, geometry, formulation: str, plane: 
 
 def main(argv=None) -> int:
     ap = build_parser()
-    args, comm = finger_cases.parse_on_one_rank(ap, argv)
+    args, comm = finger_records.parse_on_one_rank(ap, argv)
     finger = load_finger()
     cases = chosen_cases(ap, args, pressure_limits(finger))
     approach = approach_for(finger.n_joints)
     cli.setup_logging(args.quiet)
     geometry, formulation = finger_discretisation(ap, args, finger)
     plane = not args.no_plane
-    base = finger_cases.case_settings(finger, geometry, formulation, plane)
-    solver = finger_cases.solver_settings(geometry)
+    base = finger_records.case_settings(finger, geometry, formulation, plane)
+    solver = finger_records.solver_settings(geometry)
     suffix = default_suffix(geometry.joint, formulation, plane) if args.suffix is None else args.suffix
     out = Path(args.out)
     todo: dict[ObjectSpec, list] = {}       # per object, in the table's order
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
         ob = parse_object(case.spec)
         path = out / f"{case.name}{suffix}.json"
         settings = grasp_settings(base, ob, approach, FRICTION, OBJECT_WEIGHT)
-        if not finger_cases.record_stands(path, settings, solver, finger):
+        if not finger_records.record_stands(path, settings, solver, finger):
             todo.setdefault(ob, []).append((case, path, settings))
     say = (lambda line: None) if args.json else (lambda line: print(line, flush=True))
     records = []

@@ -202,3 +202,9 @@ def solve_missing(work: Path, plan, loads=LOADS, max_hours: float = 1000.0,
                          record["wall_time_s"], f" (seeded from {seed_from.key})" if "seeded_from" in record else "")
         del solver
     return True
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("fem.studies.mesh_study")

@@ -5,7 +5,7 @@
 
 When one chamber is pressurised (or M, F2 bend the joint) the other side's bellows close
 up: the two outer cell walls across a valley (gap ``valley_width`` = 2.5 mm undeformed)
-approach. For each corner load of fem.studies.mesh_study.CORNERS (and their mirrors) this solves
+approach. For each corner load of fem.studies.joint_cases.CORNERS (and their mirrors) this solves
 the joint and reports, for every valley on each side, the smallest signed gap
 
     g = min_pairs (x_b - x_a) · n
@@ -35,7 +35,7 @@ from fem.physics.contact import ValleyContact
 from fem.artefacts import SELF_CONTACT
 from fem.mesh.discretisation import FORMULATION
 from fem.mesh.geometry import JointGeometry
-from fem.studies.mesh_study import CORNERS
+from fem.studies.joint_cases import CORNERS
 from fem.options import (add_divisions, add_extrapolation, add_formulation, add_mesh_size, add_wall_mesh_size,
                          checked_loads, joint_geometry, one_rank)
 from fem.solvers.joint import JointSolver, Load, SolverConfig

@@ -79,3 +79,9 @@ def bench_calibration(model: CalibrationModel, obs: Observations, repeats: int =
         "rms_after_mm": res.rms_after_mm, "loo_tip_error_mm": res.summary()["loo_tip_error_mm"],
         "torch_threads": 1, "cpus": os.cpu_count(), "load_average_before": list(load_before),
         "load_average_after": list(os.getloadavg()), "beside": beside, "target_s": TARGET_S}
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.calibrate bench")

@@ -344,3 +344,9 @@ def recovery_summary(recovery: dict) -> dict:
             "all_identifiable_within_2pct": nf["all_identifiable_within_2pct"],
             "coverage_95": recovery["noisy"]["coverage_95"], "seeds": recovery["seeds"],
             "time_s_8_observations": nf["time_s"], "targets": recovery["targets"]}
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.calibrate fem")

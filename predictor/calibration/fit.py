@@ -393,3 +393,9 @@ def leave_one_out(model, obs: Observations, idx, priors, v_all: np.ndarray, x_al
         rx, ry = one.tip_rows[0]
         out.append(float(math.hypot(m[rx] - one.y[rx], m[ry] - one.y[ry])))
     return out
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.calibrate")

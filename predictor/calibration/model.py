@@ -436,3 +436,9 @@ def _independent_groups(d: Design) -> list[list[int]]:
         k = seen[(b, w)] = seen.get((b, w), -1) + 1
         groups.setdefault((w, k), []).append(j)
     return list(groups.values())
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.calibrate")

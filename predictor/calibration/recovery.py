@@ -188,3 +188,9 @@ def heldout_tip_errors(model: CalibrationModel, theta: torch.Tensor, truth: dict
                                      0.0, 0.0, problem=problem)
         return np.array([o.tip[:2] for o in clean.items])
     return np.linalg.norm(tips(theta) - tips(truth_theta(model, truth)), axis=1)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.calibrate recovery")

@@ -69,19 +69,8 @@ def main(argv: list[str] | None = None) -> int:
             ATLAS.write(args.out, doc)
         if args.plot:
             save_atlas_figure(args.plot, atlas, problem)
-    print_figures({**atlas.summary(), "spec": args.object, "finger": finger}, args.json)
+    cli.print_fields({**atlas.summary(), "spec": args.object, "finger": finger}, args.json)
     return 0
-
-
-def print_figures(out: dict, as_json: bool) -> None:
-    """A planning tool's figures: strict JSON, or one ``key: value`` line each."""
-    if as_json:
-        cli.print_json(out)
-        return
-    width = max(map(len, out))
-    for key, value in out.items():
-        print(f"{key:>{width}}: {value}")
-
 
 
 if __name__ == "__main__":

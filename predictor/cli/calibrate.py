@@ -79,7 +79,11 @@ def prior_arg(text: str):
     return name.strip(), mean, std
 
 
-def _model_args(ap) -> None:
+def _parse(ap, argv):
+    """Add the options every calibrate command shares (the model: joint model, finger,
+    kinematics, joint weight; LM starts; --quiet) to ``ap``, parse ``argv``, and set the
+    logging and the solver's heartbeat (predictor.solvers.solve, where the fingers meet)
+    quiet or not."""
     ap.add_argument("--model", help="joint surrogate checkpoint or 'analytic' (default: the committed surrogate)")
     ap.add_argument("--finger", type=finger_arg, default=str(DEFAULT_FINGER), help="finger description file")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
@@ -87,6 +91,29 @@ def _model_args(ap) -> None:
     ap.add_argument("--starts", type=cli.number(1, 20, integer=True), default=3,
                     help="at most this many LM starts; after the first, only while the fit is poor (default 3)")
     cli.add_quiet(ap)
+    args = ap.parse_args(argv)
+    cli.setup_logging(args.quiet)
+    set_quiet(args.quiet)
+    return args
+
+
+def _fit_names(args, model) -> list[str]:
+    """``--fit``'s names (parameters or groups), checked against the model's table."""
+    from predictor.calibration.model import resolve_fit
+
+    names = [n.strip() for n in args.fit.split(",") if n.strip()]
+    resolve_fit(names, model.table)
+    return names
+
+
+def _verdict(prog: str, result, wrote: str | None) -> int:
+    """The exit code of a fit: 0 when trusted, else 1 with one line on stderr naming every
+    reason and what was written (``wrote``: the files, by --force; None: nothing)."""
+    if result.trusted:
+        return 0
+    print(f"{prog}: not trusted: {'; '.join(result.why)}; "
+          f"{'wrote ' + wrote + ' (--force)' if wrote else 'nothing written (--force writes it)'}", file=sys.stderr)
+    return 1
 
 
 def _model(args):
@@ -97,14 +124,14 @@ def _model(args):
 
 def _observations_and_model(args):
     """The measurement file (``--observations``, checked against ``--finger``) and the
-    calibration model of the options of _model_args."""
+    calibration model of the options of _parse."""
     from predictor.calibration.observations import load_observations
 
     return load_observations(args.observations, args.finger), _model(args)
 
 
 def main_fit(argv) -> int:
-    from predictor.calibration.model import DEFAULT_FIT, resolve_fit
+    from predictor.calibration.model import DEFAULT_FIT
     from predictor.calibration.file import write_calibrated
     from predictor.calibration.fit import FitFailed, Prior, calibrate
     from predictor.calibration.observations import GRIPPER
@@ -118,16 +145,12 @@ def main_fit(argv) -> int:
     ap.add_argument("--no-loo", action="store_true", help="skip the leave-one-out predictions")
     ap.add_argument("--force", action="store_true", help="write the finger file even when the fit is not trusted")
     ap.add_output("--out", required=True, suffix=".toml", help="the calibrated finger file to write")
-    _model_args(ap)
-    args = ap.parse_args(argv)
-    cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
+    args = _parse(ap, argv)
     with ap.errors():
         from predictor.calibration.file import outside_package
         outside_package(args.out)
         obs, model = _observations_and_model(args)
-        names = [n.strip() for n in args.fit.split(",") if n.strip()]
-        resolve_fit(names, model.table)
+        names = _fit_names(args, model)
         priors = {}
         for name, mean, std in args.prior:
             if name in priors:
@@ -155,12 +178,7 @@ def main_fit(argv) -> int:
               f"{'n/a' if red is None else f'{red:.3g}'}; leave-one-out tip "
               f"{'n/a' if loo is None else f'{loo:.3f} mm'}; {out['time_s']:.1f} s; "
               f"{f'wrote {args.out}' if written else 'nothing written'}")
-    if not res.trusted:
-        print(f"python -m predictor.cli.calibrate: not trusted: {'; '.join(res.why)}; "
-              f"{'wrote ' + str(args.out) + ' (--force)' if written else 'nothing written (--force writes it)'}",
-              file=sys.stderr)
-        return 1
-    return 0
+    return _verdict("python -m predictor.cli.calibrate", res, str(args.out) if written else None)
 
 
 def main_recovery(argv) -> int:
@@ -169,10 +187,7 @@ def main_recovery(argv) -> int:
     ap = cli.Parser(prog="python -m predictor.cli.calibrate recovery", description="the known-truth recovery study")
     ap.add_output("--out", required=True, suffix=".json", help="the study's JSON")
     ap.add_argument("--seeds", type=cli.number(1, 200, integer=True), default=SEEDS, help="noisy seeds")
-    _model_args(ap)
-    args = ap.parse_args(argv)
-    cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
+    args = _parse(ap, argv)
     with ap.errors():
         model = _model(args)
         study = recovery_study(model, seeds=args.seeds, starts=args.starts, progress=LOG.info)
@@ -201,7 +216,6 @@ def _pairs(text: str):
 
 def main_fem(argv) -> int:
     from predictor.artefacts import CALIBRATION
-    from predictor.calibration.model import resolve_fit
     from predictor.calibration.fem import (CALIBRATE_ON, FIT, PRESSURES, TRUTH_FINGER, case_problem, fem_study,
                                            load_cases, recovery_summary)
     from predictor.calibration.file import write_calibrated
@@ -225,10 +239,7 @@ def main_fem(argv) -> int:
     ap.add_output("--figure", suffix=".png", help="before/after figure (default: heldout.png beside --out)")
     ap.add_output("--calibrated", suffix=".toml", help="calibrated finger file (default: calibrated.toml beside --out)")
     ap.add_argument("--force", action="store_true", help="write the files even when the fit is not trusted (exit 1 still)")
-    _model_args(ap)
-    args = ap.parse_args(argv)
-    cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
+    args = _parse(ap, argv)
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_name("heldout.png")
     calibrated = Path(args.calibrated) if args.calibrated else out.with_name("calibrated.toml")
@@ -238,8 +249,7 @@ def main_fem(argv) -> int:
             raise ValueError(f"{args.recovery}: no recovery study (run `make calibrate-recovery`)")
         recovery = recovery_summary(RECOVERY.load(args.recovery))
         model = _model(args)
-        names = [n.strip() for n in args.fit.split(",") if n.strip()]
-        resolve_fit(names, model.table)
+        names = _fit_names(args, model)
         LOG.info("calibrating on %d of %d FEM gestures (%s)", len(args.calibrate_on), len(cases),
                  "the gripper, cases solved with the plane X = 0" if case_problem(cases[0]) == "gripper"
                  else "a lone finger, as the cases were solved")
@@ -273,12 +283,7 @@ def main_fem(argv) -> int:
               f"{c['max']:.3f}), {s['improvement']:.1f}x; calibrated on {s['observations_used']} "
               f"({'lone finger' if record['problem'] == 'finger' else 'gripper'}) in "
               f"{s['time_s']:.1f} s; {f'wrote {wrote}' if written else 'nothing written'}")
-    if not study.result.trusted:
-        print(f"python -m predictor.cli.calibrate fem: not trusted: {'; '.join(study.result.why)}; "
-              f"{'wrote ' + wrote + ' (--force)' if written else 'nothing written (--force writes it)'}",
-              file=sys.stderr)
-        return 1
-    return 0
+    return _verdict("python -m predictor.cli.calibrate fem", study.result, wrote if written else None)
 
 
 def _cases_digest(cases) -> str:
@@ -296,10 +301,7 @@ def main_bench(argv) -> int:
     ap.add_argument("--repeats", type=cli.number(1, 50, integer=True), default=REPEATS, help="timed runs")
     ap.add_argument("--beside", default="", help="what else ran on the machine (recorded)")
     ap.add_output("--out", required=True, suffix=".json", help="the benchmark's JSON")
-    _model_args(ap)
-    args = ap.parse_args(argv)
-    cli.setup_logging(args.quiet)
-    set_quiet(args.quiet)   # the solver's heartbeat too (predictor.solvers.solve, where the fingers meet)
+    args = _parse(ap, argv)
     with ap.errors():
         obs, model = _observations_and_model(args)
         doc = bench_calibration(model, obs, args.repeats, args.beside, progress=LOG.info)

@@ -36,7 +36,7 @@ friction_use = |f|/(mu N) and slip (null where nothing touches), iterations, tim
 joint (the joint model's name), mu and object_weight_N (null without an object), plane
 (true: the gripper, the plane X = 0; false: one finger alone; plane_force_N and
 plane_overlap_mm its push, N, and how far the outline crosses X = 0, mm), finger
-{name, sha256}, kinematics, joint_weight, method (what produced the answer: newton, lm,
+{name, sha256}, kinematics, joint_weight, outline, method (what produced the answer: newton, lm,
 newton+lm, nn, nn+newton, ...) beside requested_method (--method). Every figure of the gesture is null when the
 solve did not converge. With ``--method nn`` also the network's own figures before any
 solver, raw_residual_force_mN and raw_residual_moment_Nmm (per joint), and whether the
@@ -156,6 +156,7 @@ def run(args: argparse.Namespace, prepared=None):
            "method": res.method, "requested_method": args.method, "object": args.object, "gravity": problem.gravity,
            "finger": {"name": problem.params.finger.name, "sha256": problem.params.finger.digest},
            "kinematics": problem.params.kinematics, "joint_weight": problem.params.joint_weight,
+           "outline": problem.params.outline,
            "joint_end_angle_deg": [math.degrees(a) for a in res.pose.phi[0].tolist()] if ok else None}
     if args.method == "nn":   # the network's own figures, before any solver (issue 15)
         out.update(raw_residual_force_mN=res.raw_residual_force_mN[0].tolist(),
@@ -203,11 +204,7 @@ def main(argv: list[str] | None = None) -> int:
             from predictor.model.plot import save_gesture
 
             save_gesture(args.plot, res, 0, problem)
-    if args.json:
-        cli.print_json(out)
-    else:
-        for key, value in out.items():
-            print(f"{key:>20}: {value}")
+    cli.print_fields(out, args.json, 20)
     if not out["converged"]:
         print(f"{ap.prog}: {failure(out, prepared)}; no gesture returned", file=sys.stderr)
         return 1

@@ -247,8 +247,6 @@ def track_label(problem: GripperProblem) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from predictor.cli.atlas import print_figures
-
     def goal_arg(text):
         try:
             parse_goal(text)
@@ -301,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
                 save_track_figure(args.track_plot, tres, free, tdoc["label"], _load_text(tdoc))
             if args.track_out:
                 TRACK.write(args.track_out, tdoc)
-        print_figures({**doc["measured"], **{f"track_{k}": doc["track"][k] for k in
+        cli.print_fields({**doc["measured"], **{f"track_{k}": doc["track"][k] for k in
                                              ("goals", "median_ms", "p95_ms", "max_tip_error_mm", "verified")}},
                       args.json)
         return 0
@@ -324,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
             if into is not None:
                 into["track"] = {k: v for k, v in tdoc.items() if k != "answers"}
                 INVERSE.write(args.into, into)
-        print_figures(tdoc if args.json else {k: v for k, v in tdoc.items() if k != "answers"}, args.json)
+        cli.print_fields(tdoc if args.json else {k: v for k, v in tdoc.items() if k != "answers"}, args.json)
         if tdoc["unreachable"]:
             print(f"{ap.prog}: {tdoc['unreachable']} of {tdoc['goals']} goals unreachable: answered with the "
                   "closest reachable tip (status unreachable)", file=sys.stderr)
@@ -351,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
         res = inverse_pressures(ip, atlas)
         if args.plot:
             save_inverse_figure(args.plot, [(args.goal, res, problem)])
-    print_figures({**res.summary(), "goal": args.goal, "object": args.object, "finger": finger_record(params_of(args)),
+    cli.print_fields({**res.summary(), "goal": args.goal, "object": args.object, "finger": finger_record(params_of(args)),
                    "plane": args.plane}, args.json)
     if res.status != "feasible":
         print(f"{ap.prog}: infeasible: {res.reason}", file=sys.stderr)

@@ -25,8 +25,8 @@ import torch
 from contract import cli
 from contract.finger import finger_arg
 from predictor.solvers import progress
-from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, JOINT_WEIGHTS, KINEMATICS, GripperParams,
-                                     default_finger)
+from predictor.model.gripper import (DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, DEFAULT_OUTLINE, JOINT_WEIGHTS, KINEMATICS,
+                                     OUTLINES, GripperParams, default_finger)
 from predictor.model.joint import load_joint
 from predictor.nn.networks import VARIANTS, NNConfig
 from predictor.nn.checkpoint import save_predictor
@@ -58,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="finger description file (default: the paper's, contract/fingers/paper.toml)")
     ap.add_argument("--kinematics", choices=KINEMATICS, default=DEFAULT_KINEMATICS)
     ap.add_argument("--joint-weight", choices=JOINT_WEIGHTS, default=DEFAULT_JOINT_WEIGHT)
+    ap.add_argument("--outline", choices=OUTLINES, default=DEFAULT_OUTLINE,
+                    help="the joints' outline the gripper's contacts see (a network learned apart answers for any)")
     side = ap.add_mutually_exclusive_group()
     side.add_argument("--plane", dest="plane", action="store_const", const=True,
                       help="gravity variants: learn the gripper's equilibrium, the right finger against the mirror "
@@ -74,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     with ap.errors():
         finger = args.finger or default_finger()
         joint = load_joint(args.model, finger)
-        params = GripperParams(finger, kinematics=args.kinematics, joint_weight=args.joint_weight)
+        params = GripperParams(finger, kinematics=args.kinematics, joint_weight=args.joint_weight, outline=args.outline)
         if params != cfg.params() or params.n_joints != cfg.widths[0]:
             cfg = cfg.for_params(params)
         if cfg.approach is not None and len(cfg.approach) != params.n_joints:

@@ -417,9 +417,10 @@ class GripperParams:
         return self.finger.parts[-1].length
 
     def describe(self) -> str:
-        """One line: finger name and the two options (for messages)."""
+        """One line: the finger's name and its options (for messages)."""
         surface = "" if self.surface == DEFAULT_SURFACE else f", contact on the {self.surface.replace('_', ' ')}"
-        return f"finger {self.finger.name!r}, {self.kinematics} kinematics, {self.joint_weight} joint weights{surface}"
+        return (f"finger {self.finger.name!r}, {self.kinematics} kinematics, {self.joint_weight} joint weights, "
+                f"{self.outline} outline{surface}")
 
 
 def rot(angle: torch.Tensor, v: torch.Tensor) -> torch.Tensor:

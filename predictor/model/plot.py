@@ -29,7 +29,7 @@ COLOURS = {"joint": "tab:blue", "rigid": "tab:red"}
 
 
 def draw_fem_render(fig, ax, render: dict, png, label: str) -> None:
-    """The whole-finger FEM's off-screen render (fem.studies.finger_cases.render: coloured by |u|;
+    """The whole-finger FEM's off-screen render (fem.studies.finger_records.render: coloured by |u|;
     ``render["extent_mm"]`` its global extent [X0, X1, Y0, Y1] mm) as the background of
     ``ax`` in equal global axes (mm), with its colour bar labelled ``label``."""
     x0, x1, y0, y1 = render["extent_mm"]

@@ -10,11 +10,11 @@ the finger's joint parts name (predictor.model.joint.check_finger).
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from predictor.defaults import default_nn_dir
-from predictor.model.gripper import GripperParams
+from predictor.model.gripper import DEFAULT_OUTLINE, GripperParams
 from predictor.model.joint import JointModel, check_finger
 from predictor.nn.networks import P_SCALE, TAU_SCALE, NNConfig, Predictor, network
 from surrogate import checkpoint
@@ -61,9 +61,14 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
         # paper's chain (tangent kinematics, lumped joint weights), not today's defaults;
         # those written before ``plane`` was recorded learned one finger alone (a gravity
         # network's labels without the plane X = 0; a contact network's always had it).
-        legacy = {"kinematics": "tangent", "joint_weight": "lumped", "plane": contact}
+        # and those written before ``outline`` was recorded had the band outline.
+        legacy = {"kinematics": "tangent", "joint_weight": "lumped", "plane": contact, "outline": "band"}
         saved = {**legacy, **ck["config"]}
         cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
+        if not cfg.learns_gripper():
+            # Learned one finger alone: no outline entered its labels, so it answers for the
+            # outline asked for (the default one without ``params``), polished on it.
+            cfg = replace(cfg, outline=params.outline if params is not None else DEFAULT_OUTLINE)
         trained_params = cfg.params()
         net = network(cfg)
         net.load_state_dict(ck["state_dict"])

@@ -55,7 +55,7 @@ from torch import nn
 
 from contract.finger import finger_from_dict, finger_to_dict
 from contract.spec import PRESSURE_LIMIT
-from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, GripperParams, default_finger
+from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, DEFAULT_OUTLINE, GripperParams, default_finger
 from predictor.model.joint import JointModel
 from predictor.solvers.ramp import APPROACH
 from predictor.model.statics import HOLDS, NO_CONTACT, SLIPS, GripperProblem, Obstacle, apart
@@ -110,11 +110,18 @@ class NNConfig:
     # gravity variant with ``predictor.cli.nn --plane``). A checkpoint without the key was
     # trained before it was recorded, on one finger alone (predictor.nn.checkpoint).
     plane: bool = False
+    # The joints' outline (GripperParams.outline) of the problem the network answers: it
+    # enters the labels only of a network that learns the gripper (``learns_gripper``: the
+    # plane or an object touches the outline); one learned apart answers for any outline,
+    # polished on the one asked for (predictor.nn.checkpoint). Checkpoints without the key
+    # were trained with ``band``.
+    outline: str = DEFAULT_OUTLINE
 
     def params(self) -> GripperParams:
         """The finger and chain options this predictor is trained for."""
         finger = finger_from_dict(self.finger) if self.finger is not None else default_finger()
-        return GripperParams(finger, kinematics=self.kinematics, joint_weight=self.joint_weight)
+        return GripperParams(finger, kinematics=self.kinematics, joint_weight=self.joint_weight,
+                             outline=self.outline)
 
     def problem(self, joint: JointModel) -> GripperProblem:
         """The gesture problem this predictor answers, on ``joint``: the gripper (its finger
@@ -145,7 +152,7 @@ class NNConfig:
         joint 1 takes p1_range, every other joint p2_range)."""
         J = params.n_joints
         return replace(self, finger=finger_to_dict(params.finger), kinematics=params.kinematics,
-                       joint_weight=params.joint_weight, widths=(J,) + tuple(self.widths[1:-1]) + (3 * J,))
+                       joint_weight=params.joint_weight, outline=params.outline, widths=(J,) + tuple(self.widths[1:-1]) + (3 * J,))
 
 
 VARIANTS = {

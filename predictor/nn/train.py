@@ -225,3 +225,9 @@ def _fit_state_heads(net: ContactNet, problem: GripperProblem, p_train: torch.Te
                 final = fit_stage(net, k, s, pk, tk, cfg, gen)
                 epochs += cfg.refine_epochs
                 log(epochs, final)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.nn")

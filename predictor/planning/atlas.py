@@ -527,3 +527,9 @@ def save_atlas_figure(path: str, atlas: Atlas, problem: GripperProblem) -> None:
         draw_gesture(axes[2 + k], atlas.result, row, problem, f"{k + 1}: {label}, P = ({p1:+.2f}, {p2:+.2f}) MPa")
     fig.tight_layout()
     save_figure(fig, path, 110)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.atlas")

@@ -817,3 +817,9 @@ def _hold_reason(ip: InverseProblem, cand: dict, checked: list, atlas: Atlas) ->
     use = cand["friction_use"]
     return ("no pressure in the box holds the object: best friction use "
             f"{use if use is not None else float('nan'):.3f} (holds <= 1)")
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.inverse")

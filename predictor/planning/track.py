@@ -811,3 +811,9 @@ def save_track_figure(path: str, result: TrackResult, problem: GripperProblem, l
     fig.suptitle("\n".join(textwrap.wrap(label + load, 150)), fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, 110)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.inverse --track FILE")

@@ -38,11 +38,8 @@ equilibrium it holds is, to ~0.05 mm, that of the outline held ON X = 0. So:
    first vertex it holds is not the one that touches), ``kkt_path`` follows the pressures
    from zero in a few legs, each KKT from the last one's answer.
 
-Measured on the committed surrogate's 7 x 7 gravity grid over [-0.3, 0.3]² MPa (one
-thread, the ramp before it in the same minutes, two FEM jobs beside, load average ~7): the
-25 pairs pressed on X = 0 take 6-53 iterations (median 9) where the ramp and its homotopy
-took 43-1,862 (median 102), 5,576 -> 407 iterations in all, 12.5 -> 0.89 s CPU; the same
-roots (tips within 3.4e-8 mm, plane forces within 5.7e-8 N); docs/gripper.md §9.
+It reaches the roots the ramp and its homotopy reach, in far fewer iterations (the figures
+against the ramp: docs/gripper.md §9, docs/decisions.md §11).
 
 A sample whose KKT does not converge (or whose polish fails) is reported as not converged:
 the caller falls back to the ramp and its homotopy (predictor.solvers.ramp). Units: x (B, 3J) = (F1 N, F2 N,

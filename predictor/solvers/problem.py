@@ -239,7 +239,7 @@ def finger_record(params: GripperParams) -> dict:
     """The finger a tool answered for, as its JSON records it (name, file digest, chain
     options): predictor.planning.atlas's and predictor.cli.inverse's "finger"."""
     return {"name": params.finger.name, "sha256": params.finger.digest, "kinematics": params.kinematics,
-            "joint_weight": params.joint_weight}
+            "joint_weight": params.joint_weight, "outline": params.outline}
 
 
 def add_plane(ap) -> None:

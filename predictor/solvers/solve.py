@@ -316,3 +316,9 @@ def _newton_then_lm(problem: GripperProblem, pressures: torch.Tensor, x0: torch.
                      x0=x[bad].reshape(-1, n_joints, 3))
 
     return _checked(problem, pressures, x, iterations, options, t0, fallback)
+
+
+if __name__ == "__main__":
+    from contract.cli import not_a_command
+
+    not_a_command("predictor.cli.gesture")

@@ -369,12 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     h.cthrough = _contact_throughput(cont_pred, m.cont_problem, p_contact, os.cpu_count() or 1)
     out = _record(args, n, joint, load, (grav_pred, paper_pred, cont_pred), s, m, h)
     BENCH.write(args.out, out)
-    top = {k: v for k, v in out.items() if not isinstance(v, dict)}
-    if args.json:
-        cli.print_json(top)
-    else:
-        for key, value in top.items():
-            print(f"{key:>36}: {value}")
+    cli.print_fields({k: v for k, v in out.items() if not isinstance(v, dict)}, args.json, 36)
     return 0
 
 

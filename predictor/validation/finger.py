@@ -35,7 +35,8 @@ mesh check.
 
 One problem (issue 56 §1): a case is the gripper's (the mirror finger's contact at X = 0,
 its settings' ``plane``, fem.studies.finger_cases' default) or one finger alone (the committed
-1.8 mm cases), and the predictor solves the same problem as each case (``case_plane``).
+1.8 mm cases), and the predictor solves the same problem as each case
+(predictor.validation.cases.case_plane).
 ``--plane`` or ``--no-plane`` validates the cases of that problem only (default: every
 case on the validated discretisation, each against its own problem), and asking for a
 problem none of them was solved for is refused (one line, exit 2): a comparison of
@@ -46,14 +47,12 @@ they mix both) and ``discretisation`` (the joint mesh and formulation), and each
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import statistics
 import sys
 import time
 from pathlib import Path
-from typing import Callable
 
 import torch
 
@@ -66,10 +65,11 @@ from fem.mesh.geometry import PAPER_MESH_SIZE
 from predictor.artefacts import VALIDATION
 from predictor.model.gripper import DEFAULT_JOINT_WEIGHT, DEFAULT_KINEMATICS, DEFAULT_OUTLINE, OUTLINES, GripperParams
 from predictor.model.joint import load_joint
-from predictor.solvers.problem import problem_words, same_problem
+from predictor.solvers.problem import same_problem
 from predictor.solvers.progress import set_quiet
 from predictor.solvers.solve import SolverOptions, solve
 from predictor.model.statics import GripperProblem, apart
+from predictor.validation.cases import case_plane, mesh_arg, one_problem, split_cases
 
 REPEATS = 5
 #: The discretisation of the committed finger cases, results/validation/finger_fem
@@ -114,12 +114,6 @@ def _deg(a: torch.Tensor) -> list[float]:
 def variant_key(method: str, kinematics: str, joint_weight: str, outline: str = "band") -> str:
     return (f"{method}_{kinematics}" + (f"_{joint_weight}" if method == "predictor" else "")
             + ("_bulged" if outline == "bulged" else ""))
-
-
-def case_plane(case: dict) -> bool:
-    """Whether a fem.studies.finger_cases record was solved with the plane X = 0 where the mirror
-    fingers meet (its settings' ``plane``; absent: a single finger without it)."""
-    return bool(case.get("settings", {}).get("plane", False))
 
 
 def run_variant(joint, finger, case: dict, method: str, kinematics: str, joint_weight: str,
@@ -190,47 +184,6 @@ def overlay(path: Path, case: dict, fem_png: Path, poses: dict, joint: str = "")
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
-
-
-def mesh_arg(text: str) -> str:
-    """argparse type of ``--mesh``: "H" or "H:W" (tetrahedra, mm), "hexN" or "hexN:S"
-    (hexahedra), returned in contract.joint.mesh_text's spelling (the records')."""
-    size, count = cli.number(0.05, 50, "mm", open_lo=True), cli.number(1, MAX_DIVISIONS, integer=True)
-    text = text.strip()
-    a, _, b = text[3:].partition(":") if text.startswith("hex") else text.partition(":")
-    try:
-        if text.startswith("hex"):
-            return mesh_text(None, None, count(a), size(b) if b else None)
-        return mesh_text(size(a), size(b) if b else None)
-    except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: {exc} (a mesh is H or H:W in mm, or hexN or hexN:S)") from None
-
-
-def split_cases(cases: list[dict], validated: tuple[str, str]) -> tuple[list[dict], list[dict]]:
-    """(the fem.studies.finger_cases records on the discretisation ``validated``, (mesh text,
-    formulation); the others, for the mesh check)."""
-    on = [(finger_case_mesh(c), finger_case_formulation(c)) == tuple(validated) for c in cases]
-    return [c for c, o in zip(cases, on) if o], [c for c, o in zip(cases, on) if not o]
-
-
-def one_problem(cases: list[dict], plane: bool | None, where: str,
-                plane_of: Callable[[dict], bool] | None = None) -> tuple[list[dict], bool | None]:
-    """(the cases validated, their problem) among ``cases`` (fem.studies.finger_cases or
-    fem.studies.grasp_cases records): with ``plane`` None all of them, each against the predictor
-    of its own problem, and their problem (True: the plane X = 0; None when they mix both);
-    else those of ``plane``. ValueError (one line) when none is of the ``plane`` asked for
-    (the comparison asked for would be of different problems); ``where``: the cases in
-    words; ``plane_of``: a case's problem (default ``case_plane``; fem.studies.grasp_cases
-    records: their ``plane``)."""
-    plane_of = plane_of or case_plane
-    kinds = {bool(plane_of(c)) for c in cases}
-    if plane is None:
-        return cases, kinds.pop() if len(kinds) == 1 else None
-    chosen = [c for c in cases if plane_of(c) == plane]
-    if cases and not chosen:
-        raise ValueError(f"{where} were all solved for {problem_words(not plane)}, the predictor was asked for "
-                         f"{problem_words(plane)}: different problems, not compared")
-    return chosen, plane
 
 
 def mesh_check(cases: list[dict], others: list[dict]) -> list[dict]:

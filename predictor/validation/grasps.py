@@ -7,7 +7,8 @@
 Data flow: the FEM grasp records of fem.studies.grasp_cases in ``--fem`` (one JSON, format
 fem.artefacts.GRASP_CASE, and one render per converged case) -> those on one
 discretisation (``--mesh``, ``--formulation``; default the paper joint file's ``[mesh]``,
-the production hex2:3 mixed; selected as predictor.validation.finger does) -> for each, the
+the production hex2:3 mixed; selected as predictor.validation.finger does, by
+predictor.validation.cases) -> for each, the
 predictor (predictor.solvers.problem.load_problem, predictor.solvers.solve, Newton; the default finger
 model) with the record's finger file, object, approach, mu, W and gravity, and the plane
 X = 0 only where the record had it; timed as the median of REPEATS single-query solves in
@@ -74,7 +75,7 @@ from predictor.solvers.problem import load_problem
 from predictor.solvers.progress import set_quiet
 from predictor.solvers.solve import SolverOptions, solve
 from predictor.model.statics import GripperProblem, apart
-from predictor.validation.finger import mesh_arg, one_problem, split_cases
+from predictor.validation.cases import mesh_arg, one_problem, split_cases
 
 REPEATS = 5
 #: issue 36's targets: fingertip (mm), tip angle (deg), normal force (fraction of the FEM's,
