@@ -292,3 +292,35 @@ def test_bad_placement_and_cli_exit_codes(tmp_path):
                        text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert json.loads(out.read_text())["grid"] == 2
+
+
+
+
+def test_lockstep_starts_take_the_steps_they_take_alone(free, circle, atlas):
+    """The starts' Gauss-Newton in lockstep (gauss_newton_all: one batched continuation
+    step and one batched gradient pass a round) ends each branch where gauss_newton alone
+    does: tip:0,-400 (no object) and the circle's hold (exact reverse-mode gradients,
+    batched) to 1e-12 MPa (measured: equal), a row of a batch being the row's own
+    evaluation up to rounding; the tip goal pressed on X = 0 (its steps through the
+    plane's homotopy and contact-constrained Newton, whose stiff penalty amplifies the
+    plane's broad phase's ~1e-16, which depends on what the graph evaluated before) to
+    1e-6 MPa and its objective to 1e-5 relative (measured: 3.6e-7 MPa, 3.3e-6)."""
+    from predictor.planning.inversion import _starts, gauss_newton, gauss_newton_all
+
+    far = InverseProblem(free.problem, Goal("tip", (0.0, -400.0)))
+    pressed = InverseProblem(free.problem, Goal("tip", (9.04, -214.93), -88.37))
+    grid = coarse_atlas(far.problem, far.box, far.options)
+    cases = ((far, grid, 1e-12), (InverseProblem(circle.problem, Goal("hold"), BOX), atlas, 1e-12),
+             (pressed, grid, 1e-6))
+    for ip, start_grid, tol in cases:
+        starts = _starts(ip, start_grid)
+        assert len(starts) == 3
+        alone = [Branch(ip, p, x) for p, x in starts]
+        for b in alone:
+            gauss_newton(ip, b)
+        together = [Branch(ip, p, x) for p, x in starts]
+        assert gauss_newton_all(ip, together) == 3
+        assert any(not torch.equal(b.p[0], p) for b, (p, _) in zip(together, starts))   # the searches moved
+        for a, b in zip(alone, together):
+            assert float((a.p - b.p).abs().max()) <= tol, (a.p, b.p)
+            assert gradient(ip, b)[0] == pytest.approx(gradient(ip, a)[0], rel=10 * tol, abs=1e-12)

@@ -39,9 +39,15 @@ spot and kept for the process's later questions of the same problem, box and opt
 ``coarse_atlas``: it does not depend on the goal), the pressure box as bounds, a
 projected Gauss-Newton on the goal residual e (Levenberg-damped, steps capped at 0.1
 MPa, 0.05 with an object, backtracking); the starts stop early once one meets the goal
-exactly (``_exact``). Candidates are verified, best first, by a forward solve along the
-ramp from the approach gesture (predictor.solvers.solve, the history of ``predictor.cli.gesture``)
-and refused if that solve disagrees (state, or tip farther than VERIFY_TOL_MM); the
+exactly (``_exact``). The starts' searches run in lockstep (``gauss_newton_all``): each
+round's continuation steps of all starts are one batched ramp step and their gradients
+one batched pass, and each start takes the steps it takes alone (one residual evaluation
+costs about the same for one row as for three: Python dispatch), as if the starts were
+searched one after the other up to the first exact one (the same answers to rounding;
+where the steps press on X = 0 the stiff plane amplifies the rounding to ~4e-7 MPa). Candidates are
+verified, best first, by a forward solve along the ramp from the approach gesture
+(predictor.solvers.solve, the history of ``predictor.cli.gesture``) and refused if that
+solve disagrees (state, or tip farther than VERIFY_TOL_MM); the
 first robust one is the answer. A tip goal that no candidate can meet verifies them all
 in one batched solve (``_verifications``). Robustness: the 8 neighbours at ±REGULATOR
 MPa (the regulators' resolution) are solved by continuation from the verified gesture
@@ -339,10 +345,73 @@ def gradient(ip: InverseProblem, branch: Branch):
     """At the branch's converged point: (f, df/dP (2,), e (k,), de/dP (k, 2)) by the
     implicit function theorem (module docstring), df/dP = 2 eᵀ de/dP, with ∂e/∂(x, P)
     (``_goal_derivatives``)."""
-    J, Jp = branch.jac[0][0], branch.jac[1][0]  # (6, 6), (6, 2)
-    e, ex, ep = _goal_derivatives(ip, branch.x, branch.p)
-    de = ep - ex @ torch.linalg.solve(J, Jp)  # d tau/dP = -J⁻¹ dr/dP
-    return float(e @ e), 2.0 * de.T @ e, e, de
+    return gradients(ip, [branch])[0]
+
+
+def gradients(ip: InverseProblem, branches: list) -> list:
+    """``gradient`` of several branches, their ∂e/∂(x, P) in one batched pass (a row of
+    the batch is the row's own evaluation)."""
+    if not branches:
+        return []
+    out = []
+    x = torch.cat([b.x for b in branches])
+    p = torch.cat([b.p for b in branches])
+    for b, (e, ex, ep) in zip(branches, _goal_derivatives_rows(ip, x, p)):
+        J, Jp = b.jac[0][0], b.jac[1][0]  # (6, 6), (6, 2)
+        de = ep - ex @ torch.linalg.solve(J, Jp)  # d tau/dP = -J⁻¹ dr/dP
+        out.append((float(e @ e), 2.0 * de.T @ e, e, de))
+    return out
+
+
+def _goal_derivatives_rows(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor) -> list:
+    """``_goal_derivatives`` of each row of x (B, 6), p (B, 2) in one batched pass: the
+    differences of the recorded graph (without an object; a row of the batch is the row's
+    own evaluation, bit for bit), or the exact reverse pass over k copies of every row
+    (with one; the rows' own to ~1e-13 relative, the batched residual's rounding)."""
+    B = len(x)
+    if B == 1:
+        return [_goal_derivatives(ip, x, p)]
+    if ip.problem.obstacle is not None:   # one reverse pass over k copies of each row
+        k = ip.goal.terms
+        with torch.enable_grad():
+            xr = x.repeat_interleave(k, 0).requires_grad_(True)
+            pr = p.repeat_interleave(k, 0).requires_grad_(True)
+            e = _goal_terms(ip, pr, xr)[1].reshape(B, k, k)      # copy i of a row feeds its row i
+            ex, ep = torch.autograd.grad(e.diagonal(dim1=1, dim2=2).sum(), (xr, pr), allow_unused=True)
+        ex = torch.zeros(B * k, 6, dtype=torch.float64) if ex is None else ex
+        ep = torch.zeros(B * k, 2, dtype=torch.float64) if ep is None else ep
+        ex, ep, e = ex.reshape(B, k, 6), ep.reshape(B, k, 2), e.detach()
+        return [(e[b, 0].clone(), ex[b].clone(), ep[b].clone()) for b in range(B)]
+    h = 1e-6 * torch.cat((box_scale(6)[1], torch.full((2,), INPUT_BOX[0], dtype=torch.float64)))
+    steps = torch.diag(h)
+    y = torch.cat((x, p), 1)                                                           # (B, 8)
+    Y = torch.cat((y[:, None], y[:, None] + steps, y[:, None] - steps), 1).reshape(-1, 8)   # (17 B, 8)
+    with torch.inference_mode():
+        fn = traced_tip_fn(ip.problem) if ip.goal.kind == "tip" else _traced_goal_fn(ip)
+        E = fn(Y[:, :6].contiguous(), Y[:, 6:].contiguous())
+    E = E.reshape(B, 17, -1).clone()
+    if ip.goal.kind == "tip":
+        return [_tip_terms(ip, E[b], h) for b in range(B)]
+    out = []
+    for b in range(B):
+        d = ((E[b, 1:9] - E[b, 9:]) / (2 * h[:, None])).T.clone()                    # (k, 8)
+        out.append((E[b, 0].clone(), d[:, :6], d[:, 6:]))
+    return out
+
+
+def _tip_terms(ip: InverseProblem, T: torch.Tensor, h: torch.Tensor):
+    """(e (k,), ∂e/∂x (k, 6), ∂e/∂P (k, 2)) of a tip goal from the fingertip rows T (17, 3)
+    at a point and its central differences of steps h (8,)."""
+    dT = (T[1:9] - T[9:]) / (2 * h[:, None])                                   # (8, 3)
+    (gx, gy), l_tip = search_tip(ip.goal), ip.problem.params.tip_length
+    e = [T[0, 0] - gx, T[0, 1] - gy]
+    cols = [dT[:, 0], dT[:, 1]]
+    if ip.goal.angle_deg is not None:
+        a = T[0, 2] - math.radians(ip.goal.angle_deg)
+        e.append(l_tip * torch.atan2(torch.sin(a), torch.cos(a)))
+        cols.append(l_tip * dT[:, 2])
+    d = torch.stack(cols)                                                      # (k, 8)
+    return torch.stack(e), d[:, :6].clone(), d[:, 6:].clone()
 
 
 def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
@@ -360,16 +429,7 @@ def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
         if ip.goal.kind == "tip":   # the pose's graph, one per problem: a track's goals share it
             with torch.inference_mode():
                 T = traced_tip_fn(ip.problem)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())   # (17, 3)
-            dT = (T[1:9] - T[9:]) / (2 * h[:, None])                                   # (8, 3)
-            (gx, gy), l_tip = search_tip(ip.goal), ip.problem.params.tip_length
-            e = [T[0, 0] - gx, T[0, 1] - gy]
-            cols = [dT[:, 0], dT[:, 1]]
-            if ip.goal.angle_deg is not None:
-                a = T[0, 2] - math.radians(ip.goal.angle_deg)
-                e.append(l_tip * torch.atan2(torch.sin(a), torch.cos(a)))
-                cols.append(l_tip * dT[:, 2])
-            d = torch.stack(cols)                                                      # (k, 8)
-            return torch.stack(e), d[:, :6].clone(), d[:, 6:].clone()
+            return _tip_terms(ip, T, h)
         with torch.inference_mode():
             E = _traced_goal_fn(ip)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())
         d = ((E[1:9] - E[9:]) / (2 * h[:, None])).T.clone()                          # (k, 8)
@@ -416,8 +476,19 @@ STALL = 1e-3  # stop when a Gauss-Newton step gains less than this fraction of f
 def gauss_newton(ip: InverseProblem, branch: Branch) -> None:
     """Projected Gauss-Newton (Levenberg-damped, capped, backtracking) on f = |e|² from the
     branch, within the box: a component at a bound whose step points out is held there
-    and the other one moves alone (sliding along the bound)."""
-    f, _, e, de = gradient(ip, branch)
+    and the other one moves alone (sliding along the bound). The steps of ``_gn_steps``,
+    each continuation and gradient of one branch in turn (``gauss_newton_all`` runs
+    several branches' steps in lockstep)."""
+    gauss_newton_all(ip, [branch])
+
+
+def _gn_steps(ip: InverseProblem, branch: Branch):
+    """The Gauss-Newton of one branch as a generator: it yields the trial pressures p (2,)
+    (numpy) it wants the branch continued to, and is sent the goal's (f, e, de/dP) there,
+    or None where the continuation failed (the branch then unchanged); on a success the
+    branch has moved there (``Branch.restore`` takes it back). It yields None first, for
+    the gradient at the branch's own point; it returns its last f."""
+    f, e, de = yield None
     damp = 1e-9
     cap = MAX_STEP if ip.problem.obstacle is None else MAX_STEP_CONTACT
     # with contact the friction use is rough in P (USE_RESOLUTION): a few steps gain all there is
@@ -425,7 +496,7 @@ def gauss_newton(ip: InverseProblem, branch: Branch) -> None:
     lo, hi = np.array([ip.box[0], ip.box[2]]), np.array([ip.box[1], ip.box[3]])
     for _ in range(max_iter):
         if f <= _exact(ip):
-            return
+            return f
         A = de.T @ de + damp * torch.eye(2, dtype=torch.float64)
         step = -torch.linalg.solve(A, de.T @ e).numpy()
         p0, here = branch.p[0].numpy().copy(), branch.save()
@@ -438,9 +509,10 @@ def gauss_newton(ip: InverseProblem, branch: Branch) -> None:
         for _ in range(6):  # backtrack: the bounds and the contact branch may cut the step
             p_try = clip_to_box(ip, p0 + step)
             if np.abs(p_try - p0).max() <= 1e-9:
-                return
-            if branch.move(torch.from_numpy(p_try)):
-                f_try, _, e_try, de_try = gradient(ip, branch)
+                return f
+            got = yield p_try
+            if got is not None:
+                f_try, e_try, de_try = got
                 if f_try < f:
                     stalled = f_try > (1.0 - STALL) * f  # a minimum with e != 0 (a bound, a fold)
                     f, e, de = f_try, e_try, de_try
@@ -448,9 +520,65 @@ def gauss_newton(ip: InverseProblem, branch: Branch) -> None:
                 branch.restore(here)
             step *= 0.5
         else:
-            return
+            return f
         if stalled:
-            return
+            return f
+
+
+def gauss_newton_all(ip: InverseProblem, branches: list, first_exact: str | None = None) -> int:
+    """``gauss_newton`` of each branch (the starts of one question), in lockstep: every
+    round continues all the branches that ask for a trial point in one batched ramp step
+    (predictor.solvers.ramp.advance: each row's own tangent predictor, LM, homotopy and
+    cut-backs; a row of a batch is the row's own solve) and takes their gradients in one
+    batched pass (``gradients``). Each branch takes the steps it takes alone
+    (``_gn_steps``; up to rounding, which the plane's stiff penalty amplifies to ~4e-7 MPa
+    where the steps press on X = 0: tests/test_planning.py): one evaluation of the
+    residual costs about the same for 1 row as for several (Python dispatch), so
+    N_STARTS searches cost about the rounds of the longest.
+
+    first_exact: the starts as if searched one after the other, until the first, in turn,
+    that meets the goal exactly (``_exact``): the later ones stop there. "refined": each
+    branch is refined (``Branch.refine``) as its search ends and judged then; "searched":
+    judged by its search's own last f. Returns how many leading branches count (all, or
+    up to that one)."""
+    gens = [_gn_steps(ip, b) for b in branches]
+    asks = {i: next(g) for i, g in enumerate(gens)}
+    count = len(branches)
+    run, opts = (branches[0].run, branches[0].opts) if branches else (None, None)
+    while asks:
+        got = {}
+        moving = [i for i, a in asks.items() if a is not None]
+        if moving:
+            P = torch.cat([branches[i].p for i in moving])
+            X = torch.cat([branches[i].x for i in moving])
+            jac = tuple(torch.cat([branches[i].jac[k] for i in moving]) for k in range(2))
+            target = torch.from_numpy(np.stack([asks[i] for i in moving])).double()
+            x, ok, _, jac_new = advance(run, X, P, target, opts.cutbacks, jac)
+            for r, i in enumerate(moving):
+                if bool(ok[r]):
+                    b = branches[i]
+                    b.p, b.x = target[r:r + 1].clone(), x[r:r + 1].clone()
+                    b.jac = (jac_new[0][r:r + 1].clone(), jac_new[1][r:r + 1].clone())
+                else:
+                    got[i] = None
+        need = [i for i in asks if i not in got]
+        for i, grad in zip(need, gradients(ip, [branches[i] for i in need])):
+            got[i] = (grad[0], grad[2], grad[3])
+        nxt = {}
+        for i in sorted(asks):
+            if i >= count:
+                continue
+            try:
+                nxt[i] = gens[i].send(got[i])
+            except StopIteration as done:
+                if first_exact == "refined":   # as the starts in turn: refined, and the first exact one ends them
+                    branches[i].refine()
+                    if gradient(ip, branches[i])[0] <= _exact(ip):
+                        count = i + 1
+                elif first_exact == "searched" and done.value <= _exact(ip):
+                    count = i + 1
+        asks = {i: a for i, a in nxt.items() if i < count}
+    return count
 
 
 USE_RESOLUTION = 0.02  # friction use below which a hold cannot be bettered meaningfully
@@ -566,8 +694,13 @@ def coarse_atlas(problem: GripperProblem, box: tuple[float, float, float, float]
     box (P1lo, P1hi, P2lo, P2hi) MPa, solved once per process for each problem, box and
     options (the grid does not depend on the goal): later questions of a planner (tip
     targets of one gripper, cold holds of one object) start at once.
-    ``coarse_atlas.cache_clear()`` forgets them (make inverse times cold queries so)."""
-    return grasp_atlas(problem, COARSE, box, options)
+    ``coarse_atlas.cache_clear()`` forgets them (make inverse times cold queries so).
+    Without an object the grid is the reference path, every point's own ``solve`` in one
+    batched call (``path="ramp"``: the plane's contact-constrained Newton at the target),
+    which has the continuation's equilibria (tests/test_planning.py: to 1e-12 N, N·mm on
+    the production surrogate) at half its time (131 against 284 ms CPU, measured); with
+    one, the continuation (the grasp's history)."""
+    return grasp_atlas(problem, COARSE, box, options, "ramp" if problem.obstacle is None else "sweep")
 
 
 def _verifications(ip: InverseProblem, ordered: list):
@@ -597,15 +730,16 @@ def inverse_pressures(ip: InverseProblem, atlas: Atlas | None = None) -> Inverse
         _check_touch(atlas)
     starts = _starts(ip, atlas)
     cands = []
-    beat = Heartbeat("inverse")
-    for k, (p, x) in enumerate(starts):
-        beat(f"start {k + 1} of {len(starts)}")
-        branch = Branch(ip, p, x)
-        gauss_newton(ip, branch)
-        branch.refine()
+    Heartbeat("inverse")(f"{len(starts)} starts")
+    # The starts' searches in lockstep (``gauss_newton_all``: each branch takes the steps it
+    # takes alone); the candidates are those of the starts in turn up to the first that
+    # meets the goal exactly (up to verification: later starts cannot beat it).
+    branches = [Branch(ip, p, x) for p, x in starts]
+    branches = branches[:gauss_newton_all(ip, branches, "refined")]   # each refined
+    for branch, (f, *_) in zip(branches, gradients(ip, branches)):
         cands.append((branch.p[0].clone(), branch))
-        if gradient(ip, branch)[0] <= _exact(ip):
-            break  # the goal is met exactly (up to verification): more starts cannot beat it
+        if f <= _exact(ip):
+            break
     if not cands:
         raise ValueError("no converged gesture in the atlas of the box: nothing to search from")
     # Verify the candidates best first, each by a forward solve along the ramp, and stop at

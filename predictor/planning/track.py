@@ -24,7 +24,8 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    one of predictor.planning.inversion with the gestures pressed on X = 0, solved once per
    process, refined by every verified answer) is looked up (no solve): when one of its
    tips is closer to the goal than the local answer, the search restarts from the
-   N_STARTS best of them and the closest verified answer is kept; when the kept grid's
+   N_STARTS best of them (their Gauss-Newton in lockstep, predictor.planning.inversion.
+   gauss_newton_all) and the closest verified answer is kept; when the kept grid's
    best is closer by SAME_TIP_MM or less (the search's loose tolerance against a kept
    earlier answer) that kept row itself is the candidate instead. No global search
    otherwise; the answer is flagged ``unreachable`` with its position error (and
@@ -76,8 +77,8 @@ import torch
 from contract.files import read_text, strict_json
 
 from predictor.planning.inversion import (N_STARTS, REGULATOR, START_SEPARATION, TIP_TOL_MM, VERIFY_TOL_MM, Goal,
-                                          InverseProblem, Branch, clip_to_box, gauss_newton, search_tip, tip_errors,
-                                          tip_met, wrap_deg)
+                                          InverseProblem, Branch, clip_to_box, gauss_newton, gauss_newton_all,
+                                          search_tip, tip_errors, tip_met, wrap_deg)
 from predictor.solvers.options import SolverOptions
 from predictor.solvers.problem import FULL_BOX, check_box
 from predictor.solvers.result import GestureResult
@@ -172,6 +173,21 @@ class Tracker:
         self.pressed = (torch.empty(0, 2, dtype=torch.float64), torch.empty(0, 6, dtype=torch.float64))
         if keep_coarse:
             self._keep_coarse()
+        self._record_graphs()
+
+    def _record_graphs(self) -> None:
+        """Record, before the first goal, the graphs the answers use that the kept grids
+        did not (predictor.solvers.graphs.traced, once per process and problem: ~30-40 ms
+        each): the search's continuation with the plane's homotopy (its three softer
+        planes' residuals), the fingertip's and the verification's Newton steps. Otherwise
+        the first goal that needs each pays for it (measured: ~0.3 s within the demo track)."""
+        from predictor.planning.inversion import traced_tip_fn
+
+        P, tau = self.kept[0], self.kept[1]
+        traced_tip_fn(self.problem)
+        if len(P):
+            Branch(self._ip(tip_goal(0.0, 0.0)), P[0], tau[0])
+            newton_iterate(self.problem, P[:1], tau[:1].reshape(1, 2, 3), self.options, 0)   # records, no step
 
     def _keep_coarse(self) -> None:
         """Add predictor.planning.inversion.coarse_atlas (COARSE x COARSE, solved by continuation with
@@ -366,6 +382,10 @@ class Tracker:
         tolerance, as predictor.planning.inversion's: the verification's forward solve converges the
         answer fully and its tip is the one reported); f."""
         gauss_newton(ip, branch)
+        return self._searched(ip, branch)
+
+    def _searched(self, ip: InverseProblem, branch: Branch) -> float:
+        """f of the goal at the branch's point (the fingertip by its recorded graph)."""
         from predictor.planning.inversion import traced_tip_fn
 
         with torch.inference_mode():
@@ -417,12 +437,12 @@ class Tracker:
                     break
             restarted = restarted or bool(found)
             P, tau = self.kept[0], self.kept[1]
-            for i in self._grid_starts(goal):
-                b = Branch(ip, P[i], tau[i])
-                anchor = (b.p.clone(), b.x.clone())
-                found.append((self._search(ip, b), b, anchor))
-                if found[-1][0] <= exact:
-                    break
+            # the grid's starts searched in lockstep (gauss_newton_all), as if one after the
+            # other until the first that meets the goal exactly
+            starts = [Branch(ip, P[i], tau[i]) for i in self._grid_starts(goal)]
+            anchors = [(b.p.clone(), b.x.clone()) for b in starts]
+            count = gauss_newton_all(ip, starts, "searched")
+            found.extend((self._searched(ip, b), b, a) for b, a in zip(starts[:count], anchors[:count]))
         found.sort(key=lambda t: t[0])
         for f, branch, anchor in found:
             ver = self._verify(ip, branch, anchor)

@@ -344,8 +344,12 @@ def plane_newton(problem: GripperProblem, options: SolverOptions, polish):
             x_out[rows], conv[rows] = xp, cp
             its = its.clone()
             its[rows] += steps + ip
-            if jp is not None and len(rows) == B:
-                jac_new = jp
+            if jp is not None:
+                # the converged rows' Jacobians at their answers, also when some rows failed
+                # (theirs zero: the caller retries them, and its retry's Jacobians replace
+                # them), so that a row of a batch continues as it does alone
+                jac_new = jp if len(rows) == B else tuple(
+                    torch.zeros((B,) + a.shape[1:], dtype=a.dtype).index_copy(0, rows, a) for a in jp)
         return x_out, conv, its, jac_new
 
     return run
