@@ -147,6 +147,39 @@ def test_near_pressed_rows_match_the_continuation(free):
     assert not bool(tracker._near(far)[1].any())
 
 
+def test_stencil_row_the_continuation_leaves_is_the_forward_equilibrium(free):
+    """Goal 41 of the demo track after goal 40 (a fresh tracker: the same answer, (0.1834,
+    0.0143) MPa pressed on X = 0): the continuation from the verified centre leaves the
+    stencil's row (+0.01, -0.01) MPa (an edge of the outline nearly flat on X = 0: the
+    LM creeps through its iterations, Newton converges linearly), which the forward solve
+    from zero pressure converges. The answer was flagged not robust; now every stencil
+    row is the forward solve's equilibrium (each row's kept verified x against ``solve``:
+    joint loads within 1e-4 N, N·mm, fingertip within 1e-4 mm, all 9 pressed)."""
+    from predictor.planning.inversion import REGULATOR, traced_tip_fn
+    from predictor.planning.track import demo_goals
+
+    prob = free.problem
+    goals = demo_goals(prob)
+    tracker = Tracker(prob, keep_coarse=True)
+    tracker.answer(goals[40])
+    a = tracker.answer(goals[41])
+    assert a.status == "reached" and a.verified and a.plane_force_N > 0
+    assert a.pressures == pytest.approx((0.18344, 0.01433), abs=1e-4)
+    d = REGULATOR * torch.tensor([(x, y) for x in (-1, 0, 1) for y in (-1, 0, 1) if (x, y) != (0, 0)],
+                                 dtype=torch.float64)
+    ps = torch.tensor([a.pressures], dtype=torch.float64) + d
+    fwd = solve(prob, ps)
+    assert bool(fwd.converged.all()) and bool((fwd.plane_force_N > 0).all())
+    assert a.robust
+    kp, kx = tracker.pressed
+    got = torch.stack([kx[int((kp - p).abs().amax(-1).argmin())] for p in ps])
+    assert float(torch.stack([(kp - p).abs().amax(-1).min() for p in ps]).max()) == 0.0
+    assert float((got - fwd.tau.reshape(-1, 6)).abs().max()) <= 1e-4
+    with torch.no_grad():
+        t = traced_tip_fn(prob)(got, ps)[:, :2]
+    assert float((t - fwd.pose.tip_end).norm(dim=-1).max()) <= 1e-4
+
+
 def test_least_squares_newton_ends_where_the_continuation_does(free):
     """A goal beyond the reach next to a verified answer (as on the demo's return leg: the
     closest tip held at P2 = -0.3 MPa): the least-squares Newton in (x, P) (one Jacobian per

@@ -98,6 +98,8 @@ KEEP_PRESSED = 90         # Tracker._near: the last verified gestures pressed on
 NEAR_MPA = REGULATOR      # Tracker._near: a kept pressed gesture this close (max norm) starts Newton
 NEAR_STEPS = 4            # Tracker._near: Newton steps of one round (newton_iterate)
 NEAR_ROUNDS = 2           # Tracker._near: rounds of NEAR_STEPS
+POLISH_STEPS = 60         # Tracker._polish: Newton steps at most (~0.4 a step where an edge lies flat on X = 0)
+POLISH_CONTRACT = 0.8     # Tracker._polish: each step must shrink the residual (tolerance units) below this fraction
 MAX_GOALS = 100_000       # goals in one track file
 COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
 #: Issue 60's targets (medians, one thread): per goal along a track, a reachable tip goal
@@ -491,6 +493,39 @@ class Tracker:
         g = gesture_result(self.problem, ps, x, ok, its, time.perf_counter(), "newton", None)
         return x, ok & meets_tolerances(g, x, self.options)
 
+    def _polish(self, ps: torch.Tensor, x0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forward equilibria at ps (n, 2) by the solver's full Newton steps (one
+        newton_iterate step at a time, the problem's residual with the plane's penalty)
+        from x0 (n, 6) for as long as each step shrinks the residual's worst joint (in
+        tolerance units: max(|R_F| / tol_force, |R_M| / tol_moment)) below POLISH_CONTRACT
+        of the last, POLISH_STEPS at most; checked by the solver's rule (``meets_tolerances``).
+        Where an edge of the outline lies flat on X = 0 (the penalty's force ~ overlap³
+        within its smoothing width) Newton converges only linearly, ~0.43 a step (measured
+        at goal 41 of the demo track: |R_F| 1e-3 -> 3e-6 N in 11 steps), so newton_iterate's
+        one-step gate (which assumes quadratic convergence) stops it short, and the LM of
+        the continuation creeps there through its 30 iterations and fails; a row that does
+        not contract (diverging, another branch) stops at once. Returns (x (n, 6), converged (n,))."""
+        from predictor.solvers.newton import bounds
+
+        (tf, tm), _ = bounds(self.options)
+        x = torch.nan_to_num(x0.clone())
+        last = torch.full((len(ps),), math.inf, dtype=torch.float64)
+        on = torch.arange(len(ps))
+        for k in range(POLISH_STEPS + 1):
+            xn, _, r = newton_iterate(self.problem, ps[on], x[on].reshape(-1, 2, 3), self.options, 1)
+            m = torch.maximum(r[..., :2].norm(dim=-1).amax(-1) / tf, r[..., 2].abs().amax(-1) / tm)
+            # the first step is free: from the continuation's last iterate (an LM's, in the
+            # penalty's narrow valley) it raised the residual 44x at goal 41, then contracted
+            go = (m > 1.0) & ((m < POLISH_CONTRACT * last[on]) | (k == 1)) & torch.isfinite(xn).all(-1)
+            last[on] = m
+            on = on[go]
+            if not len(on):
+                break
+            x[on] = xn[go]
+        g = gesture_result(self.problem, ps, x, torch.isfinite(x).all(-1), torch.zeros(len(ps), dtype=torch.long),
+                           time.perf_counter(), "newton", None)
+        return x, torch.isfinite(x).all(-1) & meets_tolerances(g, x, self.options)
+
     def _verify(self, ip: InverseProblem, branch: Branch, anchor, force: bool = False):
         """(verifying gesture (one row), verified, robust), or None when the forward solve
         disagrees (unless ``force``: then returned with verified False). Module docstring
@@ -528,6 +563,19 @@ class Tracker:
                 rest = rest & ~ok
             if bool(rest.any()):
                 x[rest], ok[rest] = self._continue(ip, (ps[:1], x[:1]) if bool(ok[0]) else anchor, ps[rest])
+                rest = rest & ~ok
+            if bool(rest.any()):
+                # the rows the continuation leaves: Newton on from its last iterate (``_polish``:
+                # where an edge lies flat on X = 0 the LM creeps and Newton converges linearly),
+                # then the forward solve itself (from zero pressure, as ``solve`` answers any
+                # user): a row is not robust only when the forward equilibrium is not found
+                # there (before: flagged NOT ROBUST at goal 41 of the demo track, whose row
+                # (0.1934, 0.0043) MPa the forward solve converges, pressed on X = 0)
+                x[rest], ok[rest] = self._polish(ps[rest], x[rest])
+                rest = rest & ~ok
+            if bool(rest.any()):
+                fwd = solve(prob, ps[rest], opts)
+                x[rest], ok[rest] = torch.nan_to_num(fwd.tau.reshape(-1, 6)), fwd.converged
             # the forward model's own convergence rule at the verified points (residual, box)
             g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
                                "track-verify", None)
