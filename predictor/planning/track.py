@@ -49,9 +49,16 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    checked by its rule) from the tangent predictor x + dx/dP·ΔP of the nearest verified
    pressed gesture within NEAR_MPA (the last KEEP_PRESSED centres and stencil rows of the
    answers, and this answer's own centre: the path moves little between goals, and an
-   answer held at a bound repeats its pressures); the rows it leaves by the continuation
-   from the verified centre (Newton from a kept x without the predictor, or from a
-   centre apart from the plane, lands deep in the stiff penalty: measured). The answer is
+   answer held at a bound repeats its pressures); the rows it leaves by the
+   contact-constrained Newton from the verified centre (``Tracker._kkt``: the KKT of
+   predictor.solvers.plane_newton along centre -> row, the continuation's equilibria in a
+   fraction of its time), then by the continuation from the verified centre, first as
+   one step without cut-backs and then with them, each followed by Newton from its last
+   iterate while it contracts (``Tracker._polish``: where an edge lies flat on X = 0 the
+   LM creeps and Newton converges only linearly), and last by the forward solve itself
+   from zero pressure (``solve``): a row is not converged only where the forward solver
+   finds no equilibrium (Newton from a kept x without the predictor, or from a centre
+   apart from the plane, lands deep in the stiff penalty: measured). The answer is
    ``verified`` when its forward solve converged and its fingertip lies within
    VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
    angle are the forward solve's; an unverified search result is never returned as
@@ -550,7 +557,9 @@ class Tracker:
         disagrees (unless ``force``: then returned with verified False). Module docstring
         §3: the centre and its 8 neighbours in one batched cold solve without the plane's
         penalty, the rows pressed on X = 0 by Newton from a kept pressed gesture (``_near``)
-        or by continuation from ``anchor`` (the centre) and from the verified centre."""
+        or by continuation from ``anchor`` (the centre); the stencil's others by the KKT
+        (``_kkt``), the continuation (``_continue``, ``_polish``) from the verified centre,
+        and last the forward solve from zero pressure."""
         prob, opts = self.problem, self.options
         d = REGULATOR * torch.tensor([(0, 0)] + [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
                                      dtype=torch.float64)
@@ -564,8 +573,8 @@ class Tracker:
         else:
             # the centre by Newton from the search's own equilibrium at the same pressures
             # (``_warm``), else by continuation from the previous verified gesture; the
-            # stencil's pressed rows by continuation from the verified centre (steps of
-            # REGULATOR: the tangent predictor lands close; Newton alone fails there, the
+            # stencil's pressed rows from kept pressed gestures, by the KKT and by continuation
+            # from the verified centre (steps of REGULATOR: Newton alone fails there, the
             # outline's vertices entering and leaving X = 0 within the step: measured)
             if bool(pressed[0]):
                 x[:1], ok[:1] = self._warm(ps[:1], branch.x)
