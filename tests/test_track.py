@@ -147,6 +147,76 @@ def test_near_pressed_rows_match_the_continuation(free):
     assert not bool(tracker._near(far)[1].any())
 
 
+def test_stencil_row_the_continuation_leaves_is_the_forward_equilibrium(free):
+    """Goal 41 of the demo track after goal 40 (a fresh tracker: the same answer, (0.1834,
+    0.0143) MPa pressed on X = 0): the continuation from the verified centre leaves the
+    stencil's row (+0.01, -0.01) MPa (an edge of the outline nearly flat on X = 0: the
+    LM creeps through its iterations, Newton converges linearly), which the forward solve
+    from zero pressure converges. The answer was flagged not robust; now every stencil
+    row is the forward solve's equilibrium (each row's kept verified x against ``solve``:
+    joint loads within 1e-4 N, N·mm, fingertip within 1e-4 mm, all 9 pressed)."""
+    from predictor.planning.inversion import REGULATOR, traced_tip_fn
+    from predictor.planning.track import demo_goals
+
+    prob = free.problem
+    goals = demo_goals(prob)
+    tracker = Tracker(prob, keep_coarse=True)
+    tracker.answer(goals[40])
+    a = tracker.answer(goals[41])
+    assert a.status == "reached" and a.verified and a.plane_force_N > 0
+    assert a.pressures == pytest.approx((0.18344, 0.01433), abs=1e-4)
+    d = REGULATOR * torch.tensor([(x, y) for x in (-1, 0, 1) for y in (-1, 0, 1) if (x, y) != (0, 0)],
+                                 dtype=torch.float64)
+    ps = torch.tensor([a.pressures], dtype=torch.float64) + d
+    fwd = solve(prob, ps)
+    assert bool(fwd.converged.all()) and bool((fwd.plane_force_N > 0).all())
+    assert a.robust
+    kp, kx = tracker.pressed
+    got = torch.stack([kx[int((kp - p).abs().amax(-1).argmin())] for p in ps])
+    assert float(torch.stack([(kp - p).abs().amax(-1).min() for p in ps]).max()) == 0.0
+    assert float((got - fwd.tau.reshape(-1, 6)).abs().max()) <= 1e-4
+    with torch.no_grad():
+        t = traced_tip_fn(prob)(got, ps)[:, :2]
+    assert float((t - fwd.pose.tip_end).norm(dim=-1).max()) <= 1e-4
+
+
+def test_kkt_stencil_rows_match_the_continuation(free):
+    """The stencil's rows pressed on X = 0 by the contact-constrained Newton from the
+    verified centre (``Tracker._kkt``) are the equilibria the plane's continuation from the
+    same centre finds (``Tracker._continue``): a centre apart from the plane (goal 31 of
+    the demo track, (0.0663, -0.0799) MPa) whose +0.01 MPa rows along P1 cross X = 0, and
+    a pressed centre (0.2, 0.05) MPa: every row converged, pressed, the same joint loads
+    (1e-5 N, N·mm: both roots within the solver's tolerances, measured 2.2e-6 N·mm) and
+    fingertips (1e-5 mm, measured 1.5e-6)."""
+    from predictor.model.statics import apart
+    from predictor.planning.inversion import REGULATOR, InverseProblem, traced_tip_fn
+
+    prob = free.problem
+    tracker = Tracker(prob)
+    d = REGULATOR * torch.tensor([(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
+                                 dtype=torch.float64)
+    for centre, plane_free in (((0.06633, -0.07993), True), ((0.2, 0.05), False)):
+        pc = torch.tensor([centre], dtype=torch.float64)
+        fc = solve(prob, pc)
+        assert bool(fc.converged[0]) and (float(fc.plane_force_N[0]) == 0.0) == plane_free
+        xc = fc.tau.reshape(1, 6)
+        ps = pc + d
+        fwd = solve(apart(prob), ps)
+        pressed = ~fwd.converged | (fwd.plane_overlap_mm > 0)
+        assert int(pressed.sum()) >= 3
+        ps = ps[pressed]
+        xk, ok = tracker._kkt((pc, xc), ps)
+        assert bool(ok.all())
+        xl, okl = tracker._continue(InverseProblem(prob, tip_goal(0.0, 0.0)), (pc, xc), ps)
+        assert bool(okl.all())
+        assert float((xk - xl).abs().max()) <= 1e-5     # the roots within the solver's tolerances
+        with torch.no_grad():
+            t, tl = traced_tip_fn(prob)(xk, ps)[:, :2], traced_tip_fn(prob)(xl, ps)[:, :2]
+        assert float((t - tl).norm(dim=-1).max()) <= 1e-5
+        g = solve(prob, ps[:1], x0=xk[:1].reshape(1, 2, 3))
+        assert float(g.plane_force_N[0]) > 0
+
+
 def test_least_squares_newton_ends_where_the_continuation_does(free):
     """A goal beyond the reach next to a verified answer (as on the demo's return leg: the
     closest tip held at P2 = -0.3 MPa): the least-squares Newton in (x, P) (one Jacobian per

@@ -49,9 +49,16 @@ meeting at X = 0). ``Tracker(problem).answer(goal)`` answers one goal after the 
    checked by its rule) from the tangent predictor x + dx/dP·ΔP of the nearest verified
    pressed gesture within NEAR_MPA (the last KEEP_PRESSED centres and stencil rows of the
    answers, and this answer's own centre: the path moves little between goals, and an
-   answer held at a bound repeats its pressures); the rows it leaves by the continuation
-   from the verified centre (Newton from a kept x without the predictor, or from a
-   centre apart from the plane, lands deep in the stiff penalty: measured). The answer is
+   answer held at a bound repeats its pressures); the rows it leaves by the
+   contact-constrained Newton from the verified centre (``Tracker._kkt``: the KKT of
+   predictor.solvers.plane_newton along centre -> row, the continuation's equilibria in a
+   fraction of its time), then by the continuation from the verified centre, first as
+   one step without cut-backs and then with them, each followed by Newton from its last
+   iterate while it contracts (``Tracker._polish``: where an edge lies flat on X = 0 the
+   LM creeps and Newton converges only linearly), and last by the forward solve itself
+   from zero pressure (``solve``): a row is not converged only where the forward solver
+   finds no equilibrium (Newton from a kept x without the predictor, or from a centre
+   apart from the plane, lands deep in the stiff penalty: measured). The answer is
    ``verified`` when its forward solve converged and its fingertip lies within
    VERIFY_TOL_MM of the search's; ``robust`` when all 9 converged. The reported tip and
    angle are the forward solve's; an unverified search result is never returned as
@@ -98,6 +105,8 @@ KEEP_PRESSED = 90         # Tracker._near: the last verified gestures pressed on
 NEAR_MPA = REGULATOR      # Tracker._near: a kept pressed gesture this close (max norm) starts Newton
 NEAR_STEPS = 4            # Tracker._near: Newton steps of one round (newton_iterate)
 NEAR_ROUNDS = 2           # Tracker._near: rounds of NEAR_STEPS
+POLISH_STEPS = 60         # Tracker._polish: Newton steps at most (~0.4 a step where an edge lies flat on X = 0)
+POLISH_CONTRACT = 0.8     # Tracker._polish: each step must shrink the residual (tolerance units) below this fraction
 MAX_GOALS = 100_000       # goals in one track file
 COORD_MM = 1e6            # |X|, |Y| of a goal in a track file
 #: Issue 60's targets (medians, one thread): per goal along a track, a reachable tip goal
@@ -168,6 +177,7 @@ class Tracker:
         self.coarse_kept = False
         self._newton_at = None                  # (x, p, its evaluation) of the last converged _newton
         self.crawled = False                    # the last _newton stopped in a crawl (backtracking failed)
+        self._kkt_run = None                    # the contact-constrained Newton of ``_kkt``, built at its first use
         # the verified gestures pressed on X = 0 (centres and stencil rows of the last answers):
         # (P (m, 2), x (m, 6)), starts of the next answers' pressed rows (``_near``)
         self.pressed = (torch.empty(0, 2, dtype=torch.float64), torch.empty(0, 6, dtype=torch.float64))
@@ -469,14 +479,32 @@ class Tracker:
                            time_ms=1e3 * (time.perf_counter() - t0), cpu_ms=1e3 * (time.process_time() - c0),
                            gesture=gest)
 
-    def _continue(self, ip: InverseProblem, start, ps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _continue(self, ip: InverseProblem, start, ps: torch.Tensor,
+                  cutbacks: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """The forward equilibria at ps (n, 2) by the solver's continuation from the
         equilibrium ``start`` (p (1, 2), x (1, 6)) at full tolerance (Branch.neighbours: the
         stiff plane's LM from the tangent predictor, then the homotopy's softer planes and
-        cut-backs for the rows it leaves). Returns (x (n, 6), converged (n,))."""
+        ``cutbacks`` (default the options') for the rows it leaves). Returns (x (n, 6),
+        converged (n,)); a row not converged has the last iterate of its last step."""
         cont = Branch(ip, start[0], start[1])
         cont.tol = self.options
+        if cutbacks is not None:
+            cont.opts = dataclasses.replace(cont.opts, cutbacks=cutbacks)
         return cont.neighbours(ps)
+
+    def _kkt(self, start, ps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forward equilibria at ps (n, 2) pressed on X = 0 by the contact-constrained
+        Newton (predictor.solvers.ramp.contact_newton: the KKT along the straight path from
+        the equilibrium ``start`` (p (1, 2), x (1, 6)) to each row, the penalty's Newton
+        steps, the stiff plane's LM polish with the ramp's checks), at full tolerance.
+        Returns (x (n, 6), converged (n,))."""
+        from predictor.solvers.ramp import contact_newton
+
+        if self._kkt_run is None:
+            self._kkt_run = contact_newton(self.problem, self.options)
+        n = len(ps)
+        x, ok, _, _ = self._kkt_run(start[1].expand(n, 6).clone(), ps, p0=start[0].expand(n, 2).clone())
+        return torch.nan_to_num(x), ok
 
     def _warm(self, ps: torch.Tensor, x0: torch.Tensor, steps: int = WARM_STEPS) -> tuple[torch.Tensor, torch.Tensor]:
         """The forward equilibria at ps (n, 2) by up to WARM_STEPS of the solver's full Newton
@@ -491,12 +519,47 @@ class Tracker:
         g = gesture_result(self.problem, ps, x, ok, its, time.perf_counter(), "newton", None)
         return x, ok & meets_tolerances(g, x, self.options)
 
+    def _polish(self, ps: torch.Tensor, x0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The forward equilibria at ps (n, 2) by the solver's full Newton steps (one
+        newton_iterate step at a time, the problem's residual with the plane's penalty)
+        from x0 (n, 6) for as long as each step shrinks the residual's worst joint (in
+        tolerance units: max(|R_F| / tol_force, |R_M| / tol_moment)) below POLISH_CONTRACT
+        of the last, POLISH_STEPS at most; checked by the solver's rule (``meets_tolerances``).
+        Where an edge of the outline lies flat on X = 0 (the penalty's force ~ overlap³
+        within its smoothing width) Newton converges only linearly, ~0.43 a step (measured
+        at goal 41 of the demo track: |R_F| 1e-3 -> 3e-6 N in 11 steps), so newton_iterate's
+        one-step gate (which assumes quadratic convergence) stops it short, and the LM of
+        the continuation creeps there through its 30 iterations and fails; a row that does
+        not contract (diverging, another branch) stops at once. Returns (x (n, 6), converged (n,))."""
+        from predictor.solvers.newton import bounds
+
+        (tf, tm), _ = bounds(self.options)
+        x = torch.nan_to_num(x0.clone())
+        last = torch.full((len(ps),), math.inf, dtype=torch.float64)
+        on = torch.arange(len(ps))
+        for k in range(POLISH_STEPS + 1):
+            xn, _, r = newton_iterate(self.problem, ps[on], x[on].reshape(-1, 2, 3), self.options, 1)
+            m = torch.maximum(r[..., :2].norm(dim=-1).amax(-1) / tf, r[..., 2].abs().amax(-1) / tm)
+            # the first step is free: from the continuation's last iterate (an LM's, in the
+            # penalty's narrow valley) it raised the residual 44x at goal 41, then contracted
+            go = (m > 1.0) & ((m < POLISH_CONTRACT * last[on]) | (k == 1)) & torch.isfinite(xn).all(-1)
+            last[on] = m
+            on = on[go]
+            if not len(on):
+                break
+            x[on] = xn[go]
+        g = gesture_result(self.problem, ps, x, torch.isfinite(x).all(-1), torch.zeros(len(ps), dtype=torch.long),
+                           time.perf_counter(), "newton", None)
+        return x, torch.isfinite(x).all(-1) & meets_tolerances(g, x, self.options)
+
     def _verify(self, ip: InverseProblem, branch: Branch, anchor, force: bool = False):
         """(verifying gesture (one row), verified, robust), or None when the forward solve
         disagrees (unless ``force``: then returned with verified False). Module docstring
         §3: the centre and its 8 neighbours in one batched cold solve without the plane's
         penalty, the rows pressed on X = 0 by Newton from a kept pressed gesture (``_near``)
-        or by continuation from ``anchor`` (the centre) and from the verified centre."""
+        or by continuation from ``anchor`` (the centre); the stencil's others by the KKT
+        (``_kkt``), the continuation (``_continue``, ``_polish``) from the verified centre,
+        and last the forward solve from zero pressure."""
         prob, opts = self.problem, self.options
         d = REGULATOR * torch.tensor([(0, 0)] + [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)],
                                      dtype=torch.float64)
@@ -510,8 +573,8 @@ class Tracker:
         else:
             # the centre by Newton from the search's own equilibrium at the same pressures
             # (``_warm``), else by continuation from the previous verified gesture; the
-            # stencil's pressed rows by continuation from the verified centre (steps of
-            # REGULATOR: the tangent predictor lands close; Newton alone fails there, the
+            # stencil's pressed rows from kept pressed gestures, by the KKT and by continuation
+            # from the verified centre (steps of REGULATOR: Newton alone fails there, the
             # outline's vertices entering and leaving X = 0 within the step: measured)
             if bool(pressed[0]):
                 x[:1], ok[:1] = self._warm(ps[:1], branch.x)
@@ -526,8 +589,34 @@ class Tracker:
                 centre = (ps[:1], x[:1]) if bool(pressed[0] & ok[0]) else None
                 x[rest], ok[rest] = self._near(ps[rest], centre)
                 rest = rest & ~ok
+            start = (ps[:1], x[:1]) if bool(ok[0]) else anchor
             if bool(rest.any()):
-                x[rest], ok[rest] = self._continue(ip, (ps[:1], x[:1]) if bool(ok[0]) else anchor, ps[rest])
+                # the contact-constrained Newton (predictor.solvers.plane_newton: KKT from the
+                # verified centre's own state along centre -> row, the penalty's Newton, the
+                # stiff LM's polish): the continuation's equilibria (to <= 1e-6 N, N·mm on the
+                # demo track) in 10-40 ms a batch where the continuation took 12-820 ms
+                x[rest], ok[rest] = self._kkt(start, ps[rest])
+                rest = rest & ~ok
+            for cutbacks in (0, None):
+                if not bool(rest.any()):
+                    break
+                # the rows the KKT leaves: the continuation, first as one step (no cut-backs),
+                # then Newton on from its last iterate (``_polish``: where an edge lies flat on
+                # X = 0 the LM creeps and Newton converges linearly; goal 41 of the demo: 107
+                # ms against 841 ms with the 4 cut-backs), then the full continuation (and the
+                # polish from it)
+                x[rest], ok[rest] = self._continue(ip, start, ps[rest], cutbacks)
+                rest = rest & ~ok
+                if bool(rest.any()):
+                    x[rest], ok[rest] = self._polish(ps[rest], x[rest])
+                    rest = rest & ~ok
+            if bool(rest.any()):
+                # the forward solve itself (from zero pressure, as ``solve`` answers any user):
+                # a row is not robust only when the forward equilibrium is not found there
+                # (before: flagged NOT ROBUST at goal 41 of the demo track, whose row (0.1934,
+                # 0.0043) MPa the forward solve converges, pressed on X = 0)
+                fwd = solve(prob, ps[rest], opts)
+                x[rest], ok[rest] = torch.nan_to_num(fwd.tau.reshape(-1, 6)), fwd.converged
             # the forward model's own convergence rule at the verified points (residual, box)
             g = gesture_result(prob, ps, torch.nan_to_num(x), ok, torch.zeros(9, dtype=torch.long), t0,
                                "track-verify", None)
