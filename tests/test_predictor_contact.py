@@ -241,7 +241,8 @@ def test_finger_pose_mirrored_and_masked():
     pose = solve(GRAVITY, p).pose
     names = [f.name for f in dataclasses.fields(FingerPose) if not f.metadata.get("static")]
     assert names == ["joints", "segments", "theta", "phi", "points", "band"]
-    assert pose.band is None          # the band outline (a bulged one's heights: tests/test_joint_outline.py)
+    assert pose.band.shape == (3, 2, 2, 11)   # the bulged outline's half-heights, mm: no direction to mirror
+    assert torch.equal(pose.mirrored().band, pose.band)
     names.remove("band")
     assert pose.joints.shape == (3, 2, 11, 2) and pose.segments.shape == (3, 2, 2, 2)
     assert pose.points.shape == (3, 25 * EDGE_GAUSS, 2)   # joint 2's 20 chords, link 2, tip 3 faces

@@ -119,8 +119,9 @@ def test_bent_outline_is_closed_where_parts_meet():
     the next rigid part's faces start and starts where the previous one's end (its end
     normals are those of theta_i and phi_i, the neighbours' directions): the shared
     corners coincide to 1e-12 mm, on both faces; and every rigid face is h = 20 mm from
-    its mirror face."""
-    params = GripperParams()
+    its mirror face. The outline ``band``: a ``bulged`` joint's end vertices stand off by
+    their end chord's bulge (tests/test_joint_outline.py)."""
+    params = GripperParams(outline="band")
     pose = finger_pose(J, params, t([[0.2, -0.15]]), t([[[0.3, 0.2, -20.0], [0.1, -0.1, 8.0]]]))
     V = outline_vertices(pose, params.layout)[0]
     J1, J2 = 0, 22            # joint vertex blocks: inner 0..10, outer 11..21

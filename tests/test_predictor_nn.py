@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import torch
 
-from predictor.model.gripper import GripperParams
+from predictor.model.gripper import DEFAULT_OUTLINE, GripperParams
 from predictor.model.joint import AnalyticJoint, load_joint
 from predictor.solvers.solve import solve
 from predictor.model.statics import GripperProblem
@@ -260,7 +260,7 @@ def test_nn_for_another_finger(tmp_path):
     back = load_predictor(path, J, params=params)
     assert back.config.params() == params
     with pytest.raises(ValueError, match="was trained for finger 'three', tangent kinematics, split joint weights, "
-                                         "band outline, not finger 'paper', cap kinematics, split joint weights"):
+                                         f"{DEFAULT_OUTLINE} outline, not finger 'paper', cap kinematics, split joint weights"):
         load_predictor(path, J, params=GripperParams())
     assert NNConfig().params() == GripperParams()
     # a checkpoint written before the chain options were recorded: the paper's chain

@@ -255,7 +255,7 @@ def test_each_figure_is_labelled_with_the_discretisation_that_made_it(tmp_path):
     shutil.copy(RESULTS / "data/heldout/manifest.json", tmp_path / "data/heldout/manifest.json")
     text, _, checks = report_app.build(tmp_path)
     assert f"| mesh | {bench['nodes']} Q2 nodes, {bench['dofs']} dofs, hex2:3 mixed |" in text
-    assert "joint mesh hex2:3 mixed, one rank) against the predictor" in text
+    assert "joint mesh hex2:3 mixed, one rank, one finger alone) against the predictor" in text
     assert (f"| discretisation: finger FEM, joint mesh hex2:3 mixed -> 1.8 mm displacement "
             f"({base['production_nodes']:,} -> {base['nodes']:,} nodes), {base['case']} |") in text
     assert "`python -m fem.studies.finger_cases --mesh-size 1.8 --formulation displacement` |" in text

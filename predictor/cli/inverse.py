@@ -44,6 +44,7 @@ from predictor.planning.inversion import (COARSE, HOLD_MARGIN, REGULATOR, TARGET
 from predictor.solvers.problem import (DEFAULT, FULL_BOX, MIN_NORMAL, add_arguments, add_finger_arguments, add_plane,
                                        approach_arg, box_arg, finger_record, load_problem, object_arg, params_of)
 from predictor.solvers.progress import Heartbeat, set_quiet
+from predictor.model.gripper import GripperParams
 from predictor.model.statics import GripperProblem, meets
 
 
@@ -113,15 +114,17 @@ def _timed(query, repeats: int = REPEATS) -> tuple[list, float]:
     return out, float(np.median(cpu))
 
 
-def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
-    """``make inverse``: every case REPEATS times (median time); hold goals start from the
+def run_cases(model: str | None, atlas_dir: Path, params: GripperParams | None = None,
+              plane: bool = True) -> tuple[dict, list]:
+    """``make inverse``: every case REPEATS times (median time) for the finger and options
+    ``params`` (None: the defaults) and the problem ``plane``; hold goals start from the
     object's committed atlas ``atlas_dir/atlas_KIND.json`` when present (the planned use),
     and are also timed cold (a COARSE x COARSE atlas solved per query)."""
     cases, figs = [], []
     beat = Heartbeat("inverse --cases")
     for kind in CASE_OBJECTS:
         beat(f"hold {kind}")
-        problem = load_problem(model, kind)
+        problem = load_problem(model, kind, params=params, plane=plane)
         ip = InverseProblem(problem, Goal("hold"))
         path = atlas_dir / f"atlas_{kind}.json"
         atlas = atlas_from_json(path, problem) if path.is_file() else None
@@ -135,7 +138,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
                       "cold_time_ms": cold.time_ms, "cold_status": cold.status, "cold_pressures": cold.pressures,
                       "atlas_check": atlas_check(res, atlas) if atlas is not None else None})
         figs.append((f"hold {kind}", res, problem))
-    free = load_problem(model, None)
+    free = load_problem(model, None, params=params, plane=plane)
     for text in CASE_TIPS:
         beat(text)
         ip = InverseProblem(free, parse_goal(text))
@@ -150,7 +153,7 @@ def run_cases(model: str | None, atlas_dir: Path) -> tuple[dict, list]:
         figs.append((text, res, free))
     med = lambda sel: float(np.median([c["time_ms_median"] for c in cases if sel(c)]))  # noqa: E731
     cmed = lambda key, sel: float(np.median([c[key] for c in cases if sel(c)]))  # noqa: E731
-    doc = {"joint": free.joint.name, "cases": cases,
+    doc = {"joint": free.joint.name, "finger": finger_record(free.params), "plane": plane, "cases": cases,
            "targets": {"inverse_tip_ms": TARGET_TIP_MS, "inverse_hold_ms": TARGET_HOLD_MS},
            "measured": {"inverse_tip_ms": med(lambda c: c["goal"] != "hold"),
                         "inverse_hold_ms": med(lambda c: c["goal"] == "hold"),
@@ -286,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.cases:
         torch.set_num_threads(1)
         with ap.errors():
-            doc, figs = run_cases(args.model, Path(args.atlas_dir))
+            doc, figs = run_cases(args.model, Path(args.atlas_dir), params_of(args), args.plane)
             free = load_problem(args.model, None, params=params_of(args), plane=args.plane)
             from predictor.planning.track import demo_goals, save_track_figure
             tdoc, tres = run_track(free, demo_goals(free), track_label(free))

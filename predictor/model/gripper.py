@@ -90,7 +90,7 @@ PLANE_GAUSS = 3
 #: A joint's outline across its chambers: ``band`` (half-height H/2 at every anchor) or
 #: ``bulged`` (and the bulge of a pressurised chamber's cells, its joint file's [outline]).
 OUTLINES = ("band", "bulged")
-DEFAULT_OUTLINE = "band"
+DEFAULT_OUTLINE = "bulged"
 #: The defaults: the chain that matches the whole-finger FEM (results/validation/finger_h1.8.json:
 #: fingertip within 0.5 mm, against 5 mm for the paper's tangent kinematics).
 DEFAULT_KINEMATICS, DEFAULT_JOINT_WEIGHT = "cap", "split"
