@@ -9,7 +9,7 @@ the file takes well under a minute.
 
 from __future__ import annotations
 
-import hashlib
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -73,31 +73,23 @@ def _fresh(n_anchors: int, box, **config) -> JointSurrogate:
 
 
 #: outputs of the committed checkpoints at FROZEN_X, written by the code before the
-#: surrogate took its joint's anchor count and box: sha256 of the float64 bytes of the
-#: anchors (4, 10, 2), the Jacobians (4, 20, 4) and the cap rotations (4,), and the tip
-#: (x, y) of the second input as float.hex.
+#: surrogate took its joint's anchor count and box: the anchors (4, 10, 2), the Jacobians
+#: (4, 20, 4) and the cap rotations (4,) in tests/data/surrogate_h1.8_frozen.json, and the
+#: tip (x, y) of the second input as float.hex as the first machine froze it. They were
+#: frozen as sha256 of the bytes; another CPU's BLAS kernels change the last bit (1 ulp,
+#: 7e-15 mm at the tip, on an AMD EPYC), so they are compared to 1e-12.
 FROZEN_X = [[0.1, 1.0, 0.5, 10.0], [-0.25, -2.0, 2.5, -80.0], [0.3, 3.0, -3.0, 100.0], [0.0, 0.0, 0.0, 0.0]]
-FROZEN = {
-    "paper": ("034857ece3f41615911c5bf301637c8fb374a448d901536e81518f3cabd2ea21",
-              "81e54d26c59066e04e458c6867fa36330ec1800b96ce71571bfdfc2e2627db85", None,
-              ("0x1.4f9a82e9d4d2fp+5", "0x1.0f3808f0a76b5p+4")),
-    "improved": ("d1d0e5145257b74099d86668c81efdbb6de1804a3727cfe82063472f9603540d",
-                 "432a178ef9e6636ce7e1816355f53fe773aeae6b5070ec08f6e31983ef87fdfc",
-                 "42ae8a4dc08c57b324538642b718142fcb27618c35562114a983b6917ffcc1b5",
-                 ("0x1.4ef010eb8c2f7p+5", "0x1.125c518019ff0p+4")),
-}
+FROZEN = json.loads((ROOT / "tests/data/surrogate_h1.8_frozen.json").read_text())
+FROZEN_TIP = {"paper": ("0x1.4f9a82e9d4d2fp+5", "0x1.0f3808f0a76b5p+4"),
+              "improved": ("0x1.4ef010eb8c2f7p+5", "0x1.125c518019ff0p+4")}
 
 
-def _sha(t: torch.Tensor) -> str:
-    return hashlib.sha256(t.numpy().tobytes()).hexdigest()
-
-
-@pytest.mark.parametrize("name", sorted(FROZEN))
-def test_committed_checkpoints_load_as_the_paper_joint_bit_for_bit(name):
+@pytest.mark.parametrize("name", sorted(FROZEN_TIP))
+def test_committed_checkpoints_load_as_the_paper_joint(name):
     """The committed 1.8 mm reference checkpoints (results/surrogate/h1.8/, the defaults
     when frozen; no n_anchors or input_box in their model_config) load as the paper's joint
     (10 anchors, contract.spec.INPUT_BOX) and give the frozen anchors, Jacobians and cap
-    rotations bit for bit."""
+    rotations to 1e-12 (FROZEN)."""
     path = ROOT / f"results/surrogate/h1.8/{name}.pt"
     if not path.is_file():
         pytest.skip("no committed surrogate")
@@ -107,10 +99,13 @@ def test_committed_checkpoints_load_as_the_paper_joint_bit_for_bit(name):
     assert model.input_box == tuple(INPUT_BOX) == tuple(model.joint.input_box)
     y, j, c = model.outputs(torch.tensor(FROZEN_X, dtype=torch.float64), jacobian=True,
                             cap=model.has_cap_rotation)
-    anchors_sha, jac_sha, cap_sha, tip = FROZEN[name]
-    assert (_sha(y), _sha(j)) == (anchors_sha, jac_sha)
-    assert (None if c is None else _sha(c)) == cap_sha
-    assert tuple(v.hex() for v in y[1, -1].tolist()) == tip
+    frozen = FROZEN[name]
+    np.testing.assert_allclose(y.numpy(), frozen["anchors"], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(j.numpy(), frozen["jacobians"], rtol=1e-12, atol=1e-12)
+    assert (c is None) == (frozen["cap"] is None)
+    if c is not None:
+        np.testing.assert_allclose(c.numpy(), frozen["cap"], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(y[1, -1].numpy(), [float.fromhex(h) for h in FROZEN_TIP[name]], rtol=1e-12, atol=0)
 
 
 def test_config_record_leaves_out_the_paper_joint():
@@ -249,5 +244,4 @@ def test_predict_checks_the_models_box(six):
     assert bad.returncode == 2 and "|P| <= 0.1 MPa" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
     good = subprocess.run([*base, "--p", "0.05", "--json"], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert good.returncode == 0, good.stderr
-    import json
     assert len(json.loads(good.stdout)["anchors_mm"]) == 6
