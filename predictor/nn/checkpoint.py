@@ -60,8 +60,8 @@ def load_predictor(path: str | Path | None, joint: JointModel | None = None, con
         # Checkpoints written before the chain options record them were trained with the
         # paper's chain (tangent kinematics, lumped joint weights), not today's defaults;
         # those written before ``plane`` was recorded learned one finger alone (a gravity
-        # network's labels without the plane X = 0; a contact network's always had it).
-        # and those written before ``outline`` was recorded had the band outline.
+        # network's labels without the plane X = 0; a contact network's always had it);
+        # those written before ``outline`` was recorded had the band outline.
         legacy = {"kinematics": "tangent", "joint_weight": "lumped", "plane": contact, "outline": "band"}
         saved = {**legacy, **ck["config"]}
         cfg = NNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()})
