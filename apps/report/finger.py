@@ -375,8 +375,17 @@ def _reference_lines(root: Path, v: dict, judged: str, j: dict) -> list[str]:
             f"{r['tip_angle_error_deg_max']:.2f}°, speed-up min {r['speedup_min']:,.0f}x. Since the switch this "
             f"validation is the production-mesh cases{_problem(v)} solved so far ({j['cases']}; `make finger-grid` adds "
             f"the grid's as they finish), so a count short of the target is the FEM still running; its predictor "
-            "times are single queries timed while two FEM jobs shared the machine's two cores, the cases pressing on "
-            "the plane solved by the ramp. " + _outline_lines(v, judged, worst)]
+            f"times are single queries {_load_words(v)}, the cases pressing on the plane solved by predictor.solvers."
+            "solve (the contact-constrained Newton, the ramp's LM where it does not converge). "
+            + _outline_lines(v, judged, worst)]
+
+
+def _load_words(v: dict) -> str:
+    """When finger.json's predictor timings ran: its recorded load averages, or unrecorded."""
+    load = v.get("load_average")
+    if not load:
+        return "on a shared machine, its load unrecorded"
+    return "at load averages " + ", ".join(f"{x:.1f}" for x in load) + " (1, 5, 15 min, at the run's end)"
 
 
 def _outline_lines(v: dict, judged: str, worst: dict) -> str:

@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import statistics
 import sys
 import time
@@ -321,6 +322,7 @@ def main(argv=None) -> int:
             "cases": [e for e in entries if "method" in e], "summary": summarise([e for e in entries if "method" in e]),
             "mesh_check": mesh_check(cases, meshes),
             "targets": targets_for(plane), "judged_variant": JUDGED, "repeats": REPEATS, "figures": figures,
+            "load_average": list(os.getloadavg()),   # 1, 5, 15 min at the end: what the predictor timings shared
         }
         VALIDATION.write(args.out, report)
     if args.json:
