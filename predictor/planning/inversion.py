@@ -29,7 +29,7 @@ so by the implicit function theorem
     df/dP    = 2 eᵀ de/dP                                            (2)
 with dr/dtau and dr/dP from the solver's Jacobian (predictor.solvers.jacobians.jacobian_fn: exact with an
 object, central differences to ~1e-10 relative without) at the converged point, and
-∂e/∂(tau, P) the same way (``_goal_derivatives``): no unrolled iterations.
+∂e/∂(tau, P) the same way (``_goal_derivatives_rows``): no unrolled iterations.
 Moving P moves the equilibrium by continuation (solve's tangent predictor + LM, cut back
 when a step fails), which keeps the grasp on its branch.
 
@@ -344,7 +344,7 @@ def _goal_terms(ip: InverseProblem, p: torch.Tensor, x: torch.Tensor):
 def gradient(ip: InverseProblem, branch: Branch):
     """At the branch's converged point: (f, df/dP (2,), e (k,), de/dP (k, 2)) by the
     implicit function theorem (module docstring), df/dP = 2 eᵀ de/dP, with ∂e/∂(x, P)
-    (``_goal_derivatives``)."""
+    (``_goal_derivatives_rows``)."""
     return gradients(ip, [branch])[0]
 
 
@@ -364,13 +364,14 @@ def gradients(ip: InverseProblem, branches: list) -> list:
 
 
 def _goal_derivatives_rows(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor) -> list:
-    """``_goal_derivatives`` of each row of x (B, 6), p (B, 2) in one batched pass: the
-    differences of the recorded graph (without an object; a row of the batch is the row's
-    own evaluation, bit for bit), or the exact reverse pass over k copies of every row
-    (with one; the rows' own to ~1e-13 relative, the batched residual's rounding)."""
+    """(e (k,), ∂e/∂x (k, 6), ∂e/∂P (k, 2)) of each row of x (B, 6), p (B, 2) in one batched
+    pass. As the solver's Jacobian (predictor.solvers.jacobians.jacobian_fn): without an
+    object, central differences of the traced goal residual (the pose is smooth; steps 1e-6
+    of (1 N, 1 N, 100 N·mm) and of 0.3 MPa; a row of the batch is the row's own evaluation,
+    bit for bit); with one, exact, by one reverse pass over k copies of every row (copy i
+    feeds goal term i only: the contact law has kinks; the rows' own to ~1e-13 relative,
+    the batched residual's rounding)."""
     B = len(x)
-    if B == 1:
-        return [_goal_derivatives(ip, x, p)]
     if ip.problem.obstacle is not None:   # one reverse pass over k copies of each row
         k = ip.goal.terms
         with torch.enable_grad():
@@ -412,36 +413,6 @@ def _tip_terms(ip: InverseProblem, T: torch.Tensor, h: torch.Tensor):
         cols.append(l_tip * dT[:, 2])
     d = torch.stack(cols)                                                      # (k, 8)
     return torch.stack(e), d[:, :6].clone(), d[:, 6:].clone()
-
-
-def _goal_derivatives(ip: InverseProblem, x: torch.Tensor, p: torch.Tensor):
-    """(e (k,), ∂e/∂x (k, 6), ∂e/∂P (k, 2)) at x (1, 6), p (1, 2). As the solver's
-    Jacobian (predictor.solvers.jacobians.jacobian_fn): without an object, central differences of the traced
-    goal residual in one pass (the pose is smooth; steps 1e-6 of (1 N, 1 N, 100 N·mm) and
-    of 0.3 MPa); with one, exact, by one reverse pass over k copies of the point (copy i
-    feeds row i only: the contact law has kinks)."""
-    k = ip.goal.terms
-    if ip.problem.obstacle is None:
-        h = 1e-6 * torch.cat((box_scale(6)[1], torch.full((2,), INPUT_BOX[0], dtype=torch.float64)))
-        steps = torch.diag(h)                                                        # (8, 8)
-        y = torch.cat((x, p), 1)
-        Y = torch.cat((y, y + steps, y - steps))                                     # (17, 8)
-        if ip.goal.kind == "tip":   # the pose's graph, one per problem: a track's goals share it
-            with torch.inference_mode():
-                T = traced_tip_fn(ip.problem)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())   # (17, 3)
-            return _tip_terms(ip, T, h)
-        with torch.inference_mode():
-            E = _traced_goal_fn(ip)(Y[:, :6].contiguous(), Y[:, 6:].contiguous())
-        d = ((E[1:9] - E[9:]) / (2 * h[:, None])).T.clone()                          # (k, 8)
-        return E[0].clone(), d[:, :6], d[:, 6:]
-    with torch.enable_grad():
-        xr = x.expand(k, 6).clone().requires_grad_(True)
-        pr = p.expand(k, 2).clone().requires_grad_(True)
-        e = _goal_terms(ip, pr, xr)[1]                                # (k, k): row i of copy i
-        ex, ep = torch.autograd.grad(e.diagonal().sum(), (xr, pr), allow_unused=True)
-    ex = torch.zeros(k, 6, dtype=torch.float64) if ex is None else ex
-    ep = torch.zeros(k, 2, dtype=torch.float64) if ep is None else ep
-    return e[0].detach(), ex, ep
 
 
 @graph_cache
